@@ -1,0 +1,325 @@
+"""Pydantic models of the YAML configuration (``configs/*.yaml``).
+
+Units are SI at the joint side everywhere: rad, rad/s, N·m, kg·m². Per-joint lists have one
+entry per joint in ``robot.joints`` order. Models forbid unknown keys so that a typo fails
+loudly instead of silently falling back to a default.
+
+These models are for loading and checking files only; nothing here runs inside the tick.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+PositiveFloat = Annotated[float, Field(gt=0.0)]
+NonNegFloat = Annotated[float, Field(ge=0.0)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=False)
+
+
+# --------------------------------------------------------------------------------- robot
+
+
+class FrictionConfig(_Strict):
+    """Joint friction per eq. (12): ``f = Fc·sign(qd) + Fv·qd + B`` (+ optional Stribeck).
+
+    ``smooth_velocity`` [rad/s] replaces sign(qd) by tanh(qd / smooth_velocity); 0 keeps the
+    hard sign. Stribeck adds ``(Fs - Fc)·exp(-(qd/vs)²)·sign(qd)`` (used by the plant; the
+    identified model normally has Fs = Fc, i.e. no Stribeck term).
+    """
+
+    coulomb: list[NonNegFloat] = Field(description="Coulomb friction Fc per joint [N·m]")
+    viscous: list[NonNegFloat] = Field(description="viscous friction Fv per joint [N·m·s/rad]")
+    bias: list[float] | None = Field(None, description="constant offset B per joint [N·m]")
+    stribeck_static: list[NonNegFloat] | None = Field(
+        None, description="static (breakaway) friction Fs per joint [N·m], >= Fc"
+    )
+    stribeck_velocity: list[PositiveFloat] | None = Field(
+        None, description="Stribeck velocity vs per joint [rad/s]"
+    )
+    smooth_velocity: NonNegFloat = Field(
+        0.0, description="tanh smoothing velocity for sign(qd) [rad/s]; 0 = hard sign"
+    )
+
+
+class LimitsConfig(_Strict):
+    """Joint limits; any field left out is taken from the URDF."""
+
+    position_lower: list[float] | None = None
+    position_upper: list[float] | None = None
+    velocity: list[PositiveFloat] | None = None
+    acceleration: list[PositiveFloat] | None = None
+    torque: list[PositiveFloat] | None = None
+
+
+class RobotConfig(_Strict):
+    """One arm: kinematics and nominal dynamics from a URDF, plus drive-side data."""
+
+    name: str
+    urdf: Path = Field(description="URDF file, relative to the config file")
+    joints: list[str] = Field(min_length=1, description="actuated joints in drive order")
+    tool_frame: str = Field(description="URDF frame of the tool centre point")
+    base_frame: str | None = Field(None, description="frame Cartesian quantities are given in")
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    rotor_inertia: list[NonNegFloat] | None = Field(
+        None, description="reflected rotor inertia per joint (joint side) [kg·m²]"
+    )
+    friction: FrictionConfig | None = None
+    limits: LimitsConfig = Field(default_factory=LimitsConfig)
+    home: list[float] | None = Field(None, description="home configuration [rad]")
+    parameters: Path | None = Field(
+        None, description="identified-parameters file (hofto-hw identify); overrides URDF"
+    )
+
+    @model_validator(mode="after")
+    def _per_joint_lengths(self) -> RobotConfig:
+        n = len(self.joints)
+        if len(set(self.joints)) != n:
+            raise ValueError("joints must be unique")
+        checks: list[tuple[str, list[float] | None]] = [
+            ("rotor_inertia", self.rotor_inertia),
+            ("home", self.home),
+        ]
+        if self.friction is not None:
+            f = self.friction
+            checks += [
+                ("friction.coulomb", f.coulomb),
+                ("friction.viscous", f.viscous),
+                ("friction.bias", f.bias),
+                ("friction.stribeck_static", f.stribeck_static),
+                ("friction.stribeck_velocity", f.stribeck_velocity),
+            ]
+        lim = self.limits
+        checks += [
+            ("limits.position_lower", lim.position_lower),
+            ("limits.position_upper", lim.position_upper),
+            ("limits.velocity", lim.velocity),
+            ("limits.acceleration", lim.acceleration),
+            ("limits.torque", lim.torque),
+        ]
+        _check_lengths(checks, n)
+        return self
+
+
+def _check_lengths(checks: list[tuple[str, list | None]], n: int) -> None:
+    for name, values in checks:
+        if values is not None and len(values) != n:
+            raise ValueError(f"{name} has {len(values)} entries, expected {n} (one per joint)")
+
+
+# ------------------------------------------------------------------------------ observers
+
+
+class DirectConfig(_Strict):
+    """Direct estimation, eq. (2), acceleration by differentiating measured velocity."""
+
+    type: Literal["direct"] = "direct"
+    accel_filter_hz: PositiveFloat | None = Field(
+        None, description="first-order low-pass on the differentiated velocity; None = raw"
+    )
+
+
+class EsoConfig(_Strict):
+    """Linear ESO, eq. (5): diagonal gains k1 [1/s], k2 [1/s²], k3 [1/s³] per joint."""
+
+    type: Literal["eso"] = "eso"
+    k1: list[PositiveFloat]
+    k2: list[PositiveFloat]
+    k3: list[PositiveFloat]
+
+
+class DobConfig(_Strict):
+    """Disturbance observer with nominal inertia and a first-order low-pass (see dob.py)."""
+
+    type: Literal["dob"] = "dob"
+    cutoff: list[PositiveFloat] = Field(description="low-pass cutoff g per joint [rad/s]")
+    nominal_inertia: list[PositiveFloat] | None = Field(
+        None, description="Jn per joint [kg·m²]; None = diag M(home)"
+    )
+
+
+class MomentumConfig(_Strict):
+    """Generalized-momentum observer (De Luca), first order, gain K_O per joint [1/s]."""
+
+    type: Literal["momentum"] = "momentum"
+    gain: list[PositiveFloat]
+
+
+class StaConfig(_Strict):
+    """Super-twisting observer (Remark 7): gains of the 1/2, 1/2 and sign stages."""
+
+    type: Literal["sta"] = "sta"
+    l1: list[PositiveFloat]
+    l2: list[PositiveFloat]
+    l3: list[PositiveFloat]
+
+
+class HoftoConfig(_Strict):
+    """High-order finite-time observer, eq. (17), of order n (n + 2 observer states).
+
+    Powers: either ``sigma`` in (-1/(n+2), 0), giving stage i (i = 1..n+2) the power
+    m_{i+1} = 1 + i·sigma, or ``powers`` listing the n + 2 stage powers explicitly (each in
+    [0, 1]; 0 is sign(), 1 is linear: Remark 7's ESO and STA special cases).
+
+    ``form`` says which convention ``gains`` are in:
+    - ``eq17``: every stage driven by e1 = x1 - z1, gains L_i of eq. (17) as printed;
+    - ``recursive``: Levant's nested form (each stage driven by the previous stage's output),
+      the convention of the paper's Section IV numbers (see docs/observers.md).
+    """
+
+    type: Literal["hofto"] = "hofto"
+    order: int = Field(2, ge=1, le=8, description="n: the (n-1)-th derivative of x3 is tracked")
+    form: Literal["eq17", "recursive"] = "recursive"
+    sigma: float | None = None
+    powers: list[Annotated[float, Field(ge=0.0, le=1.0)]] | None = None
+    gains: list[list[PositiveFloat]] = Field(description="n + 2 rows of per-joint gains L_i")
+    substeps: int = Field(1, ge=1, le=100, description="explicit-Euler substeps per tick")
+
+    @model_validator(mode="after")
+    def _check(self) -> HoftoConfig:
+        n = self.order
+        if (self.sigma is None) == (self.powers is None):
+            raise ValueError("give exactly one of sigma or powers")
+        if self.sigma is not None and not (-1.0 / (n + 2) < self.sigma < 0.0):
+            raise ValueError(
+                f"sigma = {self.sigma} is outside (-1/(n+2), 0) = ({-1.0 / (n + 2):.4f}, 0) "
+                f"for order n = {n}"
+            )
+        if self.powers is not None and len(self.powers) != n + 2:
+            raise ValueError(f"powers has {len(self.powers)} entries, expected n + 2 = {n + 2}")
+        if len(self.gains) != n + 2:
+            raise ValueError(f"gains has {len(self.gains)} rows, expected n + 2 = {n + 2}")
+        return self
+
+    def stage_powers(self) -> list[float]:
+        """The n + 2 powers m_2 .. m_{n+3} applied to the stage errors."""
+        if self.powers is not None:
+            return list(self.powers)
+        assert self.sigma is not None
+        return [1.0 + i * self.sigma for i in range(1, self.order + 3)]
+
+
+ObserverConfig = Annotated[
+    DirectConfig | EsoConfig | DobConfig | MomentumConfig | StaConfig | HoftoConfig,
+    Field(discriminator="type"),
+]
+
+
+# ----------------------------------------------------------------------------- simulation
+
+
+class ExternalTorqueConfig(_Strict):
+    """One external-torque component applied by the simulated world.
+
+    ``kind``:
+    - ``constant``: amplitude per joint [N·m];
+    - ``ramp``: amplitude + slope·(t - start) [N·m, N·m/s];
+    - ``parabola``: amplitude + slope·τ + curvature·τ², τ = t - start;
+    - ``sine``: amplitude·sin(2π·frequency·t + phase);
+    - ``chirp``: amplitude·sin(phase(t)), frequency sweeping linearly from ``frequency`` to
+      ``frequency_end`` over ``duration``;
+    - ``contact``: stiff spring-damper wall on the Cartesian position of ``frame`` (see
+      drivers/sim/scenarios.py);
+    - ``push``: Cartesian force at the tool (``force`` [N]) mapped to joints by J^T, with a
+      smooth raised-cosine profile over ``duration``.
+    Each component is active on [start, start + duration) (duration None = forever).
+    """
+
+    kind: Literal["constant", "ramp", "parabola", "sine", "chirp", "contact", "push"]
+    start: NonNegFloat = 0.0
+    duration: PositiveFloat | None = None
+    amplitude: list[float] | None = None
+    slope: list[float] | None = None
+    curvature: list[float] | None = None
+    frequency: list[NonNegFloat] | None = None
+    frequency_end: list[NonNegFloat] | None = None
+    phase: list[float] | None = None
+    frame: str | None = None
+    force: tuple[float, float, float] | None = None
+    wall_point: tuple[float, float, float] | None = None
+    wall_normal: tuple[float, float, float] | None = None
+    stiffness: PositiveFloat | None = Field(None, description="contact stiffness [N/m]")
+    damping: NonNegFloat | None = Field(None, description="contact damping [N·s/m]")
+
+
+class SimulationConfig(_Strict):
+    """The simulated arm (``drivers.sim.Plant``): how the "true" arm differs from the model."""
+
+    seed: int = 0
+    substeps: int = Field(4, ge=1, le=100, description="integration substeps per tick")
+    model_error: NonNegFloat = Field(
+        0.0, description="relative random error of the true link inertial parameters"
+    )
+    friction: FrictionConfig | None = Field(
+        None, description="true friction; None = the robot's friction"
+    )
+    encoder_counts_per_rev: list[PositiveFloat] | None = Field(
+        None, description="joint-side encoder resolution for quantisation; None = exact"
+    )
+    torque_noise: NonNegFloat = Field(0.0, description="std of measured torque noise [N·m]")
+    velocity_noise: NonNegFloat = Field(0.0, description="std of measured velocity noise [rad/s]")
+    external: list[ExternalTorqueConfig] = Field(default_factory=list)
+
+
+class LoopConfig(_Strict):
+    """The real-time loop."""
+
+    rate_hz: PositiveFloat = 1000.0
+
+
+class SystemConfig(_Strict):
+    """A whole setup: one robot, its loop, its observers and (optionally) its simulation."""
+
+    robot: RobotConfig
+    loop: LoopConfig = Field(default_factory=LoopConfig)
+    observers: dict[str, ObserverConfig] = Field(default_factory=dict)
+    simulation: SimulationConfig | None = None
+
+    @field_validator("observers")
+    @classmethod
+    def _names(cls, v: dict[str, ObserverConfig]) -> dict[str, ObserverConfig]:
+        for name in v:
+            if not name or not name.replace("_", "").replace("-", "").isalnum():
+                raise ValueError(f"observer name {name!r} must be alphanumeric (with _ or -)")
+        return v
+
+    @model_validator(mode="after")
+    def _per_joint(self) -> SystemConfig:
+        n = len(self.robot.joints)
+        for name, obs in self.observers.items():
+            rows: list[tuple[str, list | None]] = []
+            if isinstance(obs, EsoConfig):
+                rows = [("k1", obs.k1), ("k2", obs.k2), ("k3", obs.k3)]
+            elif isinstance(obs, DobConfig):
+                rows = [("cutoff", obs.cutoff), ("nominal_inertia", obs.nominal_inertia)]
+            elif isinstance(obs, MomentumConfig):
+                rows = [("gain", obs.gain)]
+            elif isinstance(obs, StaConfig):
+                rows = [("l1", obs.l1), ("l2", obs.l2), ("l3", obs.l3)]
+            elif isinstance(obs, HoftoConfig):
+                rows = [(f"gains[{i}]", g) for i, g in enumerate(obs.gains)]
+            _check_lengths([(f"observers.{name}.{k}", v) for k, v in rows], n)
+        if self.simulation is not None:
+            s = self.simulation
+            _check_lengths([("simulation.encoder_counts_per_rev", s.encoder_counts_per_rev)], n)
+            for i, ext in enumerate(s.external):
+                _check_lengths(
+                    [
+                        (f"simulation.external[{i}].{k}", getattr(ext, k))
+                        for k in (
+                            "amplitude",
+                            "slope",
+                            "curvature",
+                            "frequency",
+                            "frequency_end",
+                            "phase",
+                        )
+                    ],
+                    n,
+                )
+        return self
