@@ -1,0 +1,587 @@
+"""Recordings of joint data: reading (CSV through a column map, our own MCAP logs) and
+offline conditioning (zero-phase low-pass, acceleration, standstill trimming, decimation).
+
+A :class:`Recording` holds SI joint-side data: ``t`` (N,) [s], ``q`` (N, n) [rad],
+``qd`` (N, n) [rad/s], ``tau`` (N, n) [N·m] and, after :func:`condition`, ``qdd`` (N, n)
+[rad/s²]. Time stamps are kept as recorded: real loggers sample irregularly, and every
+derivative here uses the actual ``t[k] - t[k-1]``.
+
+Bad rows (wrong field count, text that is not a number, NaN/inf, values outside the column
+map's plausibility limits, time that does not advance or jumps forward by more than
+``max_time_step``) are handled by the ``bad_rows`` policy:
+
+- ``refuse`` (default): raise :class:`~hofto_hw.errors.UserError` naming file, row and column;
+- ``drop``: drop them, log one warning listing the rows and keep the same text in
+  ``Recording.notes``; still refuse when more than ``MAX_DROP_FRACTION`` of the rows are bad.
+
+Nothing is ever dropped silently. Rows are numbered from 1 as in a text editor.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from scipy import signal
+
+from hofto_hw.errors import ConfigError, UserError
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+BadRows = Literal["refuse", "drop"]
+
+#: at least this many samples must remain after loading, trimming and decimation
+MIN_SAMPLES = 20
+#: ``drop`` refuses a file in which more than this fraction of the rows is bad
+MAX_DROP_FRACTION = 0.05
+#: absolute limit for any used numeric column when the column map gives none
+DEFAULT_ABS_LIMIT = 1.0e6
+
+
+# ------------------------------------------------------------------------------ recording
+
+
+@dataclass
+class Recording:
+    """Joint data of one recording, SI at the joint side.
+
+    Attributes:
+        t: (N,) time stamps [s], strictly increasing, irregular spacing allowed.
+        q: (N, n) joint positions [rad].
+        qd: (N, n) joint velocities [rad/s].
+        tau: (N, n) joint torques (motor torque through the gear) [N·m].
+        source: file the data came from (used in every message about it).
+        rows: (N,) 1-based row (CSV line or MCAP message number) of each sample.
+        extra: named (N, k) arrays of further columns the column map asked to keep.
+        qdd: (N, n) joint accelerations [rad/s²] once :func:`condition` computed them.
+        notes: plain-text remarks about what was done to the data (dropped rows, trimming).
+    """
+
+    t: FloatArray
+    q: FloatArray
+    qd: FloatArray
+    tau: FloatArray
+    source: str
+    rows: NDArray[np.int64]
+    extra: dict[str, FloatArray] = field(default_factory=dict)
+    qdd: FloatArray | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n_samples(self) -> int:
+        """N, the number of samples."""
+        return int(self.t.shape[0])
+
+    @property
+    def n_joints(self) -> int:
+        """n, the number of joints."""
+        return int(self.q.shape[1])
+
+    @property
+    def duration(self) -> float:
+        """t[-1] - t[0] [s]."""
+        return float(self.t[-1] - self.t[0]) if self.n_samples else 0.0
+
+    def dt(self) -> FloatArray:
+        """(N-1,) sample intervals t[k] - t[k-1] [s]."""
+        return np.diff(self.t)
+
+    def select(self, index: slice | NDArray[Any]) -> Recording:
+        """A new recording with the samples ``index`` (a slice, index or boolean array)."""
+        return replace(
+            self,
+            t=self.t[index],
+            q=self.q[index],
+            qd=self.qd[index],
+            tau=self.tau[index],
+            rows=self.rows[index],
+            extra={k: v[index] for k, v in self.extra.items()},
+            qdd=None if self.qdd is None else self.qdd[index],
+            notes=list(self.notes),
+        )
+
+
+# ----------------------------------------------------------------------------- column map
+
+
+class ColumnMap(BaseModel):
+    """Where each quantity sits in a CSV file (column numbers start at 1).
+
+    Joint torque comes either from ``torque`` columns [N·m] or from ``current`` columns [A]
+    times ``current_to_torque`` gains [N·m/A]. Columns not named are ignored.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field("", description="layout name shown in messages")
+    columns: int | None = Field(None, ge=1, description="fields per row; None = any")
+    delimiter: str = ","
+    header_rows: int = Field(0, ge=0, description="rows to skip at the top (headers)")
+    time: int = Field(ge=1)
+    time_scale: float = Field(1.0, gt=0.0, description="multiplies time to give seconds")
+    q: list[int] = Field(min_length=1)
+    qd: list[int] = Field(min_length=1)
+    current: list[int] | None = None
+    current_to_torque: list[float] | None = Field(None, description="gain per joint [N·m/A]")
+    torque: list[int] | None = None
+    extra: dict[str, list[int]] = Field(default_factory=dict)
+    limits: dict[Literal["time", "q", "qd", "current", "torque", "extra"], float] = Field(
+        default_factory=dict, description="absolute plausibility limit per kind of column"
+    )
+    max_time_step: float = Field(
+        1.0, gt=0.0, description="a larger forward jump of time marks a row as corrupt [s]"
+    )
+    rows: tuple[int, int] | None = Field(None, description="1-based inclusive row range")
+    bad_rows: BadRows = "refuse"
+
+    @model_validator(mode="after")
+    def _check(self) -> ColumnMap:
+        n = len(self.q)
+        if len(self.qd) != n:
+            raise ValueError(f"qd has {len(self.qd)} columns, q has {n}")
+        if (self.current is None) == (self.torque is None):
+            raise ValueError("give exactly one of current (with current_to_torque) or torque")
+        if self.current is not None:
+            if len(self.current) != n:
+                raise ValueError(f"current has {len(self.current)} columns, q has {n}")
+            if self.current_to_torque is None or len(self.current_to_torque) != n:
+                raise ValueError(f"current_to_torque needs {n} gains [N·m/A], one per joint")
+        if self.torque is not None and len(self.torque) != n:
+            raise ValueError(f"torque has {len(self.torque)} columns, q has {n}")
+        used = self.used_columns()
+        if min(used) < 1:
+            raise ValueError("column numbers start at 1")
+        if self.columns is not None and max(used) > self.columns:
+            raise ValueError(f"column {max(used)} is beyond columns = {self.columns}")
+        if self.rows is not None and not (1 <= self.rows[0] <= self.rows[1]):
+            raise ValueError(f"rows = {list(self.rows)} must be [first, last] with 1 <= first <= last")
+        return self
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints n the map describes."""
+        return len(self.q)
+
+    def used_columns(self) -> list[int]:
+        """Every 1-based column the map reads."""
+        cols = [self.time, *self.q, *self.qd, *(self.current or []), *(self.torque or [])]
+        for c in self.extra.values():
+            cols += c
+        return cols
+
+
+def load_column_map(path: str | Path) -> ColumnMap:
+    """Read a column-map YAML file; errors name the file and the field."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: column map not found") from None
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{path}: cannot read column map: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level of the column map")
+    try:
+        cmap = ColumnMap.model_validate(data)
+    except ValidationError as err:
+        from hofto_hw.config.loader import format_validation_error
+
+        raise ConfigError(format_validation_error(str(path), err)) from None
+    if not cmap.name:
+        cmap.name = path.name
+    return cmap
+
+
+# ------------------------------------------------------------------------------- CSV input
+
+
+def _ranges(rows: list[int]) -> str:
+    """'2-10, 6107' from [2, 3, ..., 10, 6107]."""
+    out: list[str] = []
+    start = prev = rows[0]
+    for r in [*rows[1:], None]:
+        if r is not None and r == prev + 1:
+            prev = r
+            continue
+        out.append(f"{start}" if start == prev else f"{start}-{prev}")
+        if r is not None:
+            start = prev = r
+    return ", ".join(out)
+
+
+def _parse_fields(
+    lines: list[str], first_row: int, cmap: ColumnMap, source: str
+) -> tuple[FloatArray, dict[int, str]]:
+    """Parse the used columns of ``lines`` into (R, C) floats; bad rows -> {row: reason}.
+
+    Bad rows are left as NaN in the array and reported in the dict.
+    """
+    used = sorted(set(cmap.used_columns()))
+    col_index = {c: i for i, c in enumerate(used)}
+    out = np.full((len(lines), len(used)), np.nan)
+    bad: dict[int, str] = {}
+    expected = cmap.columns
+    need = max(used)
+    for k, line in enumerate(lines):
+        row = first_row + k
+        fields = line.split(cmap.delimiter)
+        if expected is not None and len(fields) != expected:
+            what = "empty row" if not line.strip() else f"{len(fields)} columns"
+            bad[row] = f"{what}, expected {expected}"
+            continue
+        if len(fields) < need:
+            bad[row] = f"{len(fields)} columns, the column map reads column {need}"
+            continue
+        for c in used:
+            try:
+                out[k, col_index[c]] = float(fields[c - 1])
+            except ValueError:
+                bad[row] = f"column {c}: not a number ({fields[c - 1].strip()[:20]!r})"
+                break
+    return out, bad
+
+
+def _kind_columns(cmap: ColumnMap) -> list[tuple[str, list[int]]]:
+    kinds: list[tuple[str, list[int]]] = [("time", [cmap.time]), ("q", cmap.q), ("qd", cmap.qd)]
+    if cmap.current is not None:
+        kinds.append(("current", cmap.current))
+    if cmap.torque is not None:
+        kinds.append(("torque", cmap.torque))
+    for cols in cmap.extra.values():
+        kinds.append(("extra", cols))
+    return kinds
+
+
+def _check_values(
+    data: FloatArray, first_row: int, cmap: ColumnMap, bad: dict[int, str]
+) -> None:
+    """Mark rows with NaN/inf or implausible values as bad (in place)."""
+    used = sorted(set(cmap.used_columns()))
+    col_index = {c: i for i, c in enumerate(used)}
+    for kind, cols in _kind_columns(cmap):
+        limit = cmap.limits.get(kind, DEFAULT_ABS_LIMIT)  # type: ignore[call-overload]
+        if kind == "time":
+            limit = cmap.limits.get("time", math.inf)
+        for c in cols:
+            x = data[:, col_index[c]]
+            for k in np.flatnonzero(~np.isfinite(x) | (np.abs(x) > limit)):
+                row = first_row + int(k)
+                if row in bad:
+                    continue
+                v = x[k]
+                if not np.isfinite(v):
+                    bad[row] = f"column {c} ({kind}): {'NaN' if np.isnan(v) else 'infinite'}"
+                else:
+                    bad[row] = f"column {c} ({kind}): {v:.4g} exceeds the plausible {limit:g}"
+
+
+def _check_time(
+    t: FloatArray, first_row: int, max_step: float, bad: dict[int, str]
+) -> None:
+    """Mark rows whose time does not advance, or jumps ahead by > max_step, as bad."""
+    last: float | None = None
+    for k in range(t.shape[0]):
+        row = first_row + k
+        if row in bad:
+            continue
+        tk = float(t[k])
+        if last is not None:
+            step = tk - last
+            if step <= 0.0:
+                bad[row] = f"column time: {tk:.6g} s does not advance past {last:.6g} s"
+                continue
+            if step > max_step:
+                bad[row] = (
+                    f"column time: jumps {step:.4g} s ahead (more than max_time_step "
+                    f"{max_step:g} s)"
+                )
+                continue
+        last = tk
+
+
+def load_csv(
+    path: str | Path,
+    columns: ColumnMap | str | Path,
+    *,
+    rows: tuple[int, int] | None = None,
+    bad_rows: BadRows | None = None,
+) -> Recording:
+    """Read a CSV recording through a column map.
+
+    Args:
+        path: the CSV file (no header unless the map says ``header_rows``).
+        columns: a :class:`ColumnMap` or the path of its YAML file.
+        rows: 1-based inclusive row range to read; overrides the map's ``rows``.
+        bad_rows: ``refuse`` or ``drop``; overrides the map's ``bad_rows``.
+
+    Returns:
+        A :class:`Recording` with ``t`` (N,) [s], ``q``/``qd``/``tau`` (N, n) in SI units.
+
+    Raises:
+        UserError: naming the file, row and column of the first problem.
+    """
+    path = Path(path)
+    cmap = columns if isinstance(columns, ColumnMap) else load_column_map(columns)
+    policy: BadRows = bad_rows or cmap.bad_rows
+    row_range = rows if rows is not None else cmap.rows
+    src = str(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise UserError(f"{src}: recording not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{src}: cannot read recording: {exc}") from None
+    lines = text.splitlines()
+    while lines and not lines[-1].strip():
+        lines.pop()
+    first_row = cmap.header_rows + 1
+    lines = lines[cmap.header_rows :]
+    if row_range is not None:
+        lo, hi = row_range
+        last_row = first_row + len(lines) - 1
+        if hi > last_row:
+            raise UserError(f"{src}: rows {lo}-{hi} requested but the file ends at row {last_row}")
+        lines = lines[lo - first_row : hi - first_row + 1]
+        first_row = lo
+    if len(lines) < MIN_SAMPLES:
+        raise UserError(
+            f"{src}: too short: {len(lines)} rows, at least {MIN_SAMPLES} are needed"
+        )
+    if cmap.columns is not None:
+        counts = np.array([ln.count(cmap.delimiter) + 1 for ln in lines])
+        typical = int(np.bincount(counts).argmax())
+        if typical != cmap.columns:
+            raise UserError(
+                f"{src}: rows have {typical} columns, column map '{cmap.name}' expects "
+                f"{cmap.columns} (row {first_row + int(np.argmax(counts == typical))}); "
+                f"use the column map of this layout (--columns)"
+            )
+
+    data, bad = _parse_fields(lines, first_row, cmap, src)
+    _check_values(data, first_row, cmap, bad)
+    used = sorted(set(cmap.used_columns()))
+    col = {c: i for i, c in enumerate(used)}
+    t_all = data[:, col[cmap.time]] * cmap.time_scale
+    _check_time(t_all, first_row, cmap.max_time_step, bad)
+
+    if bad:
+        bad_list = sorted(bad)
+        first = bad_list[0]
+        if policy == "refuse":
+            more = f" ({len(bad_list)} bad rows in all: {_ranges(bad_list)})" if len(bad) > 1 else ""
+            raise UserError(
+                f"{src}: row {first}: {bad[first]}{more}; fix the file, choose a row range, "
+                f"or drop bad rows with a warning (bad_rows: drop / --drop-bad-rows)"
+            )
+        if len(bad_list) > MAX_DROP_FRACTION * len(lines):
+            raise UserError(
+                f"{src}: {len(bad_list)} of {len(lines)} rows are bad (first: row {first}: "
+                f"{bad[first]}); more than {MAX_DROP_FRACTION:.0%} is not dropped"
+            )
+        note = f"{src}: dropped {len(bad_list)} bad rows ({_ranges(bad_list)}); row {first}: {bad[first]}"
+        log.warning(note)
+        notes = [note]
+    else:
+        notes = []
+
+    keep = np.ones(len(lines), dtype=bool)
+    keep[[r - first_row for r in bad]] = False
+    data = data[keep]
+    row_numbers = np.arange(first_row, first_row + len(lines), dtype=np.int64)[keep]
+    if data.shape[0] < MIN_SAMPLES:
+        raise UserError(f"{src}: too short: {data.shape[0]} good rows, at least {MIN_SAMPLES} needed")
+
+    def cols(cs: list[int]) -> FloatArray:
+        return np.ascontiguousarray(data[:, [col[c] for c in cs]])
+
+    if cmap.current is not None:
+        assert cmap.current_to_torque is not None
+        tau = cols(cmap.current) * np.asarray(cmap.current_to_torque)
+    else:
+        assert cmap.torque is not None
+        tau = cols(cmap.torque)
+    return Recording(
+        t=np.ascontiguousarray(data[:, col[cmap.time]] * cmap.time_scale),
+        q=cols(cmap.q),
+        qd=cols(cmap.qd),
+        tau=tau,
+        source=src,
+        rows=row_numbers,
+        extra={name: cols(cs) for name, cs in cmap.extra.items()},
+        notes=notes,
+    )
+
+
+# ------------------------------------------------------------------------------ MCAP input
+
+
+def load_mcap(path: str | Path, topic: str | None = None) -> Recording:
+    """Read a joint-state log written by :mod:`hofto_hw.logging` (sensor_msgs/JointState).
+
+    ``effort`` is the joint torque [N·m]; the log time of each message is ``t`` [s].
+    """
+    from hofto_hw.logging.reader import read_joint_states
+
+    js = read_joint_states(path, topic=topic)
+    src = str(path)
+    if js.t.shape[0] < MIN_SAMPLES:
+        raise UserError(f"{src}: too short: {js.t.shape[0]} joint states, at least {MIN_SAMPLES}")
+    steps = np.diff(js.t)
+    if np.any(steps <= 0.0):
+        k = int(np.argmax(steps <= 0.0)) + 1
+        raise UserError(f"{src}: message {k + 1}: time {js.t[k]:.6f} s does not advance")
+    for name, arr in (("position", js.q), ("velocity", js.qd), ("effort", js.tau)):
+        finite = np.isfinite(arr)
+        if not finite.all():
+            k, j = (int(v) for v in np.argwhere(~finite)[0])
+            raise UserError(f"{src}: message {k + 1}: {name}[{j}] is not finite")
+    return Recording(
+        t=js.t,
+        q=js.q,
+        qd=js.qd,
+        tau=js.tau,
+        source=src,
+        rows=np.arange(1, js.t.shape[0] + 1, dtype=np.int64),
+        extra={},
+    )
+
+
+def load_recording(
+    path: str | Path,
+    columns: ColumnMap | str | Path | None = None,
+    *,
+    rows: tuple[int, int] | None = None,
+    bad_rows: BadRows | None = None,
+) -> Recording:
+    """Read a recording by its extension: ``.mcap`` (our logs) or CSV (needs ``columns``)."""
+    path = Path(path)
+    if path.suffix.lower() == ".mcap":
+        rec = load_mcap(path)
+        if rows is not None:
+            rec = rec.select(slice(rows[0] - 1, rows[1]))
+        return rec
+    if columns is None:
+        raise UserError(f"{path}: a CSV recording needs a column map (--columns FILE)")
+    return load_csv(path, columns, rows=rows, bad_rows=bad_rows)
+
+
+# ---------------------------------------------------------------------------- conditioning
+
+
+def sample_rate(t: FloatArray) -> float:
+    """Nominal sample rate 1 / median(dt) [Hz] of time stamps ``t`` (N,) [s]."""
+    return float(1.0 / np.median(np.diff(t)))
+
+
+def lowpass(x: FloatArray, t: FloatArray, cutoff_hz: float, order: int = 4, source: str = "") -> FloatArray:
+    """Zero-phase Butterworth low-pass of ``x`` (N, ...) along axis 0.
+
+    The filter is designed at the median sample rate of ``t`` (N,) [s]: the jitter of the
+    time stamps is small against the pass band, so treating the samples as evenly spaced
+    here only smears the cut-off slightly; derivatives still use the real time stamps.
+    """
+    fs = sample_rate(t)
+    if not 0.0 < cutoff_hz < 0.5 * fs:
+        raise UserError(
+            f"{source or 'recording'}: cutoff {cutoff_hz:g} Hz must be in (0, {0.5 * fs:.4g}) Hz "
+            f"(half the median sample rate)"
+        )
+    sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")
+    padlen = 3 * (2 * sos.shape[0] + 1)
+    if x.shape[0] <= padlen:
+        raise UserError(
+            f"{source or 'recording'}: too short to filter: {x.shape[0]} samples, "
+            f"more than {padlen} are needed"
+        )
+    return signal.sosfiltfilt(sos, x, axis=0)
+
+
+def differentiate(x: FloatArray, t: FloatArray) -> FloatArray:
+    """d x / d t of ``x`` (N, ...) at time stamps ``t`` (N,) [s], along axis 0.
+
+    Second-order central differences on the actual, uneven spacing (one-sided at the ends).
+    """
+    return np.gradient(x, t, axis=0, edge_order=2)
+
+
+def trim_standstill(rec: Recording, speed: float = 0.01, margin: float = 0.5) -> Recording:
+    """Drop standstill at both ends: keep from ``margin`` [s] before the first sample with
+    any |qd| > ``speed`` [rad/s] to ``margin`` after the last one. A recording that never
+    moves is returned unchanged (with a note)."""
+    moving = np.flatnonzero(np.any(np.abs(rec.qd) > speed, axis=1))
+    if moving.size == 0:
+        out = rec.select(slice(None))
+        out.notes.append(f"{rec.source}: no motion above {speed:g} rad/s; nothing trimmed")
+        return out
+    t0 = rec.t[moving[0]] - margin
+    t1 = rec.t[moving[-1]] + margin
+    keep = (rec.t >= t0) & (rec.t <= t1)
+    out = rec.select(keep)
+    out.notes.append(
+        f"{rec.source}: trimmed standstill, kept {out.t[0]:.3f}-{out.t[-1]:.3f} s "
+        f"(rows {out.rows[0]}-{out.rows[-1]})"
+    )
+    _check_length(out, "after trimming")
+    return out
+
+
+def decimate(rec: Recording, factor: int) -> Recording:
+    """Every ``factor``-th sample. Low-pass first (below the new Nyquist rate): this does not."""
+    if factor < 1:
+        raise UserError(f"{rec.source}: decimation factor must be >= 1, got {factor}")
+    if factor == 1:
+        return rec
+    out = rec.select(slice(None, None, factor))
+    _check_length(out, f"after decimation by {factor}")
+    return out
+
+
+def _check_length(rec: Recording, when: str) -> None:
+    if rec.n_samples < MIN_SAMPLES:
+        raise UserError(
+            f"{rec.source}: too short {when}: {rec.n_samples} samples, at least {MIN_SAMPLES}"
+        )
+
+
+def condition(
+    rec: Recording,
+    cutoff_hz: float = 10.0,
+    *,
+    order: int = 4,
+    filter_torque: bool = True,
+    trim: bool = True,
+    trim_speed: float = 0.01,
+    trim_margin: float = 0.5,
+    decimation: int = 1,
+) -> Recording:
+    """Offline conditioning for identification (non-causal: never use it in replay).
+
+    Steps: trim standstill at the ends (optional), zero-phase low-pass of qd and (optional)
+    tau at ``cutoff_hz`` [Hz], qdd by central differences of the filtered qd on the real
+    time stamps, then keep every ``decimation``-th sample (the low-pass must then lie below
+    the new Nyquist rate, which is checked).
+    """
+    out = trim_standstill(rec, trim_speed, trim_margin) if trim else rec.select(slice(None))
+    fs = sample_rate(out.t)
+    if decimation > 1 and cutoff_hz >= 0.5 * fs / decimation:
+        raise UserError(
+            f"{rec.source}: cutoff {cutoff_hz:g} Hz is above the Nyquist rate "
+            f"{0.5 * fs / decimation:.3g} Hz after decimation by {decimation}"
+        )
+    out.qd = lowpass(out.qd, out.t, cutoff_hz, order, rec.source)
+    if filter_torque:
+        out.tau = lowpass(out.tau, out.t, cutoff_hz, order, rec.source)
+    out.qdd = differentiate(out.qd, out.t)
+    out.notes.append(
+        f"{rec.source}: zero-phase low-pass {cutoff_hz:g} Hz (order {order}) on qd"
+        + (" and tau" if filter_torque else "")
+    )
+    return decimate(out, decimation)

@@ -1,0 +1,107 @@
+"""Joint friction, eq. (12) of the paper, with optional smooth sign and Stribeck term.
+
+    f_j(qd) = Fc_j·s(qd_j) + Fv_j·qd_j + B_j + (Fs_j - Fc_j)·exp(-(qd_j / vs_j)²)·s(qd_j)
+
+with s = sign, or s(v) = tanh(v / v_s) when ``smooth_velocity`` v_s > 0 (the hard sign turns
+noise at standstill into a ±Fc square wave). All quantities per joint, joint side: Fc, Fs, B
+[N·m], Fv [N·m·s/rad], vs, v_s [rad/s].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hofto_hw.config.models import FrictionConfig
+
+
+@dataclass
+class FrictionParams:
+    """Per-joint friction coefficients, arrays of shape (n,)."""
+
+    coulomb: np.ndarray
+    viscous: np.ndarray
+    bias: np.ndarray
+    stribeck_static: np.ndarray | None = None
+    stribeck_velocity: np.ndarray | None = None
+    smooth_velocity: float = 0.0
+    _scratch: np.ndarray = field(init=False, repr=False)
+    _scratch2: np.ndarray = field(init=False, repr=False)
+    _stribeck_gap: np.ndarray | None = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        n = self.coulomb.shape[0]
+        for name in ("coulomb", "viscous", "bias", "stribeck_static", "stribeck_velocity"):
+            value = getattr(self, name)
+            if value is not None:
+                arr = np.array(value, dtype=float).reshape(-1)
+                if arr.shape != (n,):
+                    raise ValueError(f"friction.{name} has {arr.size} entries, expected {n}")
+                setattr(self, name, arr)
+        if (self.stribeck_static is None) != (self.stribeck_velocity is None):
+            raise ValueError("give both stribeck_static and stribeck_velocity, or neither")
+        self._scratch = np.zeros(n)
+        self._scratch2 = np.zeros(n)
+        self._stribeck_gap = (
+            None if self.stribeck_static is None else self.stribeck_static - self.coulomb
+        )
+
+    @classmethod
+    def zeros(cls, n: int) -> FrictionParams:
+        """No friction on ``n`` joints."""
+        return cls(np.zeros(n), np.zeros(n), np.zeros(n))
+
+    @classmethod
+    def from_config(cls, cfg: FrictionConfig | None, n: int) -> FrictionParams:
+        """Build from the YAML section (None = frictionless)."""
+        if cfg is None:
+            return cls.zeros(n)
+        return cls(
+            coulomb=np.array(cfg.coulomb, dtype=float),
+            viscous=np.array(cfg.viscous, dtype=float),
+            bias=np.zeros(n) if cfg.bias is None else np.array(cfg.bias, dtype=float),
+            stribeck_static=None
+            if cfg.stribeck_static is None
+            else np.array(cfg.stribeck_static, dtype=float),
+            stribeck_velocity=None
+            if cfg.stribeck_velocity is None
+            else np.array(cfg.stribeck_velocity, dtype=float),
+            smooth_velocity=cfg.smooth_velocity,
+        )
+
+    def copy(self) -> FrictionParams:
+        return FrictionParams(
+            self.coulomb.copy(),
+            self.viscous.copy(),
+            self.bias.copy(),
+            None if self.stribeck_static is None else self.stribeck_static.copy(),
+            None if self.stribeck_velocity is None else self.stribeck_velocity.copy(),
+            self.smooth_velocity,
+        )
+
+    def torque(self, qd: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Friction torque [N·m] for joint velocity ``qd`` [rad/s], written into ``out`` (n,).
+
+        Allocation-free: uses two preallocated scratch arrays.
+        """
+        s = self._scratch
+        if self.smooth_velocity > 0.0:
+            np.divide(qd, self.smooth_velocity, out=s)
+            np.tanh(s, out=s)
+        else:
+            np.sign(qd, out=s)
+        np.multiply(self.coulomb, s, out=out)
+        if self._stribeck_gap is not None:
+            t = self._scratch2
+            np.divide(qd, self.stribeck_velocity, out=t)
+            np.square(t, out=t)
+            np.negative(t, out=t)
+            np.exp(t, out=t)
+            np.multiply(t, s, out=t)
+            np.multiply(t, self._stribeck_gap, out=t)
+            np.add(out, t, out=out)
+        np.multiply(self.viscous, qd, out=s)
+        np.add(out, s, out=out)
+        np.add(out, self.bias, out=out)
+        return out

@@ -1,0 +1,351 @@
+"""The identified-parameters file: written by ``hofto-hw identify``, read by RobotModel.
+
+Format (YAML, UTF-8; ``version`` 1). All values SI at the joint side.
+
+.. code-block:: yaml
+
+    format: hofto-hw/parameters
+    version: 1
+    robot: ur10e                 # must equal robot.name of the config that loads it
+    urdf: ur10e.urdf             # file name, informational
+    urdf_sha256: 3f9a...         # sha256 of the URDF bytes; a different URDF is refused
+    joints: [shoulder_pan_joint, ...]         # n names, kinematic order
+    gravity: [0.0, 0.0, -9.81]   # [m/s²] used during identification
+    created: '2026-11-21T10:00:00+00:00'
+    method: consistent           # ols | wls | consistent (physically consistent SDP)
+    sources: [ur-20_02_10-30sec_12harm.csv]   # recordings it was fitted on
+    model:                       # what the loop runs on (pinocchio + rotor + friction)
+      inertial:                  # n rows of 10: m [kg], mx, my, mz [kg·m], Ixx, Ixy,
+        - [m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]  # Iyy, Ixz, Iyz, Izz [kg·m²]
+      rotor_inertia: [...]       # n values [kg·m²]
+      friction:
+        coulomb: [...]           # Fc [N·m]
+        viscous: [...]           # Fv [N·m·s/rad]
+        bias: [...]              # B [N·m]
+        smooth_velocity: 0.02    # v_s [rad/s]: sign(qd) ~ tanh(qd / v_s); 0 = hard sign
+    base:                        # eq. (14): mu = K·theta_s (the model above reproduces mu)
+      count: 58
+      parameters:
+        - name: shoulder_pan_joint.Izz     # the standard parameter it is built on
+          value: 1.23                      # identified mu_i (from the chosen method)
+          std: 0.01                        # standard deviation (OLS/WLS), null if unknown
+          relative_std_percent: 0.8
+          definition: {shoulder_pan_joint.Izz: 1.0, shoulder_lift_joint.m: 0.031, ...}
+    fit:                         # statistics on the identification data
+      samples: 5000
+      condition_number: 85.2
+      rmse: [...]                # per joint [N·m]
+      relative_rmse_percent: [...]   # 100·||e_j|| / ||tau_j||
+      residual_std: [...]        # per joint [N·m] (WLS weights)
+
+Standard parameter names are ``<joint>.<p>`` with p in m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz,
+Izz, Ia, Fc, Fv, B (see ``hofto_hw.identify.regressor``).
+
+:func:`apply_parameters_file` checks robot name, joint names and URDF hash, sets the link
+inertial parameters, rotor inertia and friction, and refuses (restoring the previous values) a
+model whose M(q) is not symmetric positive definite over a sample of the workspace.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from hofto_hw.errors import ModelError
+from hofto_hw.model.friction import FrictionParams
+
+FORMAT = "hofto-hw/parameters"
+VERSION = 1
+N_INERTIAL = 10
+
+
+@dataclass
+class BaseParameterEntry:
+    """One base parameter: its name, value, std (None if unknown) and definition."""
+
+    name: str
+    value: float
+    std: float | None
+    definition: dict[str, float]
+
+    @property
+    def relative_std_percent(self) -> float | None:
+        if self.std is None or self.value == 0.0:
+            return None
+        return 100.0 * self.std / abs(self.value)
+
+
+@dataclass
+class ParametersFile:
+    """In-memory form of the file; arrays: inertial (n, 10), the rest (n,)."""
+
+    robot: str
+    joints: list[str]
+    urdf_sha256: str
+    inertial: np.ndarray
+    rotor_inertia: np.ndarray
+    coulomb: np.ndarray
+    viscous: np.ndarray
+    bias: np.ndarray
+    smooth_velocity: float = 0.0
+    urdf: str = ""
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    created: str = ""
+    method: str = ""
+    sources: list[str] = field(default_factory=list)
+    base: list[BaseParameterEntry] = field(default_factory=list)
+    fit: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return len(self.joints)
+
+    def friction(self) -> FrictionParams:
+        """The friction model (no Stribeck term)."""
+        return FrictionParams(
+            self.coulomb.copy(),
+            self.viscous.copy(),
+            self.bias.copy(),
+            smooth_velocity=self.smooth_velocity,
+        )
+
+    def base_values(self) -> np.ndarray:
+        """The identified base parameters mu, shape (p,)."""
+        return np.array([b.value for b in self.base], dtype=float)
+
+
+def urdf_sha256(path: str | Path) -> str:
+    """sha256 (hex) of a URDF file's bytes."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def _floats(values: np.ndarray) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=float).reshape(-1)]
+
+
+def to_dict(pf: ParametersFile) -> dict[str, Any]:
+    """The YAML mapping of ``pf`` (plain Python types)."""
+    base = []
+    for b in pf.base:
+        rel = b.relative_std_percent
+        base.append(
+            {
+                "name": b.name,
+                "value": float(b.value),
+                "std": None if b.std is None else float(b.std),
+                "relative_std_percent": None if rel is None else float(rel),
+                "definition": {k: float(v) for k, v in b.definition.items()},
+            }
+        )
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "robot": pf.robot,
+        "urdf": pf.urdf,
+        "urdf_sha256": pf.urdf_sha256,
+        "joints": list(pf.joints),
+        "gravity": [float(g) for g in pf.gravity],
+        "created": pf.created,
+        "method": pf.method,
+        "sources": list(pf.sources),
+        "model": {
+            "inertial": [_floats(row) for row in pf.inertial],
+            "rotor_inertia": _floats(pf.rotor_inertia),
+            "friction": {
+                "coulomb": _floats(pf.coulomb),
+                "viscous": _floats(pf.viscous),
+                "bias": _floats(pf.bias),
+                "smooth_velocity": float(pf.smooth_velocity),
+            },
+        },
+        "base": {"count": len(base), "parameters": base},
+        "fit": _plain(pf.fit),
+    }
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, np.floating | np.integer):
+        return obj.item()
+    return obj
+
+
+def write_parameters(path: str | Path, pf: ParametersFile) -> None:
+    """Write ``pf`` as YAML to ``path``."""
+    text = "# Identified dynamic parameters (hofto-hw identify); format in hofto_hw/model/parameters.py\n"
+    text += yaml.safe_dump(to_dict(pf), sort_keys=False, default_flow_style=None, width=100)
+    Path(path).write_text(text)
+
+
+class _Reader:
+    """Pulls typed fields out of the parsed mapping with errors that name file and field."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, where: str, msg: str) -> ModelError:
+        return ModelError(f"{self.source}: {where}: {msg}")
+
+    def get(self, d: Any, key: str, where: str) -> Any:
+        if not isinstance(d, dict) or key not in d:
+            return self._missing(f"{where}{key}")
+        return d[key]
+
+    def _missing(self, where: str) -> Any:
+        raise self.fail(where, "missing")
+
+    def array(self, value: Any, where: str, shape: tuple[int, ...]) -> np.ndarray:
+        try:
+            arr = np.array(value, dtype=float)
+        except (TypeError, ValueError):
+            raise self.fail(where, f"expected numbers, got {value!r:.60}") from None
+        if arr.shape != shape:
+            raise self.fail(where, f"expected shape {shape}, got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise self.fail(where, "contains NaN or inf")
+        return arr
+
+
+def read_parameters(path: str | Path) -> ParametersFile:
+    """Read and check a parameters file. Raises ModelError naming the file and field."""
+    path = Path(path)
+    src = str(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ModelError(f"{src}: parameters file not found") from None
+    except OSError as exc:
+        raise ModelError(f"{src}: cannot read parameters file: {exc.strerror}") from None
+    except yaml.YAMLError as exc:
+        raise ModelError(f"{src}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
+    r = _Reader(src)
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise ModelError(f"{src}: not a hofto-hw parameters file (format: {FORMAT} missing)")
+    version = data.get("version")
+    if version != VERSION:
+        raise ModelError(f"{src}: version: {version!r} is not supported (expected {VERSION})")
+    joints = r.get(data, "joints", "")
+    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
+        raise r.fail("joints", "expected a list of joint names")
+    n = len(joints)
+    model = r.get(data, "model", "")
+    fr = r.get(model, "friction", "model.")
+    gravity = r.array(data.get("gravity", [0.0, 0.0, -9.81]), "gravity", (3,))
+    base_entries = []
+    base = data.get("base") or {}
+    for i, b in enumerate(base.get("parameters") or []):
+        where = f"base.parameters[{i}]"
+        if not isinstance(b, dict) or "name" not in b or "value" not in b:
+            raise r.fail(where, "expected a mapping with name and value")
+        definition = b.get("definition") or {}
+        if not isinstance(definition, dict):
+            raise r.fail(f"{where}.definition", "expected a mapping name -> coefficient")
+        std = b.get("std")
+        base_entries.append(
+            BaseParameterEntry(
+                str(b["name"]),
+                float(b["value"]),
+                None if std is None else float(std),
+                {str(k): float(v) for k, v in definition.items()},
+            )
+        )
+    robot = r.get(data, "robot", "")
+    sha = r.get(data, "urdf_sha256", "")
+    return ParametersFile(
+        robot=str(robot),
+        joints=[str(j) for j in joints],
+        urdf_sha256=str(sha),
+        inertial=r.array(r.get(model, "inertial", "model."), "model.inertial", (n, N_INERTIAL)),
+        rotor_inertia=r.array(
+            r.get(model, "rotor_inertia", "model."), "model.rotor_inertia", (n,)
+        ),
+        coulomb=r.array(r.get(fr, "coulomb", "model.friction."), "model.friction.coulomb", (n,)),
+        viscous=r.array(r.get(fr, "viscous", "model.friction."), "model.friction.viscous", (n,)),
+        bias=r.array(r.get(fr, "bias", "model.friction."), "model.friction.bias", (n,)),
+        smooth_velocity=float(fr.get("smooth_velocity", 0.0) or 0.0),
+        urdf=str(data.get("urdf", "")),
+        gravity=(float(gravity[0]), float(gravity[1]), float(gravity[2])),
+        created=str(data.get("created", "")),
+        method=str(data.get("method", "")),
+        sources=[str(s) for s in data.get("sources") or []],
+        base=base_entries,
+        fit=dict(data.get("fit") or {}),
+    )
+
+
+def workspace_samples(model: Any, n_samples: int, seed: int = 0) -> np.ndarray:
+    """Random configurations inside the joint limits (infinite limits -> ±pi), (N, n) [rad]."""
+    rng = np.random.default_rng(seed)
+    lo = np.maximum(np.asarray(model.limits.position_lower, dtype=float), -np.pi)
+    hi = np.minimum(np.asarray(model.limits.position_upper, dtype=float), np.pi)
+    bad = ~(hi > lo)
+    lo[bad], hi[bad] = -np.pi, np.pi
+    return rng.uniform(lo, hi, (n_samples, model.n))
+
+
+def check_mass_matrix(model: Any, n_samples: int = 200, seed: int = 0) -> None:
+    """Raise ModelError unless M(q) is symmetric positive definite at ``n_samples`` random
+    configurations of the workspace."""
+    for q in workspace_samples(model, n_samples, seed):
+        M = np.array(model.mass_matrix(q))
+        if not np.all(np.isfinite(M)) or not np.allclose(M, M.T, rtol=1e-9, atol=1e-12):
+            raise ModelError(f"{model.name}: M(q) is not symmetric at q = {np.round(q, 3)}")
+        eig = np.linalg.eigvalsh(M)
+        if eig[0] <= 1e-9 * max(eig[-1], 1e-12):
+            raise ModelError(
+                f"{model.name}: M(q) is not positive definite at q = {np.round(q, 3).tolist()} "
+                f"(smallest eigenvalue {eig[0]:.3g}); the parameters are not physical"
+            )
+
+
+def check_compatible(pf: ParametersFile, model: Any, source: str) -> None:
+    """Raise ModelError if ``pf`` was identified for another robot, joint set or URDF."""
+    if pf.robot != model.name:
+        raise ModelError(
+            f"{source}: parameters are for robot {pf.robot!r}, but the model is {model.name!r}"
+        )
+    if list(pf.joints) != list(model.joint_names):
+        raise ModelError(
+            f"{source}: joints {pf.joints} do not match the model's {model.joint_names}"
+        )
+    urdf_path = getattr(model, "urdf_path", None)
+    if urdf_path is not None and pf.urdf_sha256:
+        actual = urdf_sha256(urdf_path)
+        if actual != pf.urdf_sha256:
+            raise ModelError(
+                f"{source}: identified for a different URDF (urdf_sha256 {pf.urdf_sha256[:12]}…, "
+                f"but {Path(urdf_path).name} hashes to {actual[:12]}…); re-identify for this URDF"
+            )
+
+
+def apply_parameters(model: Any, pf: ParametersFile, source: str = "<parameters>") -> None:
+    """Put ``pf`` into ``model`` (a RobotModel); on a failed M(q) check restore the old values."""
+    check_compatible(pf, model, source)
+    old = (model.inertial_parameters(), model.rotor_inertia, model.friction)
+    try:
+        model.set_inertial_parameters(pf.inertial.reshape(-1))
+        model.rotor_inertia = pf.rotor_inertia
+        model.friction = pf.friction()
+        check_mass_matrix(model)
+    except ModelError as exc:
+        model.set_inertial_parameters(old[0])
+        model.rotor_inertia = old[1]
+        model.friction = old[2]
+        raise ModelError(f"{source}: {exc}") from None
+
+
+def apply_parameters_file(model: Any, path: str | Path) -> ParametersFile:
+    """Read ``path`` and apply it to ``model``; returns the file's content."""
+    pf = read_parameters(path)
+    apply_parameters(model, pf, str(path))
+    return pf
