@@ -96,7 +96,7 @@ def _add_component(
         )
     elif c.kind == "sine":
         tau += _vec(c.amplitude, n) * np.sin(
-            2.0 * math.pi * _vec(c.frequency, n) * t + _vec(c.phase, n)
+            2.0 * math.pi * _vec(c.frequency, n) * tau_rel + _vec(c.phase, n)
         )
     elif c.kind == "chirp":
         assert c.duration is not None

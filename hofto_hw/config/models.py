@@ -14,6 +14,9 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from hofto_hw.config.collision import CollisionConfig
+from hofto_hw.config.drives import BusConfig
+
 PositiveFloat = Annotated[float, Field(gt=0.0)]
 NonNegFloat = Annotated[float, Field(ge=0.0)]
 
@@ -131,6 +134,7 @@ class EsoConfig(_Strict):
     k1: list[PositiveFloat]
     k2: list[PositiveFloat]
     k3: list[PositiveFloat]
+    substeps: int = Field(1, ge=1, le=100, description="explicit-Euler substeps per tick")
 
 
 class DobConfig(_Strict):
@@ -157,6 +161,7 @@ class StaConfig(_Strict):
     l1: list[PositiveFloat]
     l2: list[PositiveFloat]
     l3: list[PositiveFloat]
+    substeps: int = Field(1, ge=1, le=100, description="explicit-Euler substeps per tick")
 
 
 class HoftoConfig(_Strict):
@@ -220,7 +225,7 @@ class ExternalTorqueConfig(_Strict):
     - ``constant``: amplitude per joint [N·m];
     - ``ramp``: amplitude + slope·(t - start) [N·m, N·m/s];
     - ``parabola``: amplitude + slope·τ + curvature·τ², τ = t - start;
-    - ``sine``: amplitude·sin(2π·frequency·t + phase);
+    - ``sine``: amplitude·sin(2π·frequency·τ + phase), τ = t - start (phase 0 starts smoothly);
     - ``chirp``: amplitude·sin(phase(t)), frequency sweeping linearly from ``frequency`` to
       ``frequency_end`` over ``duration``;
     - ``contact``: stiff spring-damper wall on the Cartesian position of ``frame`` (see
@@ -279,6 +284,8 @@ class SystemConfig(_Strict):
     loop: LoopConfig = Field(default_factory=LoopConfig)
     observers: dict[str, ObserverConfig] = Field(default_factory=dict)
     simulation: SimulationConfig | None = None
+    collision: CollisionConfig | None = None
+    bus: BusConfig | None = None
 
     @field_validator("observers")
     @classmethod
@@ -304,6 +311,8 @@ class SystemConfig(_Strict):
             elif isinstance(obs, HoftoConfig):
                 rows = [(f"gains[{i}]", g) for i, g in enumerate(obs.gains)]
             _check_lengths([(f"observers.{name}.{k}", v) for k, v in rows], n)
+        if self.bus is not None:
+            _check_lengths([("bus.drives", self.bus.drives)], n)
         if self.simulation is not None:
             s = self.simulation
             _check_lengths([("simulation.encoder_counts_per_rev", s.encoder_counts_per_rev)], n)

@@ -1,0 +1,34 @@
+"""``hofto-hw config schema`` and ``hofto-hw config check FILE``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    sub.add_parser("schema", help="print the JSON schema of the config files")
+    check = sub.add_parser("check", help="validate config files (and their URDFs)")
+    check.add_argument("files", type=Path, nargs="+", metavar="FILE")
+
+
+def run(args: argparse.Namespace) -> int:
+    from hofto_hw.config import json_schema, load_config
+
+    if args.action == "schema":
+        print(json_schema())
+        return 0
+    from hofto_hw.model import RobotModel
+    from hofto_hw.observers import make_observer
+
+    for path in args.files:
+        cfg = load_config(path)
+        model = RobotModel.from_config(cfg.robot)  # URDF, joints and tool frame exist
+        for obs in cfg.observers.values():
+            make_observer(obs, model)
+        print(
+            f"{path}: ok ({cfg.robot.name}, {model.n} joints, "
+            f"{len(cfg.observers)} observers, loop {cfg.loop.rate_hz:g} Hz)"
+        )
+    return 0

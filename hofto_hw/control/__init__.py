@@ -1,0 +1,1 @@
+"""Control: joint trajectories and the joint-space tracking controller used by the demo."""

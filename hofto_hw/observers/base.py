@@ -1,0 +1,62 @@
+"""What every observer shares: the interface and the model terms of eq. (3)-(4).
+
+All observers estimate tau_ext in eq. (1), M(q)·qdd + C(q,qd)·qd + g(q) + f(qd) = tau + tau_ext,
+from measured q [rad], qd [rad/s] and motor torque tau [N·m] (arrays of shape (n,)). They
+never read the bus and never decide to stop: safety/ does.
+
+``update`` returns a view of the observer's own output buffer (valid until the next update);
+copy it to keep it. Updates allocate nothing.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from hofto_hw.model.robot import RobotModel
+
+
+class Observer(Protocol):
+    """External-torque observer."""
+
+    name: str
+    n: int
+
+    def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        """Start from the arm at (q, qd) with no external torque."""
+        ...
+
+    def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        """Advance by dt [s] with the newest samples; return tau_ext_hat [N·m], shape (n,)."""
+        ...
+
+
+class ModelTerms:
+    """Model quantities of eq. (3)-(4), evaluated once per tick into preallocated buffers.
+
+    - :meth:`acceleration`: M(q)⁻¹·tau + F(q, qd) = M⁻¹·(tau - C·qd - g - f), the joint
+      acceleration the model predicts without contact [rad/s²] (pinocchio ABA, one call);
+    - :meth:`torque`: M(q)·x [N·m] for an acceleration-like x (eq. (5)/(17): tau_hat = M·z3).
+    """
+
+    def __init__(self, model: RobotModel) -> None:
+        self.model = model
+        self.accel = np.zeros(model.n)
+        self.out = np.zeros(model.n)
+
+    def acceleration(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        return self.model.forward_dynamics(q, qd, tau, out=self.accel)
+
+    def torque(self, q: np.ndarray, x: np.ndarray) -> np.ndarray:
+        return np.dot(self.model.mass_matrix(q), x, out=self.out)
+
+
+def per_joint(values: list[float] | np.ndarray, n: int, what: str) -> np.ndarray:
+    """Gains as a float array of shape (n,), with a clear error otherwise."""
+    arr = np.asarray(values, dtype=float).reshape(-1)
+    if arr.shape != (n,):
+        raise ValueError(f"{what}: expected {n} per-joint values, got {arr.size}")
+    if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+        raise ValueError(f"{what}: gains must be finite and > 0, got {arr.tolist()}")
+    return arr

@@ -1,0 +1,52 @@
+"""Direct estimation, eq. (2): tau_ext_hat = M(q)·qdd + C·qd + g + f - tau.
+
+qdd is not measured: it is the backward difference of measured velocity, (qd_k - qd_{k-1})/dt,
+optionally through a first-order low-pass of cutoff ``accel_filter_hz`` (discretised with
+alpha = dt / (dt + 1/(2π·fc))). The difference amplifies noise (the paper's point); the filter
+trades it for delay.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hofto_hw.model.robot import RobotModel
+
+
+class DirectObserver:
+    name = "direct"
+
+    def __init__(self, model: RobotModel, accel_filter_hz: float | None = None) -> None:
+        self.model = model
+        self.n = model.n
+        self.accel_filter_hz = accel_filter_hz
+        self._qd_prev = np.zeros(self.n)
+        self._qdd = np.zeros(self.n)
+        self._raw = np.zeros(self.n)
+        self._out = np.zeros(self.n)
+        self._started = False
+
+    def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        np.copyto(self._qd_prev, qd)
+        self._qdd.fill(0.0)
+        self._started = True
+
+    def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        if not self._started:
+            self.reset(q, qd)
+        raw = self._raw
+        np.subtract(qd, self._qd_prev, out=raw)
+        np.divide(raw, dt, out=raw)
+        np.copyto(self._qd_prev, qd)
+        if self.accel_filter_hz is None:
+            np.copyto(self._qdd, raw)
+        else:
+            alpha = dt / (dt + 1.0 / (2.0 * math.pi * self.accel_filter_hz))
+            np.subtract(raw, self._qdd, out=raw)
+            np.multiply(raw, alpha, out=raw)
+            np.add(self._qdd, raw, out=self._qdd)
+        out = self.model.inverse_dynamics(q, qd, self._qdd, out=self._out)
+        np.subtract(out, tau, out=out)
+        return out

@@ -1,0 +1,194 @@
+"""High-order finite-time observer (HOFTO), eq. (17) of the paper, of any order n >= 1.
+
+States per joint: z1 ≈ q, z2 ≈ qd, z3 ≈ x3 = M⁻¹·tau_ext, z4 ≈ x3', ..., z_{n+2} ≈ x3^(n-1);
+the estimate is tau_ext_hat = M(q)·z3. With a(q, qd, tau) = M⁻¹·tau + F(q, qd) (eq. (4)) and
+stage powers p_1..p_{n+2} (eq. (17): p_i = m_{i+1} = 1 + i·sigma), two gain conventions:
+
+``eq17`` — every stage driven by e1 = q - z1, exactly as printed:
+    z1' = z2 + L1·sig^p1(e1)
+    z2' = a + z3 + L2·sig^p2(e1)
+    z_i' = z_{i+1} + L_i·sig^p_i(e1)        (3 <= i <= n+1)
+    z_{n+2}' = L_{n+2}·sig^p_{n+2}(e1)
+
+``recursive`` — Levant's nested (recursive) differentiator, each stage driven by the
+difference to the previous stage's output, the convention of the paper's Section IV gains:
+    v1 = z2 - L1·sig^p1(z1 - q);            z1' = v1
+    v2 = z3 - L2·sig^p2(z2 - v1);           z2' = a + v2
+    v_i = z_{i+1} - L_i·sig^p_i(z_i - v_{i-1});   z_i' = v_i   (3 <= i <= n+1)
+    z_{n+2}' = -L_{n+2}·sig^p_{n+2}(z_{n+2} - v_{n+1})
+Putting the paper's numbers into eq17 literally gives an unstable linearisation
+(s⁴ + 22.36 s³ + 22.10 s² + 30 s + 440 has roots with positive real part); in the recursive
+form they are stable (see docs/observers.md).
+
+sig^p(x) = |x|^p·sign(x); p = 0 is sign(), p = 1 is linear (Remark 7's ESO/STA cases).
+
+Discretisation: explicit (forward) Euler at the sampling instants (``substeps`` = 1, the
+default) — Levant's discrete differentiator, whose accuracy the theory gives for sampled
+signals. With ``substeps`` > 1 the measured q is interpolated linearly between samples
+(first-order hold) and the model acceleration a is held. Measured on a unit double
+integrator at 1 kHz with the paper's gains (x3 = 5·sin 2πt): RMS error 0.044 with one
+step, 0.025-0.06 with 2-10 FOH substeps, but 0.71 with 10 zero-order-hold substeps (the
+observer then differentiates the staircase). So one step per tick is both the cheapest and
+as accurate as any; see docs/observers.md. No allocation in a step.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from hofto_hw.model.robot import RobotModel
+from hofto_hw.observers.base import ModelTerms
+
+Form = Literal["eq17", "recursive"]
+
+
+def sigma_powers(order: int, sigma: float) -> np.ndarray:
+    """Stage powers m_2..m_{n+3} = 1 + i·sigma (i = 1..n+2) of eq. (17), shape (n+2,)."""
+    if not -1.0 / (order + 2) < sigma < 0.0:
+        raise ValueError(f"sigma must be in (-1/(n+2), 0) = ({-1.0 / (order + 2):.4f}, 0)")
+    return 1.0 + sigma * np.arange(1, order + 3, dtype=float)
+
+
+def first_order_hold(y_prev: np.ndarray, y: np.ndarray, substeps: int, out: np.ndarray) -> None:
+    """Per-substep increment of a linear interpolation from y_prev to y: (y - y_prev)/substeps."""
+    np.subtract(y, y_prev, out=out)
+    np.divide(out, substeps, out=out)
+
+
+class HoftoCore:
+    """The observer dynamics without the robot model, for ``joints`` independent channels.
+
+    ``gains`` shape (n+2, joints), ``powers`` shape (n+2,). :meth:`step` takes the measured
+    position y and the model acceleration a (both shape (joints,)) and advances dt seconds.
+    """
+
+    def __init__(
+        self,
+        gains: np.ndarray,
+        powers: np.ndarray,
+        form: Form = "recursive",
+        substeps: int = 1,
+    ) -> None:
+        gains = np.asarray(gains, dtype=float)
+        powers = np.asarray(powers, dtype=float).reshape(-1)
+        if gains.ndim != 2 or gains.shape[0] < 3:
+            raise ValueError("gains must have shape (n+2, joints) with n >= 1")
+        if powers.shape != (gains.shape[0],):
+            raise ValueError(f"powers must have {gains.shape[0]} entries, got {powers.size}")
+        if np.any(gains <= 0) or not np.all(np.isfinite(gains)):
+            raise ValueError("gains must be finite and > 0")
+        if np.any(powers < 0) or np.any(powers > 1):
+            raise ValueError("powers must lie in [0, 1]")
+        if form not in ("eq17", "recursive"):
+            raise ValueError(f"form must be 'eq17' or 'recursive', got {form!r}")
+        if substeps < 1:
+            raise ValueError("substeps must be >= 1")
+        self.stages, self.joints = gains.shape
+        self.order = self.stages - 2
+        self.gains = gains.copy()
+        self.powers = powers.copy()
+        self.form = form
+        self.substeps = int(substeps)
+        s, j = self.stages, self.joints
+        self.z = np.zeros((s, j))
+        self._dz = np.zeros((s, j))
+        self._p = np.zeros((s, j))
+        self._pow_col = self.powers.reshape(s, 1).copy()
+        self._e = np.zeros(j)
+        self._abs = np.zeros(j)
+        self._d = np.zeros(j)
+        self._t = np.zeros(j)
+        self._v = np.zeros((s, j))
+        self._y_prev = np.zeros(j)
+        self._y_sub = np.zeros(j)
+        self._dy = np.zeros(j)
+
+    def reset(self, y: np.ndarray, yd: np.ndarray | None = None) -> None:
+        """z1 = y, z2 = yd (or 0), higher states 0."""
+        self.z.fill(0.0)
+        self.z[0] = y
+        np.copyto(self._y_prev, y)
+        if yd is not None:
+            self.z[1] = yd
+
+    def step(self, y: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
+        """Advance ``dt`` [s]; returns z3 (a view), the x3 estimate."""
+        h = dt / self.substeps
+        substep = self._substep_eq17 if self.form == "eq17" else self._substep_recursive
+        if self.substeps == 1:
+            substep(y, a, h)
+        else:
+            first_order_hold(self._y_prev, y, self.substeps, self._dy)
+            np.copyto(self._y_sub, self._y_prev)
+            for _ in range(self.substeps):
+                np.add(self._y_sub, self._dy, out=self._y_sub)
+                substep(self._y_sub, a, h)
+        np.copyto(self._y_prev, y)
+        return self.z[2]
+
+    def _substep_eq17(self, y: np.ndarray, a: np.ndarray, h: float) -> None:
+        z, dz, p = self.z, self._dz, self._p
+        e = self._e
+        np.subtract(y, z[0], out=e)
+        np.abs(e, out=self._abs)
+        np.power(self._abs, self._pow_col, out=p)  # (s, j): |e1|^p_i per stage
+        np.copysign(p, e, out=p)  # sig^p_i(e1)
+        np.multiply(p, self.gains, out=p)
+        dz[:-1] = z[1:]
+        dz[-1] = 0.0
+        np.add(dz[1], a, out=dz[1])
+        np.add(dz, p, out=dz)
+        np.multiply(dz, h, out=dz)
+        np.add(z, dz, out=z)
+
+    def _substep_recursive(self, y: np.ndarray, a: np.ndarray, h: float) -> None:
+        z, v, d, t = self.z, self._v, self._d, self._t
+        last = self.stages - 1
+        prev = y
+        for i in range(self.stages):
+            np.subtract(z[i], prev, out=d)
+            np.abs(d, out=t)
+            np.power(t, self.powers[i], out=t)
+            np.copysign(t, d, out=t)
+            np.multiply(t, self.gains[i], out=t)
+            if i < last:
+                np.subtract(z[i + 1], t, out=v[i])  # v_{i+1} = z_{i+2} - L·sig(z_{i+1} - v_i)
+                prev = v[i]
+            else:
+                np.negative(t, out=v[i])
+        np.add(v[1], a, out=v[1])
+        np.multiply(v, h, out=v)
+        np.add(z, v, out=z)
+
+
+class HoftoObserver:
+    """HOFTO on a robot: tau_ext_hat = M(q)·z3 (eq. (17))."""
+
+    name = "hofto"
+
+    def __init__(
+        self,
+        model: RobotModel,
+        gains: np.ndarray,
+        powers: np.ndarray,
+        form: Form = "recursive",
+        substeps: int = 1,
+    ) -> None:
+        gains = np.asarray(gains, dtype=float)
+        if gains.ndim != 2 or gains.shape[1] != model.n:
+            raise ValueError(f"gains must have shape (n+2, {model.n}), got {gains.shape}")
+        self.model = model
+        self.n = model.n
+        self.core = HoftoCore(gains, powers, form, substeps)
+        self.order = self.core.order
+        self.terms = ModelTerms(model)
+
+    def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.core.reset(q, qd)
+
+    def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        a = self.terms.acceleration(q, qd, tau)
+        z3 = self.core.step(q, a, dt)
+        return self.terms.torque(q, z3)
