@@ -183,7 +183,10 @@ class HoftoConfig(_Strict):
     sigma: float | None = None
     powers: list[Annotated[float, Field(ge=0.0, le=1.0)]] | None = None
     gains: list[list[PositiveFloat]] = Field(description="n + 2 rows of per-joint gains L_i")
-    substeps: int = Field(1, ge=1, le=100, description="explicit-Euler substeps per tick")
+    substeps: int = Field(1, ge=1, le=100, description="integration substeps per tick")
+    discretisation: Literal["taylor", "euler"] = Field(
+        "taylor", description="taylor: exact on polynomial signals; euler: plain forward Euler"
+    )
 
     @model_validator(mode="after")
     def _check(self) -> HoftoConfig:

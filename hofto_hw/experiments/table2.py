@@ -144,7 +144,9 @@ def hofto_bandwidth(cfg: HoftoConfig, amplitude: np.ndarray, dt: float) -> np.nd
         col = gains[:, j : j + 1]
 
         def factory(channels: int, col: np.ndarray = col) -> HoftoCore:
-            return HoftoCore(np.tile(col, (1, channels)), powers, cfg.form, cfg.substeps)
+            return HoftoCore(
+                np.tile(col, (1, channels)), powers, cfg.form, cfg.substeps, cfg.discretisation
+            )
 
         g = first_harmonic_gain(factory, float(amplitude[j]), freqs, dt=dt)
         out[j] = bandwidth_3db(freqs, g)

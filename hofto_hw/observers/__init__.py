@@ -39,6 +39,7 @@ def make_observer(cfg: ObserverConfig, model: RobotModel) -> Observer:
             np.array(cfg.stage_powers(), dtype=float),
             cfg.form,
             cfg.substeps,
+            cfg.discretisation,
         )
     if isinstance(cfg, EsoConfig):
         return EsoObserver(model, cfg.k1, cfg.k2, cfg.k3, cfg.substeps)
