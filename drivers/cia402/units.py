@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -49,6 +50,19 @@ class AxisScaling:
     rated_torque: float = 1000.0
     rated_current: float = 1000.0
     torque_constant: float = 1.0
+
+    @classmethod
+    def from_config(cls, d: Any) -> AxisScaling:
+        """From a :class:`hofto_hw.config.drives.DriveConfig` (or any object with its fields)."""
+        return cls(
+            counts_per_rev=int(d.counts_per_rev),
+            gear_ratio=float(d.gear_ratio),
+            direction=int(d.direction),
+            zero_offset=int(d.zero_offset),
+            rated_torque=float(d.rated_torque),
+            rated_current=float(d.rated_current),
+            torque_constant=float(d.torque_constant),
+        )
 
     def __post_init__(self) -> None:
         if self.counts_per_rev <= 0:

@@ -25,7 +25,9 @@ from hofto_hw.model.friction import FrictionParams
 from hofto_hw.model.robot import RobotModel
 
 
-def perturbed_model(model: RobotModel, relative_error: float, rng: np.random.Generator) -> RobotModel:
+def perturbed_model(
+    model: RobotModel, relative_error: float, rng: np.random.Generator
+) -> RobotModel:
     """A copy of ``model`` whose links differ by about ``relative_error`` (1-sigma).
 
     Per link: mass scaled by (1 + e·u), centre of mass moved by e·(|c| + 1 cm)·u (per axis),

@@ -137,8 +137,7 @@ def _format_table(comp, title: str) -> str:
         for name in TABLE_OBSERVERS:
             idx = comp.indices[name]
             row = f"{name.upper():<14}" + "".join(
-                f"{idx['offset'][j]:9.4f}{idx['ma'][j]:10.4f}{idx['rms'][j]:10.4f}"
-                for j in joints
+                f"{idx['offset'][j]:9.4f}{idx['ma'][j]:10.4f}{idx['rms'][j]:10.4f}" for j in joints
             )
             lines.append(row)
         for other, key in (("eso", "hofto/eso"), ("dob", "hofto/dob")):
@@ -149,7 +148,9 @@ def _format_table(comp, title: str) -> str:
             )
             lines.append(row)
         lines.append("")
-    lines.append("ratios: ours, then the paper's Table II in parentheses; lower is better for HOFTO")
+    lines.append(
+        "ratios: ours, then the paper's Table II in parentheses; lower is better for HOFTO"
+    )
     return "\n".join(lines)
 
 
@@ -165,7 +166,13 @@ def _plot(samples, comp, path: Path) -> None:
     for j, ax in enumerate(axes.T.ravel()):
         ax.plot(samples.t, samples.tau_ext[:, j], color="tab:blue", lw=1.6, label="true")
         for name in TABLE_OBSERVERS:
-            ax.plot(samples.t, comp.estimates[name][:, j], color=colours[name], lw=0.9, label=name.upper())
+            ax.plot(
+                samples.t,
+                comp.estimates[name][:, j],
+                color=colours[name],
+                lw=0.9,
+                label=name.upper(),
+            )
         ax.set_title(f"({'abcdef'[j]}) joint {j + 1}")
         ax.set_ylabel("tau_ext [N·m]")
         ax.grid(alpha=0.3)

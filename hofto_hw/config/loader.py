@@ -41,7 +41,9 @@ def format_validation_error(source: str, err: ValidationError) -> str:
 def parse_config(data: Any, source: str = "<config>", base_dir: Path | None = None) -> SystemConfig:
     """Validate an already-parsed mapping; relative paths are resolved against ``base_dir``."""
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: expected a mapping at the top level, got {type(data).__name__}")
+        raise ConfigError(
+            f"{source}: expected a mapping at the top level, got {type(data).__name__}"
+        )
     try:
         cfg = SystemConfig.model_validate(data)
     except ValidationError as err:

@@ -83,7 +83,12 @@ def simulate(cfg: SystemConfig, model: RobotModel, duration: float = 20.0) -> Sa
         raise ConfigError("the demo needs a `simulation:` section in the config")
     dt = 1.0 / cfg.loop.rate_hz
     traj = cartesian_loop(
-        model, model.home, WAYPOINTS, period=8.0, duration=duration, rate=cfg.loop.rate_hz,
+        model,
+        model.home,
+        WAYPOINTS,
+        period=8.0,
+        duration=duration,
+        rate=cfg.loop.rate_hz,
         frozen=(3, 5),
     )
     # joint 4 "almost unaltered": a slow 0.02 rad drift on top of the frozen IK value
@@ -97,13 +102,16 @@ def simulate(cfg: SystemConfig, model: RobotModel, duration: float = 20.0) -> Sa
     N = traj.t.size
     n = model.n
     out = Samples(
-        t=np.zeros(N), q=np.zeros((N, n)), qd=np.zeros((N, n)), tau=np.zeros((N, n)),
-        tau_ext=np.zeros((N, n)), q_des=traj.q, dt=dt,
+        t=np.zeros(N),
+        q=np.zeros((N, n)),
+        qd=np.zeros((N, n)),
+        tau=np.zeros((N, n)),
+        tau_ext=np.zeros((N, n)),
+        q_des=traj.q,
+        dt=dt,
     )
     for k in range(N):
-        tau = controller.command(
-            plant.q_meas, plant.qd_meas, traj.q[k], traj.qd[k], traj.qdd[k]
-        )
+        tau = controller.command(plant.q_meas, plant.qd_meas, traj.q[k], traj.qd[k], traj.qdd[k])
         plant.step(tau)
         out.t[k] = plant.t
         out.q[k] = plant.q_meas
@@ -122,9 +130,7 @@ def run_observer(observer, samples: Samples) -> np.ndarray:
     return est
 
 
-def compare(
-    label: str, observers: dict[str, object], samples: Samples
-) -> Comparison:
+def compare(label: str, observers: dict[str, object], samples: Samples) -> Comparison:
     """Estimates and Table II indices of each observer on the same samples."""
     result = Comparison(label)
     for name, obs in observers.items():

@@ -16,6 +16,7 @@ import scipy.linalg
 
 from hofto_hw.errors import ModelError
 from hofto_hw.identify.regressor import Regressor, standard_names
+from hofto_hw.identify.threads import one_blas_thread
 
 COEFF_ZERO = 1e-9  # |K| entries below this are rounding noise of the QR
 
@@ -71,6 +72,7 @@ def random_samples(
     return q, qd, qdd
 
 
+@one_blas_thread
 def find_base_parameters(
     regressor: Regressor,
     joint_names: list[str],
@@ -112,5 +114,5 @@ def find_base_parameters(
     resid = np.linalg.norm(Hb @ K[:, drop] - W[:, drop]) / max(np.linalg.norm(W), 1.0)
     if resid > 1e-8:
         raise ModelError(f"base parameters: regrouping residual {resid:.2e} is too large")
-    names_s = standard_names(joint_names)
+    names_s = standard_names(joint_names, regressor.stribeck_velocity is not None)
     return BaseParameters(keep, K, [names_s[i] for i in keep], names_s)

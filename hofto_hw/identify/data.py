@@ -162,7 +162,9 @@ class ColumnMap(BaseModel):
         if self.columns is not None and max(used) > self.columns:
             raise ValueError(f"column {max(used)} is beyond columns = {self.columns}")
         if self.rows is not None and not (1 <= self.rows[0] <= self.rows[1]):
-            raise ValueError(f"rows = {list(self.rows)} must be [first, last] with 1 <= first <= last")
+            raise ValueError(
+                f"rows = {list(self.rows)} must be [first, last] with 1 <= first <= last"
+            )
         return self
 
     @property
@@ -260,9 +262,7 @@ def _kind_columns(cmap: ColumnMap) -> list[tuple[str, list[int]]]:
     return kinds
 
 
-def _check_values(
-    data: FloatArray, first_row: int, cmap: ColumnMap, bad: dict[int, str]
-) -> None:
+def _check_values(data: FloatArray, first_row: int, cmap: ColumnMap, bad: dict[int, str]) -> None:
     """Mark rows with NaN/inf or implausible values as bad (in place)."""
     used = sorted(set(cmap.used_columns()))
     col_index = {c: i for i, c in enumerate(used)}
@@ -283,9 +283,7 @@ def _check_values(
                     bad[row] = f"column {c} ({kind}): {v:.4g} exceeds the plausible {limit:g}"
 
 
-def _check_time(
-    t: FloatArray, first_row: int, max_step: float, bad: dict[int, str]
-) -> None:
+def _check_time(t: FloatArray, first_row: int, max_step: float, bad: dict[int, str]) -> None:
     """Mark rows whose time does not advance, or jumps ahead by > max_step, as bad."""
     last: float | None = None
     for k in range(t.shape[0]):
@@ -352,9 +350,7 @@ def load_csv(
         lines = lines[lo - first_row : hi - first_row + 1]
         first_row = lo
     if len(lines) < MIN_SAMPLES:
-        raise UserError(
-            f"{src}: too short: {len(lines)} rows, at least {MIN_SAMPLES} are needed"
-        )
+        raise UserError(f"{src}: too short: {len(lines)} rows, at least {MIN_SAMPLES} are needed")
     if cmap.columns is not None:
         counts = np.array([ln.count(cmap.delimiter) + 1 for ln in lines])
         typical = int(np.bincount(counts).argmax())
@@ -376,7 +372,9 @@ def load_csv(
         bad_list = sorted(bad)
         first = bad_list[0]
         if policy == "refuse":
-            more = f" ({len(bad_list)} bad rows in all: {_ranges(bad_list)})" if len(bad) > 1 else ""
+            more = (
+                f" ({len(bad_list)} bad rows in all: {_ranges(bad_list)})" if len(bad) > 1 else ""
+            )
             raise UserError(
                 f"{src}: row {first}: {bad[first]}{more}; fix the file, choose a row range, "
                 f"or drop bad rows with a warning (bad_rows: drop / --drop-bad-rows)"
@@ -386,7 +384,10 @@ def load_csv(
                 f"{src}: {len(bad_list)} of {len(lines)} rows are bad (first: row {first}: "
                 f"{bad[first]}); more than {MAX_DROP_FRACTION:.0%} is not dropped"
             )
-        note = f"{src}: dropped {len(bad_list)} bad rows ({_ranges(bad_list)}); row {first}: {bad[first]}"
+        note = (
+            f"{src}: dropped {len(bad_list)} bad rows ({_ranges(bad_list)}); "
+            f"row {first}: {bad[first]}"
+        )
         log.warning(note)
         notes = [note]
     else:
@@ -397,7 +398,9 @@ def load_csv(
     data = data[keep]
     row_numbers = np.arange(first_row, first_row + len(lines), dtype=np.int64)[keep]
     if data.shape[0] < MIN_SAMPLES:
-        raise UserError(f"{src}: too short: {data.shape[0]} good rows, at least {MIN_SAMPLES} needed")
+        raise UserError(
+            f"{src}: too short: {data.shape[0]} good rows, at least {MIN_SAMPLES} needed"
+        )
 
     def cols(cs: list[int]) -> FloatArray:
         return np.ascontiguousarray(data[:, [col[c] for c in cs]])
@@ -481,7 +484,9 @@ def sample_rate(t: FloatArray) -> float:
     return float(1.0 / np.median(np.diff(t)))
 
 
-def lowpass(x: FloatArray, t: FloatArray, cutoff_hz: float, order: int = 4, source: str = "") -> FloatArray:
+def lowpass(
+    x: FloatArray, t: FloatArray, cutoff_hz: float, order: int = 4, source: str = ""
+) -> FloatArray:
     """Zero-phase Butterworth low-pass of ``x`` (N, ...) along axis 0.
 
     The filter is designed at the median sample rate of ``t`` (N,) [s]: the jitter of the

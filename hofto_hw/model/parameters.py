@@ -23,6 +23,8 @@ Format (YAML, UTF-8; ``version`` 1). All values SI at the joint side.
         viscous: [...]           # Fv [N·m·s/rad]
         bias: [...]              # B [N·m]
         smooth_velocity: 0.02    # v_s [rad/s]: sign(qd) ~ tanh(qd / v_s); 0 = hard sign
+        stribeck_static: [...]   # optional: Fs [N·m] (>= Fc), adds (Fs-Fc)·exp(-(qd/vs)²)·s(qd)
+        stribeck_velocity: [...] # optional, with stribeck_static: vs [rad/s]
     base:                        # eq. (14): mu = K·theta_s (the model above reproduces mu)
       count: 58
       parameters:
@@ -39,7 +41,8 @@ Format (YAML, UTF-8; ``version`` 1). All values SI at the joint side.
       residual_std: [...]        # per joint [N·m] (WLS weights)
 
 Standard parameter names are ``<joint>.<p>`` with p in m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz,
-Izz, Ia, Fc, Fv, B (see ``hofto_hw.identify.regressor``).
+Izz, Ia, Fc, Fv, B and, with Stribeck friction, S = Fs − Fc (see
+``hofto_hw.identify.regressor``).
 
 :func:`apply_parameters_file` checks robot name, joint names and URDF hash, sets the link
 inertial parameters, rotor inertia and friction, and refuses (restoring the previous values) a
@@ -51,13 +54,16 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
 
 from hofto_hw.errors import ModelError
 from hofto_hw.model.friction import FrictionParams
+
+if TYPE_CHECKING:
+    from hofto_hw.model.robot import RobotModel
 
 FORMAT = "hofto-hw/parameters"
 VERSION = 1
@@ -93,6 +99,8 @@ class ParametersFile:
     viscous: np.ndarray
     bias: np.ndarray
     smooth_velocity: float = 0.0
+    stribeck_static: np.ndarray | None = None
+    stribeck_velocity: np.ndarray | None = None
     urdf: str = ""
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     created: str = ""
@@ -106,11 +114,13 @@ class ParametersFile:
         return len(self.joints)
 
     def friction(self) -> FrictionParams:
-        """The friction model (no Stribeck term)."""
+        """The friction model (with the Stribeck term when the file has one)."""
         return FrictionParams(
             self.coulomb.copy(),
             self.viscous.copy(),
             self.bias.copy(),
+            None if self.stribeck_static is None else self.stribeck_static.copy(),
+            None if self.stribeck_velocity is None else self.stribeck_velocity.copy(),
             smooth_velocity=self.smooth_velocity,
         )
 
@@ -142,6 +152,15 @@ def to_dict(pf: ParametersFile) -> dict[str, Any]:
                 "definition": {k: float(v) for k, v in b.definition.items()},
             }
         )
+    friction: dict[str, Any] = {
+        "coulomb": _floats(pf.coulomb),
+        "viscous": _floats(pf.viscous),
+        "bias": _floats(pf.bias),
+        "smooth_velocity": float(pf.smooth_velocity),
+    }
+    if pf.stribeck_static is not None and pf.stribeck_velocity is not None:
+        friction["stribeck_static"] = _floats(pf.stribeck_static)
+        friction["stribeck_velocity"] = _floats(pf.stribeck_velocity)
     return {
         "format": FORMAT,
         "version": VERSION,
@@ -156,12 +175,7 @@ def to_dict(pf: ParametersFile) -> dict[str, Any]:
         "model": {
             "inertial": [_floats(row) for row in pf.inertial],
             "rotor_inertia": _floats(pf.rotor_inertia),
-            "friction": {
-                "coulomb": _floats(pf.coulomb),
-                "viscous": _floats(pf.viscous),
-                "bias": _floats(pf.bias),
-                "smooth_velocity": float(pf.smooth_velocity),
-            },
+            "friction": friction,
         },
         "base": {"count": len(base), "parameters": base},
         "fit": _plain(pf.fit),
@@ -182,7 +196,7 @@ def _plain(obj: Any) -> Any:
 
 def write_parameters(path: str | Path, pf: ParametersFile) -> None:
     """Write ``pf`` as YAML to ``path``."""
-    text = "# Identified dynamic parameters (hofto-hw identify); format in hofto_hw/model/parameters.py\n"
+    text = "# Identified dynamic parameters; format: hofto_hw/model/parameters.py\n"
     text += yaml.safe_dump(to_dict(pf), sort_keys=False, default_flow_style=None, width=100)
     Path(path).write_text(text)
 
@@ -259,6 +273,18 @@ def read_parameters(path: str | Path) -> ParametersFile:
                 {str(k): float(v) for k, v in definition.items()},
             )
         )
+    if ("stribeck_static" in fr) != ("stribeck_velocity" in fr):
+        raise r.fail("model.friction", "give both stribeck_static and stribeck_velocity")
+    stribeck = (
+        (
+            r.array(fr["stribeck_static"], "model.friction.stribeck_static", (n,)),
+            r.array(fr["stribeck_velocity"], "model.friction.stribeck_velocity", (n,)),
+        )
+        if "stribeck_static" in fr
+        else (None, None)
+    )
+    if stribeck[1] is not None and np.any(stribeck[1] <= 0.0):
+        raise r.fail("model.friction.stribeck_velocity", "values must be > 0 [rad/s]")
     robot = r.get(data, "robot", "")
     sha = r.get(data, "urdf_sha256", "")
     return ParametersFile(
@@ -266,13 +292,13 @@ def read_parameters(path: str | Path) -> ParametersFile:
         joints=[str(j) for j in joints],
         urdf_sha256=str(sha),
         inertial=r.array(r.get(model, "inertial", "model."), "model.inertial", (n, N_INERTIAL)),
-        rotor_inertia=r.array(
-            r.get(model, "rotor_inertia", "model."), "model.rotor_inertia", (n,)
-        ),
+        rotor_inertia=r.array(r.get(model, "rotor_inertia", "model."), "model.rotor_inertia", (n,)),
         coulomb=r.array(r.get(fr, "coulomb", "model.friction."), "model.friction.coulomb", (n,)),
         viscous=r.array(r.get(fr, "viscous", "model.friction."), "model.friction.viscous", (n,)),
         bias=r.array(r.get(fr, "bias", "model.friction."), "model.friction.bias", (n,)),
         smooth_velocity=float(fr.get("smooth_velocity", 0.0) or 0.0),
+        stribeck_static=stribeck[0],
+        stribeck_velocity=stribeck[1],
         urdf=str(data.get("urdf", "")),
         gravity=(float(gravity[0]), float(gravity[1]), float(gravity[2])),
         created=str(data.get("created", "")),
@@ -283,7 +309,7 @@ def read_parameters(path: str | Path) -> ParametersFile:
     )
 
 
-def workspace_samples(model: Any, n_samples: int, seed: int = 0) -> np.ndarray:
+def workspace_samples(model: RobotModel, n_samples: int, seed: int = 0) -> np.ndarray:
     """Random configurations inside the joint limits (infinite limits -> ±pi), (N, n) [rad]."""
     rng = np.random.default_rng(seed)
     lo = np.maximum(np.asarray(model.limits.position_lower, dtype=float), -np.pi)
@@ -293,7 +319,7 @@ def workspace_samples(model: Any, n_samples: int, seed: int = 0) -> np.ndarray:
     return rng.uniform(lo, hi, (n_samples, model.n))
 
 
-def check_mass_matrix(model: Any, n_samples: int = 200, seed: int = 0) -> None:
+def check_mass_matrix(model: RobotModel, n_samples: int = 200, seed: int = 0) -> None:
     """Raise ModelError unless M(q) is symmetric positive definite at ``n_samples`` random
     configurations of the workspace."""
     for q in workspace_samples(model, n_samples, seed):
@@ -308,7 +334,7 @@ def check_mass_matrix(model: Any, n_samples: int = 200, seed: int = 0) -> None:
             )
 
 
-def check_compatible(pf: ParametersFile, model: Any, source: str) -> None:
+def check_compatible(pf: ParametersFile, model: RobotModel, source: str) -> None:
     """Raise ModelError if ``pf`` was identified for another robot, joint set or URDF."""
     if pf.robot != model.name:
         raise ModelError(
@@ -328,7 +354,7 @@ def check_compatible(pf: ParametersFile, model: Any, source: str) -> None:
             )
 
 
-def apply_parameters(model: Any, pf: ParametersFile, source: str = "<parameters>") -> None:
+def apply_parameters(model: RobotModel, pf: ParametersFile, source: str = "<parameters>") -> None:
     """Put ``pf`` into ``model`` (a RobotModel); on a failed M(q) check restore the old values."""
     check_compatible(pf, model, source)
     old = (model.inertial_parameters(), model.rotor_inertia, model.friction)
@@ -344,7 +370,7 @@ def apply_parameters(model: Any, pf: ParametersFile, source: str = "<parameters>
         raise ModelError(f"{source}: {exc}") from None
 
 
-def apply_parameters_file(model: Any, path: str | Path) -> ParametersFile:
+def apply_parameters_file(model: RobotModel, path: str | Path) -> ParametersFile:
     """Read ``path`` and apply it to ``model``; returns the file's content."""
     pf = read_parameters(path)
     apply_parameters(model, pf, str(path))

@@ -27,7 +27,9 @@ from hofto_hw.config.models import RobotConfig
 from hofto_hw.errors import ModelError
 from hofto_hw.model.friction import FrictionParams
 
-N_INERTIAL = 10  # pinocchio dynamic parameters per link: m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz
+N_INERTIAL = (
+    10  # pinocchio dynamic parameters per link: m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz
+)
 
 
 @dataclass
@@ -122,9 +124,7 @@ class RobotModel:
                     f"(it has: {', '.join(present)})"
                 )
         lock = [full.getJointId(j) for j in present if j not in joints]
-        model = (
-            pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
-        )
+        model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
         order = [model.names[i] for i in range(1, model.njoints)]
         if order != list(joints):
             raise ModelError(
@@ -159,7 +159,13 @@ class RobotModel:
             base_frame=cfg.base_frame,
         )
         lim = robot.limits
-        for field_name in ("position_lower", "position_upper", "velocity", "acceleration", "torque"):
+        for field_name in (
+            "position_lower",
+            "position_upper",
+            "velocity",
+            "acceleration",
+            "torque",
+        ):
             override = getattr(cfg.limits, field_name)
             if override is not None:
                 setattr(lim, field_name, np.asarray(override, dtype=float))

@@ -88,7 +88,9 @@ class EsoObserver:
         self.model = model
         self.n = n
         self.core = EsoCore(
-            per_joint(k1, n, "eso.k1"), per_joint(k2, n, "eso.k2"), per_joint(k3, n, "eso.k3"),
+            per_joint(k1, n, "eso.k1"),
+            per_joint(k2, n, "eso.k2"),
+            per_joint(k3, n, "eso.k3"),
             substeps,
         )
         self.terms = ModelTerms(model)

@@ -51,9 +51,7 @@ def first_harmonic_gain(
             z3_hist[k - start] = z3
     gains = np.zeros(freqs.size)
     for i in range(freqs.size):
-        basis = np.column_stack(
-            [np.sin(w[i] * t_fit), np.cos(w[i] * t_fit), np.ones_like(t_fit)]
-        )
+        basis = np.column_stack([np.sin(w[i] * t_fit), np.cos(w[i] * t_fit), np.ones_like(t_fit)])
         coef, *_ = np.linalg.lstsq(basis, z3_hist[:, i], rcond=None)
         gains[i] = np.hypot(coef[0], coef[1]) / amplitude
     return gains

@@ -59,8 +59,11 @@ def test_contact_wall_only_pushes(er3a_model):
     q = er3a_model.home
     x = er3a_model.tool_pose(q)[0]
     wall = ExternalTorqueConfig(
-        kind="contact", frame="tool0", wall_point=tuple(x + [0.01, 0, 0]),
-        wall_normal=(-1.0, 0.0, 0.0), stiffness=1e4,
+        kind="contact",
+        frame="tool0",
+        wall_point=tuple(x + [0.01, 0, 0]),
+        wall_normal=(-1.0, 0.0, 0.0),
+        stiffness=1e4,
     )
     inside = ExternalTorque([wall], er3a_model).evaluate(0.0, q, np.zeros(6)).copy()
     assert np.allclose(inside, 0.0)  # the wall is 1 cm ahead: no contact yet

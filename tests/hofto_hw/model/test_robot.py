@@ -32,9 +32,9 @@ def test_mdot_equals_c_plus_ct(er3a_model):
     for q, qd, _ in _random_states(er3a_model, rng):
         C = er3a_model.coriolis_matrix(q, qd).copy()
         eps = 1e-6
-        Md = (er3a_model.mass_matrix(q + eps * qd).copy() - er3a_model.mass_matrix(q - eps * qd)) / (
-            2 * eps
-        )
+        Md = (
+            er3a_model.mass_matrix(q + eps * qd).copy() - er3a_model.mass_matrix(q - eps * qd)
+        ) / (2 * eps)
         assert np.allclose(Md, C + C.T, atol=1e-6)
         assert np.allclose(C @ qd, er3a_model.coriolis(q, qd))
 
@@ -106,5 +106,5 @@ def test_bad_tool_frame(er3a_config):
     from hofto_hw.model import RobotModel
 
     robot = er3a_config.robot.model_copy(update={"tool_frame": "no_such_frame"})
-    with pytest.raises(ModelError, match="robot.tool_frame: frame 'no_such_frame'"):
+    with pytest.raises(ModelError, match=r"robot\.tool_frame: frame 'no_such_frame'"):
         RobotModel.from_config(robot)

@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.observers import run_hold
 
 from drivers.sim.plant import Plant
 from hofto_hw.config.models import EsoConfig, ExternalTorqueConfig, SimulationConfig
 from hofto_hw.observers import make_observer
 from hofto_hw.observers.eso import bandwidth_gains, error_matrices
-
-from support.observers import run_hold
 
 NAMES = ["hofto", "eso", "dob", "momentum", "sta", "direct"]
 

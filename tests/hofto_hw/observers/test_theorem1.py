@@ -5,16 +5,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.observers import levant_gains, levant_powers, run_hold
 
 from hofto_hw.observers import EsoCore, EsoObserver, HoftoCore, HoftoObserver
 from hofto_hw.observers.eso import error_matrices
 
-from support.observers import levant_gains, levant_powers, run_hold
-
 CASES = [
     # order n, external torque kind and its coefficients (N·m, N·m/s, N·m/s²)
     (1, "constant", {"amplitude": [5.0, -8.0, 4.0, 1.0, -1.0, 0.5]}),
-    (2, "ramp", {"amplitude": [1.0, -2.0, 1.0, 0.2, 0.0, 0.1], "slope": [2.0, 3.0, -1.5, 0.4, -0.4, 0.2]}),
+    (
+        2,
+        "ramp",
+        {"amplitude": [1.0, -2.0, 1.0, 0.2, 0.0, 0.1], "slope": [2.0, 3.0, -1.5, 0.4, -0.4, 0.2]},
+    ),
     (
         3,
         "parabola",
@@ -53,6 +56,7 @@ def test_finite_time_exact_on_pure_chain(order):
     core = HoftoCore(gains, levant_powers(order), "recursive")
     dt = 1e-3
     core.reset(np.zeros(1), np.zeros(1))
+
     # exact position: integrate x3 twice analytically
     def q_of(t: float) -> float:
         return sum(c * t ** (i + 2) / ((i + 1) * (i + 2)) for i, c in enumerate(coeffs))

@@ -1,0 +1,375 @@
+"""The drive layer above any transport: n CiA-402 axes as one group, SI in, SI out.
+
+Every cycle (hot path, no allocation): :meth:`DriveGroup.read` decodes the TxPDO into
+``q`` [rad], ``qd`` [rad/s], ``tau`` [N·m] (joint side), ``current`` [A] and ``states``
+(uint8 :class:`~drivers.cia402.state_machine.State` codes), all shape (n,);
+:meth:`DriveGroup.command_position` / ``command_velocity`` / ``command_torque`` encode SI
+commands into the RxPDO; :meth:`DriveGroup.cycle` exchanges and reads.
+
+Setup (blocking, outside the tick): :meth:`configure`, :meth:`set_mode` (with the 0x6061
+mode-display check), :meth:`enable`, :meth:`disable`, :meth:`quick_stop`,
+:meth:`fault_reset`. Each state transition has a timeout counted in bus cycles; a timeout
+raises :class:`DriveTimeoutError` naming the axis, its state and statusword. Faults are
+decoded from 0x603F (:meth:`fault_messages`).
+
+The service, the EtherCAT master and the CANopen transport all use this class unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from drivers.cia402 import state_machine as sm
+from drivers.cia402.codes import describe_error_code
+from drivers.cia402.state_machine import STATE_NAMES, Mode, State
+from drivers.cia402.units import AxisScaling, Scaling
+from drivers.transport import SdoAbortError, Transport, describe_status
+from hofto_hw.errors import ConfigError, UserError
+
+
+class DriveError(UserError):
+    """A drive did not do what was asked; ``axis``, ``state``, ``statusword`` name it."""
+
+    def __init__(self, message: str, axis: int = -1, state: int = -1, statusword: int = 0):
+        super().__init__(message)
+        self.axis = axis
+        self.state = state
+        self.statusword = statusword
+
+
+class DriveTimeoutError(DriveError):
+    """A state transition or mode change did not complete within its timeout."""
+
+
+class DriveFaultError(DriveError):
+    """A drive is in Fault (or fault reaction); ``error_code`` is its 0x603F value."""
+
+    def __init__(self, message: str, axis: int, state: int, statusword: int, error_code: int):
+        super().__init__(message, axis, state, statusword)
+        self.error_code = error_code
+
+
+_FAULTY = (State.FAULT, State.FAULT_REACTION_ACTIVE)
+
+
+class DriveGroup:
+    """All axes of one transport as a CiA-402 group (see module docstring).
+
+    ``transition_timeout`` [s] bounds each single state transition; it is converted to bus
+    cycles with ``transport.cycle_time`` so simulated buses time out in simulated time.
+    """
+
+    def __init__(
+        self,
+        transport: Transport,
+        scaling: Scaling,
+        *,
+        transition_timeout: float = 0.5,
+    ) -> None:
+        n = transport.n_axes
+        if scaling.n != n:
+            raise ValueError(f"scaling has {scaling.n} axes, transport has {n}")
+        self.transport = transport
+        self.scaling = scaling
+        self.n = n
+        self.names = transport.axis_names
+        self.timeout_cycles = max(1, round(transition_timeout / transport.cycle_time))
+        self.transition_timeout = transition_timeout
+        #: joint angle [rad], (n,)
+        self.q = np.zeros(n)
+        #: joint velocity [rad/s], (n,)
+        self.qd = np.zeros(n)
+        #: joint-side motor torque [N·m], (n,)
+        self.tau = np.zeros(n)
+        #: motor current [A] in the joint's sense, (n,)
+        self.current = np.zeros(n)
+        #: State code per axis, uint8 (n,)
+        self.states = np.zeros(n, dtype=np.uint8)
+        #: status of the last exchange (0 = ok)
+        self.status = 0
+        rx, tx = transport.rx, transport.tx
+        self._rx_cw = rx["controlword"]
+        self._rx_mode = rx["mode"]
+        self._rx_pos = rx["target_position"]
+        self._rx_vel = rx["target_velocity"]
+        self._rx_tau = rx["target_torque"]
+        self._rx_off = rx["torque_offset"]
+        self._tx_sw = tx["statusword"]
+        self._tx_mode = tx["mode_display"]
+        self._tx_pos = tx["position"]
+        self._tx_vel = tx["velocity"]
+        self._tx_tau = tx["torque"]
+        self._tx_cur = tx["current"]
+        self._tx_err = tx["error_code"]
+        self._u16 = np.zeros(n, dtype=np.uint16)
+        self._cw = np.zeros(n, dtype=np.uint16)
+        self._flags = np.zeros(n, dtype=bool)
+
+    @classmethod
+    def from_config(cls, transport: Transport, bus: Any) -> DriveGroup:
+        """From a :class:`hofto_hw.config.drives.BusConfig`."""
+        scaling = Scaling([AxisScaling.from_config(d) for d in bus.drives])
+        return cls(transport, scaling, transition_timeout=bus.transition_timeout)
+
+    # ------------------------------------------------------------ hot path (tick)
+
+    def read(self) -> None:
+        """Decode the TxPDO into q, qd, tau, current, states (no allocation)."""
+        sc = self.scaling
+        sc.position_to_si(self._tx_pos, self.q)
+        sc.velocity_to_si(self._tx_vel, self.qd)
+        sc.torque_to_si(self._tx_tau, self.tau)
+        sc.current_to_si(self._tx_cur, self.current)
+        sm.decode_states(self._tx_sw, self.states, self._u16)
+
+    def cycle(self) -> int:
+        """Exchange the process image, then :meth:`read`. Returns the transport status."""
+        self.status = self.transport.exchange()
+        self.read()
+        return self.status
+
+    def command_position(self, q: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
+        """CSP target q [rad] (n,) and optional torque feed-forward [N·m] (n,)."""
+        self.scaling.position_to_raw(q, self._rx_pos)
+        if tau_offset is not None:
+            self.scaling.torque_to_raw(tau_offset, self._rx_off)
+
+    def command_velocity(self, qd: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
+        """CSV target qd [rad/s] (n,) and optional torque feed-forward [N·m] (n,)."""
+        self.scaling.velocity_to_raw(qd, self._rx_vel)
+        if tau_offset is not None:
+            self.scaling.torque_to_raw(tau_offset, self._rx_off)
+
+    def command_torque(self, tau: np.ndarray) -> None:
+        """CST target torque [N·m] (n,), joint side."""
+        self.scaling.torque_to_raw(tau, self._rx_tau)
+
+    def command_quick_stop(self) -> None:
+        """Send Quick stop to every axis this cycle (stop category 1); non-blocking."""
+        self._rx_cw.fill(sm.CW_QUICK_STOP)
+
+    def command_disable_voltage(self) -> None:
+        """Send Disable voltage to every axis this cycle (stop category 0); non-blocking."""
+        self._rx_cw.fill(sm.CW_DISABLE_VOLTAGE)
+
+    def any_fault(self) -> bool:
+        """True when any axis is in Fault or Fault reaction active (no allocation)."""
+        np.greater_equal(self.states, State.FAULT_REACTION_ACTIVE, out=self._flags)
+        # UNKNOWN (8) also counts: a statusword matching no state is not trustworthy.
+        return bool(self._flags.any())
+
+    def all_in(self, state: State) -> bool:
+        """True when every axis is in ``state`` (no allocation)."""
+        np.equal(self.states, state, out=self._flags)
+        return bool(self._flags.all())
+
+    def hold(self) -> None:
+        """Command the current position, zero velocity and torque (bumpless targets)."""
+        np.copyto(self._rx_pos, self._tx_pos)
+        self._rx_vel.fill(0)
+        self._rx_tau.fill(0)
+
+    # ------------------------------------------------------------------ setup
+
+    def configure(self, drives: Sequence[Any]) -> None:
+        """Check identity and ratings by SDO and write limits (DriveConfig list, one per axis).
+
+        Raises ConfigError naming the axis and the object when a drive's 0x1018 identity or
+        its rated torque/current (which set the scaling) differ from the config.
+        """
+        t, sc = self.transport, self.scaling
+        for i, d in enumerate(drives):
+            who = f"axis {i} ({self.names[i]})"
+            ident = d.identity
+            if ident.vendor_id or ident.product_code:
+                checks = [
+                    (1, "vendor id", ident.vendor_id),
+                    (2, "product code", ident.product_code),
+                ]
+                if ident.revision is not None:
+                    checks.append((3, "revision", ident.revision))
+                for sub, what, want in checks:
+                    got = t.read_value(i, 0x1018, sub, "u32")
+                    if got != want:
+                        raise ConfigError(
+                            f"bus.drives[{i}].identity: {who} reports {what} 0x{got:08X}, "
+                            f"config expects 0x{want:08X}"
+                        )
+            for index, what, want in (
+                (0x6076, "rated_torque", d.rated_torque),
+                (0x6075, "rated_current", d.rated_current),
+            ):
+                got = t.read_value(i, index, 0, "u32")
+                if got != round(want):
+                    raise ConfigError(
+                        f"bus.drives[{i}].{what}: {who} object 0x{index:04X} says {got}, "
+                        f"config says {want:g}"
+                    )
+            t.write_value(i, 0x6072, 0, "u16", sc.torque_limit_permille(i, d.torque_limit))
+            decel = max(1, sc.acceleration_to_raw(i, d.quick_stop_deceleration))
+            t.write_value(i, 0x6085, 0, "u32", decel)
+            t.write_value(i, 0x6065, 0, "u32", sc.angle_to_counts(i, d.following_error_window))
+            t.write_value(i, 0x6066, 0, "u16", round(d.following_error_timeout * 1000.0))
+
+    def _step(self) -> None:
+        self.transport.wait_next_cycle()
+        self.cycle()
+
+    def set_mode(self, mode: Mode | int) -> None:
+        """Select the mode of operation on every axis and wait for 0x6061 to show it."""
+        mode = Mode(int(mode))
+        self._rx_mode.fill(mode)
+        for _ in range(self.timeout_cycles):
+            self._step()
+            np.equal(self._tx_mode, mode, out=self._flags)
+            if self._flags.all():
+                return
+        bad = int(np.flatnonzero(self._tx_mode != mode)[0])
+        shown = int(self._tx_mode[bad])
+        shown_name = Mode(shown).name if shown in Mode._value2member_map_ else "unknown mode"
+        raise DriveTimeoutError(
+            f"axis {bad} ({self.names[bad]}): mode of operation display 0x6061 shows "
+            f"{shown} ({shown_name}) {self.transition_timeout:g} s after selecting "
+            f"{int(mode)} ({mode.name}); {self._describe(bad)}",
+            bad,
+            int(self.states[bad]),
+            int(self._tx_sw[bad]),
+        )
+
+    def enable(self) -> None:
+        """Bring every axis to Operation enabled, holding the current position.
+
+        Raises DriveFaultError if an axis is (or falls) in Fault (call :meth:`fault_reset`
+        first; faults latch) and DriveTimeoutError if an axis stays in one state longer
+        than the transition timeout.
+        """
+        self._drive_to(State.OPERATION_ENABLED, hold=True)
+
+    def disable(self) -> None:
+        """Bring every axis to Switch on disabled (power stage off, brakes closed)."""
+        self._drive_to(State.SWITCH_ON_DISABLED, hold=True, allow_fault=True)
+
+    def _drive_to(self, target: State, hold: bool, allow_fault: bool = False) -> None:
+        n = self.n
+        self.cycle()
+        since = np.zeros(n, dtype=np.int64)
+        last = self.states.copy()
+        for k in range(1, 100 * self.timeout_cycles):
+            if not allow_fault and self.any_fault():
+                self._raise_fault()
+            at = self.states == target
+            if allow_fault:
+                at |= self.states == State.FAULT
+            if at.all():
+                return
+            moved = self.states != last
+            since[moved] = k
+            last[:] = self.states
+            late = ~at & (k - since > self.timeout_cycles)
+            if late.any():
+                i = int(np.flatnonzero(late)[0])
+                raise DriveTimeoutError(
+                    f"axis {i} ({self.names[i]}): no transition toward {STATE_NAMES[target]} "
+                    f"within {self.transition_timeout:g} s; {self._describe(i)}" + self._bus_note(),
+                    i,
+                    int(self.states[i]),
+                    int(self._tx_sw[i]),
+                )
+            sm.controlwords_toward_no_reset(self.states, target, self._cw)
+            np.copyto(self._rx_cw, self._cw)
+            if hold:
+                self.hold()
+            self._step()
+        raise DriveTimeoutError(f"drives did not reach {STATE_NAMES[target]}")
+
+    def quick_stop(self, timeout: float = 5.0) -> None:
+        """Quick stop every enabled axis (ramp 0x6085), wait until all are disabled.
+
+        ``timeout`` [s] covers the whole ramp. Axes already off stay off.
+        """
+        self.cycle()
+        enabled = self.states == State.OPERATION_ENABLED
+        cw = np.where(enabled, sm.CW_QUICK_STOP, sm.CW_DISABLE_VOLTAGE)
+        np.copyto(self._rx_cw, cw, casting="unsafe")
+        cycles = max(1, round(timeout / self.transport.cycle_time))
+        for _ in range(cycles):
+            self._step()
+            # Option codes 5-8 hold in Quick stop active once stopped: that also counts.
+            st = self.states
+            done = (st == State.SWITCH_ON_DISABLED) | (st == State.FAULT)
+            done |= (st == State.QUICK_STOP_ACTIVE) & (np.abs(self.qd) < 1e-3)
+            if done.all():
+                np.copyto(self._rx_cw, sm.CW_DISABLE_VOLTAGE)
+                return
+        i = int(np.flatnonzero(~done)[0])
+        raise DriveTimeoutError(
+            f"axis {i} ({self.names[i]}): quick stop not finished within {timeout:g} s; "
+            f"{self._describe(i)}",
+            i,
+            int(self.states[i]),
+            int(self._tx_sw[i]),
+        )
+
+    def fault_reset(self) -> None:
+        """Reset latched faults (rising edge of controlword bit 7) and wait for the result.
+
+        Raises DriveFaultError naming the axis and decoded 0x603F code when a fault stays.
+        """
+        self.cycle()
+        faulted = self.states == State.FAULT
+        if not faulted.any():
+            return
+        self._rx_cw[faulted] = sm.CW_DISABLE_VOLTAGE  # bit 7 low first: the edge must rise
+        self._step()
+        self._rx_cw[faulted] = sm.CW_FAULT_RESET
+        for _ in range(self.timeout_cycles):
+            self._step()
+            if not (self.states[faulted] == State.FAULT).any():
+                break
+        self._rx_cw[faulted] = sm.CW_DISABLE_VOLTAGE
+        self._step()
+        if (self.states == State.FAULT).any():
+            self._raise_fault(prefix="fault reset refused, cause still present: ")
+
+    # ---------------------------------------------------------------- faults
+
+    def error_code(self, axis: int) -> int:
+        """0x603F of ``axis`` read by SDO (falls back to the PDO value if the SDO fails)."""
+        try:
+            return self.transport.read_value(axis, 0x603F, 0, "u16")
+        except SdoAbortError:
+            return int(self._tx_err[axis])
+
+    def fault_messages(self) -> list[str]:
+        """One plain-words line per axis in Fault / Fault reaction active (reads 0x603F)."""
+        out = []
+        for i in range(self.n):
+            if self.states[i] in _FAULTY:
+                out.append(
+                    f"axis {i} ({self.names[i]}): {self._describe(i)}: "
+                    f"{describe_error_code(self.error_code(i))}"
+                )
+        return out
+
+    def _raise_fault(self, prefix: str = "") -> None:
+        for i in range(self.n):
+            if self.states[i] in _FAULTY:
+                code = self.error_code(i)
+                raise DriveFaultError(
+                    f"{prefix}axis {i} ({self.names[i]}): {self._describe(i)}: "
+                    f"{describe_error_code(code)}",
+                    i,
+                    int(self.states[i]),
+                    int(self._tx_sw[i]),
+                    code,
+                )
+        raise DriveError(f"{prefix}statusword matches no CiA 402 state")
+
+    def _describe(self, i: int) -> str:
+        return sm.describe_statusword(int(self._tx_sw[i]))
+
+    def _bus_note(self) -> str:
+        return "" if self.status == 0 else f" (last bus status: {describe_status(self.status)})"

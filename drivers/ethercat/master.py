@@ -1,0 +1,476 @@
+"""EtherCAT master on pysoem (SOEM) implementing :class:`drivers.transport.Transport`.
+
+Start-up (:meth:`EtherCATTransport.open`, blocking, raises errors that name the interface,
+the slave and the values involved):
+
+1. open the interface (must exist; raw sockets need root or CAP_NET_RAW);
+2. scan (``config_init``): the slave count must equal the configured drive count, and each
+   slave's SII identity (vendor id, product code, revision) must match ``bus.drives[i]``;
+3. INIT -> PRE-OP; in the PRE-OP -> SAFE-OP hook map the PDOs by CoE SDO: 0x1C12/0x1C13
+   cleared, 0x1600/0x1A00 written entry by entry from :mod:`drivers.cia402.pdo`, then
+   assigned (the CiA 301 order); ``config_map`` builds the process image;
+4. optional DC: ``config_dc`` and SYNC0 at the bus cycle time on every slave;
+5. SAFE-OP, then OP while exchanging process data, checking states on the way; a slave that
+   refuses is reported with its AL status code in words.
+
+Every cycle (:meth:`EtherCATTransport.exchange`): copy ``rx`` into the slaves' outputs, send
+the process-data frame, receive it and compare the working counter with the expected one;
+a lost frame or a short WKC is reported in the same cycle as a status code (``tx`` then
+keeps the last good values). pysoem's API hands process data over as ``bytes``, so a cycle
+makes one small ``bytes`` object per slave and direction; nothing else is allocated.
+
+Outside the cycle: :meth:`check_bus` reads every slave's AL state and says in words what is
+wrong (lost slave, SAFE-OP + ERROR with its AL status code), :meth:`recover_slaves` brings
+them back when they answer again, :meth:`drive_faults` reads 0x603F of faulted drives.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import time
+from collections import deque
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from drivers.cia402 import pdo
+from drivers.cia402.codes import describe_error_code
+from drivers.ethercat.al_status import (
+    STATE_NAMES,
+    STATE_OP,
+    STATE_PREOP,
+    STATE_SAFEOP,
+    describe_al_status_code,
+    describe_state,
+)
+from drivers.ethercat.errors import (
+    EtherCATError,
+    IdentityMismatchError,
+    SlaveLostError,
+    StateChangeError,
+)
+from drivers.transport import (
+    STATUS_BUS_ERROR,
+    STATUS_NO_RESPONSE,
+    STATUS_NOT_OPEN,
+    STATUS_OK,
+    STATUS_WKC_MISMATCH,
+    SdoAbortError,
+    Transport,
+)
+
+_STATE_ACK = 0x10
+_FAULT_BIT = 0x0008  # CiA 402 statusword bit 3
+
+
+def _pysoem() -> Any:
+    import pysoem
+
+    return pysoem
+
+
+class EtherCATTransport(Transport):
+    """CiA-402 drives on EtherCAT through pysoem (see the module docstring).
+
+    ``drives``: one :class:`hofto_hw.config.drives.DriveConfig` per slave, in line order
+    (their ``identity`` is checked against the SII). ``dc_sync``: program SYNC0 at
+    ``cycle_time``. ``recover``: :meth:`recover_slaves` may bring lost slaves back (else a
+    lost slave stops the transport). ``receive_timeout`` [s]: how long ``exchange`` waits
+    for its frame (default: one cycle). ``state_timeout`` [s]: per AL state change.
+    """
+
+    def __init__(
+        self,
+        interface: str,
+        drives: Sequence[Any],
+        cycle_time: float = 0.001,
+        axis_names: list[str] | None = None,
+        *,
+        dc_sync: bool = False,
+        recover: bool = False,
+        receive_timeout: float | None = None,
+        state_timeout: float = 3.0,
+    ) -> None:
+        super().__init__(len(drives), cycle_time, axis_names)
+        self.interface = interface
+        self.drives = list(drives)
+        self.dc_sync = dc_sync
+        self.recover = recover
+        self.state_timeout = state_timeout
+        timeout = cycle_time if receive_timeout is None else receive_timeout
+        self._timeout_us = max(100, int(timeout * 1e6))
+        self.master: Any = None
+        self.slaves: list[Any] = []
+        self.is_open = False
+        self.stopped = False
+        self.expected_wkc = 0
+        self.last_wkc = 0
+        self.cycles = 0
+        self.lost_frames = 0
+        self.wkc_errors = 0
+        size = pdo.TXPDO_SIZE
+        tx_bytes = memoryview(self.tx.view(np.uint8))
+        #: one writable byte view per slave into ``tx`` (filled from pysoem's input bytes)
+        self._tx_rows = [tx_bytes[i * size : (i + 1) * size] for i in range(self.n_axes)]
+        #: emergencies received (in mailbox reads), newest last: (axis, error code, register)
+        self.emergencies: deque[tuple[int, int, int]] = deque(maxlen=64)
+        self._rx_size = pdo.RXPDO_SIZE
+        self._tx_size = pdo.TXPDO_SIZE
+
+    @classmethod
+    def from_config(cls, bus: Any, axis_names: list[str] | None = None) -> EtherCATTransport:
+        """From a :class:`hofto_hw.config.drives.BusConfig` with ``transport: ethercat``."""
+        opts = getattr(bus, "ethercat", None)
+        kw: dict[str, Any] = {}
+        if opts is not None:
+            kw = {
+                "dc_sync": opts.dc_sync,
+                "recover": opts.recover_lost_slaves,
+                "receive_timeout": opts.receive_timeout,
+                "state_timeout": opts.state_timeout,
+            }
+        return cls(bus.interface, bus.drives, bus.cycle_time, axis_names, **kw)
+
+    # -------------------------------------------------------------------- start-up
+
+    def _who(self, axis: int) -> str:
+        return f"slave {axis + 1} ({self.axis_names[axis]}) on {self.interface}"
+
+    def open(self) -> None:
+        """Bring every slave to OP (steps in the module docstring); raises EtherCATError."""
+        if self.is_open:
+            return
+        pysoem = _pysoem()
+        if not os.path.exists(f"/sys/class/net/{self.interface}"):
+            raise EtherCATError(
+                f"bus.interface: network interface {self.interface!r} does not exist "
+                "(see `ip link`)"
+            )
+        master = pysoem.Master()
+        try:
+            master.open(self.interface)
+        except ConnectionError:
+            raise EtherCATError(
+                f"cannot open EtherCAT interface {self.interface!r}: raw sockets need root or "
+                "CAP_NET_RAW"
+            ) from None
+        self.master = master
+        try:
+            self._start(pysoem)
+        except BaseException:
+            self._shutdown()
+            raise
+        self.is_open = True
+        self.stopped = False
+
+    def _start(self, pysoem: Any) -> None:
+        m = self.master
+        m.manual_state_change = 1
+        found = m.config_init()
+        if found <= 0:
+            raise EtherCATError(f"no EtherCAT slave answered on {self.interface}")
+        if found != self.n_axes:
+            raise EtherCATError(
+                f"{self.interface}: found {found} EtherCAT slaves, the config has "
+                f"{self.n_axes} drives (bus.drives)"
+            )
+        self.slaves = list(m.slaves)
+        self._check_identities()
+        for s in self.slaves:
+            s.add_emergency_callback(self._on_emergency)
+        self._request(STATE_PREOP)
+        for s in self.slaves:
+            s.config_func = self._map_pdos
+        try:
+            m.config_map()
+        except pysoem.ConfigMapError as exc:
+            raise EtherCATError(
+                f"{self.interface}: PDO mapping failed: "
+                + "; ".join(self._describe_mailbox_error(e) for e in exc.error_list)
+            ) from None
+        except pysoem.SdoError as exc:
+            raise self._sdo_error(exc, "write") from None
+        for i, s in enumerate(self.slaves):
+            sizes = (len(s.output), len(s.input))
+            if sizes != (self._rx_size, self._tx_size):
+                raise EtherCATError(
+                    f"{self._who(i)}: process data is {sizes[0]} bytes out / {sizes[1]} in, "
+                    f"expected {self._rx_size} / {self._tx_size} (PDO mapping not applied)"
+                )
+        if self.dc_sync:
+            if not m.config_dc():
+                raise EtherCATError(f"{self.interface}: no slave supports distributed clocks")
+            for s in self.slaves:
+                s.dc_sync(True, round(self.cycle_time * 1e9))
+        self._request(STATE_SAFEOP)
+        self.expected_wkc = m.expected_wkc
+        self.rx.fill(0)
+        self._request(STATE_OP, cyclic=True)
+
+    def _check_identities(self) -> None:
+        for i, (s, d) in enumerate(zip(self.slaves, self.drives, strict=True)):
+            ident = d.identity
+            checks = [
+                ("vendor id", ident.vendor_id, s.man),
+                ("product code", ident.product_code, s.id),
+            ]
+            if ident.revision is not None:
+                checks.append(("revision", ident.revision, s.rev))
+            for what, want, got in checks:
+                if got != want:
+                    raise IdentityMismatchError(
+                        f"bus.drives[{i}].identity: {self._who(i)} ('{s.name}') has {what} "
+                        f"0x{got:08X}, expected 0x{want:08X}",
+                        i + 1,
+                        what,
+                        want,
+                        got,
+                    )
+
+    def _map_pdos(self, pos: int) -> None:
+        """PRE-OP -> SAFE-OP hook: write the PDO mapping and assignment by SDO (CiA 301)."""
+        s = self.slaves[pos]
+        u8, u16, u32 = (struct.Struct(f).pack for f in ("<B", "<H", "<I"))
+        for assign, pdo_index, entries in (
+            (pdo.RXPDO_ASSIGN_INDEX, pdo.RXPDO_INDEX, pdo.RXPDO_MAPPING),
+            (pdo.TXPDO_ASSIGN_INDEX, pdo.TXPDO_INDEX, pdo.TXPDO_MAPPING),
+        ):
+            s.sdo_write(assign, 0, u8(0))
+            s.sdo_write(pdo_index, 0, u8(0))
+            for k, e in enumerate(entries):
+                s.sdo_write(pdo_index, k + 1, u32(pdo.mapping_value(e)))
+            s.sdo_write(pdo_index, 0, u8(len(entries)))
+            s.sdo_write(assign, 1, u16(pdo_index))
+            s.sdo_write(assign, 0, u8(1))
+
+    def _request(self, state: int, cyclic: bool = False) -> None:
+        """Request ``state`` on all slaves and wait; raises StateChangeError in words."""
+        m = self.master
+        m.state = state
+        m.write_state()
+        deadline = time.monotonic() + self.state_timeout
+        reached = 0
+        while time.monotonic() < deadline:
+            if cyclic:
+                self._raw_exchange()
+            reached = m.state_check(state, 1000 if cyclic else 50_000)
+            if reached == state:
+                return
+            m.read_state()
+            if any(s.state & 0x10 for s in self.slaves):
+                break  # a slave refused with an error: no point waiting
+            if cyclic:
+                time.sleep(self.cycle_time)
+        m.read_state()
+        problems = {
+            i + 1: (s.state, s.al_status) for i, s in enumerate(self.slaves) if s.state != state
+        }
+        target = STATE_NAMES.get(state, hex(state))
+        parts = []
+        for slave, (st, code) in problems.items():
+            who = self._who(slave - 1)
+            if st == 0:
+                parts.append(f"{who} does not answer")
+            else:
+                parts.append(
+                    f"{who} is in {describe_state(st)}, AL status {describe_al_status_code(code)}"
+                )
+        raise StateChangeError(
+            f"EtherCAT slaves did not reach {target}: " + "; ".join(parts or ["timeout"]),
+            problems,
+        )
+
+    # ------------------------------------------------------------------- the cycle
+
+    def _raw_exchange(self) -> int:
+        m = self.master
+        raw = self.rx.tobytes()
+        size = self._rx_size
+        for i, s in enumerate(self.slaves):
+            s.output = raw[i * size : (i + 1) * size]
+        m.send_processdata()
+        return m.receive_processdata(self._timeout_us)
+
+    def exchange(self) -> int:
+        """One cycle: outputs out, inputs in, WKC checked. Returns a status; never raises."""
+        if not self.is_open:
+            return STATUS_NOT_OPEN
+        if self.stopped:
+            return STATUS_BUS_ERROR
+        self.cycles += 1
+        try:
+            wkc = self._raw_exchange()
+        except Exception:
+            return STATUS_BUS_ERROR
+        self.last_wkc = wkc
+        if wkc < 0:
+            self.lost_frames += 1
+            return STATUS_NO_RESPONSE
+        if wkc != self.expected_wkc:
+            self.wkc_errors += 1
+            return STATUS_WKC_MISMATCH
+        for row, s in zip(self._tx_rows, self.slaves, strict=False):
+            row[:] = s.input
+        return STATUS_OK
+
+    # ------------------------------------------------------------- supervision
+
+    def check_bus(self) -> list[str]:
+        """Read every slave's AL state; one plain-word line per slave that is not in OP."""
+        if self.master is None:
+            return [f"EtherCAT master on {self.interface} is not open"]
+        self.master.read_state()
+        out = []
+        for i, s in enumerate(self.slaves):
+            if s.state == STATE_OP:
+                continue
+            if s.state == 0:
+                out.append(f"{self._who(i)} does not answer (lost)")
+            else:
+                out.append(
+                    f"{self._who(i)} is in {describe_state(s.state)}, AL status "
+                    f"{describe_al_status_code(s.al_status)}"
+                )
+        return out
+
+    def recover_slaves(self) -> list[str]:
+        """Bring slaves that are not in OP back to OP; returns what was done, in words.
+
+        A lost slave is re-addressed and reconfigured (PDO mapping again) once it answers;
+        a slave in an error state is acknowledged and requested to OP. Without ``recover``
+        the transport stops instead and :class:`SlaveLostError` is raised.
+        """
+        problems = self.check_bus()
+        if not problems:
+            return []
+        if not self.recover:
+            self.stopped = True
+            raise SlaveLostError("EtherCAT bus stopped: " + "; ".join(problems))
+        done = []
+        pysoem = _pysoem()
+        for i, s in enumerate(self.slaves):
+            if s.state == STATE_OP:
+                continue
+            if s.state == 0:
+                if s.recover(20_000) <= 0:
+                    done.append(f"{self._who(i)} still does not answer")
+                    continue
+                s.reconfig(50_000)
+                done.append(f"{self._who(i)} answered again and was reconfigured")
+            elif s.state & 0x10:
+                s.state = (s.state & 0x0F) | _STATE_ACK
+                s.write_state()
+                done.append(
+                    f"{self._who(i)}: acknowledged AL status {describe_al_status_code(s.al_status)}"
+                )
+            if s.state & 0x0F == STATE_SAFEOP or s.state & 0x10:
+                s.state = pysoem.OP_STATE
+                s.write_state()
+        for _ in range(max(1, int(0.5 / self.cycle_time))):
+            self._raw_exchange()
+            if self.master.state_check(STATE_OP, 1000) == STATE_OP:
+                break
+        remaining = self.check_bus()
+        return done + remaining
+
+    def drive_faults(self) -> list[str]:
+        """Axes whose statusword shows Fault, with 0x603F read by SDO and decoded."""
+        out = []
+        for i in np.flatnonzero(self.tx["statusword"] & _FAULT_BIT):
+            axis = int(i)
+            try:
+                code = self.read_value(axis, 0x603F, 0, "u16")
+            except EtherCATError as exc:
+                out.append(f"{self._who(axis)}: fault, error code unreadable ({exc})")
+                continue
+            out.append(f"{self._who(axis)}: drive fault {describe_error_code(code)}")
+        return out
+
+    def _on_emergency(self, emcy: Any) -> None:
+        self.emergencies.append(
+            (int(emcy.slave_pos) - 1, int(emcy.error_code), int(emcy.error_reg))
+        )
+
+    def emergency_messages(self) -> list[str]:
+        """Emergency messages received so far, in words (oldest first)."""
+        return [
+            f"{self._who(a)}: emergency {describe_error_code(code)}, error register 0x{reg:02X}"
+            for a, code, reg in self.emergencies
+            if 0 <= a < self.n_axes
+        ]
+
+    # ----------------------------------------------------------------------- SDO
+
+    def _describe_mailbox_error(self, exc: Any) -> str:
+        pysoem = _pysoem()
+        if isinstance(exc, pysoem.SdoError):
+            return str(self._sdo_error(exc, "access"))
+        pos = getattr(exc, "slave_pos", 0)
+        who = self._who(pos - 1) if 1 <= pos <= self.n_axes else f"slave {pos}"
+        desc = getattr(exc, "desc", "") or type(exc).__name__
+        return f"{who}: {desc}"
+
+    def _sdo_error(self, exc: Any, action: str) -> SdoAbortError:
+        pos = int(getattr(exc, "slave_pos", 1))
+        axis = pos - 1 if 1 <= pos <= self.n_axes else 0
+        return SdoAbortError(
+            axis, exc.index, exc.subindex, exc.abort_code, action, self.axis_names[axis]
+        )
+
+    def sdo_read(self, axis: int, index: int, subindex: int) -> bytes:
+        """Upload ``index:subindex`` of drive ``axis``; raises SdoAbortError/EtherCATError."""
+        self._check_axis(axis)
+        pysoem = _pysoem()
+        if self.master is None:
+            raise EtherCATError(f"EtherCAT master on {self.interface} is not open")
+        try:
+            return bytes(self.slaves[axis].sdo_read(index, subindex))
+        except pysoem.SdoError as exc:
+            raise SdoAbortError(
+                axis, index, subindex, exc.abort_code, "read", self.axis_names[axis]
+            ) from None
+        except (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError) as exc:
+            raise EtherCATError(
+                f"{self._who(axis)}: SDO read 0x{index:04X}:{subindex:02X} failed: "
+                f"{getattr(exc, 'desc', None) or type(exc).__name__}"
+            ) from None
+
+    def sdo_write(self, axis: int, index: int, subindex: int, data: bytes) -> None:
+        """Download ``data`` to ``index:subindex`` of drive ``axis``; raises SdoAbortError."""
+        self._check_axis(axis)
+        pysoem = _pysoem()
+        if self.master is None:
+            raise EtherCATError(f"EtherCAT master on {self.interface} is not open")
+        try:
+            self.slaves[axis].sdo_write(index, subindex, bytes(data))
+        except pysoem.SdoError as exc:
+            raise SdoAbortError(
+                axis, index, subindex, exc.abort_code, "write", self.axis_names[axis]
+            ) from None
+        except (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError) as exc:
+            raise EtherCATError(
+                f"{self._who(axis)}: SDO write 0x{index:04X}:{subindex:02X} failed: "
+                f"{getattr(exc, 'desc', None) or type(exc).__name__}"
+            ) from None
+
+    # ----------------------------------------------------------------------- close
+
+    def _shutdown(self) -> None:
+        m = self.master
+        if m is None:
+            return
+        try:
+            if self.slaves:
+                m.state = 1  # INIT
+                m.write_state()
+        except Exception:  # closing a broken bus: nothing more to do
+            pass
+        m.close()
+        self.master = None
+
+    def close(self) -> None:
+        """Request INIT and close the interface. Safe to call twice."""
+        self.is_open = False
+        self._shutdown()

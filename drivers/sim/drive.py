@@ -1,0 +1,555 @@
+"""Emulated CiA-402 servo drives on the simulated arm (:class:`drivers.sim.plant.Plant`).
+
+:class:`EmulatedDrives` is a group of n drives, one per joint, sharing one plant. Each cycle
+:meth:`EmulatedDrives.step` takes the RxPDO records (shape (n,)), runs every drive's state
+machine and control loops, applies the joint torques to the plant for one tick and writes
+the TxPDO records. EtherCAT and CANopen emulators and the in-process SimBus all drive this
+class; each drive's :class:`~drivers.sim.object_dictionary.ObjectDictionary` is in ``ods``.
+
+Per drive (all in joint-side SI internally, raw units only at the process image):
+- CiA 402 state machine (drivers.cia402.state_machine), quick-stop option codes 0-8;
+- modes CSP (cascaded P position / PI velocity loop with velocity feed-forward from the
+  target increments), CSV (PI velocity loop) and CST (torque), torque offset 0x60B2 in all;
+- torque limit 0x6072, quick-stop ramp 0x6085 then disable, following-error supervision
+  0x6065/0x6066, communication watchdog;
+- a motor holding brake while the power stage is off (the plant has none): a saturated
+  spring-damper holding the position where the brake closed, so a disabled arm stays put;
+- fault injection (:meth:`EmulatedDrives.inject_fault`) with the CiA 402 error codes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.cia402 import state_machine as sm
+from drivers.cia402.pdo import new_rx, new_tx
+from drivers.cia402.state_machine import Command, Mode, State
+from drivers.cia402.units import AxisScaling, Scaling
+from drivers.sim.object_dictionary import DriveObjects, ObjectDictionary, cia402_dictionary
+from drivers.sim.plant import Plant
+from hofto_hw.config.drives import DriveConfig
+
+#: injectable faults -> (0x603F error code, reaction: True = ramp down first, False = torque off)
+FAULTS: dict[str, tuple[int, bool]] = {
+    "over_current": (0x2310, False),
+    "short_circuit": (0x2320, False),
+    "over_voltage": (0x3210, False),
+    "under_voltage": (0x3220, False),
+    "over_temperature": (0x4310, False),
+    "encoder": (0x7305, False),
+    "following_error": (0x8611, True),
+    "comm_loss": (0x8130, True),
+}
+CODE_FOLLOWING_ERROR = 0x8611
+CODE_COMM_LOSS = 0x8130
+SUPPORTED_MODES = (Mode.NO_MODE, Mode.CSP, Mode.CSV, Mode.CST)
+
+# Plain ints for the per-cycle code (enum attribute access is slow).
+_NR, _SOD, _RTSO, _SO, _OE, _QSA, _FRA, _FLT = (int(s) for s in list(State)[:8])
+_CSP, _CSV, _CST = int(Mode.CSP), int(Mode.CSV), int(Mode.CST)
+_N_COMMANDS = len(Command)
+_POWERED = (_OE, _QSA, _FRA)
+_WATCHED = (_SO, *_POWERED)  # states that fault when the bus goes silent
+_STO_BLOCKED = (_RTSO, _SO, *_POWERED)
+_NEXT = sm.NEXT_STATE.ravel().copy()
+_NEXT_HOLD = sm.NEXT_STATE_QS_HOLD.ravel().copy()
+#: per state code: needs an automatic transition check after the plant step
+_HAS_AUTOMATIC = np.array([s in (_NR, _QSA, _FRA) for s in range(len(State))])
+#: per state code: statusword state bits + remote + voltage enabled
+_STATUS_BASE = np.array(
+    [
+        int(sm.STATUS_FROM_STATE[s])
+        | sm.SW_REMOTE
+        | (sm.SW_VOLTAGE_ENABLED if s in (_RTSO, _SO, *_POWERED) else 0)
+        for s in range(len(State))
+    ],
+    dtype=np.uint16,
+)
+#: per mode byte (as uint8): supported by the emulated drive
+_MODE_SUPPORTED = np.array([(m - 256 if m > 127 else m) in SUPPORTED_MODES for m in range(256)])
+#: error-register (0x1001) bit per error class: generic, current, voltage, temperature, comm
+_ERROR_REGISTER = {0x2: 0x03, 0x3: 0x05, 0x4: 0x09, 0x8: 0x11}
+
+
+@dataclass(frozen=True)
+class LoopTuning:
+    """Drive control-loop gains per axis, joint side, arrays of shape (n,).
+
+    position_gain [1/s]; velocity_gain [N·m·s/rad]; velocity_integral [N·m/rad];
+    brake stiffness [N·m/rad], damping [N·m·s/rad] and holding torque [N·m].
+    """
+
+    position_gain: np.ndarray
+    velocity_gain: np.ndarray
+    velocity_integral: np.ndarray
+    brake_stiffness: np.ndarray
+    brake_damping: np.ndarray
+    brake_torque: np.ndarray
+
+    @classmethod
+    def from_inertia(
+        cls, inertia: np.ndarray, torque_limit: np.ndarray, bandwidth: float = 150.0
+    ) -> LoopTuning:
+        """Gains for a velocity-loop ``bandwidth`` [rad/s] on joints of ``inertia`` [kg·m²].
+
+        PI zero and position gain at a quarter of the bandwidth; brake at twice it.
+        """
+        j = np.asarray(inertia, dtype=float)
+        kv = j * bandwidth
+        wb = 2.0 * bandwidth
+        return cls(
+            position_gain=np.full(j.shape, bandwidth / 4.0),
+            velocity_gain=kv,
+            velocity_integral=kv * bandwidth / 4.0,
+            brake_stiffness=j * wb * wb / 4.0,
+            brake_damping=j * wb,
+            brake_torque=2.0 * np.asarray(torque_limit, dtype=float),
+        )
+
+
+class EmulatedDrives:
+    """n emulated CiA-402 drives driving one plant; see the module docstring.
+
+    ``rx``/``tx``: the drives' own process images (shape (n,)), what their object
+    dictionaries read and write. ``watchdog_cycles``: cycles without an RxPDO before a
+    powered drive faults with 0x8130 (communication lost).
+    """
+
+    def __init__(
+        self,
+        plant: Plant,
+        drives: Sequence[DriveConfig],
+        *,
+        tuning: LoopTuning | None = None,
+        watchdog_cycles: int = 3,
+        names: Sequence[str] | None = None,
+    ) -> None:
+        n = plant.n
+        if len(drives) != n:
+            raise ValueError(f"{len(drives)} drive configs for a plant with {n} joints")
+        self.plant = plant
+        self.n = n
+        self.dt = plant.dt
+        self.names = list(names) if names else [f"drive{i}" for i in range(n)]
+        self.scaling = Scaling([AxisScaling.from_config(d) for d in drives])
+        self.watchdog_cycles = int(watchdog_cycles)
+        sc = self.scaling
+
+        self.rx = new_rx(n)
+        self.tx = new_tx(n)
+        self.max_torque = np.array(
+            [sc.torque_limit_permille(i, d.torque_limit) for i, d in enumerate(drives)],
+            dtype=np.uint16,
+        )
+        self.quick_stop_decel = np.array(
+            [sc.acceleration_to_raw(i, d.quick_stop_deceleration) for i, d in enumerate(drives)],
+            dtype=np.uint32,
+        )
+        self.following_window = np.array(
+            [sc.angle_to_counts(i, d.following_error_window) for i, d in enumerate(drives)],
+            dtype=np.uint32,
+        )
+        self.following_timeout = np.array(
+            [round(d.following_error_timeout * 1000.0) for d in drives], dtype=np.uint16
+        )
+        self.quick_stop_option = np.full(n, 2, dtype=np.int16)
+        self.error_register = np.zeros(n, dtype=np.uint8)
+        objs = DriveObjects(
+            self.rx,
+            self.tx,
+            self.max_torque,
+            self.quick_stop_decel,
+            self.following_window,
+            self.following_timeout,
+            self.quick_stop_option,
+            self.error_register,
+        )
+        self.ods: list[ObjectDictionary] = []
+        for i, d in enumerate(drives):
+            motor, shaft = _gear_fraction(d.gear_ratio)
+            self.ods.append(
+                cia402_dictionary(
+                    i,
+                    objs,
+                    vendor_id=d.identity.vendor_id,
+                    product_code=d.identity.product_code,
+                    revision=d.identity.revision or 0,
+                    serial=0x5100 + i,
+                    device_name=f"hofto-sim servo {self.names[i]}",
+                    counts_per_rev=d.counts_per_rev,
+                    gear_motor_revs=motor,
+                    gear_shaft_revs=shaft,
+                    rated_torque_mnm=round(d.rated_torque),
+                    rated_current_ma=round(d.rated_current),
+                )
+            )
+
+        if tuning is None:
+            inertia = np.diag(plant.true_model.mass_matrix(plant.q)).copy()
+            limit = np.array([d.torque_limit for d in drives])
+            # Velocity-loop bandwidth: 150 rad/s, lower on slow buses (the loops run once per
+            # cycle and the measurement is one cycle old: keep bandwidth·dt <= 0.2).
+            tuning = LoopTuning.from_inertia(inertia, limit, min(150.0, 0.2 / self.dt))
+        self.tuning = tuning
+
+        # Drive-internal state.
+        self.state = np.full(n, State.NOT_READY_TO_SWITCH_ON, dtype=np.uint8)
+        self.mode_display = np.zeros(n, dtype=np.int8)
+        self.prev_controlword = np.zeros(n, dtype=np.uint16)
+        self.fault_code = np.zeros(n, dtype=np.uint16)
+        self.fault_ramp = np.zeros(n, dtype=bool)
+        self.fault_persistent = np.zeros(n, dtype=bool)
+        self.encoder_failed = np.zeros(n, dtype=bool)
+        self.sto = np.zeros(n, dtype=bool)
+        self.missed_cycles = 0
+        self._pending: list[tuple[int, int, bool]] = []
+        self._fe_cycles = np.zeros(n, dtype=np.int64)
+        self._integral = np.zeros(n)
+        self._ramp_v = np.zeros(n)
+        self._brake_q = plant.q_meas.copy()
+        self._prev_target = np.zeros(n)
+        self._target_valid = np.zeros(n, dtype=bool)
+        self._limited = np.zeros(n, dtype=bool)
+        self._fe_flag = np.zeros(n, dtype=bool)
+        # Precomputed factors and process-image field views.
+        self._abs_rpc = np.abs(sc.rad_per_count)
+        self._abs_nm = np.abs(sc.nm_per_permille)
+        self._ki_dt = tuning.velocity_integral * self.dt
+        self._neg_brake = -tuning.brake_torque
+        self._inv_dt = 1.0 / self.dt
+        self._encoder_ok = np.ones(n, dtype=bool)
+        rx, tx = self.rx, self.tx
+        self._rx_cw = rx["controlword"]
+        self._rx_mode = rx["mode"]
+        self._rx_mode_u8 = self._rx_mode.view(np.uint8)
+        self._rx_pos = rx["target_position"]
+        self._rx_vel = rx["target_velocity"]
+        self._rx_tau = rx["target_torque"]
+        self._rx_off = rx["torque_offset"]
+        self._tx_sw = tx["statusword"]
+        self._tx_mode = tx["mode_display"]
+        self._tx_pos = tx["position"]
+        self._tx_vel = tx["velocity"]
+        self._tx_tau = tx["torque"]
+        self._tx_cur = tx["current"]
+        self._tx_err = tx["error_code"]
+        self._tx_din = tx["digital_inputs"]
+        # Scratch (no allocation per cycle).
+        f = np.zeros
+        self._tau, self._qt, self._vt, self._tt, self._toff = (f(n) for _ in range(5))
+        self._vcmd, self._err, self._lim, self._neg_lim = (f(n) for _ in range(4))
+        self._w, self._w2, self._w3 = f(n), f(n), f(n)
+        (
+            self._b1,
+            self._enabled,
+            self._csp,
+            self._csv,
+            self._cst,
+            self._ramping,
+            self._loop,
+            self._active,
+        ) = (f(n, dtype=bool) for _ in range(8))
+        self._u16 = f(n, dtype=np.uint16)
+        self._cmd = f(n, dtype=np.uint8)
+        self._next = f(n, dtype=np.uint8)
+        self._next_hold = f(n, dtype=np.uint8)
+        self._flat = f(n, dtype=np.intp)
+        self._pos_raw = f(n, dtype=np.int32)
+        self._update_tx()
+
+    def reset(self, q0: np.ndarray, qd0: np.ndarray | None = None) -> None:
+        """Power-cycle the drives and put the plant at ``q0`` [rad] (``qd0`` [rad/s])."""
+        self.plant.reset(q0, qd0)
+        self.state.fill(State.NOT_READY_TO_SWITCH_ON)
+        for a in (self.mode_display, self.prev_controlword, self.fault_code, self.error_register):
+            a.fill(0)
+        for a in (self.fault_ramp, self.fault_persistent, self.encoder_failed, self.sto):
+            a.fill(False)
+        self._pending.clear()
+        self.missed_cycles = 0
+        self._integral.fill(0.0)
+        self._ramp_v.fill(0.0)
+        self._target_valid.fill(False)
+        self._fe_cycles.fill(0)
+        self._encoder_ok.fill(True)
+        np.copyto(self._brake_q, self.plant.q_meas)
+        self.rx.fill(0)
+        self._update_tx()
+
+    # ------------------------------------------------------------------ faults
+
+    def inject_fault(self, axis: int, kind: str, persistent: bool = False) -> None:
+        """Make drive ``axis`` detect fault ``kind`` (a key of :data:`FAULTS`) next cycle.
+
+        ``persistent``: the cause stays until :meth:`clear_fault`, so fault resets fail.
+        ``encoder`` also freezes the reported position until cleared.
+        """
+        if kind not in FAULTS:
+            raise ValueError(f"unknown fault {kind!r}; known: {', '.join(FAULTS)}")
+        if not 0 <= axis < self.n:
+            raise ValueError(f"axis {axis} does not exist ({self.n} drives)")
+        code, ramp = FAULTS[kind]
+        self._pending.append((axis, code, ramp))
+        self.fault_persistent[axis] = persistent
+        if kind == "encoder":
+            self.encoder_failed[axis] = True
+            self._encoder_ok[axis] = False
+
+    def set_safe_torque_off(self, axis: int, active: bool) -> None:
+        """Safe torque off input of drive ``axis``: while active the power stage cannot be
+        switched on (transition 2 is refused, a powered drive drops to Switch on disabled)
+        and 0x60FD bit 16 is set."""
+        self.sto[axis] = active
+
+    def clear_fault(self, axis: int) -> None:
+        """Remove the cause of an injected fault (a fault reset can then succeed)."""
+        self.fault_persistent[axis] = False
+        self.encoder_failed[axis] = False
+        self._encoder_ok[axis] = True
+
+    def _raise_fault(self, axis: int, code: int, ramp: bool) -> None:
+        state = int(self.state[axis])
+        if state in (_FLT, _FRA):
+            return
+        self.fault_code[axis] = code
+        self.error_register[axis] = _ERROR_REGISTER.get(code >> 12, 0x01)
+        self.fault_ramp[axis] = ramp and state in (_OE, _QSA)
+        if self.fault_ramp[axis] and state == _OE:
+            self._ramp_v[axis] = self.plant.qd_meas[axis]
+        elif not self.fault_ramp[axis]:
+            self._close_brake(axis)
+        self.state[axis] = _FRA
+
+    # ------------------------------------------------------------------- cycle
+
+    def step(self, rx: np.ndarray | None) -> None:
+        """One cycle: take ``rx`` (None = no frame arrived), control, plant step, fill tx.
+
+        The common path (no state change, no fault) allocates no arrays.
+        """
+        if rx is None:
+            self.missed_cycles += 1
+            if self.missed_cycles > self.watchdog_cycles:
+                for i in range(self.n):
+                    if int(self.state[i]) in _WATCHED:
+                        self._raise_fault(i, CODE_COMM_LOSS, True)
+        else:
+            self.missed_cycles = 0
+            np.copyto(self.rx, rx)
+        while self._pending:
+            self._raise_fault(*self._pending.pop())
+        if rx is not None:
+            self._state_machine()
+        if self.sto.any():
+            for i in np.flatnonzero(self.sto):
+                if int(self.state[i]) in _STO_BLOCKED:
+                    self._close_brake(i)
+                    self.state[i] = _SOD
+        self._mode()
+        self._control()
+        self.plant.step(self._tau)
+        self._automatic_transitions()
+        self._update_tx()
+
+    def _state_machine(self) -> None:
+        cw = self._rx_cw
+        np.bitwise_and(cw, 0x0F, out=self._u16)
+        np.take(sm.COMMAND_FROM_CONTROL, self._u16, out=self._cmd)
+        # Bit 7: rising edge = fault reset; held high = no command.
+        np.bitwise_and(cw, 0x80, out=self._u16)
+        if self._u16.any():
+            for i in np.flatnonzero(self._u16):
+                rising = not int(self.prev_controlword[i]) & 0x80
+                self._cmd[i] = Command.FAULT_RESET if rising else Command.NONE
+        np.copyto(self.prev_controlword, cw)
+        np.multiply(self.state, _N_COMMANDS, out=self._flat)
+        np.add(self._flat, self._cmd, out=self._flat)
+        np.take(_NEXT, self._flat, out=self._next)
+        np.greater_equal(self.quick_stop_option, 5, out=self._b1)
+        if self._b1.any():
+            np.take(_NEXT_HOLD, self._flat, out=self._next_hold)
+            np.copyto(self._next, self._next_hold, where=self._b1)
+        np.not_equal(self._next, self.state, out=self._b1)
+        if self._b1.any():
+            for i in np.flatnonzero(self._b1):
+                self._enter(int(i), int(self.state[i]), int(self._next[i]))
+
+    def _enter(self, i: int, old: int, new: int) -> None:
+        if self.sto[i] and (new == _RTSO or new in _POWERED):
+            return  # safe torque off: no power stage
+        if old == _FLT:
+            if self.fault_persistent[i]:
+                return  # cause still present: stay in Fault
+            self.fault_code[i] = 0
+            self.error_register[i] = 0
+        if new == _OE and old != _QSA:
+            # Brake opens; start the integrator at the torque the brake was holding.
+            self._integral[i] = self._brake_torque(i)
+            self._target_valid[i] = False
+            self._fe_cycles[i] = 0
+        elif new == _QSA:
+            self._ramp_v[i] = self.plant.qd_meas[i]
+            if self.quick_stop_option[i] == 0:
+                new = _SOD
+        if new not in _POWERED and old in _POWERED:
+            self._close_brake(i)
+        self.state[i] = new
+
+    def _mode(self) -> None:
+        np.take(_MODE_SUPPORTED, self._rx_mode_u8, out=self._b1)
+        np.copyto(self.mode_display, self._rx_mode, where=self._b1)
+
+    def _control(self) -> None:
+        p, tn, sc = self.plant, self.tuning, self.scaling
+        q, qd = p.q_meas, p.qd_meas
+        w, t = self._w, self._w2
+        sc.position_to_si(self._rx_pos, self._qt)
+        sc.velocity_to_si(self._rx_vel, self._vt)
+        sc.torque_to_si(self._rx_tau, self._tt)
+        sc.torque_to_si(self._rx_off, self._toff)
+        np.multiply(self.max_torque, self._abs_nm, out=self._lim)
+        np.negative(self._lim, out=self._neg_lim)
+        np.equal(self.state, _OE, out=self._enabled)
+        np.equal(self.mode_display, _CSP, out=self._csp)
+        np.equal(self.mode_display, _CSV, out=self._csv)
+        np.equal(self.mode_display, _CST, out=self._cst)
+        np.equal(self.state, _QSA, out=self._ramping)
+        np.equal(self.state, _FRA, out=self._b1)
+        self._b1 &= self.fault_ramp
+        self._ramping |= self._b1
+
+        # Velocity command: CSP = feed-forward + P on position; CSV = target; ramps override.
+        np.subtract(self._qt, self._prev_target, out=self._vcmd)
+        self._vcmd *= self._inv_dt
+        self._vcmd *= self._target_valid
+        np.copyto(self._prev_target, self._qt)
+        np.subtract(self._qt, q, out=self._err)
+        np.multiply(self._err, tn.position_gain, out=w)
+        self._vcmd += w
+        np.copyto(self._vcmd, self._vt, where=self._csv)
+        if self._ramping.any():
+            self._advance_ramp()
+            np.copyto(self._vcmd, self._ramp_v, where=self._ramping)
+
+        # PI velocity loop where it runs (CSP, CSV, ramps); CST is torque straight through.
+        np.logical_or(self._csp, self._csv, out=self._loop)
+        self._loop &= self._enabled
+        self._loop |= self._ramping
+        np.logical_and(self._cst, self._enabled, out=self._cst)
+        np.subtract(self._vcmd, qd, out=w)
+        np.multiply(w, self._ki_dt, out=t)
+        t *= self._loop
+        self._integral += t
+        np.clip(self._integral, self._neg_lim, self._lim, out=self._integral)
+        np.multiply(w, tn.velocity_gain, out=self._tau)
+        self._tau += self._integral
+        np.copyto(self._tau, self._tt, where=self._cst)
+        self._tau += self._toff
+        np.logical_or(self._loop, self._cst, out=self._active)
+        self._tau *= self._active
+        np.abs(self._tau, out=t)
+        np.greater(t, self._lim, out=self._limited)
+        np.clip(self._tau, self._neg_lim, self._lim, out=self._tau)
+        np.copyto(self._target_valid, self._enabled)
+
+        # Following error (CSP, operation enabled) for longer than 0x6066.
+        np.multiply(self.following_window, self._abs_rpc, out=t)
+        np.abs(self._err, out=w)
+        np.greater(w, t, out=self._fe_flag)
+        self._fe_flag &= self._csp
+        self._fe_flag &= self._enabled
+        self._fe_cycles += 1
+        self._fe_cycles *= self._fe_flag
+        if self._fe_flag.any():
+            np.multiply(self._fe_cycles, self.dt * 1000.0, out=w)
+            np.greater(w, self.following_timeout, out=self._b1)
+            for i in np.flatnonzero(self._b1):
+                self._pending.append((int(i), CODE_FOLLOWING_ERROR, True))
+
+        # Holding brake where the power stage is off.
+        np.logical_or(self._active, self._ramping, out=self._b1)
+        np.logical_not(self._b1, out=self._b1)
+        if self._b1.any():
+            np.subtract(self._brake_q, q, out=w)
+            w *= tn.brake_stiffness
+            np.multiply(tn.brake_damping, qd, out=t)
+            w -= t
+            np.clip(w, self._neg_brake, tn.brake_torque, out=w)
+            np.copyto(self._tau, w, where=self._b1)
+
+    def _advance_ramp(self) -> None:
+        step, sign = self._w2, self._w3
+        np.multiply(self.quick_stop_decel, self._abs_rpc, out=step)
+        step *= self.dt
+        np.abs(self._ramp_v, out=sign)
+        np.minimum(step, sign, out=step)
+        np.sign(self._ramp_v, out=sign)
+        step *= sign
+        step *= self._ramping
+        self._ramp_v -= step
+
+    def _automatic_transitions(self) -> None:
+        np.take(_HAS_AUTOMATIC, self.state, out=self._b1)
+        if not self._b1.any():
+            return
+        qd = self.plant.qd_meas
+        for i in np.flatnonzero(self._b1):
+            s = int(self.state[i])
+            if s == _NR:
+                self.state[i] = _SOD  # transition 1: self test done
+            elif s == _FRA:
+                if not self.fault_ramp[i]:
+                    self.state[i] = _FLT  # transition 14 (brake closed at the fault)
+                elif self._stopped(i, qd[i]):
+                    self._close_brake(i)
+                    self.state[i] = _FLT  # transition 14 after the ramp
+            elif s == _QSA and self.quick_stop_option[i] < 5 and self._stopped(i, qd[i]):
+                self._close_brake(i)
+                self.state[i] = _SOD  # transition 12
+
+    def _stopped(self, i: int, qd: float) -> bool:
+        return self._ramp_v[i] == 0.0 and abs(qd) < 0.01
+
+    def _close_brake(self, i: int) -> None:
+        self._brake_q[i] = self.plant.q_meas[i]
+
+    def _brake_torque(self, i: int) -> float:
+        tn = self.tuning
+        p = self.plant
+        t = tn.brake_stiffness[i] * (self._brake_q[i] - p.q_meas[i])
+        t -= tn.brake_damping[i] * p.qd_meas[i]
+        return float(np.clip(t, -tn.brake_torque[i], tn.brake_torque[i]))
+
+    def _update_tx(self) -> None:
+        p, sc = self.plant, self.scaling
+        sc.position_to_raw(p.q_meas, self._pos_raw)
+        np.copyto(self._tx_pos, self._pos_raw, where=self._encoder_ok)
+        sc.velocity_to_raw(p.qd_meas, self._tx_vel)
+        sc.torque_to_raw(p.tau_meas, self._tx_tau)
+        np.divide(p.tau_meas, sc.gear_ratio, out=self._w)
+        self._w /= sc.torque_constant
+        sc.current_to_raw(self._w, self._tx_cur)
+        sw, u16 = self._tx_sw, self._u16
+        np.take(_STATUS_BASE, self.state, out=sw)
+        np.equal(self.state, _OE, out=self._enabled)
+        np.multiply(self._enabled, sm.SW_FOLLOWING, out=u16, casting="unsafe")
+        sw |= u16
+        np.logical_and(self._limited, self._enabled, out=self._b1)
+        np.multiply(self._b1, sm.SW_INTERNAL_LIMIT, out=u16, casting="unsafe")
+        sw |= u16
+        np.multiply(self._fe_flag, sm.SW_FOLLOWING_ERROR, out=u16, casting="unsafe")
+        sw |= u16
+        np.copyto(self._tx_mode, self.mode_display)
+        np.copyto(self._tx_err, self.fault_code)
+        np.multiply(self.sto, 1 << 16, out=self._tx_din, casting="unsafe")
+
+
+def _gear_fraction(ratio: float) -> tuple[int, int]:
+    """Gear ratio as motor/shaft revolutions for 0x6091 (denominator up to 1000)."""
+    from fractions import Fraction
+
+    f = Fraction(ratio).limit_denominator(1000)
+    return f.numerator, f.denominator

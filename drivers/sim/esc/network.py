@@ -1,0 +1,365 @@
+"""The emulated EtherCAT network: a line of emulated slaves serving emulated CiA-402 drives.
+
+:class:`EmulatedNetwork` joins the slave controllers (``esc.py``), the frame processor
+(``datagram.py``) and the emulated drives on the simulated arm
+(:class:`drivers.sim.drive.EmulatedDrives`). Each frame that carries process data (LRD/
+LWR/LRW) is answered first and then advances the drives and the plant by one tick: the
+simulated time is the number of process-data frames times the bus cycle time.
+
+:func:`serve` binds an AF_PACKET socket for ethertype 0x88A4 to one interface (one end of a
+veth pair; the master opens the other end) and runs the network until stopped. A Unix
+socket (``control``) accepts one JSON object per line for fault injection and status (see
+:meth:`EmulatedNetwork.control` and :class:`ControlClient`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import socket
+import struct
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from drivers.cia402 import pdo
+from drivers.sim.drive import FAULTS, EmulatedDrives
+from drivers.sim.esc import datagram
+from drivers.sim.esc import registers as r
+from drivers.sim.esc.description import SlaveDescription
+from drivers.sim.esc.esc import Esc
+from hofto_hw.errors import UserError
+
+ETH_P_ECAT = 0x88A4
+_FAULT_KINDS = {code: kind for kind, (code, _ramp) in FAULTS.items()}
+
+
+class EmulatedNetwork:
+    """Slaves in line order, one per drive of ``drives`` (or bare slaves when ``None``)."""
+
+    def __init__(
+        self, descriptions: Sequence[SlaveDescription], drives: EmulatedDrives | None
+    ) -> None:
+        n = len(descriptions)
+        if drives is not None and drives.n != n:
+            raise ValueError(f"{n} slave descriptions for {drives.n} drives")
+        ods = drives.ods if drives is not None else [None] * n
+        self.slaves = [
+            Esc(d, od, i, n) for i, (d, od) in enumerate(zip(descriptions, ods, strict=True))
+        ]
+        self.drives = drives
+        self.n = n
+        self.frames = 0
+        self.process_frames = 0
+        self.dropped = 0
+        self.corrupted = 0
+        self.malformed = 0
+        self.drop_next = 0
+        self.corrupt_next = 0
+        self.corrupt_at = 0
+        self.rx = pdo.new_rx(n)
+        self._rx_u8 = self.rx.view(np.uint8).reshape(n, pdo.RXPDO_SIZE)
+        if drives is not None:
+            self._tx_u8 = drives.tx.view(np.uint8).reshape(n, pdo.TXPDO_SIZE)
+        self._last_error = np.zeros(n, dtype=np.uint16)
+        self._changed = np.zeros(n, dtype=bool)
+
+    # ----------------------------------------------------------------- frames
+
+    def handle(self, frame: bytearray, length: int) -> bool:
+        """Process one received frame in place; False when it must not be answered.
+
+        When the frame carried process data, :meth:`step` must be called after the reply
+        is sent (``self.pending_step``).
+        """
+        self.frames += 1
+        self.pending_step = False
+        if self.drop_next > 0:
+            self.drop_next -= 1
+            self.dropped += 1
+            return False
+        cut = None
+        if self.corrupt_next > 0:
+            self.corrupt_next -= 1
+            self.corrupted += 1
+            cut = self.corrupt_at
+        try:
+            logical = datagram.process_frame(frame, length, self.slaves, cut)
+        except ValueError:
+            self.malformed += 1
+            return False
+        if cut is not None:
+            # the damaged bytes the slaves behind the fault saw travel on to the master
+            frame[datagram.ETH_HEADER + 2 + datagram.DG_HEADER] ^= 0xFF
+        frame[6] |= 0x02  # port 0 marks the source MAC as locally administered, as an ESC does
+        self.pending_step = logical
+        return True
+
+    def step(self) -> None:
+        """One drive/plant tick with the outputs of every slave in OP (others: all zero)."""
+        self.process_frames += 1
+        if self.drives is None:
+            return
+        rx_u8 = self._rx_u8
+        for i, s in enumerate(self.slaves):
+            if not s.pull_outputs(rx_u8[i]):
+                rx_u8[i] = 0
+        self.drives.step(self.rx)
+        tx_u8 = self._tx_u8
+        for i, s in enumerate(self.slaves):
+            s.push_inputs(tx_u8[i])
+        codes = self.drives.tx["error_code"]
+        np.not_equal(codes, self._last_error, out=self._changed)
+        if self._changed.any():
+            for i in np.flatnonzero(self._changed):
+                code = int(codes[i])
+                s = self.slaves[i]
+                if code and s.coe is not None:
+                    reg = int(self.drives.error_register[i])
+                    s.queue_mailbox(s.coe.emergency(code, reg))
+            np.copyto(self._last_error, codes)
+
+    def check_watchdogs(self) -> None:
+        """Run every slave's SyncManager watchdog."""
+        now = time.monotonic_ns()
+        for s in self.slaves:
+            s.check_watchdog(now)
+
+    # ------------------------------------------------------------ control channel
+
+    def control(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Apply one control request; returns ``{"ok": True, ...}`` or ``{"ok": False,
+        "error": text}``.
+
+        Requests (``op``): ``status``; ``drop`` (count); ``corrupt`` (count, slave: first
+        slave to see a damaged frame); ``silence`` (slave, on); ``drive_fault`` (slave,
+        code: a 0x603F code of drivers.sim.drive.FAULTS, persistent); ``clear_drive_fault``
+        (slave); ``sdo_abort`` (slave, index, sub (-1 = all), code; code 0 removes);
+        ``refuse_state`` (slave, state, code; code 0 removes); ``al_error`` (slave, code:
+        the slave drops to SAFE-OP, or stays lower, with the error flag and this code);
+        ``stop``. Slaves are 0-based positions on the line.
+        """
+        op = request.get("op")
+        try:
+            if op == "status":
+                return {"ok": True, **self.status()}
+            if op == "drop":
+                self.drop_next += int(request.get("count", 1))
+            elif op == "corrupt":
+                self.corrupt_next += int(request.get("count", 1))
+                self.corrupt_at = self._slave_index(request.get("slave", 0))
+            elif op == "silence":
+                self.slaves[self._slave_index(request["slave"])].silent = bool(
+                    request.get("on", True)
+                )
+            elif op == "drive_fault":
+                self._drive_fault(request)
+            elif op == "clear_drive_fault":
+                if self.drives is None:
+                    raise ValueError("no drives on this network")
+                self.drives.clear_fault(self._slave_index(request["slave"]))
+            elif op == "sdo_abort":
+                s = self.slaves[self._slave_index(request["slave"])]
+                if s.coe is None:
+                    raise ValueError("slave has no CoE server")
+                key = (int(request["index"]), int(request.get("sub", -1)))
+                code = int(request["code"])
+                if code:
+                    s.coe.forced_aborts[key] = code
+                else:
+                    s.coe.forced_aborts.pop(key, None)
+            elif op == "refuse_state":
+                s = self.slaves[self._slave_index(request["slave"])]
+                state, code = int(request["state"]), int(request["code"])
+                if code:
+                    s.refuse[state] = code
+                else:
+                    s.refuse.pop(state, None)
+            elif op == "al_error":
+                s = self.slaves[self._slave_index(request["slave"])]
+                state = min(s.al_state & 0x0F, r.STATE_SAFEOP)
+                s._set_al(state, int(request["code"]), error=True)
+            elif op == "stop":
+                self.stopping = True
+            else:
+                raise ValueError(f"unknown op {op!r}")
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            return {"ok": False, "error": f"{op}: {exc}"}
+        return {"ok": True}
+
+    def _slave_index(self, value: Any) -> int:
+        i = int(value)
+        if not 0 <= i < self.n:
+            raise ValueError(f"slave {i} does not exist (0..{self.n - 1})")
+        return i
+
+    def _drive_fault(self, request: dict[str, Any]) -> None:
+        if self.drives is None:
+            raise ValueError("no drives on this network")
+        code = int(request["code"])
+        kind = _FAULT_KINDS.get(code)
+        if kind is None:
+            known = ", ".join(f"0x{c:04X}" for c in sorted(_FAULT_KINDS))
+            raise ValueError(f"no injectable drive fault with code 0x{code:04X} (known: {known})")
+        self.drives.inject_fault(
+            self._slave_index(request["slave"]), kind, bool(request.get("persistent", False))
+        )
+
+    def status(self) -> dict[str, Any]:
+        """Counters, AL states/codes per slave and the true arm state (SI)."""
+        out: dict[str, Any] = {
+            "frames": self.frames,
+            "process_frames": self.process_frames,
+            "dropped": self.dropped,
+            "corrupted": self.corrupted,
+            "malformed": self.malformed,
+            "al_state": [s.al_state for s in self.slaves],
+            "al_status_code": [s.al_status_code for s in self.slaves],
+            "station_address": [s.station_address for s in self.slaves],
+            "silent": [s.silent for s in self.slaves],
+        }
+        if self.drives is not None:
+            plant = self.drives.plant
+            out.update(
+                t=plant.t,
+                q=plant.q.tolist(),
+                qd=plant.qd.tolist(),
+                tau_applied=plant.tau_applied.tolist(),
+                drive_state=[int(x) for x in self.drives.state],
+                error_code=[int(x) for x in self.drives.tx["error_code"]],
+            )
+        return out
+
+    stopping = False
+    pending_step = False
+
+
+# -------------------------------------------------------------------- the process
+
+
+def open_packet_socket(iface: str) -> socket.socket:
+    """AF_PACKET socket for EtherCAT frames on ``iface`` (needs root or CAP_NET_RAW)."""
+    if not os.path.exists(f"/sys/class/net/{iface}"):
+        raise UserError(f"network interface {iface!r} does not exist (see `ip link`)")
+    try:
+        sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ECAT))
+        sock.bind((iface, ETH_P_ECAT))
+    except PermissionError:
+        raise UserError(
+            f"cannot open a raw socket on {iface!r}: needs root or CAP_NET_RAW"
+        ) from None
+    sock.setblocking(False)
+    return sock
+
+
+def open_control_socket(path: str) -> socket.socket:
+    """Listening Unix stream socket at ``path`` (an old socket file there is replaced)."""
+    if os.path.exists(path):
+        os.unlink(path)
+    srv = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    srv.bind(path)
+    srv.listen(4)
+    srv.setblocking(False)
+    return srv
+
+
+def _serve_control(net: EmulatedNetwork, srv: socket.socket) -> None:
+    try:
+        conn, _ = srv.accept()
+    except BlockingIOError:
+        return
+    with conn:
+        conn.settimeout(2.0)
+        data = b""
+        try:
+            while not data.endswith(b"\n"):
+                chunk = conn.recv(4096)
+                if not chunk:
+                    break
+                data += chunk
+            try:
+                request = json.loads(data.decode() or "{}")
+                reply = net.control(request if isinstance(request, dict) else {})
+            except json.JSONDecodeError as exc:
+                reply = {"ok": False, "error": f"bad JSON: {exc}"}
+            conn.sendall(json.dumps(reply).encode() + b"\n")
+        except OSError:
+            pass
+
+
+def serve(
+    net: EmulatedNetwork,
+    iface: str,
+    control: str | None = None,
+    duration: float | None = None,
+    ready_file: str | None = None,
+) -> None:
+    """Answer EtherCAT frames on ``iface`` until a ``stop`` request, SIGTERM or ``duration``
+    seconds. ``ready_file`` is created once the sockets are open (for test harnesses)."""
+    sock = open_packet_socket(iface)
+    srv = open_control_socket(control) if control else None
+    fds: list[Any] = [sock] + ([srv] if srv is not None else [])
+    buf = bytearray(2048)
+    view = memoryview(buf)
+    if ready_file:
+        with open(ready_file, "w") as f:
+            f.write(str(os.getpid()))
+    end = None if duration is None else time.monotonic() + duration
+    next_watchdog = time.monotonic()
+    try:
+        while not net.stopping:
+            readable, _, _ = select.select(fds, [], [], 0.01)
+            if sock in readable:
+                while True:
+                    try:
+                        n = sock.recv_into(buf)
+                    except BlockingIOError:
+                        break
+                    if n < 16 or struct.unpack_from("!H", buf, 12)[0] != ETH_P_ECAT:
+                        continue
+                    if net.handle(buf, n):
+                        sock.send(view[:n])
+                    if net.pending_step:
+                        net.step()
+            if srv is not None and srv in readable:
+                _serve_control(net, srv)
+            now = time.monotonic()
+            if now >= next_watchdog:
+                net.check_watchdogs()
+                next_watchdog = now + 0.01
+            if end is not None and now >= end:
+                break
+    finally:
+        sock.close()
+        if srv is not None:
+            srv.close()
+            if control and os.path.exists(control):
+                os.unlink(control)
+
+
+class ControlClient:
+    """Client of the emulator's control socket: ``call(op="drop", count=1) -> dict``."""
+
+    def __init__(self, path: str, timeout: float = 5.0) -> None:
+        self.path = path
+        self.timeout = timeout
+
+    def call(self, **request: Any) -> dict[str, Any]:
+        """Send one request; raises ``RuntimeError`` with the emulator's message if refused."""
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+            s.settimeout(self.timeout)
+            s.connect(self.path)
+            s.sendall(json.dumps(request).encode() + b"\n")
+            data = b""
+            while not data.endswith(b"\n"):
+                chunk = s.recv(65536)
+                if not chunk:
+                    break
+                data += chunk
+        reply = json.loads(data.decode())
+        if not reply.get("ok"):
+            raise RuntimeError(f"emulator refused {request.get('op')}: {reply.get('error')}")
+        return reply

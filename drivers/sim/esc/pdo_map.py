@@ -1,0 +1,59 @@
+"""From a drive's PDO mapping objects to byte-copy plans between SyncManagers and records.
+
+The emulated slave reads what the master wrote into 0x1C12/0x1C13 and 0x1600/0x1A00 (the
+drive's :class:`~drivers.sim.object_dictionary.ObjectDictionary` stores and checks those
+writes) when it goes PRE-OP -> SAFE-OP, checks that the drive can run with it, and turns it
+into a copy plan: contiguous runs of ``(sm_offset, record_offset, size)`` bytes. With the
+default mapping each plan is one run of the whole record.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from drivers.cia402 import pdo
+from drivers.sim.object_dictionary import ObjectDictionary
+
+#: (sm_offset, record_offset, size) in bytes.
+CopyPlan = tuple[tuple[int, int, int], ...]
+
+
+def assigned_entries(od: ObjectDictionary, assign_index: int) -> list[pdo.PdoEntry]:
+    """Mapped objects of every PDO assigned to a SyncManager, in process-image order."""
+    out: list[pdo.PdoEntry] = []
+    for sub in range(1, od.get(assign_index, 0) + 1):
+        out.extend(od.mapping(od.get(assign_index, sub)))
+    return out
+
+
+def copy_plan(entries: list[pdo.PdoEntry], dtype: np.dtype) -> tuple[CopyPlan, int]:
+    """Copy plan for ``entries`` against record ``dtype`` and the SM length it needs [byte].
+
+    Raises ``ValueError`` naming an object that is not a field of ``dtype``.
+    """
+    runs: list[list[int]] = []
+    sm_off = 0
+    for e in entries:
+        if not e.field or e.field not in dtype.names:
+            raise ValueError(f"object 0x{e.index:04X}:{e.subindex:02X} is not in this PDO")
+        size = e.bit_length // 8
+        rec_off = dtype.fields[e.field][1]
+        last = runs[-1] if runs else None
+        if last and last[0] + last[2] == sm_off and last[1] + last[2] == rec_off:
+            last[2] += size
+        else:
+            runs.append([sm_off, rec_off, size])
+        sm_off += size
+    return tuple((a, b, c) for a, b, c in runs), sm_off
+
+
+def check_mapping(entries: list[pdo.PdoEntry], required: str, dtype: np.dtype) -> str | None:
+    """Why the drive cannot run with ``entries`` (``None`` when it can)."""
+    fields = [e.field for e in entries]
+    if required not in fields:
+        return f"mapping lacks {required}"
+    if len(set(fields)) != len(fields):
+        return "an object is mapped twice"
+    if any(f not in dtype.names for f in fields):
+        return "an object is mapped in the wrong direction"
+    return None

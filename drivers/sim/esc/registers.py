@@ -1,0 +1,110 @@
+"""EtherCAT slave controller (ESC) register addresses and bit values used by the emulator.
+
+Addresses are byte offsets in the ESC's 64 KiB physical address space (ETG.1000.4 /
+Beckhoff ESC datasheet section II). Registers live below 0x1000; process RAM (mailboxes and
+process data) above.
+"""
+
+from __future__ import annotations
+
+# --- information (read-only)
+TYPE = 0x0000
+REVISION = 0x0001
+BUILD = 0x0002
+FMMUS_SUPPORTED = 0x0004
+SMS_SUPPORTED = 0x0005
+RAM_SIZE = 0x0006
+PORT_DESCRIPTOR = 0x0007
+FEATURES = 0x0008
+
+# --- addressing
+STATION_ADDRESS = 0x0010
+STATION_ALIAS = 0x0012
+
+# --- data link layer
+DL_CONTROL = 0x0100
+DL_STATUS = 0x0110
+
+# --- application layer
+AL_CONTROL = 0x0120
+AL_STATUS = 0x0130
+AL_STATUS_CODE = 0x0134
+PDI_CONTROL = 0x0140
+
+# --- watchdogs
+WATCHDOG_DIVIDER = 0x0400
+WATCHDOG_TIME_PDI = 0x0410
+WATCHDOG_TIME_PD = 0x0420
+
+# --- errors
+RX_ERROR_COUNTERS = 0x0300
+
+# --- SII EEPROM interface
+EEPROM_CONFIG = 0x0500
+EEPROM_PDI_ACCESS = 0x0501
+EEPROM_CONTROL = 0x0502
+EEPROM_ADDRESS = 0x0504
+EEPROM_DATA = 0x0508
+
+# --- FMMUs and SyncManagers
+FMMU_BASE = 0x0600
+FMMU_SIZE = 16
+FMMU_COUNT = 8
+SM_BASE = 0x0800
+SM_SIZE = 8
+SM_COUNT = 8
+SM_STATUS_OFFSET = 5
+SM_ACTIVATE_OFFSET = 6
+SM_PDI_CONTROL_OFFSET = 7
+
+# --- distributed clocks
+DC_RECEIVE_TIME_PORT0 = 0x0900
+DC_SYSTEM_TIME = 0x0910
+DC_RECEIVE_TIME_PU = 0x0918
+DC_SYSTEM_TIME_OFFSET = 0x0920
+DC_SYSTEM_TIME_DELAY = 0x0928
+DC_CYCLIC_UNIT_CONTROL = 0x0980
+DC_ACTIVATION = 0x0981
+DC_SYNC0_START = 0x0990
+DC_SYNC0_CYCLE = 0x09A0
+DC_SYNC1_CYCLE = 0x09A4
+
+PROCESS_RAM = 0x1000
+ADDRESS_SPACE = 0x10000
+
+# --- AL states (AL control / AL status low nibble)
+STATE_INIT = 0x01
+STATE_PREOP = 0x02
+STATE_BOOT = 0x03
+STATE_SAFEOP = 0x04
+STATE_OP = 0x08
+AL_ERROR_FLAG = 0x10
+AL_ACK_FLAG = 0x10
+
+# --- SII EEPROM control/status (0x0502) bits
+EEPROM_WRITE_ENABLE = 0x0001
+EEPROM_READ_8_BYTES = 0x0040
+EEPROM_CMD_MASK = 0x0700
+EEPROM_CMD_READ = 0x0100
+EEPROM_CMD_WRITE = 0x0200
+EEPROM_CMD_RELOAD = 0x0400
+EEPROM_ERROR_ACK = 0x2000
+EEPROM_BUSY = 0x8000
+
+# --- SyncManager control byte
+SM_MODE_MASK = 0x03
+SM_MODE_BUFFERED = 0x00
+SM_MODE_MAILBOX = 0x02
+SM_DIR_MASK = 0x0C
+SM_DIR_READ = 0x00  # ECAT reads, PDI writes (inputs, mailbox slave->master)
+SM_DIR_WRITE = 0x04  # ECAT writes, PDI reads (outputs, mailbox master->slave)
+SM_WATCHDOG_ENABLE = 0x40
+SM_STATUS_MAILBOX_FULL = 0x08
+SM_ACTIVATE_ENABLE = 0x01
+SM_ACTIVATE_REPEAT = 0x02
+SM_PDI_DEACTIVATE = 0x01
+SM_PDI_REPEAT_ACK = 0x02
+
+# --- FMMU types
+FMMU_READ = 0x01
+FMMU_WRITE = 0x02

@@ -1,0 +1,75 @@
+"""``hofto-hw sim-ethercat``: serve emulated EtherCAT CiA-402 drives on a network interface.
+
+Example (root): ``hofto-hw sim-ethercat --iface ecs0 --config configs/er3a.yaml
+--create-veth`` makes the veth pair ecm0/ecs0, serves the six drives of the config on ecs0
+and leaves ecm0 to the master (``bus.interface: ecm0``). Fault injection and status go
+through the Unix socket given with ``--control`` (one JSON object per line, see
+:meth:`drivers.sim.esc.network.EmulatedNetwork.control`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+from pathlib import Path
+from types import FrameType
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the command's arguments."""
+    parser.add_argument("--iface", default="ecs0", help="interface to serve on (default ecs0)")
+    parser.add_argument("--config", required=True, type=Path, help="system config (YAML)")
+    parser.add_argument(
+        "--create-veth",
+        action="store_true",
+        help="create the veth pair MASTER/IFACE first and delete it on exit (root)",
+    )
+    parser.add_argument(
+        "--master-iface",
+        default=None,
+        help="master end of the veth pair (default: IFACE with 's' -> 'm', e.g. ecm0)",
+    )
+    parser.add_argument("--control", default=None, help="Unix socket path for control/faults")
+    parser.add_argument("--duration", type=float, default=None, help="stop after N seconds")
+    parser.add_argument(
+        "--quiet-arm", action="store_true", help="leave out the config's scripted external torques"
+    )
+    parser.add_argument("--ready-file", default=None, help="file created once serving")
+
+
+def _master_name(iface: str) -> str:
+    if "s" in iface:
+        i = iface.rindex("s")
+        return iface[:i] + "m" + iface[i + 1 :]
+    return iface + "m"
+
+
+def run(args: argparse.Namespace) -> int:
+    """Build the network from the config and serve until SIGTERM/SIGINT or ``--duration``."""
+    from drivers.sim.esc import veth
+    from drivers.sim.esc.build import build_network
+    from drivers.sim.esc.network import serve
+    from hofto_hw.config.loader import load_config
+
+    cfg = load_config(args.config)
+    net = build_network(cfg, external=not args.quiet_arm)
+    master = args.master_iface or _master_name(args.iface)
+    if args.create_veth:
+        veth.create_pair(master, args.iface)
+
+    def _stop(_signum: int, _frame: FrameType | None) -> None:
+        net.stopping = True
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+    print(
+        f"serving {net.n} emulated EtherCAT drives on {args.iface}"
+        + (f" (master side: {master})" if args.create_veth else ""),
+        flush=True,
+    )
+    try:
+        serve(net, args.iface, args.control, args.duration, args.ready_file)
+    finally:
+        if args.create_veth:
+            veth.delete_pair(master)
+    return 0

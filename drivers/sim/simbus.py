@@ -1,0 +1,150 @@
+"""SimBus: an in-process :class:`~drivers.transport.Transport` over emulated CiA-402 drives.
+
+The fast path for unit tests and the default demo. Each :meth:`SimBus.exchange` is one bus
+cycle: the drives take ``rx``, step the plant by one tick and answer in ``tx``. Code above
+the transport cannot tell it from EtherCAT; SDOs go to each drive's object dictionary.
+
+Fault injection for tests: :meth:`SimBus.drop_cycles` loses the next frames (exchange
+returns :data:`~drivers.transport.STATUS_NO_RESPONSE`, ``tx`` keeps its last values, the
+drives see no RxPDO and fault with 0x8130 after their watchdog), and
+:meth:`SimBus.inject_fault` forwards to :meth:`EmulatedDrives.inject_fault`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from drivers.sim.drive import EmulatedDrives, LoopTuning
+from drivers.sim.object_dictionary import SdoAbort
+from drivers.sim.plant import Plant
+from drivers.transport import (
+    STATUS_NO_RESPONSE,
+    STATUS_NOT_OPEN,
+    STATUS_OK,
+    SdoAbortError,
+    Transport,
+)
+from hofto_hw.config.drives import BusConfig, DriveConfig
+from hofto_hw.config.models import SimulationConfig, SystemConfig
+from hofto_hw.errors import ConfigError
+
+
+class SimBus(Transport):
+    """In-process bus: ``rx``/``tx`` exchanged with :class:`EmulatedDrives` every cycle.
+
+    Simulated time advances by ``plant.dt`` per exchange (so ``cycle_time == plant.dt``)
+    and :meth:`wait_next_cycle` does not sleep.
+    """
+
+    def __init__(
+        self,
+        plant: Plant,
+        drives: Sequence[DriveConfig],
+        *,
+        axis_names: list[str] | None = None,
+        tuning: LoopTuning | None = None,
+        watchdog_cycles: int = 3,
+    ) -> None:
+        super().__init__(len(drives), plant.dt, axis_names)
+        self.drives = EmulatedDrives(
+            plant, drives, tuning=tuning, watchdog_cycles=watchdog_cycles, names=self.axis_names
+        )
+        self.plant = plant
+        self.is_open = False
+        self.cycles = 0
+        self._drop = 0
+        np.copyto(self.tx, self.drives.tx)
+
+    @classmethod
+    def from_config(
+        cls, bus: BusConfig, plant: Plant, axis_names: list[str] | None = None
+    ) -> SimBus:
+        """A SimBus for ``bus.drives`` on ``plant``; ``bus.cycle_time`` must equal plant.dt."""
+        if abs(bus.cycle_time - plant.dt) > 1e-12:
+            raise ConfigError(
+                f"bus.cycle_time: {bus.cycle_time} s differs from the simulation tick "
+                f"{plant.dt} s (the simulated bus runs one plant tick per cycle)"
+            )
+        return cls(plant, bus.drives, axis_names=axis_names)
+
+    # -------------------------------------------------------------- lifecycle
+
+    def open(self) -> None:
+        """Start cyclic exchange (the emulated drives lock their PDO mapping)."""
+        self.is_open = True
+        for od in self.drives.ods:
+            od.pdo_locked = True
+
+    def close(self) -> None:
+        """Stop cyclic exchange; the drives will miss frames if stepped further."""
+        self.is_open = False
+        for od in self.drives.ods:
+            od.pdo_locked = False
+
+    def exchange(self) -> int:
+        """One cycle: rx -> drives -> plant tick -> tx. Returns a status code; never raises."""
+        if not self.is_open:
+            return STATUS_NOT_OPEN
+        self.cycles += 1
+        if self._drop > 0:
+            self._drop -= 1
+            self.drives.step(None)
+            return STATUS_NO_RESPONSE
+        self.drives.step(self.rx)
+        np.copyto(self.tx, self.drives.tx)
+        return STATUS_OK
+
+    def wait_next_cycle(self) -> None:
+        """Simulated time: nothing to wait for."""
+
+    # ------------------------------------------------------------ fault injection
+
+    def drop_cycles(self, count: int = 1) -> None:
+        """Lose the next ``count`` frames in both directions."""
+        self._drop += int(count)
+
+    def inject_fault(self, axis: int, kind: str, persistent: bool = False) -> None:
+        """Make drive ``axis`` raise fault ``kind`` (see drivers.sim.drive.FAULTS)."""
+        self.drives.inject_fault(axis, kind, persistent)
+
+    # -------------------------------------------------------------------- SDO
+
+    def sdo_read(self, axis: int, index: int, subindex: int) -> bytes:
+        """Read from drive ``axis``'s object dictionary; raises SdoAbortError."""
+        self._check_axis(axis)
+        try:
+            return self.drives.ods[axis].read(index, subindex)
+        except SdoAbort as a:
+            raise SdoAbortError(
+                axis, index, subindex, a.code, "read", self.axis_names[axis]
+            ) from None
+
+    def sdo_write(self, axis: int, index: int, subindex: int, data: bytes) -> None:
+        """Write to drive ``axis``'s object dictionary; raises SdoAbortError."""
+        self._check_axis(axis)
+        try:
+            self.drives.ods[axis].write(index, subindex, bytes(data))
+        except SdoAbort as a:
+            raise SdoAbortError(
+                axis, index, subindex, a.code, "write", self.axis_names[axis]
+            ) from None
+
+
+def make_sim_bus(cfg: SystemConfig, *, external: bool = True) -> SimBus:
+    """SimBus + plant for a whole config (``bus`` and optional ``simulation`` sections).
+
+    The plant ticks at ``bus.cycle_time``; ``external=False`` drops the scripted external
+    torques (a quiet arm for tests). Raises ConfigError when the config has no ``bus``.
+    """
+    from hofto_hw.model.robot import RobotModel
+
+    if cfg.bus is None:
+        raise ConfigError("bus: section missing; the simulated bus needs the drive data")
+    sim = cfg.simulation if cfg.simulation is not None else SimulationConfig()
+    if not external:
+        sim = sim.model_copy(update={"external": []})
+    model = RobotModel.from_config(cfg.robot)
+    plant = Plant(model, sim, cfg.bus.cycle_time)
+    return SimBus.from_config(cfg.bus, plant, axis_names=list(cfg.robot.joints))

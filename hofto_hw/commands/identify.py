@@ -1,0 +1,132 @@
+"""``hofto-hw identify``: fit the dynamic parameters to recordings, write a parameters file.
+
+Example (UR10e, two excitation runs)::
+
+    hofto-hw identify --config configs/ur10e.yaml -o configs/ur10e/parameters.yaml \\
+        ur-20_02_12-40sec_12harm.csv@500:4460 ur-20_02_12-50sec_12harm.csv@355:5090
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from hofto_hw.identify.inputs import Conditioning, load_samples, parse_rows
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("recordings", nargs="+", metavar="FILE[@FIRST:LAST]")
+    parser.add_argument("--config", required=True, type=Path, help="robot config YAML")
+    parser.add_argument("--columns", type=Path, help="CSV column map (default: found by width)")
+    parser.add_argument("--rows", help="FIRST:LAST rows (1-based) for every file")
+    parser.add_argument("-o", "--output", type=Path, required=True, help="parameters file")
+    parser.add_argument(
+        "--method",
+        choices=("ols", "wls", "consistent"),
+        default="consistent",
+        help="estimate put in the file (default: physically consistent SDP)",
+    )
+    parser.add_argument("--cutoff", type=float, default=5.0, help="low-pass cut-off [Hz]")
+    parser.add_argument("--decimate", type=int, default=1, help="keep every k-th sample")
+    parser.add_argument(
+        "--smooth-velocity",
+        type=float,
+        default=0.02,
+        help="v_s [rad/s] of the smooth Coulomb sign tanh(qd/v_s); 0 = hard sign",
+    )
+    parser.add_argument(
+        "--stribeck-velocity",
+        metavar="VS[,VS...]",
+        help="identify a Stribeck term with these Stribeck velocities [rad/s] (one, or n)",
+    )
+    parser.add_argument(
+        "--filter-torque",
+        action="store_true",
+        help="low-pass the torque too (default: raw torque; filtering smears friction steps)",
+    )
+    parser.add_argument("--drop-bad-rows", action="store_true", help="drop corrupt rows")
+    parser.add_argument("--json", action="store_true", help="print the fit as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from hofto_hw.config.loader import load_config
+    from hofto_hw.errors import UserError
+    from hofto_hw.identify.pipeline import identify
+    from hofto_hw.model import RobotModel
+    from hofto_hw.model.parameters import apply_parameters, write_parameters
+
+    cfg = load_config(args.config)
+    model = RobotModel.from_config(cfg.robot, apply_parameters=False)
+    opts = Conditioning(args.cutoff, args.filter_torque, args.decimate, args.drop_bad_rows)
+    vs = None
+    if args.stribeck_velocity is not None:
+        try:
+            values = [float(v) for v in args.stribeck_velocity.split(",")]
+        except ValueError:
+            values = []
+        if len(values) not in (1, model.n):
+            raise UserError(
+                f"identify: --stribeck-velocity needs 1 or {model.n} comma-separated numbers, "
+                f"got {args.stribeck_velocity!r}"
+            )
+        vs = np.broadcast_to(np.asarray(values), (model.n,)).copy()
+    search = [cfg.robot.urdf.parent, args.config.parent]
+
+    def say(msg: str) -> None:
+        print(f"identify: {msg}", file=sys.stderr, flush=True)
+
+    loaded = load_samples(args.recordings, args.columns, parse_rows(args.rows), opts, search)
+    for _s, rec in loaded:
+        say(f"loaded {rec.source}: {rec.n_samples} samples, {rec.duration:.1f} s")
+    result = identify(
+        model,
+        [s for s, _ in loaded],
+        args.method,
+        args.smooth_velocity,
+        progress=say,
+        stribeck_velocity=vs,
+    )
+    apply_parameters(model, result.parameters, str(args.output))  # refuses a non-SPD M(q)
+    write_parameters(args.output, result.parameters)
+    say(f"wrote {args.output}")
+    fit = result.parameters.fit
+    if args.json:
+        print(
+            json.dumps(
+                {
+                    "method": args.method,
+                    "base_parameters": [
+                        {
+                            "name": b.name,
+                            "value": b.value,
+                            "std": b.std,
+                            "relative_std_percent": b.relative_std_percent,
+                        }
+                        for b in result.parameters.base
+                    ],
+                    "rmse": list(map(float, fit["rmse"])),
+                    "relative_rmse_percent": list(map(float, fit["relative_rmse_percent"])),
+                    "condition_number": float(fit["condition_number"]),
+                    "samples": int(fit["samples"]),
+                }
+            )
+        )
+        return 0
+    print(f"{'base parameter':<28}{'value':>13}{'std':>12}{'rel std %':>11}")
+    for b in result.parameters.base:
+        rel = b.relative_std_percent
+        rel_txt = f"{rel:11.3g}" if rel is not None and np.isfinite(rel) else f"{'-':>11}"
+        print(f"{b.name:<28}{b.value:13.5g}{(b.std or 0.0):12.3g}{rel_txt}")
+    print()
+    print(f"{'joint':<22}{'RMSE [N·m]':>12}{'rel. RMSE %':>13}")
+    for j, name in enumerate(model.joint_names):
+        print(f"{name:<22}{fit['rmse'][j]:12.3f}{fit['relative_rmse_percent'][j]:13.2f}")
+    print(
+        f"{fit['samples']} samples, condition number {fit['condition_number']:.4g}, "
+        f"method {args.method}"
+    )
+    return 0

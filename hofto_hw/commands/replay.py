@@ -1,0 +1,144 @@
+"""``hofto-hw replay PARAMS FILE``: run an observer offline over a recording, apply the
+collision thresholds, list contact episodes, optionally write a PNG and JSON.
+
+Example (UR10e; config, column map and thresholds are found from the parameters file)::
+
+    hofto-hw replay configs/ur10e/parameters.yaml ur-20_01_22-push_pose_1.csv --plot push.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from hofto_hw.errors import UserError
+from hofto_hw.replay.defaults import OBSERVER_NAMES
+
+DEFAULT_OBSERVER = "momentum"
+
+
+def parse_rows(text: str | None) -> tuple[int, int] | None:
+    """'FIRST:LAST' (1-based, inclusive) -> (first, last)."""
+    if text is None:
+        return None
+    try:
+        a, b = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise UserError(f"--rows: expected FIRST:LAST (e.g. 635:3510), got {text!r}") from None
+    if not 1 <= a <= b:
+        raise UserError(f"--rows: need 1 <= FIRST <= LAST, got {text!r}")
+    return a, b
+
+
+def add_common(parser: argparse.ArgumentParser) -> None:
+    """Options shared by replay and thresholds."""
+    parser.add_argument("--config", type=Path, help="robot config (default: <robot>.yaml)")
+    parser.add_argument("--columns", type=Path, help="CSV column map (default: by column count)")
+    parser.add_argument("--rows", help="FIRST:LAST rows (1-based, inclusive) to replay")
+    parser.add_argument(
+        "--drop-bad-rows",
+        action="store_true",
+        help="drop corrupt CSV rows with a warning instead of refusing the file",
+    )
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("params", type=Path, metavar="PARAMS", help="identified-parameters file")
+    parser.add_argument("file", type=Path, metavar="FILE", help="recording (CSV or .mcap)")
+    add_common(parser)
+    parser.add_argument(
+        "--observer",
+        choices=OBSERVER_NAMES,
+        default=DEFAULT_OBSERVER,
+        help=f"observer to run (default: {DEFAULT_OBSERVER})",
+    )
+    parser.add_argument(
+        "--thresholds", type=Path, help="thresholds file (default: <robot>/thresholds.yaml)"
+    )
+    parser.add_argument(
+        "--no-thresholds", action="store_true", help="estimate statistics only, no detection"
+    )
+    parser.add_argument(
+        "--merge-gap", type=float, default=0.5, help="join episodes closer than this [s]"
+    )
+    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.add_argument("--plot", type=Path, metavar="PNG", help="write a figure")
+
+
+def _print_text(report_dict: dict, thresholds: Path | None) -> None:
+    d = report_dict
+    print(f"{d['file']}: {d['samples']} samples, {d['duration']:.2f} s, observer {d['observer']}")
+    for note in d["notes"]:
+        print(f"  note: {note}")
+    print(
+        "  joint   mean[N·m]   std[N·m]  max|.|[N·m]" + ("  max ratio" if d["thresholds"] else "")
+    )
+    for row in d["joints"]:
+        line = f"  {row['joint']:5d} {row['mean']:11.2f} {row['std']:10.2f} {row['max_abs']:12.2f}"
+        if "max_ratio" in row:
+            line += f" {row['max_ratio']:10.2f}"
+        print(line)
+    if not d["thresholds"]:
+        print(
+            "  no thresholds for this observer: statistics only (calibrate with "
+            "`hofto-hw thresholds calibrate`)"
+        )
+        return
+    print(f"  thresholds: {thresholds}")
+    print(f"  {len(d['episodes'])} contact episode(s)")
+    for i, ep in enumerate(d["episodes"], start=1):
+        j = max(ep["joints"], key=lambda jj: ep["peak"][jj - 1])
+        print(
+            f"  {i:3d}. {ep['start']:.3f}-{ep['end']:.3f} s ({ep['duration']:.2f} s, rows "
+            f"{ep['rows'][0]}-{ep['rows'][1]}), joints {','.join(map(str, ep['joints']))}, "
+            f"peak {ep['peak'][j - 1]:.1f} N·m on joint {j}, {ep['peak_ratio']:.2f}x threshold"
+        )
+
+
+def run(args: argparse.Namespace) -> int:
+    from hofto_hw.replay.plot import plot_replay
+    from hofto_hw.replay.session import load_for_replay, run_replay
+    from hofto_hw.replay.setup import (
+        default_thresholds,
+        load_setup,
+        load_thresholds_for,
+        sha256_of,
+    )
+
+    setup = load_setup(args.params, args.config)
+    th_path = args.thresholds if args.thresholds is not None else default_thresholds(setup)
+    if args.no_thresholds:
+        th_path = None
+    thresholds = load_thresholds_for(setup, th_path) if th_path is not None else None
+    if thresholds is not None and args.observer not in thresholds.observers:
+        raise UserError(
+            f"{th_path}: no thresholds for observer {args.observer!r} (has: "
+            f"{', '.join(thresholds.observers)}); calibrate it or choose another --observer"
+        )
+    rec = load_for_replay(
+        setup,
+        args.file,
+        args.columns,
+        parse_rows(args.rows),
+        "drop" if args.drop_bad_rows else None,
+    )
+    report = run_replay(setup, rec, args.observer, thresholds, args.merge_gap)
+    d = report.as_dict()
+    if thresholds is not None and thresholds.parameters is not None:
+        ref = thresholds.parameters
+        if ref.sha256 and ref.sha256 != sha256_of(args.params):
+            d["notes"].append(
+                f"thresholds were calibrated with another parameters file ({ref.file}); "
+                f"recalibrate for {args.params.name}"
+            )
+    if args.plot is not None:
+        plot_replay(report.result, report.episodes, args.plot)
+        d["plot"] = str(args.plot)
+    if args.json:
+        print(json.dumps(d, indent=2))
+    else:
+        _print_text(d, th_path)
+        if args.plot is not None:
+            print(f"  plot: {args.plot}")
+    return 0

@@ -1,0 +1,158 @@
+"""``hofto-hw thresholds``: calibrate collision thresholds on free-motion recordings, and
+check them on other recordings (leave-some-out: no alarm may be raised on free motion).
+
+Examples (UR10e)::
+
+    hofto-hw thresholds calibrate --params configs/ur10e/parameters.yaml \\
+        -o configs/ur10e/thresholds.yaml RUN1.csv RUN2.csv ...
+    hofto-hw thresholds check --params configs/ur10e/parameters.yaml OTHER1.csv OTHER2.csv
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+from pathlib import Path
+
+from hofto_hw.commands.replay import add_common, parse_rows
+from hofto_hw.errors import UserError
+from hofto_hw.replay.defaults import OBSERVER_NAMES
+
+CALIBRATED_BY_DEFAULT = ("momentum", "hofto", "dob", "eso", "direct")
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    cal = sub.add_parser("calibrate", help="thresholds from free-motion recordings")
+    cal.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    cal.add_argument("-o", "--output", type=Path, required=True, help="thresholds file")
+    cal.add_argument("--params", type=Path, required=True, help="identified-parameters file")
+    cal.add_argument(
+        "--observer",
+        action="append",
+        choices=OBSERVER_NAMES,
+        help=f"observer(s) to calibrate (repeat; default: {', '.join(CALIBRATED_BY_DEFAULT)})",
+    )
+    cal.add_argument(
+        "--margin",
+        type=float,
+        default=0.6,
+        help="thresholds = (1 + margin) x the smallest envelope of the residuals (default 0.6)",
+    )
+    cal.add_argument(
+        "--debounce", type=float, default=0.03, help="time above threshold to trip [s]"
+    )
+    cal.add_argument("--json", action="store_true", help="print a summary as JSON")
+    add_common(cal)
+    chk = sub.add_parser("check", help="replay recordings and count alarms per file")
+    chk.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    chk.add_argument("--params", type=Path, required=True, help="identified-parameters file")
+    chk.add_argument("--thresholds", type=Path, help="default: <robot>/thresholds.yaml")
+    chk.add_argument(
+        "--observer",
+        action="append",
+        choices=OBSERVER_NAMES,
+        help="observer(s) to check (repeat; default: all in the thresholds file)",
+    )
+    chk.add_argument("--json", action="store_true", help="print the results as JSON")
+    add_common(chk)
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    from hofto_hw.config.collision import CollisionConfig
+    from hofto_hw.observers import make_observer
+    from hofto_hw.replay.calibrate import calibrate
+    from hofto_hw.replay.runner import run_observer
+    from hofto_hw.replay.session import load_for_replay
+    from hofto_hw.replay.setup import load_setup, observer_config, sha256_of
+    from hofto_hw.replay.thresholds import (
+        ObserverThresholds,
+        ParametersRef,
+        ThresholdsFile,
+        write_thresholds,
+    )
+
+    if args.margin < 0.0:
+        raise UserError(f"--margin must be >= 0, got {args.margin}")
+    setup = load_setup(args.params, args.config)
+    n = setup.model.n
+    bad = "drop" if args.drop_bad_rows else None
+    recs = [load_for_replay(setup, f, args.columns, parse_rows(args.rows), bad) for f in args.files]
+    template = CollisionConfig(base=[1.0] * n, debounce_time=args.debounce)
+    entries: dict[str, ObserverThresholds] = {}
+    for name in args.observer or CALIBRATED_BY_DEFAULT:
+        obs_cfg = observer_config(name, setup)
+        observer = make_observer(obs_cfg, setup.model)
+        residuals = [run_observer(rec, observer) for rec in recs]
+        cal = calibrate(recs, residuals, template, margin=args.margin)
+        entries[name] = ObserverThresholds(
+            observer=obs_cfg, monitor=cal.config, peak=list(cal.peak), samples=cal.samples
+        )
+    content = ThresholdsFile(
+        robot=setup.config.robot.name,
+        parameters=ParametersRef(file=args.params.name, sha256=sha256_of(args.params)),
+        created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        margin=args.margin,
+        calibrated_on=[f.name for f in args.files],
+        observers=entries,
+    )
+    write_thresholds(args.output, content)
+    summary = {
+        name: {"base": e.monitor.base, "peak": e.peak, "samples": e.samples}
+        for name, e in entries.items()
+    }
+    if args.json:
+        print(json.dumps({"output": str(args.output), "observers": summary}, indent=2))
+    else:
+        print(f"{args.output}: thresholds for {', '.join(entries)} from {len(recs)} recording(s)")
+        for name, s in summary.items():
+            base = " ".join(f"{v:6.2f}" for v in s["base"])
+            print(f"  {name:9s} resting thresholds [N·m]: {base}")
+    return 0
+
+
+def _check(args: argparse.Namespace) -> int:
+    from hofto_hw.replay.session import load_for_replay, run_replay
+    from hofto_hw.replay.setup import default_thresholds, load_setup, load_thresholds_for
+
+    setup = load_setup(args.params, args.config)
+    th_path = args.thresholds or default_thresholds(setup)
+    if th_path is None:
+        raise UserError(f"no thresholds file: pass --thresholds (looked in {setup.robot_dir})")
+    thresholds = load_thresholds_for(setup, th_path)
+    names = args.observer or list(thresholds.observers)
+    for name in names:
+        if name not in thresholds.observers:
+            raise UserError(f"{th_path}: no thresholds for observer {name!r}")
+    bad = "drop" if args.drop_bad_rows else None
+    results = []
+    for f in args.files:
+        rec = load_for_replay(setup, f, args.columns, parse_rows(args.rows), bad)
+        for name in names:
+            rep = run_replay(setup, rec, name, thresholds)
+            worst = max(row.get("max_ratio", 0.0) for row in rep.stats())
+            results.append(
+                {
+                    "file": str(f),
+                    "observer": name,
+                    "episodes": [ep.as_dict() for ep in rep.episodes],
+                    "max_ratio": worst,
+                }
+            )
+    if args.json:
+        print(json.dumps(results, indent=2))
+    else:
+        for r in results:
+            starts = ", ".join(f"{ep['start']:.2f}" for ep in r["episodes"][:6])
+            print(
+                f"{Path(r['file']).name:40s} {r['observer']:9s} {len(r['episodes']):3d} episode(s)"
+                f"  max |est|/threshold {r['max_ratio']:.2f}" + (f"  at {starts}" if starts else "")
+            )
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.action == "calibrate":
+        return _calibrate(args)
+    return _check(args)

@@ -1,0 +1,115 @@
+"""``hofto-hw validate``: torque prediction errors of a parameters file on recordings.
+
+Prints per-joint RMSE [N·m] and relative RMSE (100·||e||/||tau|| [%]) for each file and
+over all of them, writes a measured-vs-predicted PNG (the paper's Fig. 2), or with ``--json``
+prints the same numbers as JSON. ``--compare OTHER`` evaluates a second parameters file side
+by side. The config is found from the file's robot name (``<robot>.yaml`` next to it or one
+folder up) unless ``--config`` is given; CSV column maps likewise (``columns_<k>.yaml``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from hofto_hw.identify.inputs import Conditioning, find_config, load_samples, parse_rows
+
+if TYPE_CHECKING:
+    from hofto_hw.config.models import SystemConfig
+    from hofto_hw.model.robot import RobotModel
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("parameters", type=Path, metavar="PARAMS", help="parameters file")
+    parser.add_argument("recordings", nargs="+", metavar="FILE[@FIRST:LAST]")
+    parser.add_argument("--config", type=Path, help="robot config (default: found by name)")
+    parser.add_argument("--columns", type=Path, help="CSV column map (default: found by width)")
+    parser.add_argument("--rows", help="FIRST:LAST rows (1-based) for every file")
+    parser.add_argument("--compare", type=Path, metavar="PARAMS2", help="second file to compare")
+    parser.add_argument("--cutoff", type=float, default=5.0, help="velocity low-pass [Hz]")
+    parser.add_argument(
+        "--filter-torque",
+        action="store_true",
+        help="low-pass the measured torque too (default: compare with the raw torque)",
+    )
+    parser.add_argument("--plot", type=Path, help="PNG to write (default: PARAMS stem + .png)")
+    parser.add_argument("--no-plot", action="store_true", help="write no figure")
+    parser.add_argument("--drop-bad-rows", action="store_true", help="drop corrupt rows")
+    parser.add_argument("--json", action="store_true", help="print the numbers as JSON")
+
+
+def _model(params: Path, config: Path | None) -> tuple[RobotModel, SystemConfig]:
+    from hofto_hw.config.loader import load_config
+    from hofto_hw.model import RobotModel
+    from hofto_hw.model.parameters import apply_parameters, read_parameters
+
+    pf = read_parameters(params)
+    cfg_path = config if config is not None else find_config(pf.robot, params.parent)
+    cfg = load_config(cfg_path)
+    model = RobotModel.from_config(cfg.robot, apply_parameters=False)
+    apply_parameters(model, pf, str(params))
+    return model, cfg
+
+
+def run(args: argparse.Namespace) -> int:
+    from hofto_hw.identify.validation import errors, plot_fit, predict
+
+    model, cfg = _model(args.parameters, args.config)
+    models = {args.parameters.stem: model}
+    if args.compare is not None:
+        other, _ = _model(args.compare, args.config)
+        models[args.compare.stem] = other
+    opts = Conditioning(args.cutoff, args.filter_torque, 1, args.drop_bad_rows)
+    search = [args.parameters.parent, cfg.robot.urdf.parent]
+    loaded = load_samples(args.recordings, args.columns, parse_rows(args.rows), opts, search)
+
+    report: dict = {"files": [], "models": list(models)}
+    taus, preds = [], {k: [] for k in models}
+    for s, rec in loaded:
+        entry = {"file": rec.source, "samples": rec.n_samples, "models": {}}
+        taus.append(s.tau)
+        for name, m in models.items():
+            tau_hat = predict(m, s.q, s.qd, s.qdd)
+            preds[name].append(tau_hat)
+            entry["models"][name] = errors(s.tau, tau_hat).as_dict()
+        report["files"].append(entry)
+    tau_all = np.vstack(taus)
+    report["overall"] = {name: errors(tau_all, np.vstack(p)).as_dict() for name, p in preds.items()}
+    if not args.no_plot:
+        png = args.plot or args.parameters.with_suffix(".png")
+        s0, rec0 = loaded[0]
+        plot_fit(
+            png,
+            rec0.t - rec0.t[0],
+            s0.tau,
+            {k: v[0] for k, v in preds.items()},
+            model.joint_names,
+            title=f"{Path(rec0.source).name}: measured vs predicted",
+        )
+        report["plot"] = str(png)
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    _print(report, model.joint_names)
+    return 0
+
+
+def _print(report: dict, joints: list[str]) -> None:
+    names = report["models"]
+    head = "".join(f"{'RMSE ' + n[:14]:>22}{'rel %':>8}" for n in names)
+    for entry in [*report["files"], {"file": "all files", "models": report["overall"]}]:
+        print(f"{Path(entry['file']).name}")
+        print(f"  {'joint':<22}{head}")
+        for j, joint in enumerate(joints):
+            row = "".join(
+                f"{entry['models'][n]['rmse'][j]:22.3f}"
+                f"{entry['models'][n]['relative_rmse_percent'][j]:8.2f}"
+                for n in names
+            )
+            print(f"  {joint:<22}{row}")
+    if "plot" in report:
+        print(f"figure: {report['plot']}")

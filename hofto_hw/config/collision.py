@@ -1,0 +1,56 @@
+"""Pydantic model of the collision monitor's settings (``collision:`` in a system config,
+``monitor:`` in a thresholds file). Units SI at the joint side; lists are per joint.
+
+Effective threshold of joint j at tick k (see safety/collision.py):
+
+    thr_j = base_j + velocity_gain_j·|qd_j| + acceleration_gain_j·|a_j| + reversal_margin_j·r_j
+
+with a_j the low-passed acceleration [rad/s²] and r_j in [0, 1] the velocity-reversal
+indicator (1 while a joint that was moving passes through |qd| < reversal_velocity).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+NonNeg = Annotated[float, Field(ge=0.0)]
+Positive = Annotated[float, Field(gt=0.0)]
+
+
+class CollisionConfig(BaseModel):
+    """Thresholds on the estimated external torque and the tools that make them robust."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    base: list[Positive] = Field(description="threshold at rest per joint [N·m]")
+    velocity_gain: list[NonNeg] | None = Field(None, description="[N·m·s/rad] per joint")
+    acceleration_gain: list[NonNeg] | None = Field(None, description="[N·m·s²/rad] per joint")
+    reversal_margin: list[NonNeg] | None = Field(
+        None, description="extra threshold during a velocity reversal [N·m] per joint"
+    )
+    reversal_velocity: Positive = Field(
+        0.05, description="|qd| below which a moving joint counts as reversing [rad/s]"
+    )
+    moving_time: Positive = Field(
+        0.5, description="how long a joint counts as moving after |qd| fell [s]"
+    )
+    reversal_time: Positive = Field(0.2, description="decay of the reversal indicator [s]")
+    accel_filter_hz: Positive = Field(5.0, description="low-pass on the acceleration [Hz]")
+    debounce_time: NonNeg = Field(
+        0.02, description="a joint must stay above its threshold this long to trip [s]"
+    )
+    release_ratio: Annotated[float, Field(gt=0.0, le=1.0)] = Field(
+        0.8, description="hysteresis: a tripped joint releases below ratio·threshold"
+    )
+    release_time: NonNeg = Field(0.1, description="... for at least this long [s]")
+
+    @model_validator(mode="after")
+    def _lengths(self) -> CollisionConfig:
+        n = len(self.base)
+        for name in ("velocity_gain", "acceleration_gain", "reversal_margin"):
+            v = getattr(self, name)
+            if v is not None and len(v) != n:
+                raise ValueError(f"{name} has {len(v)} entries, base has {n} (one per joint)")
+        return self

@@ -1,0 +1,92 @@
+"""Pydantic models of the drive bus (``bus:`` section of a config file).
+
+Per-axis values are SI at the joint side except the drive's own scaling data (counts,
+mN·m, mA), which are the numbers printed on the drive/motor data sheet and written to the
+drive's object dictionary (0x608F, 0x6091, 0x6075, 0x6076).
+
+Loading and checking only; nothing here runs in the tick.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+PositiveFloat = Annotated[float, Field(gt=0.0)]
+U32 = Annotated[int, Field(ge=0, le=0xFFFFFFFF)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class DriveIdentity(_Strict):
+    """CiA 301 identity object 0x1018 a drive must report (checked at bus start-up)."""
+
+    vendor_id: U32 = Field(description="0x1018:1 vendor id")
+    product_code: U32 = Field(description="0x1018:2 product code")
+    revision: U32 | None = Field(None, description="0x1018:3 revision; None = any")
+
+
+class DriveConfig(_Strict):
+    """One servo drive axis: identity, raw scaling, limits and supervision."""
+
+    identity: DriveIdentity = Field(
+        default_factory=lambda: DriveIdentity(vendor_id=0x00000000, product_code=0x00000000)
+    )
+    counts_per_rev: Annotated[int, Field(gt=0, le=2**31)] = Field(
+        description="encoder counts per MOTOR revolution"
+    )
+    gear_ratio: PositiveFloat = Field(description="motor revolutions per joint revolution")
+    direction: Literal[1, -1] = Field(1, description="joint sense for positive motor motion")
+    zero_offset: int = Field(0, description="encoder count at joint angle 0 [counts]")
+    rated_torque: PositiveFloat = Field(description="0x6076 rated motor torque [mN·m]")
+    rated_current: PositiveFloat = Field(description="0x6075 rated motor current [mA]")
+    torque_constant: PositiveFloat = Field(description="motor torque constant [N·m/A]")
+    torque_limit: PositiveFloat = Field(description="joint-side torque limit, 0x6072 [N·m]")
+    quick_stop_deceleration: PositiveFloat = Field(
+        description="quick-stop ramp, 0x6085, joint side [rad/s²]"
+    )
+    following_error_window: PositiveFloat = Field(
+        0.05, description="CSP following-error window, 0x6065, joint side [rad]"
+    )
+    following_error_timeout: Annotated[float, Field(ge=0.0, le=65.535)] = Field(
+        0.01, description="time outside the window before the fault, 0x6066 [s]"
+    )
+
+
+class EtherCATOptions(_Strict):
+    """EtherCAT master options (``bus.ethercat``; used when ``transport: ethercat``)."""
+
+    dc_sync: bool = Field(False, description="program DC SYNC0 at the bus cycle time")
+    recover_lost_slaves: bool = Field(
+        False, description="bring lost slaves back when they answer again (else stop the bus)"
+    )
+    receive_timeout: PositiveFloat | None = Field(
+        None, description="wait for the process-data frame [s]; None = one bus cycle"
+    )
+    state_timeout: PositiveFloat = Field(3.0, description="max time per AL state change [s]")
+
+
+class BusConfig(_Strict):
+    """The drive bus: which transport, where, how fast, and one drive per joint."""
+
+    transport: Literal["sim", "ethercat", "canopen"]
+    interface: str | None = Field(
+        None, description="network interface (ethercat, e.g. 'eth1') or CAN channel (canopen)"
+    )
+    cycle_time: Annotated[float, Field(gt=0.0, le=0.1)] = Field(
+        0.001, description="bus cycle time [s]"
+    )
+    transition_timeout: PositiveFloat = Field(
+        0.5, description="max time for one CiA-402 state transition or mode change [s]"
+    )
+    drives: list[DriveConfig] = Field(min_length=1, description="one drive per joint, in order")
+    ethercat: EtherCATOptions | None = Field(None, description="EtherCAT master options")
+
+    @model_validator(mode="after")
+    def _interface(self) -> BusConfig:
+        if self.transport != "sim" and not self.interface:
+            raise ValueError(f"interface is required for transport {self.transport!r}")
+        return self

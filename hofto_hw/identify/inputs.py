@@ -1,0 +1,100 @@
+"""Command-line inputs shared by ``identify`` and ``validate``: recordings given as
+``FILE`` or ``FILE@first:last`` (1-based inclusive rows), the column map found next to the
+robot's files when not given, the config found from a parameters file's robot name.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from hofto_hw.errors import UserError
+from hofto_hw.identify.data import Recording, condition, load_recording
+from hofto_hw.identify.pipeline import Samples
+
+
+@dataclass
+class Conditioning:
+    """Offline conditioning options: low-pass ``cutoff_hz`` [Hz], torque filtering,
+    decimation factor, bad-row policy."""
+
+    cutoff_hz: float = 5.0
+    filter_torque: bool = True
+    decimation: int = 1
+    drop_bad_rows: bool = False
+
+
+def parse_rows(text: str | None, what: str = "--rows") -> tuple[int, int] | None:
+    """``'a:b'`` -> (a, b), 1-based inclusive; None passes through."""
+    if text is None:
+        return None
+    try:
+        a, b = (int(x) for x in text.split(":"))
+    except ValueError:
+        raise UserError(f"{what}: expected FIRST:LAST (1-based rows), got {text!r}") from None
+    if not 1 <= a <= b:
+        raise UserError(f"{what}: need 1 <= FIRST <= LAST, got {text!r}")
+    return a, b
+
+
+def split_spec(spec: str) -> tuple[Path, tuple[int, int] | None]:
+    """``FILE@a:b`` -> (FILE, (a, b)); plain ``FILE`` -> (FILE, None)."""
+    if "@" in spec:
+        name, rows = spec.rsplit("@", 1)
+        return Path(name), parse_rows(rows, f"{spec}")
+    return Path(spec), None
+
+
+def find_column_map(recording: Path, search: list[Path]) -> Path:
+    """``columns_<k>.yaml`` for a CSV with k fields per row, from the ``search`` folders."""
+    try:
+        with recording.open() as fh:
+            first = fh.readline()
+    except OSError:
+        raise UserError(f"{recording}: recording not found") from None
+    k = first.count(",") + 1
+    for folder in search:
+        candidate = folder / f"columns_{k}.yaml"
+        if candidate.is_file():
+            return candidate
+    raise UserError(
+        f"{recording}: no column map given and no columns_{k}.yaml next to the robot's files; "
+        "pass --columns FILE"
+    )
+
+
+def load_samples(
+    specs: list[str],
+    columns: Path | None,
+    rows: tuple[int, int] | None,
+    opts: Conditioning,
+    search: list[Path],
+) -> list[tuple[Samples, Recording]]:
+    """Load and condition every recording; (samples for the fit, the conditioned recording)."""
+    out = []
+    for spec in specs:
+        path, own_rows = split_spec(spec)
+        cmap = columns
+        if cmap is None and path.suffix.lower() != ".mcap":
+            cmap = find_column_map(path, search)
+        rec = load_recording(
+            path,
+            cmap,
+            rows=own_rows or rows,
+            bad_rows="drop" if opts.drop_bad_rows else None,
+        )
+        rec = condition(
+            rec, opts.cutoff_hz, filter_torque=opts.filter_torque, decimation=opts.decimation
+        )
+        assert rec.qdd is not None
+        out.append((Samples(rec.q, rec.qd, rec.qdd, rec.tau, rec.source), rec))
+    return out
+
+
+def find_config(robot: str, near: Path) -> Path:
+    """The config ``<robot>.yaml`` in the parameters file's folder or the one above it."""
+    for folder in (near, near.parent):
+        candidate = folder / f"{robot}.yaml"
+        if candidate.is_file():
+            return candidate
+    raise UserError(f"unknown robot {robot!r}: no {robot}.yaml next to {near}; pass --config FILE")

@@ -1,0 +1,124 @@
+"""Collision-threshold calibration from free-motion recordings (no contact anywhere).
+
+For each joint j the threshold is linear in four features of the motion,
+``thr = c0 + c1·|qd| + c2·|a| + c3·r`` (see safety/collision.py), with c >= 0. Calibration
+finds the smallest such envelope over the free-motion residuals by a linear program,
+
+    minimise  mean_k thr_k    subject to  thr_k >= |tau_ext_hat_k|  for every sample k,
+
+then scales it by ``1 + margin``. Minimising the mean threshold keeps the resting threshold
+c0 as low as the recordings allow (sensitivity to pushes on a still arm) while the other
+terms absorb what motion adds: acceleration steps (inertia errors) and velocity reversals
+(Coulomb friction switching).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linprog
+
+from hofto_hw.config.collision import CollisionConfig
+from hofto_hw.errors import UserError
+from hofto_hw.identify.data import Recording
+from safety.collision import CollisionMonitor
+
+FloatArray = NDArray[np.float64]
+TERMS = ("base", "velocity_gain", "acceleration_gain", "reversal_margin")
+
+
+@dataclass
+class Calibration:
+    """A calibrated monitor config and what it was fitted on.
+
+    ``peak`` (n,) largest |tau_ext_hat| [N·m] on the calibration data; ``envelope`` (n, 4)
+    coefficients before the margin; ``samples`` count.
+    """
+
+    config: CollisionConfig
+    envelope: FloatArray
+    peak: FloatArray
+    samples: int
+
+
+def features(rec: Recording, template: CollisionConfig) -> FloatArray:
+    """(N, n, 4) threshold features [1, |qd|, |a|, r] of ``rec`` under ``template``'s
+    filter settings, computed by the monitor's own per-tick code (so they match replay)."""
+    n = rec.n_joints
+    unit = template.model_copy(
+        update={
+            "base": [1.0] * n,
+            "velocity_gain": None,
+            "acceleration_gain": None,
+            "reversal_margin": None,
+        }
+    )
+    mon = CollisionMonitor(unit)
+    out = np.zeros((rec.n_samples, n, 4))
+    out[:, :, 0] = 1.0
+    out[:, :, 1] = np.abs(rec.qd)
+    mon.reset(rec.qd[0])
+    t, qd = rec.t, rec.qd
+    for k in range(1, rec.n_samples):
+        mon.features(qd[k], t[k] - t[k - 1])
+        out[k, :, 2] = np.abs(mon.accel)
+        out[k, :, 3] = mon.reversal
+    out[0, :, 2:] = 0.0
+    return out
+
+
+def fit_envelope(
+    feats: FloatArray, residual: FloatArray, use: tuple[bool, bool, bool, bool], min_base: float
+) -> FloatArray:
+    """Coefficients (4,) >= 0 of the smallest-mean envelope of |residual| for one joint.
+
+    ``feats`` (N, 4), ``residual`` (N,) [N·m]; ``use`` switches terms on; c0 >= min_base.
+    """
+    cols = [i for i in range(4) if use[i]]
+    F = feats[:, cols]
+    r = np.abs(residual)
+    # c0 >= min_base and features >= 0: rows with |r| <= min_base cannot bind.
+    keep = r > min_base
+    F, r = F[keep], r[keep]
+    if r.size == 0:
+        out = np.zeros(4)
+        out[0] = min_base
+        return out
+    bounds = [(min_base, None)] + [(0.0, None)] * (len(cols) - 1)
+    res = linprog(c=F.mean(axis=0), A_ub=-F, b_ub=-r, bounds=bounds, method="highs")
+    if res.status != 0:
+        raise UserError(f"threshold calibration failed: {res.message}")
+    out = np.zeros(4)
+    out[cols] = res.x
+    return out
+
+
+def calibrate(
+    recordings: list[Recording],
+    residuals: list[FloatArray],
+    template: CollisionConfig,
+    *,
+    margin: float = 0.5,
+    min_base: float = 1.0,
+    terms: tuple[bool, bool, bool, bool] = (True, True, True, True),
+) -> Calibration:
+    """Thresholds covering every sample of ``residuals`` (each (N_i, n) [N·m]) with a margin.
+
+    ``template`` gives the filter, debounce and hysteresis settings; its per-joint values are
+    replaced. ``margin`` 0.5 puts the thresholds 50 % above the envelope.
+    """
+    if not recordings:
+        raise UserError("thresholds calibrate: no recordings given")
+    n = recordings[0].n_joints
+    feats = np.concatenate([features(rec, template) for rec in recordings])
+    resid = np.concatenate(residuals)
+    env = np.stack([fit_envelope(feats[:, j], resid[:, j], terms, min_base) for j in range(n)])
+    scaled = env * (1.0 + margin)
+    values = {name: [float(v) for v in scaled[:, i]] for i, name in enumerate(TERMS)}
+    for i, name in enumerate(TERMS[1:], start=1):
+        if not terms[i]:
+            values[name] = None  # type: ignore[assignment]
+    cfg = template.model_copy(update=values)
+    return Calibration(cfg, env, np.max(np.abs(resid), axis=0), int(resid.shape[0]))

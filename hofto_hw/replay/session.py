@@ -1,0 +1,101 @@
+"""One replay as the commands run it: recording + setup + observer + thresholds -> report."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hofto_hw.identify.data import BadRows, Recording, load_recording
+from hofto_hw.observers import make_observer
+from hofto_hw.replay.episodes import Episode, find_episodes
+from hofto_hw.replay.runner import ReplayResult, replay
+from hofto_hw.replay.setup import Setup, default_columns
+from hofto_hw.replay.thresholds import ThresholdsFile
+from safety.collision import CollisionMonitor
+
+
+@dataclass
+class Report:
+    """A finished replay: the result, its episodes and per-joint statistics."""
+
+    result: ReplayResult
+    episodes: list[Episode]
+    calibrated: bool
+
+    def stats(self) -> list[dict[str, float]]:
+        """Per joint: mean, std, rms, max |.| of tau_ext_hat [N·m] (and peak ratio)."""
+        e = self.result.tau_ext
+        out = []
+        for j in range(e.shape[1]):
+            row = {
+                "joint": j + 1,
+                "mean": float(np.mean(e[:, j])),
+                "std": float(np.std(e[:, j])),
+                "rms": float(np.sqrt(np.mean(e[:, j] ** 2))),
+                "max_abs": float(np.max(np.abs(e[:, j]))),
+            }
+            if self.result.threshold is not None:
+                row["max_ratio"] = float(np.max(np.abs(e[:, j]) / self.result.threshold[:, j]))
+            out.append(row)
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain types for --json."""
+        rec = self.result.recording
+        return {
+            "file": rec.source,
+            "observer": self.result.observer,
+            "samples": rec.n_samples,
+            "duration": rec.duration,
+            "thresholds": self.calibrated,
+            "episodes": [ep.as_dict() for ep in self.episodes],
+            "joints": self.stats(),
+            "notes": rec.notes,
+        }
+
+
+def load_for_replay(
+    setup: Setup,
+    path: Path,
+    columns: Path | None,
+    rows: tuple[int, int] | None = None,
+    bad_rows: BadRows | None = None,
+) -> Recording:
+    """The recording, with the robot's default column map when none is given."""
+    cmap = columns if columns is not None else default_columns(setup, path)
+    rec = load_recording(path, cmap, rows=rows, bad_rows=bad_rows)
+    if rec.n_joints != setup.model.n:
+        from hofto_hw.errors import UserError
+
+        raise UserError(
+            f"{path}: {rec.n_joints} joints, robot {setup.config.robot.name} has {setup.model.n}"
+        )
+    return rec
+
+
+def run_replay(
+    setup: Setup,
+    rec: Recording,
+    observer_name: str,
+    thresholds: ThresholdsFile | None,
+    merge_gap: float = 0.5,
+) -> Report:
+    """Replay ``observer_name`` over ``rec``; with thresholds also detect episodes."""
+    from hofto_hw.replay.setup import observer_config
+
+    obs_cfg = observer_config(observer_name, setup, thresholds)
+    observer = make_observer(obs_cfg, setup.model)
+    monitor = None
+    if thresholds is not None and observer_name in thresholds.observers:
+        monitor = CollisionMonitor(thresholds.observers[observer_name].monitor)
+    result = replay(rec, observer, monitor)
+    result.observer = observer_name
+    episodes: list[Episode] = []
+    if result.joints is not None and result.threshold is not None:
+        episodes = find_episodes(
+            rec.t, result.joints, result.tau_ext, result.threshold, rec.rows, merge_gap
+        )
+    return Report(result, episodes, monitor is not None)

@@ -1,0 +1,106 @@
+"""The collision-thresholds file written by ``hofto-hw thresholds calibrate``.
+
+Thresholds are only valid for the observer gains and the model they were calibrated with, so
+the file carries both: each observer entry holds the observer config and the monitor config,
+and the file names the parameters file (with its sha256) behind the model.
+
+.. code-block:: yaml
+
+    format: hofto-hw/collision-thresholds
+    version: 1
+    robot: ur10e
+    parameters: {file: ur10e_parameters.yaml, sha256: 3f9a...}
+    created: '2026-11-21T10:00:00+00:00'
+    margin: 0.6                      # thresholds = (1 + margin) · envelope
+    calibrated_on: [ur-20_02_05-20sec_8harm.csv, ...]
+    observers:
+      momentum:
+        observer: {type: momentum, gain: [20.0, ...]}
+        monitor: {base: [...], velocity_gain: [...], ...}   # see hofto_hw/config/collision.py
+        peak: [...]                  # largest |tau_ext_hat| on the calibration data [N·m]
+        samples: 41230
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from hofto_hw.config.collision import CollisionConfig
+from hofto_hw.config.models import ObserverConfig
+from hofto_hw.errors import ConfigError
+
+FORMAT = "hofto-hw/collision-thresholds"
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ParametersRef(_Strict):
+    """Which identified-parameters file the thresholds were calibrated with."""
+
+    file: str
+    sha256: str = ""
+
+
+class ObserverThresholds(_Strict):
+    """Thresholds of one observer: its config, the monitor config, calibration figures."""
+
+    observer: ObserverConfig
+    monitor: CollisionConfig
+    peak: list[float] = Field(default_factory=list, description="[N·m] per joint")
+    samples: int = 0
+
+
+class ThresholdsFile(_Strict):
+    """Content of a thresholds file (see the module docstring)."""
+
+    format: Literal["hofto-hw/collision-thresholds"] = FORMAT
+    version: Literal[1] = 1
+    robot: str
+    parameters: ParametersRef | None = None
+    created: str = ""
+    margin: float = 0.0
+    calibrated_on: list[str] = Field(default_factory=list)
+    observers: dict[str, ObserverThresholds]
+
+
+def read_thresholds(path: str | Path) -> ThresholdsFile:
+    """Read and validate a thresholds file; errors name the file and the field."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: thresholds file not found") from None
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{path}: cannot read thresholds file: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level of a thresholds file")
+    try:
+        return ThresholdsFile.model_validate(data)
+    except ValidationError as err:
+        from hofto_hw.config.loader import format_validation_error
+
+        raise ConfigError(format_validation_error(str(path), err)) from None
+
+
+def write_thresholds(path: str | Path, content: ThresholdsFile) -> None:
+    """Write ``content`` as YAML (lists of numbers in flow style, one line each)."""
+
+    class _Dumper(yaml.SafeDumper):
+        pass
+
+    def _list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
+        flow = all(isinstance(v, (int, float)) for v in data)
+        return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+    _Dumper.add_representer(list, _list)
+    data = content.model_dump(mode="json", exclude_none=True)
+    Path(path).write_text(
+        "# Collision thresholds: written by `hofto-hw thresholds calibrate`.\n"
+        + yaml.dump(data, Dumper=_Dumper, sort_keys=False, width=100)
+    )

@@ -1,0 +1,66 @@
+"""Bus and drive config models: defaults, validation errors naming the field."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from pydantic import ValidationError
+
+from hofto_hw.config.drives import BusConfig
+from hofto_hw.config.loader import load_config, parse_config
+from hofto_hw.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[3]
+DRIVE = {
+    "counts_per_rev": 131072,
+    "gear_ratio": 100.0,
+    "rated_torque": 640,
+    "rated_current": 2800,
+    "torque_constant": 0.23,
+    "torque_limit": 120.0,
+    "quick_stop_deceleration": 10.0,
+}
+
+
+def test_shipped_configs_have_six_drives() -> None:
+    for name in ("er3a.yaml", "ur10e.yaml"):
+        cfg = load_config(ROOT / "configs" / name)
+        assert cfg.bus is not None and len(cfg.bus.drives) == 6
+        assert cfg.bus.cycle_time == pytest.approx(1.0 / cfg.loop.rate_hz)
+
+
+def test_defaults() -> None:
+    bus = BusConfig(transport="sim", drives=[DRIVE])
+    d = bus.drives[0]
+    assert d.direction == 1 and d.zero_offset == 0 and bus.cycle_time == 0.001
+    assert d.following_error_window == 0.05 and d.identity.revision is None
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        ({"gear_ratio": 0.0}, "gear_ratio"),
+        ({"direction": 2}, "direction"),
+        ({"counts_per_rev": -5}, "counts_per_rev"),
+        ({"torque_limit": -1.0}, "torque_limit"),
+        ({"bogus": 1}, "bogus"),
+    ],
+)
+def test_bad_drive_values_name_the_field(change: dict, field: str) -> None:
+    with pytest.raises(ValidationError, match=field):
+        BusConfig(transport="sim", drives=[{**DRIVE, **change}])
+
+
+def test_real_transports_need_an_interface() -> None:
+    with pytest.raises(ValidationError, match="interface is required for transport 'ethercat'"):
+        BusConfig(transport="ethercat", drives=[DRIVE])
+    assert BusConfig(transport="ethercat", interface="eth1", drives=[DRIVE]).interface == "eth1"
+
+
+def test_one_drive_per_joint_is_checked_with_the_file_named() -> None:
+    cfg = load_config(ROOT / "configs" / "er3a.yaml")
+    data = cfg.model_dump(mode="json")
+    data["bus"]["drives"] = data["bus"]["drives"][:5]
+    with pytest.raises(ConfigError, match=r"my\.yaml: .*bus\.drives has 5 entries, expected 6"):
+        parse_config(data, source="my.yaml")
