@@ -91,6 +91,10 @@ def run(args: argparse.Namespace) -> int:
         + [f"qd{j + 1}" for j in range(n)]
         + [f"qdd{j + 1}" for j in range(n)]
     )
+    try:
+        args.output.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"--output: cannot create {args.output.parent}: {exc.strerror}") from None
     np.savetxt(
         args.output,
         np.column_stack([t, q, qd, qdd]),

@@ -36,7 +36,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="low-pass the measured torque too (default: compare with the raw torque)",
     )
-    parser.add_argument("--plot", type=Path, help="PNG to write (default: PARAMS stem + .png)")
+    parser.add_argument(
+        "--plot", type=Path, help="PNG to write (default: out/validate_<PARAMS stem>.png)"
+    )
     parser.add_argument("--no-plot", action="store_true", help="write no figure")
     parser.add_argument("--drop-bad-rows", action="store_true", help="drop corrupt rows")
     parser.add_argument("--json", action="store_true", help="print the numbers as JSON")
@@ -80,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     tau_all = np.vstack(taus)
     report["overall"] = {name: errors(tau_all, np.vstack(p)).as_dict() for name, p in preds.items()}
     if not args.no_plot:
-        png = args.plot or args.parameters.with_suffix(".png")
+        png = args.plot or Path("out") / f"validate_{args.parameters.stem}.png"
         s0, rec0 = loaded[0]
         plot_fit(
             png,
