@@ -50,10 +50,13 @@ def run(args: argparse.Namespace) -> int:
     from drivers.sim.esc.build import build_network
     from drivers.sim.esc.network import serve
     from hofto_hw.config.loader import load_config
+    from hofto_hw.errors import UserError
 
+    master = args.master_iface or _master_name(args.iface)
+    if not args.create_veth and not veth.exists(args.iface):
+        raise UserError(f"network interface {args.iface!r} does not exist (see `ip link`)")
     cfg = load_config(args.config)
     net = build_network(cfg, external=not args.quiet_arm)
-    master = args.master_iface or _master_name(args.iface)
     if args.create_veth:
         veth.create_pair(master, args.iface)
 

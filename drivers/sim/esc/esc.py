@@ -471,9 +471,11 @@ class Esc:
         if requested in self.refuse:
             self._set_al(current, self.refuse[requested], error=True)
             return
-        going_down = requested < current or (current == r.STATE_BOOT and requested == r.STATE_INIT)
-        if requested == r.STATE_BOOT or current == r.STATE_BOOT:
+        if current == r.STATE_BOOT or requested == r.STATE_BOOT:
+            # BOOT is entered from INIT and left to INIT only
             going_down = current == r.STATE_BOOT and requested == r.STATE_INIT
+        else:
+            going_down = requested < current
         if going_down:
             self._set_al(requested, AL_NO_ERROR, error=False)
             return
@@ -546,6 +548,10 @@ class Esc:
         self.output_plan = out_plan
         self.input_plan = in_plan
         return AL_NO_ERROR
+
+    def raise_al_error(self, code: int) -> None:
+        """The application reports an error: drop to SAFE-OP (or stay lower) with ``code``."""
+        self._set_al(min(self.al_state & 0x0F, r.STATE_SAFEOP), code, error=True)
 
     def check_watchdog(self, now_ns: int) -> None:
         """SM watchdog: in OP without an SM2 write for the watchdog time -> SAFE-OP + 0x001B."""

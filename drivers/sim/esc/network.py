@@ -28,7 +28,6 @@ import numpy as np
 from drivers.cia402 import pdo
 from drivers.sim.drive import FAULTS, EmulatedDrives
 from drivers.sim.esc import datagram
-from drivers.sim.esc import registers as r
 from drivers.sim.esc.description import SlaveDescription
 from drivers.sim.esc.esc import Esc
 from hofto_hw.errors import UserError
@@ -60,6 +59,10 @@ class EmulatedNetwork:
         self.drop_next = 0
         self.corrupt_next = 0
         self.corrupt_at = 0
+        #: set by a ``stop`` request or a signal: :func:`serve` returns
+        self.stopping = False
+        #: the last handled frame carried process data: call :meth:`step` after replying
+        self.pending_step = False
         self.rx = pdo.new_rx(n)
         self._rx_u8 = self.rx.view(np.uint8).reshape(n, pdo.RXPDO_SIZE)
         if drives is not None:
@@ -140,6 +143,7 @@ class EmulatedNetwork:
         (slave); ``sdo_abort`` (slave, index, sub (-1 = all), code; code 0 removes);
         ``refuse_state`` (slave, state, code; code 0 removes); ``al_error`` (slave, code:
         the slave drops to SAFE-OP, or stays lower, with the error flag and this code);
+        ``restart`` (slave: power-cycled, registers reset, INIT, no station address);
         ``stop``. Slaves are 0-based positions on the line.
         """
         op = request.get("op")
@@ -179,9 +183,13 @@ class EmulatedNetwork:
                 else:
                     s.refuse.pop(state, None)
             elif op == "al_error":
-                s = self.slaves[self._slave_index(request["slave"])]
-                state = min(s.al_state & 0x0F, r.STATE_SAFEOP)
-                s._set_al(state, int(request["code"]), error=True)
+                self.slaves[self._slave_index(request["slave"])].raise_al_error(
+                    int(request["code"])
+                )
+            elif op == "restart":
+                k = self._slave_index(request["slave"])
+                old = self.slaves[k]
+                self.slaves[k] = Esc(old.desc, old.od, k, self.n)
             elif op == "stop":
                 self.stopping = True
             else:
@@ -232,9 +240,6 @@ class EmulatedNetwork:
                 error_code=[int(x) for x in self.drives.tx["error_code"]],
             )
         return out
-
-    stopping = False
-    pending_step = False
 
 
 # -------------------------------------------------------------------- the process

@@ -179,6 +179,22 @@ def test_lost_slave_is_recovered_when_it_returns(emulated_bus) -> None:
         t.close()
 
 
+def test_restarted_slave_is_readdressed_and_remapped(emulated_bus) -> None:
+    t = _transport(emulated_bus, recover=True)
+    try:
+        t.open()
+        emulated_bus.call(op="restart", slave=4)
+        assert t.exchange() == STATUS_WKC_MISMATCH
+        assert any("slave 5" in p and "does not answer" in p for p in t.check_bus())
+        notes = t.recover_slaves()
+        assert any("slave 5" in n and "reconfigured" in n for n in notes), notes
+        assert t.check_bus() == []
+        assert emulated_bus.call(op="status")["al_state"] == [0x08] * 6
+        assert set(_cycles(t, 10)) == {STATUS_OK}
+    finally:
+        t.close()
+
+
 def test_drive_fault_is_surfaced_with_its_code(emulated_bus) -> None:
     cfg = emulated_bus.cfg
     t = _transport(emulated_bus)

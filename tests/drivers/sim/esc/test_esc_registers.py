@@ -143,3 +143,25 @@ def test_dc_latch_and_system_time_offset() -> None:
     esc.write(r.DC_SYSTEM_TIME_OFFSET, struct.pack("<q", 5_000))
     now[0] = 2_000_000
     assert struct.unpack("<Q", _read(esc, r.DC_SYSTEM_TIME, 8))[0] == 2_005_000
+
+
+def test_boot_is_entered_from_init_and_left_to_init_only(esc: Esc) -> None:
+    setup_mailbox(esc)
+    request_state(esc, r.STATE_BOOT)
+    assert esc.al_state == r.STATE_BOOT
+    request_state(esc, r.STATE_PREOP)
+    assert (esc.al_state, esc.al_status_code) == (r.STATE_BOOT | r.AL_ERROR_FLAG, 0x0011)
+    request_state(esc, r.STATE_INIT | r.AL_ACK_FLAG)
+    assert esc.al_state == r.STATE_INIT
+
+
+def test_application_error_drops_op_to_safeop(esc: Esc) -> None:
+    to_safeop_ready(esc)
+    request_state(esc, r.STATE_SAFEOP)
+    request_state(esc, r.STATE_OP)
+    esc.raise_al_error(0x001A)
+    assert (esc.al_state, esc.al_status_code) == (r.STATE_SAFEOP | r.AL_ERROR_FLAG, 0x001A)
+    request_state(esc, r.STATE_OP)  # not acknowledged: ignored
+    assert esc.al_state == r.STATE_SAFEOP | r.AL_ERROR_FLAG
+    request_state(esc, r.STATE_OP | r.AL_ACK_FLAG)
+    assert esc.al_state == r.STATE_OP

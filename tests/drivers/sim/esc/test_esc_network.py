@@ -1,0 +1,65 @@
+"""The emulated network's frame handling and control requests, in-process (no sockets)."""
+
+from __future__ import annotations
+
+import struct
+
+from esc_helpers import make_desc
+
+from drivers.sim.esc import datagram as dg
+from drivers.sim.esc import registers as r
+from drivers.sim.esc.network import EmulatedNetwork
+
+
+def _brd() -> bytearray:
+    body = struct.pack("<BBHHHH", dg.BRD, 0, 0, r.TYPE, 2, 0) + bytes(4)
+    eth = b"\xff" * 6 + b"\x01" * 6 + b"\x88\xa4"
+    return bytearray(eth + struct.pack("<H", len(body) | 0x1000) + body)
+
+
+def _wkc(frame: bytearray) -> int:
+    return dg.describe_frame(bytes(frame))[0][4]
+
+
+def test_drop_and_corrupt_requests_apply_to_the_next_frames() -> None:
+    net = EmulatedNetwork([make_desc() for _ in range(3)], None)
+    assert net.control({"op": "drop", "count": 1}) == {"ok": True}
+    assert not net.handle(_brd(), len(_brd()))
+    frame = _brd()
+    assert net.handle(frame, len(frame))
+    assert _wkc(frame) == 3
+    assert frame[6] & 0x02, "the reply's source MAC is marked by port 0"
+    net.control({"op": "corrupt", "count": 1, "slave": 1})
+    frame = _brd()
+    assert net.handle(frame, len(frame))
+    assert _wkc(frame) == 1
+    status = net.control({"op": "status"})
+    assert (status["frames"], status["dropped"], status["corrupted"]) == (3, 1, 1)
+
+
+def test_silence_restart_and_al_error_requests() -> None:
+    net = EmulatedNetwork([make_desc() for _ in range(3)], None)
+    net.control({"op": "silence", "slave": 2, "on": True})
+    frame = _brd()
+    net.handle(frame, len(frame))
+    assert _wkc(frame) == 2
+    net.slaves[0].write(r.STATION_ADDRESS, b"\x01\x10")
+    net.control({"op": "restart", "slave": 0})
+    assert net.slaves[0].station_address == 0
+    net.control({"op": "al_error", "slave": 1, "code": 0x001A})
+    assert net.control({"op": "status"})["al_status_code"] == [0, 0x001A, 0]
+
+
+def test_bad_requests_are_answered_with_the_reason() -> None:
+    net = EmulatedNetwork([make_desc()], None)
+    reply = net.control({"op": "silence", "slave": 5})
+    assert not reply["ok"] and "slave 5 does not exist" in reply["error"]
+    assert "unknown op" in net.control({"op": "explode"})["error"]
+    assert "no drives" in net.control({"op": "drive_fault", "slave": 0, "code": 0x2310})["error"]
+
+
+def test_malformed_frames_are_counted_and_not_answered() -> None:
+    net = EmulatedNetwork([make_desc()], None)
+    frame = bytearray(_brd()[:20])
+    assert not net.handle(frame, len(frame))
+    assert net.malformed == 1
