@@ -10,7 +10,7 @@ import yaml
 from pydantic import ValidationError
 
 from hofto_hw.config.models import SystemConfig
-from hofto_hw.errors import ConfigError
+from hofto_hw.errors import ConfigError, UserError
 
 
 def _format_loc(loc: tuple[Any, ...]) -> str:
@@ -61,25 +61,35 @@ def _resolve_paths(cfg: SystemConfig, base_dir: Path) -> None:
         robot.parameters = (base_dir / robot.parameters).resolve()
 
 
+def read_yaml(path: str | Path, what: str, error: type[UserError] = ConfigError) -> Any:
+    """Parse the YAML file ``path``; ``what`` names the kind of file in messages.
+
+    Raises ``error`` naming the file: ``FILE: <what> not found``, ``FILE: cannot read <what>:
+    reason`` or ``FILE: line L column C: not valid YAML: problem``.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise error(f"{path}: {what} not found") from None
+    except OSError as exc:
+        raise error(f"{path}: cannot read {what}: {exc.strerror}") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1} column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise error(f"{path}:{where}: not valid YAML: {problem}") from None
+
+
 def load_config(path: str | Path) -> SystemConfig:
     """Load and validate ``path``; relative file names inside resolve against its folder.
 
     Raises :class:`ConfigError` naming the file, the field path and the bad value.
     """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: config file not found") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read config file: {exc.strerror}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1} column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise ConfigError(f"{path}:{where}: not valid YAML: {problem}") from None
+    data = read_yaml(path, "config file")
     cfg = parse_config(data, source=str(path), base_dir=path.parent)
     if not cfg.robot.urdf.is_file():
         raise ConfigError(f"{path}: robot.urdf: file not found (got '{cfg.robot.urdf}')")

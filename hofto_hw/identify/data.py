@@ -26,11 +26,11 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from scipy import signal
 
+from hofto_hw.config.loader import format_validation_error, read_yaml
 from hofto_hw.errors import ConfigError, UserError
 
 log = logging.getLogger(__name__)
@@ -183,19 +183,12 @@ class ColumnMap(BaseModel):
 def load_column_map(path: str | Path) -> ColumnMap:
     """Read a column-map YAML file; errors name the file and the field."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: column map not found") from None
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{path}: cannot read column map: {exc}") from None
+    data = read_yaml(path, "column map")
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level of the column map")
     try:
         cmap = ColumnMap.model_validate(data)
     except ValidationError as err:
-        from hofto_hw.config.loader import format_validation_error
-
         raise ConfigError(format_validation_error(str(path), err)) from None
     if not cmap.name:
         cmap.name = path.name

@@ -59,6 +59,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
+from hofto_hw.config.loader import read_yaml
 from hofto_hw.errors import ModelError
 from hofto_hw.model.friction import FrictionParams
 
@@ -234,14 +235,7 @@ def read_parameters(path: str | Path) -> ParametersFile:
     """Read and check a parameters file. Raises ModelError naming the file and field."""
     path = Path(path)
     src = str(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise ModelError(f"{src}: parameters file not found") from None
-    except OSError as exc:
-        raise ModelError(f"{src}: cannot read parameters file: {exc.strerror}") from None
-    except yaml.YAMLError as exc:
-        raise ModelError(f"{src}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
+    data = read_yaml(path, "parameters file", ModelError)
     r = _Reader(src)
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise ModelError(f"{src}: not a hofto-hw parameters file (format: {FORMAT} missing)")

@@ -30,6 +30,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from hofto_hw.config.collision import CollisionConfig
+from hofto_hw.config.loader import format_validation_error, read_yaml
 from hofto_hw.config.models import ObserverConfig
 from hofto_hw.errors import ConfigError
 
@@ -72,19 +73,12 @@ class ThresholdsFile(_Strict):
 def read_thresholds(path: str | Path) -> ThresholdsFile:
     """Read and validate a thresholds file; errors name the file and the field."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: thresholds file not found") from None
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{path}: cannot read thresholds file: {exc}") from None
+    data = read_yaml(path, "thresholds file")
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level of a thresholds file")
     try:
         return ThresholdsFile.model_validate(data)
     except ValidationError as err:
-        from hofto_hw.config.loader import format_validation_error
-
         raise ConfigError(format_validation_error(str(path), err)) from None
 
 

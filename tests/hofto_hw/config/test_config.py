@@ -99,3 +99,24 @@ def test_sigma_gives_eq17_powers(tmp_path, base):
     h["sigma"] = -0.2
     cfg = load_config(_write(tmp_path, base))
     assert cfg.observers["hofto"].stage_powers() == pytest.approx([0.8, 0.6, 0.4, 0.2])
+
+
+def test_read_yaml_names_file_and_kind_for_every_reader(tmp_path):
+    from hofto_hw.config.loader import read_yaml
+    from hofto_hw.identify.data import load_column_map
+    from hofto_hw.model.parameters import read_parameters
+    from hofto_hw.replay.thresholds import read_thresholds
+
+    bad = tmp_path / "broken.yaml"
+    bad.write_text("a: [1, 2\n")
+    with pytest.raises(ConfigError, match=r"broken\.yaml: line 2 column 1: not valid YAML"):
+        read_yaml(bad, "column map")
+    with pytest.raises(ModelError, match=r"absent\.yaml: parameters file not found"):
+        read_yaml(tmp_path / "absent.yaml", "parameters file", ModelError)
+    for reader, err in (
+        (load_column_map, ConfigError),
+        (read_thresholds, ConfigError),
+        (read_parameters, ModelError),
+    ):
+        with pytest.raises(err, match=r"broken\.yaml: line 2 column 1: not valid YAML"):
+            reader(bad)
