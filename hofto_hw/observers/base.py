@@ -52,6 +52,38 @@ class ModelTerms:
         return np.dot(self.model.mass_matrix(q), x, out=self.out)
 
 
+class LinearHold:
+    """Measured positions between two samples, for observers that take substeps.
+
+    First-order hold: over ``substeps`` substeps, :meth:`next` walks linearly from the previous
+    sample to the new one (the k-th call returns y_prev + k·(y - y_prev)/substeps).
+    Allocation-free; shape (joints,).
+    """
+
+    def __init__(self, joints: int) -> None:
+        self.prev = np.zeros(joints)
+        self._cur = np.zeros(joints)
+        self._step = np.zeros(joints)
+
+    def reset(self, y: np.ndarray) -> None:
+        np.copyto(self.prev, y)
+
+    def begin(self, y: np.ndarray, substeps: int) -> None:
+        """Start walking towards the new sample ``y``."""
+        np.subtract(y, self.prev, out=self._step)
+        np.divide(self._step, substeps, out=self._step)
+        np.copyto(self._cur, self.prev)
+
+    def next(self) -> np.ndarray:
+        """The next substep's position (a view of an internal buffer)."""
+        np.add(self._cur, self._step, out=self._cur)
+        return self._cur
+
+    def end(self, y: np.ndarray) -> None:
+        """The new sample becomes the previous one."""
+        np.copyto(self.prev, y)
+
+
 def per_joint(values: list[float] | np.ndarray, n: int, what: str) -> np.ndarray:
     """Gains as a float array of shape (n,), with a clear error otherwise."""
     arr = np.asarray(values, dtype=float).reshape(-1)

@@ -19,8 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import ModelTerms, per_joint
-from hofto_hw.observers.hofto import first_order_hold
+from hofto_hw.observers.base import LinearHold, ModelTerms, per_joint
 
 
 def bandwidth_gains(w0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -46,22 +45,20 @@ class EsoCore:
         self.z1, self.z2, self.z3 = np.zeros(j), np.zeros(j), np.zeros(j)
         self._e = np.zeros(j)
         self._d1, self._d2, self._d3 = np.zeros(j), np.zeros(j), np.zeros(j)
-        self._y_prev, self._y_sub, self._dy = np.zeros(j), np.zeros(j), np.zeros(j)
+        self._hold = LinearHold(j)
 
     def reset(self, y: np.ndarray, yd: np.ndarray | None = None) -> None:
         self.z1[:] = y
         self.z2[:] = 0.0 if yd is None else yd
         self.z3.fill(0.0)
-        np.copyto(self._y_prev, y)
+        self._hold.reset(y)
 
     def step(self, y: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
         h = dt / self.substeps
         e, d1, d2, d3 = self._e, self._d1, self._d2, self._d3
-        first_order_hold(self._y_prev, y, self.substeps, self._dy)
-        np.copyto(self._y_sub, self._y_prev)
+        self._hold.begin(y, self.substeps)
         for _ in range(self.substeps):
-            np.add(self._y_sub, self._dy, out=self._y_sub)
-            np.subtract(self._y_sub, self.z1, out=e)
+            np.subtract(self._hold.next(), self.z1, out=e)
             np.multiply(self.k1, e, out=d1)
             np.add(d1, self.z2, out=d1)
             np.multiply(self.k2, e, out=d2)
@@ -74,7 +71,7 @@ class EsoCore:
             np.add(self.z2, d2, out=self.z2)
             np.multiply(d3, h, out=d3)
             np.add(self.z3, d3, out=self.z3)
-        np.copyto(self._y_prev, y)
+        self._hold.end(y)
         return self.z3
 
 

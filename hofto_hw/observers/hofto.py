@@ -36,7 +36,7 @@ from typing import Literal
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import ModelTerms
+from hofto_hw.observers.base import LinearHold, ModelTerms
 
 Form = Literal["eq17", "recursive"]
 
@@ -46,12 +46,6 @@ def sigma_powers(order: int, sigma: float) -> np.ndarray:
     if not -1.0 / (order + 2) < sigma < 0.0:
         raise ValueError(f"sigma must be in (-1/(n+2), 0) = ({-1.0 / (order + 2):.4f}, 0)")
     return 1.0 + sigma * np.arange(1, order + 3, dtype=float)
-
-
-def first_order_hold(y_prev: np.ndarray, y: np.ndarray, substeps: int, out: np.ndarray) -> None:
-    """Per-substep increment of a linear interpolation from y_prev to y: (y - y_prev)/substeps."""
-    np.subtract(y, y_prev, out=out)
-    np.divide(out, substeps, out=out)
 
 
 class HoftoCore:
@@ -113,9 +107,7 @@ class HoftoCore:
         self._d = np.zeros(j)
         self._t = np.zeros(j)
         self._prev = np.zeros(j)
-        self._y_prev = np.zeros(j)
-        self._y_sub = np.zeros(j)
-        self._dy = np.zeros(j)
+        self._hold = LinearHold(j)
         self._T = np.eye(s)
         self._h = -1.0
         self._a_h2 = 0.0  # coefficient of a in z1's update (h²/2 with Taylor terms, else 0)
@@ -124,7 +116,7 @@ class HoftoCore:
         """z1 = y, z2 = yd (or 0), higher states 0."""
         self.z.fill(0.0)
         self.z[0] = y
-        np.copyto(self._y_prev, y)
+        self._hold.reset(y)
         if yd is not None:
             self.z[1] = yd
 
@@ -136,12 +128,10 @@ class HoftoCore:
         if self.substeps == 1:
             self._substep(y, a, h)
         else:
-            first_order_hold(self._y_prev, y, self.substeps, self._dy)
-            np.copyto(self._y_sub, self._y_prev)
+            self._hold.begin(y, self.substeps)
             for _ in range(self.substeps):
-                np.add(self._y_sub, self._dy, out=self._y_sub)
-                self._substep(self._y_sub, a, h)
-        np.copyto(self._y_prev, y)
+                self._substep(self._hold.next(), a, h)
+        self._hold.end(y)
         return self.z[2]
 
     def _set_step(self, h: float) -> None:

@@ -19,8 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import ModelTerms, per_joint
-from hofto_hw.observers.hofto import first_order_hold
+from hofto_hw.observers.base import LinearHold, ModelTerms, per_joint
 
 
 class StaObserver:
@@ -39,24 +38,22 @@ class StaObserver:
         self.z1, self.z2, self.z3 = np.zeros(n), np.zeros(n), np.zeros(n)
         self._e, self._sqrt, self._sgn = np.zeros(n), np.zeros(n), np.zeros(n)
         self._tmp = np.zeros(n)
-        self._y_prev, self._y_sub, self._dy = np.zeros(n), np.zeros(n), np.zeros(n)
+        self._hold = LinearHold(n)
         self.terms = ModelTerms(model)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.z1[:] = q
         self.z2[:] = qd
         self.z3.fill(0.0)
-        np.copyto(self._y_prev, q)
+        self._hold.reset(q)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
         a = self.terms.acceleration(q, qd, tau)
         h = dt / self.substeps
         e, root, sgn, tmp = self._e, self._sqrt, self._sgn, self._tmp
-        first_order_hold(self._y_prev, q, self.substeps, self._dy)
-        np.copyto(self._y_sub, self._y_prev)
+        self._hold.begin(q, self.substeps)
         for _ in range(self.substeps):
-            np.add(self._y_sub, self._dy, out=self._y_sub)
-            np.subtract(self._y_sub, self.z1, out=e)
+            np.subtract(self._hold.next(), self.z1, out=e)
             np.sign(e, out=sgn)
             np.abs(e, out=root)
             np.sqrt(root, out=root)
@@ -74,5 +71,5 @@ class StaObserver:
             np.add(self.z2, root, out=self.z2)
             np.multiply(sgn, h, out=sgn)
             np.add(self.z3, sgn, out=self.z3)
-        np.copyto(self._y_prev, q)
+        self._hold.end(q)
         return self.terms.torque(q, self.z3)
