@@ -420,11 +420,11 @@ def load_csv(
 
 
 def load_mcap(path: str | Path, topic: str | None = None) -> Recording:
-    """Read a joint-state log written by :mod:`hofto_hw.logging` (sensor_msgs/JointState).
+    """Read a joint-state log written by :mod:`hofto_hw.recording` (sensor_msgs/JointState).
 
     ``effort`` is the joint torque [N·m]; the log time of each message is ``t`` [s].
     """
-    from hofto_hw.logging.reader import read_joint_states
+    from hofto_hw.recording.reader import read_joint_states
 
     js = read_joint_states(path, topic=topic)
     src = str(path)

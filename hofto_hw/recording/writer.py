@@ -15,7 +15,7 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from numpy.typing import NDArray
 
 from hofto_hw.errors import UserError
-from hofto_hw.logging.schemas import (
+from hofto_hw.recording.schemas import (
     JOINT_STATE_MSGDEF,
     JOINT_STATE_TOPIC,
     JOINT_STATE_TYPE,

@@ -9,7 +9,7 @@ import pytest
 
 from hofto_hw.errors import UserError
 from hofto_hw.identify.data import load_recording
-from hofto_hw.logging import JointStateWriter, read_joint_states, write_joint_states
+from hofto_hw.recording import JointStateWriter, read_joint_states, write_joint_states
 
 
 def _series(n_samples: int = 50, n: int = 6) -> tuple[np.ndarray, ...]:

@@ -1,4 +1,4 @@
-"""Read joint-state MCAP logs written by :mod:`hofto_hw.logging.writer` into arrays."""
+"""Read joint-state MCAP logs written by :mod:`hofto_hw.recording.writer` into arrays."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from mcap_ros2.decoder import DecoderFactory
 from numpy.typing import NDArray
 
 from hofto_hw.errors import UserError
-from hofto_hw.logging.schemas import JOINT_STATE_TOPIC, JOINT_STATE_TYPE
+from hofto_hw.recording.schemas import JOINT_STATE_TOPIC, JOINT_STATE_TYPE
 
 
 @dataclass
