@@ -27,9 +27,10 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_validator
 from scipy import signal
 
+from hofto_hw.config.base import FileModel
 from hofto_hw.config.loader import format_validation_error, read_yaml
 from hofto_hw.errors import ConfigError, UserError
 
@@ -112,14 +113,12 @@ class Recording:
 # ----------------------------------------------------------------------------- column map
 
 
-class ColumnMap(BaseModel):
+class ColumnMap(FileModel):
     """Where each quantity sits in a CSV file (column numbers start at 1).
 
     Joint torque comes either from ``torque`` columns [N·m] or from ``current`` columns [A]
     times ``current_to_torque`` gains [N·m/A]. Columns not named are ignored.
     """
-
-    model_config = ConfigDict(extra="forbid")
 
     name: str = Field("", description="layout name shown in messages")
     columns: int | None = Field(None, ge=1, description="fields per row; None = any")

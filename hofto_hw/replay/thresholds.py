@@ -27,8 +27,9 @@ from pathlib import Path
 from typing import Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import Field, ValidationError
 
+from hofto_hw.config.base import FileModel
 from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.loader import format_validation_error, read_yaml
 from hofto_hw.config.models import ObserverConfig
@@ -37,18 +38,14 @@ from hofto_hw.errors import ConfigError
 FORMAT = "hofto-hw/collision-thresholds"
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class ParametersRef(_Strict):
+class ParametersRef(FileModel):
     """Which identified-parameters file the thresholds were calibrated with."""
 
     file: str
     sha256: str = ""
 
 
-class ObserverThresholds(_Strict):
+class ObserverThresholds(FileModel):
     """Thresholds of one observer: its config, the monitor config, calibration figures."""
 
     observer: ObserverConfig
@@ -57,7 +54,7 @@ class ObserverThresholds(_Strict):
     samples: int = 0
 
 
-class ThresholdsFile(_Strict):
+class ThresholdsFile(FileModel):
     """Content of a thresholds file (see the module docstring)."""
 
     format: Literal["hofto-hw/collision-thresholds"] = FORMAT
