@@ -104,18 +104,21 @@ def read_yaml(path: str | Path, what: str, error: type[UserError] = ConfigError)
         data = yaml.safe_load(text)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
-        problem = exc.problem or exc.context or "invalid"
+        problem = " ".join(str(exc.problem or exc.context or "invalid").split())
         if mark is None:
             raise error(f"{path}: not valid YAML: {problem}") from None
-        ends_early = mark.index >= len(text.rstrip()) or "end of stream" in str(problem)
+        at_end = mark.index >= len(text.rstrip())
+        ends_early = at_end or "<stream end>" in problem or "end of stream" in problem
         hint = " (the file ends early: truncated?)" if ends_early else ""
         raise error(
             f"{path}: line {mark.line + 1} column {mark.column + 1}: not valid YAML{hint}: "
             f"{problem}"
         ) from None
     except yaml.reader.ReaderError as exc:
+        at = exc.position
+        line, column = text.count("\n", 0, at) + 1, at - text.rfind("\n", 0, at)
         raise error(
-            f"{path}: character {exc.position + 1}: not valid YAML: control character "
+            f"{path}: line {line} column {column}: not valid YAML: control character "
             f"U+{_code_point(exc.character):04X} is not allowed in a {what}"
         ) from None
     except (yaml.YAMLError, RecursionError) as exc:
