@@ -63,3 +63,18 @@ def test_an_infinite_gain_is_one_line_naming_field_and_value(
     code, err = _check(path, capsys)
     assert code == 2 and len(err.splitlines()) == 1 and "Traceback" not in err
     assert f"{path}: observers.momentum.momentum.gain[0]: " in err and "(got inf)" in err
+
+
+def test_the_registry_not_the_schema_decides_which_transports_exist(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # as `transport: canopen` before a CANopen backend existed: the name is known to the
+    # schema's authors but no backend serves it, so config check must refuse it
+    monkeypatch.delitem(BACKENDS, "ethercat")
+    path = _config(tmp_path, ("  transport: sim", "  transport: ethercat\n  interface: eth1"))
+    code, err = _check(path, capsys)
+    assert code == 2 and len(err.splitlines()) == 1
+    assert err.endswith(
+        f"{path}: bus.transport: no transport backend of that name; the backends are "
+        f"{', '.join(sorted(BACKENDS))} (got 'ethercat')"
+    )
