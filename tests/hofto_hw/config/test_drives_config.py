@@ -58,9 +58,8 @@ def test_real_transports_need_an_interface() -> None:
     assert BusConfig(transport="ethercat", interface="eth1", drives=[DRIVE]).interface == "eth1"
 
 
-def test_one_drive_per_joint_is_checked_with_the_file_named() -> None:
-    cfg = load_config(ROOT / "configs" / "er3a.yaml")
-    data = cfg.model_dump(mode="json")
+def test_one_drive_per_joint_is_checked_with_the_file_named(er3a_config) -> None:
+    data = er3a_config.model_dump(mode="json")
     data["bus"]["drives"] = data["bus"]["drives"][:5]
     with pytest.raises(ConfigError, match=r"my\.yaml: .*bus\.drives has 5 entries, expected 6"):
         parse_config(data, source="my.yaml")

@@ -1,4 +1,5 @@
-"""Shared fixtures: the UR10e and ER3A models, their regressors and base sets (built once)."""
+"""Shared fixtures: the UR10e model, regressors and base sets, built once (the ER3A config
+and model come from tests/conftest.py)."""
 
 from __future__ import annotations
 
@@ -20,16 +21,6 @@ UR10E_DATA = Path("/work/shared/data/ur10e")
 @pytest.fixture(scope="session")
 def ur10e_model() -> RobotModel:
     return RobotModel.from_config(load_config(CONFIGS / "ur10e.yaml").robot)
-
-
-@pytest.fixture(scope="session")
-def er3a_config():
-    return load_config(CONFIGS / "er3a.yaml")
-
-
-@pytest.fixture(scope="session")
-def er3a_model(er3a_config) -> RobotModel:
-    return RobotModel.from_config(er3a_config.robot)
 
 
 @pytest.fixture(scope="session")
