@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import yaml
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.errors import ConfigError, UserError
+
+M = TypeVar("M", bound=BaseModel)
 
 
 def _format_loc(loc: tuple[Any, ...]) -> str:
@@ -165,6 +167,18 @@ def _kind(data: Any) -> str:
     if isinstance(data, list):
         return "a list"
     return f"a single value {data!r:.40}"
+
+
+def read_model(path: str | Path, what: str, model: type[M]) -> M:
+    """Read the YAML file ``path`` (see :func:`read_yaml`) and validate it as ``model``.
+
+    Raises :class:`ConfigError`, one line per problem: ``FILE: field.path: message (got VALUE)``.
+    """
+    data = read_yaml(path, what)
+    try:
+        return model.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(format_validation_error(str(path), err)) from None
 
 
 def load_config(path: str | Path) -> SystemConfig:

@@ -27,12 +27,12 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field, ValidationError, model_validator
+from pydantic import Field, model_validator
 from scipy import signal
 
 from hofto_hw.config.base import FileModel
-from hofto_hw.config.loader import format_validation_error, read_yaml
-from hofto_hw.errors import ConfigError, UserError
+from hofto_hw.config.loader import read_model
+from hofto_hw.errors import UserError
 
 log = logging.getLogger(__name__)
 
@@ -182,13 +182,7 @@ class ColumnMap(FileModel):
 def load_column_map(path: str | Path) -> ColumnMap:
     """Read a column-map YAML file; errors name the file and the field."""
     path = Path(path)
-    data = read_yaml(path, "column map")
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping at the top level of the column map")
-    try:
-        cmap = ColumnMap.model_validate(data)
-    except ValidationError as err:
-        raise ConfigError(format_validation_error(str(path), err)) from None
+    cmap = read_model(path, "column map", ColumnMap)
     if not cmap.name:
         cmap.name = path.name
     return cmap

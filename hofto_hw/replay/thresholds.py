@@ -27,13 +27,12 @@ from pathlib import Path
 from typing import Literal
 
 import yaml
-from pydantic import Field, ValidationError
+from pydantic import Field
 
 from hofto_hw.config.base import FileModel
 from hofto_hw.config.collision import CollisionConfig
-from hofto_hw.config.loader import format_validation_error, read_yaml
+from hofto_hw.config.loader import read_model
 from hofto_hw.config.models import ObserverConfig
-from hofto_hw.errors import ConfigError
 
 FORMAT = "hofto-hw/collision-thresholds"
 
@@ -69,14 +68,7 @@ class ThresholdsFile(FileModel):
 
 def read_thresholds(path: str | Path) -> ThresholdsFile:
     """Read and validate a thresholds file; errors name the file and the field."""
-    path = Path(path)
-    data = read_yaml(path, "thresholds file")
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping at the top level of a thresholds file")
-    try:
-        return ThresholdsFile.model_validate(data)
-    except ValidationError as err:
-        raise ConfigError(format_validation_error(str(path), err)) from None
+    return read_model(path, "thresholds file", ThresholdsFile)
 
 
 def write_thresholds(path: str | Path, content: ThresholdsFile) -> None:
