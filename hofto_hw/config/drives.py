@@ -78,7 +78,7 @@ class BusConfig(FileModel):
     transport: str = Field(
         min_length=1,
         description="transport backend, a name registered in drivers.transport.BACKENDS "
-        "(e.g. 'sim', 'ethercat'; `hofto-hw config check` lists them)",
+        "(e.g. 'sim', 'ethercat'; `hofto-hw config check` refuses others)",
     )
     interface: str | None = Field(
         None, description="network interface (ethercat, e.g. 'eth1') or CAN channel (canopen)"

@@ -83,3 +83,23 @@ def test_the_damaged_files_come_from_good_ones(capsys: pytest.CaptureFixture[str
     # the same commands accept the undamaged files (else the test above proves nothing)
     assert main(["config", "check", str(ROLES["config"][0])]) == 0
     assert PARAMS.read_bytes().startswith(_truncated(PARAMS))
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ("smooth_velocity: ", "smooth_velocity: .inf #", "model.friction.smooth_velocity"),
+        ("    value: ", "    value: .nan #", "base.parameters[0].value"),
+    ],
+)
+def test_non_finite_numbers_in_a_parameters_file_are_one_line(
+    old: str, new: str, field: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    text = PARAMS.read_text()
+    assert old in text
+    bad = tmp_path / "parameters.yaml"
+    bad.write_text(text.replace(old, new, 1))
+    code = main(["replay", str(bad), str(CSV)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert f"{bad}: {field}: contains NaN or inf" in err
