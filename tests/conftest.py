@@ -20,9 +20,9 @@ def er3a_config():
     return load_config(CONFIGS / "er3a.yaml")
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture()
 def er3a_model(er3a_config):
-    """The ER3A RobotModel built from :func:`er3a_config`, once for the whole run."""
+    """A fresh ER3A RobotModel per test (some tests change its friction or parameters)."""
     from hofto_hw.model import RobotModel
 
     return RobotModel.from_config(er3a_config.robot)

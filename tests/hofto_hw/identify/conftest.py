@@ -1,5 +1,5 @@
-"""Shared fixtures: the UR10e model, regressors and base sets, built once (the ER3A config
-and model come from tests/conftest.py)."""
+"""Shared fixtures: the UR10e and ER3A models, their regressors and base sets, built once
+(the ER3A config comes from tests/conftest.py)."""
 
 from __future__ import annotations
 
@@ -21,6 +21,13 @@ UR10E_DATA = Path("/work/shared/data/ur10e")
 @pytest.fixture(scope="session")
 def ur10e_model() -> RobotModel:
     return RobotModel.from_config(load_config(CONFIGS / "ur10e.yaml").robot)
+
+
+@pytest.fixture(scope="session")
+def er3a_model(er3a_config) -> RobotModel:
+    """One ER3A model for the identification tests (they do not modify it): the regressor
+    and base-parameter fixtures below are built once from it."""
+    return RobotModel.from_config(er3a_config.robot)
 
 
 @pytest.fixture(scope="session")
