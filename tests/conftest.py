@@ -13,6 +13,8 @@ SHARED_DATA = ROOT.parent / "shared" / "data"
 
 @pytest.fixture(scope="session")
 def er3a_config():
+    """configs/er3a.yaml, loaded once for the whole run: the one fixture every test that needs
+    the ER3A config uses (do not modify it; ``model_copy(update=...)`` for a variant)."""
     from hofto_hw.config import load_config
 
     return load_config(CONFIGS / "er3a.yaml")
@@ -20,6 +22,7 @@ def er3a_config():
 
 @pytest.fixture()
 def er3a_model(er3a_config):
+    """A fresh ER3A RobotModel per test (some tests change its friction or parameters)."""
     from hofto_hw.model import RobotModel
 
     return RobotModel.from_config(er3a_config.robot)

@@ -120,8 +120,11 @@ class EtherCATTransport(Transport):
         self._tx_size = pdo.TXPDO_SIZE
 
     @classmethod
-    def from_config(cls, bus: Any, axis_names: list[str] | None = None) -> EtherCATTransport:
-        """From a :class:`hofto_hw.config.drives.BusConfig` with ``transport: ethercat``."""
+    def from_config(
+        cls, bus: Any, axis_names: list[str] | None = None, *, cycle_time: float
+    ) -> EtherCATTransport:
+        """From a :class:`hofto_hw.config.drives.BusConfig` with ``transport: ethercat``;
+        ``cycle_time`` [s] is the system config's ``cycle_time`` (1 / loop.rate_hz)."""
         opts = getattr(bus, "ethercat", None)
         kw: dict[str, Any] = {}
         if opts is not None:
@@ -131,7 +134,7 @@ class EtherCATTransport(Transport):
                 "receive_timeout": opts.receive_timeout,
                 "state_timeout": opts.state_timeout,
             }
-        return cls(bus.interface, bus.drives, bus.cycle_time, axis_names, **kw)
+        return cls(bus.interface, bus.drives, cycle_time, axis_names, **kw)
 
     # -------------------------------------------------------------------- start-up
 

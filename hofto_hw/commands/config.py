@@ -4,6 +4,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+from hofto_hw.errors import ConfigError
+
+if TYPE_CHECKING:
+    from hofto_hw.config.models import SystemConfig
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -11,6 +17,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
     sub.add_parser("schema", help="print the JSON schema of the config files")
     check = sub.add_parser("check", help="validate config files (and their URDFs)")
     check.add_argument("files", type=Path, nargs="+", metavar="FILE")
+
+
+def check_transport(cfg: SystemConfig, source: str) -> None:
+    """Refuse a ``bus.transport`` that no backend registers in drivers.transport.BACKENDS.
+
+    The schema cannot check it: backends live in drivers/, above the config layer.
+    """
+    from drivers.transport import BACKENDS
+
+    if cfg.bus is None or cfg.bus.transport in BACKENDS:
+        return
+    raise ConfigError(
+        f"{source}: bus.transport: no transport backend of that name; the backends are "
+        f"{', '.join(sorted(BACKENDS))} (got {cfg.bus.transport!r})"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -24,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
 
     for path in args.files:
         cfg = load_config(path)
+        check_transport(cfg, str(path))
         model = RobotModel.from_config(cfg.robot)  # URDF, joints and tool frame exist
         for obs in cfg.observers.values():
             make_observer(obs, model)

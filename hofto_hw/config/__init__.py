@@ -1,6 +1,14 @@
 """Configuration: pydantic models of configs/*.yaml and the loader that names bad fields."""
 
-from hofto_hw.config.loader import format_validation_error, json_schema, load_config, parse_config
+from hofto_hw.config.base import FileModel
+from hofto_hw.config.loader import (
+    format_validation_error,
+    json_schema,
+    load_config,
+    parse_config,
+    read_model,
+    read_yaml,
+)
 from hofto_hw.config.models import (
     DirectConfig,
     DobConfig,
@@ -23,6 +31,7 @@ __all__ = [
     "DobConfig",
     "EsoConfig",
     "ExternalTorqueConfig",
+    "FileModel",
     "FrictionConfig",
     "HoftoConfig",
     "LimitsConfig",
@@ -37,4 +46,6 @@ __all__ = [
     "json_schema",
     "load_config",
     "parse_config",
+    "read_model",
+    "read_yaml",
 ]

@@ -13,38 +13,35 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-NonNeg = Annotated[float, Field(ge=0.0)]
-Positive = Annotated[float, Field(gt=0.0)]
+from hofto_hw.config.base import FileModel, NonNegFloat, PositiveFloat
 
 
-class CollisionConfig(BaseModel):
+class CollisionConfig(FileModel):
     """Thresholds on the estimated external torque and the tools that make them robust."""
 
-    model_config = ConfigDict(extra="forbid")
-
-    base: list[Positive] = Field(description="threshold at rest per joint [N·m]")
-    velocity_gain: list[NonNeg] | None = Field(None, description="[N·m·s/rad] per joint")
-    acceleration_gain: list[NonNeg] | None = Field(None, description="[N·m·s²/rad] per joint")
-    reversal_margin: list[NonNeg] | None = Field(
+    base: list[PositiveFloat] = Field(description="threshold at rest per joint [N·m]")
+    velocity_gain: list[NonNegFloat] | None = Field(None, description="[N·m·s/rad] per joint")
+    acceleration_gain: list[NonNegFloat] | None = Field(None, description="[N·m·s²/rad] per joint")
+    reversal_margin: list[NonNegFloat] | None = Field(
         None, description="extra threshold during a velocity reversal [N·m] per joint"
     )
-    reversal_velocity: Positive = Field(
+    reversal_velocity: PositiveFloat = Field(
         0.05, description="|qd| below which a moving joint counts as reversing [rad/s]"
     )
-    moving_time: Positive = Field(
+    moving_time: PositiveFloat = Field(
         0.5, description="how long a joint counts as moving after |qd| fell [s]"
     )
-    reversal_time: Positive = Field(0.2, description="decay of the reversal indicator [s]")
-    accel_filter_hz: Positive = Field(5.0, description="low-pass on the acceleration [Hz]")
-    debounce_time: NonNeg = Field(
+    reversal_time: PositiveFloat = Field(0.2, description="decay of the reversal indicator [s]")
+    accel_filter_hz: PositiveFloat = Field(5.0, description="low-pass on the acceleration [Hz]")
+    debounce_time: NonNegFloat = Field(
         0.02, description="a joint must stay above its threshold this long to trip [s]"
     )
     release_ratio: Annotated[float, Field(gt=0.0, le=1.0)] = Field(
         0.8, description="hysteresis: a tripped joint releases below ratio·threshold"
     )
-    release_time: NonNeg = Field(0.1, description="... for at least this long [s]")
+    release_time: NonNegFloat = Field(0.1, description="... for at least this long [s]")
 
     @model_validator(mode="after")
     def _lengths(self) -> CollisionConfig:

@@ -11,17 +11,14 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-PositiveFloat = Annotated[float, Field(gt=0.0)]
+from hofto_hw.config.base import FileModel, PositiveFloat
+
 U32 = Annotated[int, Field(ge=0, le=0xFFFFFFFF)]
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class DriveIdentity(_Strict):
+class DriveIdentity(FileModel):
     """CiA 301 identity object 0x1018 a drive must report (checked at bus start-up)."""
 
     vendor_id: U32 = Field(description="0x1018:1 vendor id")
@@ -29,7 +26,7 @@ class DriveIdentity(_Strict):
     revision: U32 | None = Field(None, description="0x1018:3 revision; None = any")
 
 
-class DriveConfig(_Strict):
+class DriveConfig(FileModel):
     """One servo drive axis: identity, raw scaling, limits and supervision."""
 
     identity: DriveIdentity = Field(
@@ -56,10 +53,12 @@ class DriveConfig(_Strict):
     )
 
 
-class EtherCATOptions(_Strict):
+class EtherCATOptions(FileModel):
     """EtherCAT master options (``bus.ethercat``; used when ``transport: ethercat``)."""
 
-    dc_sync: bool = Field(False, description="program DC SYNC0 at the bus cycle time")
+    dc_sync: bool = Field(
+        False, description="program DC SYNC0 at the loop period (1 / loop.rate_hz)"
+    )
     recover_lost_slaves: bool = Field(
         False, description="bring lost slaves back when they answer again (else stop the bus)"
     )
@@ -69,15 +68,20 @@ class EtherCATOptions(_Strict):
     state_timeout: PositiveFloat = Field(3.0, description="max time per AL state change [s]")
 
 
-class BusConfig(_Strict):
-    """The drive bus: which transport, where, how fast, and one drive per joint."""
+class BusConfig(FileModel):
+    """The drive bus: which transport, where, and one drive per joint.
 
-    transport: Literal["sim", "ethercat", "canopen"]
+    The bus cycles at ``loop.rate_hz`` (:attr:`SystemConfig.cycle_time`): there is no
+    separate bus cycle time to disagree with it.
+    """
+
+    transport: str = Field(
+        min_length=1,
+        description="transport backend, a name registered in drivers.transport.BACKENDS "
+        "(e.g. 'sim', 'ethercat'; `hofto-hw config check` refuses others)",
+    )
     interface: str | None = Field(
         None, description="network interface (ethercat, e.g. 'eth1') or CAN channel (canopen)"
-    )
-    cycle_time: Annotated[float, Field(gt=0.0, le=0.1)] = Field(
-        0.001, description="bus cycle time [s]"
     )
     transition_timeout: PositiveFloat = Field(
         0.5, description="max time for one CiA-402 state transition or mode change [s]"

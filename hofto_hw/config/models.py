@@ -2,7 +2,8 @@
 
 Units are SI at the joint side everywhere: rad, rad/s, N·m, kg·m². Per-joint lists have one
 entry per joint in ``robot.joints`` order. Models forbid unknown keys so that a typo fails
-loudly instead of silently falling back to a default.
+loudly instead of silently falling back to a default, and refuse non-finite numbers (see
+:mod:`hofto_hw.config.base`).
 
 These models are for loading and checking files only; nothing here runs inside the tick.
 """
@@ -12,23 +13,16 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
+from hofto_hw.config.base import FileModel, NonNegFloat, PositiveFloat
 from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.drives import BusConfig
-
-PositiveFloat = Annotated[float, Field(gt=0.0)]
-NonNegFloat = Annotated[float, Field(ge=0.0)]
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=False)
-
 
 # --------------------------------------------------------------------------------- robot
 
 
-class FrictionConfig(_Strict):
+class FrictionConfig(FileModel):
     """Joint friction per eq. (12): ``f = Fc·sign(qd) + Fv·qd + B`` (+ optional Stribeck).
 
     ``smooth_velocity`` [rad/s] replaces sign(qd) by tanh(qd / smooth_velocity); 0 keeps the
@@ -50,7 +44,7 @@ class FrictionConfig(_Strict):
     )
 
 
-class LimitsConfig(_Strict):
+class LimitsConfig(FileModel):
     """Joint limits; any field left out is taken from the URDF."""
 
     position_lower: list[float] | None = None
@@ -60,7 +54,7 @@ class LimitsConfig(_Strict):
     torque: list[PositiveFloat] | None = None
 
 
-class RobotConfig(_Strict):
+class RobotConfig(FileModel):
     """One arm: kinematics and nominal dynamics from a URDF, plus drive-side data."""
 
     name: str
@@ -118,7 +112,21 @@ def _check_lengths(checks: list[tuple[str, list | None]], n: int) -> None:
 # ------------------------------------------------------------------------------ observers
 
 
-class DirectConfig(_Strict):
+class _ObserverConfig(FileModel):
+    """What every observer config tells the system config: its per-joint lists."""
+
+    def per_joint(self) -> dict[str, list | None]:
+        """Field name -> list that must hold one entry per joint (None: not given)."""
+        return {}
+
+
+class _EulerObserverConfig(_ObserverConfig):
+    """An observer integrated by explicit Euler in ``substeps`` steps per tick."""
+
+    substeps: int = Field(1, ge=1, le=100, description="explicit-Euler substeps per tick")
+
+
+class DirectConfig(_ObserverConfig):
     """Direct estimation, eq. (2), acceleration by differentiating measured velocity."""
 
     type: Literal["direct"] = "direct"
@@ -127,17 +135,19 @@ class DirectConfig(_Strict):
     )
 
 
-class EsoConfig(_Strict):
+class EsoConfig(_EulerObserverConfig):
     """Linear ESO, eq. (5): diagonal gains k1 [1/s], k2 [1/s²], k3 [1/s³] per joint."""
 
     type: Literal["eso"] = "eso"
     k1: list[PositiveFloat]
     k2: list[PositiveFloat]
     k3: list[PositiveFloat]
-    substeps: int = Field(1, ge=1, le=100, description="explicit-Euler substeps per tick")
+
+    def per_joint(self) -> dict[str, list | None]:
+        return {"k1": self.k1, "k2": self.k2, "k3": self.k3}
 
 
-class DobConfig(_Strict):
+class DobConfig(_ObserverConfig):
     """Disturbance observer with nominal inertia and a first-order low-pass (see dob.py)."""
 
     type: Literal["dob"] = "dob"
@@ -146,25 +156,33 @@ class DobConfig(_Strict):
         None, description="Jn per joint [kg·m²]; None = diag M(home)"
     )
 
+    def per_joint(self) -> dict[str, list | None]:
+        return {"cutoff": self.cutoff, "nominal_inertia": self.nominal_inertia}
 
-class MomentumConfig(_Strict):
+
+class MomentumConfig(_ObserverConfig):
     """Generalized-momentum observer (De Luca), first order, gain K_O per joint [1/s]."""
 
     type: Literal["momentum"] = "momentum"
     gain: list[PositiveFloat]
 
+    def per_joint(self) -> dict[str, list | None]:
+        return {"gain": self.gain}
 
-class StaConfig(_Strict):
+
+class StaConfig(_EulerObserverConfig):
     """Super-twisting observer (Remark 7): gains of the 1/2, 1/2 and sign stages."""
 
     type: Literal["sta"] = "sta"
     l1: list[PositiveFloat]
     l2: list[PositiveFloat]
     l3: list[PositiveFloat]
-    substeps: int = Field(1, ge=1, le=100, description="explicit-Euler substeps per tick")
+
+    def per_joint(self) -> dict[str, list | None]:
+        return {"l1": self.l1, "l2": self.l2, "l3": self.l3}
 
 
-class HoftoConfig(_Strict):
+class HoftoConfig(_ObserverConfig):
     """High-order finite-time observer, eq. (17), of order n (n + 2 observer states).
 
     Powers: either ``sigma`` in (-1/(n+2), 0), giving stage i (i = 1..n+2) the power
@@ -204,6 +222,9 @@ class HoftoConfig(_Strict):
             raise ValueError(f"gains has {len(self.gains)} rows, expected n + 2 = {n + 2}")
         return self
 
+    def per_joint(self) -> dict[str, list | None]:
+        return {f"gains[{i}]": g for i, g in enumerate(self.gains)}
+
     def stage_powers(self) -> list[float]:
         """The n + 2 powers m_2 .. m_{n+3} applied to the stage errors."""
         if self.powers is not None:
@@ -221,7 +242,7 @@ ObserverConfig = Annotated[
 # ----------------------------------------------------------------------------- simulation
 
 
-class ExternalTorqueConfig(_Strict):
+class ExternalTorqueConfig(FileModel):
     """One external-torque component applied by the simulated world.
 
     ``kind``:
@@ -255,7 +276,7 @@ class ExternalTorqueConfig(_Strict):
     damping: NonNegFloat | None = Field(None, description="contact damping [N·s/m]")
 
 
-class SimulationConfig(_Strict):
+class SimulationConfig(FileModel):
     """The simulated arm (``drivers.sim.Plant``): how the "true" arm differs from the model."""
 
     seed: int = 0
@@ -274,13 +295,17 @@ class SimulationConfig(_Strict):
     external: list[ExternalTorqueConfig] = Field(default_factory=list)
 
 
-class LoopConfig(_Strict):
-    """The real-time loop."""
+class LoopConfig(FileModel):
+    """The real-time loop; the drive bus cycles at the same rate."""
 
-    rate_hz: PositiveFloat = 1000.0
+    rate_hz: float = Field(
+        1000.0,
+        ge=10.0,
+        description="loop and bus cycle rate [Hz]; the cycle time is 1 / rate_hz",
+    )
 
 
-class SystemConfig(_Strict):
+class SystemConfig(FileModel):
     """A whole setup: one robot, its loop, its observers and (optionally) its simulation."""
 
     robot: RobotConfig
@@ -289,6 +314,11 @@ class SystemConfig(_Strict):
     simulation: SimulationConfig | None = None
     collision: CollisionConfig | None = None
     bus: BusConfig | None = None
+
+    @property
+    def cycle_time(self) -> float:
+        """The loop period and bus cycle time [s]: ``1 / loop.rate_hz`` (the single source)."""
+        return 1.0 / self.loop.rate_hz
 
     @field_validator("observers")
     @classmethod
@@ -302,18 +332,7 @@ class SystemConfig(_Strict):
     def _per_joint(self) -> SystemConfig:
         n = len(self.robot.joints)
         for name, obs in self.observers.items():
-            rows: list[tuple[str, list | None]] = []
-            if isinstance(obs, EsoConfig):
-                rows = [("k1", obs.k1), ("k2", obs.k2), ("k3", obs.k3)]
-            elif isinstance(obs, DobConfig):
-                rows = [("cutoff", obs.cutoff), ("nominal_inertia", obs.nominal_inertia)]
-            elif isinstance(obs, MomentumConfig):
-                rows = [("gain", obs.gain)]
-            elif isinstance(obs, StaConfig):
-                rows = [("l1", obs.l1), ("l2", obs.l2), ("l3", obs.l3)]
-            elif isinstance(obs, HoftoConfig):
-                rows = [(f"gains[{i}]", g) for i, g in enumerate(obs.gains)]
-            _check_lengths([(f"observers.{name}.{k}", v) for k, v in rows], n)
+            _check_lengths([(f"observers.{name}.{k}", v) for k, v in obs.per_joint().items()], n)
         if self.bus is not None:
             _check_lengths([("bus.drives", self.bus.drives)], n)
         if self.simulation is not None:

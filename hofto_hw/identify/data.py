@@ -27,11 +27,12 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, model_validator
 from scipy import signal
 
-from hofto_hw.config.loader import format_validation_error, read_yaml
-from hofto_hw.errors import ConfigError, UserError
+from hofto_hw.config.base import FileModel
+from hofto_hw.config.loader import read_model
+from hofto_hw.errors import UserError
 
 log = logging.getLogger(__name__)
 
@@ -112,14 +113,12 @@ class Recording:
 # ----------------------------------------------------------------------------- column map
 
 
-class ColumnMap(BaseModel):
+class ColumnMap(FileModel):
     """Where each quantity sits in a CSV file (column numbers start at 1).
 
     Joint torque comes either from ``torque`` columns [N·m] or from ``current`` columns [A]
     times ``current_to_torque`` gains [N·m/A]. Columns not named are ignored.
     """
-
-    model_config = ConfigDict(extra="forbid")
 
     name: str = Field("", description="layout name shown in messages")
     columns: int | None = Field(None, ge=1, description="fields per row; None = any")
@@ -183,13 +182,7 @@ class ColumnMap(BaseModel):
 def load_column_map(path: str | Path) -> ColumnMap:
     """Read a column-map YAML file; errors name the file and the field."""
     path = Path(path)
-    data = read_yaml(path, "column map")
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping at the top level of the column map")
-    try:
-        cmap = ColumnMap.model_validate(data)
-    except ValidationError as err:
-        raise ConfigError(format_validation_error(str(path), err)) from None
+    cmap = read_model(path, "column map", ColumnMap)
     if not cmap.name:
         cmap.name = path.name
     return cmap

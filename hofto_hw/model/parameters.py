@@ -219,6 +219,10 @@ class _Reader:
     def _missing(self, where: str) -> Any:
         raise self.fail(where, "missing")
 
+    def number(self, value: Any, where: str) -> float:
+        """``value`` as a finite float, or ModelError naming ``where`` and the value."""
+        return float(self.array(value, where, ()))
+
     def array(self, value: Any, where: str, shape: tuple[int, ...]) -> np.ndarray:
         try:
             arr = np.array(value, dtype=float)
@@ -227,7 +231,7 @@ class _Reader:
         if arr.shape != shape:
             raise self.fail(where, f"expected shape {shape}, got {arr.shape}")
         if not np.all(np.isfinite(arr)):
-            raise self.fail(where, "contains NaN or inf")
+            raise self.fail(where, f"contains NaN or inf (got {value!r:.60})")
         return arr
 
 
@@ -262,9 +266,9 @@ def read_parameters(path: str | Path) -> ParametersFile:
         base_entries.append(
             BaseParameterEntry(
                 str(b["name"]),
-                float(b["value"]),
-                None if std is None else float(std),
-                {str(k): float(v) for k, v in definition.items()},
+                r.number(b["value"], f"{where}.value"),
+                None if std is None else r.number(std, f"{where}.std"),
+                {str(k): r.number(v, f"{where}.definition.{k}") for k, v in definition.items()},
             )
         )
     if ("stribeck_static" in fr) != ("stribeck_velocity" in fr):
@@ -290,7 +294,9 @@ def read_parameters(path: str | Path) -> ParametersFile:
         coulomb=r.array(r.get(fr, "coulomb", "model.friction."), "model.friction.coulomb", (n,)),
         viscous=r.array(r.get(fr, "viscous", "model.friction."), "model.friction.viscous", (n,)),
         bias=r.array(r.get(fr, "bias", "model.friction."), "model.friction.bias", (n,)),
-        smooth_velocity=float(fr.get("smooth_velocity", 0.0) or 0.0),
+        smooth_velocity=r.number(
+            fr.get("smooth_velocity") or 0.0, "model.friction.smooth_velocity"
+        ),
         stribeck_static=stribeck[0],
         stribeck_velocity=stribeck[1],
         urdf=str(data.get("urdf", "")),

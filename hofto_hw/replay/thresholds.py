@@ -27,28 +27,24 @@ from pathlib import Path
 from typing import Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import Field
 
+from hofto_hw.config.base import FileModel
 from hofto_hw.config.collision import CollisionConfig
-from hofto_hw.config.loader import format_validation_error, read_yaml
+from hofto_hw.config.loader import read_model
 from hofto_hw.config.models import ObserverConfig
-from hofto_hw.errors import ConfigError
 
 FORMAT = "hofto-hw/collision-thresholds"
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class ParametersRef(_Strict):
+class ParametersRef(FileModel):
     """Which identified-parameters file the thresholds were calibrated with."""
 
     file: str
     sha256: str = ""
 
 
-class ObserverThresholds(_Strict):
+class ObserverThresholds(FileModel):
     """Thresholds of one observer: its config, the monitor config, calibration figures."""
 
     observer: ObserverConfig
@@ -57,7 +53,7 @@ class ObserverThresholds(_Strict):
     samples: int = 0
 
 
-class ThresholdsFile(_Strict):
+class ThresholdsFile(FileModel):
     """Content of a thresholds file (see the module docstring)."""
 
     format: Literal["hofto-hw/collision-thresholds"] = FORMAT
@@ -72,14 +68,7 @@ class ThresholdsFile(_Strict):
 
 def read_thresholds(path: str | Path) -> ThresholdsFile:
     """Read and validate a thresholds file; errors name the file and the field."""
-    path = Path(path)
-    data = read_yaml(path, "thresholds file")
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping at the top level of a thresholds file")
-    try:
-        return ThresholdsFile.model_validate(data)
-    except ValidationError as err:
-        raise ConfigError(format_validation_error(str(path), err)) from None
+    return read_model(path, "thresholds file", ThresholdsFile)
 
 
 def write_thresholds(path: str | Path, content: ThresholdsFile) -> None:

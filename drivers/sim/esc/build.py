@@ -42,7 +42,7 @@ def build_network(cfg: SystemConfig, *, external: bool = True) -> EmulatedNetwor
     if not external:
         sim = sim.model_copy(update={"external": []})
     model = RobotModel.from_config(cfg.robot)
-    plant = Plant(model, sim, cfg.bus.cycle_time)
+    plant = Plant(model, sim, cfg.cycle_time)
     names = list(cfg.robot.joints)
     drives = EmulatedDrives(plant, cfg.bus.drives, names=names)
     return EmulatedNetwork(slave_descriptions(cfg.bus, names), drives)

@@ -33,7 +33,7 @@ def _transport(bus, drives=None, **kw) -> EtherCATTransport:
     return EtherCATTransport(
         bus.master_iface,
         drives if drives is not None else cfg.bus.drives,
-        cfg.bus.cycle_time,
+        cfg.cycle_time,
         list(cfg.robot.joints),
         receive_timeout=0.02,  # generous: the test machine is shared
         **kw,

@@ -120,3 +120,32 @@ def test_read_yaml_names_file_and_kind_for_every_reader(tmp_path):
     ):
         with pytest.raises(err, match=r"broken\.yaml: line 2 column 1: not valid YAML"):
             reader(bad)
+
+
+@pytest.mark.parametrize(
+    ("content", "words"),
+    [
+        (b"a: 1\nb: '\x07x'\n", r"line 2 column 5: not valid YAML: control character U\+0007"),
+        (b"a: " + b"[" * 3000 + b"\n", "not valid YAML: nested too deeply"),
+        (b"42\n", "expected a mapping .* got a single value 42"),
+        (b"a: 1\n\xff\xfe", r"not UTF-8 text at byte 5 \(line 2, byte 0xff\)"),
+    ],
+)
+def test_read_yaml_one_line_for_each_kind_of_damage(tmp_path, content, words):
+    from hofto_hw.config.loader import read_yaml
+
+    path = tmp_path / "f.yaml"
+    path.write_bytes(content)
+    with pytest.raises(ConfigError, match=rf"^{path}: .*{words}") as err:
+        read_yaml(path, "column map")
+    assert len(str(err.value).splitlines()) == 1
+
+
+def test_read_yaml_accepts_a_bom_and_names_a_folder(tmp_path):
+    from hofto_hw.config.loader import read_yaml
+
+    path = tmp_path / "bom.yaml"
+    path.write_bytes("\ufeffname: caf\u00e9\n".encode())
+    assert read_yaml(path, "column map") == {"name": "caf\u00e9"}
+    with pytest.raises(ConfigError, match=rf"^{tmp_path}: is a folder, not a column map$"):
+        read_yaml(tmp_path, "column map")

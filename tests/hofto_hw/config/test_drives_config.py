@@ -27,13 +27,13 @@ def test_shipped_configs_have_six_drives() -> None:
     for name in ("er3a.yaml", "ur10e.yaml"):
         cfg = load_config(ROOT / "configs" / name)
         assert cfg.bus is not None and len(cfg.bus.drives) == 6
-        assert cfg.bus.cycle_time == pytest.approx(1.0 / cfg.loop.rate_hz)
+        assert cfg.cycle_time == pytest.approx(1.0 / cfg.loop.rate_hz)
 
 
 def test_defaults() -> None:
     bus = BusConfig(transport="sim", drives=[DRIVE])
     d = bus.drives[0]
-    assert d.direction == 1 and d.zero_offset == 0 and bus.cycle_time == 0.001
+    assert d.direction == 1 and d.zero_offset == 0 and not hasattr(bus, "cycle_time")
     assert d.following_error_window == 0.05 and d.identity.revision is None
 
 
@@ -58,9 +58,34 @@ def test_real_transports_need_an_interface() -> None:
     assert BusConfig(transport="ethercat", interface="eth1", drives=[DRIVE]).interface == "eth1"
 
 
-def test_one_drive_per_joint_is_checked_with_the_file_named() -> None:
-    cfg = load_config(ROOT / "configs" / "er3a.yaml")
-    data = cfg.model_dump(mode="json")
+def test_one_drive_per_joint_is_checked_with_the_file_named(er3a_config) -> None:
+    data = er3a_config.model_dump(mode="json")
     data["bus"]["drives"] = data["bus"]["drives"][:5]
     with pytest.raises(ConfigError, match=r"my\.yaml: .*bus\.drives has 5 entries, expected 6"):
         parse_config(data, source="my.yaml")
+
+
+def test_the_cycle_time_is_one_over_the_loop_rate(er3a_config) -> None:
+    loop = er3a_config.loop.model_copy(update={"rate_hz": 250.0})
+    slow = er3a_config.model_copy(update={"loop": loop})
+    assert er3a_config.cycle_time == pytest.approx(0.001)
+    assert slow.cycle_time == pytest.approx(0.004)
+
+
+def test_an_old_bus_cycle_time_is_one_line_naming_its_replacement(er3a_config) -> None:
+    data = er3a_config.model_dump(mode="json")
+    data["loop"]["rate_hz"] = 1000.0
+    data["bus"]["cycle_time"] = 0.002  # disagrees with the loop: once silently accepted
+    with pytest.raises(ConfigError) as err:
+        parse_config(data, source="old.yaml")
+    assert str(err.value) == (
+        "old.yaml: bus.cycle_time: removed; the bus cycles at loop.rate_hz "
+        "(here 1000.0 Hz, a 0.001 s cycle): delete the line (got 0.002)"
+    )
+
+
+def test_any_transport_name_passes_the_schema() -> None:
+    # which names exist is drivers.transport.BACKENDS' business (checked by `config check`)
+    assert BusConfig(transport="profinet", interface="eth1", drives=[DRIVE]).transport == "profinet"
+    with pytest.raises(ValidationError, match="transport"):
+        BusConfig(transport="", drives=[DRIVE])

@@ -1,4 +1,5 @@
-"""Shared fixtures: the UR10e and ER3A models, their regressors and base sets (built once)."""
+"""Shared fixtures: the UR10e and ER3A models, their regressors and base sets, built once
+(the ER3A config comes from tests/conftest.py)."""
 
 from __future__ import annotations
 
@@ -23,12 +24,9 @@ def ur10e_model() -> RobotModel:
 
 
 @pytest.fixture(scope="session")
-def er3a_config():
-    return load_config(CONFIGS / "er3a.yaml")
-
-
-@pytest.fixture(scope="session")
 def er3a_model(er3a_config) -> RobotModel:
+    """One ER3A model for the identification tests (they do not modify it): the regressor
+    and base-parameter fixtures below are built once from it."""
     return RobotModel.from_config(er3a_config.robot)
 
 
