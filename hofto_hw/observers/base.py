@@ -42,14 +42,15 @@ class ModelTerms:
 
     def __init__(self, model: RobotModel) -> None:
         self.model = model
+        self.data = model.create_data()  # this observer's own workspace
         self.accel = np.zeros(model.n)
         self.out = np.zeros(model.n)
 
     def acceleration(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        return self.model.forward_dynamics(q, qd, tau, out=self.accel)
+        return self.data.forward_dynamics(q, qd, tau, out=self.accel)
 
     def torque(self, q: np.ndarray, x: np.ndarray) -> np.ndarray:
-        return np.dot(self.model.mass_matrix(q), x, out=self.out)
+        return np.dot(self.data.mass_matrix(q), x, out=self.out)
 
 
 class LinearHold:

@@ -20,6 +20,7 @@ class DirectObserver:
 
     def __init__(self, model: RobotModel, accel_filter_hz: float | None = None) -> None:
         self.model = model
+        self.data = model.create_data()
         self.n = model.n
         self.accel_filter_hz = accel_filter_hz
         self._qd_prev = np.zeros(self.n)
@@ -47,6 +48,6 @@ class DirectObserver:
             np.subtract(raw, self._qdd, out=raw)
             np.multiply(raw, alpha, out=raw)
             np.add(self._qdd, raw, out=self._qdd)
-        out = self.model.inverse_dynamics(q, qd, self._qdd, out=self._out)
+        out = self.data.inverse_dynamics(q, qd, self._qdd, out=self._out)
         np.subtract(out, tau, out=out)
         return out

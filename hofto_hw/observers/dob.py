@@ -31,10 +31,11 @@ class DobObserver:
     ) -> None:
         n = model.n
         self.model = model
+        self.data = model.create_data()
         self.n = n
         self.cutoff = per_joint(cutoff, n, "dob.cutoff")
         if nominal_inertia is None:
-            nominal_inertia = np.diag(model.mass_matrix(model.home)).copy()
+            nominal_inertia = np.diag(self.data.mass_matrix(model.home)).copy()
         self.jn = per_joint(nominal_inertia, n, "dob.nominal_inertia")
         self._gj = self.cutoff * self.jn  # g·Jn
         self.w = np.zeros(n)
@@ -55,8 +56,8 @@ class DobObserver:
         u, out = self._u, self._out
         np.multiply(self._gj, qd, out=out)  # g·Jn·qd
         np.add(out, tau, out=u)
-        np.subtract(u, self.model.nonlinear_effects(q, qd), out=u)
-        np.subtract(u, self.model.friction_torque(qd), out=u)
+        np.subtract(u, self.data.nonlinear_effects(q, qd), out=u)
+        np.subtract(u, self.data.friction_torque(qd), out=u)
         np.subtract(u, self.w, out=u)
         np.multiply(u, self._alpha, out=u)
         np.add(self.w, u, out=self.w)

@@ -1,4 +1,5 @@
-"""Model buffers alias (defect 3 of issue 7), old API: friction_torque's result is overwritten."""
+"""Model buffers alias (defect 3 of issue 7): within one workspace, friction_torque's result
+survives forward and inverse dynamics (first written against the old shared-buffer API)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,10 @@ def test_friction_result_survives_forward_and_inverse_dynamics(er3a_model) -> No
     model = er3a_model
     rng = np.random.default_rng(1)
     q, qd, tau = rng.uniform(-1, 1, 6), rng.uniform(-2, 2, 6), rng.uniform(-5, 5, 6)
-    f = model.friction_torque(qd)
+    data = model.create_data()
+    f = data.friction_torque(qd)
     expected = f.copy()
     # "valid until the same method is called again": other methods must not overwrite it
-    model.forward_dynamics(q, -qd, tau)
-    model.inverse_dynamics(q, 2 * qd, tau)
+    data.forward_dynamics(q, -qd, tau)
+    data.inverse_dynamics(q, 2 * qd, tau)
     assert np.array_equal(f, expected)
