@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
+from hofto_hw.observers.base import SampleGuard
 
 
 class DirectObserver:
@@ -28,6 +29,7 @@ class DirectObserver:
         self._raw = np.zeros(self.n)
         self._out = np.zeros(self.n)
         self._started = False
+        self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         np.copyto(self._qd_prev, qd)
@@ -35,6 +37,8 @@ class DirectObserver:
         self._started = True
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        if not self._guard.finite(q, qd, tau, dt):
+            return self._guard.nan()
         if not self._started:
             self.reset(q, qd)
         raw = self._raw

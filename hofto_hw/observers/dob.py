@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import per_joint
+from hofto_hw.observers.base import SampleGuard, per_joint
 
 
 class DobObserver:
@@ -43,11 +43,14 @@ class DobObserver:
         self._alpha = np.zeros(n)
         self._dt = -1.0
         self._out = np.zeros(n)
+        self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         np.multiply(self._gj, qd, out=self.w)  # tau_ext_hat starts at 0
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        if not self._guard.finite(q, qd, tau, dt):
+            return self._guard.nan()
         if dt != self._dt:  # recompute the discrete pole only when the period changes
             np.multiply(self.cutoff, -dt, out=self._alpha)
             np.expm1(self._alpha, out=self._alpha)

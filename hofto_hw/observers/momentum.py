@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import per_joint
+from hofto_hw.observers.base import SampleGuard, per_joint
 
 
 class MomentumObserver:
@@ -33,6 +33,7 @@ class MomentumObserver:
         self._p = np.zeros(n)
         self._tmp = np.zeros(n)
         self._ct_qd = np.zeros(n)
+        self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         np.dot(self.data.mass_matrix(q), qd, out=self.p0)
@@ -40,6 +41,8 @@ class MomentumObserver:
         self.r.fill(0.0)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        if not self._guard.finite(q, qd, tau, dt):
+            return self._guard.nan()
         m = self.data
         tmp = self._tmp
         np.dot(m.coriolis_matrix(q, qd).T, qd, out=self._ct_qd)
