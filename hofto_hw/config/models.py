@@ -126,6 +126,10 @@ class DirectConfig(_Strict):
         None, description="first-order low-pass on the differentiated velocity; None = raw"
     )
 
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return []
+
 
 class EsoConfig(_Strict):
     """Linear ESO, eq. (5): diagonal gains k1 [1/s], k2 [1/s²], k3 [1/s³] per joint."""
@@ -135,6 +139,10 @@ class EsoConfig(_Strict):
     k2: list[PositiveFloat]
     k3: list[PositiveFloat]
     substeps: int = Field(1, ge=1, le=100, description="explicit-Euler substeps per tick")
+
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return [("k1", self.k1), ("k2", self.k2), ("k3", self.k3)]
 
 
 class DobConfig(_Strict):
@@ -146,12 +154,20 @@ class DobConfig(_Strict):
         None, description="Jn per joint [kg·m²]; None = diag M(home)"
     )
 
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return [("cutoff", self.cutoff), ("nominal_inertia", self.nominal_inertia)]
+
 
 class MomentumConfig(_Strict):
     """Generalized-momentum observer (De Luca), first order, gain K_O per joint [1/s]."""
 
     type: Literal["momentum"] = "momentum"
     gain: list[PositiveFloat]
+
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return [("gain", self.gain)]
 
 
 class StaConfig(_Strict):
@@ -162,6 +178,10 @@ class StaConfig(_Strict):
     l2: list[PositiveFloat]
     l3: list[PositiveFloat]
     substeps: int = Field(1, ge=1, le=100, description="explicit-Euler substeps per tick")
+
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return [("l1", self.l1), ("l2", self.l2), ("l3", self.l3)]
 
 
 class HoftoConfig(_Strict):
@@ -204,6 +224,10 @@ class HoftoConfig(_Strict):
             raise ValueError(f"gains has {len(self.gains)} rows, expected n + 2 = {n + 2}")
         return self
 
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return [(f"gains[{i}]", g) for i, g in enumerate(self.gains)]
+
     def stage_powers(self) -> list[float]:
         """The n + 2 powers m_2 .. m_{n+3} applied to the stage errors."""
         if self.powers is not None:
@@ -212,6 +236,8 @@ class HoftoConfig(_Strict):
         return [1.0 + i * self.sigma for i in range(1, self.order + 3)]
 
 
+# The observer types: this union (config side) and hofto_hw.observers.registry.OBSERVERS (builders,
+# replay defaults) list the same classes; a test keeps them in step.
 ObserverConfig = Annotated[
     DirectConfig | EsoConfig | DobConfig | MomentumConfig | StaConfig | HoftoConfig,
     Field(discriminator="type"),
@@ -302,17 +328,7 @@ class SystemConfig(_Strict):
     def _per_joint(self) -> SystemConfig:
         n = len(self.robot.joints)
         for name, obs in self.observers.items():
-            rows: list[tuple[str, list | None]] = []
-            if isinstance(obs, EsoConfig):
-                rows = [("k1", obs.k1), ("k2", obs.k2), ("k3", obs.k3)]
-            elif isinstance(obs, DobConfig):
-                rows = [("cutoff", obs.cutoff), ("nominal_inertia", obs.nominal_inertia)]
-            elif isinstance(obs, MomentumConfig):
-                rows = [("gain", obs.gain)]
-            elif isinstance(obs, StaConfig):
-                rows = [("l1", obs.l1), ("l2", obs.l2), ("l3", obs.l3)]
-            elif isinstance(obs, HoftoConfig):
-                rows = [(f"gains[{i}]", g) for i, g in enumerate(obs.gains)]
+            rows = obs.per_joint_fields()
             _check_lengths([(f"observers.{name}.{k}", v) for k, v in rows], n)
         if self.bus is not None:
             _check_lengths([("bus.drives", self.bus.drives)], n)
