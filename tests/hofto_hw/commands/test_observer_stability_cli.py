@@ -63,3 +63,19 @@ def test_replay_refuses_momentum_200_on_100hz_data(tmp_path, capsys) -> None:
     err = _one_line_error(capsys)
     assert PUSH.name in err and "observers.momentum.gain[0] = 200 1/s" in err
     assert "100 Hz" in err and "gain < 200 1/s" in err
+
+
+def test_thresholds_calibrate_refuses_and_writes_nothing(tmp_path, capsys) -> None:
+    text = (CONFIGS / "ur10e.yaml").read_text()
+    text = text.replace("urdf: ur10e/ur10e.urdf", f"urdf: {CONFIGS}/ur10e/ur10e.urdf")
+    text += "\nobservers:\n  momentum:\n    type: momentum\n    gain: [20, 20, 20, 20, 20, 300]\n"
+    cfg = tmp_path / "ur10e.yaml"
+    cfg.write_text(text)
+    out = tmp_path / "thresholds.yaml"
+    cols = CONFIGS / "ur10e" / "columns_31.yaml"
+    args = ["thresholds", "calibrate", "--params", str(PARAMS), "-o", str(out)]
+    args += ["--observer", "momentum", "--config", str(cfg), "--columns", str(cols), str(PUSH)]
+    assert main(args) == 2
+    err = _one_line_error(capsys)
+    assert "observers.momentum.gain[5] = 300 1/s (joint 6 (wrist_3_joint))" in err
+    assert not out.exists()
