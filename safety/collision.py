@@ -14,6 +14,15 @@
 A joint trips after staying above its threshold for ``debounce_time`` and releases after
 staying below ``release_ratio``·threshold for ``release_time`` (hysteresis).
 
+Non-finite inputs: a NaN or inf in ``qd`` or ``tau_ext`` is reported in the same update
+(``nonfinite`` names the joints, ``fault_nonfinite`` is the fault) and never enters the
+filters: a joint with a non-finite velocity keeps its last finite acceleration, moving and
+reversal state and its threshold uses its last finite velocity, so detection on it goes on
+with its torque; a joint with a non-finite torque keeps its debounce/hysteresis state and
+cannot trip or release in that update, while the other joints are judged as usual. Once the
+inputs are finite again the monitor works as before. The monitor only *reports*: latching a
+fault and the stop category it commands belong to the stop controller (safety/stop.py).
+
 ``update`` allocates nothing: all arrays are preallocated and written with ``out=``.
 """
 
@@ -35,7 +44,9 @@ class CollisionMonitor:
 
     Public state after :meth:`update` (views, valid until the next update):
     ``detected`` (bool), ``joints`` (n,) bool tripped joints, ``threshold`` (n,) [N·m] the
-    effective thresholds, ``ratio`` (n,) |tau_ext_hat| / threshold.
+    effective thresholds, ``ratio`` (n,) |tau_ext_hat| / threshold (0 where tau_ext_hat is
+    not finite), ``nonfinite`` (n,) bool joints whose qd or tau_ext_hat was NaN/inf in this
+    update, ``fault_nonfinite`` (bool) any of them.
     """
 
     def __init__(self, cfg: CollisionConfig) -> None:
@@ -60,6 +71,14 @@ class CollisionMonitor:
         self._tmp = np.zeros(n)
         self._mask = np.zeros(n, dtype=bool)
         self._mask2 = np.zeros(n, dtype=bool)
+        self.nonfinite = np.zeros(n, dtype=bool)
+        self.fault_nonfinite = False
+        self._ok_qd = np.zeros(n, dtype=bool)
+        self._bad_qd = np.zeros(n, dtype=bool)
+        self._bad_tau = np.zeros(n, dtype=bool)
+        self._qd = np.zeros(n)  # qd with non-finite entries replaced by the last finite ones
+        self._saved = np.zeros((3, n))  # accel, moving, reversal before this update
+        self._saved_time = np.zeros((2, n))  # above/below times before this update
         self._started = False
         # (t >= 0) would hold with zero time above: a tiny floor keeps "0 = trip at once"
         self._trip_after = max(cfg.debounce_time - 1e-9, 1e-12)
@@ -76,6 +95,10 @@ class CollisionMonitor:
         self.reversal[:] = 0.0
         self._above_time[:] = 0.0
         self._below_time[:] = 0.0
+        self.nonfinite[:] = False
+        self.fault_nonfinite = False
+        if qd is not None and not np.all(np.isfinite(qd)):
+            qd = None  # a non-finite seed is no seed
         if qd is None:
             self._started = False
         else:
@@ -84,11 +107,31 @@ class CollisionMonitor:
             self._started = True
 
     def features(self, qd: np.ndarray, dt: float) -> None:
-        """Advance the threshold features (accel, moving, reversal) by one tick of dt [s]."""
-        tmp = self._tmp
+        """Advance the threshold features (accel, moving, reversal) by one tick of dt [s].
+
+        Joints whose ``qd`` is not finite keep their previous state (see the module notes).
+        """
+        ok, bad = self._ok_qd, self._bad_qd
+        np.isfinite(qd, out=ok)
+        np.logical_not(ok, out=bad)
         if not self._started:
-            self._qd_prev[:] = qd
+            self._qd_prev.fill(0.0)
+            np.copyto(self._qd_prev, qd, where=ok)
             self._started = True
+        qd_ok = self._qd
+        np.copyto(qd_ok, qd)
+        np.copyto(qd_ok, self._qd_prev, where=bad)
+        saved = self._saved
+        np.copyto(saved[0], self.accel)
+        np.copyto(saved[1], self.moving)
+        np.copyto(saved[2], self.reversal)
+        self._advance(qd_ok, dt)
+        np.copyto(self.accel, saved[0], where=bad)
+        np.copyto(self.moving, saved[1], where=bad)
+        np.copyto(self.reversal, saved[2], where=bad)
+
+    def _advance(self, qd: np.ndarray, dt: float) -> None:
+        tmp = self._tmp
         # low-passed acceleration: a += alpha·((qd - qd_prev)/dt - a)
         np.subtract(qd, self._qd_prev, out=tmp)
         tmp *= 1.0 / dt
@@ -118,6 +161,12 @@ class CollisionMonitor:
         ``joints``).
         """
         self.features(qd, dt)
+        qd = self._qd  # finite: the last finite velocity where qd is not
+        bad_tau = self._bad_tau
+        np.isfinite(tau_ext, out=bad_tau)
+        np.logical_not(bad_tau, out=bad_tau)
+        np.logical_or(self._bad_qd, bad_tau, out=self.nonfinite)
+        self.fault_nonfinite = bool(self.nonfinite.any())
         thr, tmp = self.threshold, self._tmp
         # thr = base + kv·|qd| + ka·|a| + kr·r
         np.abs(qd, out=tmp)
@@ -129,7 +178,10 @@ class CollisionMonitor:
         np.multiply(self.reversal, self.kr, out=tmp)
         thr += tmp
         np.abs(tau_ext, out=tmp)
+        np.copyto(tmp, 0.0, where=bad_tau)
         np.divide(tmp, thr, out=self.ratio)
+        np.copyto(self._saved_time[0], self._above_time)
+        np.copyto(self._saved_time[1], self._below_time)
         above, below = self._mask, self._mask2
         # debounce: time spent above the threshold
         np.greater(self.ratio, 1.0, out=above)
@@ -139,6 +191,9 @@ class CollisionMonitor:
         np.less(self.ratio, self.cfg.release_ratio, out=below)
         self._below_time += dt
         self._below_time *= below
+        # a joint without a finite torque neither trips nor releases in this update
+        np.copyto(self._above_time, self._saved_time[0], where=bad_tau)
+        np.copyto(self._below_time, self._saved_time[1], where=bad_tau)
         # trip: above for debounce_time; release: below for release_time
         np.greater_equal(self._above_time, self._trip_after, out=above)
         np.logical_or(self.joints, above, out=self.joints)

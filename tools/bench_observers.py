@@ -63,11 +63,12 @@ def main(argv: list[str] | None = None) -> int:
     t = np.arange(1000) * 1e-3
     q = model.home + 0.3 * np.sin(np.outer(t, rng.uniform(0.5, 3.0, model.n)))
     qd = np.gradient(q, 1e-3, axis=0)
-    tau = np.array([model.gravity(x).copy() for x in q]) + rng.normal(0, 1, q.shape)
+    data = model.create_data()
+    tau = np.array([data.gravity(x).copy() for x in q]) + rng.normal(0, 1, q.shape)
     dt = 1.0 / cfg.loop.rate_hz
     samples = [(q[k].copy(), qd[k].copy(), tau[k].copy()) for k in range(len(t))]
 
-    m, d = model.pin_model, model.pin_data
+    m, d = model.pin_model, data.pin_data
     floor = {
         "pin.crba": lambda q_, qd_, tau_: pin.crba(m, d, q_),
         "pin.aba": lambda q_, qd_, tau_: pin.aba(m, d, q_, qd_, tau_),
@@ -79,8 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     out6 = np.zeros(model.n)
 
     def hofto_model_terms(q_, qd_, tau_):
-        model.forward_dynamics(q_, qd_, tau_)
-        np.dot(model.mass_matrix(q_), z3, out=out6)
+        data.forward_dynamics(q_, qd_, tau_)
+        np.dot(data.mass_matrix(q_), z3, out=out6)
 
     floor["model terms of HOFTO (M⁻¹ via ABA + friction, M(q) symmetric, M·z3)"] = hofto_model_terms
 

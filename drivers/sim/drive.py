@@ -188,7 +188,7 @@ class EmulatedDrives:
             )
 
         if tuning is None:
-            inertia = np.diag(plant.true_model.mass_matrix(plant.q)).copy()
+            inertia = np.diag(plant.data.mass_matrix(plant.q)).copy()
             limit = np.array([d.torque_limit for d in drives])
             # Velocity-loop bandwidth: 150 rad/s, lower on slow buses (the loops run once per
             # cycle and the measurement is one cycle old: keep bandwidth·dt <= 0.2).

@@ -76,6 +76,7 @@ class Plant:
         if sim.friction is not None:
             self.true_model.friction = FrictionParams.from_config(sim.friction, model.n)
         self.n = model.n
+        self.data = self.true_model.create_data()  # the plant's own workspace
         self.external = ExternalTorque(sim.external, self.true_model)
         cpr = sim.encoder_counts_per_rev
         self._resolution = None if cpr is None else 2.0 * np.pi / np.asarray(cpr, dtype=float)
@@ -106,10 +107,10 @@ class Plant:
         """Advance one tick with motor torque ``tau`` [N·m] (joint side) held constant."""
         np.copyto(self.tau_applied, tau)
         h = self.h
-        model = self.true_model
+        data = self.data
         for _ in range(self.substeps):
             self.external.evaluate(self.t, self.q, self.qd, out=self.tau_ext)
-            model.forward_dynamics(self.q, self.qd, self.tau_applied, self.tau_ext, out=self.qdd)
+            data.forward_dynamics(self.q, self.qd, self.tau_applied, self.tau_ext, out=self.qdd)
             self.qd += h * self.qdd
             self.q += h * self.qd
             self.t += h

@@ -21,6 +21,7 @@ import numpy as np
 
 from hofto_hw.config.models import ExternalTorqueConfig
 from hofto_hw.errors import ConfigError
+from hofto_hw.model.data import ModelData
 from hofto_hw.model.robot import RobotModel
 
 
@@ -29,6 +30,7 @@ class ExternalTorque:
 
     def __init__(self, components: Sequence[ExternalTorqueConfig], model: RobotModel) -> None:
         self.model = model
+        self.data = model.create_data()  # own workspace for the Jacobians
         self.n = model.n
         self.components = list(components)
         for i, c in enumerate(self.components):
@@ -44,7 +46,7 @@ class ExternalTorque:
         for c in self.components:
             if t < c.start or (c.duration is not None and t >= c.start + c.duration):
                 continue
-            _add_component(c, t, q, qd, self.model, tau)
+            _add_component(c, t, q, qd, self.data, tau)
         return tau
 
     def joint_space_only(self) -> bool:
@@ -79,7 +81,7 @@ def _add_component(
     t: float,
     q: np.ndarray,
     qd: np.ndarray,
-    model: RobotModel,
+    data: ModelData,
     tau: np.ndarray,
 ) -> None:
     n = tau.shape[0]
@@ -108,18 +110,18 @@ def _add_component(
     elif c.kind == "push":
         assert c.duration is not None and c.force is not None
         profile = 0.5 * (1.0 - math.cos(2.0 * math.pi * tau_rel / c.duration))
-        frame = c.frame or model.tool_frame
-        J = model.frame_jacobian(q, frame)
+        frame = c.frame or data.model.tool_frame
+        J = data.frame_jacobian(q, frame)
         tau += J[:3].T @ (profile * np.asarray(c.force, dtype=float))
     elif c.kind == "contact":
         assert c.frame and c.wall_point and c.wall_normal and c.stiffness
         normal = np.asarray(c.wall_normal, dtype=float)
         normal /= np.linalg.norm(normal)
-        x = model.frame_position(q, c.frame)
+        x = data.frame_position(q, c.frame)
         penetration = float(normal @ (np.asarray(c.wall_point) - x))
         if penetration <= 0.0:
             return
-        J = model.frame_jacobian(q, c.frame)[:3]
+        J = data.frame_jacobian(q, c.frame)[:3]
         v_n = float(normal @ (J @ qd))
         magnitude = c.stiffness * penetration - (c.damping or 0.0) * v_n
         if magnitude > 0.0:  # a wall pushes, it never pulls

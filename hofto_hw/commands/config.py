@@ -36,18 +36,24 @@ def check_transport(cfg: SystemConfig, source: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.config import json_schema, load_config
+    from hofto_hw.errors import ConfigError
 
     if args.action == "schema":
         print(json_schema())
         return 0
     from hofto_hw.model import RobotModel
     from hofto_hw.observers import make_observer
+    from hofto_hw.observers.stability import check_observer
 
     for path in args.files:
         cfg = load_config(path)
         check_transport(cfg, str(path))
         model = RobotModel.from_config(cfg.robot)  # URDF, joints and tool frame exist
-        for obs in cfg.observers.values():
+        for name, obs in cfg.observers.items():
+            try:
+                check_observer(name, obs, model, cfg.loop.rate_hz)
+            except ConfigError as exc:
+                raise ConfigError(f"{path}: {exc} (rate: loop.rate_hz)") from None
             make_observer(obs, model)
         print(
             f"{path}: ok ({cfg.robot.name}, {model.n} joints, "

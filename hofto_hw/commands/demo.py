@@ -38,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.experiments import table2
     from hofto_hw.model import RobotModel
     from hofto_hw.observers import make_observer
+    from hofto_hw.observers.stability import check_observer
 
     if args.duration < 5.0:
         raise ConfigError(f"--duration: at least 5 s are needed, got {args.duration}")
@@ -48,6 +49,11 @@ def run(args: argparse.Namespace) -> int:
     say = (lambda *_: None) if args.json else (lambda msg: print(msg, file=sys.stderr))
     started = time.perf_counter()
     model = RobotModel.from_config(cfg.robot)
+    for name, ocfg in cfg.observers.items():  # refuse gains unstable at the loop rate
+        try:
+            check_observer(name, ocfg, model, cfg.loop.rate_hz)
+        except ConfigError as exc:
+            raise ConfigError(f"{args.config}: {exc} (rate: loop.rate_hz)") from None
     say(f"simulating {args.duration:.0f} s of the tracking task at {cfg.loop.rate_hz:.0f} Hz ...")
     samples = table2.simulate(cfg, model, args.duration)
     say("running the observers on the same samples ...")

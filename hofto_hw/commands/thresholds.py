@@ -61,10 +61,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def _calibrate(args: argparse.Namespace) -> int:
     from hofto_hw.config.collision import CollisionConfig
-    from hofto_hw.observers import make_observer
     from hofto_hw.replay.calibrate import calibrate
     from hofto_hw.replay.runner import run_observer
-    from hofto_hw.replay.session import load_for_replay
+    from hofto_hw.replay.session import load_for_replay, observer_for
     from hofto_hw.replay.setup import load_setup, observer_config, sha256_of
     from hofto_hw.replay.thresholds import (
         ObserverThresholds,
@@ -83,8 +82,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     entries: dict[str, ObserverThresholds] = {}
     for name in args.observer or CALIBRATED_BY_DEFAULT:
         obs_cfg = observer_config(name, setup)
-        observer = make_observer(obs_cfg, setup.model)
-        residuals = [run_observer(rec, observer) for rec in recs]
+        residuals = [run_observer(rec, observer_for(name, obs_cfg, setup, rec)) for rec in recs]
         cal = calibrate(recs, residuals, template, margin=args.margin)
         entries[name] = ObserverThresholds(
             observer=obs_cfg, monitor=cal.config, peak=list(cal.peak), samples=cal.samples

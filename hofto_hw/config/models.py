@@ -115,9 +115,9 @@ def _check_lengths(checks: list[tuple[str, list | None]], n: int) -> None:
 class _ObserverConfig(FileModel):
     """What every observer config tells the system config: its per-joint lists."""
 
-    def per_joint(self) -> dict[str, list | None]:
-        """Field name -> list that must hold one entry per joint (None: not given)."""
-        return {}
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return []
 
 
 class _EulerObserverConfig(_ObserverConfig):
@@ -143,8 +143,9 @@ class EsoConfig(_EulerObserverConfig):
     k2: list[PositiveFloat]
     k3: list[PositiveFloat]
 
-    def per_joint(self) -> dict[str, list | None]:
-        return {"k1": self.k1, "k2": self.k2, "k3": self.k3}
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return [("k1", self.k1), ("k2", self.k2), ("k3", self.k3)]
 
 
 class DobConfig(_ObserverConfig):
@@ -156,8 +157,9 @@ class DobConfig(_ObserverConfig):
         None, description="Jn per joint [kg·m²]; None = diag M(home)"
     )
 
-    def per_joint(self) -> dict[str, list | None]:
-        return {"cutoff": self.cutoff, "nominal_inertia": self.nominal_inertia}
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return [("cutoff", self.cutoff), ("nominal_inertia", self.nominal_inertia)]
 
 
 class MomentumConfig(_ObserverConfig):
@@ -166,8 +168,9 @@ class MomentumConfig(_ObserverConfig):
     type: Literal["momentum"] = "momentum"
     gain: list[PositiveFloat]
 
-    def per_joint(self) -> dict[str, list | None]:
-        return {"gain": self.gain}
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return [("gain", self.gain)]
 
 
 class StaConfig(_EulerObserverConfig):
@@ -178,8 +181,9 @@ class StaConfig(_EulerObserverConfig):
     l2: list[PositiveFloat]
     l3: list[PositiveFloat]
 
-    def per_joint(self) -> dict[str, list | None]:
-        return {"l1": self.l1, "l2": self.l2, "l3": self.l3}
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return [("l1", self.l1), ("l2", self.l2), ("l3", self.l3)]
 
 
 class HoftoConfig(_ObserverConfig):
@@ -222,8 +226,9 @@ class HoftoConfig(_ObserverConfig):
             raise ValueError(f"gains has {len(self.gains)} rows, expected n + 2 = {n + 2}")
         return self
 
-    def per_joint(self) -> dict[str, list | None]:
-        return {f"gains[{i}]": g for i, g in enumerate(self.gains)}
+    def per_joint_fields(self) -> list[tuple[str, list | None]]:
+        """(field, values) of every per-joint list, for the length check of SystemConfig."""
+        return [(f"gains[{i}]", g) for i, g in enumerate(self.gains)]
 
     def stage_powers(self) -> list[float]:
         """The n + 2 powers m_2 .. m_{n+3} applied to the stage errors."""
@@ -233,6 +238,8 @@ class HoftoConfig(_ObserverConfig):
         return [1.0 + i * self.sigma for i in range(1, self.order + 3)]
 
 
+# The observer types: this union (config side) and hofto_hw.observers.registry.OBSERVERS (builders,
+# replay defaults) list the same classes; a test keeps them in step.
 ObserverConfig = Annotated[
     DirectConfig | EsoConfig | DobConfig | MomentumConfig | StaConfig | HoftoConfig,
     Field(discriminator="type"),
@@ -332,7 +339,8 @@ class SystemConfig(FileModel):
     def _per_joint(self) -> SystemConfig:
         n = len(self.robot.joints)
         for name, obs in self.observers.items():
-            _check_lengths([(f"observers.{name}.{k}", v) for k, v in obs.per_joint().items()], n)
+            rows = obs.per_joint_fields()
+            _check_lengths([(f"observers.{name}.{k}", v) for k, v in rows], n)
         if self.bus is not None:
             _check_lengths([("bus.drives", self.bus.drives)], n)
         if self.simulation is not None:

@@ -18,6 +18,7 @@ class ComputedTorque:
     def __init__(self, model: RobotModel, bandwidth: np.ndarray, damping: float = 1.0) -> None:
         w = np.asarray(bandwidth, dtype=float)
         self.model = model
+        self.data = model.create_data()
         self.kp = w * w
         self.kd = 2.0 * damping * w
         n = model.n
@@ -41,7 +42,7 @@ class ComputedTorque:
         np.multiply(self.kd, e, out=e)
         np.add(a, e, out=a)
         np.add(a, qdd_d, out=a)
-        np.dot(self.model.mass_matrix(q), a, out=tau)
-        np.add(tau, self.model.nonlinear_effects(q, qd), out=tau)
-        np.add(tau, self.model.friction_torque(qd), out=tau)
+        np.dot(self.data.mass_matrix(q), a, out=tau)
+        np.add(tau, self.data.nonlinear_effects(q, qd), out=tau)
+        np.add(tau, self.data.friction_torque(qd), out=tau)
         return tau

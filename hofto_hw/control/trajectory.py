@@ -49,7 +49,8 @@ def cartesian_loop(
     Joints listed in ``frozen`` (0-based) take no part in the IK and stay at q_start.
     Raises ModelError when IK leaves the workspace (residual > 1 mm).
     """
-    p0, _ = model.tool_pose(q_start)
+    data = model.create_data()
+    p0, _ = data.tool_pose(q_start)
     pts = np.vstack([np.zeros(3), offsets, np.zeros(3)])
     knots = np.linspace(0.0, period, pts.shape[0])
     loop = CubicSpline(knots, pts, bc_type="periodic", axis=0)
@@ -61,15 +62,15 @@ def cartesian_loop(
     qs = np.zeros((t_ik.size, model.n))
     for k, target in enumerate(targets):
         for _ in range(20):
-            pos, _ = model.tool_pose(q)
-            J = model.tool_jacobian(q)[:3]
+            pos, _ = data.tool_pose(q)
+            J = data.tool_jacobian(q)[:3].copy()
             J[:, list(frozen)] = 0.0
             JJt = J @ J.T + damping * np.eye(3)
             J_pinv = J.T @ np.linalg.solve(JJt, np.eye(3))
             null = np.eye(model.n) - J_pinv @ J
             null[list(frozen)] = 0.0
             q = q + J_pinv @ (target - pos) + null @ (posture_gain * (q_start - q))
-        residual = np.linalg.norm(model.tool_pose(q)[0] - target)
+        residual = np.linalg.norm(data.tool_pose(q)[0] - target)
         if residual > 1e-3:
             raise ModelError(f"trajectory leaves the workspace at t = {t_ik[k]:.2f} s")
         qs[k] = q

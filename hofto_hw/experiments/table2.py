@@ -169,7 +169,7 @@ def matched_observers(
     """
     hcfg = cfg.observers[hofto_name]
     assert isinstance(hcfg, HoftoConfig)
-    m_diag = np.diag(model.mass_matrix(model.home)).copy()
+    m_diag = np.diag(model.create_data().mass_matrix(model.home)).copy()
     amplitude = np.sqrt(2.0) * np.sqrt((samples.tau_ext**2).mean(axis=0)) / m_diag
     amplitude = np.maximum(amplitude, 1e-3)
     fc = hofto_bandwidth(hcfg, amplitude, samples.dt)

@@ -55,17 +55,18 @@ def simulate_tracking(
     q_des, qd_des, qdd_des = trajectory.evaluate(t)
     N, n = t.size, model.n
     plant.reset(q_des[0])
-    Mdiag = np.diag(model.mass_matrix(model.home)).copy()
+    data = model.create_data()
+    Mdiag = np.diag(data.mass_matrix(model.home)).copy()
     Kp, Kd = kp * Mdiag, kd * Mdiag
     out = {k: np.zeros((N, n)) for k in ("q", "qd", "tau", "applied", "qe", "qde", "qdde")}
     tm = np.zeros(N)
     tau = np.zeros(n)
-    true = plant.true_model
+    true = plant.true_model.create_data()
     for k in range(N):
         tm[k] = plant.t
         out["q"][k] = plant.q_meas
         out["qd"][k] = plant.qd_meas
-        model.inverse_dynamics(q_des[k], qd_des[k], qdd_des[k], out=tau)
+        data.inverse_dynamics(q_des[k], qd_des[k], qdd_des[k], out=tau)
         tau += Kp * (q_des[k] - plant.q_meas) + Kd * (qd_des[k] - plant.qd_meas)
         out["qe"][k] = plant.q
         out["qde"][k] = plant.qd

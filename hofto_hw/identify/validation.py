@@ -35,8 +35,9 @@ class Errors:
 def predict(model: RobotModel, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
     """tau_hat = M·qdd + C·qd + g + f for every sample; inputs and output (N, n)."""
     out = np.empty_like(np.asarray(q, dtype=float))
+    data = model.create_data()
     for k in range(out.shape[0]):
-        model.inverse_dynamics(q[k], qd[k], qdd[k], out=out[k])
+        data.inverse_dynamics(q[k], qd[k], qdd[k], out=out[k])
     return out
 
 

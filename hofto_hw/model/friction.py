@@ -26,8 +26,6 @@ class FrictionParams:
     stribeck_static: np.ndarray | None = None
     stribeck_velocity: np.ndarray | None = None
     smooth_velocity: float = 0.0
-    _scratch: np.ndarray = field(init=False, repr=False)
-    _scratch2: np.ndarray = field(init=False, repr=False)
     _stribeck_gap: np.ndarray | None = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -41,8 +39,6 @@ class FrictionParams:
                 setattr(self, name, arr)
         if (self.stribeck_static is None) != (self.stribeck_velocity is None):
             raise ValueError("give both stribeck_static and stribeck_velocity, or neither")
-        self._scratch = np.zeros(n)
-        self._scratch2 = np.zeros(n)
         self._stribeck_gap = (
             None if self.stribeck_static is None else self.stribeck_static - self.coulomb
         )
@@ -80,12 +76,17 @@ class FrictionParams:
             self.smooth_velocity,
         )
 
-    def torque(self, qd: np.ndarray, out: np.ndarray) -> np.ndarray:
+    def torque(
+        self, qd: np.ndarray, out: np.ndarray, scratch: np.ndarray | None = None
+    ) -> np.ndarray:
         """Friction torque [N·m] for joint velocity ``qd`` [rad/s], written into ``out`` (n,).
 
-        Allocation-free: uses two preallocated scratch arrays.
+        ``scratch`` (2, n) is the caller's workspace (a ModelData owns one); allocation-free
+        when given. The parameters themselves are constant: two callers never share a buffer.
         """
-        s = self._scratch
+        if scratch is None:
+            scratch = np.zeros((2, qd.shape[0]))
+        s = scratch[0]
         if self.smooth_velocity > 0.0:
             np.divide(qd, self.smooth_velocity, out=s)
             np.tanh(s, out=s)
@@ -93,7 +94,7 @@ class FrictionParams:
             np.sign(qd, out=s)
         np.multiply(self.coulomb, s, out=out)
         if self._stribeck_gap is not None:
-            t = self._scratch2
+            t = scratch[1]
             np.divide(qd, self.stribeck_velocity, out=t)
             np.square(t, out=t)
             np.negative(t, out=t)

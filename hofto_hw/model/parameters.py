@@ -322,8 +322,9 @@ def workspace_samples(model: RobotModel, n_samples: int, seed: int = 0) -> np.nd
 def check_mass_matrix(model: RobotModel, n_samples: int = 200, seed: int = 0) -> None:
     """Raise ModelError unless M(q) is symmetric positive definite at ``n_samples`` random
     configurations of the workspace."""
+    data = model.create_data()
     for q in workspace_samples(model, n_samples, seed):
-        M = np.array(model.mass_matrix(q))
+        M = np.array(data.mass_matrix(q))
         if not np.all(np.isfinite(M)) or not np.allclose(M, M.T, rtol=1e-9, atol=1e-12):
             raise ModelError(f"{model.name}: M(q) is not symmetric at q = {np.round(q, 3)}")
         eig = np.linalg.eigvalsh(M)

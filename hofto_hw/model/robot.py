@@ -1,4 +1,4 @@
-"""RobotModel: the arm's rigid-body dynamics (pinocchio underneath) plus rotor inertia and friction.
+"""RobotModel: the arm's constant parameters (pinocchio Model, rotor inertia, friction, limits).
 
 Equation (1) of the paper, joint side, SI units:
 
@@ -6,9 +6,8 @@ Equation (1) of the paper, joint side, SI units:
 
 ``M`` includes the reflected rotor inertia on its diagonal (pinocchio's ``armature``).
 ``C`` is the Christoffel-consistent Coriolis matrix, so Mdot = C + Cᵀ (used by the momentum
-observer). Every method returns a view of a preallocated buffer that stays valid until the
-same method is called again, or writes into ``out=``; none allocates (the Jacobian and pose
-helpers excepted, see their docstrings).
+observer). As pinocchio's Model/Data: the model holds no buffers; each consumer evaluates the
+dynamics on its own workspace, ``data = model.create_data()`` (:class:`ModelData`).
 
 The identified model is data: :meth:`set_inertial_parameters`, :attr:`rotor_inertia` and
 :attr:`friction` take identified values (see ``hofto_hw.model.parameters``); the URDF gives
@@ -17,14 +16,17 @@ kinematics and the nominal values.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 import pinocchio as pin
 
 from hofto_hw.config.models import RobotConfig
 from hofto_hw.errors import ModelError
+from hofto_hw.model.data import ModelData
 from hofto_hw.model.friction import FrictionParams
 
 N_INERTIAL = (
@@ -69,7 +71,6 @@ class RobotModel:
         self.name = name
         self.urdf_path = urdf_path
         self.pin_model = pin_model
-        self.pin_data = pin_model.createData()
         self.joint_names = list(joint_names)
         self.n = pin_model.nv
         if not pin_model.existFrame(tool_frame):
@@ -81,17 +82,6 @@ class RobotModel:
         self.limits = limits if limits is not None else _urdf_limits(pin_model)
         n = self.n
         self.home = np.zeros(n)
-        self._M = np.zeros((n, n))
-        self._Mt = np.zeros((n, n))
-        self._lower = np.tril(np.ones((n, n), dtype=bool), -1)
-        self._C = np.zeros((n, n))
-        self._Cqd = np.zeros(n)
-        self._g = np.zeros(n)
-        self._nle = np.zeros(n)
-        self._f = np.zeros(n)
-        self._tau_id = np.zeros(n)
-        self._qdd = np.zeros(n)
-        self._tau_total = np.zeros(n)
 
     # ------------------------------------------------------------------ construction
 
@@ -116,6 +106,7 @@ class RobotModel:
             full = pin.buildModelFromUrdf(str(urdf))
         except (RuntimeError, ValueError) as exc:
             raise ModelError(f"{urdf}: cannot parse URDF: {exc}") from None
+        _check_link_inertias(urdf)
         present = [full.names[i] for i in range(1, full.njoints)]
         for i, j in enumerate(joints):
             if j not in present:
@@ -177,7 +168,7 @@ class RobotModel:
         return robot
 
     def copy(self) -> RobotModel:
-        """An independent copy (own pinocchio model, data and buffers)."""
+        """An independent copy (own pinocchio model and parameters; workspaces are per caller)."""
         other = RobotModel(
             pin.Model(self.pin_model),
             self.joint_names,
@@ -228,114 +219,57 @@ class RobotModel:
                 pi[N_INERTIAL * j : N_INERTIAL * (j + 1)]
             )
 
-    # ------------------------------------------------------------------ dynamics
+    # ------------------------------------------------------------------ workspaces
 
-    def mass_matrix(self, q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """M(q) [kg·m²], symmetric, shape (n, n), rotor inertia included."""
-        pin.crba(self.pin_model, self.pin_data, q)
-        M = self._M if out is None else out
-        np.copyto(M, self.pin_data.M)
-        np.copyto(self._Mt, M.T)
-        np.copyto(M, self._Mt, where=self._lower)
-        return M
+    def create_data(self) -> ModelData:
+        """A new caller-owned workspace for this model's dynamics (pinocchio Data + buffers)."""
+        return ModelData(self)
 
-    def coriolis_matrix(
-        self, q: np.ndarray, qd: np.ndarray, out: np.ndarray | None = None
-    ) -> np.ndarray:
-        """C(q, qd) [N·m·s/rad], shape (n, n), with Mdot = C + Cᵀ."""
-        C = self._C if out is None else out
-        np.copyto(C, pin.computeCoriolisMatrix(self.pin_model, self.pin_data, q, qd))
-        return C
 
-    def gravity(self, q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """g(q) [N·m], shape (n,)."""
-        g = self._g if out is None else out
-        np.copyto(g, pin.computeGeneralizedGravity(self.pin_model, self.pin_data, q))
-        return g
-
-    def nonlinear_effects(
-        self, q: np.ndarray, qd: np.ndarray, out: np.ndarray | None = None
-    ) -> np.ndarray:
-        """C(q, qd)·qd + g(q) [N·m], shape (n,)."""
-        h = self._nle if out is None else out
-        np.copyto(h, pin.nonLinearEffects(self.pin_model, self.pin_data, q, qd))
-        return h
-
-    def coriolis(self, q: np.ndarray, qd: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """C(q, qd)·qd [N·m], shape (n,)."""
-        c = self._Cqd if out is None else out
-        h = pin.nonLinearEffects(self.pin_model, self.pin_data, q, qd)
-        g = pin.computeGeneralizedGravity(self.pin_model, self.pin_data, q)
-        np.subtract(h, g, out=c)
-        return c
-
-    def friction_torque(self, qd: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """f(qd) [N·m], shape (n,), eq. (12)."""
-        return self.friction.torque(qd, self._f if out is None else out)
-
-    def inverse_dynamics(
-        self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, out: np.ndarray | None = None
-    ) -> np.ndarray:
-        """M·qdd + C·qd + g + f [N·m]: the motor torque that produces qdd with no contact."""
-        tau = self._tau_id if out is None else out
-        np.copyto(tau, pin.rnea(self.pin_model, self.pin_data, q, qd, qdd))
-        np.add(tau, self.friction.torque(qd, self._f), out=tau)
-        return tau
-
-    def forward_dynamics(
-        self,
-        q: np.ndarray,
-        qd: np.ndarray,
-        tau: np.ndarray,
-        tau_ext: np.ndarray | None = None,
-        out: np.ndarray | None = None,
-    ) -> np.ndarray:
-        """qdd [rad/s²] = M⁻¹·(tau + tau_ext - C·qd - g - f), shape (n,) (ABA)."""
-        total = self._tau_total
-        np.subtract(tau, self.friction.torque(qd, self._f), out=total)
-        if tau_ext is not None:
-            np.add(total, tau_ext, out=total)
-        qdd = self._qdd if out is None else out
-        np.copyto(qdd, pin.aba(self.pin_model, self.pin_data, q, qd, total))
-        return qdd
-
-    # ------------------------------------------------------------------ kinematics
-
-    def tool_jacobian(self, q: np.ndarray) -> np.ndarray:
-        """Geometric Jacobian of the tool frame, shape (6, n), rows (v_x, v_y, v_z, w_x, w_y,
-        w_z) in the world-aligned frame at the tool origin [m/rad, 1]. Allocates (pinocchio
-        returns a new array)."""
-        return pin.computeFrameJacobian(
-            self.pin_model,
-            self.pin_data,
-            q,
-            self.tool_frame_id,
-            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+def _check_link_inertias(urdf: Path) -> None:
+    """Refuse a link with a negative or non-finite mass or a non-physical rotational inertia
+    (not positive semi-definite, or principal moments violating the triangle inequality)."""
+    try:
+        root = ElementTree.parse(urdf).getroot()
+    except ElementTree.ParseError:
+        return  # pinocchio parsed it; leave the XML details to it
+    for link in root.iter("link"):
+        inertial = link.find("inertial")
+        if inertial is None:
+            continue
+        name = link.get("name", "?")
+        mass_el, inertia_el = inertial.find("mass"), inertial.find("inertia")
+        try:
+            mass = float(mass_el.get("value", "0")) if mass_el is not None else 0.0
+            keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+            i = {k: float(inertia_el.get(k, "0")) if inertia_el is not None else 0.0 for k in keys}
+        except ValueError as exc:
+            raise ModelError(f"{urdf}: link {name!r}: {exc}") from None
+        if not math.isfinite(mass) or mass < 0.0:
+            raise ModelError(f"{urdf}: link {name!r}: mass {mass} kg must be finite and >= 0")
+        inertia = np.array(
+            [
+                [i["ixx"], i["ixy"], i["ixz"]],
+                [i["ixy"], i["iyy"], i["iyz"]],
+                [i["ixz"], i["iyz"], i["izz"]],
+            ]
         )
-
-    def frame_jacobian(self, q: np.ndarray, frame: str) -> np.ndarray:
-        """Like :meth:`tool_jacobian` for any URDF frame; shape (6, n). Allocates."""
-        if not self.pin_model.existFrame(frame):
-            raise ModelError(f"{self.name}: frame {frame!r} is not in the URDF")
-        return pin.computeFrameJacobian(
-            self.pin_model,
-            self.pin_data,
-            q,
-            self.pin_model.getFrameId(frame),
-            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
-        )
-
-    def frame_position(self, q: np.ndarray, frame: str | None = None) -> np.ndarray:
-        """World position [m] of ``frame`` (default: the tool), shape (3,). Allocates."""
-        fid = self.tool_frame_id if frame is None else self.pin_model.getFrameId(frame)
-        pin.forwardKinematics(self.pin_model, self.pin_data, q)
-        return pin.updateFramePlacement(self.pin_model, self.pin_data, fid).translation.copy()
-
-    def tool_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Tool position [m], shape (3,), and rotation matrix, shape (3, 3). Allocates."""
-        pin.forwardKinematics(self.pin_model, self.pin_data, q)
-        placement = pin.updateFramePlacement(self.pin_model, self.pin_data, self.tool_frame_id)
-        return placement.translation.copy(), placement.rotation.copy()
+        values = ", ".join(f"{k}={i[k]:g}" for k in keys)
+        if not np.all(np.isfinite(inertia)):
+            raise ModelError(f"{urdf}: link {name!r}: inertia must be finite ({values})")
+        moments = np.linalg.eigvalsh(inertia)
+        tol = 1e-9 * max(1.0, float(np.abs(moments).max()))
+        if moments[0] < -tol:
+            raise ModelError(
+                f"{urdf}: link {name!r}: inertia is not positive semi-definite ({values}; "
+                f"principal moments {', '.join(f'{m:g}' for m in moments)} kg·m²)"
+            )
+        if moments[0] + moments[1] < moments[2] - tol:
+            raise ModelError(
+                f"{urdf}: link {name!r}: inertia violates the triangle inequality "
+                f"({values}; principal moments {', '.join(f'{m:g}' for m in moments)} kg·m²: "
+                "the two smaller must sum to at least the largest)"
+            )
 
 
 def _urdf_limits(model: pin.Model) -> JointLimits:

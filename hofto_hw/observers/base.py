@@ -6,10 +6,16 @@ never read the bus and never decide to stop: safety/ does.
 
 ``update`` returns a view of the observer's own output buffer (valid until the next update);
 copy it to keep it. Updates allocate nothing.
+
+Non-finite samples: an update whose q, qd, tau or dt holds a NaN or inf returns NaN on every
+joint (so the fault stays visible to safety/, which reports it) and leaves the observer's
+state untouched, so the next finite sample continues from the last finite state. ``reset``
+clears every state.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Protocol
 
 import numpy as np
@@ -42,14 +48,36 @@ class ModelTerms:
 
     def __init__(self, model: RobotModel) -> None:
         self.model = model
+        self.data = model.create_data()  # this observer's own workspace
         self.accel = np.zeros(model.n)
         self.out = np.zeros(model.n)
 
     def acceleration(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        return self.model.forward_dynamics(q, qd, tau, out=self.accel)
+        return self.data.forward_dynamics(q, qd, tau, out=self.accel)
 
     def torque(self, q: np.ndarray, x: np.ndarray) -> np.ndarray:
-        return np.dot(self.model.mass_matrix(q), x, out=self.out)
+        return np.dot(self.data.mass_matrix(q), x, out=self.out)
+
+
+class SampleGuard:
+    """Allocation-free check that a sample (q, qd, tau, dt) is finite, and the all-NaN output
+    an observer returns for one that is not."""
+
+    def __init__(self, n: int) -> None:
+        self._nan = np.full(n, np.nan)
+
+    def finite(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> bool:
+        # one sum: NaN and ±inf propagate into it (a finite sum can only overflow for values
+        # near 1e308, which are refused too); about 3x cheaper than np.isfinite per array
+        return math.isfinite(_sum(q) + _sum(qd) + _sum(tau) + dt)
+
+    def nan(self) -> np.ndarray:
+        """NaN on every joint (refilled each call: the caller may have written into it)."""
+        self._nan.fill(np.nan)
+        return self._nan
+
+
+_sum = np.add.reduce
 
 
 class LinearHold:

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
+from hofto_hw.observers.base import SampleGuard
 
 
 class DirectObserver:
@@ -20,6 +21,7 @@ class DirectObserver:
 
     def __init__(self, model: RobotModel, accel_filter_hz: float | None = None) -> None:
         self.model = model
+        self.data = model.create_data()
         self.n = model.n
         self.accel_filter_hz = accel_filter_hz
         self._qd_prev = np.zeros(self.n)
@@ -27,6 +29,7 @@ class DirectObserver:
         self._raw = np.zeros(self.n)
         self._out = np.zeros(self.n)
         self._started = False
+        self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         np.copyto(self._qd_prev, qd)
@@ -34,6 +37,8 @@ class DirectObserver:
         self._started = True
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        if not self._guard.finite(q, qd, tau, dt):
+            return self._guard.nan()
         if not self._started:
             self.reset(q, qd)
         raw = self._raw
@@ -47,6 +52,6 @@ class DirectObserver:
             np.subtract(raw, self._qdd, out=raw)
             np.multiply(raw, alpha, out=raw)
             np.add(self._qdd, raw, out=self._qdd)
-        out = self.model.inverse_dynamics(q, qd, self._qdd, out=self._out)
+        out = self.data.inverse_dynamics(q, qd, self._qdd, out=self._out)
         np.subtract(out, tau, out=out)
         return out

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import per_joint
+from hofto_hw.observers.base import SampleGuard, per_joint
 
 
 class DobObserver:
@@ -31,10 +31,11 @@ class DobObserver:
     ) -> None:
         n = model.n
         self.model = model
+        self.data = model.create_data()
         self.n = n
         self.cutoff = per_joint(cutoff, n, "dob.cutoff")
         if nominal_inertia is None:
-            nominal_inertia = np.diag(model.mass_matrix(model.home)).copy()
+            nominal_inertia = np.diag(self.data.mass_matrix(model.home)).copy()
         self.jn = per_joint(nominal_inertia, n, "dob.nominal_inertia")
         self._gj = self.cutoff * self.jn  # g·Jn
         self.w = np.zeros(n)
@@ -42,11 +43,14 @@ class DobObserver:
         self._alpha = np.zeros(n)
         self._dt = -1.0
         self._out = np.zeros(n)
+        self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         np.multiply(self._gj, qd, out=self.w)  # tau_ext_hat starts at 0
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        if not self._guard.finite(q, qd, tau, dt):
+            return self._guard.nan()
         if dt != self._dt:  # recompute the discrete pole only when the period changes
             np.multiply(self.cutoff, -dt, out=self._alpha)
             np.expm1(self._alpha, out=self._alpha)
@@ -55,8 +59,8 @@ class DobObserver:
         u, out = self._u, self._out
         np.multiply(self._gj, qd, out=out)  # g·Jn·qd
         np.add(out, tau, out=u)
-        np.subtract(u, self.model.nonlinear_effects(q, qd), out=u)
-        np.subtract(u, self.model.friction_torque(qd), out=u)
+        np.subtract(u, self.data.nonlinear_effects(q, qd), out=u)
+        np.subtract(u, self.data.friction_torque(qd), out=u)
         np.subtract(u, self.w, out=u)
         np.multiply(u, self._alpha, out=u)
         np.add(self.w, u, out=self.w)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import LinearHold, ModelTerms, per_joint
+from hofto_hw.observers.base import LinearHold, ModelTerms, SampleGuard, per_joint
 
 
 def bandwidth_gains(w0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -91,10 +91,13 @@ class EsoObserver:
             substeps,
         )
         self.terms = ModelTerms(model)
+        self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.core.reset(q, qd)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        if not self._guard.finite(q, qd, tau, dt):
+            return self._guard.nan()
         a = self.terms.acceleration(q, qd, tau)
         return self.terms.torque(q, self.core.step(q, a, dt))

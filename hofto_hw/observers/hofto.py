@@ -36,7 +36,7 @@ from typing import Literal
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import LinearHold, ModelTerms
+from hofto_hw.observers.base import LinearHold, ModelTerms, SampleGuard
 
 Form = Literal["eq17", "recursive"]
 
@@ -222,11 +222,14 @@ class HoftoObserver:
         self.core = HoftoCore(gains, powers, form, substeps, discretisation)
         self.order = self.core.order
         self.terms = ModelTerms(model)
+        self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.core.reset(q, qd)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        if not self._guard.finite(q, qd, tau, dt):
+            return self._guard.nan()
         a = self.terms.acceleration(q, qd, tau)
         z3 = self.core.step(q, a, dt)
         return self.terms.torque(q, z3)

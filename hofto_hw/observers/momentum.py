@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import per_joint
+from hofto_hw.observers.base import SampleGuard, per_joint
 
 
 class MomentumObserver:
@@ -24,6 +24,7 @@ class MomentumObserver:
     def __init__(self, model: RobotModel, gain: np.ndarray) -> None:
         n = model.n
         self.model = model
+        self.data = model.create_data()
         self.n = n
         self.gain = per_joint(gain, n, "momentum.gain")
         self.integral = np.zeros(n)
@@ -32,14 +33,17 @@ class MomentumObserver:
         self._p = np.zeros(n)
         self._tmp = np.zeros(n)
         self._ct_qd = np.zeros(n)
+        self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
-        np.dot(self.model.mass_matrix(q), qd, out=self.p0)
+        np.dot(self.data.mass_matrix(q), qd, out=self.p0)
         self.integral.fill(0.0)
         self.r.fill(0.0)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
-        m = self.model
+        if not self._guard.finite(q, qd, tau, dt):
+            return self._guard.nan()
+        m = self.data
         tmp = self._tmp
         np.dot(m.coriolis_matrix(q, qd).T, qd, out=self._ct_qd)
         np.subtract(tau, m.friction_torque(qd), out=tmp)

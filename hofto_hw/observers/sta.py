@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import LinearHold, ModelTerms, per_joint
+from hofto_hw.observers.base import LinearHold, ModelTerms, SampleGuard, per_joint
 
 
 class StaObserver:
@@ -40,6 +40,7 @@ class StaObserver:
         self._tmp = np.zeros(n)
         self._hold = LinearHold(n)
         self.terms = ModelTerms(model)
+        self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.z1[:] = q
@@ -48,6 +49,8 @@ class StaObserver:
         self._hold.reset(q)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        if not self._guard.finite(q, qd, tau, dt):
+            return self._guard.nan()
         a = self.terms.acceleration(q, qd, tau)
         h = dt / self.substeps
         e, root, sgn, tmp = self._e, self._sqrt, self._sgn, self._tmp

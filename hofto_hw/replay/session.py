@@ -8,8 +8,11 @@ from typing import Any
 
 import numpy as np
 
+from hofto_hw.config.models import ObserverConfig
+from hofto_hw.errors import ConfigError
 from hofto_hw.identify.data import BadRows, Recording, load_recording
-from hofto_hw.observers import make_observer
+from hofto_hw.observers import Observer, make_observer
+from hofto_hw.observers.stability import check_observer
 from hofto_hw.replay.episodes import Episode, find_episodes
 from hofto_hw.replay.runner import ReplayResult, replay
 from hofto_hw.replay.setup import Setup, default_columns
@@ -76,6 +79,26 @@ def load_for_replay(
     return rec
 
 
+def recording_rate(rec: Recording) -> float:
+    """The recording's sampling rate [Hz]: 1 / median sample interval."""
+    dt = rec.dt()
+    step = float(np.median(dt)) if dt.size else 0.0
+    if not (step > 0.0 and np.isfinite(step)):
+        raise ConfigError(f"{rec.source}: cannot tell the sampling rate (median interval {step})")
+    return 1.0 / step
+
+
+def observer_for(name: str, cfg: ObserverConfig, setup: Setup, rec: Recording) -> Observer:
+    """Observer ``name`` built from ``cfg``, refused (ConfigError) if its gains are unstable at
+    the recording's rate."""
+    rate = recording_rate(rec)
+    try:
+        check_observer(name, cfg, setup.model, rate)
+    except ConfigError as exc:
+        raise ConfigError(f"{rec.source} ({rate:.4g} Hz): {exc}") from None
+    return make_observer(cfg, setup.model)
+
+
 def run_replay(
     setup: Setup,
     rec: Recording,
@@ -87,7 +110,7 @@ def run_replay(
     from hofto_hw.replay.setup import observer_config
 
     obs_cfg = observer_config(observer_name, setup, thresholds)
-    observer = make_observer(obs_cfg, setup.model)
+    observer = observer_for(observer_name, obs_cfg, setup, rec)
     monitor = None
     if thresholds is not None and observer_name in thresholds.observers:
         monitor = CollisionMonitor(thresholds.observers[observer_name].monitor)

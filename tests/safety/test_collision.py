@@ -130,3 +130,57 @@ def test_config_lengths_are_checked() -> None:
         CollisionConfig.model_validate({"base": [1.0, 2.0], "velocity_gain": [1.0]})
     with pytest.raises(ValidationError, match="base"):
         CollisionConfig.model_validate({"base": [0.0]})
+
+
+# ---------------------------------------------------------------- non-finite inputs (issue 7)
+
+
+def test_nan_velocity_reports_fault_and_detection_keeps_working() -> None:
+    mon = CollisionMonitor(
+        CollisionConfig.model_validate(
+            {
+                "base": [1.0, 1.0],
+                "velocity_gain": [0.5, 0.5],
+                "acceleration_gain": [0.1, 0.1],
+                "reversal_margin": [2.0, 2.0],
+                "debounce_time": 0.02,
+            }
+        )
+    )
+    zero = np.zeros(2)
+    for _ in range(5):
+        mon.update(zero, zero, DT)
+    mon.update(zero, np.array([np.nan, 0.0]), DT)
+    assert mon.fault_nonfinite
+    assert list(mon.nonfinite) == [True, False]
+    mon.update(zero, zero, DT)
+    assert not mon.fault_nonfinite and not mon.nonfinite.any()
+    assert np.all(np.isfinite(mon.threshold)) and np.all(np.isfinite(mon.accel))
+    tau = np.array([100.0, 0.0])
+    det = [mon.update(tau, zero, DT) for _ in range(5)]
+    assert det[-1] and mon.joints[0]
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nonfinite_torque_is_a_fault_and_hides_no_collision_elsewhere(bad: float) -> None:
+    mon = _monitor(debounce_time=0.0)
+    qd = np.zeros(2)
+    tau = np.array([bad, 50.0])
+    assert mon.update(tau, qd, DT)
+    assert mon.fault_nonfinite and list(mon.nonfinite) == [True, False]
+    assert list(mon.joints) == [False, True]
+    assert np.all(np.isfinite(mon.ratio))
+
+
+def test_nonfinite_handling_allocates_nothing() -> None:
+    mon = _monitor()
+    tau = np.array([np.nan, 1.0])
+    qd = np.array([0.1, np.inf])
+    mon.update(tau, qd, DT)
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    for _ in range(2000):
+        mon.update(tau, qd, DT)
+    grown = tracemalloc.get_traced_memory()[1] - before
+    tracemalloc.stop()
+    assert grown < 2000

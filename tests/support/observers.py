@@ -35,7 +35,12 @@ def run_hold(model, observer, external, duration=6.0, dt=1e-3, sim=None):
     est = np.zeros((steps, model.n))
     for k in range(steps):
         q, qd = plant.q_meas, plant.qd_meas
-        tau = model.gravity(q) + model.friction_torque(qd) + kp * (model.home - q) - kd * qd
+        tau = (
+            model.create_data().gravity(q)
+            + model.create_data().friction_torque(qd)
+            + kp * (model.home - q)
+            - kd * qd
+        )
         plant.step(tau)
         est[k] = observer.update(plant.q_meas, plant.qd_meas, plant.tau_meas, dt)
         t[k] = plant.t

@@ -90,7 +90,7 @@ def test_cst_torque_reaches_the_plant(group: DriveGroup, bus: SimBus) -> None:
     plant = bus.plant
     _enabled(group)
     model = plant.true_model
-    tau = model.gravity(plant.q).copy()
+    tau = model.create_data().gravity(plant.q).copy()
     tau[0] += 8.0
     tau[3] -= 4.0  # beyond the wrist's 1.8 N·m breakaway friction
     group.command_torque(tau)
@@ -99,7 +99,9 @@ def test_cst_torque_reaches_the_plant(group: DriveGroup, bus: SimBus) -> None:
         group.cycle()
     raw_step = np.abs(group.scaling.nm_per_permille)
     assert np.all(np.abs(plant.tau_applied - tau) <= 0.5 * raw_step + 1e-9)
-    expected = model.forward_dynamics(plant.q, plant.qd, plant.tau_applied, plant.tau_ext)
+    expected = model.create_data().forward_dynamics(
+        plant.q, plant.qd, plant.tau_applied, plant.tau_ext
+    )
     assert np.allclose(plant.qdd, expected, rtol=0.05, atol=0.05)
     assert expected[0] > 1.0 and expected[3] < -1.0  # the offsets really accelerate
     assert np.allclose(group.tau, plant.tau_meas, atol=raw_step.max())  # reported back

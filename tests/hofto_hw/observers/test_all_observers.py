@@ -27,8 +27,8 @@ def test_free_motion_gives_near_zero(er3a_config, er3a_model, name):
         t = k * 1e-3
         q_des = er3a_model.home + 0.3 * np.sin(1.5 * t) * np.array([1, 1, 1, 1, 1, 1])
         tau = (
-            er3a_model.gravity(plant.q_meas)
-            + er3a_model.friction_torque(plant.qd_meas)
+            er3a_model.create_data().gravity(plant.q_meas)
+            + er3a_model.create_data().friction_torque(plant.qd_meas)
             + 400 * (q_des - plant.q_meas)
             - 40 * plant.qd_meas
         )

@@ -1,0 +1,173 @@
+"""ModelData: a caller-owned workspace for the dynamics of a RobotModel (pinocchio's Data).
+
+:class:`~hofto_hw.model.robot.RobotModel` holds constant parameters only; every consumer (each
+observer, the plant, a controller, a logger) creates its own workspace with
+``data = model.create_data()`` and calls the dynamics on it, so two consumers in one tick never
+overwrite each other's results.
+
+Equation (1) of the paper, joint side, SI units:
+
+    M(q)·qdd + C(q, qd)·qd + g(q) + f(qd) = tau + tau_ext
+
+Every method writes into ``out=`` or returns a view of a buffer of this workspace that stays
+valid until the *same method* of the *same workspace* is called again (each method has its own
+buffers, friction included). None allocates arrays; :meth:`frame_jacobian`,
+:meth:`frame_position` and :meth:`tool_pose` (off the tick) return new arrays.
+The workspace reads the model's parameters at every call, so a change of parameters
+(``set_inertial_parameters``, ``rotor_inertia``, ``friction``) is seen by existing workspaces.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+
+from hofto_hw.errors import ModelError
+
+if TYPE_CHECKING:
+    from hofto_hw.model.robot import RobotModel
+
+
+class ModelData:
+    """Workspace of one consumer: pinocchio Data and every buffer. Arrays float64, shape (n,)
+    or (n, n); q [rad], qd [rad/s], qdd [rad/s²], torques [N·m]."""
+
+    def __init__(self, model: RobotModel) -> None:
+        self.model = model
+        self.pin_data = model.pin_model.createData()
+        n = model.n
+        self.n = n
+        self._M = np.zeros((n, n))
+        self._Mt = np.zeros((n, n))
+        self._lower = np.tril(np.ones((n, n), dtype=bool), -1)
+        self._C = np.zeros((n, n))
+        self._Cqd = np.zeros(n)
+        self._g = np.zeros(n)
+        self._nle = np.zeros(n)
+        self._f = np.zeros(n)
+        self._f_id = np.zeros(n)  # friction inside inverse_dynamics
+        self._f_fd = np.zeros(n)  # friction inside forward_dynamics
+        self._fscratch = np.zeros((2, n))
+        self._tau_id = np.zeros(n)
+        self._qdd = np.zeros(n)
+        self._tau_total = np.zeros(n)
+        self._J = np.zeros((6, n))
+
+    # ------------------------------------------------------------------ dynamics
+
+    def mass_matrix(self, q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """M(q) [kg·m²], symmetric, shape (n, n), rotor inertia included."""
+        m = self.model
+        pin.crba(m.pin_model, self.pin_data, q)
+        M = self._M if out is None else out
+        np.copyto(M, self.pin_data.M)
+        np.copyto(self._Mt, M.T)
+        np.copyto(M, self._Mt, where=self._lower)
+        return M
+
+    def coriolis_matrix(
+        self, q: np.ndarray, qd: np.ndarray, out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """C(q, qd) [N·m·s/rad], shape (n, n), with Mdot = C + Cᵀ."""
+        C = self._C if out is None else out
+        np.copyto(C, pin.computeCoriolisMatrix(self.model.pin_model, self.pin_data, q, qd))
+        return C
+
+    def gravity(self, q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """g(q) [N·m], shape (n,)."""
+        g = self._g if out is None else out
+        np.copyto(g, pin.computeGeneralizedGravity(self.model.pin_model, self.pin_data, q))
+        return g
+
+    def nonlinear_effects(
+        self, q: np.ndarray, qd: np.ndarray, out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """C(q, qd)·qd + g(q) [N·m], shape (n,)."""
+        h = self._nle if out is None else out
+        np.copyto(h, pin.nonLinearEffects(self.model.pin_model, self.pin_data, q, qd))
+        return h
+
+    def coriolis(self, q: np.ndarray, qd: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """C(q, qd)·qd [N·m], shape (n,)."""
+        pm, pd = self.model.pin_model, self.pin_data
+        c = self._Cqd if out is None else out
+        np.copyto(c, pin.nonLinearEffects(pm, pd, q, qd))
+        np.subtract(c, pin.computeGeneralizedGravity(pm, pd, q), out=c)
+        return c
+
+    def friction_torque(self, qd: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """f(qd) [N·m], shape (n,), eq. (12)."""
+        return self.model.friction.torque(qd, self._f if out is None else out, self._fscratch)
+
+    def inverse_dynamics(
+        self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """M·qdd + C·qd + g + f [N·m]: the motor torque that produces qdd with no contact."""
+        m = self.model
+        tau = self._tau_id if out is None else out
+        np.copyto(tau, pin.rnea(m.pin_model, self.pin_data, q, qd, qdd))
+        np.add(tau, m.friction.torque(qd, self._f_id, self._fscratch), out=tau)
+        return tau
+
+    def forward_dynamics(
+        self,
+        q: np.ndarray,
+        qd: np.ndarray,
+        tau: np.ndarray,
+        tau_ext: np.ndarray | None = None,
+        out: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """qdd [rad/s²] = M⁻¹·(tau + tau_ext - C·qd - g - f), shape (n,) (ABA)."""
+        m = self.model
+        total = self._tau_total
+        np.subtract(tau, m.friction.torque(qd, self._f_fd, self._fscratch), out=total)
+        if tau_ext is not None:
+            np.add(total, tau_ext, out=total)
+        qdd = self._qdd if out is None else out
+        np.copyto(qdd, pin.aba(m.pin_model, self.pin_data, q, qd, total))
+        return qdd
+
+    # ------------------------------------------------------------------ kinematics
+
+    def tool_jacobian(self, q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Geometric Jacobian of the tool frame, shape (6, n), rows (v_x, v_y, v_z, w_x, w_y,
+        w_z) in the world-aligned frame at the tool origin [m/rad, 1], written into this
+        workspace's (6, n) buffer (or ``out``)."""
+        m = self.model
+        J = self._J if out is None else out
+        np.copyto(
+            J,
+            pin.computeFrameJacobian(
+                m.pin_model, self.pin_data, q, m.tool_frame_id, pin.LOCAL_WORLD_ALIGNED
+            ),
+        )
+        return J
+
+    def frame_jacobian(self, q: np.ndarray, frame: str) -> np.ndarray:
+        """Like :meth:`tool_jacobian` for any URDF frame; shape (6, n). Allocates."""
+        m = self.model
+        if not m.pin_model.existFrame(frame):
+            raise ModelError(f"{m.name}: frame {frame!r} is not in the URDF")
+        return pin.computeFrameJacobian(
+            m.pin_model,
+            self.pin_data,
+            q,
+            m.pin_model.getFrameId(frame),
+            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+        )
+
+    def frame_position(self, q: np.ndarray, frame: str | None = None) -> np.ndarray:
+        """World position [m] of ``frame`` (default: the tool), shape (3,). Allocates."""
+        m = self.model
+        fid = m.tool_frame_id if frame is None else m.pin_model.getFrameId(frame)
+        pin.forwardKinematics(m.pin_model, self.pin_data, q)
+        return pin.updateFramePlacement(m.pin_model, self.pin_data, fid).translation.copy()
+
+    def tool_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Tool position [m], shape (3,), and rotation matrix, shape (3, 3). Allocates."""
+        m = self.model
+        pin.forwardKinematics(m.pin_model, self.pin_data, q)
+        placement = pin.updateFramePlacement(m.pin_model, self.pin_data, m.tool_frame_id)
+        return placement.translation.copy(), placement.rotation.copy()
