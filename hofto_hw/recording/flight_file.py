@@ -67,7 +67,7 @@ class CountingFile:
     total = 0
 
     def __init__(self, path: Path, fail_after: int | None = None) -> None:
-        self._f = open(path, "wb", buffering=0)  # noqa: SIM115 - closed by close()
+        self._f = open(path, "wb", buffering=0)
         self.written = 0
         self._fail_after = fail_after
 
@@ -160,7 +160,7 @@ class FlightFile:
         raw = batch.tobytes()
         size = batch.dtype.itemsize
         add = self.w.add_message
-        for i, (t_ns, k) in enumerate(zip(ns.tolist(), seq.tolist())):
+        for i, (t_ns, k) in enumerate(zip(ns.tolist(), seq.tolist(), strict=True)):
             add(channel, t_ns, raw[i * size : (i + 1) * size], t_ns, k)
         self.messages += len(batch)
 

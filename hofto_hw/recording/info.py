@@ -68,7 +68,7 @@ def log_info(path: Path) -> LogInfo:
             info.metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
             info.complete = True
             return info
-    except Exception:  # noqa: BLE001 - truncated: fall back to streaming what is there
+    except Exception:
         pass
     _stream(path, info)
     return info
@@ -94,7 +94,7 @@ def _stream(path: Path, info: LogInfo) -> None:
                     info.attachments.append(rec.name)
                 elif isinstance(rec, Metadata):
                     info.metadata[rec.name] = dict(rec.metadata)
-        except Exception:  # noqa: BLE001 - the truncation point
+        except Exception:
             pass
     for cid, (topic, ty) in topics.items():
         info.topics[topic] = (ty, counts.get(cid, 0))

@@ -74,7 +74,7 @@ def recover(src: Path, dst: Path) -> Salvage:
             try:
                 for rec in StreamReader(f, record_size_limit=1 << 30).records:
                     copier.copy(rec)
-            except Exception as exc:  # noqa: BLE001 - any damage ends the readable part
+            except Exception as exc:
                 copier.out.stopped = type(exc).__name__ + (f": {exc}" if str(exc) else "")
             w.finish()
         if copier.out.total == 0 and not copier.out.complete:

@@ -16,6 +16,8 @@ import os
 import signal
 import time
 
+import numpy as np
+
 from hofto_hw.recording import shared as sh
 from hofto_hw.recording.flight_file import FlightFile, LogSpec, rotated_path
 from hofto_hw.recording.record import tick_dtype
@@ -165,7 +167,7 @@ def writer_main(shm_name: str, n_joints: int, n_observers: int, caps: sh.Capacit
     block.close()
 
 
-def _run(w: _Writer, ctl, parent: int, term: list[float]) -> None:  # noqa: ANN001
+def _run(w: _Writer, ctl: np.ndarray, parent: int, term: list[float]) -> None:
     """Drain until stopped (STOP word, owner gone, or SIGTERM grace over), then finish."""
     while True:
         now = time.monotonic()
