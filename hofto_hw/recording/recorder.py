@@ -30,7 +30,8 @@ from hofto_hw.recording.writer_process import writer_main
 @dataclass
 class RecorderHealth:
     """A snapshot of the recorder: ``writer_alive``, ``state`` (starting/running/failed/
-    finished), ``bytes_written`` (all files), ``records_written``, ``dropped`` (refused by a
+    finished), ``bytes_written`` (all files), ``records_written``, ``records_flushed`` (in
+    closed chunks: they survive a SIGKILL), ``dropped`` (refused by a
     full ring, all kinds), ``records_lost`` (drained while the disk failed), ``write_errors``,
     ``disk_failing`` (the last write failed and no file is open), ``files`` opened, the
     ``current_file``, ``pending`` ticks in the ring."""
@@ -39,6 +40,7 @@ class RecorderHealth:
     state: str
     bytes_written: int
     records_written: int
+    records_flushed: int
     dropped: int
     records_lost: int
     write_errors: int
@@ -172,6 +174,7 @@ class FlightRecorder:
             state=sh.STATE_NAMES.get(int(c[sh.STATE]), "unknown"),
             bytes_written=int(c[sh.BYTES]),
             records_written=int(c[sh.RECORDS]),
+            records_flushed=int(c[sh.FLUSHED]),
             dropped=self.dropped,
             records_lost=int(c[sh.LOST]),
             write_errors=int(c[sh.ERRORS]),

@@ -18,7 +18,8 @@ from hofto_hw.recording.ring import Ring, ring_nbytes
 CONTROL_BYTES = 256
 
 #: control words (index into the u64 view); the owner writes STOP, the writer the others
-STOP, PID, HEARTBEAT, BYTES, RECORDS, ERRORS, FAILING, FILES, LOST, STATE = range(10)
+STOP, PID, HEARTBEAT, BYTES, RECORDS, ERRORS, FAILING, FILES, LOST, STATE, FLUSHED = range(11)
+#: FLUSHED: records whose messages are in closed chunks handed to the kernel (survive SIGKILL)
 
 #: writer states in the STATE word
 STARTING, RUNNING, FAILED, FINISHED = 0, 1, 2, 3

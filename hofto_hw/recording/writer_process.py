@@ -107,6 +107,7 @@ class _Writer:
             if now - self.flushed_at >= self.spec.flush_seconds:
                 self.file.flush()
                 self.flushed_at = now
+                self.ctl[sh.FLUSHED] = self.ctl[sh.RECORDS]
             self._maybe_rotate(now)
         except OSError:
             self.ctl[sh.LOST] += n
@@ -121,6 +122,7 @@ class _Writer:
         by_time = spec.rotate_seconds and now - self.opened_at >= spec.rotate_seconds
         if by_size or by_time:
             f.finish()
+            self.ctl[sh.FLUSHED] = self.ctl[sh.RECORDS]
             self.bytes_closed += f.bytes
             self._open(now)
 
@@ -129,6 +131,7 @@ class _Writer:
             return
         try:
             self.file.finish()
+            self.ctl[sh.FLUSHED] = self.ctl[sh.RECORDS]
         except OSError:
             self._fail(time.monotonic())
             return
