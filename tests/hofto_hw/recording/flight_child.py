@@ -31,7 +31,7 @@ ATTACHMENTS = [
 ]
 
 
-def fill(rec, k: int) -> None:  # noqa: ANN001
+def fill(rec, k: int) -> None:
     """Tick k's values (see the module docstring)."""
     rec["t"] = k * 1e-3
     rec["tick"] = k

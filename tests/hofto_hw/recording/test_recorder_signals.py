@@ -17,7 +17,7 @@ from hofto_hw.recording.schemas import JOINT_STATE_TOPIC, SAFETY_TOPIC, observer
 N_TICKS = 3000
 
 
-def decode_all(path, topic):  # noqa: ANN001, ANN201
+def decode_all(path, topic):
     """(sequences, decoded messages) on ``topic`` with the independent mcap_ros2 decoder."""
     seqs, msgs = [], []
     with open(path, "rb") as f:
@@ -28,7 +28,7 @@ def decode_all(path, topic):  # noqa: ANN001, ANN201
     return np.array(seqs), msgs
 
 
-def check_joint_states(seqs, msgs, n):  # noqa: ANN001
+def check_joint_states(seqs, msgs, n):
     """Ticks 0..n-1 once each, with the values flight_child.py pushed."""
     order = np.argsort(seqs)
     assert np.array_equal(seqs[order], np.arange(n))
@@ -76,7 +76,7 @@ def test_sigkill_then_recover_keeps_every_flushed_tick(tmp_path, child_factory, 
         _, pushed, flushed, t = child.expect("pushed").split()
         flushed = int(flushed)
     child.kill_group()
-    with pytest.raises(Exception):  # noqa: B017, PT011 - any reader error: no summary
+    with pytest.raises(Exception):  # noqa: B017 - any reader error: no summary
         with open(out, "rb") as f:
             list(make_reader(f).iter_messages())
     fixed = tmp_path / "fixed.mcap"
