@@ -44,9 +44,22 @@ def add_common(parser: argparse.ArgumentParser) -> None:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("params", type=Path, metavar="PARAMS", help="identified-parameters file")
-    parser.add_argument("file", type=Path, metavar="FILE", help="recording (CSV or .mcap)")
+    parser.add_argument(
+        "params",
+        type=Path,
+        metavar="PARAMS",
+        help="identified-parameters file (omit for a flight-recorder log: it carries its own)",
+    )
+    parser.add_argument(
+        "file", type=Path, nargs="?", metavar="FILE", help="recording (CSV or .mcap)"
+    )
     add_common(parser)
+    parser.add_argument(
+        "--reproduce",
+        action="store_true",
+        help="flight-recorder logs (the default for them): re-run the recorded observers and "
+        "monitor and check the recorded collision tick; exit 1 if it differs",
+    )
     parser.add_argument(
         "--observer",
         choices=OBSERVER_NAMES,
@@ -97,6 +110,23 @@ def _print_text(report_dict: dict, thresholds: Path | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hofto_hw.replay.flight_log import flight_metadata
+
+    if args.file is None:  # `replay FILE`: only a flight log carries its own parameters
+        args.file, args.params = args.params, None
+    if flight_metadata(args.file) is not None:
+        if args.params is not None:
+            raise UserError(
+                f"{args.file}: a flight-recorder log carries its config and parameters; "
+                "run `hofto-hw replay FILE` without PARAMS"
+            )
+        from hofto_hw.commands.replay_flight import run_flight
+
+        return run_flight(args)
+    if args.params is None:
+        raise UserError(f"{args.file}: not a flight-recorder log: give PARAMS FILE")
+    if args.reproduce:
+        raise UserError(f"{args.file}: --reproduce needs a flight-recorder log")
     from hofto_hw.replay.plot import plot_replay
     from hofto_hw.replay.session import load_for_replay, run_replay
     from hofto_hw.replay.setup import (

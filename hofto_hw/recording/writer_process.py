@@ -139,8 +139,14 @@ class _Writer:
         self.file = None
 
 
-def writer_main(shm_name: str, n_joints: int, n_observers: int, caps: sh.Capacities,
-                spec: LogSpec, cpus: list[int] | None = None) -> None:  # fmt: skip
+def writer_main(
+    shm_name: str,
+    n_joints: int,
+    n_observers: int,
+    caps: sh.Capacities,
+    spec: LogSpec,
+    cpus: list[int] | None = None,
+) -> None:
     """Entry point of the writer process (multiprocessing target)."""
     _drop_realtime()
     if cpus:
