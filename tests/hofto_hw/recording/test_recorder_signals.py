@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import signal
+import time
 
 import numpy as np
 import pytest
@@ -92,3 +93,30 @@ def test_sigkill_then_recover_keeps_every_flushed_tick(tmp_path, child_factory, 
             "parameters.yaml",
             "thresholds.yaml",
         }
+
+
+def test_sigkill_of_the_loop_alone_lets_the_writer_finish_the_file(tmp_path, child_factory):
+    out = tmp_path / "run.mcap"
+    child = child_factory(out, 0)
+    writer_pid = int(child.expect("ready").split()[1])
+    flushed = 0
+    while flushed < 1000:
+        flushed = int(child.expect("pushed").split()[2])
+    child.proc.send_signal(signal.SIGKILL)  # the loop only: its writer sees the owner gone
+    child.proc.wait()
+    deadline = time.monotonic() + 120
+    while pid_alive(writer_pid):
+        assert time.monotonic() < deadline, "writer did not finish after its owner died"
+        time.sleep(0.05)
+    seqs, msgs = decode_all(out, JOINT_STATE_TOPIC)  # the indexed reader: file is complete
+    assert len(msgs) >= flushed - 1
+    check_joint_states(seqs, msgs, len(msgs))
+
+
+def pid_alive(pid: int) -> bool:
+    """True while ``pid`` runs (a zombie waiting for its reaper counts as gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
