@@ -6,9 +6,9 @@ writer thread in the loop's process, the design the issue measured at p99 3.1 ms
     python tools/bench_recorder.py --quick    # ~10 s
     python tools/bench_recorder.py --json --fifo   # SCHED_FIFO 50 for the loop (root)
 
-Figures: push median/p99 [µs]; writer messages/s and tick records/s (6 joints, 3 observers:
-6 messages per tick); loop wake-up latency median/p99/p99.9/max [µs] and overruns (> 1 ms
-late) for each mode; dropped records.
+Figures: push median/p99 [µs]; JointState encoding cost per message; writer messages/s
+and tick records/s (6 joints, 3 observers: 6 messages per tick); loop wake-up latency
+median/p99/p99.9/max [µs] and overruns (> 1 ms late) for each mode; dropped records.
 """
 
 from __future__ import annotations
@@ -89,6 +89,41 @@ def bench_push(folder: Path, n: int) -> dict[str, float]:
             time.sleep(0.05)  # let the writer drain (this measures the push, not the drain)
     health = rec.close()
     return {**stats_us(times), "dropped": health.dropped}
+
+
+def bench_encode(n: int) -> dict[str, float]:
+    """Per-message cost of a JointState [µs]: mcap_ros2's dict encoder vs a fixed-layout
+    batch (what the writer does), both to bytes."""
+    from mcap_ros2._dynamic import serialize_dynamic
+
+    from hofto_hw.recording import cdr
+    from hofto_hw.recording import schemas as s
+
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(n, 6))
+    enc = serialize_dynamic(s.JOINT_STATE_TYPE, s.JOINT_STATE_MSGDEF)[s.JOINT_STATE_TYPE]
+    t0 = time.perf_counter()
+    for k in range(n):
+        enc(
+            {
+                "header": {"stamp": {"sec": 0, "nanosec": k}, "frame_id": ""},
+                "name": JOINTS,
+                "position": q[k].tolist(),
+                "velocity": q[k].tolist(),
+                "effort": q[k].tolist(),
+            }
+        )
+    dict_us = (time.perf_counter() - t0) / n * 1e6
+    dtype, template = cdr.joint_state_layout(JOINTS, position=True, velocity=True, effort=True)
+    t0 = time.perf_counter()
+    for start in range(0, n, 100):  # batches of 100 (0.1 s at 1 kHz), as the writer drains
+        b = cdr.fill_batch(dtype, template, 100)
+        cdr.set_stamps(b, np.arange(100) * 1e-3)
+        b["position"] = b["velocity"] = b["effort"] = q[start : start + 100]
+        raw = b.tobytes()
+        _ = [raw[i * dtype.itemsize : (i + 1) * dtype.itemsize] for i in range(100)]
+    batch_us = (time.perf_counter() - t0) / n * 1e6
+    return {"mcap_ros2_dict": dict_us, "fixed_layout_batch": batch_us}
 
 
 def bench_writer(folder: Path, n_ticks: int) -> dict[str, float]:
@@ -208,6 +243,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         out["push_us"] = bench_push(folder, 5000 if args.quick else 20000)
+        out["encode_us_per_message"] = bench_encode(2000 if args.quick else 10000)
         out["writer"] = bench_writer(folder, 10000 if args.quick else 30000)
         out["loop_wakeup_us"] = {
             mode: bench_loop(folder, mode, seconds, args.fifo)
@@ -218,6 +254,11 @@ def main() -> int:
         return 0
     p = out["push_us"]
     print(f"push_tick: median {p['median']:.2f} µs, p99 {p['p99']:.2f} µs")  # type: ignore[index]
+    e = out["encode_us_per_message"]
+    print(
+        f"JointState encoding: mcap_ros2 {e['mcap_ros2_dict']:.1f} µs/message, "  # type: ignore[index]
+        f"fixed-layout batch {e['fixed_layout_batch']:.2f} µs/message"  # type: ignore[index]
+    )
     w = out["writer"]
     print(
         f"writer process: {w['ticks_per_s']:.0f} ticks/s = {w['messages_per_s']:.0f} "  # type: ignore[index]

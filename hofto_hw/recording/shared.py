@@ -61,7 +61,8 @@ class SharedBlock:
         buf = self.shm.buf
         self.control = np.ndarray((CONTROL_BYTES // 8,), dtype="<u8", buffer=buf)
         if create:
-            self.control[:] = 0
+            # touch every page now: the loop's first pushes must not page-fault
+            np.ndarray((total,), dtype=np.uint8, buffer=buf)[:] = 0
         off = CONTROL_BYTES
         self.ticks = Ring(buf, off, tick_dtype, caps.tick, init=create)
         off += sizes[0]
