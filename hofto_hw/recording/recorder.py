@@ -14,7 +14,10 @@ the loop — whether that is a fault is the caller's policy.
 
 from __future__ import annotations
 
-import multiprocessing as mp
+import os
+import pickle
+import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +27,6 @@ import numpy as np
 from hofto_hw.recording import shared as sh
 from hofto_hw.recording.flight_file import LogSpec, rotated_path
 from hofto_hw.recording.record import tick_dtype
-from hofto_hw.recording.writer_process import writer_main
 
 
 @dataclass
@@ -76,14 +78,14 @@ class FlightRecorder:
         self.tick_dtype = tick_dtype(self.n_joints, self.n_observers)
         self._cpus = cpus
         self._block: sh.SharedBlock | None = None
-        self._proc: mp.process.BaseProcess | None = None
+        self._proc: subprocess.Popen[bytes] | None = None
         self._final: RecorderHealth | None = None
 
     # ---------------------------------------------------------------- lifecycle
     def start(self, timeout: float = 60.0) -> FlightRecorder:
-        """Create the rings, start the writer process (spawned: it does not inherit the
-        loop's threads or locks) and wait until it has opened the first file (or failed, or
-        died), at most ``timeout`` [s]. Returns self; check :meth:`health` for failures."""
+        """Create the rings, start the writer process and wait until it has opened the first
+        file (or failed, or died), at most ``timeout`` [s]. Returns self; check
+        :meth:`health` for failures."""
         if self._block is not None:
             raise RuntimeError("flight recorder already started")
         Path(self.spec.path).parent.mkdir(parents=True, exist_ok=True)
@@ -95,18 +97,26 @@ class FlightRecorder:
             b.events.push,
             b.diags.push,
         )
-        ctx = mp.get_context("spawn")
-        self._proc = ctx.Process(
-            target=writer_main,
-            args=(b.name, self.n_joints, self.n_observers, self.caps, self.spec, self._cpus),
-            name="hofto-hw-recorder",
-            daemon=True,
+        # A fresh interpreter (not multiprocessing): it does not depend on how the loop's
+        # __main__ was started, inherits no threads or locks, and owns no resource tracker
+        # of ours. It notices our death by its parent pid changing.
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "hofto_hw.recording.writer_process", b.name],
+            stdin=subprocess.PIPE,
+            close_fds=True,
+            env=_child_env(),
         )
-        self._proc.start()
+        assert self._proc.stdin is not None
+        args = (self.n_joints, self.n_observers, self.caps, self.spec, self._cpus)
+        try:
+            self._proc.stdin.write(pickle.dumps(args))
+            self._proc.stdin.close()
+        except BrokenPipeError:  # died at once: reported by health()
+            pass
         deadline = time.monotonic() + timeout
         while (
             int(b.control[sh.STATE]) == sh.STARTING
-            and self._proc.is_alive()
+            and self._proc.poll() is None
             and time.monotonic() < deadline
         ):
             time.sleep(0.01)
@@ -121,10 +131,11 @@ class FlightRecorder:
             raise RuntimeError("flight recorder not started")
         self._block.control[sh.STOP] = 1
         assert self._proc is not None
-        self._proc.join(timeout)
-        if self._proc.is_alive():
+        try:
+            self._proc.wait(timeout)
+        except subprocess.TimeoutExpired:
             self._proc.kill()
-            self._proc.join()
+            self._proc.wait()
         self._final = self.health()
         self._push_tick = self._push_event = self._push_diag = _discard  # type: ignore[assignment]
         self._block.close()
@@ -170,7 +181,7 @@ class FlightRecorder:
         c = b.control
         files = int(c[sh.FILES])
         return RecorderHealth(
-            writer_alive=self._proc.is_alive(),
+            writer_alive=self._proc.poll() is None,
             state=sh.STATE_NAMES.get(int(c[sh.STATE]), "unknown"),
             bytes_written=int(c[sh.BYTES]),
             records_written=int(c[sh.RECORDS]),
@@ -185,8 +196,24 @@ class FlightRecorder:
         )
 
     @property
+    def shm_name(self) -> str | None:
+        """Name of the shared-memory segment (/dev/shm/<name> on Linux) while running."""
+        return self._block.name if self._block is not None and self._final is None else None
+
+    @property
     def writer_pid(self) -> int | None:
         return self._proc.pid if self._proc is not None else None
+
+
+def _child_env() -> dict[str, str]:
+    """Our environment with this hofto_hw's folder first on PYTHONPATH, so the writer runs
+    the same code even when the loop found it through sys.path rather than an install."""
+    import hofto_hw
+
+    root = str(Path(hofto_hw.__file__).resolve().parent.parent)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    return env
 
 
 def _discard(rec: np.ndarray) -> bool:

@@ -90,7 +90,13 @@ class SharedBlock:
 
 
 def _attach(name: str) -> shared_memory.SharedMemory:
-    """Attach to the owner's segment. The writer is a multiprocessing child, so it shares
-    the owner's resource tracker: registering the name again changes nothing, and the
-    segment is unlinked by the owner (or by the tracker if the owner dies)."""
-    return shared_memory.SharedMemory(name=name)
+    """Attach to the owner's segment without letting this process's resource tracker own it
+    (before Python 3.13 the tracker would unlink the owner's segment when we exit)."""
+    try:
+        return shared_memory.SharedMemory(name=name, track=False)  # type: ignore[call-arg]
+    except TypeError:  # Python < 3.13
+        from multiprocessing import resource_tracker
+
+        shm = shared_memory.SharedMemory(name=name)
+        resource_tracker.unregister(shm._name, "shared_memory")  # type: ignore[attr-defined]
+        return shm

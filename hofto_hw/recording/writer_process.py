@@ -191,3 +191,19 @@ def _run(w: _Writer, ctl: np.ndarray, parent: int, term: list[float]) -> None:
         if n == 0:
             time.sleep(IDLE_SLEEP)
     w.finish()
+
+
+def main() -> int:
+    """``python -m hofto_hw.recording.writer_process SHM_NAME`` with the pickled arguments
+    (n_joints, n_observers, caps, spec, cpus) on stdin: how FlightRecorder starts it."""
+    import pickle
+    import sys
+
+    args = pickle.load(sys.stdin.buffer)
+    sys.stdin.close()
+    writer_main(sys.argv[1], *args)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

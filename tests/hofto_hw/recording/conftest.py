@@ -32,6 +32,7 @@ class Child:
             start_new_session=True,
         )
         self.lines: queue.Queue[str] = queue.Queue()
+        self.shm_name = ""
         threading.Thread(target=self._read, daemon=True).start()
 
     def _read(self) -> None:
@@ -41,6 +42,12 @@ class Child:
         self.lines.put("")  # EOF
 
     def expect(self, prefix: str) -> str:
+        line = self._expect(prefix)
+        if prefix == "ready":
+            self.shm_name = line.split()[2]
+        return line
+
+    def _expect(self, prefix: str) -> str:
         while True:
             try:
                 line = self.lines.get(timeout=STATE_TIMEOUT)
@@ -72,3 +79,5 @@ def child_factory():
     for c in made:
         if c.proc.poll() is None:
             c.kill_group()
+        if c.shm_name:  # a killed group takes its resource tracker along: unlink for it
+            Path("/dev/shm", c.shm_name.lstrip("/")).unlink(missing_ok=True)

@@ -3,7 +3,7 @@ absolute deadlines into a FlightRecorder and reports progress on stdout.
 
     python flight_child.py OUT.mcap N_TICKS   # N_TICKS = 0: push until killed
 
-Prints ``ready WRITER_PID`` once the writer has opened the file, then ``pushed K FLUSHED T``
+Prints ``ready WRITER_PID SHM_NAME`` once the writer has opened the file, then ``pushed K FLUSHED T``
 every 100 ticks (T: the tick time [s]) and ``done K`` after N_TICKS; SIGTERM closes the recorder,
 prints ``closed <health as JSON>`` and exits 0. Tick k carries q = k·1e-3 + j (joint j), so
 a reader can check every value.
@@ -48,7 +48,7 @@ def main() -> int:
     rec = FlightRecorder(spec).start()
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
-    print(f"ready {rec.writer_pid}", flush=True)
+    print(f"ready {rec.writer_pid} {rec.shm_name}", flush=True)
     tick = new_record(rec.tick_dtype)
     ev = new_record(EVENT_DTYPE)
     k = 0
