@@ -4,10 +4,9 @@ absolute deadlines into a FlightRecorder and reports progress on stdout.
     python flight_child.py OUT.mcap N_TICKS   # N_TICKS = 0: push until killed
 
 Prints ``ready WRITER_PID SHM_NAME`` once the writer has opened the file, then
-``pushed K FLUSHED T``
-every 100 ticks (T: the tick time [s]) and ``done K`` after N_TICKS; SIGTERM closes the recorder,
-prints ``closed <health as JSON>`` and exits 0. Tick k carries q = k·1e-3 + j (joint j), so
-a reader can check every value.
+``pushed K FLUSHED T`` every 100 ticks (T: the tick time [s]) and ``done K`` after N_TICKS;
+SIGTERM closes the recorder, prints ``closed <health as JSON>`` and exits 0. Tick k carries
+q = k·1e-3 + j (joint j), so a reader can check every value.
 """
 
 from __future__ import annotations
