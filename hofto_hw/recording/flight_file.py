@@ -60,14 +60,14 @@ class LogSpec:
 
 
 class CountingFile:
-    """Unbuffered file that counts the bytes written (``written``), shared with a global
-    total for the ``fail_after_bytes`` fault hook. Data reaches the kernel at each write, so
-    a killed writer process loses nothing that was written."""
+    """Unbuffered new file (FileExistsError if it exists) that counts the bytes written
+    (``written``, and a process-wide total for the ``fail_after_bytes`` fault hook). Data
+    reaches the kernel at each write: a killed writer loses nothing it wrote."""
 
     total = 0
 
     def __init__(self, path: Path, fail_after: int | None = None) -> None:
-        self._f = open(path, "wb", buffering=0)
+        self._f = open(path, "xb", buffering=0)  # never overwrite a log
         self.written = 0
         self._fail_after = fail_after
 

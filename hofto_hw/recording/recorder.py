@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hofto_hw.errors import UserError
 from hofto_hw.recording import shared as sh
 from hofto_hw.recording.flight_file import LogSpec, rotated_path
 from hofto_hw.recording.record import tick_dtype
@@ -88,6 +89,8 @@ class FlightRecorder:
         :meth:`health` for failures."""
         if self._block is not None:
             raise RuntimeError("flight recorder already started")
+        if Path(self.spec.path).exists():
+            raise UserError(f"{self.spec.path}: exists; a flight log is never overwritten")
         Path(self.spec.path).parent.mkdir(parents=True, exist_ok=True)
         self._block = sh.SharedBlock(self.tick_dtype, self.caps, create=True)
         b = self._block
@@ -191,7 +194,7 @@ class FlightRecorder:
             write_errors=int(c[sh.ERRORS]),
             disk_failing=bool(c[sh.FAILING]),
             files=files,
-            current_file=rotated_path(Path(self.spec.path), files - 1) if files else None,
+            current_file=rotated_path(Path(self.spec.path), int(c[sh.INDEX])) if files else None,
             pending=b.ticks.pending(),
         )
 

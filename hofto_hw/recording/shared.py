@@ -17,9 +17,11 @@ from hofto_hw.recording.ring import Ring, ring_nbytes
 
 CONTROL_BYTES = 256
 
-#: control words (index into the u64 view); the owner writes STOP, the writer the others
-STOP, PID, HEARTBEAT, BYTES, RECORDS, ERRORS, FAILING, FILES, LOST, STATE, FLUSHED = range(11)
-#: FLUSHED: records whose messages are in closed chunks handed to the kernel (survive SIGKILL)
+#: control words (index into the u64 view); the owner writes STOP, the writer the others.
+#: INDEX: rotation index of the open file; FLUSHED: records whose messages are in closed
+#: chunks handed to the kernel (they survive a SIGKILL).
+(STOP, PID, HEARTBEAT, BYTES, RECORDS, ERRORS, FAILING, FILES, LOST, STATE, FLUSHED,
+ INDEX) = range(12)  # fmt: skip
 
 #: writer states in the STATE word
 STARTING, RUNNING, FAILED, FINISHED = 0, 1, 2, 3

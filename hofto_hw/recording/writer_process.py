@@ -62,10 +62,17 @@ class _Writer:
         }
 
     def _open(self, now: float) -> None:
-        path = rotated_path(self.spec.path, self.index)
-        self.index += 1
-        self.ctl[sh.FILES] = self.index
-        self.file = FlightFile(self.spec, path, self.index - 1)
+        """Open the next free file name (existing files are never overwritten)."""
+        while True:
+            path = rotated_path(self.spec.path, self.index)
+            self.index += 1
+            try:
+                self.file = FlightFile(self.spec, path, self.index - 1)
+                break
+            except FileExistsError:
+                continue
+        self.ctl[sh.FILES] += 1
+        self.ctl[sh.INDEX] = self.index - 1
         self.opened_at = self.flushed_at = now
 
     def _fail(self, now: float) -> None:
@@ -108,10 +115,14 @@ class _Writer:
                 self.file.flush()
                 self.flushed_at = now
                 self.ctl[sh.FLUSHED] = self.ctl[sh.RECORDS]
-            self._maybe_rotate(now)
         except OSError:
             self.ctl[sh.LOST] += n
             self._fail(now)
+        if self.file is not None:
+            try:
+                self._maybe_rotate(now)
+            except OSError:  # the records are in the finished file; the new one failed
+                self._fail(now)
         self._sync_bytes()
         return n
 

@@ -8,10 +8,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
 
+from hofto_hw.errors import UserError
 from hofto_hw.recording import shared as sh
 from hofto_hw.recording.flight_file import LogSpec, rotated_path
 from hofto_hw.recording.record import new_record, tick_dtype
@@ -56,16 +58,22 @@ def joint_state_ticks(path: Path) -> list[int]:
 
 
 def test_rotates_by_size_into_complete_files_that_together_hold_every_tick(tmp_path):
+    old = tmp_path / "run.1.mcap"  # a file of an earlier run: skipped, never overwritten
+    old.write_bytes(b"earlier run")
     rec = FlightRecorder(spec(tmp_path / "run.mcap", rotate_bytes=100_000)).start()
     push, k = pusher(rec)
     while rec.health().files < 3:
         push(100)
         wait_for(lambda: rec.health().pending == 0, "ring drained")
+    assert rec.health().current_file == rotated_path(tmp_path / "run.mcap", rec.health().files)
     health = rec.close()
     assert health.dropped == 0 and health.write_errors == 0
-    files = [rotated_path(tmp_path / "run.mcap", i) for i in range(health.files)]
+    assert old.read_bytes() == b"earlier run"
+    files = [tmp_path / "run.mcap"] + [
+        rotated_path(tmp_path / "run.mcap", i) for i in range(2, health.files + 1)
+    ]
     assert all(p.is_file() for p in files)
-    assert files[1].name == "run.1.mcap"
+    assert files[1].name == "run.2.mcap"
     ticks = [t for p in files for t in joint_state_ticks(p)]  # each opens with the indexed reader
     assert sorted(ticks) == list(range(k[0]))
     assert all(p.stat().st_size < 100_000 + 200_000 for p in files[:-1])
@@ -141,3 +149,33 @@ def test_ticks_are_written_with_tick_as_sequence(tmp_path):
     rec.close()
     assert joint_state_ticks(tmp_path / "run.mcap") == list(range(10))
     assert np.dtype(rec.tick_dtype) == tick_dtype(3, 1)
+
+
+def test_a_real_file_size_limit_is_a_counted_write_error(tmp_path):
+    """RLIMIT_FSIZE (inherited by the writer): the kernel refuses the write with EFBIG."""
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    small = sh.Capacities(tick=64, event=16, diag=16)  # the segment is under the limit too
+    resource.setrlimit(resource.RLIMIT_FSIZE, (120_000, hard))
+    try:
+        rec = FlightRecorder(spec(tmp_path / "run.mcap", retry_seconds=3600.0), small).start()
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+    push, k = pusher(rec)
+    while rec.health().write_errors == 0:
+        push(50)
+        wait_for(lambda: rec.health().pending == 0, "ring drained")
+    h = rec.health()
+    assert h.writer_alive and h.disk_failing and rec.dropped == 0
+    assert (tmp_path / "run.mcap").stat().st_size <= 120_000
+    final = rec.close()
+    assert final.records_written + final.records_lost == k[0]
+
+
+def test_an_existing_log_is_never_overwritten(tmp_path):
+    path = tmp_path / "run.mcap"
+    path.write_bytes(b"earlier run")
+    with pytest.raises(UserError, match="never overwritten"):
+        FlightRecorder(spec(path)).start()
+    assert path.read_bytes() == b"earlier run"
