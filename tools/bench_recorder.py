@@ -5,6 +5,7 @@ writer thread in the loop's process, the design the issue measured at p99 3.1 ms
     python tools/bench_recorder.py            # ~40 s
     python tools/bench_recorder.py --quick    # ~10 s
     python tools/bench_recorder.py --json --fifo   # SCHED_FIFO 50 for the loop (root)
+    python tools/bench_recorder.py --fifo --pin    # loop on the last CPU, writer elsewhere
 
 Figures: push median/p99 [µs]; JointState encoding cost per message; writer messages/s
 and tick records/s (6 joints, 3 observers: 6 messages per tick); loop wake-up latency
@@ -187,11 +188,17 @@ class _ThreadWriter:
         self.file.finish()
 
 
-def bench_loop(folder: Path, mode: str, seconds: float, fifo: bool) -> dict[str, object]:
-    """A bare 1 kHz loop (absolute deadlines, gc off) pushing one tick per cycle."""
+def bench_loop(folder: Path, mode: str, seconds: float, fifo: bool, pin: bool) -> dict[str, object]:
+    """A bare 1 kHz loop (absolute deadlines, gc off) pushing one tick per cycle. ``pin``:
+    the loop on the last CPU, the writer process on the others."""
     sink: object | None = None
+    cpus = sorted(os.sched_getaffinity(0))
+    old_affinity = set(cpus)
+    if pin and len(cpus) > 1:
+        os.sched_setaffinity(0, {cpus[-1]})
     if mode == "process":
-        sink = FlightRecorder(spec(folder, "loop.mcap")).start()
+        writer_cpus = cpus[:-1] if pin and len(cpus) > 1 else None
+        sink = FlightRecorder(spec(folder, "loop.mcap"), cpus=writer_cpus).start()
     elif mode == "thread":
         sink = _ThreadWriter(spec(folder, "loop_thread.mcap"))
     tick = new_record(tick_dtype(len(JOINTS), len(OBSERVERS)))
@@ -224,6 +231,7 @@ def bench_loop(folder: Path, mode: str, seconds: float, fifo: bool) -> dict[str,
         gc.enable()
         if fifo:
             os.sched_setscheduler(0, old_policy, os.sched_param(0))
+        os.sched_setaffinity(0, old_affinity)
     dropped = 0
     if sink is not None:
         dropped = sink.dropped  # type: ignore[attr-defined]
@@ -236,17 +244,20 @@ def main() -> int:
     parser.add_argument("--json", action="store_true", help="print figures as JSON")
     parser.add_argument("--quick", action="store_true", help="short runs (~10 s)")
     parser.add_argument("--fifo", action="store_true", help="SCHED_FIFO 50 for the loop")
+    parser.add_argument(
+        "--pin", action="store_true", help="loop on the last CPU, writer on the others"
+    )
     parser.add_argument("--seconds", type=float, help="seconds per loop mode (default 10/3)")
     args = parser.parse_args()
     seconds = args.seconds or (3.0 if args.quick else 10.0)
-    out: dict[str, object] = {"loop_seconds": seconds, "fifo": args.fifo}
+    out: dict[str, object] = {"loop_seconds": seconds, "fifo": args.fifo, "pin": args.pin}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         out["push_us"] = bench_push(folder, 5000 if args.quick else 20000)
         out["encode_us_per_message"] = bench_encode(2000 if args.quick else 10000)
         out["writer"] = bench_writer(folder, 10000 if args.quick else 30000)
         out["loop_wakeup_us"] = {
-            mode: bench_loop(folder, mode, seconds, args.fifo)
+            mode: bench_loop(folder, mode, seconds, args.fifo, args.pin)
             for mode in ("off", "process", "thread")
         }
     if args.json:
@@ -264,7 +275,7 @@ def main() -> int:
         f"writer process: {w['ticks_per_s']:.0f} ticks/s = {w['messages_per_s']:.0f} "  # type: ignore[index]
         f"messages/s, {w['bytes_per_tick']:.0f} B/tick on disk"  # type: ignore[index]
     )
-    fifo = "SCHED_FIFO 50" if args.fifo else "SCHED_OTHER"
+    fifo = ("SCHED_FIFO 50" if args.fifo else "SCHED_OTHER") + (", pinned" if args.pin else "")
     print(f"1 kHz loop wake-up latency [µs], {seconds:.0f} s each, {fifo}:")
     for mode, r in out["loop_wakeup_us"].items():  # type: ignore[union-attr]
         print(

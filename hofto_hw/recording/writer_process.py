@@ -161,7 +161,10 @@ def writer_main(
     """Entry point of the writer process (multiprocessing target)."""
     _drop_realtime()
     if cpus:
-        os.sched_setaffinity(0, cpus)
+        try:
+            os.sched_setaffinity(0, cpus)
+        except OSError:  # CPUs outside our cpuset: keep the inherited affinity
+            pass
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the owner decides when to stop
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # RLIMIT_FSIZE: get EFBIG, not death
     term = [0.0]
