@@ -179,3 +179,19 @@ def test_an_existing_log_is_never_overwritten(tmp_path):
     with pytest.raises(UserError, match="never overwritten"):
         FlightRecorder(spec(path)).start()
     assert path.read_bytes() == b"earlier run"
+
+
+def test_the_writer_leaves_the_pinned_loops_cpu(tmp_path):
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        pytest.skip("one CPU: nowhere else to put the writer")
+    os.sched_setaffinity(0, {cpus[-1]})  # the loop pins itself before starting the recorder
+    try:
+        rec = FlightRecorder(spec(tmp_path / "run.mcap")).start()
+    finally:
+        os.sched_setaffinity(0, set(cpus))
+    try:
+        assert rec.health().state == "running"  # affinity is set before the writer runs
+        assert cpus[-1] not in os.sched_getaffinity(rec.writer_pid)
+    finally:
+        rec.close()
