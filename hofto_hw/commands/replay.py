@@ -1,9 +1,14 @@
-"""``hofto-hw replay PARAMS FILE``: run an observer offline over a recording, apply the
-collision thresholds, list contact episodes, optionally write a PNG and JSON.
+"""``hofto-hw replay PARAMS FILE`` (or ``hofto-hw replay FLIGHT.mcap``): run an observer
+offline over a recording, apply the collision thresholds, list contact episodes, optionally
+write a PNG and JSON.
 
 Example (UR10e; config, column map and thresholds are found from the parameters file)::
 
     hofto-hw replay configs/ur10e/parameters.yaml ur-20_01_22-push_pose_1.csv --plot push.png
+
+A flight-recorder log carries its config, parameters and thresholds: ``hofto-hw replay
+run.mcap`` re-runs its observers and monitor and checks the recorded collision tick
+(hofto_hw/commands/replay_flight.py; exit 1 when the replay decides differently).
 """
 
 from __future__ import annotations
