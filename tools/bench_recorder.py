@@ -8,7 +8,7 @@ writer thread in the loop's process, the design the issue measured at p99 3.1 ms
     python tools/bench_recorder.py --fifo --pin    # loop on the last CPU, writer elsewhere
 
 Figures: push median/p99 [µs]; JointState encoding cost per message; writer messages/s
-and tick records/s (6 joints, 3 observers: 6 messages per tick); loop wake-up latency
+and tick records/s (6 joints, 3 observers: 7 messages per tick); loop wake-up latency
 median/p99/p99.9/max [µs] and overruns (> 1 ms late) for each mode; dropped records.
 """
 
@@ -140,7 +140,7 @@ def bench_writer(folder: Path, n_ticks: int) -> dict[str, float]:
         time.sleep(0.002)
     elapsed = time.perf_counter() - t0
     health = rec.close()
-    per_tick = 3 + len(OBSERVERS)  # joint states, commands, wrench, one per observer
+    per_tick = 4 + len(OBSERVERS)  # joint states, commands, status, wrench, observers
     return {
         "ticks_per_s": n_ticks / elapsed,
         "messages_per_s": n_ticks * per_tick / elapsed,

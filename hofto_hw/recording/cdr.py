@@ -20,7 +20,7 @@ ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR little endian, no options
 class CdrLayout:
     """Builder of one fixed layout: add fields in message order, then :meth:`build`.
 
-    Variable fields (``i4``/``u4``/``f8`` scalars or fixed-length ``f8`` arrays) become
+    Variable fields (integer/float scalars or fixed-length ``f8`` arrays) become
     named dtype fields; constants (strings, sequence lengths) go into the template.
     """
 
@@ -41,8 +41,9 @@ class CdrLayout:
         self._pos = end
 
     def scalar(self, name: str, fmt: str) -> CdrLayout:
-        """A variable scalar: fmt 'i4', 'u4' or 'f8'."""
-        size = int(fmt[1])
+        """A variable scalar of numpy kind+size ``fmt`` ('u1', 'i4', 'u4', 'f4', 'u8', 'f8'),
+        aligned to its size as CDR does."""
+        size = int(fmt[1:])
         self._align(size)
         self._fields[name] = (fmt, 1, self._pos)
         self._put(b"\x00" * size)
@@ -135,3 +136,11 @@ def set_stamps(batch: np.ndarray, t: np.ndarray) -> np.ndarray:
     batch["sec"] = ns // 1_000_000_000
     batch["nanosec"] = ns % 1_000_000_000
     return ns
+
+
+def tick_status_layout() -> tuple[np.dtype, np.ndarray]:
+    """hofto_hw_msgs/msg/TickStatus: ``tick`` u8, ``mode`` u1, ``faults`` u4, ``bus_status``
+    i4, ``wakeup_us``/``compute_us`` f4."""
+    lay = header(CdrLayout(), "").scalar("tick", "u8").scalar("mode", "u1")
+    lay.scalar("faults", "u4").scalar("bus_status", "i4")
+    return lay.scalar("wakeup_us", "f4").scalar("compute_us", "f4").build()

@@ -8,6 +8,8 @@ Topics (log time = publish time = the record's ``t`` in ns, sequence = tick mod 
 - ``/joint_commands`` JointState: position = commanded q [rad];
 - ``/observers/<name>/tau_ext`` JointState: effort = that observer's tau_ext_hat [N·m];
 - ``/tool/wrench_estimate`` geometry_msgs/WrenchStamped [N, N·m] (ticks where it is computed);
+- ``/loop/status`` hofto_hw_msgs/TickStatus: mode, latched fault bits, bus status, wake-up
+  and compute time [µs], one per tick;
 - ``/diagnostics`` diagnostic_msgs/DiagnosticArray (loop, bus, recorder health, 10 Hz);
 - ``/safety/events`` hofto_hw_msgs/SafetyEvent (see schemas.py for why a custom message).
 """
@@ -140,10 +142,12 @@ class FlightFile:
             s.DIAGNOSTICS_TOPIC, s.DIAGNOSTIC_ARRAY_TYPE, s.DIAGNOSTIC_ARRAY_MSGDEF
         )
         self.ch_event = channel(s.SAFETY_TOPIC, s.SAFETY_EVENT_TYPE, s.SAFETY_EVENT_MSGDEF)
+        self.ch_status = channel(s.TICK_STATUS_TOPIC, s.TICK_STATUS_TYPE, s.TICK_STATUS_MSGDEF)
         self.lay_state = cdr.joint_state_layout(names, position=True, velocity=True, effort=True)
         self.lay_cmd = cdr.joint_state_layout(names, position=True, velocity=False, effort=False)
         self.lay_obs = cdr.joint_state_layout(names, position=False, velocity=False, effort=True)
         self.lay_wrench = cdr.wrench_stamped_layout(spec.wrench_frame)
+        self.lay_status = cdr.tick_status_layout()
         self.enc_diag = serialize_dynamic(s.DIAGNOSTIC_ARRAY_TYPE, s.DIAGNOSTIC_ARRAY_MSGDEF)[
             s.DIAGNOSTIC_ARRAY_TYPE
         ]
@@ -181,6 +185,11 @@ class FlightFile:
         for i, ch in enumerate(self.ch_obs):
             b["effort"] = ticks["tau_ext"][:, i]
             self._emit(ch, b, ns, seq)
+        b = cdr.fill_batch(*self.lay_status, n)
+        cdr.set_stamps(b, ticks["t"])
+        for name in ("tick", "mode", "faults", "bus_status", "wakeup_us", "compute_us"):
+            b[name] = ticks[name]
+        self._emit(self.ch_status, b, ns, seq)
         have = np.isfinite(ticks["wrench"]).all(axis=1)
         if have.any():
             w = ticks[have]

@@ -99,11 +99,30 @@ SAFETY_EVENT_MSGDEF = _msgdef(
     _TIME,
 )
 
+#: Per-tick loop status (controller mode, latched fault bits, bus status, timing): a custom
+#: message for the same reasons as the safety event; fixed size, so the writer packs it in
+#: batches like the joint states.
+TICK_STATUS_TYPE = "hofto_hw_msgs/msg/TickStatus"
+TICK_STATUS_MSGDEF = _msgdef(
+    [
+        "std_msgs/Header header",
+        "uint64 tick",
+        "uint8 mode",
+        "uint32 faults",
+        "int32 bus_status",
+        "float32 wakeup_us",
+        "float32 compute_us",
+    ],
+    _HEADER,
+    _TIME,
+)
+
 #: flight-recorder topics (JOINT_STATE_TOPIC carries q [rad], qd [rad/s], tau [N·m])
 COMMAND_TOPIC = "/joint_commands"  # JointState, position = commanded q [rad]
 WRENCH_TOPIC = "/tool/wrench_estimate"  # WrenchStamped [N, N·m]
 DIAGNOSTICS_TOPIC = "/diagnostics"  # DiagnosticArray at 10 Hz
 SAFETY_TOPIC = "/safety/events"  # SafetyEvent
+TICK_STATUS_TOPIC = "/loop/status"  # TickStatus, every tick
 
 
 def observer_topic(name: str) -> str:

@@ -40,6 +40,8 @@ def fill(rec, k: int) -> None:
     rec["qd"][:] = 0.5
     rec["tau"][:] = -1.0
     rec["tau_ext"][:] = 0.25
+    rec["faults"] = k % 7
+    rec["wakeup_us"] = 1.5
 
 
 def main() -> int:

@@ -77,3 +77,23 @@ def test_wrench_stamped_matches():
         }
     )
     assert batch.tobytes() == ref
+
+
+def test_tick_status_matches():
+    dtype, template = cdr.tick_status_layout()
+    batch = cdr.fill_batch(dtype, template, 1)
+    cdr.set_stamps(batch, np.array([1.001]))
+    batch["tick"], batch["mode"], batch["faults"] = 2**40 + 3, 2, 0x80000001
+    batch["bus_status"], batch["wakeup_us"], batch["compute_us"] = -3, 12.5, 250.25
+    ref = encoder(s.TICK_STATUS_TYPE, s.TICK_STATUS_MSGDEF)(
+        {
+            "header": stamp(1_001_000_000),
+            "tick": 2**40 + 3,
+            "mode": 2,
+            "faults": 0x80000001,
+            "bus_status": -3,
+            "wakeup_us": 12.5,
+            "compute_us": 250.25,
+        }
+    )
+    assert batch.tobytes() == ref

@@ -13,7 +13,12 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from hofto_hw.cli import main as cli_main
-from hofto_hw.recording.schemas import JOINT_STATE_TOPIC, SAFETY_TOPIC, observer_topic
+from hofto_hw.recording.schemas import (
+    JOINT_STATE_TOPIC,
+    SAFETY_TOPIC,
+    TICK_STATUS_TOPIC,
+    observer_topic,
+)
 
 N_TICKS = 3000
 
@@ -57,6 +62,9 @@ def test_sigterm_gives_a_complete_file_with_every_tick(tmp_path, child_factory):
     for name in ("hofto", "momentum", "eso"):
         seqs, msgs = decode_all(out, observer_topic(name))
         assert len(msgs) == N_TICKS and np.allclose(msgs[-1].effort, 0.25)
+    seqs, status = decode_all(out, TICK_STATUS_TOPIC)
+    assert sorted(seqs) == list(range(N_TICKS))
+    assert all(m.faults == m.tick % 7 and m.wakeup_us == 1.5 for m in status)
     _, events = decode_all(out, SAFETY_TOPIC)
     assert [(e.tick, e.kind_name, e.joint, e.category) for e in events] == [
         (500, "collision", 2, 1)
