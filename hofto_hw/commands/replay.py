@@ -1,9 +1,14 @@
-"""``hofto-hw replay PARAMS FILE``: run an observer offline over a recording, apply the
-collision thresholds, list contact episodes, optionally write a PNG and JSON.
+"""``hofto-hw replay PARAMS FILE`` (or ``hofto-hw replay FLIGHT.mcap``): run an observer
+offline over a recording, apply the collision thresholds, list contact episodes, optionally
+write a PNG and JSON.
 
 Example (UR10e; config, column map and thresholds are found from the parameters file)::
 
     hofto-hw replay configs/ur10e/parameters.yaml ur-20_01_22-push_pose_1.csv --plot push.png
+
+A flight-recorder log carries its config, parameters and thresholds: ``hofto-hw replay
+run.mcap`` re-runs its observers and monitor and checks the recorded collision tick
+(hofto_hw/commands/replay_flight.py; exit 1 when the replay decides differently).
 """
 
 from __future__ import annotations
@@ -44,9 +49,22 @@ def add_common(parser: argparse.ArgumentParser) -> None:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("params", type=Path, metavar="PARAMS", help="identified-parameters file")
-    parser.add_argument("file", type=Path, metavar="FILE", help="recording (CSV or .mcap)")
+    parser.add_argument(
+        "params",
+        type=Path,
+        metavar="PARAMS",
+        help="identified-parameters file (omit for a flight-recorder log: it carries its own)",
+    )
+    parser.add_argument(
+        "file", type=Path, nargs="?", metavar="FILE", help="recording (CSV or .mcap)"
+    )
     add_common(parser)
+    parser.add_argument(
+        "--reproduce",
+        action="store_true",
+        help="flight-recorder logs (the default for them): re-run the recorded observers and "
+        "monitor and check the recorded collision tick; exit 1 if it differs",
+    )
     parser.add_argument(
         "--observer",
         choices=OBSERVER_NAMES,
@@ -97,6 +115,23 @@ def _print_text(report_dict: dict, thresholds: Path | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hofto_hw.replay.flight_log import flight_metadata
+
+    if args.file is None:  # `replay FILE`: only a flight log carries its own parameters
+        args.file, args.params = args.params, None
+    if flight_metadata(args.file) is not None:
+        if args.params is not None:
+            raise UserError(
+                f"{args.file}: a flight-recorder log carries its config and parameters; "
+                "run `hofto-hw replay FILE` without PARAMS"
+            )
+        from hofto_hw.commands.replay_flight import run_flight
+
+        return run_flight(args)
+    if args.params is None:
+        raise UserError(f"{args.file}: not a flight-recorder log: give PARAMS FILE")
+    if args.reproduce:
+        raise UserError(f"{args.file}: --reproduce needs a flight-recorder log")
     from hofto_hw.replay.plot import plot_replay
     from hofto_hw.replay.session import load_for_replay, run_replay
     from hofto_hw.replay.setup import (

@@ -35,3 +35,101 @@ JOINT_STATE_MSGDEF = "\n".join(
 
 #: metadata record naming the joints and where the data came from
 METADATA_NAME = "hofto_hw"
+
+
+# ----------------------------------------------------------------- flight recorder topics
+
+
+def _msgdef(*parts: list[str]) -> str:
+    """A top-level definition followed by its dependencies, separated as rosbag2 does."""
+    out: list[str] = list(parts[0])
+    for dep in parts[1:]:
+        out += [_SEPARATOR, *dep]
+    return "\n".join(out)
+
+
+_HEADER = ["MSG: std_msgs/Header", "builtin_interfaces/Time stamp", "string frame_id"]
+_TIME = ["MSG: builtin_interfaces/Time", "int32 sec", "uint32 nanosec"]
+
+WRENCH_STAMPED_TYPE = "geometry_msgs/msg/WrenchStamped"
+WRENCH_STAMPED_MSGDEF = _msgdef(
+    ["std_msgs/Header header", "Wrench wrench"],
+    _HEADER,
+    _TIME,
+    ["MSG: geometry_msgs/Wrench", "Vector3  force", "Vector3  torque"],
+    ["MSG: geometry_msgs/Vector3", "float64 x", "float64 y", "float64 z"],
+)
+
+DIAGNOSTIC_ARRAY_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
+DIAGNOSTIC_ARRAY_MSGDEF = _msgdef(
+    ["std_msgs/Header header", "DiagnosticStatus[] status"],
+    _HEADER,
+    _TIME,
+    [
+        "MSG: diagnostic_msgs/DiagnosticStatus",
+        "byte OK=0",
+        "byte WARN=1",
+        "byte ERROR=2",
+        "byte STALE=3",
+        "byte level",
+        "string name",
+        "string message",
+        "string hardware_id",
+        "KeyValue[] values",
+    ],
+    ["MSG: diagnostic_msgs/KeyValue", "string key", "string value"],
+)
+
+#: Safety events use a small custom message rather than std_msgs/String with JSON: the
+#: fields are typed (Foxglove plots them, replay reads the tick as an integer, no parser or
+#: schema drift), and the definition travels in the file, so mcap/Foxglove decode it without
+#: a ROS installation. (A live ROS 2 subscriber would need the package built; we only log.)
+SAFETY_EVENT_TYPE = "hofto_hw_msgs/msg/SafetyEvent"
+SAFETY_EVENT_MSGDEF = _msgdef(
+    [
+        "std_msgs/Header header",
+        "uint64 tick",
+        "uint16 kind",
+        "string kind_name",
+        "int16 joint",
+        "int8 category",
+        "float64 value",
+    ],
+    _HEADER,
+    _TIME,
+)
+
+#: Per-tick loop status (controller mode, latched fault bits, bus status, timing): a custom
+#: message for the same reasons as the safety event; fixed size, so the writer packs it in
+#: batches like the joint states.
+TICK_STATUS_TYPE = "hofto_hw_msgs/msg/TickStatus"
+TICK_STATUS_MSGDEF = _msgdef(
+    [
+        "std_msgs/Header header",
+        "uint64 tick",
+        "uint8 mode",
+        "uint32 faults",
+        "int32 bus_status",
+        "float32 wakeup_us",
+        "float32 compute_us",
+    ],
+    _HEADER,
+    _TIME,
+)
+
+#: flight-recorder topics (JOINT_STATE_TOPIC carries q [rad], qd [rad/s], tau [N·m])
+COMMAND_TOPIC = "/joint_commands"  # JointState, position = commanded q [rad]
+WRENCH_TOPIC = "/tool/wrench_estimate"  # WrenchStamped [N, N·m]
+DIAGNOSTICS_TOPIC = "/diagnostics"  # DiagnosticArray at 10 Hz
+SAFETY_TOPIC = "/safety/events"  # SafetyEvent
+TICK_STATUS_TOPIC = "/loop/status"  # TickStatus, every tick
+
+
+def observer_topic(name: str) -> str:
+    """JointState topic of observer ``name``'s tau_ext_hat [N·m] (effort field)."""
+    return f"/observers/{name}/tau_ext"
+
+
+#: metadata record name and format tag of flight-recorder files
+FLIGHT_METADATA = "hofto_hw.flight"
+FLIGHT_FORMAT = "hofto-hw/flight-recorder"

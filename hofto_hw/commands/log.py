@@ -1,0 +1,71 @@
+"""``hofto-hw log info FILE`` and ``hofto-hw log recover FILE [-o OUT]``: inspect flight-
+recorder MCAP logs and salvage one whose writer was killed.
+
+Examples::
+
+    hofto-hw log info /var/log/hofto-hw/run.mcap
+    hofto-hw log recover /var/log/hofto-hw/run.mcap        # -> run.recovered.mcap
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from hofto_hw.errors import UserError
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="log_command", metavar="ACTION", required=True)
+    p = sub.add_parser("info", help="topics, message counts, duration, size of a log")
+    p.add_argument("file", type=Path, metavar="FILE")
+    p.add_argument("--json", action="store_true", help="print as JSON")
+    p = sub.add_parser("recover", help="rewrite a truncated log into a complete one")
+    p.add_argument("file", type=Path, metavar="FILE")
+    p.add_argument(
+        "-o", "--output", type=Path, help="output file (default: FILE's stem + .recovered.mcap)"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.log_command == "info":
+        return _info(args)
+    return _recover(args)
+
+
+def _info(args: argparse.Namespace) -> int:
+    from hofto_hw.recording.info import log_info
+
+    info = log_info(args.file)
+    if args.json:
+        print(json.dumps(info.as_dict(), indent=2))
+        return 0
+    state = "complete" if info.complete else "INCOMPLETE (truncated; try `hofto-hw log recover`)"
+    print(f"{info.path}: {info.size / 1e6:.2f} MB, {info.duration:.3f} s, {state}")
+    width = max((len(t) for t in info.topics), default=0)
+    for topic, (type_name, count) in sorted(info.topics.items()):
+        print(f"  {topic:<{width}}  {count:9d}  {type_name}")
+    if info.attachments:
+        print(f"  attachments: {', '.join(info.attachments)}")
+    for name, meta in info.metadata.items():
+        print(f"  metadata {name}: {', '.join(f'{k}={v}' for k, v in meta.items())}")
+    return 0
+
+
+def _recover(args: argparse.Namespace) -> int:
+    from hofto_hw.recording.recover import default_output, recover
+
+    src: Path = args.file
+    dst: Path = args.output if args.output is not None else default_output(src)
+    if args.output is None and dst.exists():
+        raise UserError(f"{dst}: exists; name the output with -o (it will be replaced)")
+    out = recover(src, dst)
+    state = "was complete" if out.complete else f"truncated ({out.stopped or 'end of file'})"
+    print(
+        f"{src}: {state}; wrote {dst}: {out.total} messages up to {out.end_ns * 1e-9:.3f} s, "
+        f"{out.attachments} attachments, {out.metadata} metadata records"
+    )
+    for topic, n in sorted(out.messages.items()):
+        print(f"  {topic}: {n}")
+    return 0

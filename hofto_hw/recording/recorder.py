@@ -1,0 +1,234 @@
+"""FlightRecorder: the loop's RecordSink backed by shared-memory rings and a writer process.
+
+The loop calls ``push_tick`` / ``push_event`` / ``push_diag`` (a copy into a ring slot, no
+lock, no allocation, never blocks); the writer process it owns turns the records into MCAP
+(:mod:`hofto_hw.recording.writer_process`). :meth:`health` says whether the writer is alive,
+what it wrote and what was lost; a dead writer or a full disk is reported, never raised into
+the loop — whether that is a fault is the caller's policy.
+
+    rec = FlightRecorder(LogSpec(path, joint_names, observers, attachments=...))
+    rec.start()
+    ... rec.push_tick(tick_record) every tick ...
+    rec.close()          # finishes the file (also on SIGTERM of the owner, if it calls close)
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hofto_hw.errors import UserError
+from hofto_hw.recording import shared as sh
+from hofto_hw.recording.flight_file import LogSpec, rotated_path
+from hofto_hw.recording.record import tick_dtype
+
+
+@dataclass
+class RecorderHealth:
+    """A snapshot of the recorder: ``writer_alive``, ``state`` (starting/running/failed/
+    finished), ``bytes_written`` (all files), ``records_written``, ``records_flushed`` (in
+    closed chunks: they survive a SIGKILL), ``dropped`` (refused by a
+    full ring, all kinds), ``records_lost`` (drained while the disk failed), ``write_errors``,
+    ``disk_failing`` (the last write failed and no file is open), ``files`` opened, the
+    ``current_file``, ``pending`` ticks in the ring."""
+
+    writer_alive: bool
+    state: str
+    bytes_written: int
+    records_written: int
+    records_flushed: int
+    dropped: int
+    records_lost: int
+    write_errors: int
+    disk_failing: bool
+    files: int
+    current_file: Path | None
+    pending: int
+
+    @property
+    def ok(self) -> bool:
+        """Writer alive, no write failing now."""
+        return self.writer_alive and not self.disk_failing
+
+
+class FlightRecorder:
+    """A RecordSink (see record.py) writing MCAP through a writer process.
+
+    ``n_joints`` comes from the spec's joint names, the tick layout from ``tick_dtype(n,
+    len(spec.observers))``. ``cpus``: CPUs for the writer; by default the CPUs outside the
+    caller's affinity if it is pinned (a writer sharing the loop's CPU costs wake-up latency:
+    p99 34 µs pinned apart vs up to 300 µs sharing, tools/bench_recorder.py).
+    """
+
+    def __init__(
+        self,
+        spec: LogSpec,
+        caps: sh.Capacities | None = None,
+        *,
+        cpus: list[int] | None = None,
+    ) -> None:
+        self.spec = spec
+        self.caps = caps or sh.Capacities()
+        self.n_joints = len(spec.joint_names)
+        self.n_observers = len(spec.observers)
+        self.tick_dtype = tick_dtype(self.n_joints, self.n_observers)
+        self._cpus = cpus
+        self._block: sh.SharedBlock | None = None
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._final: RecorderHealth | None = None
+
+    # ---------------------------------------------------------------- lifecycle
+    def start(self, timeout: float = 60.0) -> FlightRecorder:
+        """Create the rings, start the writer process and wait until it has opened the first
+        file (or failed, or died), at most ``timeout`` [s]. Returns self; check
+        :meth:`health` for failures."""
+        if self._block is not None:
+            raise RuntimeError("flight recorder already started")
+        if Path(self.spec.path).exists():
+            raise UserError(f"{self.spec.path}: exists; a flight log is never overwritten")
+        Path(self.spec.path).parent.mkdir(parents=True, exist_ok=True)
+        self._block = sh.SharedBlock(self.tick_dtype, self.caps, create=True)
+        b = self._block
+        # bound methods of the rings: the loop's push is one attribute call
+        self._push_tick, self._push_event, self._push_diag = (
+            b.ticks.push,
+            b.events.push,
+            b.diags.push,
+        )
+        # A fresh interpreter (not multiprocessing): it does not depend on how the loop's
+        # __main__ was started, inherits no threads or locks, and owns no resource tracker
+        # of ours. It notices our death by its parent pid changing.
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "hofto_hw.recording.writer_process", b.name],
+            stdin=subprocess.PIPE,
+            close_fds=True,
+            env=_child_env(),
+        )
+        assert self._proc.stdin is not None
+        cpus = self._cpus if self._cpus is not None else _other_cpus()
+        args = (self.n_joints, self.n_observers, self.caps, self.spec, cpus)
+        try:
+            self._proc.stdin.write(pickle.dumps(args))
+            self._proc.stdin.close()
+        except BrokenPipeError:  # died at once: reported by health()
+            pass
+        deadline = time.monotonic() + timeout
+        while (
+            int(b.control[sh.STATE]) == sh.STARTING
+            and self._proc.poll() is None
+            and time.monotonic() < deadline
+        ):
+            time.sleep(0.01)
+        return self
+
+    def close(self, timeout: float = 10.0) -> RecorderHealth:
+        """Ask the writer to drain and finish the file, wait up to ``timeout`` [s] (then
+        kill it), free the shared memory. Returns the final health. Idempotent."""
+        if self._final is not None:
+            return self._final
+        if self._block is None:
+            raise RuntimeError("flight recorder not started")
+        self._block.control[sh.STOP] = 1
+        assert self._proc is not None
+        try:
+            self._proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self._proc.kill()
+            self._proc.wait()
+        self._final = self.health()
+        self._push_tick = self._push_event = self._push_diag = _discard  # type: ignore[assignment]
+        self._block.close()
+        return self._final
+
+    def __enter__(self) -> FlightRecorder:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---------------------------------------------------------------- RecordSink
+    def push_tick(self, rec: np.ndarray) -> None:
+        """Copy one tick record (0-d, ``self.tick_dtype``) into the ring."""
+        self._push_tick(rec)
+
+    def push_event(self, rec: np.ndarray) -> None:
+        """Copy one event record (0-d, EVENT_DTYPE) into the ring."""
+        self._push_event(rec)
+
+    def push_diag(self, rec: np.ndarray) -> None:
+        """Copy one diagnostics record (0-d, DIAG_DTYPE) into the ring."""
+        self._push_diag(rec)
+
+    @property
+    def dropped(self) -> int:
+        """Records refused by full rings (all kinds) since start."""
+        if self._final is not None:
+            return self._final.dropped
+        b = self._block
+        if b is None:
+            return 0
+        return b.ticks.dropped + b.events.dropped + b.diags.dropped
+
+    # ---------------------------------------------------------------- health
+    def health(self) -> RecorderHealth:
+        """Counters from the shared control block (cheap; not for every tick)."""
+        if self._final is not None:
+            return self._final
+        b = self._block
+        if b is None or self._proc is None:
+            raise RuntimeError("flight recorder not started")
+        c = b.control
+        files = int(c[sh.FILES])
+        return RecorderHealth(
+            writer_alive=self._proc.poll() is None,
+            state=sh.STATE_NAMES.get(int(c[sh.STATE]), "unknown"),
+            bytes_written=int(c[sh.BYTES]),
+            records_written=int(c[sh.RECORDS]),
+            records_flushed=int(c[sh.FLUSHED]),
+            dropped=self.dropped,
+            records_lost=int(c[sh.LOST]),
+            write_errors=int(c[sh.ERRORS]),
+            disk_failing=bool(c[sh.FAILING]),
+            files=files,
+            current_file=rotated_path(Path(self.spec.path), int(c[sh.INDEX])) if files else None,
+            pending=b.ticks.pending(),
+        )
+
+    @property
+    def shm_name(self) -> str | None:
+        """Name of the shared-memory segment (/dev/shm/<name> on Linux) while running."""
+        return self._block.name if self._block is not None and self._final is None else None
+
+    @property
+    def writer_pid(self) -> int | None:
+        return self._proc.pid if self._proc is not None else None
+
+
+def _other_cpus() -> list[int] | None:
+    """CPUs outside the caller's affinity when the caller (the loop) is pinned to some of
+    them: the writer would otherwise inherit the loop's CPU. None when not pinned."""
+    mine = os.sched_getaffinity(0)
+    rest = set(range(os.cpu_count() or 1)) - mine
+    return sorted(rest) if rest else None
+
+
+def _child_env() -> dict[str, str]:
+    """Our environment with this hofto_hw's folder first on PYTHONPATH, so the writer runs
+    the same code even when the loop found it through sys.path rather than an install."""
+    import hofto_hw
+
+    root = str(Path(hofto_hw.__file__).resolve().parent.parent)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    return env
+
+
+def _discard(rec: np.ndarray) -> bool:
+    return False

@@ -1,0 +1,223 @@
+"""The writer process: drains the shared-memory rings into MCAP files.
+
+It runs at normal priority (it drops the SCHED_FIFO policy it may inherit from the loop) and
+never blocks the loop: the loop only touches the rings. It finishes the file when the owner
+sets STOP or dies; a SIGTERM sent to the whole service (systemd's control group) only starts
+a grace period, so the owner can still stop the arm while its records are written.
+
+A write error (disk full) abandons the current file, counts the error, discards the records
+drained meanwhile (counted in LOST, so the rings never fill because of it) and retries a new
+file after ``retry_seconds``.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import numpy as np
+
+from hofto_hw.recording import shared as sh
+from hofto_hw.recording.flight_file import FlightFile, LogSpec, rotated_path
+from hofto_hw.recording.record import tick_dtype
+
+IDLE_SLEEP = 0.005  # [s] between polls of empty rings (5 ms: 5 records at 1 kHz)
+TERM_GRACE = 10.0  # [s] after a SIGTERM to this process before it finishes by itself
+
+
+def _drop_realtime() -> None:
+    try:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass
+    try:
+        os.nice(5)
+    except OSError:
+        pass
+
+
+class _Writer:
+    """The drain loop's state: current file, counters in the control block."""
+
+    def __init__(self, block: sh.SharedBlock, spec: LogSpec) -> None:
+        self.block = block
+        self.spec = spec
+        self.ctl = block.control
+        self.file: FlightFile | None = None
+        self.index = 0
+        self.opened_at = 0.0
+        self.flushed_at = 0.0
+        self.retry_at = 0.0
+        self.bytes_closed = 0
+
+    def counters(self) -> dict[str, int]:
+        c = self.ctl
+        return {
+            "bytes_written": int(c[sh.BYTES]),
+            "records_written": int(c[sh.RECORDS]),
+            "write_errors": int(c[sh.ERRORS]),
+            "records_lost": int(c[sh.LOST]),
+            "failing": int(c[sh.FAILING]),
+        }
+
+    def _open(self, now: float) -> None:
+        """Open the next free file name (existing files are never overwritten)."""
+        while True:
+            path = rotated_path(self.spec.path, self.index)
+            self.index += 1
+            try:
+                self.file = FlightFile(self.spec, path, self.index - 1)
+                break
+            except FileExistsError:
+                continue
+        self.ctl[sh.FILES] += 1
+        self.ctl[sh.INDEX] = self.index - 1
+        self.opened_at = self.flushed_at = now
+
+    def _fail(self, now: float) -> None:
+        self.ctl[sh.ERRORS] += 1
+        self.ctl[sh.FAILING] = 1
+        self.ctl[sh.STATE] = sh.FAILED
+        if self.file is not None:
+            self.bytes_closed += self.file.bytes
+            self.file.abandon()
+        self.file = None
+        self.retry_at = now + self.spec.retry_seconds
+
+    def _sync_bytes(self) -> None:
+        self.ctl[sh.BYTES] = self.bytes_closed + (self.file.bytes if self.file else 0)
+
+    def step(self, now: float) -> int:
+        """Drain once; returns the records drained."""
+        b = self.block
+        ticks, events, diags = b.ticks.drain(), b.events.drain(), b.diags.drain()
+        n = len(ticks) + len(events) + len(diags)
+        if self.file is None and now >= self.retry_at:
+            try:
+                self._open(now)
+                self.ctl[sh.FAILING] = 0
+                self.ctl[sh.STATE] = sh.RUNNING
+            except OSError:
+                self._fail(now)
+        if self.file is None:
+            self.ctl[sh.LOST] += n
+            return n
+        try:
+            if len(ticks):
+                self.file.write_ticks(ticks)
+            if len(events):
+                self.file.write_events(events)
+            if len(diags):
+                self.file.write_diags(diags, self.counters())
+            self.ctl[sh.RECORDS] += n
+            if now - self.flushed_at >= self.spec.flush_seconds:
+                self.file.flush()
+                self.flushed_at = now
+                self.ctl[sh.FLUSHED] = self.ctl[sh.RECORDS]
+        except OSError:
+            self.ctl[sh.LOST] += n
+            self._fail(now)
+        if self.file is not None:
+            try:
+                self._maybe_rotate(now)
+            except OSError:  # the records are in the finished file; the new one failed
+                self._fail(now)
+        self._sync_bytes()
+        return n
+
+    def _maybe_rotate(self, now: float) -> None:
+        f, spec = self.file, self.spec
+        assert f is not None
+        by_size = spec.rotate_bytes and f.bytes >= spec.rotate_bytes
+        by_time = spec.rotate_seconds and now - self.opened_at >= spec.rotate_seconds
+        if by_size or by_time:
+            f.finish()
+            self.ctl[sh.FLUSHED] = self.ctl[sh.RECORDS]
+            self.bytes_closed += f.bytes
+            self._open(now)
+
+    def finish(self) -> None:
+        if self.file is None:
+            return
+        try:
+            self.file.finish()
+            self.ctl[sh.FLUSHED] = self.ctl[sh.RECORDS]
+        except OSError:
+            self._fail(time.monotonic())
+            return
+        self._sync_bytes()
+        self.file = None
+
+
+def writer_main(
+    shm_name: str,
+    n_joints: int,
+    n_observers: int,
+    caps: sh.Capacities,
+    spec: LogSpec,
+    cpus: list[int] | None = None,
+) -> None:
+    """Entry point of the writer process (multiprocessing target)."""
+    _drop_realtime()
+    if cpus:
+        try:
+            os.sched_setaffinity(0, cpus)
+        except OSError:  # CPUs outside our cpuset: keep the inherited affinity
+            pass
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the owner decides when to stop
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # RLIMIT_FSIZE: get EFBIG, not death
+    term = [0.0]
+    signal.signal(signal.SIGTERM, lambda *_: term.__setitem__(0, time.monotonic()))
+    parent = os.getppid()
+    block = sh.SharedBlock(tick_dtype(n_joints, n_observers), caps, name=shm_name)
+    ctl = block.control
+    ctl[sh.PID] = os.getpid()
+    w = _Writer(block, spec)
+    try:
+        _run(w, ctl, parent, term)
+    except BaseException:
+        # A bug, not a full disk: count it, leave the file for `log recover`, and die (the
+        # owner sees writer_alive False). The traceback goes to stderr (the journal).
+        ctl[sh.ERRORS] += 1
+        ctl[sh.STATE] = sh.FAILED
+        if w.file is not None:
+            w.file.abandon()
+        raise
+    if ctl[sh.STATE] != sh.FAILED:
+        ctl[sh.STATE] = sh.FINISHED
+    del ctl, w
+    block.close()
+
+
+def _run(w: _Writer, ctl: np.ndarray, parent: int, term: list[float]) -> None:
+    """Drain until stopped (STOP word, owner gone, or SIGTERM grace over), then finish."""
+    while True:
+        now = time.monotonic()
+        stop = bool(ctl[sh.STOP]) or os.getppid() != parent
+        stop = stop or (term[0] > 0.0 and now - term[0] > TERM_GRACE)
+        n = w.step(now)
+        ctl[sh.HEARTBEAT] += 1
+        if stop:
+            while w.step(time.monotonic()):  # whatever the owner pushed before stopping
+                pass
+            break
+        if n == 0:
+            time.sleep(IDLE_SLEEP)
+    w.finish()
+
+
+def main() -> int:
+    """``python -m hofto_hw.recording.writer_process SHM_NAME`` with the pickled arguments
+    (n_joints, n_observers, caps, spec, cpus) on stdin: how FlightRecorder starts it."""
+    import pickle
+    import sys
+
+    args = pickle.load(sys.stdin.buffer)
+    sys.stdin.close()
+    writer_main(sys.argv[1], *args)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

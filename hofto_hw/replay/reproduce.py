@@ -1,0 +1,202 @@
+"""Re-run a flight log's observers and collision monitor and check the recorded decision.
+
+The robot, its observers and the thresholds come from the log's attachments (config, URDF,
+parameters, thresholds files; see hofto_hw.recording.attachments), the measurements from
+/joint_states, dt from consecutive stamps. The run's collision decision is reproduced when
+the monitor, fed the re-computed estimate of the recorded detector observer, first detects
+in the same tick as the first recorded collision event (and on that event's joint).
+
+Bit-exact reproduction needs the loop to do what replay does: t from integer nanoseconds
+(the stamp stores t exactly then), dt = t[k] - t[k-1], observers reset on the first tick's
+q, qd and updated from the second. ``max_abs_diff`` per observer shows whether they did.
+
+:func:`make_detector` is the single place that builds the monitor from the recorded config:
+the two-level monitor of the service branch plugs in there.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import yaml
+
+from hofto_hw.config.loader import parse_config
+from hofto_hw.config.models import ObserverConfig, SystemConfig
+from hofto_hw.errors import ConfigError, UserError
+from hofto_hw.identify.data import Recording
+from hofto_hw.model import RobotModel
+from hofto_hw.observers import make_observer
+from hofto_hw.recording import attachments as att
+from hofto_hw.replay.flight_log import FlightLog, RecordedEvent
+from hofto_hw.replay.runner import run_observer
+from hofto_hw.replay.thresholds import ThresholdsFile, read_thresholds
+
+#: event kind name of a collision stop (the safety fault class's name in event_kinds)
+COLLISION_KIND = "collision"
+
+
+class Monitor(Protocol):
+    """What replay needs of a collision monitor (safety.collision.CollisionMonitor)."""
+
+    joints: np.ndarray
+
+    def reset(self, qd: np.ndarray | None = None) -> None: ...
+
+    def update(self, tau_ext: np.ndarray, qd: np.ndarray, dt: float) -> bool: ...
+
+
+@dataclass
+class RunSetup:
+    """The recorded run rebuilt: config, model, thresholds (None when not attached)."""
+
+    config: SystemConfig
+    model: RobotModel
+    thresholds: ThresholdsFile | None
+
+
+@dataclass
+class Detector:
+    """The recorded detector: which observer's estimate feeds which monitor."""
+
+    observer: str
+    monitor: Monitor
+
+
+@dataclass
+class Reproduction:
+    """Outcome: recorded vs replayed first collision tick/joints, per-observer max |Δ|."""
+
+    detector: str
+    recorded: RecordedEvent | None
+    replayed_tick: int | None
+    replayed_joints: list[int]
+    max_abs_diff: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def match(self) -> bool:
+        if self.recorded is None:
+            return self.replayed_tick is None
+        same_tick = self.replayed_tick == self.recorded.tick
+        joint = self.recorded.joint
+        return same_tick and (joint < 0 or joint in self.replayed_joints)
+
+    def as_dict(self) -> dict[str, Any]:
+        rec = self.recorded
+        return {
+            "detector": self.detector,
+            "recorded": None
+            if rec is None
+            else {
+                "tick": rec.tick,
+                "t": rec.t,
+                "joint": rec.joint,
+                "category": rec.category,
+            },
+            "replayed": {"tick": self.replayed_tick, "joints": self.replayed_joints},
+            "match": self.match,
+            "max_abs_diff": self.max_abs_diff,
+        }
+
+
+def run_setup(log: FlightLog) -> RunSetup:
+    """Config, model and thresholds from the log's attachments."""
+    files = log.attachments
+    if att.CONFIG not in files or att.URDF not in files:
+        raise UserError(
+            f"{log.path}: no {att.CONFIG}/{att.URDF} attachments: cannot rebuild the robot"
+        )
+    src = f"{log.path}:{att.CONFIG}"
+    try:
+        data = yaml.safe_load(files[att.CONFIG])
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{src}: not valid YAML: {exc}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("robot"), dict):
+        raise ConfigError(f"{src}: no robot section")
+    with tempfile.TemporaryDirectory(prefix="hofto-replay-") as tmp:
+        folder = Path(tmp)
+        for name in (att.URDF, att.PARAMETERS, att.THRESHOLDS):
+            if name in files:
+                (folder / name).write_bytes(files[name])
+        data["robot"]["urdf"] = att.URDF
+        data["robot"]["parameters"] = att.PARAMETERS if att.PARAMETERS in files else None
+        cfg = parse_config(data, source=src, base_dir=folder)
+        model = RobotModel.from_config(cfg.robot)
+        thresholds = read_thresholds(folder / att.THRESHOLDS) if att.THRESHOLDS in files else None
+    if model.n != len(log.joint_names):
+        raise UserError(f"{log.path}: {len(log.joint_names)} joints, its robot has {model.n}")
+    return RunSetup(cfg, model, thresholds)
+
+
+def observer_config(setup: RunSetup, name: str, path: Path) -> ObserverConfig:
+    """Observer ``name`` as the run's config defines it (else as the thresholds file does)."""
+    if name in setup.config.observers:
+        return setup.config.observers[name]
+    th = setup.thresholds
+    if th is not None and name in th.observers:
+        return th.observers[name].observer
+    raise UserError(f"{path}: observer {name!r} is in the log but not in its config")
+
+
+def make_detector(log: FlightLog, setup: RunSetup) -> Detector:
+    """The monitor the run used, built from the recorded config: the ``detector`` observer
+    (metadata) with its thresholds-file monitor, else the config's ``collision`` section."""
+    from safety.collision import CollisionMonitor
+
+    name = log.metadata.get("detector") or (log.observers[0] if log.observers else "")
+    th = setup.thresholds
+    if th is not None and name in th.observers:
+        return Detector(name, CollisionMonitor(th.observers[name].monitor))
+    if setup.config.collision is not None:
+        return Detector(name, CollisionMonitor(setup.config.collision))
+    raise UserError(f"{log.path}: no thresholds for detector {name!r} in the attached files")
+
+
+def as_recording(log: FlightLog) -> Recording:
+    return Recording(
+        t=log.t,
+        q=log.q,
+        qd=log.qd,
+        tau=log.tau,
+        source=str(log.path),
+        rows=np.arange(1, log.n_ticks + 1, dtype=np.int64),
+    )
+
+
+def first_detection(
+    monitor: Monitor, tau_ext: np.ndarray, log: FlightLog
+) -> tuple[int | None, list[int]]:
+    """Index of the first tick the monitor detects on ``tau_ext`` (N, n), and its joints."""
+    qd, t = log.qd, log.t
+    monitor.reset(qd[0])
+    for k in range(1, log.n_ticks):
+        if monitor.update(tau_ext[k], qd[k], t[k] - t[k - 1]):
+            return k, [int(j) for j in np.flatnonzero(monitor.joints)]
+    return None, []
+
+
+def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
+    """Replay every recorded observer and the detector's monitor; compare with the log."""
+    setup = run_setup(log)
+    rec = as_recording(log)
+    replayed: dict[str, np.ndarray] = {}
+    diffs: dict[str, float] = {}
+    for name in log.observers:
+        obs = make_observer(observer_config(setup, name, log.path), setup.model)
+        replayed[name] = run_observer(rec, obs)
+        diffs[name] = float(np.max(np.abs(replayed[name] - log.tau_ext[name])))
+    det = detector_factory(log, setup)
+    if det.observer not in replayed:
+        raise UserError(f"{log.path}: detector observer {det.observer!r} was not recorded")
+    k, joints = first_detection(det.monitor, replayed[det.observer], log)
+    collisions = [e for e in log.events if e.kind_name == COLLISION_KIND]
+    return Reproduction(
+        detector=det.observer,
+        recorded=collisions[0] if collisions else None,
+        replayed_tick=None if k is None else int(log.ticks[k]),
+        replayed_joints=joints,
+        max_abs_diff=diffs,
+    )
