@@ -26,18 +26,10 @@ from drivers.cia402 import state_machine as sm
 from drivers.cia402.codes import describe_error_code
 from drivers.cia402.state_machine import STATE_NAMES, Mode, State
 from drivers.cia402.units import AxisScaling, Scaling
-from drivers.transport import SdoAbortError, Transport, describe_status
-from hofto_hw.errors import ConfigError, UserError
-
-
-class DriveError(UserError):
-    """A drive did not do what was asked; ``axis``, ``state``, ``statusword`` name it."""
-
-    def __init__(self, message: str, axis: int = -1, state: int = -1, statusword: int = 0):
-        super().__init__(message)
-        self.axis = axis
-        self.state = state
-        self.statusword = statusword
+from drivers.errors import DriveError as DriveError  # re-exported
+from drivers.errors import TransportError
+from drivers.transport import Transport, describe_status
+from hofto_hw.errors import ConfigError
 
 
 class DriveTimeoutError(DriveError):
@@ -337,10 +329,11 @@ class DriveGroup:
     # ---------------------------------------------------------------- faults
 
     def error_code(self, axis: int) -> int:
-        """0x603F of ``axis`` read by SDO (falls back to the PDO value if the SDO fails)."""
+        """0x603F of ``axis`` read by SDO (falls back to the PDO value if the SDO fails:
+        an abort or a mailbox failure, both :class:`~drivers.errors.TransportError`)."""
         try:
             return self.transport.read_value(axis, 0x603F, 0, "u16")
-        except SdoAbortError:
+        except TransportError:
             return int(self._tx_err[axis])
 
     def fault_messages(self) -> list[str]:

@@ -59,6 +59,7 @@ from drivers.transport import (
     STATUS_WKC_MISMATCH,
     SdoAbortError,
     Transport,
+    TransportError,
 )
 
 _STATE_ACK = 0x10
@@ -382,7 +383,7 @@ class EtherCATTransport(Transport):
             axis = int(i)
             try:
                 code = self.read_value(axis, 0x603F, 0, "u16")
-            except EtherCATError as exc:
+            except TransportError as exc:  # SdoAbortError, EtherCATError (mailbox), short data
                 out.append(f"{self._who(axis)}: fault, error code unreadable ({exc})")
                 continue
             out.append(f"{self._who(axis)}: drive fault {describe_error_code(code)}")

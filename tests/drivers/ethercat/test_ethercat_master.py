@@ -217,6 +217,33 @@ def test_drive_fault_is_surfaced_with_its_code(emulated_bus) -> None:
         t.close()
 
 
+def test_drive_fault_with_an_aborted_0x603f_read_is_still_reported(emulated_bus) -> None:
+    """The fault-read path: an SDO abort on 0x603F is reported, not raised (defect 4)."""
+    cfg = emulated_bus.cfg
+    t = _transport(emulated_bus)
+    try:
+        t.open()
+        g = DriveGroup.from_config(t, cfg.bus)
+        g.set_mode(Mode.CSP)
+        g.enable()
+        emulated_bus.call(op="sdo_abort", slave=2, index=0x603F, sub=0, code=0x06060000)
+        emulated_bus.call(op="drive_fault", slave=2, code=0x2310)
+        for _ in range(5):
+            g.hold()
+            g.cycle()
+            t.wait_next_cycle()
+        assert int(t.tx["error_code"][2]) == 0x2310
+        faults = t.drive_faults()  # raised SdoAbortError before the fix
+        assert len(faults) == 1
+        assert "slave 3" in faults[0] and "unreadable" in faults[0]
+        assert "0x06060000" in faults[0]
+        # the drive layer falls back to the PDO copy of 0x603F
+        assert g.error_code(2) == 0x2310
+        assert any(describe_error_code(0x2310) in m for m in g.fault_messages())
+    finally:
+        t.close()
+
+
 def test_sdo_abort_is_surfaced_with_its_meaning(emulated_bus) -> None:
     t = _transport(emulated_bus)
     try:
