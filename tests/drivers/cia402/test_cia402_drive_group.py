@@ -105,6 +105,28 @@ def test_cst_torque_reaches_the_plant(group: DriveGroup, bus: SimBus) -> None:
     assert np.allclose(group.tau, plant.tau_meas, atol=raw_step.max())  # reported back
 
 
+@pytest.mark.parametrize("mode", [Mode.CSP, Mode.CSV, Mode.CST])
+def test_enable_is_bumpless_under_gravity(mode: Mode, group: DriveGroup, bus: SimBus) -> None:
+    """Enabling must not drop the arm (defect 2): CSP holds the measured position, CSV
+    commands zero velocity, CST keeps the caller's gravity torque from the first enabled
+    cycle. Before the fix, CST enable wrote zero torque and joint 2 sagged 0.026 rad."""
+    plant = bus.plant
+    tau_g = plant.true_model.gravity(plant.q).copy()  # the torque that holds the true arm
+    assert abs(tau_g[1]) > 10.0  # joint 2 really carries the arm
+    q0 = plant.q.copy()
+    group.set_mode(mode)
+    if mode == Mode.CST:
+        group.command_torque(tau_g)
+    group.enable()
+    assert group.all_in(State.OPERATION_ENABLED)
+    if mode == Mode.CST:
+        raw_step = np.abs(group.scaling.nm_per_permille)
+        assert np.all(np.abs(plant.tau_applied - tau_g) <= 0.5 * raw_step + 1e-9)
+    for _ in range(100):  # 0.1 s of holding
+        assert group.cycle() == 0
+    assert np.max(np.abs(plant.q - q0)) < 2e-3
+
+
 def test_quick_stop_ramps_velocity_down_then_disables(
     group: DriveGroup, bus: SimBus, cfg: SystemConfig
 ) -> None:
