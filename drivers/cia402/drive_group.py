@@ -159,10 +159,12 @@ class DriveGroup:
         return bool(self._flags.all())
 
     def hold(self) -> None:
-        """Command the current position, zero velocity and torque (bumpless targets)."""
+        """Bumpless targets for every mode: CSP the measured position, CSV zero velocity,
+        CST the torque last given to :meth:`command_torque` (kept, not zeroed: a caller
+        holding the arm against gravity keeps holding it). The torque offset is kept too.
+        """
         np.copyto(self._rx_pos, self._tx_pos)
         self._rx_vel.fill(0)
-        self._rx_tau.fill(0)
 
     # ------------------------------------------------------------------ setup
 
@@ -232,7 +234,9 @@ class DriveGroup:
         )
 
     def enable(self) -> None:
-        """Bring every axis to Operation enabled, holding the current position.
+        """Bring every axis to Operation enabled, bumpless (see :meth:`hold`): CSP holds the
+        measured position, CSV commands zero velocity, CST applies the torque the caller
+        commanded before (e.g. gravity) from the first enabled cycle.
 
         Raises DriveFaultError if an axis is (or falls) in Fault (call :meth:`fault_reset`
         first; faults latch) and DriveTimeoutError if an axis stays in one state longer
