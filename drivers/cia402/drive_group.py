@@ -4,7 +4,8 @@ Every cycle (hot path, no allocation): :meth:`DriveGroup.read` decodes the TxPDO
 ``q`` [rad], ``qd`` [rad/s], ``tau`` [N·m] (joint side), ``current`` [A] and ``states``
 (uint8 :class:`~drivers.cia402.state_machine.State` codes), all shape (n,);
 :meth:`DriveGroup.command_position` / ``command_velocity`` / ``command_torque`` encode SI
-commands into the RxPDO; :meth:`DriveGroup.cycle` exchanges and reads.
+commands into the RxPDO; :meth:`DriveGroup.cycle` exchanges and reads, returns the transport status and sets
+``fresh`` (False when the data is stale after a lost frame or a working-counter error).
 
 Setup (blocking, outside the tick): :meth:`configure`, :meth:`set_mode` (with the 0x6061
 mode-display check), :meth:`enable`, :meth:`disable`, :meth:`quick_stop`,
@@ -28,7 +29,7 @@ from drivers.cia402.state_machine import STATE_NAMES, Mode, State
 from drivers.cia402.units import AxisScaling, Scaling
 from drivers.errors import DriveError as DriveError  # re-exported
 from drivers.errors import TransportError
-from drivers.transport import Transport, describe_status
+from drivers.transport import STATUS_OK, Transport, describe_status
 from hofto_hw.errors import ConfigError
 
 
@@ -80,8 +81,14 @@ class DriveGroup:
         self.current = np.zeros(n)
         #: State code per axis, uint8 (n,)
         self.states = np.zeros(n, dtype=np.uint8)
-        #: status of the last exchange (0 = ok)
-        self.status = 0
+        #: status of the last exchange (0 = ok, see drivers.transport.STATUS_TEXT)
+        self.status = STATUS_OK
+        #: True only when the last :meth:`cycle` brought new TxPDO data; after a lost frame
+        #: or a short working counter the transport keeps the last good ``tx`` and q, qd, tau,
+        #: current, states are those of an earlier cycle (stale)
+        self.fresh = False
+        #: consecutive cycles without fresh data (0 after a good cycle)
+        self.stale_cycles = 0
         rx, tx = transport.rx, transport.tx
         self._rx_cw = rx["controlword"]
         self._rx_mode = rx["mode"]
@@ -118,10 +125,19 @@ class DriveGroup:
         sm.decode_states(self._tx_sw, self.states, self._u16)
 
     def cycle(self) -> int:
-        """Exchange the process image, then :meth:`read`. Returns the transport status."""
-        self.status = self.transport.exchange()
+        """Exchange the process image, then :meth:`read`. Returns the transport status
+        (0 = ok) and sets :attr:`fresh` (new TxPDO data this cycle) and :attr:`stale_cycles`.
+        """
+        status = self.transport.exchange()
+        self.status = status
+        if status == STATUS_OK:
+            self.fresh = True
+            self.stale_cycles = 0
+        else:
+            self.fresh = False
+            self.stale_cycles += 1
         self.read()
-        return self.status
+        return status
 
     def command_position(self, q: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
         """CSP target q [rad] (n,) and optional torque feed-forward [N·m] (n,)."""

@@ -11,6 +11,7 @@ from drivers.cia402.drive_group import DriveFaultError, DriveGroup, DriveTimeout
 from drivers.cia402.state_machine import Mode, State
 from drivers.sim.drive import FAULTS
 from drivers.sim.simbus import SimBus, make_sim_bus
+from drivers.transport import STATUS_NO_RESPONSE
 from hofto_hw.config.loader import load_config
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.errors import ConfigError
@@ -212,6 +213,26 @@ def test_lost_frames_give_status_then_comm_loss_fault(group: DriveGroup, bus: Si
         group.cycle()
     assert all(group.states == State.FAULT)
     assert all("0x8130 communication lost" in m for m in group.fault_messages())
+
+
+def test_stale_data_after_a_lost_frame_is_flagged(group: DriveGroup, bus: SimBus) -> None:
+    """cycle() returns the status and sets `fresh` (defect 5): the TxPDO of a lost frame is
+    the previous cycle's, and the caller must be able to tell."""
+    _enabled(group, Mode.CSV)
+    for _ in range(50):
+        group.command_velocity(np.full(6, 0.2))
+        assert group.cycle() == 0
+        assert group.fresh and group.stale_cycles == 0
+    q_before = group.q.copy()
+    bus.drop_cycles(2)
+    assert group.cycle() == STATUS_NO_RESPONSE
+    assert not group.fresh and group.stale_cycles == 1
+    np.testing.assert_array_equal(group.q, q_before)  # stale: the same values again
+    assert not np.allclose(bus.plant.q_meas, q_before)  # ... while the arm moved on
+    assert group.cycle() == STATUS_NO_RESPONSE and group.stale_cycles == 2
+    assert group.cycle() == 0
+    assert group.fresh and group.stale_cycles == 0
+    np.testing.assert_allclose(group.q, bus.plant.q_meas, atol=1e-5)
 
 
 def test_persistent_fault_refuses_reset_with_the_decoded_cause(

@@ -145,6 +145,25 @@ def test_dropped_and_damaged_frames_are_detected_in_the_same_cycle(emulated_bus)
         t.close()
 
 
+def test_drive_group_flags_stale_data_after_a_lost_or_damaged_frame(emulated_bus) -> None:
+    cfg = emulated_bus.cfg
+    t = _transport(emulated_bus)
+    try:
+        t.open()
+        g = DriveGroup.from_config(t, cfg.bus)
+        assert g.cycle() == STATUS_OK and g.fresh
+        emulated_bus.call(op="drop", count=1)
+        assert g.cycle() == STATUS_NO_RESPONSE
+        assert not g.fresh and g.stale_cycles == 1
+        emulated_bus.call(op="corrupt", count=1, slave=2)
+        assert g.cycle() == STATUS_WKC_MISMATCH
+        assert not g.fresh and g.stale_cycles == 2
+        assert g.cycle() == STATUS_OK
+        assert g.fresh and g.stale_cycles == 0
+    finally:
+        t.close()
+
+
 def test_silent_slave_is_reported_and_stops_the_bus(emulated_bus) -> None:
     t = _transport(emulated_bus)
     try:
