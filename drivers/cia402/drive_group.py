@@ -4,8 +4,9 @@ Every cycle (hot path, no allocation): :meth:`DriveGroup.read` decodes the TxPDO
 ``q`` [rad], ``qd`` [rad/s], ``tau`` [N·m] (joint side), ``current`` [A] and ``states``
 (uint8 :class:`~drivers.cia402.state_machine.State` codes), all shape (n,);
 :meth:`DriveGroup.command_position` / ``command_velocity`` / ``command_torque`` encode SI
-commands into the RxPDO; :meth:`DriveGroup.cycle` exchanges and reads, returns the transport status and sets
-``fresh`` (False when the data is stale after a lost frame or a working-counter error).
+commands into the RxPDO; :meth:`DriveGroup.cycle` exchanges and reads, returns the
+transport status and sets ``fresh`` (False when the data is stale after a lost frame or a
+working-counter error).
 
 Setup (blocking, outside the tick): :meth:`configure`, :meth:`set_mode` (with the 0x6061
 mode-display check), :meth:`enable`, :meth:`disable`, :meth:`quick_stop`,
