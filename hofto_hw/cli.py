@@ -1,7 +1,7 @@
 """The ``hofto-hw`` command.
 
-Each sub-command lives in its own module (``hofto_hw/commands/<name>.py`` or, for driver
-tools, under ``drivers/``) exposing two functions:
+Each sub-command lives in its own module (``hofto_hw/commands/<name>.py``) exposing two
+functions:
 
 - ``configure(parser: argparse.ArgumentParser) -> None`` adds its arguments;
 - ``run(args: argparse.Namespace) -> int`` does the work and returns the exit code.
@@ -33,7 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("hofto_hw.commands.replay", "run observers and collision thresholds offline"),
     "thresholds": ("hofto_hw.commands.thresholds", "calibrate collision thresholds"),
     "sim-ethercat": (
-        "drivers.sim.ethercat_cli",
+        "hofto_hw.commands.sim_ethercat",
         "serve emulated EtherCAT CiA-402 drives on a network interface",
     ),
 }

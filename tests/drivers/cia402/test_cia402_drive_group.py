@@ -10,25 +10,21 @@ import pytest
 from drivers.cia402.drive_group import DriveFaultError, DriveGroup, DriveTimeoutError
 from drivers.cia402.state_machine import Mode, State
 from drivers.sim.drive import FAULTS
-from drivers.sim.simbus import SimBus, make_sim_bus
+from drivers.sim.simbus import SimBus
 from drivers.transport import STATUS_NO_RESPONSE
 from hofto_hw.config.loader import load_config
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.errors import ConfigError
+from hofto_hw.runtime.build import build_sim_bus
 
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
 
-@pytest.fixture(scope="module")
-def cfg() -> SystemConfig:
-    return load_config(CONFIG)
-
-
 @pytest.fixture
-def bus(cfg: SystemConfig) -> SimBus:
-    b = make_sim_bus(cfg, external=False)
-    b.open()
-    return b
+def bus(bus: SimBus) -> SimBus:
+    """The shared quiet SimBus (tests/drivers/conftest.py), opened."""
+    bus.open()
+    return bus
 
 
 @pytest.fixture
@@ -291,7 +287,7 @@ def test_read_and_commands_do_not_allocate(group: DriveGroup) -> None:
 
 def test_ur10e_bus_at_500_hz_enables_and_follows() -> None:
     cfg = load_config(CONFIG.parent / "ur10e.yaml")
-    bus = make_sim_bus(cfg, external=False)
+    bus = build_sim_bus(cfg, external=False)
     group = DriveGroup.from_config(bus, cfg.bus)
     with bus:
         group.configure(cfg.bus.drives)

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from drivers.sim.simbus import SimBus, make_sim_bus
+from drivers.sim.simbus import SimBus
 from drivers.transport import (
     STATUS_NO_RESPONSE,
     STATUS_NOT_OPEN,
@@ -15,21 +13,8 @@ from drivers.transport import (
     SdoAbortError,
     TransportError,
 )
-from hofto_hw.config.loader import load_config
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.errors import ConfigError
-
-CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
-
-
-@pytest.fixture(scope="module")
-def cfg() -> SystemConfig:
-    return load_config(CONFIG)
-
-
-@pytest.fixture
-def bus(cfg: SystemConfig) -> SimBus:
-    return make_sim_bus(cfg, external=False)
 
 
 def test_exchange_needs_open_and_advances_one_tick(bus: SimBus) -> None:
@@ -106,11 +91,6 @@ def test_cycle_time_must_match_the_plant(cfg: SystemConfig, bus: SimBus) -> None
     bad = cfg.bus.model_copy(update={"cycle_time": 0.002})
     with pytest.raises(ConfigError, match=r"bus\.cycle_time: 0\.002 s differs"):
         SimBus.from_config(bad, bus.plant)
-
-
-def test_config_without_bus_is_a_clear_error(cfg: SystemConfig) -> None:
-    with pytest.raises(ConfigError, match="bus: section missing"):
-        make_sim_bus(cfg.model_copy(update={"bus": None}))
 
 
 def test_wait_next_cycle_does_not_sleep(bus: SimBus) -> None:
