@@ -26,6 +26,7 @@ import numpy as np
 
 from drivers.cia402 import state_machine as sm
 from drivers.cia402.codes import describe_error_code
+from drivers.cia402.pdo import ImageFields
 from drivers.cia402.state_machine import STATE_NAMES, Mode, State
 from drivers.cia402.units import AxisScaling, Scaling
 from drivers.errors import DriveError as DriveError  # re-exported
@@ -49,7 +50,7 @@ class DriveFaultError(DriveError):
 _FAULTY = (State.FAULT, State.FAULT_REACTION_ACTIVE)
 
 
-class DriveGroup:
+class DriveGroup(ImageFields):
     """All axes of one transport as a CiA-402 group (see module docstring).
 
     ``transition_timeout`` [s] bounds each single state transition; it is converted to bus
@@ -90,20 +91,7 @@ class DriveGroup:
         self.fresh = False
         #: consecutive cycles without fresh data (0 after a good cycle)
         self.stale_cycles = 0
-        rx, tx = transport.rx, transport.tx
-        self._rx_cw = rx["controlword"]
-        self._rx_mode = rx["mode"]
-        self._rx_pos = rx["target_position"]
-        self._rx_vel = rx["target_velocity"]
-        self._rx_tau = rx["target_torque"]
-        self._rx_off = rx["torque_offset"]
-        self._tx_sw = tx["statusword"]
-        self._tx_mode = tx["mode_display"]
-        self._tx_pos = tx["position"]
-        self._tx_vel = tx["velocity"]
-        self._tx_tau = tx["torque"]
-        self._tx_cur = tx["current"]
-        self._tx_err = tx["error_code"]
+        self._bind_image(transport.rx, transport.tx)
         self._u16 = np.zeros(n, dtype=np.uint16)
         self._cw = np.zeros(n, dtype=np.uint16)
         self._flags = np.zeros(n, dtype=bool)
