@@ -29,7 +29,11 @@ pytestmark = pytest.mark.root
 
 
 def _transport(bus, drives=None, **kw) -> EtherCATTransport:
+    """A master for the emulated bus. Tests pause cycling between steps (control requests,
+    checks), so the SM watchdog is 2 s unless a test sets it: with the slaves' 100 ms a
+    descheduled test process would trip it (a real loop never pauses)."""
     cfg = bus.cfg
+    kw.setdefault("pdo_watchdog", 2.0)
     return EtherCATTransport(
         bus.master_iface,
         drives if drives is not None else cfg.bus.drives,
@@ -38,6 +42,17 @@ def _transport(bus, drives=None, **kw) -> EtherCATTransport:
         receive_timeout=0.02,  # generous: the test machine is shared
         **kw,
     )
+
+
+def _cycle_until(t: EtherCATTransport, done, what: str, timeout: float = 20.0) -> list[int]:
+    """Keep the bus cycling until ``done()`` (a state, not a time); fail after ``timeout``."""
+    out = []
+    deadline = time.monotonic() + timeout
+    while not done():
+        assert time.monotonic() < deadline, f"{what} not reached within {timeout} s"
+        out.append(t.exchange())
+        t.wait_next_cycle()
+    return out
 
 
 def _cycles(t: EtherCATTransport, n: int) -> list[int]:
@@ -56,6 +71,7 @@ def test_soem_finds_six_drives_and_brings_them_to_op(emulated_bus) -> None:
         assert t.expected_wkc == 18  # 3 per slave: outputs written (2) + inputs read (1)
         assert t.check_bus() == []
         assert all(s.name == "hofto-sim CiA-402 servo" for s in t.slaves)
+        assert [s.get_watchdog("processdata") for s in t.slaves] == [2000.0] * 6
         status = emulated_bus.call(op="status")
         assert status["al_state"] == [0x08] * 6
         # the master wrote the mapping and assignment by SDO in PRE-OP -> SAFE-OP
@@ -181,11 +197,16 @@ def test_silent_slave_is_reported_and_stops_the_bus(emulated_bus) -> None:
 
 
 def test_lost_slave_is_recovered_when_it_returns(emulated_bus) -> None:
-    t = _transport(emulated_bus, recover=True)
+    t = _transport(emulated_bus, recover=True, pdo_watchdog=0.1)
     try:
         t.open()
         emulated_bus.call(op="silence", slave=1, on=True)
-        _cycles(t, 150)  # longer than the 100 ms SM watchdog: it drops to SAFE-OP + ERROR
+        # past the 100 ms SM watchdog the silent slave drops to SAFE-OP + ERROR
+        _cycle_until(
+            t,
+            lambda: emulated_bus.call(op="status")["al_state"][1] == 0x14,
+            "SM watchdog of the silent slave",
+        )
         assert t.exchange() == STATUS_WKC_MISMATCH
         emulated_bus.call(op="silence", slave=1, on=False)
         status = emulated_bus.call(op="status")
