@@ -139,8 +139,11 @@ class EtherCATTransport(Transport):
         self._tx_size = pdo.TXPDO_SIZE
 
     @classmethod
-    def from_config(cls, bus: Any, axis_names: list[str] | None = None) -> EtherCATTransport:
-        """From a :class:`hofto_hw.config.drives.BusConfig` with ``transport: ethercat``."""
+    def from_config(
+        cls, bus: Any, axis_names: list[str] | None = None, *, cycle_time: float | None = None
+    ) -> EtherCATTransport:
+        """From a :class:`hofto_hw.config.drives.BusConfig` with ``transport: ethercat``;
+        ``cycle_time`` [s] (the composition root passes it) defaults to ``bus.cycle_time``."""
         opts = getattr(bus, "ethercat", None)
         kw: dict[str, Any] = {}
         if opts is not None:
@@ -153,7 +156,8 @@ class EtherCATTransport(Transport):
             for name in ("mailbox_retries", "pdo_watchdog"):  # newer schema fields
                 if getattr(opts, name, None) is not None:
                     kw[name] = getattr(opts, name)
-        return cls(bus.interface, bus.drives, bus.cycle_time, axis_names, **kw)
+        dt = bus.cycle_time if cycle_time is None else cycle_time
+        return cls(bus.interface, bus.drives, dt, axis_names, **kw)
 
     # -------------------------------------------------------------------- start-up
 
@@ -190,7 +194,13 @@ class EtherCATTransport(Transport):
     def _start(self, pysoem: Any) -> None:
         m = self.master
         m.manual_state_change = 1
+        # A scan whose frames got no answer (a link still coming up, a late emulator) finds
+        # no slave: scan again until state_timeout, as a state wait.
+        deadline = time.monotonic() + self.state_timeout
         found = m.config_init()
+        while found <= 0 and time.monotonic() < deadline:
+            time.sleep(_RETRY_PAUSE)
+            found = m.config_init()
         if found <= 0:
             raise EtherCATError(f"no EtherCAT slave answered on {self.interface}")
         if found != self.n_axes:
@@ -507,40 +517,28 @@ class EtherCATTransport(Transport):
 
     def sdo_read(self, axis: int, index: int, subindex: int) -> bytes:
         """Upload ``index:subindex`` of drive ``axis``; raises SdoAbortError/EtherCATError."""
+        return bytes(
+            self._sdo(axis, index, subindex, "read", lambda s: s.sdo_read(index, subindex))
+        )
+
+    def sdo_write(self, axis: int, index: int, subindex: int, data: bytes) -> None:
+        """Download ``data`` to ``index:subindex`` of drive ``axis``; raises SdoAbortError."""
+        payload = bytes(data)
+        self._sdo(axis, index, subindex, "write", lambda s: s.sdo_write(index, subindex, payload))
+
+    def _sdo(self, axis: int, index: int, subindex: int, action: str, call: Any) -> Any:
+        """``call(slave)`` with mailbox retries; an SDO abort becomes SdoAbortError."""
         self._check_axis(axis)
         pysoem = _pysoem()
         if self.master is None:
             raise EtherCATError(f"EtherCAT master on {self.interface} is not open")
         slave = self.slaves[axis]
+        what = f"SDO {action} 0x{index:04X}:{subindex:02X}"
         try:
-            return bytes(
-                self._retry(
-                    lambda: slave.sdo_read(index, subindex),
-                    axis,
-                    f"SDO read 0x{index:04X}:{subindex:02X}",
-                )
-            )
+            return self._retry(lambda: call(slave), axis, what)
         except pysoem.SdoError as exc:
             raise SdoAbortError(
-                axis, index, subindex, exc.abort_code, "read", self.axis_names[axis]
-            ) from None
-
-    def sdo_write(self, axis: int, index: int, subindex: int, data: bytes) -> None:
-        """Download ``data`` to ``index:subindex`` of drive ``axis``; raises SdoAbortError."""
-        self._check_axis(axis)
-        pysoem = _pysoem()
-        if self.master is None:
-            raise EtherCATError(f"EtherCAT master on {self.interface} is not open")
-        slave, payload = self.slaves[axis], bytes(data)
-        try:
-            self._retry(
-                lambda: slave.sdo_write(index, subindex, payload),
-                axis,
-                f"SDO write 0x{index:04X}:{subindex:02X}",
-            )
-        except pysoem.SdoError as exc:
-            raise SdoAbortError(
-                axis, index, subindex, exc.abort_code, "write", self.axis_names[axis]
+                axis, index, subindex, exc.abort_code, action, self.axis_names[axis]
             ) from None
 
     # ----------------------------------------------------------------------- close

@@ -6,7 +6,8 @@
   (``hofto-hw sim-ethercat``);
 - :func:`build_transport`: the transport named by ``bus.transport``, looked up in
   :data:`drivers.transport.BACKENDS` (a backend is one line there; it needs an entry in
-  ``_SPECIAL`` below only when it cannot be built by ``Class.from_config(bus, axis_names)``);
+  ``_SPECIAL`` below only when it cannot be built by
+  ``Class.from_config(bus, axis_names=..., cycle_time=...)``);
 - :func:`build_drive_group`: the CiA-402 drive layer over a transport.
 
 All raise :class:`hofto_hw.errors.ConfigError` naming the missing or wrong field.
@@ -79,7 +80,7 @@ def build_emulated_network(cfg: SystemConfig, *, external: bool = True) -> Emula
     return EmulatedNetwork(slave_descriptions(bus.drives), drives)
 
 
-#: backends that need more than ``Class.from_config(bus, axis_names)``
+#: backends that need more than ``Class.from_config(bus, axis_names=, cycle_time=)``
 _SPECIAL: dict[str, Callable[[SystemConfig], Transport]] = {"sim": build_sim_bus}
 
 
@@ -97,7 +98,8 @@ def build_transport(cfg: SystemConfig) -> Transport:
     special = _SPECIAL.get(name)
     if special is not None:
         return special(cfg)
-    return backend_class(name).from_config(bus, axis_names=list(cfg.robot.joints))
+    cls = backend_class(name)
+    return cls.from_config(bus, axis_names=list(cfg.robot.joints), cycle_time=cycle_time(cfg))
 
 
 def build_drive_group(cfg: SystemConfig, transport: Transport) -> DriveGroup:

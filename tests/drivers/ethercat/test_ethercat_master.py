@@ -24,6 +24,7 @@ from drivers.transport import (
     STATUS_WKC_MISMATCH,
     SdoAbortError,
 )
+from hofto_hw.runtime.build import cycle_time
 
 pytestmark = pytest.mark.root
 
@@ -37,7 +38,7 @@ def _transport(bus, drives=None, **kw) -> EtherCATTransport:
     return EtherCATTransport(
         bus.master_iface,
         drives if drives is not None else cfg.bus.drives,
-        cfg.bus.cycle_time,
+        cycle_time(cfg),
         list(cfg.robot.joints),
         receive_timeout=0.02,  # generous: the test machine is shared
         **kw,
@@ -53,6 +54,17 @@ def _cycle_until(t: EtherCATTransport, done, what: str, timeout: float = 20.0) -
         out.append(t.exchange())
         t.wait_next_cycle()
     return out
+
+
+def _enabled_group(t: EtherCATTransport, cfg, mode: Mode, configure: bool = False) -> DriveGroup:
+    """Open ``t`` and enable its drives in ``mode`` (CiA-402 drive layer over EtherCAT)."""
+    t.open()
+    g = DriveGroup.from_config(t, cfg.bus)
+    if configure:
+        g.configure(cfg.bus.drives)
+    g.set_mode(mode)
+    g.enable()
+    return g
 
 
 def _cycles(t: EtherCATTransport, n: int) -> list[int]:
@@ -96,14 +108,9 @@ def test_wrong_product_code_names_slave_expected_and_found(emulated_bus) -> None
 
 
 def test_csp_move_on_every_joint_is_followed_by_the_plant(emulated_bus) -> None:
-    cfg = emulated_bus.cfg
     t = _transport(emulated_bus)
     try:
-        t.open()
-        g = DriveGroup.from_config(t, cfg.bus)
-        g.configure(cfg.bus.drives)
-        g.set_mode(Mode.CSP)
-        g.enable()
+        g = _enabled_group(t, emulated_bus.cfg, Mode.CSP, configure=True)
         assert g.all_in(State.OPERATION_ENABLED)
         q0 = g.q.copy()
         plant0 = np.array(emulated_bus.call(op="status")["q"])
@@ -123,13 +130,9 @@ def test_csp_move_on_every_joint_is_followed_by_the_plant(emulated_bus) -> None:
 
 
 def test_cst_torque_reaches_the_plant(emulated_bus) -> None:
-    cfg = emulated_bus.cfg
     t = _transport(emulated_bus)
     try:
-        t.open()
-        g = DriveGroup.from_config(t, cfg.bus)
-        g.set_mode(Mode.CST)
-        g.enable()
+        g = _enabled_group(t, emulated_bus.cfg, Mode.CST)
         tau = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.5])
         g.command_torque(tau)
         for _ in range(10):
@@ -236,13 +239,9 @@ def test_restarted_slave_is_readdressed_and_remapped(emulated_bus) -> None:
 
 
 def test_drive_fault_is_surfaced_with_its_code(emulated_bus) -> None:
-    cfg = emulated_bus.cfg
     t = _transport(emulated_bus)
     try:
-        t.open()
-        g = DriveGroup.from_config(t, cfg.bus)
-        g.set_mode(Mode.CSP)
-        g.enable()
+        g = _enabled_group(t, emulated_bus.cfg, Mode.CSP)
         emulated_bus.call(op="drive_fault", slave=1, code=0x2310)
         for _ in range(5):
             g.hold()
@@ -259,13 +258,9 @@ def test_drive_fault_is_surfaced_with_its_code(emulated_bus) -> None:
 
 def test_drive_fault_with_an_aborted_0x603f_read_is_still_reported(emulated_bus) -> None:
     """The fault-read path: an SDO abort on 0x603F is reported, not raised (defect 4)."""
-    cfg = emulated_bus.cfg
     t = _transport(emulated_bus)
     try:
-        t.open()
-        g = DriveGroup.from_config(t, cfg.bus)
-        g.set_mode(Mode.CSP)
-        g.enable()
+        g = _enabled_group(t, emulated_bus.cfg, Mode.CSP)
         emulated_bus.call(op="sdo_abort", slave=2, index=0x603F, sub=0, code=0x06060000)
         emulated_bus.call(op="drive_fault", slave=2, code=0x2310)
         for _ in range(5):
