@@ -75,6 +75,16 @@ _AL_SM_WATCHDOG = 0x001B
 _RETRY_PAUSE = 0.01  # [s] between mailbox retries: lets a late answer drain first
 
 
+def _describe_exc(exc: BaseException) -> str:
+    """pysoem's description of ``exc`` (its ``desc`` property can itself raise for an
+    unknown code), else the exception's name."""
+    try:
+        desc = getattr(exc, "desc", "")
+    except Exception:  # PacketError.desc looks the code up in a dict
+        desc = f"code {getattr(exc, 'error_code', '?')}"
+    return str(desc or type(exc).__name__)
+
+
 def _pysoem() -> Any:
     import pysoem
 
@@ -305,7 +315,7 @@ class EtherCATTransport(Transport):
                 if attempt == self.mailbox_retries:
                     raise EtherCATError(
                         f"{self._who(axis)}: {what} failed after {attempt + 1} attempts: "
-                        f"{getattr(exc, 'desc', None) or type(exc).__name__}"
+                        f"{_describe_exc(exc)}"
                     ) from None
                 self.mailbox_retried += 1
                 time.sleep(_RETRY_PAUSE)
@@ -505,7 +515,7 @@ class EtherCATTransport(Transport):
             return str(self._sdo_error(exc, "access"))
         pos = getattr(exc, "slave_pos", 0)
         who = self._who(pos - 1) if 1 <= pos <= self.n_axes else f"slave {pos}"
-        desc = getattr(exc, "desc", "") or type(exc).__name__
+        desc = _describe_exc(exc)
         return f"{who}: {desc}"
 
     def _sdo_error(self, exc: Any, action: str) -> SdoAbortError:
