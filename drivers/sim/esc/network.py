@@ -334,7 +334,8 @@ def _answer_first() -> None:
     and no cyclic garbage collection on the frame path (objects made at start-up are frozen
     out of the collector, the rest is collected between control requests)."""
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(_RT_PRIORITY))
+        if os.sched_getscheduler(0) not in (os.SCHED_FIFO, os.SCHED_RR):  # keep a chrt choice
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(_RT_PRIORITY))
     except (AttributeError, OSError):
         with contextlib.suppress(OSError):
             os.nice(-10)
