@@ -376,7 +376,11 @@ def serve(
     ready_file: str | None = None,
 ) -> None:
     """Answer EtherCAT frames on ``iface`` until a ``stop`` request, SIGTERM or ``duration``
-    seconds. ``ready_file`` is created once the sockets are open (for test harnesses)."""
+    seconds. ``ready_file`` is created once the sockets are open (for test harnesses).
+
+    Meant to run in a process of its own (``hofto-hw sim-ethercat``): it raises the calling
+    process to real-time priority when allowed and pauses its garbage collector while
+    serving (see :func:`_answer_first`)."""
     sock = open_packet_socket(iface)
     srv = open_control_socket(control) if control else None
     ident = None
@@ -417,6 +421,7 @@ def serve(
             if end is not None and now >= end:
                 break
     finally:
+        gc.unfreeze()
         gc.enable()
         sock.close()
         if srv is not None:
