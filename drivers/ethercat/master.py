@@ -205,10 +205,11 @@ class EtherCATTransport(Transport):
         m = self.master
         m.manual_state_change = 1
         # A scan whose frames got no answer (a link still coming up, a late emulator) finds
-        # no slave: scan again until state_timeout, as a state wait.
+        # no slave, or a slave whose SII read timed out (vendor id 0 is no ETG identity):
+        # scan again until state_timeout, as a state wait.
         deadline = time.monotonic() + self.state_timeout
         found = m.config_init()
-        while found <= 0 and time.monotonic() < deadline:
+        while (found <= 0 or any(s.man == 0 for s in m.slaves)) and (time.monotonic() < deadline):
             time.sleep(_RETRY_PAUSE)
             found = m.config_init()
         if found <= 0:
