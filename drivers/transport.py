@@ -8,7 +8,8 @@ caller fills ``rx``, calls :meth:`Transport.exchange` and reads ``tx``.
 ``exchange`` never raises and never allocates: it returns a status code (0 = ok, see
 :data:`STATUS_TEXT`). On a non-zero status ``tx`` keeps the last good values. SDO access
 (:meth:`Transport.sdo_read` / :meth:`Transport.sdo_write`) is for setup, outside the cycle,
-and raises :class:`SdoAbortError` naming the axis and the decoded abort code.
+and raises :class:`SdoAbortError` naming the axis and the decoded abort code. The errors live
+in :mod:`drivers.errors` (re-exported here).
 """
 
 from __future__ import annotations
@@ -22,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from drivers.cia402.codes import describe_sdo_abort
 from drivers.cia402.pdo import new_rx, new_tx
-from hofto_hw.errors import UserError
+from drivers.errors import SdoAbortError as SdoAbortError  # re-exported
+from drivers.errors import TransportError
 
 # Status codes returned by exchange(). Backends may add their own codes >= 100.
 STATUS_OK = 0
@@ -47,29 +48,6 @@ STATUS_TEXT: dict[int, str] = {
 def describe_status(code: int) -> str:
     """Plain words for an exchange() status code."""
     return STATUS_TEXT.get(code, f"transport status {code}")
-
-
-class TransportError(UserError):
-    """A transport cannot be opened or used; the message names the device/interface."""
-
-
-class SdoAbortError(UserError):
-    """An SDO transfer was aborted by a drive (or timed out).
-
-    Attributes: ``axis`` (0-based), ``index``, ``subindex``, ``code`` (CiA 301 abort code).
-    """
-
-    def __init__(
-        self, axis: int, index: int, subindex: int, code: int, action: str, device: str = ""
-    ) -> None:
-        self.axis = axis
-        self.index = index
-        self.subindex = subindex
-        self.code = code
-        who = f"axis {axis}" + (f" ({device})" if device else "")
-        super().__init__(
-            f"{who}: SDO {action} 0x{index:04X}:{subindex:02X} aborted: {describe_sdo_abort(code)}"
-        )
 
 
 _FORMATS = {"u8": "<B", "i8": "<b", "u16": "<H", "i16": "<h", "u32": "<I", "i32": "<i"}

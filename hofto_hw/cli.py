@@ -1,7 +1,7 @@
 """The ``hofto-hw`` command.
 
-Each sub-command lives in its own module (``hofto_hw/commands/<name>.py`` or, for driver
-tools, under ``drivers/``) exposing two functions:
+Each sub-command lives in its own module (``hofto_hw/commands/<name>.py``) exposing two
+functions:
 
 - ``configure(parser: argparse.ArgumentParser) -> None`` adds its arguments;
 - ``run(args: argparse.Namespace) -> int`` does the work and returns the exit code.
@@ -34,7 +34,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "thresholds": ("hofto_hw.commands.thresholds", "calibrate collision thresholds"),
     "log": ("hofto_hw.commands.log", "inspect flight-recorder logs or recover a truncated one"),
     "sim-ethercat": (
-        "drivers.sim.ethercat_cli",
+        "hofto_hw.commands.sim_ethercat",
         "serve emulated EtherCAT CiA-402 drives on a network interface",
     ),
 }

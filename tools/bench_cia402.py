@@ -21,8 +21,8 @@ import numpy as np
 
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import Mode
-from drivers.sim.simbus import make_sim_bus
 from hofto_hw.config.loader import load_config
+from hofto_hw.runtime.build import build_sim_bus
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -46,7 +46,7 @@ def main() -> int:
     args = ap.parse_args()
 
     cfg = load_config(args.config)
-    bus = make_sim_bus(cfg, external=False)
+    bus = build_sim_bus(cfg, external=False)
     group = DriveGroup.from_config(bus, cfg.bus)
     bus.open()
     group.configure(cfg.bus.drives)

@@ -4,7 +4,9 @@ Every cycle (hot path, no allocation): :meth:`DriveGroup.read` decodes the TxPDO
 ``q`` [rad], ``qd`` [rad/s], ``tau`` [N·m] (joint side), ``current`` [A] and ``states``
 (uint8 :class:`~drivers.cia402.state_machine.State` codes), all shape (n,);
 :meth:`DriveGroup.command_position` / ``command_velocity`` / ``command_torque`` encode SI
-commands into the RxPDO; :meth:`DriveGroup.cycle` exchanges and reads.
+commands into the RxPDO; :meth:`DriveGroup.cycle` exchanges and reads, returns the
+transport status and sets ``fresh`` (False when the data is stale after a lost frame or a
+working-counter error).
 
 Setup (blocking, outside the tick): :meth:`configure`, :meth:`set_mode` (with the 0x6061
 mode-display check), :meth:`enable`, :meth:`disable`, :meth:`quick_stop`,
@@ -24,20 +26,13 @@ import numpy as np
 
 from drivers.cia402 import state_machine as sm
 from drivers.cia402.codes import describe_error_code
+from drivers.cia402.pdo import ImageFields
 from drivers.cia402.state_machine import STATE_NAMES, Mode, State
 from drivers.cia402.units import AxisScaling, Scaling
-from drivers.transport import SdoAbortError, Transport, describe_status
-from hofto_hw.errors import ConfigError, UserError
-
-
-class DriveError(UserError):
-    """A drive did not do what was asked; ``axis``, ``state``, ``statusword`` name it."""
-
-    def __init__(self, message: str, axis: int = -1, state: int = -1, statusword: int = 0):
-        super().__init__(message)
-        self.axis = axis
-        self.state = state
-        self.statusword = statusword
+from drivers.errors import DriveError as DriveError  # re-exported
+from drivers.errors import TransportError
+from drivers.transport import STATUS_OK, Transport, describe_status
+from hofto_hw.errors import ConfigError
 
 
 class DriveTimeoutError(DriveError):
@@ -55,7 +50,7 @@ class DriveFaultError(DriveError):
 _FAULTY = (State.FAULT, State.FAULT_REACTION_ACTIVE)
 
 
-class DriveGroup:
+class DriveGroup(ImageFields):
     """All axes of one transport as a CiA-402 group (see module docstring).
 
     ``transition_timeout`` [s] bounds each single state transition; it is converted to bus
@@ -88,22 +83,15 @@ class DriveGroup:
         self.current = np.zeros(n)
         #: State code per axis, uint8 (n,)
         self.states = np.zeros(n, dtype=np.uint8)
-        #: status of the last exchange (0 = ok)
-        self.status = 0
-        rx, tx = transport.rx, transport.tx
-        self._rx_cw = rx["controlword"]
-        self._rx_mode = rx["mode"]
-        self._rx_pos = rx["target_position"]
-        self._rx_vel = rx["target_velocity"]
-        self._rx_tau = rx["target_torque"]
-        self._rx_off = rx["torque_offset"]
-        self._tx_sw = tx["statusword"]
-        self._tx_mode = tx["mode_display"]
-        self._tx_pos = tx["position"]
-        self._tx_vel = tx["velocity"]
-        self._tx_tau = tx["torque"]
-        self._tx_cur = tx["current"]
-        self._tx_err = tx["error_code"]
+        #: status of the last exchange (0 = ok, see drivers.transport.STATUS_TEXT)
+        self.status = STATUS_OK
+        #: True only when the last :meth:`cycle` brought new TxPDO data; after a lost frame
+        #: or a short working counter the transport keeps the last good ``tx`` and q, qd, tau,
+        #: current, states are those of an earlier cycle (stale)
+        self.fresh = False
+        #: consecutive cycles without fresh data (0 after a good cycle)
+        self.stale_cycles = 0
+        self._bind_image(transport.rx, transport.tx)
         self._u16 = np.zeros(n, dtype=np.uint16)
         self._cw = np.zeros(n, dtype=np.uint16)
         self._flags = np.zeros(n, dtype=bool)
@@ -126,10 +114,19 @@ class DriveGroup:
         sm.decode_states(self._tx_sw, self.states, self._u16)
 
     def cycle(self) -> int:
-        """Exchange the process image, then :meth:`read`. Returns the transport status."""
-        self.status = self.transport.exchange()
+        """Exchange the process image, then :meth:`read`. Returns the transport status
+        (0 = ok) and sets :attr:`fresh` (new TxPDO data this cycle) and :attr:`stale_cycles`.
+        """
+        status = self.transport.exchange()
+        self.status = status
+        if status == STATUS_OK:
+            self.fresh = True
+            self.stale_cycles = 0
+        else:
+            self.fresh = False
+            self.stale_cycles += 1
         self.read()
-        return self.status
+        return status
 
     def command_position(self, q: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
         """CSP target q [rad] (n,) and optional torque feed-forward [N·m] (n,)."""
@@ -167,10 +164,12 @@ class DriveGroup:
         return bool(self._flags.all())
 
     def hold(self) -> None:
-        """Command the current position, zero velocity and torque (bumpless targets)."""
+        """Bumpless targets for every mode: CSP the measured position, CSV zero velocity,
+        CST the torque last given to :meth:`command_torque` (kept, not zeroed: a caller
+        holding the arm against gravity keeps holding it). The torque offset is kept too.
+        """
         np.copyto(self._rx_pos, self._tx_pos)
         self._rx_vel.fill(0)
-        self._rx_tau.fill(0)
 
     # ------------------------------------------------------------------ setup
 
@@ -240,7 +239,9 @@ class DriveGroup:
         )
 
     def enable(self) -> None:
-        """Bring every axis to Operation enabled, holding the current position.
+        """Bring every axis to Operation enabled, bumpless (see :meth:`hold`): CSP holds the
+        measured position, CSV commands zero velocity, CST applies the torque the caller
+        commanded before (e.g. gravity) from the first enabled cycle.
 
         Raises DriveFaultError if an axis is (or falls) in Fault (call :meth:`fault_reset`
         first; faults latch) and DriveTimeoutError if an axis stays in one state longer
@@ -337,10 +338,11 @@ class DriveGroup:
     # ---------------------------------------------------------------- faults
 
     def error_code(self, axis: int) -> int:
-        """0x603F of ``axis`` read by SDO (falls back to the PDO value if the SDO fails)."""
+        """0x603F of ``axis`` read by SDO (falls back to the PDO value if the SDO fails:
+        an abort or a mailbox failure, both :class:`~drivers.errors.TransportError`)."""
         try:
             return self.transport.read_value(axis, 0x603F, 0, "u16")
-        except SdoAbortError:
+        except TransportError:
             return int(self._tx_err[axis])
 
     def fault_messages(self) -> list[str]:

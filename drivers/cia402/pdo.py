@@ -125,3 +125,44 @@ def new_rx(n_axes: int) -> np.ndarray:
 def new_tx(n_axes: int) -> np.ndarray:
     """Zeroed TxPDO image, shape (n_axes,), dtype :data:`TXPDO_DTYPE`."""
     return np.zeros(n_axes, dtype=TXPDO_DTYPE)
+
+
+class ImageFields:
+    """Mixin: named views of the process-image fields, bound by :meth:`_bind_image`.
+
+    For the classes that fill and decode the images every cycle (the drive layer and the
+    emulated drives). Each attribute is a field view of shape (n,) into the records, so
+    writes go straight into ``rx``/``tx`` and nothing is allocated in the cycle.
+    """
+
+    _rx_cw: np.ndarray  # 0x6040 controlword, uint16
+    _rx_mode: np.ndarray  # 0x6060 mode of operation, int8
+    _rx_pos: np.ndarray  # 0x607A target position [counts], int32
+    _rx_vel: np.ndarray  # 0x60FF target velocity [counts/s], int32
+    _rx_tau: np.ndarray  # 0x6071 target torque [per mille], int16
+    _rx_off: np.ndarray  # 0x60B2 torque offset [per mille], int16
+    _tx_sw: np.ndarray  # 0x6041 statusword, uint16
+    _tx_mode: np.ndarray  # 0x6061 mode display, int8
+    _tx_pos: np.ndarray  # 0x6064 position [counts], int32
+    _tx_vel: np.ndarray  # 0x606C velocity [counts/s], int32
+    _tx_tau: np.ndarray  # 0x6077 torque [per mille], int16
+    _tx_cur: np.ndarray  # 0x6078 current [per mille], int16
+    _tx_err: np.ndarray  # 0x603F error code, uint16
+    _tx_din: np.ndarray  # 0x60FD digital inputs, uint32
+
+    def _bind_image(self, rx: np.ndarray, tx: np.ndarray) -> None:
+        """Point the views at ``rx`` (RXPDO_DTYPE) and ``tx`` (TXPDO_DTYPE), shape (n,)."""
+        self._rx_cw = rx["controlword"]
+        self._rx_mode = rx["mode"]
+        self._rx_pos = rx["target_position"]
+        self._rx_vel = rx["target_velocity"]
+        self._rx_tau = rx["target_torque"]
+        self._rx_off = rx["torque_offset"]
+        self._tx_sw = tx["statusword"]
+        self._tx_mode = tx["mode_display"]
+        self._tx_pos = tx["position"]
+        self._tx_vel = tx["velocity"]
+        self._tx_tau = tx["torque"]
+        self._tx_cur = tx["current"]
+        self._tx_err = tx["error_code"]
+        self._tx_din = tx["digital_inputs"]

@@ -1,12 +1,13 @@
-"""Errors of the EtherCAT master; each message names the interface, slave and values."""
+"""Errors of the EtherCAT master; each message names the interface, slave and values.
+
+All derive from :class:`drivers.errors.EtherCATError` (a TransportError, a DriverError).
+"""
 
 from __future__ import annotations
 
-from drivers.transport import TransportError
+from drivers.errors import EtherCATError
 
-
-class EtherCATError(TransportError):
-    """The EtherCAT bus cannot be brought up or used."""
+__all__ = ["EtherCATError", "IdentityMismatchError", "SlaveLostError", "StateChangeError"]
 
 
 class IdentityMismatchError(EtherCATError):

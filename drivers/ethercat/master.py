@@ -13,6 +13,13 @@ the slave and the values involved):
 5. SAFE-OP, then OP while exchanging process data, checking states on the way; a slave that
    refuses is reported with its AL status code in words.
 
+Start-up waits for states, never for a fixed time: every state change is polled until
+``state_timeout``; mailbox traffic (SDOs, the watchdog register) that fails for lack of an
+answer (WkcError, MailboxError, PacketError: a lost or late frame on a busy machine) is
+retried ``mailbox_retries`` times with a short pause, as SOEM's users do; an SDO *abort* is
+the drive's answer and is never retried. A slave whose SM watchdog expired while the master
+was late (SAFE-OP + ERROR, 0x001B) is acknowledged and requested to OP again.
+
 Every cycle (:meth:`EtherCATTransport.exchange`): copy ``rx`` into the slaves' outputs, send
 the process-data frame, receive it and compare the working counter with the expected one;
 a lost frame or a short WKC is reported in the same cycle as a status code (``tx`` then
@@ -59,10 +66,23 @@ from drivers.transport import (
     STATUS_WKC_MISMATCH,
     SdoAbortError,
     Transport,
+    TransportError,
 )
 
 _STATE_ACK = 0x10
 _FAULT_BIT = 0x0008  # CiA 402 statusword bit 3
+_AL_SM_WATCHDOG = 0x001B
+_RETRY_PAUSE = 0.01  # [s] between mailbox retries: lets a late answer drain first
+
+
+def _describe_exc(exc: BaseException) -> str:
+    """pysoem's description of ``exc`` (its ``desc`` property can itself raise for an
+    unknown code), else the exception's name."""
+    try:
+        desc = getattr(exc, "desc", "")
+    except Exception:  # PacketError.desc looks the code up in a dict
+        desc = f"code {getattr(exc, 'error_code', '?')}"
+    return str(desc or type(exc).__name__)
 
 
 def _pysoem() -> Any:
@@ -79,6 +99,9 @@ class EtherCATTransport(Transport):
     ``cycle_time``. ``recover``: :meth:`recover_slaves` may bring lost slaves back (else a
     lost slave stops the transport). ``receive_timeout`` [s]: how long ``exchange`` waits
     for its frame (default: one cycle). ``state_timeout`` [s]: per AL state change.
+    ``mailbox_retries``: extra attempts of an SDO or register access that got no answer.
+    ``pdo_watchdog`` [s]: SM (process-data) watchdog written to every slave before SAFE-OP
+    (None keeps the slave's default, typically 100 ms).
     """
 
     def __init__(
@@ -92,6 +115,8 @@ class EtherCATTransport(Transport):
         recover: bool = False,
         receive_timeout: float | None = None,
         state_timeout: float = 3.0,
+        mailbox_retries: int = 3,
+        pdo_watchdog: float | None = None,
     ) -> None:
         super().__init__(len(drives), cycle_time, axis_names)
         self.interface = interface
@@ -99,6 +124,10 @@ class EtherCATTransport(Transport):
         self.dc_sync = dc_sync
         self.recover = recover
         self.state_timeout = state_timeout
+        self.mailbox_retries = max(0, int(mailbox_retries))
+        self.pdo_watchdog = pdo_watchdog
+        #: mailbox accesses that needed a retry (start-up and SDO), for diagnostics
+        self.mailbox_retried = 0
         timeout = cycle_time if receive_timeout is None else receive_timeout
         self._timeout_us = max(100, int(timeout * 1e6))
         self.master: Any = None
@@ -134,6 +163,9 @@ class EtherCATTransport(Transport):
                 "receive_timeout": opts.receive_timeout,
                 "state_timeout": opts.state_timeout,
             }
+            for name in ("mailbox_retries", "pdo_watchdog"):
+                if getattr(opts, name, None) is not None:
+                    kw[name] = getattr(opts, name)
         return cls(bus.interface, bus.drives, cycle_time, axis_names, **kw)
 
     # -------------------------------------------------------------------- start-up
@@ -171,7 +203,14 @@ class EtherCATTransport(Transport):
     def _start(self, pysoem: Any) -> None:
         m = self.master
         m.manual_state_change = 1
+        # A scan whose frames got no answer (a link still coming up, a late emulator) finds
+        # no slave, or a slave whose SII read timed out (vendor id 0 is no ETG identity):
+        # scan again until state_timeout, as a state wait.
+        deadline = time.monotonic() + self.state_timeout
         found = m.config_init()
+        while (found <= 0 or any(s.man == 0 for s in m.slaves)) and (time.monotonic() < deadline):
+            time.sleep(_RETRY_PAUSE)
+            found = m.config_init()
         if found <= 0:
             raise EtherCATError(f"no EtherCAT slave answered on {self.interface}")
         if found != self.n_axes:
@@ -233,20 +272,54 @@ class EtherCATTransport(Transport):
                     )
 
     def _map_pdos(self, pos: int) -> None:
-        """PRE-OP -> SAFE-OP hook: write the PDO mapping and assignment by SDO (CiA 301)."""
-        s = self.slaves[pos]
+        """PRE-OP -> SAFE-OP hook: write the PDO mapping and assignment by SDO (CiA 301),
+        then the SM watchdog time if configured."""
+        s = self.slaves[pos]  # pysoem passes the 0-based position
+        axis = pos
         u8, u16, u32 = (struct.Struct(f).pack for f in ("<B", "<H", "<I"))
+
+        def write(index: int, sub: int, data: bytes) -> None:
+            self._retry(
+                lambda: s.sdo_write(index, sub, data), axis, f"SDO write 0x{index:04X}:{sub:02X}"
+            )
+
         for assign, pdo_index, entries in (
             (pdo.RXPDO_ASSIGN_INDEX, pdo.RXPDO_INDEX, pdo.RXPDO_MAPPING),
             (pdo.TXPDO_ASSIGN_INDEX, pdo.TXPDO_INDEX, pdo.TXPDO_MAPPING),
         ):
-            s.sdo_write(assign, 0, u8(0))
-            s.sdo_write(pdo_index, 0, u8(0))
+            write(assign, 0, u8(0))
+            write(pdo_index, 0, u8(0))
             for k, e in enumerate(entries):
-                s.sdo_write(pdo_index, k + 1, u32(pdo.mapping_value(e)))
-            s.sdo_write(pdo_index, 0, u8(len(entries)))
-            s.sdo_write(assign, 1, u16(pdo_index))
-            s.sdo_write(assign, 0, u8(1))
+                write(pdo_index, k + 1, u32(pdo.mapping_value(e)))
+            write(pdo_index, 0, u8(len(entries)))
+            write(assign, 1, u16(pdo_index))
+            write(assign, 0, u8(1))
+        if self.pdo_watchdog is not None:
+            ms = self.pdo_watchdog * 1000.0
+            self._retry(lambda: s.set_watchdog("processdata", ms), axis, "SM watchdog write")
+
+    def _retry(self, fn: Any, axis: int, what: str) -> Any:
+        """Call ``fn`` again when the mailbox/register access got no (valid) answer.
+
+        WkcError (no answer in time), MailboxError and PacketError (a late or unexpected
+        mailbox frame) are transient on a busy machine: SOEM users retry them after a short
+        pause. SdoError (an abort: the drive's answer) propagates at once. After the last
+        attempt an EtherCATError names the slave and the access.
+        """
+        pysoem = _pysoem()
+        transient = (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError)
+        for attempt in range(self.mailbox_retries + 1):
+            try:
+                return fn()
+            except transient as exc:
+                if attempt == self.mailbox_retries:
+                    raise EtherCATError(
+                        f"{self._who(axis)}: {what} failed after {attempt + 1} attempts: "
+                        f"{_describe_exc(exc)}"
+                    ) from None
+                self.mailbox_retried += 1
+                time.sleep(_RETRY_PAUSE)
+        raise AssertionError("unreachable")
 
     def _request(self, state: int, cyclic: bool = False) -> None:
         """Request ``state`` on all slaves and wait; raises StateChangeError in words."""
@@ -262,6 +335,8 @@ class EtherCATTransport(Transport):
             if reached == state:
                 return
             m.read_state()
+            if cyclic and self._ack_watchdog_errors(state):
+                continue  # the master was late, not the slave wrong: ask again
             if any(s.state & 0x10 for s in self.slaves):
                 break  # a slave refused with an error: no point waiting
             if cyclic:
@@ -284,6 +359,19 @@ class EtherCATTransport(Transport):
             f"EtherCAT slaves did not reach {target}: " + "; ".join(parts or ["timeout"]),
             problems,
         )
+
+    def _ack_watchdog_errors(self, state: int) -> bool:
+        """Acknowledge slaves in SAFE-OP + ERROR with an expired SM watchdog (0x001B) and
+        request ``state`` again; True if any was. Other AL errors are real refusals."""
+        acked = False
+        for s in self.slaves:
+            if s.state == STATE_SAFEOP | _STATE_ACK and s.al_status == _AL_SM_WATCHDOG:
+                s.state = STATE_SAFEOP | _STATE_ACK
+                s.write_state()
+                s.state = state
+                s.write_state()
+                acked = True
+        return acked
 
     # ------------------------------------------------------------------- the cycle
 
@@ -357,10 +445,10 @@ class EtherCATTransport(Transport):
             if s.state == STATE_OP:
                 continue
             if s.state == 0:
-                if s.recover(20_000) <= 0:
+                if not self._until(lambda s=s: s.recover(20_000) > 0):
                     done.append(f"{self._who(i)} still does not answer")
                     continue
-                s.reconfig(50_000)
+                self._until(lambda s=s: s.reconfig(50_000) >= STATE_PREOP)
                 done.append(f"{self._who(i)} answered again and was reconfigured")
             elif s.state & 0x10:
                 s.state = (s.state & 0x0F) | _STATE_ACK
@@ -371,12 +459,27 @@ class EtherCATTransport(Transport):
             if s.state & 0x0F == STATE_SAFEOP or s.state & 0x10:
                 s.state = pysoem.OP_STATE
                 s.write_state()
-        for _ in range(max(1, int(0.5 / self.cycle_time))):
+        deadline = time.monotonic() + self.state_timeout
+        while time.monotonic() < deadline:
             self._raw_exchange()
             if self.master.state_check(STATE_OP, 1000) == STATE_OP:
                 break
+            self.master.read_state()
+            self._ack_watchdog_errors(STATE_OP)
+            time.sleep(self.cycle_time)
         remaining = self.check_bus()
         return done + remaining
+
+    def _until(self, attempt: Any) -> bool:
+        """Repeat ``attempt()`` (a short SOEM call with its own timeout) until it returns
+        True or ``state_timeout`` has passed."""
+        deadline = time.monotonic() + self.state_timeout
+        while True:
+            if attempt():
+                return True
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(_RETRY_PAUSE)
 
     def drive_faults(self) -> list[str]:
         """Axes whose statusword shows Fault, with 0x603F read by SDO and decoded."""
@@ -385,7 +488,7 @@ class EtherCATTransport(Transport):
             axis = int(i)
             try:
                 code = self.read_value(axis, 0x603F, 0, "u16")
-            except EtherCATError as exc:
+            except TransportError as exc:  # SdoAbortError, EtherCATError (mailbox), short data
                 out.append(f"{self._who(axis)}: fault, error code unreadable ({exc})")
                 continue
             out.append(f"{self._who(axis)}: drive fault {describe_error_code(code)}")
@@ -412,7 +515,7 @@ class EtherCATTransport(Transport):
             return str(self._sdo_error(exc, "access"))
         pos = getattr(exc, "slave_pos", 0)
         who = self._who(pos - 1) if 1 <= pos <= self.n_axes else f"slave {pos}"
-        desc = getattr(exc, "desc", "") or type(exc).__name__
+        desc = _describe_exc(exc)
         return f"{who}: {desc}"
 
     def _sdo_error(self, exc: Any, action: str) -> SdoAbortError:
@@ -424,38 +527,28 @@ class EtherCATTransport(Transport):
 
     def sdo_read(self, axis: int, index: int, subindex: int) -> bytes:
         """Upload ``index:subindex`` of drive ``axis``; raises SdoAbortError/EtherCATError."""
-        self._check_axis(axis)
-        pysoem = _pysoem()
-        if self.master is None:
-            raise EtherCATError(f"EtherCAT master on {self.interface} is not open")
-        try:
-            return bytes(self.slaves[axis].sdo_read(index, subindex))
-        except pysoem.SdoError as exc:
-            raise SdoAbortError(
-                axis, index, subindex, exc.abort_code, "read", self.axis_names[axis]
-            ) from None
-        except (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError) as exc:
-            raise EtherCATError(
-                f"{self._who(axis)}: SDO read 0x{index:04X}:{subindex:02X} failed: "
-                f"{getattr(exc, 'desc', None) or type(exc).__name__}"
-            ) from None
+        return bytes(
+            self._sdo(axis, index, subindex, "read", lambda s: s.sdo_read(index, subindex))
+        )
 
     def sdo_write(self, axis: int, index: int, subindex: int, data: bytes) -> None:
         """Download ``data`` to ``index:subindex`` of drive ``axis``; raises SdoAbortError."""
+        payload = bytes(data)
+        self._sdo(axis, index, subindex, "write", lambda s: s.sdo_write(index, subindex, payload))
+
+    def _sdo(self, axis: int, index: int, subindex: int, action: str, call: Any) -> Any:
+        """``call(slave)`` with mailbox retries; an SDO abort becomes SdoAbortError."""
         self._check_axis(axis)
         pysoem = _pysoem()
         if self.master is None:
             raise EtherCATError(f"EtherCAT master on {self.interface} is not open")
+        slave = self.slaves[axis]
+        what = f"SDO {action} 0x{index:04X}:{subindex:02X}"
         try:
-            self.slaves[axis].sdo_write(index, subindex, bytes(data))
+            return self._retry(lambda: call(slave), axis, what)
         except pysoem.SdoError as exc:
             raise SdoAbortError(
-                axis, index, subindex, exc.abort_code, "write", self.axis_names[axis]
-            ) from None
-        except (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError) as exc:
-            raise EtherCATError(
-                f"{self._who(axis)}: SDO write 0x{index:04X}:{subindex:02X} failed: "
-                f"{getattr(exc, 'desc', None) or type(exc).__name__}"
+                axis, index, subindex, exc.abort_code, action, self.axis_names[axis]
             ) from None
 
     # ----------------------------------------------------------------------- close

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.cia402 import state_machine as sm
-from drivers.cia402.pdo import new_rx, new_tx
+from drivers.cia402.pdo import ImageFields, new_rx, new_tx
 from drivers.cia402.state_machine import Command, Mode, State
 from drivers.cia402.units import AxisScaling, Scaling
 from drivers.sim.object_dictionary import DriveObjects, ObjectDictionary, cia402_dictionary
@@ -110,7 +110,7 @@ class LoopTuning:
         )
 
 
-class EmulatedDrives:
+class EmulatedDrives(ImageFields):
     """n emulated CiA-402 drives driving one plant; see the module docstring.
 
     ``rx``/``tx``: the drives' own process images (shape (n,)), what their object
@@ -221,22 +221,8 @@ class EmulatedDrives:
         self._neg_brake = -tuning.brake_torque
         self._inv_dt = 1.0 / self.dt
         self._encoder_ok = np.ones(n, dtype=bool)
-        rx, tx = self.rx, self.tx
-        self._rx_cw = rx["controlword"]
-        self._rx_mode = rx["mode"]
+        self._bind_image(self.rx, self.tx)
         self._rx_mode_u8 = self._rx_mode.view(np.uint8)
-        self._rx_pos = rx["target_position"]
-        self._rx_vel = rx["target_velocity"]
-        self._rx_tau = rx["target_torque"]
-        self._rx_off = rx["torque_offset"]
-        self._tx_sw = tx["statusword"]
-        self._tx_mode = tx["mode_display"]
-        self._tx_pos = tx["position"]
-        self._tx_vel = tx["velocity"]
-        self._tx_tau = tx["torque"]
-        self._tx_cur = tx["current"]
-        self._tx_err = tx["error_code"]
-        self._tx_din = tx["digital_inputs"]
         # Scratch (no allocation per cycle).
         f = np.zeros
         self._tau, self._qt, self._vt, self._tt, self._toff = (f(n) for _ in range(5))

@@ -8,6 +8,8 @@ Fault injection for tests: :meth:`SimBus.drop_cycles` loses the next frames (exc
 returns :data:`~drivers.transport.STATUS_NO_RESPONSE`, ``tx`` keeps its last values, the
 drives see no RxPDO and fault with 0x8130 after their watchdog), and
 :meth:`SimBus.inject_fault` forwards to :meth:`EmulatedDrives.inject_fault`.
+
+Built from a whole config by :func:`hofto_hw.runtime.build.build_sim_bus`.
 """
 
 from __future__ import annotations
@@ -27,8 +29,6 @@ from drivers.transport import (
     Transport,
 )
 from hofto_hw.config.drives import BusConfig, DriveConfig
-from hofto_hw.config.models import SimulationConfig, SystemConfig
-from hofto_hw.errors import ConfigError
 
 
 class SimBus(Transport):
@@ -125,22 +125,3 @@ class SimBus(Transport):
             raise SdoAbortError(
                 axis, index, subindex, a.code, "write", self.axis_names[axis]
             ) from None
-
-
-def make_sim_bus(cfg: SystemConfig, *, external: bool = True) -> SimBus:
-    """SimBus + plant for a whole config (``bus`` and optional ``simulation`` sections).
-
-    The plant ticks at ``cfg.cycle_time`` (1 / loop.rate_hz); ``external=False`` drops the
-    scripted external torques (a quiet arm for tests). Raises ConfigError when the config
-    has no ``bus``.
-    """
-    from hofto_hw.model.robot import RobotModel
-
-    if cfg.bus is None:
-        raise ConfigError("bus: section missing; the simulated bus needs the drive data")
-    sim = cfg.simulation if cfg.simulation is not None else SimulationConfig()
-    if not external:
-        sim = sim.model_copy(update={"external": []})
-    model = RobotModel.from_config(cfg.robot)
-    plant = Plant(model, sim, cfg.cycle_time)
-    return SimBus.from_config(cfg.bus, plant, axis_names=list(cfg.robot.joints))

@@ -7,10 +7,12 @@ configuration file (identity per axis) is enough to describe the emulated networ
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import pairwise
 
 from drivers.cia402 import pdo
+from hofto_hw.config.drives import DriveConfig
 
 #: Mailbox protocol bits of SII word 0x1C.
 MBX_PROTO_AOE = 0x01
@@ -100,3 +102,20 @@ class SlaveDescription:
     def default_inputs_size(self) -> int:
         """SM3 length for the default TxPDO mapping [byte]."""
         return pdo.TXPDO_SIZE
+
+
+def slave_descriptions(drives: Sequence[DriveConfig]) -> list[SlaveDescription]:
+    """One slave per drive: identity from ``drives[i].identity`` (``bus.drives``)."""
+    out = []
+    for i, d in enumerate(drives):
+        ident = d.identity
+        out.append(
+            SlaveDescription(
+                vendor_id=ident.vendor_id,
+                product_code=ident.product_code,
+                revision=ident.revision or 0,
+                serial=0x5100 + i,
+                name="hofto-sim CiA-402 servo",
+            )
+        )
+    return out

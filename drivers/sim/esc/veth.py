@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import subprocess
+import time
 
 from hofto_hw.errors import UserError
 
@@ -44,6 +45,33 @@ def create_pair(master: str, slave: str) -> None:
         except OSError:
             pass  # IPv6 disabled system-wide or not permitted: only costs stray frames
         _ip("link", "set", name, "up")
+    wait_up(master, slave)
+
+
+def wait_up(*names: str, timeout: float = 10.0) -> None:
+    """Wait until every interface reports carrier and operstate up.
+
+    The kernel activates a new link's queueing discipline asynchronously (link watch); a
+    frame sent before that is dropped, and SOEM would report no slave. Waits for the state,
+    not for a time; raises UserError naming the interface after ``timeout`` [s].
+    """
+    deadline = time.monotonic() + timeout
+    for name in names:
+        while _read(name, "operstate") != "up" or _read(name, "carrier") != "1":
+            if time.monotonic() > deadline:
+                raise UserError(
+                    f"network interface {name!r} is not up {timeout:g} s after `ip link set up` "
+                    f"(operstate {_read(name, 'operstate') or 'unknown'})"
+                )
+            time.sleep(0.01)
+
+
+def _read(name: str, attr: str) -> str:
+    try:
+        with open(f"/sys/class/net/{name}/{attr}") as f:
+            return f.read().strip()
+    except OSError:
+        return ""
 
 
 def delete_pair(master: str) -> None:

@@ -10,24 +10,21 @@ import pytest
 from drivers.cia402.drive_group import DriveFaultError, DriveGroup, DriveTimeoutError
 from drivers.cia402.state_machine import Mode, State
 from drivers.sim.drive import FAULTS
-from drivers.sim.simbus import SimBus, make_sim_bus
+from drivers.sim.simbus import SimBus
+from drivers.transport import STATUS_NO_RESPONSE
 from hofto_hw.config.loader import load_config
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.errors import ConfigError
+from hofto_hw.runtime.build import build_sim_bus
 
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
 
-@pytest.fixture(scope="module")
-def cfg() -> SystemConfig:
-    return load_config(CONFIG)
-
-
 @pytest.fixture
-def bus(cfg: SystemConfig) -> SimBus:
-    b = make_sim_bus(cfg, external=False)
-    b.open()
-    return b
+def bus(bus: SimBus) -> SimBus:
+    """The shared quiet SimBus (tests/drivers/conftest.py), opened."""
+    bus.open()
+    return bus
 
 
 @pytest.fixture
@@ -105,6 +102,28 @@ def test_cst_torque_reaches_the_plant(group: DriveGroup, bus: SimBus) -> None:
     assert np.allclose(plant.qdd, expected, rtol=0.05, atol=0.05)
     assert expected[0] > 1.0 and expected[3] < -1.0  # the offsets really accelerate
     assert np.allclose(group.tau, plant.tau_meas, atol=raw_step.max())  # reported back
+
+
+@pytest.mark.parametrize("mode", [Mode.CSP, Mode.CSV, Mode.CST])
+def test_enable_is_bumpless_under_gravity(mode: Mode, group: DriveGroup, bus: SimBus) -> None:
+    """Enabling must not drop the arm (defect 2): CSP holds the measured position, CSV
+    commands zero velocity, CST keeps the caller's gravity torque from the first enabled
+    cycle. Before the fix, CST enable wrote zero torque and joint 2 sagged 0.026 rad."""
+    plant = bus.plant
+    tau_g = plant.true_model.create_data().gravity(plant.q).copy()  # holds the true arm
+    assert abs(tau_g[1]) > 10.0  # joint 2 really carries the arm
+    q0 = plant.q.copy()
+    group.set_mode(mode)
+    if mode == Mode.CST:
+        group.command_torque(tau_g)
+    group.enable()
+    assert group.all_in(State.OPERATION_ENABLED)
+    if mode == Mode.CST:
+        raw_step = np.abs(group.scaling.nm_per_permille)
+        assert np.all(np.abs(plant.tau_applied - tau_g) <= 0.5 * raw_step + 1e-9)
+    for _ in range(100):  # 0.1 s of holding
+        assert group.cycle() == 0
+    assert np.max(np.abs(plant.q - q0)) < 2e-3
 
 
 def test_quick_stop_ramps_velocity_down_then_disables(
@@ -194,6 +213,26 @@ def test_lost_frames_give_status_then_comm_loss_fault(group: DriveGroup, bus: Si
     assert all("0x8130 communication lost" in m for m in group.fault_messages())
 
 
+def test_stale_data_after_a_lost_frame_is_flagged(group: DriveGroup, bus: SimBus) -> None:
+    """cycle() returns the status and sets `fresh` (defect 5): the TxPDO of a lost frame is
+    the previous cycle's, and the caller must be able to tell."""
+    _enabled(group, Mode.CSV)
+    for _ in range(50):
+        group.command_velocity(np.full(6, 0.2))
+        assert group.cycle() == 0
+        assert group.fresh and group.stale_cycles == 0
+    q_before = group.q.copy()
+    bus.drop_cycles(2)
+    assert group.cycle() == STATUS_NO_RESPONSE
+    assert not group.fresh and group.stale_cycles == 1
+    np.testing.assert_array_equal(group.q, q_before)  # stale: the same values again
+    assert not np.allclose(bus.plant.q_meas, q_before)  # ... while the arm moved on
+    assert group.cycle() == STATUS_NO_RESPONSE and group.stale_cycles == 2
+    assert group.cycle() == 0
+    assert group.fresh and group.stale_cycles == 0
+    np.testing.assert_allclose(group.q, bus.plant.q_meas, atol=1e-5)
+
+
 def test_persistent_fault_refuses_reset_with_the_decoded_cause(
     group: DriveGroup, bus: SimBus
 ) -> None:
@@ -250,7 +289,7 @@ def test_read_and_commands_do_not_allocate(group: DriveGroup) -> None:
 
 def test_ur10e_bus_at_500_hz_enables_and_follows() -> None:
     cfg = load_config(CONFIG.parent / "ur10e.yaml")
-    bus = make_sim_bus(cfg, external=False)
+    bus = build_sim_bus(cfg, external=False)
     group = DriveGroup.from_config(bus, cfg.bus)
     with bus:
         group.configure(cfg.bus.drives)

@@ -29,7 +29,11 @@ pytestmark = pytest.mark.root
 
 
 def _transport(bus, drives=None, **kw) -> EtherCATTransport:
+    """A master for the emulated bus. Tests pause cycling between steps (control requests,
+    checks), so the SM watchdog is 2 s unless a test sets it: with the slaves' 100 ms a
+    descheduled test process would trip it (a real loop never pauses)."""
     cfg = bus.cfg
+    kw.setdefault("pdo_watchdog", 2.0)
     return EtherCATTransport(
         bus.master_iface,
         drives if drives is not None else cfg.bus.drives,
@@ -38,6 +42,28 @@ def _transport(bus, drives=None, **kw) -> EtherCATTransport:
         receive_timeout=0.02,  # generous: the test machine is shared
         **kw,
     )
+
+
+def _cycle_until(t: EtherCATTransport, done, what: str, timeout: float = 20.0) -> list[int]:
+    """Keep the bus cycling until ``done()`` (a state, not a time); fail after ``timeout``."""
+    out = []
+    deadline = time.monotonic() + timeout
+    while not done():
+        assert time.monotonic() < deadline, f"{what} not reached within {timeout} s"
+        out.append(t.exchange())
+        t.wait_next_cycle()
+    return out
+
+
+def _enabled_group(t: EtherCATTransport, cfg, mode: Mode, configure: bool = False) -> DriveGroup:
+    """Open ``t`` and enable its drives in ``mode`` (CiA-402 drive layer over EtherCAT)."""
+    t.open()
+    g = DriveGroup.from_config(t, cfg.bus)
+    if configure:
+        g.configure(cfg.bus.drives)
+    g.set_mode(mode)
+    g.enable()
+    return g
 
 
 def _cycles(t: EtherCATTransport, n: int) -> list[int]:
@@ -56,6 +82,7 @@ def test_soem_finds_six_drives_and_brings_them_to_op(emulated_bus) -> None:
         assert t.expected_wkc == 18  # 3 per slave: outputs written (2) + inputs read (1)
         assert t.check_bus() == []
         assert all(s.name == "hofto-sim CiA-402 servo" for s in t.slaves)
+        assert [s.get_watchdog("processdata") for s in t.slaves] == [2000.0] * 6
         status = emulated_bus.call(op="status")
         assert status["al_state"] == [0x08] * 6
         # the master wrote the mapping and assignment by SDO in PRE-OP -> SAFE-OP
@@ -80,14 +107,9 @@ def test_wrong_product_code_names_slave_expected_and_found(emulated_bus) -> None
 
 
 def test_csp_move_on_every_joint_is_followed_by_the_plant(emulated_bus) -> None:
-    cfg = emulated_bus.cfg
     t = _transport(emulated_bus)
     try:
-        t.open()
-        g = DriveGroup.from_config(t, cfg.bus)
-        g.configure(cfg.bus.drives)
-        g.set_mode(Mode.CSP)
-        g.enable()
+        g = _enabled_group(t, emulated_bus.cfg, Mode.CSP, configure=True)
         assert g.all_in(State.OPERATION_ENABLED)
         q0 = g.q.copy()
         plant0 = np.array(emulated_bus.call(op="status")["q"])
@@ -107,13 +129,9 @@ def test_csp_move_on_every_joint_is_followed_by_the_plant(emulated_bus) -> None:
 
 
 def test_cst_torque_reaches_the_plant(emulated_bus) -> None:
-    cfg = emulated_bus.cfg
     t = _transport(emulated_bus)
     try:
-        t.open()
-        g = DriveGroup.from_config(t, cfg.bus)
-        g.set_mode(Mode.CST)
-        g.enable()
+        g = _enabled_group(t, emulated_bus.cfg, Mode.CST)
         tau = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.5])
         g.command_torque(tau)
         for _ in range(10):
@@ -145,6 +163,25 @@ def test_dropped_and_damaged_frames_are_detected_in_the_same_cycle(emulated_bus)
         t.close()
 
 
+def test_drive_group_flags_stale_data_after_a_lost_or_damaged_frame(emulated_bus) -> None:
+    cfg = emulated_bus.cfg
+    t = _transport(emulated_bus)
+    try:
+        t.open()
+        g = DriveGroup.from_config(t, cfg.bus)
+        assert g.cycle() == STATUS_OK and g.fresh
+        emulated_bus.call(op="drop", count=1)
+        assert g.cycle() == STATUS_NO_RESPONSE
+        assert not g.fresh and g.stale_cycles == 1
+        emulated_bus.call(op="corrupt", count=1, slave=2)
+        assert g.cycle() == STATUS_WKC_MISMATCH
+        assert not g.fresh and g.stale_cycles == 2
+        assert g.cycle() == STATUS_OK
+        assert g.fresh and g.stale_cycles == 0
+    finally:
+        t.close()
+
+
 def test_silent_slave_is_reported_and_stops_the_bus(emulated_bus) -> None:
     t = _transport(emulated_bus)
     try:
@@ -162,11 +199,16 @@ def test_silent_slave_is_reported_and_stops_the_bus(emulated_bus) -> None:
 
 
 def test_lost_slave_is_recovered_when_it_returns(emulated_bus) -> None:
-    t = _transport(emulated_bus, recover=True)
+    t = _transport(emulated_bus, recover=True, pdo_watchdog=0.1)
     try:
         t.open()
         emulated_bus.call(op="silence", slave=1, on=True)
-        _cycles(t, 150)  # longer than the 100 ms SM watchdog: it drops to SAFE-OP + ERROR
+        # past the 100 ms SM watchdog the silent slave drops to SAFE-OP + ERROR
+        _cycle_until(
+            t,
+            lambda: emulated_bus.call(op="status")["al_state"][1] == 0x14,
+            "SM watchdog of the silent slave",
+        )
         assert t.exchange() == STATUS_WKC_MISMATCH
         emulated_bus.call(op="silence", slave=1, on=False)
         status = emulated_bus.call(op="status")
@@ -196,13 +238,9 @@ def test_restarted_slave_is_readdressed_and_remapped(emulated_bus) -> None:
 
 
 def test_drive_fault_is_surfaced_with_its_code(emulated_bus) -> None:
-    cfg = emulated_bus.cfg
     t = _transport(emulated_bus)
     try:
-        t.open()
-        g = DriveGroup.from_config(t, cfg.bus)
-        g.set_mode(Mode.CSP)
-        g.enable()
+        g = _enabled_group(t, emulated_bus.cfg, Mode.CSP)
         emulated_bus.call(op="drive_fault", slave=1, code=0x2310)
         for _ in range(5):
             g.hold()
@@ -213,6 +251,29 @@ def test_drive_fault_is_surfaced_with_its_code(emulated_bus) -> None:
         assert len(faults) == 1
         assert "slave 2" in faults[0] and describe_error_code(0x2310) in faults[0]
         assert any("0x2310" in m for m in t.emergency_messages())
+    finally:
+        t.close()
+
+
+def test_drive_fault_with_an_aborted_0x603f_read_is_still_reported(emulated_bus) -> None:
+    """The fault-read path: an SDO abort on 0x603F is reported, not raised (defect 4)."""
+    t = _transport(emulated_bus)
+    try:
+        g = _enabled_group(t, emulated_bus.cfg, Mode.CSP)
+        emulated_bus.call(op="sdo_abort", slave=2, index=0x603F, sub=0, code=0x06060000)
+        emulated_bus.call(op="drive_fault", slave=2, code=0x2310)
+        for _ in range(5):
+            g.hold()
+            g.cycle()
+            t.wait_next_cycle()
+        assert int(t.tx["error_code"][2]) == 0x2310
+        faults = t.drive_faults()  # raised SdoAbortError before the fix
+        assert len(faults) == 1
+        assert "slave 3" in faults[0] and "unreadable" in faults[0]
+        assert "0x06060000" in faults[0]
+        # the drive layer falls back to the PDO copy of 0x603F
+        assert g.error_code(2) == 0x2310
+        assert any(describe_error_code(0x2310) in m for m in g.fault_messages())
     finally:
         t.close()
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import struct
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,21 +10,12 @@ import pytest
 from drivers.cia402 import state_machine as sm
 from drivers.cia402.state_machine import Mode, State
 from drivers.sim.drive import EmulatedDrives
-from drivers.sim.simbus import make_sim_bus
-from hofto_hw.config.loader import load_config
-from hofto_hw.config.models import SystemConfig
-
-CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
-
-
-@pytest.fixture(scope="module")
-def cfg() -> SystemConfig:
-    return load_config(CONFIG)
+from drivers.sim.simbus import SimBus
 
 
 @pytest.fixture
-def drives(cfg: SystemConfig) -> EmulatedDrives:
-    return make_sim_bus(cfg, external=False).drives
+def drives(bus: SimBus) -> EmulatedDrives:
+    return bus.drives
 
 
 def _states(d: EmulatedDrives) -> list[State]:

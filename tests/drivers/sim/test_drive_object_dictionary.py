@@ -4,27 +4,13 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable
-from pathlib import Path
 
 import pytest
 
 from drivers.cia402.pdo import RXPDO_MAPPING, TXPDO_MAPPING, PdoEntry, mapping_value
 from drivers.sim.object_dictionary import ObjectDictionary, SdoAbort
-from drivers.sim.simbus import SimBus, make_sim_bus
-from hofto_hw.config.loader import load_config
+from drivers.sim.simbus import SimBus
 from hofto_hw.config.models import SystemConfig
-
-CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
-
-
-@pytest.fixture(scope="module")
-def cfg() -> SystemConfig:
-    return load_config(CONFIG)
-
-
-@pytest.fixture
-def bus(cfg: SystemConfig) -> SimBus:
-    return make_sim_bus(cfg, external=False)
 
 
 @pytest.fixture

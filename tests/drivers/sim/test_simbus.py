@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from drivers.sim.simbus import SimBus, make_sim_bus
+from drivers.sim.simbus import SimBus
 from drivers.transport import (
     STATUS_NO_RESPONSE,
     STATUS_NOT_OPEN,
@@ -15,21 +13,8 @@ from drivers.transport import (
     SdoAbortError,
     TransportError,
 )
-from hofto_hw.config.loader import load_config
 from hofto_hw.config.models import SystemConfig
-from hofto_hw.errors import ConfigError
-
-CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
-
-
-@pytest.fixture(scope="module")
-def cfg() -> SystemConfig:
-    return load_config(CONFIG)
-
-
-@pytest.fixture
-def bus(cfg: SystemConfig) -> SimBus:
-    return make_sim_bus(cfg, external=False)
+from hofto_hw.runtime.build import build_sim_bus
 
 
 def test_exchange_needs_open_and_advances_one_tick(bus: SimBus) -> None:
@@ -105,17 +90,12 @@ def test_inject_fault_reaches_the_drive(bus: SimBus) -> None:
 def test_the_bus_cycles_at_the_loop_rate(cfg: SystemConfig) -> None:
     # loop.rate_hz is the only cycle time in a config (bus.cycle_time could disagree with it)
     slow = cfg.model_copy(update={"loop": cfg.loop.model_copy(update={"rate_hz": 500.0})})
-    bus = make_sim_bus(slow, external=False)
+    bus = build_sim_bus(slow, external=False)
     assert bus.cycle_time == bus.plant.dt == pytest.approx(0.002)
     with bus:
         t0 = bus.plant.t
         bus.exchange()
         assert bus.plant.t == pytest.approx(t0 + 0.002)
-
-
-def test_config_without_bus_is_a_clear_error(cfg: SystemConfig) -> None:
-    with pytest.raises(ConfigError, match="bus: section missing"):
-        make_sim_bus(cfg.model_copy(update={"bus": None}))
 
 
 def test_wait_next_cycle_does_not_sleep(bus: SimBus) -> None:

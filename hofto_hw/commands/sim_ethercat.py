@@ -4,12 +4,14 @@ Example (root): ``hofto-hw sim-ethercat --iface ecs0 --config configs/er3a.yaml
 --create-veth`` makes the veth pair ecm0/ecs0, serves the six drives of the config on ecs0
 and leaves ecm0 to the master (``bus.interface: ecm0``). Fault injection and status go
 through the Unix socket given with ``--control`` (one JSON object per line, see
-:meth:`drivers.sim.esc.network.EmulatedNetwork.control`).
+:meth:`drivers.sim.esc.network.EmulatedNetwork.control`); the socket is created with mode
+0600, and only a stale socket at that path is replaced (anything else is refused).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 from pathlib import Path
 from types import FrameType
@@ -30,7 +32,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="master end of the veth pair (default: IFACE with 's' -> 'm', e.g. ecm0)",
     )
     parser.add_argument("--control", default=None, help="Unix socket path for control/faults")
-    parser.add_argument("--duration", type=float, default=None, help="stop after N seconds")
+    parser.add_argument(
+        "--duration", type=float, default=None, help="stop after N seconds (default: run)"
+    )
     parser.add_argument(
         "--quiet-arm", action="store_true", help="leave out the config's scripted external torques"
     )
@@ -47,16 +51,23 @@ def _master_name(iface: str) -> str:
 def run(args: argparse.Namespace) -> int:
     """Build the network from the config and serve until SIGTERM/SIGINT or ``--duration``."""
     from drivers.sim.esc import veth
-    from drivers.sim.esc.build import build_network
-    from drivers.sim.esc.network import serve
+    from drivers.sim.esc.network import check_control_path, serve
     from hofto_hw.config.loader import load_config
     from hofto_hw.errors import UserError
+    from hofto_hw.runtime.build import build_emulated_network
 
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise UserError(
+            f"--duration: {args.duration} is not a positive finite number of seconds "
+            "(leave it out to serve until stopped)"
+        )
+    if args.control:
+        check_control_path(args.control)
     master = args.master_iface or _master_name(args.iface)
     if not args.create_veth and not veth.exists(args.iface):
         raise UserError(f"network interface {args.iface!r} does not exist (see `ip link`)")
     cfg = load_config(args.config)
-    net = build_network(cfg, external=not args.quiet_arm)
+    net = build_emulated_network(cfg, external=not args.quiet_arm)
     if args.create_veth:
         veth.create_pair(master, args.iface)
 
