@@ -36,6 +36,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "drivers.sim.ethercat_cli",
         "serve emulated EtherCAT CiA-402 drives on a network interface",
     ),
+    "sim-canopen": ("hofto_hw.commands.sim_canopen", "serve emulated CANopen CiA-402 drives"),
 }
 
 

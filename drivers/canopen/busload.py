@@ -116,6 +116,4 @@ def configured_load(bus: object, rate_hz: float) -> BusLoad:
 
     opts = getattr(bus, "canopen", None) or CANopenOptions()
     n = len(bus.drives)  # type: ignore[attr-defined]
-    return bus_load(
-        frame_payloads(n), rate_hz, opts.bitrate, opts.data_bitrate, opts.load_limit
-    )
+    return bus_load(frame_payloads(n), rate_hz, opts.bitrate, opts.data_bitrate, opts.load_limit)

@@ -287,7 +287,9 @@ class CANopenTransport(Transport):
                 self._rpdo_msgs.append(msg)
                 self._rpdo_views.append(np.frombuffer(msg.data, dtype=np.uint8))
                 self._rpdo_idx.append(_gather(plan, i, RXPDO_SIZE))
-        self._sync_msg = can.Message(arbitration_id=layout.SYNC_COB_ID, data=b"", is_extended_id=False)
+        self._sync_msg = can.Message(
+            arbitration_id=layout.SYNC_COB_ID, data=b"", is_extended_id=False
+        )
 
     def _wait(self, done: Any, timeout: float) -> bool:
         end = time.monotonic() + timeout
