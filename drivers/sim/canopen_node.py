@@ -505,8 +505,14 @@ def node_dictionary(drive: Any, node_id: int, name: str = "drive") -> ObjectDict
 
     z = np.zeros
     objs = DriveObjects(
-        new_rx(1), new_tx(1), z(1, np.uint16), z(1, np.uint32), z(1, np.uint32),
-        z(1, np.uint16), z(1, np.int16), z(1, np.uint8),
+        new_rx(1),
+        new_tx(1),
+        z(1, np.uint16),
+        z(1, np.uint32),
+        z(1, np.uint32),
+        z(1, np.uint16),
+        z(1, np.int16),
+        z(1, np.uint8),
     )
     motor, shaft = _gear_fraction(drive.gear_ratio)
     od = cia402_dictionary(

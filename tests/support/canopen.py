@@ -67,5 +67,3 @@ def load_cfg() -> Any:
     from hofto_hw.config.loader import load_config
 
     return load_config(CONFIG)
-
-

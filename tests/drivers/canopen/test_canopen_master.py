@@ -116,7 +116,9 @@ def test_emcy_becomes_a_drive_fault_with_its_code_in_words(rig) -> None:
     assert "node 2 (joint_2): EMCY 0x2310 continuous over-current" in t.emergency_messages()[0]
     g.cycle()  # the EMCY's code reaches tx["error_code"] in the next exchange
     assert int(t.tx["error_code"][1]) == 0x2310
-    with pytest.raises(DriveFaultError, match=r"axis 1 \(joint_2\).*0x2310 continuous over-current"):
+    with pytest.raises(
+        DriveFaultError, match=r"axis 1 \(joint_2\).*0x2310 continuous over-current"
+    ):
         g.enable()
     g.fault_reset()
     assert not g.any_fault()
@@ -156,7 +158,9 @@ def test_bus_load_refused_at_open(rig) -> None:
     t = CANopenTransport(
         rig.channel, rig.cfg.bus.drives, 1 / 1000, can_interface="virtual", node_ids=None
     )
-    with pytest.raises(ConfigError, match=r"bus load 318 % at 1000 Hz.*highest feasible rate is 220 Hz"):
+    with pytest.raises(
+        ConfigError, match=r"bus load 318 % at 1000 Hz.*highest feasible rate is 220 Hz"
+    ):
         t.open()
 
 
