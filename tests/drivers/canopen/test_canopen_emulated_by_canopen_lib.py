@@ -8,7 +8,6 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-
 from support.canopen import ROOT, load_cfg, unique_channel, wait_for
 
 canopen = pytest.importorskip("canopen")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.canopen import wait_for
 
 from drivers.canopen.errors import IdentityMismatchError
 from drivers.canopen.master import STATUS_HEARTBEAT_LOST
@@ -11,7 +12,6 @@ from drivers.cia402.drive_group import DriveFaultError, DriveGroup
 from drivers.cia402.state_machine import Mode, State
 from drivers.transport import STATUS_OK, STATUS_PARTIAL, SdoAbortError, backend_class
 from hofto_hw.errors import ConfigError
-from support.canopen import wait_for
 
 
 def _group(rig, **kw):

@@ -9,10 +9,10 @@ import struct
 from collections.abc import Iterator
 
 import pytest
+from support.canopen import ROOT, load_cfg, unique_channel
 
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import Mode, State
-from support.canopen import ROOT, load_cfg, unique_channel
 
 canopen = pytest.importorskip("canopen")
 EDS = str(ROOT / "configs" / "canopen" / "emulated_drive.eds")
