@@ -243,7 +243,7 @@ class CANopenTransport(Transport):
             for i, nid in enumerate(self.node_ids):
                 node = canopen.RemoteNode(nid, canopen.ObjectDictionary())
                 node.sdo.RESPONSE_TIMEOUT = self.sdo_timeout
-                node.sdo.MAX_RETRIES = 0
+                node.sdo.MAX_RETRIES = 2  # udp_multicast drops frames in bursts
                 net.add_node(node)
                 self.nodes.append(node)
                 net.subscribe(layout.HEARTBEAT_BASE + nid, self._heartbeat_cb(i))
