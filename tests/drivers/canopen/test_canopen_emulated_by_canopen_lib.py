@@ -26,6 +26,7 @@ def lib_rig() -> Iterator[tuple]:
     bus = can.Bus(interface="virtual", channel=channel)
     emu = CanopenDrives(build_drives(cfg, external=False), bus).start()
     net = canopen.Network()
+    net.NOTIFIER_CYCLE = 0.05  # quick teardown
     net.connect(interface="virtual", channel=channel)
     try:
         yield net, emu, cfg

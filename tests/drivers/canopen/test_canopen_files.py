@@ -8,10 +8,10 @@ import stat
 import threading
 
 import pytest
+from support.canopen import ROOT
 
 from drivers.sim.control_socket import open_control_socket, serve_control
 from hofto_hw.errors import UserError
-from support.canopen import ROOT
 
 
 def test_shipped_eds_is_what_the_generator_writes() -> None:

@@ -80,6 +80,7 @@ def local_nodes() -> Iterator[tuple]:
     cfg = load_cfg()
     channel = unique_channel("local")
     net = canopen.Network()
+    net.NOTIFIER_CYCLE = 0.05  # quick teardown
     net.connect(interface="virtual", channel=channel)
     nodes = [GluedNode(net, i + 1, d) for i, d in enumerate(cfg.bus.drives)]
     try:

@@ -13,7 +13,6 @@ import time
 
 import numpy as np
 import pytest
-
 from support.canopen import CONFIG, ROOT
 
 _counter = itertools.count()
