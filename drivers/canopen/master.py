@@ -21,7 +21,9 @@ PDO communication and mapping parameters by SDO (CiA 301 order: PDO invalid, map
 wait for every node's operational heartbeat.
 
 Every cycle (:meth:`exchange`, never raises): late TPDOs of the last cycle are taken first
-(and counted), RPDOs then SYNC are sent, TPDOs collected until ``tpdo_deadline``; missing
+(and counted), RPDOs then SYNC are sent, TPDOs collected until ``tpdo_deadline`` (a second
+frame of one PDO in one cycle counts as late and is dropped: CAN frames carry no sequence
+number, so which of the two is stale cannot be told); missing
 TPDOs give :data:`~drivers.transport.STATUS_PARTIAL` (:meth:`missing_nodes` names them), a
 heartbeat older than ``heartbeat_timeout`` gives :data:`STATUS_HEARTBEAT_LOST`, a node that
 left operational :data:`STATUS_NOT_OPERATIONAL`, a send failure (bus-off, buffer full)
@@ -406,10 +408,17 @@ class CANopenTransport(Transport):
                 m = bus.recv(remaining)
                 if m is None:
                     break
-                slot = self._take(m)
-                if slot is not None and not self._got[slot]:
-                    self._got[slot] = True
-                    pending -= 1
+                slot = self._slot(m)
+                if slot is None:
+                    continue
+                if self._got[slot]:
+                    # Second frame of one PDO in one cycle: one of the two is late (CAN
+                    # frames carry no sequence number); keep the first.
+                    self.late_frames += 1
+                    continue
+                self._store(m)
+                self._got[slot] = True
+                pending -= 1
         except Exception:  # python-can raises CanError/OSError on bus-off, buffer full
             self.send_errors += 1
             return STATUS_BUS_ERROR
@@ -429,16 +438,27 @@ class CANopenTransport(Transport):
         self._missing.fill(False)
         return STATUS_OK
 
-    def _take(self, m: Any) -> tuple[int, int] | None:
+    def _slot(self, m: Any) -> tuple[int, int] | None:
+        """(axis, TPDO number) of a well-formed TPDO frame, else None."""
         hit = self._tpdo_slots.get(m.arbitration_id)
         if hit is None or m.is_error_frame or m.is_remote_frame:
             return None
-        k, i, idx, size = hit
+        k, i, _idx, size = hit
         if len(m.data) != size:
             self.bad_frames += 1
             return None
-        np.put(self._tx_flat, idx, np.frombuffer(m.data, dtype=np.uint8))
         return i, k
+
+    def _store(self, m: Any) -> None:
+        """Scatter a TPDO frame's payload into ``tx``."""
+        idx = self._tpdo_slots[m.arbitration_id][2]
+        np.put(self._tx_flat, idx, np.frombuffer(m.data, dtype=np.uint8))
+
+    def _take(self, m: Any) -> tuple[int, int] | None:
+        slot = self._slot(m)
+        if slot is not None:
+            self._store(m)
+        return slot
 
     # ----------------------------------------------------------- diagnostics
 

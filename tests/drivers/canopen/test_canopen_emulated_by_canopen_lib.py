@@ -55,6 +55,9 @@ def _node402(net, node_id: int = 1):
 
 def test_base_node_402_states_mode_csp_move_fault_and_reset(lib_rig) -> None:
     net, emu, cfg = lib_rig
+    # canopen's RPDO and SYNC come from two independent timer threads: on a loaded machine
+    # several SYNCs can pass without an RPDO; widen the drives' RPDO watchdog for this.
+    emu.drives.watchdog_cycles = 100
     node = _node402(net)
     assert node.tpdo[1].cob_id == 0x181 and node.tpdo[1].trans_type == 1
     assert [v.index for v in node.tpdo[1]] == [0x6041, 0x6064, 0x6077]
