@@ -15,8 +15,10 @@ dictionary's CiA 301 codes; block transfer is answered with 0x05040001), synchro
 latched until the SYNC, TPDOs sent on every SYNC (transmission type n: every n-th SYNC),
 heartbeat producer, EMCY when the drive's 0x603F changes (code 0 = error reset).
 
-Each SYNC applies the latched RPDOs, steps the drives and the plant by one tick, then sends
-the TPDOs: simulated time is the number of SYNCs times the plant tick. Fault injection
+Each SYNC first sends the TPDOs (inputs sampled at the SYNC, CiA 301 synchronous), then
+applies the RPDOs latched before it and steps the drives and the plant by one tick: the
+answer does not wait for the plant step, and a command is seen in the TPDOs of the next
+SYNC. Simulated time is the number of SYNCs times the plant tick. Fault injection
 (:meth:`CanopenDrives.control`): silent node, EMCY with a code, SDO abort with a code, late
 or missing TPDOs, wrong identity, bus-off.
 """
@@ -200,8 +202,6 @@ class CanopenDrives:
 
     def _sync(self) -> None:
         self.syncs += 1
-        self.drives.step(self._rx if self._got_rpdo else None)
-        self._got_rpdo = False
         now = time.monotonic()
         for i in range(self.n):
             if self.nmt[i] != layout.NMT_OPERATIONAL or not self._talks(i):
@@ -222,6 +222,10 @@ class CanopenDrives:
                     self._send(cob, payload.tobytes())
             if self.tpdo_late[i] > 0:
                 self.tpdo_late[i] -= 1
+        # TPDOs are sampled at the SYNC and sent first; then the RPDOs latched before this
+        # SYNC take effect for one tick (the plant step does not delay the answer).
+        self.drives.step(self._rx if self._got_rpdo else None)
+        self._got_rpdo = False
         err = self.drives.tx["error_code"]
         if (err != self._last_error).any():
             for i in np.flatnonzero(err != self._last_error):
