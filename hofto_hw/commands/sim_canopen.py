@@ -88,13 +88,18 @@ def run(args: argparse.Namespace) -> int:
     stop_control = threading.Event()
     ctl = None
     if args.control:
-        ctl = serve_control(args.control, net.control, stop_control)
+        try:
+            ctl = serve_control(args.control, net.control, stop_control)
+        except BaseException:
+            bus.shutdown()
+            raise
 
     def _stop(_signum: int, _frame: FrameType | None) -> None:
         net.stopping = True
 
-    signal.signal(signal.SIGTERM, _stop)
-    signal.signal(signal.SIGINT, _stop)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _stop)
+        signal.signal(signal.SIGINT, _stop)
     print(
         f"serving {net.n} emulated CANopen drives (nodes {net.node_ids}) on "
         f"{args.interface}:{channel}",
