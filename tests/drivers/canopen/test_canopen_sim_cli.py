@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import threading
 
-from hofto_hw.cli import main
 from support.canopen import CONFIG, unique_channel, wait_for
+
+from hofto_hw.cli import main
 
 
 def test_duration_must_be_positive_and_finite(capsys) -> None:
@@ -25,9 +26,10 @@ def test_control_path_that_is_a_file_is_refused_and_kept(tmp_path, capsys) -> No
 
 
 def test_serves_a_master_until_the_duration(tmp_path) -> None:
+    from support.canopen import load_cfg
+
     from drivers.canopen.master import CANopenTransport
     from drivers.sim.esc.network import ControlClient
-    from support.canopen import load_cfg
 
     cfg = load_cfg()
     channel, ready, ctl = unique_channel(), tmp_path / "ready", str(tmp_path / "c.sock")
