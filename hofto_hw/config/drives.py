@@ -136,7 +136,5 @@ class BusConfig(_Strict):
             raise ValueError(f"interface is required for transport {self.transport!r}")
         ids = self.canopen.node_ids if self.canopen is not None else None
         if ids is not None and len(ids) != len(self.drives):
-            raise ValueError(
-                f"canopen.node_ids has {len(ids)} ids for {len(self.drives)} drives"
-            )
+            raise ValueError(f"canopen.node_ids has {len(ids)} ids for {len(self.drives)} drives")
         return self

@@ -82,3 +82,22 @@ def test_config_check_refuses_a_rate_the_bus_cannot_carry(tmp_path, capsys) -> N
     assert "bus load 127 % at 400 Hz" in err and "limit 70 %" in err and "220 Hz" in err
     assert main(["config", "check", str(CONFIG)]) == 0
     assert "CANopen bus load 64 % at 200 Hz" in capsys.readouterr().out
+
+
+def test_canopen_options_are_validated_naming_the_field() -> None:
+    import yaml
+
+    from hofto_hw.config.loader import parse_config
+    from support.canopen import CONFIG
+
+    data = yaml.safe_load(CONFIG.read_text())
+    data["bus"]["canopen"]["node_ids"] = [1, 2, 3]
+    with pytest.raises(ConfigError, match="node_ids has 3 ids for 6 drives"):
+        parse_config(data, "x.yaml", CONFIG.parent)
+    data["bus"]["canopen"]["node_ids"] = [1, 2, 3, 4, 5, 5]
+    with pytest.raises(ConfigError, match="node_ids must be unique"):
+        parse_config(data, "x.yaml", CONFIG.parent)
+    data["bus"]["canopen"]["node_ids"] = None
+    data["bus"]["canopen"]["load_limit"] = 1.5
+    with pytest.raises(ConfigError, match="load_limit"):
+        parse_config(data, "x.yaml", CONFIG.parent)
