@@ -171,3 +171,24 @@ def test_missing_node_at_boot_is_named(rig) -> None:
     t = rig.master(boot_timeout=0.5)
     with pytest.raises(Exception, match=r"no boot-up message from node 3 \(joint_3\)"):
         t.open()
+
+
+def test_nmt_stop_of_one_node_is_reported_by_its_heartbeat(rig) -> None:
+    from drivers.canopen.master import STATUS_NOT_OPERATIONAL
+
+    t, g = _group(rig)
+    t.nmt("stop", 2)
+    statuses: list[int] = []
+
+    def stopped() -> bool:
+        t.wait_next_cycle()
+        statuses.append(t.exchange())
+        return statuses[-1] == STATUS_NOT_OPERATIONAL
+
+    wait_for(stopped, 10.0, "node 3 stopped")
+    assert rig.emu.status()["nmt"][2] == 4
+    assert "node 3 (joint_3): left operational, heartbeat reports stopped" in t.problems()
+    t.nmt("start")
+    wait_for(lambda: t.exchange() == STATUS_OK, 10.0, "all operational again")
+    with pytest.raises(Exception, match="unknown NMT command 'sleep'"):
+        t.nmt("sleep")
