@@ -39,6 +39,14 @@ NMT_STATE_NAMES = {
 }
 #: NMT command specifiers
 NMT_START, NMT_STOP, NMT_ENTER_PRE_OP, NMT_RESET_NODE, NMT_RESET_COMM = 0x01, 0x02, 0x80, 0x81, 0x82
+#: NMT command by name
+NMT_COMMANDS = {
+    "start": NMT_START,
+    "stop": NMT_STOP,
+    "pre-operational": NMT_ENTER_PRE_OP,
+    "reset node": NMT_RESET_NODE,
+    "reset communication": NMT_RESET_COMM,
+}
 #: transmission type: synchronous, every SYNC
 SYNC_EVERY = 1
 COB_ID_INVALID = 0x80000000

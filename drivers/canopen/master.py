@@ -462,27 +462,19 @@ class CANopenTransport(Transport):
 
     # ---------------------------------------------------------------------- NMT
 
-    NMT_COMMANDS = {
-        "start": layout.NMT_START,
-        "stop": layout.NMT_STOP,
-        "pre-operational": layout.NMT_ENTER_PRE_OP,
-        "reset node": layout.NMT_RESET_NODE,
-        "reset communication": layout.NMT_RESET_COMM,
-    }
-
     def nmt(self, command: str, axis: int | None = None) -> None:
-        """Send NMT ``command`` (a key of :attr:`NMT_COMMANDS`) to one node or to all.
+        """Send NMT ``command`` (a key of :data:`drivers.canopen.layout.NMT_COMMANDS`) to one node or to all.
 
         Outside the tick. A node that leaves operational makes :meth:`exchange` return
         :data:`STATUS_NOT_OPERATIONAL` once its heartbeat says so.
         """
-        if command not in self.NMT_COMMANDS:
+        if command not in layout.NMT_COMMANDS:
             raise CANopenError(
-                f"unknown NMT command {command!r} (known: {', '.join(self.NMT_COMMANDS)})"
+                f"unknown NMT command {command!r} (known: {', '.join(layout.NMT_COMMANDS)})"
             )
         if self.network is None:
             raise CANopenError(f"NMT {command}: the bus is not open")
-        code = self.NMT_COMMANDS[command]
+        code = layout.NMT_COMMANDS[command]
         if axis is None:
             self.network.nmt.send_command(code)
         else:

@@ -86,9 +86,9 @@ def test_config_check_refuses_a_rate_the_bus_cannot_carry(tmp_path, capsys) -> N
 
 def test_canopen_options_are_validated_naming_the_field() -> None:
     import yaml
+    from support.canopen import CONFIG
 
     from hofto_hw.config.loader import parse_config
-    from support.canopen import CONFIG
 
     data = yaml.safe_load(CONFIG.read_text())
     data["bus"]["canopen"]["node_ids"] = [1, 2, 3]
