@@ -463,7 +463,8 @@ class CANopenTransport(Transport):
     # ---------------------------------------------------------------------- NMT
 
     def nmt(self, command: str, axis: int | None = None) -> None:
-        """Send NMT ``command`` (a key of :data:`drivers.canopen.layout.NMT_COMMANDS`) to one node or to all.
+        """Send NMT ``command`` (a key of :data:`~drivers.canopen.layout.NMT_COMMANDS`) to
+        one node (``axis``) or to all.
 
         Outside the tick. A node that leaves operational makes :meth:`exchange` return
         :data:`STATUS_NOT_OPERATIONAL` once its heartbeat says so.
