@@ -155,13 +155,12 @@ class CANopenTransport(Transport):
 
     @classmethod
     def from_config(
-        cls, bus: Any, axis_names: list[str] | None = None, cycle_time: float | None = None
+        cls, bus: Any, axis_names: list[str] | None = None, *, cycle_time: float
     ) -> CANopenTransport:
-        """From a BusConfig with ``transport: canopen``; ``cycle_time`` = 1 / loop.rate_hz."""
+        """From a :class:`hofto_hw.config.drives.BusConfig` with ``transport: canopen``;
+        ``cycle_time`` [s] is the system config's 1 / loop.rate_hz (as EtherCAT's)."""
         from hofto_hw.config.drives import CANopenOptions
 
-        if cycle_time is None:
-            cycle_time = float(bus.cycle_time)
         o = bus.canopen or CANopenOptions()
         return cls(
             bus.interface,

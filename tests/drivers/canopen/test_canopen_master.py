@@ -192,3 +192,19 @@ def test_nmt_stop_of_one_node_is_reported_by_its_heartbeat(rig) -> None:
     wait_for(lambda: t.exchange() == STATUS_OK, 10.0, "all operational again")
     with pytest.raises(Exception, match="unknown NMT command 'sleep'"):
         t.nmt("sleep")
+
+
+def test_from_config_takes_the_options_and_the_loop_cycle() -> None:
+    from drivers.canopen.master import CANopenTransport
+    from support.canopen import load_cfg
+
+    cfg = load_cfg()
+    t = CANopenTransport.from_config(
+        cfg.bus, list(cfg.robot.joints), cycle_time=1.0 / cfg.loop.rate_hz
+    )
+    assert t.cycle_time == pytest.approx(0.005)
+    assert (t.can_interface, t.channel) == ("udp_multicast", "239.74.163.2")
+    assert t.node_ids == [1, 2, 3, 4, 5, 6]
+    assert t.heartbeat_timeout == pytest.approx(0.15)
+    assert t.tpdo_deadline == pytest.approx(0.004)
+    assert t.load().load == pytest.approx(0.635, abs=0.001)
