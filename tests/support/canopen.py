@@ -46,6 +46,7 @@ class CanRig:
         kw.setdefault("tpdo_deadline", 0.05)  # generous: CI is a loaded 2-core machine
         kw.setdefault("heartbeat_time", 0.05)
         kw.setdefault("heartbeat_timeout", 0.5)
+        kw.setdefault("sdo_timeout", 2.0)
         t = CANopenTransport(
             self.channel,
             self.cfg.bus.drives,

@@ -103,6 +103,7 @@ def test_master_on_canopen_local_nodes_identity_mapping_enable(local_nodes) -> N
         can_interface="virtual",
         tpdo_deadline=0.05,
         heartbeat_timeout=0.5,
+        sdo_timeout=2.0,  # LocalNode answers from canopen's notifier thread: slow under load
     )
     try:
         t.open()
