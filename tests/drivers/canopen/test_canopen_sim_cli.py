@@ -39,7 +39,7 @@ def test_serves_a_master_until_the_duration(tmp_path) -> None:
     th = threading.Thread(target=lambda: result.append(main([*args, "--duration", "8"])))
     th.start()
     wait_for(ready.exists, 10.0, "emulator ready")
-    t = CANopenTransport(channel, cfg.bus.drives, 1 / 200, can_interface="virtual")
+    t = CANopenTransport(channel, cfg.bus.drives, 1 / 200, can_interface="virtual", sdo_timeout=2.0)
     with t:
         assert ControlClient(ctl).call(op="status")["nmt"] == [5] * 6
     assert ControlClient(ctl).call(op="stop")["ok"]
