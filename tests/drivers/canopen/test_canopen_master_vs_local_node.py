@@ -132,7 +132,12 @@ def test_wrong_identity_on_a_local_node_is_named(local_nodes) -> None:
     cfg, channel, nodes = local_nodes
     nodes[3].node.set_data(0x1018, 1, struct.pack("<I", 0x12345678))
     t = CANopenTransport(
-        channel, cfg.bus.drives, 1 / 200, list(cfg.robot.joints), can_interface="virtual"
+        channel,
+        cfg.bus.drives,
+        1 / 200,
+        list(cfg.robot.joints),
+        can_interface="virtual",
+        sdo_timeout=2.0,
     )
     with pytest.raises(
         IdentityMismatchError,
