@@ -162,6 +162,7 @@ class Transport(ABC):
 BACKENDS: dict[str, str] = {
     "sim": "drivers.sim.simbus:SimBus",
     "ethercat": "drivers.ethercat.master:EtherCATTransport",
+    "canopen": "drivers.canopen.master:CANopenTransport",
 }
 
 

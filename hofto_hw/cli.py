@@ -37,6 +37,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "hofto_hw.commands.sim_ethercat",
         "serve emulated EtherCAT CiA-402 drives on a network interface",
     ),
+    "sim-canopen": ("hofto_hw.commands.sim_canopen", "serve emulated CANopen CiA-402 drives"),
 }
 
 

@@ -118,6 +118,8 @@ class ObjectDictionary:
         self._entries: dict[tuple[int, int], OdEntry] = {}
         self._names: dict[int, str] = {}
         self.pdo_locked = False
+        #: largest PDO accepted [bits]; a CANopen node sets 64 (one classic CAN frame)
+        self.max_pdo_bits = MAX_PDO_BITS
 
     # ------------------------------------------------------------------ building
 
@@ -220,7 +222,7 @@ class ObjectDictionary:
             raise SdoAbort(codes.ABORT_VALUE_LOW, index, subindex)
         if e.high is not None and value > e.high:
             raise SdoAbort(codes.ABORT_VALUE_HIGH, index, subindex)
-        if index in (RXPDO_INDEX, TXPDO_INDEX, RXPDO_ASSIGN_INDEX, TXPDO_ASSIGN_INDEX):
+        if _is_mapping(index) or index in (RXPDO_ASSIGN_INDEX, TXPDO_ASSIGN_INDEX):
             self._check_pdo_write(index, subindex, value)
         e.set(value)
 
@@ -248,7 +250,7 @@ class ObjectDictionary:
             raw = self.get(index, sub)
             self._check_mapped_object(index, sub, raw)
             bits += raw & 0xFF
-        if bits > MAX_PDO_BITS:
+        if bits > self.max_pdo_bits:
             raise SdoAbort(codes.ABORT_PDO_LENGTH, index, subindex)
 
     def _check_mapped_object(self, index: int, subindex: int, raw: int) -> None:
@@ -256,7 +258,7 @@ class ObjectDictionary:
         e = self._entries.get((target.index, target.subindex))
         if e is None:
             raise SdoAbort(codes.ABORT_NO_OBJECT, index, subindex)
-        wants_rx = index == RXPDO_INDEX
+        wants_rx = 0x1600 <= index < 0x1800
         direction_ok = (e.access in ("rw", "wo")) if wants_rx else (e.access != "wo")
         if not e.pdo_mappable or not direction_ok:
             raise SdoAbort(codes.ABORT_NOT_MAPPABLE, index, subindex)
@@ -267,6 +269,11 @@ class ObjectDictionary:
         """The PDO mapping currently in ``index`` (0x1600 or 0x1A00)."""
         n = self.get(index, 0)
         return [parse_mapping_value(self.get(index, s)) for s in range(1, n + 1)]
+
+
+def _is_mapping(index: int) -> bool:
+    """RxPDO (0x1600-0x17FF) or TxPDO (0x1A00-0x1BFF) mapping object."""
+    return 0x1600 <= index < 0x1800 or 0x1A00 <= index < 0x1C00
 
 
 # ------------------------------------------------------------------- CiA 402 drive

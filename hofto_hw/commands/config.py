@@ -55,6 +55,16 @@ def run(args: argparse.Namespace) -> int:
             except ConfigError as exc:
                 raise ConfigError(f"{path}: {exc} (rate: loop.rate_hz)") from None
             make_observer(obs, model)
+        if cfg.bus is not None and cfg.bus.transport == "canopen":
+            from drivers.canopen.busload import check_bus_load, configured_load
+
+            load = configured_load(cfg.bus, cfg.loop.rate_hz)
+            check_bus_load(load, f"{path}: loop.rate_hz with bus.canopen")
+            print(
+                f"{path}: CANopen bus load {load.load * 100:.0f} % at {cfg.loop.rate_hz:g} Hz "
+                f"(limit {load.limit * 100:.0f} %, highest feasible rate "
+                f"{load.highest_rate():.0f} Hz)"
+            )
         print(
             f"{path}: ok ({cfg.robot.name}, {model.n} joints, "
             f"{len(cfg.observers)} observers, loop {cfg.loop.rate_hz:g} Hz)"

@@ -50,8 +50,9 @@ def _master_name(iface: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Build the network from the config and serve until SIGTERM/SIGINT or ``--duration``."""
+    from drivers.sim.control_socket import check_control_path
     from drivers.sim.esc import veth
-    from drivers.sim.esc.network import check_control_path, serve
+    from drivers.sim.esc.network import serve
     from hofto_hw.config.loader import load_config
     from hofto_hw.errors import UserError
     from hofto_hw.runtime.build import build_emulated_network

@@ -68,6 +68,50 @@ class EtherCATOptions(FileModel):
     state_timeout: PositiveFloat = Field(3.0, description="max time per AL state change [s]")
 
 
+class CANopenOptions(FileModel):
+    """CANopen master options (``bus.canopen``; used when ``transport: canopen``).
+
+    ``bus.interface`` is the python-can channel (e.g. ``can0``, ``239.74.163.2``); the cycle
+    time is ``1 / loop.rate_hz`` and the SYNC comes from the loop itself.
+    """
+
+    can_interface: str = Field(
+        "socketcan",
+        description="python-can interface: socketcan, pcan, kvaser, ixxat, virtual, udp_multicast",
+    )
+    bitrate: Annotated[int, Field(ge=10_000, le=1_000_000)] = Field(
+        1_000_000, description="(nominal) bitrate [bit/s]"
+    )
+    data_bitrate: Annotated[int, Field(ge=10_000, le=12_000_000)] | None = Field(
+        None, description="CAN FD data-phase bitrate [bit/s]; None = classic CAN"
+    )
+    node_ids: list[Annotated[int, Field(ge=1, le=127)]] | None = Field(
+        None, description="CANopen node id per drive, in bus.drives order; None = 1, 2, ..."
+    )
+    load_limit: Annotated[float, Field(gt=0.0, le=1.0)] = Field(
+        0.7, description="highest accepted worst-case bus load (fraction of the bus time)"
+    )
+    heartbeat_time: Annotated[float, Field(ge=0.001, le=65.535)] = Field(
+        0.05, description="heartbeat producer time written to each node's 0x1017 [s]"
+    )
+    heartbeat_timeout: PositiveFloat | None = Field(
+        None, description="heartbeat consumer time [s]; None = 3 x heartbeat_time"
+    )
+    tpdo_deadline: PositiveFloat | None = Field(
+        None, description="wait for a cycle's TPDOs [s] after the SYNC; None = 0.8 cycle"
+    )
+    sdo_timeout: PositiveFloat = Field(0.5, description="SDO response timeout [s]")
+    boot_timeout: PositiveFloat = Field(
+        3.0, description="wait for boot-up / operational heartbeats at start-up [s]"
+    )
+
+    @model_validator(mode="after")
+    def _unique_ids(self) -> CANopenOptions:
+        if self.node_ids is not None and len(set(self.node_ids)) != len(self.node_ids):
+            raise ValueError(f"node_ids must be unique (got {self.node_ids})")
+        return self
+
+
 class BusConfig(FileModel):
     """The drive bus: which transport, where, and one drive per joint.
 
@@ -78,7 +122,7 @@ class BusConfig(FileModel):
     transport: str = Field(
         min_length=1,
         description="transport backend, a name registered in drivers.transport.BACKENDS "
-        "(e.g. 'sim', 'ethercat'; `hofto-hw config check` refuses others)",
+        "(e.g. 'sim', 'ethercat', 'canopen'; `hofto-hw config check` refuses others)",
     )
     interface: str | None = Field(
         None, description="network interface (ethercat, e.g. 'eth1') or CAN channel (canopen)"
@@ -88,9 +132,13 @@ class BusConfig(FileModel):
     )
     drives: list[DriveConfig] = Field(min_length=1, description="one drive per joint, in order")
     ethercat: EtherCATOptions | None = Field(None, description="EtherCAT master options")
+    canopen: CANopenOptions | None = Field(None, description="CANopen master options")
 
     @model_validator(mode="after")
     def _interface(self) -> BusConfig:
         if self.transport != "sim" and not self.interface:
             raise ValueError(f"interface is required for transport {self.transport!r}")
+        ids = self.canopen.node_ids if self.canopen is not None else None
+        if ids is not None and len(ids) != len(self.drives):
+            raise ValueError(f"canopen.node_ids has {len(ids)} ids for {len(self.drives)} drives")
         return self

@@ -24,6 +24,7 @@ from hofto_hw.errors import ConfigError
 
 if TYPE_CHECKING:
     from drivers.cia402.drive_group import DriveGroup
+    from drivers.sim.drive import EmulatedDrives
     from drivers.sim.esc.network import EmulatedNetwork
     from drivers.sim.plant import Plant
     from drivers.sim.simbus import SimBus
@@ -63,18 +64,24 @@ def build_sim_bus(cfg: SystemConfig, *, external: bool = True) -> SimBus:
     return SimBus.from_config(bus, plant, axis_names=list(cfg.robot.joints))
 
 
-def build_emulated_network(cfg: SystemConfig, *, external: bool = True) -> EmulatedNetwork:
-    """Emulated EtherCAT slaves (identity from ``bus.drives[i].identity``) serving emulated
-    drives on :func:`build_plant`: what ``hofto-hw sim-ethercat`` serves."""
+def build_emulated_drives(cfg: SystemConfig, *, external: bool = True) -> EmulatedDrives:
+    """Emulated CiA-402 drives (``bus.drives``) on :func:`build_plant`: what the EtherCAT and
+    CANopen emulators serve."""
     from drivers.sim.drive import EmulatedDrives
+
+    bus = _bus(cfg, "the emulated drives")
+    plant = build_plant(cfg, external=external)
+    return EmulatedDrives(plant, bus.drives, names=list(cfg.robot.joints))
+
+
+def build_emulated_network(cfg: SystemConfig, *, external: bool = True) -> EmulatedNetwork:
+    """Emulated EtherCAT slaves (identity from ``bus.drives[i].identity``) serving
+    :func:`build_emulated_drives`: what ``hofto-hw sim-ethercat`` serves."""
     from drivers.sim.esc.description import slave_descriptions
     from drivers.sim.esc.network import EmulatedNetwork
 
-    bus = _bus(cfg, "the emulated EtherCAT network")
-    plant = build_plant(cfg, external=external)
-    names = list(cfg.robot.joints)
-    drives = EmulatedDrives(plant, bus.drives, names=names)
-    return EmulatedNetwork(slave_descriptions(bus.drives), drives)
+    drives = build_emulated_drives(cfg, external=external)
+    return EmulatedNetwork(slave_descriptions(_bus(cfg, "the network").drives), drives)
 
 
 #: backends that need more than ``Class.from_config(bus, axis_names=, cycle_time=)``

@@ -20,7 +20,6 @@ import json
 import os
 import select
 import socket
-import stat
 import struct
 import time
 from collections.abc import Sequence
@@ -29,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from drivers.cia402 import pdo
+from drivers.sim.control_socket import open_control_socket, remove_own_socket
 from drivers.sim.drive import FAULTS, EmulatedDrives
 from drivers.sim.esc import datagram
 from drivers.sim.esc.description import SlaveDescription
@@ -265,69 +265,6 @@ def open_packet_socket(iface: str) -> socket.socket:
     return sock
 
 
-def check_control_path(path: str) -> None:
-    """Refuse a control-socket path that is not free or a stale socket (UserError, one line).
-
-    Only a socket nobody listens on may be replaced; a regular file, a folder, a link, a
-    live socket or a path in a missing folder is refused and left alone.
-    """
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise UserError(f"--control: folder {folder!r} for the socket {path!r} does not exist")
-    try:
-        st = os.lstat(path)
-    except FileNotFoundError:
-        return
-    if not stat.S_ISSOCK(st.st_mode):
-        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a socket"
-        raise UserError(f"--control: {path!r} exists and is {kind}; refusing to replace it")
-    if _socket_is_live(path):
-        raise UserError(f"--control: {path!r} is in use by another process; refusing to replace it")
-
-
-def _socket_is_live(path: str) -> bool:
-    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as probe:
-        probe.settimeout(0.5)
-        try:
-            probe.connect(path)
-        except (ConnectionRefusedError, FileNotFoundError):
-            return False
-        except OSError:
-            return True  # busy or not ours to judge: leave it
-    return True
-
-
-def open_control_socket(path: str) -> socket.socket:
-    """Listening Unix stream socket at ``path``, mode 0600 (owner only: it can stop the
-    emulator and inject faults). A stale socket there is replaced; anything else is
-    refused (:func:`check_control_path`)."""
-    check_control_path(path)
-    with contextlib.suppress(FileNotFoundError):
-        if stat.S_ISSOCK(os.lstat(path).st_mode):
-            os.unlink(path)
-    srv = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    old_mask = os.umask(0o177)  # the socket file is created with mode 0600
-    try:
-        srv.bind(path)
-    except OSError as exc:
-        srv.close()
-        raise UserError(f"--control: cannot create the socket {path!r}: {exc.strerror}") from None
-    finally:
-        os.umask(old_mask)
-    os.chmod(path, 0o600)
-    srv.listen(4)
-    srv.setblocking(False)
-    return srv
-
-
-def _remove_own_socket(path: str, ident: tuple[int, int]) -> None:
-    """Unlink ``path`` only if it is still the socket file this process created."""
-    with contextlib.suppress(OSError):
-        st = os.lstat(path)
-        if stat.S_ISSOCK(st.st_mode) and (st.st_dev, st.st_ino) == ident:
-            os.unlink(path)
-
-
 def _answer_first() -> None:
     """Make this process answer frames before other work: real-time priority when allowed
     (SCHED_FIFO; the loop blocks in select, so it never spins), else a better nice value;
@@ -427,7 +364,7 @@ def serve(
         if srv is not None:
             srv.close()
             if control and ident is not None:
-                _remove_own_socket(control, ident)
+                remove_own_socket(control, ident)
 
 
 class ControlClient:

@@ -49,7 +49,10 @@ def test_every_registered_transport_passes_config_check(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     for name in BACKENDS:
-        path = _config(tmp_path, ("  transport: sim", f"  transport: {name}\n  interface: x0"))
+        if name == "canopen":  # a 1 kHz loop is more than a CAN bus carries: its own config
+            path = ROOT / "configs" / "er3a_canopen.yaml"
+        else:
+            path = _config(tmp_path, ("  transport: sim", f"  transport: {name}\n  interface: x0"))
         assert _check(path, capsys)[0] == 0, name
 
 

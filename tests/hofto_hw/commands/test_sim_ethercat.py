@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from drivers.sim.esc.network import check_control_path, open_control_socket
+from drivers.sim.control_socket import check_control_path, open_control_socket
 from hofto_hw.cli import main
 from hofto_hw.errors import UserError
 

@@ -1,0 +1,113 @@
+"""The CANopen PDO layout: how the shared CiA-402 process image travels in CAN frames.
+
+The process image (:mod:`drivers.cia402.pdo`) is 15 bytes each way that matter per cycle,
+more than one classic CAN frame (8 bytes) holds, so each drive gets two RPDOs and two
+TPDOs. 0x603F (error code) and 0x60FD (digital inputs) do not travel cyclically: the error
+code comes with the emergency message (EMCY) and is read by SDO on a fault.
+
+RPDO1 0x1600 (COB-ID 0x200 + node): controlword, target position, torque offset (8 bytes)
+RPDO2 0x1601 (COB-ID 0x300 + node): target velocity, target torque, modes of operation (7)
+TPDO1 0x1A00 (COB-ID 0x180 + node): statusword, position actual, torque actual (8 bytes)
+TPDO2 0x1A01 (COB-ID 0x280 + node): velocity actual, current actual, mode display (7)
+
+Every PDO is synchronous: RPDOs received before a SYNC take effect at that SYNC, TPDOs are
+sent on every SYNC (transmission type 1). Each PDO has a byte-copy plan between its frame
+payload and the process-image record (:func:`copy_plan`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from drivers.cia402.pdo import OBJECT_FIELDS, RXPDO_DTYPE, TXPDO_DTYPE, PdoEntry
+
+SYNC_COB_ID = 0x080
+EMCY_BASE = 0x080
+NMT_COB_ID = 0x000
+SDO_TX_BASE = 0x580  # server -> client (answers)
+SDO_RX_BASE = 0x600  # client -> server (requests)
+HEARTBEAT_BASE = 0x700
+#: CiA 301 NMT states as reported in heartbeats / boot-up
+NMT_BOOTUP, NMT_STOPPED, NMT_OPERATIONAL, NMT_PRE_OPERATIONAL = 0x00, 0x04, 0x05, 0x7F
+NMT_STATE_NAMES = {
+    NMT_BOOTUP: "boot-up",
+    NMT_STOPPED: "stopped",
+    NMT_OPERATIONAL: "operational",
+    NMT_PRE_OPERATIONAL: "pre-operational",
+}
+#: NMT command specifiers
+NMT_START, NMT_STOP, NMT_ENTER_PRE_OP, NMT_RESET_NODE, NMT_RESET_COMM = 0x01, 0x02, 0x80, 0x81, 0x82
+#: NMT command by name
+NMT_COMMANDS = {
+    "start": NMT_START,
+    "stop": NMT_STOP,
+    "pre-operational": NMT_ENTER_PRE_OP,
+    "reset node": NMT_RESET_NODE,
+    "reset communication": NMT_RESET_COMM,
+}
+#: transmission type: synchronous, every SYNC
+SYNC_EVERY = 1
+COB_ID_INVALID = 0x80000000
+
+
+def _entry(index: int) -> PdoEntry:
+    from drivers.cia402.pdo import OBJECT_TYPES
+
+    bits = np.dtype(OBJECT_TYPES[(index, 0)]).itemsize * 8
+    return PdoEntry(index, 0, bits, OBJECT_FIELDS[(index, 0)])
+
+
+class CanPdo(NamedTuple):
+    """One CANopen PDO: communication object, mapping object, COB-ID base, mapped objects."""
+
+    name: str
+    comm_index: int  # 0x1400+k (RPDO) / 0x1800+k (TPDO)
+    map_index: int  # 0x1600+k / 0x1A00+k
+    cob_base: int  # COB-ID = cob_base + node id
+    entries: tuple[PdoEntry, ...]
+
+    @property
+    def size(self) -> int:
+        """Payload size [byte]."""
+        return sum(e.bit_length for e in self.entries) // 8
+
+
+RPDOS: tuple[CanPdo, ...] = (
+    CanPdo("RPDO1", 0x1400, 0x1600, 0x200, tuple(_entry(i) for i in (0x6040, 0x607A, 0x60B2))),
+    CanPdo("RPDO2", 0x1401, 0x1601, 0x300, tuple(_entry(i) for i in (0x60FF, 0x6071, 0x6060))),
+)
+TPDOS: tuple[CanPdo, ...] = (
+    CanPdo("TPDO1", 0x1800, 0x1A00, 0x180, tuple(_entry(i) for i in (0x6041, 0x6064, 0x6077))),
+    CanPdo("TPDO2", 0x1801, 0x1A01, 0x280, tuple(_entry(i) for i in (0x606C, 0x6078, 0x6061))),
+)
+
+#: (payload offset, record offset, size) in bytes
+CopyPlan = tuple[tuple[int, int, int], ...]
+
+
+def copy_plan(entries: tuple[PdoEntry, ...] | list[PdoEntry], dtype: np.dtype) -> CopyPlan:
+    """Byte-copy plan between a PDO payload mapping ``entries`` and a record of ``dtype``.
+
+    Raises ``ValueError`` naming an object that is not a field of ``dtype``.
+    """
+    out = []
+    off = 0
+    for e in entries:
+        if not e.field or e.field not in (dtype.names or ()):
+            raise ValueError(f"object 0x{e.index:04X}:{e.subindex:02X} is not in this PDO")
+        size = e.bit_length // 8
+        out.append((off, dtype.fields[e.field][1], size))
+        off += size
+    return tuple(out)
+
+
+RPDO_PLANS: tuple[CopyPlan, ...] = tuple(copy_plan(p.entries, RXPDO_DTYPE) for p in RPDOS)
+TPDO_PLANS: tuple[CopyPlan, ...] = tuple(copy_plan(p.entries, TXPDO_DTYPE) for p in TPDOS)
+
+
+def frame_payloads(n_nodes: int) -> list[int]:
+    """Payload sizes [byte] of every frame of one cycle: SYNC, then each node's PDOs."""
+    per_node = [p.size for p in RPDOS + TPDOS]
+    return [0] + per_node * n_nodes

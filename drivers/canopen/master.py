@@ -1,0 +1,573 @@
+"""CANopen master implementing :class:`drivers.transport.Transport` for CiA-402 drives.
+
+Library split (measured figures in docs/canopen.md):
+
+- **Setup through the ``canopen`` library**: a ``canopen.Network`` on its own python-can bus
+  object carries NMT, the SDO client (expedited and segmented, abort codes) and the
+  heartbeat/EMCY subscriptions, dispatched by its notifier thread. That bus is filtered to
+  EMCY, SDO answers and heartbeats, so the notifier thread does not wake for PDOs.
+- **Cyclic path on python-can directly**: a second bus object on the same channel, filtered
+  to the TPDO COB-IDs. :meth:`CANopenTransport.exchange` runs in the caller's thread: it
+  fills preallocated RPDO messages from ``rx`` (one ``np.take`` per frame), sends them, sends
+  the SYNC (the loop is the SYNC producer: canopen's SYNC thread jitters by milliseconds),
+  then receives TPDOs until all arrived or the per-cycle deadline passed. canopen's own PDO
+  objects decode through per-variable callbacks in its notifier thread, a thread hop and
+  Python objects per value; the direct path is one scatter per frame in the caller's thread.
+
+Start-up (:meth:`CANopenTransport.open`, blocking; errors name the node and the values):
+bus-load check, NMT reset communication and boot-up of every node, identity 0x1018 check,
+PDO communication and mapping parameters by SDO (CiA 301 order: PDO invalid, mapping count
+0, entries, count, valid) read back and compared, heartbeat producer 0x1017, NMT start and
+wait for every node's operational heartbeat.
+
+Every cycle (:meth:`exchange`, never raises): late TPDOs of the last cycle are taken first
+(and counted), RPDOs then SYNC are sent, TPDOs collected until ``tpdo_deadline`` (a second
+frame of one PDO in one cycle counts as late and is dropped: CAN frames carry no sequence
+number, so which of the two is stale cannot be told); missing
+TPDOs give :data:`~drivers.transport.STATUS_PARTIAL` (:meth:`missing_nodes` names them), a
+heartbeat older than ``heartbeat_timeout`` gives :data:`STATUS_HEARTBEAT_LOST`, a node that
+left operational :data:`STATUS_NOT_OPERATIONAL`, a send failure (bus-off, buffer full)
+:data:`~drivers.transport.STATUS_BUS_ERROR`. The error code of each node's last EMCY is
+written to ``tx["error_code"]``; :meth:`problems` says in words what is wrong, per node.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from drivers.canopen import layout
+from drivers.canopen.busload import bus_load, check_bus_load
+from drivers.canopen.errors import CANopenError, IdentityMismatchError, NodeMissingError
+from drivers.cia402.codes import describe_error_code
+from drivers.cia402.pdo import RXPDO_SIZE, TXPDO_SIZE, mapping_value, parse_mapping_value
+from drivers.transport import (
+    STATUS_BUS_ERROR,
+    STATUS_NOT_OPEN,
+    STATUS_OK,
+    STATUS_PARTIAL,
+    STATUS_TEXT,
+    SdoAbortError,
+    Transport,
+)
+
+STATUS_HEARTBEAT_LOST = 100
+STATUS_NOT_OPERATIONAL = 101
+STATUS_TEXT.setdefault(STATUS_HEARTBEAT_LOST, "CANopen heartbeat lost (a node went silent)")
+STATUS_TEXT.setdefault(STATUS_NOT_OPERATIONAL, "a CANopen node left the operational state")
+_ABORT_TIMEOUT = 0x05040000
+
+
+def _gather(plan: layout.CopyPlan, axis: int, record_size: int) -> np.ndarray:
+    """Flat record-byte indices of one PDO payload, in payload order."""
+    idx = []
+    for _po, ro, size in plan:
+        idx.extend(range(axis * record_size + ro, axis * record_size + ro + size))
+    return np.array(idx, dtype=np.intp)
+
+
+class CANopenTransport(Transport):
+    """CiA-402 drives on CANopen (see the module docstring).
+
+    ``channel``: python-can channel; ``drives``: one DriveConfig per node (identity
+    checked); ``cycle_time`` [s]: 1 / loop rate; ``node_ids``: CANopen node ids (default
+    1..n). ``heartbeat_time`` [s]: producer time written to 0x1017; ``heartbeat_timeout``
+    [s]: consumer limit (default 3 x producer); ``tpdo_deadline`` [s]: how long a cycle waits
+    for TPDOs after its SYNC (default 0.8 cycle). ``bus_kwargs``: extra python-can options.
+    """
+
+    def __init__(
+        self,
+        channel: str,
+        drives: Sequence[Any],
+        cycle_time: float,
+        axis_names: list[str] | None = None,
+        *,
+        can_interface: str = "socketcan",
+        node_ids: Sequence[int] | None = None,
+        bitrate: int = 1_000_000,
+        data_bitrate: int | None = None,
+        load_limit: float = 0.7,
+        heartbeat_time: float = 0.05,
+        heartbeat_timeout: float | None = None,
+        tpdo_deadline: float | None = None,
+        sdo_timeout: float = 0.5,
+        boot_timeout: float = 3.0,
+        bus_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        super().__init__(len(drives), cycle_time, axis_names)
+        n = self.n_axes
+        self.channel = channel
+        self.can_interface = can_interface
+        self.drives = list(drives)
+        self.node_ids = list(node_ids) if node_ids is not None else list(range(1, n + 1))
+        if len(self.node_ids) != n:
+            raise ValueError(f"{len(self.node_ids)} node ids for {n} drives")
+        self.bitrate = bitrate
+        self.data_bitrate = data_bitrate
+        self.load_limit = load_limit
+        self.heartbeat_time = heartbeat_time
+        self.heartbeat_timeout = heartbeat_timeout or 3.0 * heartbeat_time
+        self.tpdo_deadline = tpdo_deadline or 0.8 * cycle_time
+        self.sdo_timeout = sdo_timeout
+        self.boot_timeout = boot_timeout
+        self.bus_kwargs = dict(bus_kwargs or {})
+        self.network: Any = None
+        self.nodes: list[Any] = []
+        self._cyc: Any = None
+        self.is_open = False
+        # Counters (read outside the tick).
+        self.cycles = 0
+        self.partial_cycles = 0
+        self.late_frames = 0
+        self.bad_frames = 0
+        self.send_errors = 0
+        #: emergencies received, newest last: (axis, error code, error register, time)
+        self.emergencies: deque[tuple[int, int, int, float]] = deque(maxlen=64)
+        # Per-node state written by the notifier thread (plain numpy stores).
+        self._hb_time = np.zeros(n)
+        self._hb_state = np.full(n, -1, dtype=np.int16)
+        self._booted = np.zeros(n, dtype=bool)
+        self._emcy_code = np.zeros(n, dtype=np.uint16)
+        # Cyclic-path buffers.
+        n_t = len(layout.TPDOS)
+        self._got = np.zeros((n, n_t), dtype=bool)
+        self._got_any = np.zeros(n, dtype=bool)
+        self._age = np.zeros(n)
+        self._lost = np.zeros(n, dtype=bool)
+        self._missing = np.zeros(n, dtype=bool)
+        self._rx_flat = self.rx.view(np.uint8).reshape(-1)
+        self._tx_flat = self.tx.view(np.uint8).reshape(-1)
+        self._tx_err = self.tx["error_code"]
+        self._rpdo_msgs: list[Any] = []
+        self._rpdo_views: list[np.ndarray] = []
+        self._rpdo_idx: list[np.ndarray] = []
+        #: TPDO COB-ID -> (axis, slot, scatter indices, payload size)
+        self._tpdo_slots: dict[int, tuple[int, int, np.ndarray, int]] = {}
+        for i, nid in enumerate(self.node_ids):
+            for k, (p, plan) in enumerate(zip(layout.TPDOS, layout.TPDO_PLANS, strict=True)):
+                self._tpdo_slots[p.cob_base + nid] = (k, i, _gather(plan, i, TXPDO_SIZE), p.size)
+        self._sync_msg: Any = None
+
+    @classmethod
+    def from_config(
+        cls, bus: Any, axis_names: list[str] | None = None, *, cycle_time: float
+    ) -> CANopenTransport:
+        """From a :class:`hofto_hw.config.drives.BusConfig` with ``transport: canopen``;
+        ``cycle_time`` [s] is the system config's 1 / loop.rate_hz (as EtherCAT's)."""
+        from hofto_hw.config.drives import CANopenOptions
+
+        o = bus.canopen or CANopenOptions()
+        return cls(
+            bus.interface,
+            bus.drives,
+            cycle_time,
+            axis_names,
+            can_interface=o.can_interface,
+            node_ids=o.node_ids,
+            bitrate=o.bitrate,
+            data_bitrate=o.data_bitrate,
+            load_limit=o.load_limit,
+            heartbeat_time=o.heartbeat_time,
+            heartbeat_timeout=o.heartbeat_timeout,
+            tpdo_deadline=o.tpdo_deadline,
+            sdo_timeout=o.sdo_timeout,
+            boot_timeout=o.boot_timeout,
+        )
+
+    # ------------------------------------------------------------------ naming
+
+    def _who(self, axis: int) -> str:
+        return f"node {self.node_ids[axis]} ({self.axis_names[axis]})"
+
+    def load(self) -> Any:
+        """Worst-case bus load of this configuration (:class:`BusLoad`)."""
+        return bus_load(
+            layout.frame_payloads(self.n_axes),
+            1.0 / self.cycle_time,
+            self.bitrate,
+            self.data_bitrate,
+            self.load_limit,
+        )
+
+    # ---------------------------------------------------------------- start-up
+
+    def _bus(self, filters: list[dict[str, int]]) -> Any:
+        import can
+
+        kw = dict(self.bus_kwargs)
+        if self.data_bitrate is not None:
+            kw.setdefault("fd", True)
+            if self.can_interface not in ("virtual", "udp_multicast"):
+                kw.setdefault("data_bitrate", self.data_bitrate)
+        if self.can_interface not in ("virtual", "udp_multicast"):
+            kw.setdefault("bitrate", self.bitrate)
+        try:
+            return can.Bus(
+                interface=self.can_interface, channel=self.channel, can_filters=filters, **kw
+            )
+        except (can.CanError, OSError, ValueError, ImportError) as exc:
+            raise CANopenError(
+                f"bus.interface: cannot open CAN channel {self.channel!r} with python-can "
+                f"interface {self.can_interface!r}: {exc}"
+            ) from None
+
+    def open(self) -> None:
+        """Bring every node to operational (see the module docstring); raises CANopenError."""
+        if self.is_open:
+            return
+        check_bus_load(self.load(), "bus.canopen")
+        import can
+        import canopen
+
+        exact = 0x7FF
+        setup_filters = [
+            {"can_id": base + nid, "can_mask": exact, "extended": False}
+            for nid in self.node_ids
+            for base in (layout.EMCY_BASE, layout.SDO_TX_BASE, layout.HEARTBEAT_BASE)
+        ]
+        cyc_filters = [
+            {"can_id": cob, "can_mask": exact, "extended": False} for cob in self._tpdo_slots
+        ]
+        setup_bus = self._bus(setup_filters)
+        try:
+            self._cyc = self._bus(cyc_filters)
+            net = canopen.Network(setup_bus)
+            net.NOTIFIER_CYCLE = 0.1
+            net.connect()
+            self.network = net
+            self.nodes = []
+            for i, nid in enumerate(self.node_ids):
+                node = canopen.RemoteNode(nid, canopen.ObjectDictionary())
+                node.sdo.RESPONSE_TIMEOUT = self.sdo_timeout
+                node.sdo.MAX_RETRIES = 2  # udp_multicast drops frames in bursts
+                net.add_node(node)
+                self.nodes.append(node)
+                net.subscribe(layout.HEARTBEAT_BASE + nid, self._heartbeat_cb(i))
+                net.subscribe(layout.EMCY_BASE + nid, self._emcy_cb(i))
+            self._prepare_messages(can)
+            self._start(net)
+        except BaseException:
+            self._shutdown()
+            raise
+        self.is_open = True
+
+    def _heartbeat_cb(self, axis: int) -> Any:
+        def on_heartbeat(_can_id: int, data: bytes, _timestamp: float) -> None:
+            if data:
+                state = data[0] & 0x7F
+                self._hb_state[axis] = state
+                self._hb_time[axis] = time.monotonic()
+                if state == layout.NMT_BOOTUP:
+                    self._booted[axis] = True
+
+        return on_heartbeat
+
+    def _emcy_cb(self, axis: int) -> Any:
+        def on_emcy(_can_id: int, data: bytes, _timestamp: float) -> None:
+            if len(data) >= 3:
+                code = data[0] | (data[1] << 8)
+                self._emcy_code[axis] = code
+                self.emergencies.append((axis, code, data[2], time.monotonic()))
+
+        return on_emcy
+
+    def _prepare_messages(self, can: Any) -> None:
+        fd = self.data_bitrate is not None
+        self._rpdo_msgs, self._rpdo_views, self._rpdo_idx = [], [], []
+        for i, nid in enumerate(self.node_ids):
+            for p, plan in zip(layout.RPDOS, layout.RPDO_PLANS, strict=True):
+                data = bytearray(p.size)
+                msg = can.Message(
+                    arbitration_id=p.cob_base + nid, data=data, is_extended_id=False, is_fd=fd
+                )
+                self._rpdo_msgs.append(msg)
+                self._rpdo_views.append(np.frombuffer(msg.data, dtype=np.uint8))
+                self._rpdo_idx.append(_gather(plan, i, RXPDO_SIZE))
+        self._sync_msg = can.Message(
+            arbitration_id=layout.SYNC_COB_ID, data=b"", is_extended_id=False
+        )
+
+    def _wait(self, done: Any, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if done():
+                return True
+            time.sleep(0.002)
+        return bool(done())
+
+    def _start(self, net: Any) -> None:
+        self._booted.fill(False)
+        net.nmt.send_command(layout.NMT_RESET_COMM)
+        if not self._wait(lambda: self._booted.all(), self.boot_timeout):
+            missing = [self._who(i) for i in np.flatnonzero(~self._booted)]
+            raise NodeMissingError(
+                f"CAN channel {self.channel}: no boot-up message from {', '.join(missing)} "
+                f"within {self.boot_timeout:g} s after NMT reset communication"
+            )
+        for i in range(self.n_axes):
+            self._check_identity(i)
+            for p in layout.RPDOS:
+                self._map_pdo(i, p, transmission=layout.SYNC_EVERY)
+            for p in layout.TPDOS:
+                self._map_pdo(i, p, transmission=layout.SYNC_EVERY)
+            self.write_value(i, 0x1017, 0, "u16", max(1, round(self.heartbeat_time * 1000)))
+        self.rx.fill(0)
+        self._hb_state.fill(-1)
+        net.nmt.send_command(layout.NMT_START)
+        if not self._wait(
+            lambda: bool((self._hb_state == layout.NMT_OPERATIONAL).all()), self.boot_timeout
+        ):
+            bad = [
+                f"{self._who(i)} reports "
+                + layout.NMT_STATE_NAMES.get(int(s), "no heartbeat" if s < 0 else f"state {s}")
+                for i, s in enumerate(self._hb_state)
+                if s != layout.NMT_OPERATIONAL
+            ]
+            raise NodeMissingError(
+                f"CAN channel {self.channel}: not operational {self.boot_timeout:g} s after "
+                f"NMT start: {'; '.join(bad)}"
+            )
+        self._hb_time.fill(time.monotonic())
+
+    def _check_identity(self, i: int) -> None:
+        ident = self.drives[i].identity
+        if not (ident.vendor_id or ident.product_code):
+            return
+        checks = [(1, "vendor id", ident.vendor_id), (2, "product code", ident.product_code)]
+        if ident.revision is not None:
+            checks.append((3, "revision", ident.revision))
+        for sub, what, want in checks:
+            got = self.read_value(i, 0x1018, sub, "u32")
+            if got != want:
+                raise IdentityMismatchError(
+                    f"bus.drives[{i}].identity: {self._who(i)} reports {what} 0x{got:08X} "
+                    f"(0x1018:{sub}), expected 0x{want:08X}",
+                    self.node_ids[i],
+                    what,
+                    want,
+                    got,
+                )
+
+    def _map_pdo(self, i: int, p: layout.CanPdo, transmission: int) -> None:
+        cob = p.cob_base + self.node_ids[i]
+        self.write_value(i, p.comm_index, 1, "u32", cob | layout.COB_ID_INVALID)
+        self.write_value(i, p.comm_index, 2, "u8", transmission)
+        self.write_value(i, p.map_index, 0, "u8", 0)
+        for sub, e in enumerate(p.entries, start=1):
+            self.write_value(i, p.map_index, sub, "u32", mapping_value(e))
+        self.write_value(i, p.map_index, 0, "u8", len(p.entries))
+        self.write_value(i, p.comm_index, 1, "u32", cob)
+        count = self.read_value(i, p.map_index, 0, "u8")
+        found = [
+            parse_mapping_value(self.read_value(i, p.map_index, s, "u32"))[:3]
+            for s in range(1, count + 1)
+        ]
+        want = [e[:3] for e in p.entries]
+        if found != want:
+            raise CANopenError(
+                f"{self._who(i)}: {p.name} mapping 0x{p.map_index:04X} reads back as "
+                f"{_fmt_map(found)}, written {_fmt_map(want)}"
+            )
+
+    # ------------------------------------------------------------------- cycle
+
+    def exchange(self) -> int:
+        """RPDOs, SYNC, TPDOs until the deadline; returns a status code. Never raises."""
+        if not self.is_open:
+            return STATUS_NOT_OPEN
+        self.cycles += 1
+        bus = self._cyc
+        try:
+            # TPDOs that missed the last deadline: newer than tx, but late.
+            while True:
+                m = bus.recv(0.0)
+                if m is None:
+                    break
+                if self._take(m):
+                    self.late_frames += 1
+            rx_flat = self._rx_flat
+            for msg, view, idx in zip(
+                self._rpdo_msgs, self._rpdo_views, self._rpdo_idx, strict=False
+            ):
+                np.take(rx_flat, idx, out=view)
+                bus.send(msg)
+            bus.send(self._sync_msg)
+            self._got.fill(False)
+            pending = self._got.size
+            deadline = time.monotonic() + self.tpdo_deadline
+            while pending:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    break
+                m = bus.recv(remaining)
+                if m is None:
+                    break
+                slot = self._slot(m)
+                if slot is None:
+                    continue
+                if self._got[slot]:
+                    # Second frame of one PDO in one cycle: one of the two is late (CAN
+                    # frames carry no sequence number); keep the first.
+                    self.late_frames += 1
+                    continue
+                self._store(m)
+                self._got[slot] = True
+                pending -= 1
+        except Exception:  # python-can raises CanError/OSError on bus-off, buffer full
+            self.send_errors += 1
+            return STATUS_BUS_ERROR
+        np.copyto(self._tx_err, self._emcy_code)
+        now = time.monotonic()
+        np.subtract(now, self._hb_time, out=self._age)
+        np.greater(self._age, self.heartbeat_timeout, out=self._lost)
+        if self._lost.any():
+            return STATUS_HEARTBEAT_LOST
+        if (self._hb_state != layout.NMT_OPERATIONAL).any():
+            return STATUS_NOT_OPERATIONAL
+        if pending:
+            self.partial_cycles += 1
+            np.all(self._got, axis=1, out=self._got_any)
+            np.logical_not(self._got_any, out=self._missing)
+            return STATUS_PARTIAL
+        self._missing.fill(False)
+        return STATUS_OK
+
+    def _slot(self, m: Any) -> tuple[int, int] | None:
+        """(axis, TPDO number) of a well-formed TPDO frame, else None."""
+        hit = self._tpdo_slots.get(m.arbitration_id)
+        if hit is None or m.is_error_frame or m.is_remote_frame:
+            return None
+        k, i, _idx, size = hit
+        if len(m.data) != size:
+            self.bad_frames += 1
+            return None
+        return i, k
+
+    def _store(self, m: Any) -> None:
+        """Scatter a TPDO frame's payload into ``tx``."""
+        idx = self._tpdo_slots[m.arbitration_id][2]
+        np.put(self._tx_flat, idx, np.frombuffer(m.data, dtype=np.uint8))
+
+    def _take(self, m: Any) -> tuple[int, int] | None:
+        slot = self._slot(m)
+        if slot is not None:
+            self._store(m)
+        return slot
+
+    # ---------------------------------------------------------------------- NMT
+
+    def nmt(self, command: str, axis: int | None = None) -> None:
+        """Send NMT ``command`` (a key of :data:`~drivers.canopen.layout.NMT_COMMANDS`) to
+        one node (``axis``) or to all.
+
+        Outside the tick. A node that leaves operational makes :meth:`exchange` return
+        :data:`STATUS_NOT_OPERATIONAL` once its heartbeat says so.
+        """
+        if command not in layout.NMT_COMMANDS:
+            raise CANopenError(
+                f"unknown NMT command {command!r} (known: {', '.join(layout.NMT_COMMANDS)})"
+            )
+        if self.network is None:
+            raise CANopenError(f"NMT {command}: the bus is not open")
+        code = layout.NMT_COMMANDS[command]
+        if axis is None:
+            self.network.nmt.send_command(code)
+        else:
+            self._check_axis(axis)
+            self.nodes[axis].nmt.send_command(code)
+
+    # ----------------------------------------------------------- diagnostics
+
+    def missing_nodes(self) -> list[str]:
+        """Nodes whose TPDOs did not all arrive in the last cycle."""
+        return [self._who(i) for i in np.flatnonzero(self._missing)]
+
+    def problems(self) -> list[str]:
+        """What is wrong on the bus, one line per node and cause (outside the tick)."""
+        out = []
+        now = time.monotonic()
+        for i in range(self.n_axes):
+            who = self._who(i)
+            age = now - self._hb_time[i]
+            if age > self.heartbeat_timeout:
+                out.append(
+                    f"{who}: heartbeat lost (none for {age:.2f} s, limit "
+                    f"{self.heartbeat_timeout:g} s)"
+                )
+            elif self._hb_state[i] != layout.NMT_OPERATIONAL:
+                state = layout.NMT_STATE_NAMES.get(int(self._hb_state[i]), "unknown state")
+                out.append(f"{who}: left operational, heartbeat reports {state}")
+            if self._missing[i]:
+                out.append(
+                    f"{who}: TPDOs missing or late (not within {self.tpdo_deadline * 1e3:.1f} ms "
+                    "of the SYNC)"
+                )
+            if self._emcy_code[i]:
+                out.append(f"{who}: emergency {describe_error_code(int(self._emcy_code[i]))}")
+        return out
+
+    def emergency_messages(self) -> list[str]:
+        """Every EMCY received (oldest first) in words, e.g. 'node 2 (joint_2): EMCY 0x2310
+        continuous over-current, error register 0x03'."""
+        return [
+            f"{self._who(i)}: EMCY {describe_error_code(code)}, error register 0x{reg:02X}"
+            if code
+            else f"{self._who(i)}: EMCY error reset (no error)"
+            for i, code, reg, _t in self.emergencies
+        ]
+
+    # --------------------------------------------------------------------- SDO
+
+    def _sdo(self, axis: int, index: int, subindex: int, action: str, data: bytes = b"") -> bytes:
+        self._check_axis(axis)
+        if self.network is None:
+            raise CANopenError(f"{self._who(axis)}: SDO {action} before the bus was opened")
+        import canopen
+
+        node = self.nodes[axis]
+        device = f"{self.axis_names[axis]}, node {self.node_ids[axis]}"
+        try:
+            if action == "read":
+                return bytes(node.sdo.upload(index, subindex))
+            node.sdo.download(index, subindex, bytes(data))
+            return b""
+        except canopen.SdoAbortedError as exc:
+            raise SdoAbortError(axis, index, subindex, exc.code, action, device) from None
+        except canopen.SdoCommunicationError:
+            raise SdoAbortError(axis, index, subindex, _ABORT_TIMEOUT, action, device) from None
+
+    def sdo_read(self, axis: int, index: int, subindex: int) -> bytes:
+        """SDO upload through canopen's SDO client; raises SdoAbortError naming the node."""
+        return self._sdo(axis, index, subindex, "read")
+
+    def sdo_write(self, axis: int, index: int, subindex: int, data: bytes) -> None:
+        """SDO download through canopen's SDO client; raises SdoAbortError naming the node."""
+        self._sdo(axis, index, subindex, "write", data)
+
+    # ------------------------------------------------------------------- close
+
+    def _shutdown(self) -> None:
+        net, self.network = self.network, None
+        if net is not None:
+            try:
+                net.nmt.send_command(layout.NMT_ENTER_PRE_OP)
+            except Exception:  # closing a broken bus: nothing more to do
+                pass
+            net.disconnect()
+        cyc, self._cyc = self._cyc, None
+        if cyc is not None:
+            cyc.shutdown()
+
+    def close(self) -> None:
+        """NMT pre-operational to every node (PDOs stop), release both buses. Idempotent."""
+        self.is_open = False
+        self._shutdown()
+
+
+def _fmt_map(entries: list[tuple[int, int, int]]) -> str:
+    return "[" + ", ".join(f"0x{i:04X}:{s:02X}/{b}" for i, s, b in entries) + "]"
