@@ -27,12 +27,11 @@ from pathlib import Path
 from typing import Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field
 
 from hofto_hw.config.collision import CollisionConfig
-from hofto_hw.config.loader import format_validation_error, read_yaml
 from hofto_hw.config.models import ObserverConfig
-from hofto_hw.errors import ConfigError
+from hofto_hw.config.typed_file import read_typed_yaml
 
 FORMAT = "hofto-hw/collision-thresholds"
 
@@ -72,14 +71,7 @@ class ThresholdsFile(_Strict):
 
 def read_thresholds(path: str | Path) -> ThresholdsFile:
     """Read and validate a thresholds file; errors name the file and the field."""
-    path = Path(path)
-    data = read_yaml(path, "thresholds file")
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping at the top level of a thresholds file")
-    try:
-        return ThresholdsFile.model_validate(data)
-    except ValidationError as err:
-        raise ConfigError(format_validation_error(str(path), err)) from None
+    return read_typed_yaml(path, "thresholds file", ThresholdsFile)
 
 
 def write_thresholds(path: str | Path, content: ThresholdsFile) -> None:
@@ -94,7 +86,7 @@ def write_thresholds(path: str | Path, content: ThresholdsFile) -> None:
 
     _Dumper.add_representer(list, _list)
     data = content.model_dump(mode="json", exclude_none=True)
-    Path(path).write_text(
+    Path(path).write_text(  # OSError: the caller names the option
         "# Collision thresholds: written by `hofto-hw thresholds calibrate`.\n"
         + yaml.dump(data, Dumper=_Dumper, sort_keys=False, width=100)
     )
