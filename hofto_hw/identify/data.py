@@ -359,15 +359,16 @@ def _line_blocks(path: Path, src: str) -> Iterator[list[str]]:
 
 
 def _count_lines(path: Path) -> int:
-    """Newlines + 1: an upper bound of the rows, to preallocate the arrays."""
-    n = 1
+    """Lines of a file (a last line without a newline counts), to preallocate the arrays."""
+    n, last = 0, b"\n"
     try:
         with path.open("rb") as fh:
             while block := fh.read(CHUNK_BYTES):
                 n += block.count(b"\n")
+                last = block[-1:]
     except OSError:
         pass  # reported by the reader with the file's name
-    return n
+    return n + (last != b"\n")
 
 
 def count_columns(path: Path, delimiter: str = ",") -> int:
