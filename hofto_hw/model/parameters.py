@@ -116,14 +116,11 @@ class ParametersFile:
         return len(self.joints)
 
     def friction(self) -> FrictionParams:
-        """The friction model (with the Stribeck term when the file has one)."""
+        """The friction model (with the Stribeck term when the file has one); its own copies
+        of the arrays (FrictionParams copies what it is given)."""
+        stribeck = (self.stribeck_static, self.stribeck_velocity)
         return FrictionParams(
-            self.coulomb.copy(),
-            self.viscous.copy(),
-            self.bias.copy(),
-            None if self.stribeck_static is None else self.stribeck_static.copy(),
-            None if self.stribeck_velocity is None else self.stribeck_velocity.copy(),
-            smooth_velocity=self.smooth_velocity,
+            self.coulomb, self.viscous, self.bias, *stribeck, self.smooth_velocity
         )
 
     def base_values(self) -> np.ndarray:

@@ -160,13 +160,19 @@ def test_identify_into_a_missing_folder_fails_before_the_fit(tmp_path, capsys) -
     assert not target.parent.exists()  # and nothing created
 
 
-def test_validate_prints_numbers_then_reports_a_failed_figure(tmp_path, capsys, monkeypatch):
+@pytest.fixture
+def full_disk(monkeypatch):
+    """Every figure write fails as on a full disk (root ignores permissions, so no chmod)."""
     import matplotlib.figure
 
     def no_space(self, *args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(matplotlib.figure.Figure, "savefig", no_space)
+
+
+@pytest.mark.usefixtures("full_disk")
+def test_validate_prints_numbers_then_reports_a_failed_figure(tmp_path, capsys):
     png = tmp_path / "fit.png"
     code, out, err = _run(capsys, "validate", PARAMS, EXCITATION, "--plot", png)
     _one_line(code, err, str(png), "cannot write figure", "No space left on device")
@@ -174,13 +180,8 @@ def test_validate_prints_numbers_then_reports_a_failed_figure(tmp_path, capsys, 
     assert not png.exists()
 
 
-def test_replay_prints_report_then_reports_a_failed_figure(tmp_path, capsys, monkeypatch):
-    import matplotlib.figure
-
-    def no_space(self, *args, **kwargs):
-        raise OSError(errno.ENOSPC, "No space left on device")
-
-    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", no_space)
+@pytest.mark.usefixtures("full_disk")
+def test_replay_prints_report_then_reports_a_failed_figure(tmp_path, capsys):
     png = tmp_path / "push.png"
     code, out, err = _run(capsys, "replay", PARAMS, PUSH, "--plot", png)
     _one_line(code, err, str(png), "cannot write plot")
