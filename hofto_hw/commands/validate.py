@@ -86,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
         models[args.compare.stem] = other
     opts = Conditioning(args.cutoff, args.filter_torque, 1, args.drop_bad_rows)
     search = [args.parameters.parent, cfg.robot.urdf.parent]
-    loaded = load_samples(args.recordings, args.columns, parse_rows(args.rows), opts, search)
+    rows = parse_rows(args.rows)
+    loaded = load_samples(args.recordings, args.columns, rows, opts, search, robot=cfg.robot.name)
 
     report: dict = {"files": [], "models": list(models)}
     taus, preds = [], {k: [] for k in models}

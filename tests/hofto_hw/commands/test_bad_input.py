@@ -117,10 +117,12 @@ def test_column_map_of_another_robot_is_refused_by_identify(tmp_path, capsys) ->
     assert not (tmp_path / "p.yaml").exists()
 
 
-def test_column_map_of_another_robot_is_refused_by_replay(tmp_path, capsys) -> None:
+@pytest.mark.parametrize("command", ["replay", "validate"])
+def test_column_map_of_another_robot_is_refused(command, tmp_path, capsys) -> None:
     other = tmp_path / "columns_other.yaml"
     other.write_text(COLUMNS_31.read_text().replace("robot: ur10e", "robot: er3a"))
-    code, _, err = _run(capsys, "replay", PARAMS, PUSH, "--columns", other)
+    extra = ["--no-plot"] if command == "validate" else []
+    code, _, err = _run(capsys, command, PARAMS, PUSH, "--columns", other, *extra)
     _one_line(code, err, str(other), "robot 'er3a'", "'ur10e'")
 
 
