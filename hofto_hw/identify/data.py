@@ -477,9 +477,9 @@ def load_csv(
             data = grown
         data[n : n + len(block)] = arr
         bad.update(block_bad)
-        nonempty = [i for i in range(len(block) - 1, -1, -1) if block[i].strip()][:1]
-        if nonempty:
-            last_nonempty = n + nonempty[0]
+        last = next((i for i in range(len(block) - 1, -1, -1) if block[i].strip()), None)
+        if last is not None:
+            last_nonempty = n + last
         n += len(block)
         if progress is not None:
             progress(min(row, hi) - first_row + 1, min(hi, total) - first_row + 1)
