@@ -261,10 +261,15 @@ def _kind_columns(cmap: ColumnMap) -> list[tuple[str, list[int]]]:
     return kinds
 
 
+def _layout(cmap: ColumnMap) -> list[int]:
+    """The used columns in the order the arrays are stored: time, q, qd, current/torque,
+    extra (each column once), so that each quantity is a slice of the stored block."""
+    return list(dict.fromkeys(cmap.used_columns()))
+
+
 def _check_values(data: FloatArray, first_row: int, cmap: ColumnMap, bad: dict[int, str]) -> None:
     """Mark rows with NaN/inf or implausible values as bad (in place)."""
-    used = sorted(set(cmap.used_columns()))
-    col_index = {c: i for i, c in enumerate(used)}
+    col_index = {c: i for i, c in enumerate(_layout(cmap))}
     for kind, cols in _kind_columns(cmap):
         limit = cmap.limits.get(kind, DEFAULT_ABS_LIMIT)  # type: ignore[call-overload]
         if kind == "time":
@@ -436,7 +441,7 @@ def load_csv(
     policy: BadRows = bad_rows or cmap.bad_rows
     row_range = rows if rows is not None else cmap.rows
     src = str(path)
-    used = sorted(set(cmap.used_columns()))
+    used = _layout(cmap)
     col = {c: i for i, c in enumerate(used)}
     total = _count_lines(path)
     lo, hi = row_range if row_range is not None else (1, total)
@@ -534,8 +539,15 @@ def load_csv(
             f"{src}: too short: {data.shape[0]} good rows, at least {MIN_SAMPLES} needed"
         )
 
+    shared = len(used) != len(cmap.used_columns())  # a column read as two quantities
+
     def cols(cs: list[int]) -> FloatArray:
-        return np.ascontiguousarray(data[:, [col[c] for c in cs]])
+        """(N, k) columns: a view of the stored block when they sit side by side (no copy:
+        rows stay contiguous for the per-sample loops), else a copy."""
+        idx = [col[c] for c in cs]
+        if not shared and idx == list(range(idx[0], idx[0] + len(idx))):
+            return data[:, idx[0] : idx[0] + len(idx)]
+        return np.ascontiguousarray(data[:, idx])
 
     if cmap.current is not None:
         assert cmap.current_to_torque is not None
