@@ -41,6 +41,7 @@ APPLICATION = (
     "hofto_hw.experiments",
     "hofto_hw.identify",
     "hofto_hw.recording",
+    "hofto_hw.progress",
 )
 #: layer -> layers it may import (besides third-party and standard-library modules)
 ALLOWED: dict[str, set[str]] = {

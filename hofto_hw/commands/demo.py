@@ -16,24 +16,32 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "er3a.yaml"
+from hofto_hw.commands.args import (
+    add_config,
+    ensure_default_folder,
+    finite_positive_float,
+    output_file,
+    write_failed,
+)
+
+DEFAULT_CONFIG = "er3a"  # the simulated ER3A-class arm of the paper (configs/er3a.yaml)
+DEFAULT_PLOT = Path("out/demo_fig4.png")  # ours: its folder is created
 TABLE_OBSERVERS = ("hofto", "eso", "dob")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
+    add_config(parser, default=DEFAULT_CONFIG)
     parser.add_argument(
-        "--config", type=Path, default=DEFAULT_CONFIG, help="system config (default: ER3A)"
+        "--duration", type=finite_positive_float, default=20.0, help="simulated seconds (>= 5)"
     )
-    parser.add_argument("--duration", type=float, default=20.0, help="simulated seconds")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON only")
-    parser.add_argument(
-        "--plot", type=Path, default=Path("out/demo_fig4.png"), help="Fig. 4-style PNG"
-    )
+    parser.add_argument("--plot", type=output_file, default=DEFAULT_PLOT, help="Fig. 4-style PNG")
     parser.add_argument("--no-plot", action="store_true", help="do not write the PNG")
 
 
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.config import load_config
+    from hofto_hw.config.locate import find_config
     from hofto_hw.errors import ConfigError
     from hofto_hw.experiments import table2
     from hofto_hw.model import RobotModel
@@ -42,10 +50,13 @@ def run(args: argparse.Namespace) -> int:
 
     if args.duration < 5.0:
         raise ConfigError(f"--duration: at least 5 s are needed, got {args.duration}")
-    cfg = load_config(args.config)
+    config_path = find_config(args.config)
+    if not args.no_plot and args.plot == DEFAULT_PLOT:
+        ensure_default_folder(args.plot)
+    cfg = load_config(config_path)
     missing = [name for name in TABLE_OBSERVERS if name not in cfg.observers]
     if missing:
-        raise ConfigError(f"{args.config}: observers: the demo needs {', '.join(missing)}")
+        raise ConfigError(f"{config_path}: observers: the demo needs {', '.join(missing)}")
     say = (lambda *_: None) if args.json else (lambda msg: print(msg, file=sys.stderr))
     started = time.perf_counter()
     model = RobotModel.from_config(cfg.robot)
@@ -91,7 +102,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {'|tau_ext|':<9}" + "".join(f"{v:9.3f}" for v in rms) + "   (RMS of the truth)")
         print(f"\nsimulated {samples.t[-1]:.1f} s in {elapsed:.1f} s")
     if not args.no_plot:
-        _plot(samples, paper, args.plot)
+        try:
+            _plot(samples, paper, args.plot)
+        except OSError as exc:
+            raise write_failed(args.plot, "figure", exc) from None
         say(f"wrote {args.plot}")
     return 0
 
@@ -166,7 +180,6 @@ def _plot(samples, comp, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    path.parent.mkdir(parents=True, exist_ok=True)
     fig, axes = plt.subplots(3, 2, figsize=(12, 9), sharex=True)
     colours = {"hofto": "tab:red", "eso": "gold", "dob": "tab:purple"}
     for j, ax in enumerate(axes.T.ravel()):
@@ -187,5 +200,7 @@ def _plot(samples, comp, path: Path) -> None:
     axes[0, 0].legend(loc="upper right", fontsize=8)
     fig.suptitle("External torque estimates, paper's gains (cf. Fig. 4 of Han et al. 2022)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=110, format="png")  # exactly at path, whatever its suffix
+    finally:
+        plt.close(fig)

@@ -13,34 +13,51 @@ from pathlib import Path
 
 import numpy as np
 
+from hofto_hw.commands.args import (
+    add_config,
+    finite_positive_float,
+    output_file,
+    positive_int,
+    refuse_overwrite,
+    write_failed,
+)
+
 DEFAULT_ACCELERATION = 5.0  # rad/s², when neither the config nor --max-acceleration gives one
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", required=True, type=Path, help="robot config YAML")
-    parser.add_argument("-o", "--output", type=Path, required=True, help="trajectory CSV")
-    parser.add_argument("--plot", type=Path, help="PNG (default: OUTPUT with .png)")
-    parser.add_argument("--harmonics", type=int, default=5, help="Fourier harmonics L")
-    parser.add_argument("--period", type=float, default=10.0, help="period [s]")
-    parser.add_argument("--cycles", type=int, default=1, help="periods in the file")
-    parser.add_argument("--rate", type=float, default=100.0, help="sample rate of the CSV [Hz]")
+    add_config(parser, default=None, required=True)
+    parser.add_argument("-o", "--output", type=output_file, required=True, help="trajectory CSV")
+    parser.add_argument("--plot", type=output_file, help="PNG (default: OUTPUT with .png)")
+    parser.add_argument("--harmonics", type=positive_int, default=5, help="Fourier harmonics L")
+    parser.add_argument("--period", type=finite_positive_float, default=10.0, help="period [s]")
+    parser.add_argument("--cycles", type=positive_int, default=1, help="periods in the file")
+    parser.add_argument(
+        "--rate", type=finite_positive_float, default=100.0, help="sample rate of the CSV [Hz]"
+    )
     parser.add_argument(
         "--range",
-        type=float,
+        type=finite_positive_float,
         default=1.0,
         help="max excursion from home per joint [rad] (within the position limits)",
     )
     parser.add_argument(
-        "--velocity-scale", type=float, default=0.8, help="fraction of the velocity limits"
+        "--velocity-scale",
+        type=finite_positive_float,
+        default=0.8,
+        help="fraction of the velocity limits",
     )
-    parser.add_argument("--max-acceleration", type=float, help="[rad/s²] for every joint")
-    parser.add_argument("--iterations", type=int, default=100, help="SLSQP iterations")
+    parser.add_argument(
+        "--max-acceleration", type=finite_positive_float, help="[rad/s²] for every joint"
+    )
+    parser.add_argument("--iterations", type=positive_int, default=100, help="SLSQP iterations")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-torque-limits", action="store_true", help="ignore torque limits")
 
 
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.config.loader import load_config
+    from hofto_hw.config.locate import find_config
     from hofto_hw.errors import UserError
     from hofto_hw.identify.base_params import find_base_parameters
     from hofto_hw.identify.excitation import ExcitationLimits, design_excitation
@@ -48,13 +65,13 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.identify.regressor import Regressor
     from hofto_hw.model import RobotModel
 
-    for name in ("harmonics", "cycles"):
-        if getattr(args, name) < 1:
-            raise UserError(f"excite: --{name} must be >= 1")
-    for name in ("period", "rate", "range", "velocity_scale"):
-        if not getattr(args, name) > 0:
-            raise UserError(f"excite: --{name.replace('_', '-')} must be > 0")
-    cfg = load_config(args.config)
+    config_path = find_config(args.config)
+    png = args.plot or args.output.with_suffix(".png")
+    if png == args.output:
+        raise UserError(f"--plot {png}: is the trajectory file (--output); give another name")
+    for option, out in (("--output", args.output), ("--plot", png)):
+        refuse_overwrite(out, [config_path], option)
+    cfg = load_config(config_path)
     model = RobotModel.from_config(cfg.robot)
     lim = model.limits
     lo = np.maximum(lim.position_lower, model.home - args.range)
@@ -91,24 +108,26 @@ def run(args: argparse.Namespace) -> int:
         + [f"qd{j + 1}" for j in range(n)]
         + [f"qdd{j + 1}" for j in range(n)]
     )
-    try:
-        args.output.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UserError(f"--output: cannot create {args.output.parent}: {exc.strerror}") from None
-    np.savetxt(
-        args.output,
-        np.column_stack([t, q, qd, qdd]),
-        delimiter=",",
-        header=header,
-        comments="",
-        fmt="%.9g",
-    )
-    png = args.plot or args.output.with_suffix(".png")
-    _plot(png, t, q, qd, qdd, model.joint_names, cond)
     print(
         f"condition number {cond:.4g} ({base.p} base parameters, {args.harmonics} harmonics, "
-        f"period {args.period:g} s)"
+        f"period {args.period:g} s)",
+        flush=True,
     )
+    try:
+        np.savetxt(
+            args.output,
+            np.column_stack([t, q, qd, qdd]),
+            delimiter=",",
+            header=header,
+            comments="",
+            fmt="%.9g",
+        )
+    except OSError as exc:
+        raise write_failed(args.output, "trajectory", exc) from None
+    try:
+        _plot(png, t, q, qd, qdd, model.joint_names, cond)
+    except OSError as exc:
+        raise write_failed(png, "figure", exc) from None
     print(f"wrote {args.output} ({t.size} samples) and {png}")
     return 0
 
@@ -139,5 +158,7 @@ def _plot(
     axes[-1].set_xlabel("t [s]")
     fig.suptitle(f"excitation trajectory, condition number {cond:.4g}")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=100, format="png")  # exactly at path, whatever its suffix
+    finally:
+        plt.close(fig)

@@ -11,30 +11,41 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from hofto_hw.identify.inputs import Conditioning, load_samples, parse_rows
+from hofto_hw.commands.args import (
+    add_config,
+    add_recording_options,
+    finite_nonnegative_float,
+    finite_positive_float,
+    output_file,
+    parse_rows,
+    positive_int,
+    refuse_overwrite,
+    write_failed,
+)
+from hofto_hw.identify.inputs import Conditioning, load_samples
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recordings", nargs="+", metavar="FILE[@FIRST:LAST]")
-    parser.add_argument("--config", required=True, type=Path, help="robot config YAML")
-    parser.add_argument("--columns", type=Path, help="CSV column map (default: found by width)")
-    parser.add_argument("--rows", help="FIRST:LAST rows (1-based) for every file")
-    parser.add_argument("-o", "--output", type=Path, required=True, help="parameters file")
+    add_config(parser, default=None, required=True)
+    add_recording_options(parser, "rows (1-based, inclusive) for every file")
+    parser.add_argument("-o", "--output", type=output_file, required=True, help="parameters file")
     parser.add_argument(
         "--method",
         choices=("ols", "wls", "consistent"),
         default="consistent",
         help="estimate put in the file (default: physically consistent SDP)",
     )
-    parser.add_argument("--cutoff", type=float, default=5.0, help="low-pass cut-off [Hz]")
-    parser.add_argument("--decimate", type=int, default=1, help="keep every k-th sample")
+    parser.add_argument(
+        "--cutoff", type=finite_positive_float, default=5.0, help="low-pass cut-off [Hz]"
+    )
+    parser.add_argument("--decimate", type=positive_int, default=1, help="keep every k-th sample")
     parser.add_argument(
         "--smooth-velocity",
-        type=float,
+        type=finite_nonnegative_float,
         default=0.02,
         help="v_s [rad/s] of the smooth Coulomb sign tanh(qd/v_s); 0 = hard sign",
     )
@@ -48,18 +59,20 @@ def configure(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="low-pass the torque too (default: raw torque; filtering smears friction steps)",
     )
-    parser.add_argument("--drop-bad-rows", action="store_true", help="drop corrupt rows")
     parser.add_argument("--json", action="store_true", help="print the fit as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.config.loader import load_config
+    from hofto_hw.config.locate import find_config
     from hofto_hw.errors import UserError
     from hofto_hw.identify.pipeline import identify
     from hofto_hw.model import RobotModel
     from hofto_hw.model.parameters import apply_parameters, write_parameters
 
-    cfg = load_config(args.config)
+    config_path = find_config(args.config)
+    refuse_overwrite(args.output, [config_path, args.columns, *args.recordings], "--output")
+    cfg = load_config(config_path)
     model = RobotModel.from_config(cfg.robot, apply_parameters=False)
     opts = Conditioning(args.cutoff, args.filter_torque, args.decimate, args.drop_bad_rows)
     vs = None
@@ -68,18 +81,21 @@ def run(args: argparse.Namespace) -> int:
             values = [float(v) for v in args.stribeck_velocity.split(",")]
         except ValueError:
             values = []
-        if len(values) not in (1, model.n):
+        if len(values) not in (1, model.n) or not all(0.0 < v < np.inf for v in values):
             raise UserError(
-                f"identify: --stribeck-velocity needs 1 or {model.n} comma-separated numbers, "
+                f"identify: --stribeck-velocity needs 1 or {model.n} comma-separated finite "
+                f"numbers > 0 [rad/s], "
                 f"got {args.stribeck_velocity!r}"
             )
         vs = np.broadcast_to(np.asarray(values), (model.n,)).copy()
-    search = [cfg.robot.urdf.parent, args.config.parent]
+    search = [cfg.robot.urdf.parent, config_path.parent]
 
     def say(msg: str) -> None:
         print(f"identify: {msg}", file=sys.stderr, flush=True)
 
-    loaded = load_samples(args.recordings, args.columns, parse_rows(args.rows), opts, search)
+    loaded = load_samples(
+        args.recordings, args.columns, parse_rows(args.rows), opts, search, robot=cfg.robot.name
+    )
     for _s, rec in loaded:
         say(f"loaded {rec.source}: {rec.n_samples} samples, {rec.duration:.1f} s")
     result = identify(
@@ -91,7 +107,10 @@ def run(args: argparse.Namespace) -> int:
         stribeck_velocity=vs,
     )
     apply_parameters(model, result.parameters, str(args.output))  # refuses a non-SPD M(q)
-    write_parameters(args.output, result.parameters)
+    try:
+        write_parameters(args.output, result.parameters)
+    except OSError as exc:
+        raise write_failed(args.output, "parameters file", exc) from None
     say(f"wrote {args.output}")
     fit = result.parameters.fit
     if args.json:

@@ -15,37 +15,45 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
 from pathlib import Path
 
+from hofto_hw.commands.args import (
+    add_config,
+    add_recording_options,
+    finite_nonnegative_float,
+    output_file,
+    parse_rows,
+    refuse_overwrite,
+)
 from hofto_hw.errors import UserError
 from hofto_hw.replay.defaults import OBSERVER_NAMES
 
 DEFAULT_OBSERVER = "momentum"
 
 
-def parse_rows(text: str | None) -> tuple[int, int] | None:
-    """'FIRST:LAST' (1-based, inclusive) -> (first, last)."""
-    if text is None:
-        return None
-    try:
-        a, b = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise UserError(f"--rows: expected FIRST:LAST (e.g. 635:3510), got {text!r}") from None
-    if not 1 <= a <= b:
-        raise UserError(f"--rows: need 1 <= FIRST <= LAST, got {text!r}")
-    return a, b
+def progress_for(label: str) -> Callable[[str], Callable[[int, int], None]]:
+    """Progress callbacks per stage of a long replay (``label: stage: k/N``, on stderr)."""
+    from hofto_hw.progress import Progress
+
+    def stage(name: str) -> Callable[[int, int], None]:
+        bar: Progress | None = None
+
+        def update(done: int, total: int) -> None:
+            nonlocal bar
+            if bar is None:
+                bar = Progress(f"{label}: {name}", total)
+            bar.update(done)
+
+        return update
+
+    return stage
 
 
 def add_common(parser: argparse.ArgumentParser) -> None:
     """Options shared by replay and thresholds."""
-    parser.add_argument("--config", type=Path, help="robot config (default: <robot>.yaml)")
-    parser.add_argument("--columns", type=Path, help="CSV column map (default: by column count)")
-    parser.add_argument("--rows", help="FIRST:LAST rows (1-based, inclusive) to replay")
-    parser.add_argument(
-        "--drop-bad-rows",
-        action="store_true",
-        help="drop corrupt CSV rows with a warning instead of refusing the file",
-    )
+    add_config(parser, default=None)
+    add_recording_options(parser, "rows (1-based, inclusive) to replay")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -78,10 +86,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--no-thresholds", action="store_true", help="estimate statistics only, no detection"
     )
     parser.add_argument(
-        "--merge-gap", type=float, default=0.5, help="join episodes closer than this [s]"
+        "--merge-gap",
+        type=finite_nonnegative_float,
+        default=0.5,
+        help="join episodes closer than this [s]",
     )
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
-    parser.add_argument("--plot", type=Path, metavar="PNG", help="write a figure")
+    parser.add_argument("--plot", type=output_file, metavar="PNG", help="write a figure")
 
 
 def _print_text(report_dict: dict, thresholds: Path | None) -> None:
@@ -141,6 +152,7 @@ def run(args: argparse.Namespace) -> int:
         sha256_of,
     )
 
+    refuse_overwrite(args.plot, [args.params, args.file, args.config, args.thresholds], "--plot")
     setup = load_setup(args.params, args.config)
     th_path = args.thresholds if args.thresholds is not None else default_thresholds(setup)
     if args.no_thresholds:
@@ -157,8 +169,11 @@ def run(args: argparse.Namespace) -> int:
         args.columns,
         parse_rows(args.rows),
         "drop" if args.drop_bad_rows else None,
+        progress_for(args.file.name),
     )
-    report = run_replay(setup, rec, args.observer, thresholds, args.merge_gap)
+    report = run_replay(
+        setup, rec, args.observer, thresholds, args.merge_gap, progress_for(args.file.name)
+    )
     d = report.as_dict()
     if thresholds is not None and thresholds.parameters is not None:
         ref = thresholds.parameters
@@ -168,12 +183,14 @@ def run(args: argparse.Namespace) -> int:
                 f"recalibrate for {args.params.name}"
             )
     if args.plot is not None:
-        plot_replay(report.result, report.episodes, args.plot)
         d["plot"] = str(args.plot)
+    # results first: a figure that cannot be written must not cost the user the numbers
     if args.json:
-        print(json.dumps(d, indent=2))
+        print(json.dumps(d, indent=2), flush=True)
     else:
         _print_text(d, th_path)
-        if args.plot is not None:
+    if args.plot is not None:
+        plot_replay(report.result, report.episodes, args.plot)
+        if not args.json:
             print(f"  plot: {args.plot}")
     return 0

@@ -15,7 +15,16 @@ import datetime as _dt
 import json
 from pathlib import Path
 
-from hofto_hw.commands.replay import add_common, parse_rows
+from hofto_hw.commands.args import (
+    HelpFormatter,
+    finite_nonnegative_float,
+    finite_positive_float,
+    output_file,
+    parse_rows,
+    refuse_overwrite,
+    write_failed,
+)
+from hofto_hw.commands.replay import add_common, progress_for
 from hofto_hw.errors import UserError
 from hofto_hw.replay.defaults import OBSERVER_NAMES
 
@@ -24,9 +33,11 @@ CALIBRATED_BY_DEFAULT = ("momentum", "hofto", "dob", "eso", "direct")
 
 def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    cal = sub.add_parser("calibrate", help="thresholds from free-motion recordings")
+    cal = sub.add_parser(
+        "calibrate", help="thresholds from free-motion recordings", formatter_class=HelpFormatter
+    )
     cal.add_argument("files", nargs="+", type=Path, metavar="FILE")
-    cal.add_argument("-o", "--output", type=Path, required=True, help="thresholds file")
+    cal.add_argument("-o", "--output", type=output_file, required=True, help="thresholds file")
     cal.add_argument("--params", type=Path, required=True, help="identified-parameters file")
     cal.add_argument(
         "--observer",
@@ -36,16 +47,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     cal.add_argument(
         "--margin",
-        type=float,
+        type=finite_nonnegative_float,
         default=0.6,
         help="thresholds = (1 + margin) x the smallest envelope of the residuals (default 0.6)",
     )
     cal.add_argument(
-        "--debounce", type=float, default=0.03, help="time above threshold to trip [s]"
+        "--debounce",
+        type=finite_positive_float,
+        default=0.03,
+        help="time above threshold to trip [s]",
     )
     cal.add_argument("--json", action="store_true", help="print a summary as JSON")
     add_common(cal)
-    chk = sub.add_parser("check", help="replay recordings and count alarms per file")
+    chk = sub.add_parser(
+        "check", help="replay recordings and count alarms per file", formatter_class=HelpFormatter
+    )
     chk.add_argument("files", nargs="+", type=Path, metavar="FILE")
     chk.add_argument("--params", type=Path, required=True, help="identified-parameters file")
     chk.add_argument("--thresholds", type=Path, help="default: <robot>/thresholds.yaml")
@@ -72,17 +88,27 @@ def _calibrate(args: argparse.Namespace) -> int:
         write_thresholds,
     )
 
-    if args.margin < 0.0:
-        raise UserError(f"--margin must be >= 0, got {args.margin}")
+    inputs = [args.params, args.config, args.columns, *args.files]
+    refuse_overwrite(args.output, inputs, "--output")
     setup = load_setup(args.params, args.config)
     n = setup.model.n
     bad = "drop" if args.drop_bad_rows else None
-    recs = [load_for_replay(setup, f, args.columns, parse_rows(args.rows), bad) for f in args.files]
+    rows = parse_rows(args.rows)
+    recs = [
+        load_for_replay(setup, f, args.columns, rows, bad, progress_for(f.name)) for f in args.files
+    ]
     template = CollisionConfig(base=[1.0] * n, debounce_time=args.debounce)
     entries: dict[str, ObserverThresholds] = {}
     for name in args.observer or CALIBRATED_BY_DEFAULT:
         obs_cfg = observer_config(name, setup)
-        residuals = [run_observer(rec, observer_for(name, obs_cfg, setup, rec)) for rec in recs]
+        residuals = [
+            run_observer(
+                rec,
+                observer_for(name, obs_cfg, setup, rec),
+                progress=progress_for(Path(rec.source).name)(name),
+            )
+            for rec in recs
+        ]
         cal = calibrate(recs, residuals, template, margin=args.margin)
         entries[name] = ObserverThresholds(
             observer=obs_cfg, monitor=cal.config, peak=list(cal.peak), samples=cal.samples
@@ -95,7 +121,10 @@ def _calibrate(args: argparse.Namespace) -> int:
         calibrated_on=[f.name for f in args.files],
         observers=entries,
     )
-    write_thresholds(args.output, content)
+    try:
+        write_thresholds(args.output, content)
+    except OSError as exc:
+        raise write_failed(args.output, "thresholds file", exc) from None
     summary = {
         name: {"base": e.monitor.base, "peak": e.peak, "samples": e.samples}
         for name, e in entries.items()
@@ -126,9 +155,11 @@ def _check(args: argparse.Namespace) -> int:
     bad = "drop" if args.drop_bad_rows else None
     results = []
     for f in args.files:
-        rec = load_for_replay(setup, f, args.columns, parse_rows(args.rows), bad)
+        rec = load_for_replay(
+            setup, f, args.columns, parse_rows(args.rows), bad, progress_for(f.name)
+        )
         for name in names:
-            rep = run_replay(setup, rec, name, thresholds)
+            rep = run_replay(setup, rec, name, thresholds, progress=progress_for(f.name))
             worst = max(row.get("max_ratio", 0.0) for row in rep.stats())
             results.append(
                 {

@@ -16,7 +16,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hofto_hw.identify.inputs import Conditioning, find_config, load_samples, parse_rows
+from hofto_hw.commands.args import (
+    add_config,
+    add_recording_options,
+    ensure_default_folder,
+    finite_positive_float,
+    output_file,
+    parse_rows,
+    refuse_overwrite,
+    write_failed,
+)
+from hofto_hw.identify.inputs import Conditioning, load_samples
 
 if TYPE_CHECKING:
     from hofto_hw.config.models import SystemConfig
@@ -26,31 +36,35 @@ if TYPE_CHECKING:
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("parameters", type=Path, metavar="PARAMS", help="parameters file")
     parser.add_argument("recordings", nargs="+", metavar="FILE[@FIRST:LAST]")
-    parser.add_argument("--config", type=Path, help="robot config (default: found by name)")
-    parser.add_argument("--columns", type=Path, help="CSV column map (default: found by width)")
-    parser.add_argument("--rows", help="FIRST:LAST rows (1-based) for every file")
+    add_config(parser, default=None)
+    add_recording_options(parser, "rows (1-based, inclusive) for every file")
     parser.add_argument("--compare", type=Path, metavar="PARAMS2", help="second file to compare")
-    parser.add_argument("--cutoff", type=float, default=5.0, help="velocity low-pass [Hz]")
+    parser.add_argument(
+        "--cutoff", type=finite_positive_float, default=5.0, help="velocity low-pass [Hz]"
+    )
     parser.add_argument(
         "--filter-torque",
         action="store_true",
         help="low-pass the measured torque too (default: compare with the raw torque)",
     )
     parser.add_argument(
-        "--plot", type=Path, help="PNG to write (default: out/validate_<PARAMS stem>.png)"
+        "--plot",
+        type=output_file,
+        metavar="PNG",
+        help="PNG to write (default: out/validate_<PARAMS stem>.png)",
     )
     parser.add_argument("--no-plot", action="store_true", help="write no figure")
-    parser.add_argument("--drop-bad-rows", action="store_true", help="drop corrupt rows")
     parser.add_argument("--json", action="store_true", help="print the numbers as JSON")
 
 
-def _model(params: Path, config: Path | None) -> tuple[RobotModel, SystemConfig]:
+def _model(params: Path, config: str | None) -> tuple[RobotModel, SystemConfig]:
     from hofto_hw.config.loader import load_config
+    from hofto_hw.config.locate import find_config
     from hofto_hw.model import RobotModel
     from hofto_hw.model.parameters import apply_parameters, read_parameters
 
     pf = read_parameters(params)
-    cfg_path = config if config is not None else find_config(pf.robot, params.parent)
+    cfg_path = find_config(config, pf.robot, params.parent)
     cfg = load_config(cfg_path)
     model = RobotModel.from_config(cfg.robot, apply_parameters=False)
     apply_parameters(model, pf, str(params))
@@ -60,6 +74,11 @@ def _model(params: Path, config: Path | None) -> tuple[RobotModel, SystemConfig]
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.identify.validation import errors, plot_fit, predict
 
+    png = None if args.no_plot else args.plot
+    if png is None and not args.no_plot:
+        png = Path("out") / f"validate_{args.parameters.stem}.png"
+    inputs = [args.parameters, args.compare, args.config, args.columns, *args.recordings]
+    refuse_overwrite(png, inputs, "--plot")
     model, cfg = _model(args.parameters, args.config)
     models = {args.parameters.stem: model}
     if args.compare is not None:
@@ -67,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
         models[args.compare.stem] = other
     opts = Conditioning(args.cutoff, args.filter_torque, 1, args.drop_bad_rows)
     search = [args.parameters.parent, cfg.robot.urdf.parent]
-    loaded = load_samples(args.recordings, args.columns, parse_rows(args.rows), opts, search)
+    rows = parse_rows(args.rows)
+    loaded = load_samples(args.recordings, args.columns, rows, opts, search, robot=cfg.robot.name)
 
     report: dict = {"files": [], "models": list(models)}
     taus, preds = [], {k: [] for k in models}
@@ -81,22 +101,30 @@ def run(args: argparse.Namespace) -> int:
         report["files"].append(entry)
     tau_all = np.vstack(taus)
     report["overall"] = {name: errors(tau_all, np.vstack(p)).as_dict() for name, p in preds.items()}
-    if not args.no_plot:
-        png = args.plot or Path("out") / f"validate_{args.parameters.stem}.png"
-        s0, rec0 = loaded[0]
-        plot_fit(
-            png,
-            rec0.t - rec0.t[0],
-            s0.tau,
-            {k: v[0] for k, v in preds.items()},
-            model.joint_names,
-            title=f"{Path(rec0.source).name}: measured vs predicted",
-        )
+    if png is not None:
         report["plot"] = str(png)
+    # numbers first: a figure that cannot be written must not cost the user the results
     if args.json:
         print(json.dumps(report))
-        return 0
-    _print(report, model.joint_names)
+    else:
+        _print(report, model.joint_names)
+    if png is not None:
+        if args.plot is None:
+            ensure_default_folder(png)
+        s0, rec0 = loaded[0]
+        try:
+            plot_fit(
+                png,
+                rec0.t - rec0.t[0],
+                s0.tau,
+                {k: v[0] for k, v in preds.items()},
+                model.joint_names,
+                title=f"{Path(rec0.source).name}: measured vs predicted",
+            )
+        except OSError as exc:
+            raise write_failed(png, "figure", exc) from None
+        if not args.json:
+            print(f"figure: {png}")
     return 0
 
 
@@ -113,5 +141,3 @@ def _print(report: dict, joints: list[str]) -> None:
                 for n in names
             )
             print(f"  {joint:<22}{row}")
-    if "plot" in report:
-        print(f"figure: {report['plot']}")

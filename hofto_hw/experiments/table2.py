@@ -121,8 +121,10 @@ def simulate(cfg: SystemConfig, model: RobotModel, duration: float = 20.0) -> Sa
     return out
 
 
-def run_observer(observer, samples: Samples) -> np.ndarray:
-    """Run an observer causally over the samples; estimates of shape (N, n)."""
+def estimates_at_fixed_rate(observer, samples: Samples) -> np.ndarray:
+    """Run an observer causally over simulated samples at their fixed step ``samples.dt``,
+    updating at every sample (also the first); estimates of shape (N, n) [N·m]. (Recordings
+    with their own time stamps: :func:`hofto_hw.replay.runner.run_observer`.)"""
     est = np.zeros_like(samples.tau_ext)
     observer.reset(samples.q[0], samples.qd[0])
     for k in range(samples.t.size):
@@ -134,7 +136,7 @@ def compare(label: str, observers: dict[str, object], samples: Samples) -> Compa
     """Estimates and Table II indices of each observer on the same samples."""
     result = Comparison(label)
     for name, obs in observers.items():
-        est = run_observer(obs, samples)
+        est = estimates_at_fixed_rate(obs, samples)
         result.estimates[name] = est
         result.indices[name] = error_indices(est, samples.tau_ext)
     return result

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -32,7 +33,7 @@ from scipy import signal
 
 from hofto_hw.config.base import FileModel
 from hofto_hw.config.loader import read_model
-from hofto_hw.errors import UserError
+from hofto_hw.errors import ConfigError, UserError
 
 log = logging.getLogger(__name__)
 
@@ -121,6 +122,9 @@ class ColumnMap(FileModel):
     """
 
     name: str = Field("", description="layout name shown in messages")
+    robot: str | None = Field(
+        None, description="robot the map is written for (robot.name); None = any robot"
+    )
     columns: int | None = Field(None, ge=1, description="fields per row; None = any")
     delimiter: str = ","
     header_rows: int = Field(0, ge=0, description="rows to skip at the top (headers)")
@@ -179,12 +183,21 @@ class ColumnMap(FileModel):
         return cols
 
 
-def load_column_map(path: str | Path) -> ColumnMap:
-    """Read a column-map YAML file; errors name the file and the field."""
-    path = Path(path)
-    cmap = read_model(path, "column map", ColumnMap)
-    if not cmap.name:
-        cmap.name = path.name
+def load_column_map(path: str | Path | ColumnMap, robot: str | None = None) -> ColumnMap:
+    """Read a column-map YAML file (a :class:`ColumnMap` passes through); errors name the
+    file and the field. With ``robot``, a map written for another robot is refused."""
+    if isinstance(path, ColumnMap):
+        cmap, where = path, path.name
+    else:
+        cmap = read_model(path, "column map", ColumnMap)
+        where = str(path)
+        if not cmap.name:
+            cmap.name = Path(path).name
+    if robot is not None and cmap.robot is not None and cmap.robot != robot:
+        raise ConfigError(
+            f"{where}: robot: column map is for robot {cmap.robot!r}, the config is for "
+            f"{robot!r}; pass the column map of this robot (--columns)"
+        )
     return cmap
 
 
@@ -206,13 +219,12 @@ def _ranges(rows: list[int]) -> str:
 
 
 def _parse_fields(
-    lines: list[str], first_row: int, cmap: ColumnMap, source: str
+    lines: list[str], first_row: int, cmap: ColumnMap, source: str, used: list[int]
 ) -> tuple[FloatArray, dict[int, str]]:
-    """Parse the used columns of ``lines`` into (R, C) floats; bad rows -> {row: reason}.
+    """Parse the ``used`` columns of ``lines`` into (R, C) floats; bad rows -> {row: reason}.
 
     Bad rows are left as NaN in the array and reported in the dict.
     """
-    used = sorted(set(cmap.used_columns()))
     col_index = {c: i for i, c in enumerate(used)}
     out = np.full((len(lines), len(used)), np.nan)
     bad: dict[int, str] = {}
@@ -248,10 +260,15 @@ def _kind_columns(cmap: ColumnMap) -> list[tuple[str, list[int]]]:
     return kinds
 
 
+def _layout(cmap: ColumnMap) -> list[int]:
+    """The used columns in the order the arrays are stored: time, q, qd, current/torque,
+    extra (each column once), so that each quantity is a slice of the stored block."""
+    return list(dict.fromkeys(cmap.used_columns()))
+
+
 def _check_values(data: FloatArray, first_row: int, cmap: ColumnMap, bad: dict[int, str]) -> None:
     """Mark rows with NaN/inf or implausible values as bad (in place)."""
-    used = sorted(set(cmap.used_columns()))
-    col_index = {c: i for i, c in enumerate(used)}
+    col_index = {c: i for i, c in enumerate(_layout(cmap))}
     for kind, cols in _kind_columns(cmap):
         limit = cmap.limits.get(kind, DEFAULT_ABS_LIMIT)  # type: ignore[call-overload]
         if kind == "time":
@@ -271,6 +288,10 @@ def _check_values(data: FloatArray, first_row: int, cmap: ColumnMap, bad: dict[i
 
 def _check_time(t: FloatArray, first_row: int, max_step: float, bad: dict[int, str]) -> None:
     """Mark rows whose time does not advance, or jumps ahead by > max_step, as bad."""
+    if not bad:
+        step = np.diff(t)
+        if np.all((step > 0.0) & (step <= max_step)):
+            return  # the usual case, without a Python loop over millions of rows
     last: float | None = None
     for k in range(t.shape[0]):
         row = first_row + k
@@ -278,17 +299,110 @@ def _check_time(t: FloatArray, first_row: int, max_step: float, bad: dict[int, s
             continue
         tk = float(t[k])
         if last is not None:
-            step = tk - last
-            if step <= 0.0:
+            step_k = tk - last
+            if step_k <= 0.0:
                 bad[row] = f"column time: {tk:.6g} s does not advance past {last:.6g} s"
                 continue
-            if step > max_step:
+            if step_k > max_step:
                 bad[row] = (
-                    f"column time: jumps {step:.4g} s ahead (more than max_time_step "
+                    f"column time: jumps {step_k:.4g} s ahead (more than max_time_step "
                     f"{max_step:g} s)"
                 )
                 continue
         last = tk
+
+
+#: bytes read from a CSV file at a time (memory stays O(chunk) besides the result arrays)
+CHUNK_BYTES = 4 << 20
+
+
+def _decode(block: bytes, src: str, offset: int) -> list[str]:
+    """Lines of one block of a CSV file; a binary or non-UTF-8 file gives one clear error."""
+    nul = block.find(b"\x00")
+    if nul >= 0:
+        raise UserError(f"{src}: byte {offset + nul}: NUL byte: a binary file, not a CSV recording")
+    try:
+        text = block.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise UserError(
+            f"{src}: byte {offset + exc.start}: 0x{block[exc.start]:02x} is not UTF-8 text: "
+            "not a CSV recording"
+        ) from None
+    return text.split("\n")
+
+
+def _line_blocks(path: Path, src: str) -> Iterator[list[str]]:
+    """The lines of a text file, a block of about CHUNK_BYTES at a time (no line endings)."""
+    try:
+        fh = path.open("rb")
+    except FileNotFoundError:
+        raise UserError(f"{src}: recording not found") from None
+    except OSError as exc:
+        raise UserError(f"{src}: cannot read recording: {exc.strerror}") from None
+    offset, rest = 0, b""
+    with fh:
+        while True:
+            try:
+                block = fh.read(CHUNK_BYTES)
+            except OSError as exc:
+                raise UserError(f"{src}: cannot read recording: {exc.strerror}") from None
+            if not block:
+                break
+            block = rest + block
+            cut = block.rfind(b"\n") + 1
+            if cut == 0:
+                rest = block
+                continue
+            lines = _decode(block[: cut - 1], src, offset)
+            yield [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+            offset += cut
+            rest = block[cut:]
+    if rest:
+        lines = _decode(rest, src, offset)
+        yield [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+
+
+def _count_lines(path: Path) -> int:
+    """Lines of a file (a last line without a newline counts), to preallocate the arrays."""
+    n, last = 0, b"\n"
+    try:
+        with path.open("rb") as fh:
+            while block := fh.read(CHUNK_BYTES):
+                n += block.count(b"\n")
+                last = block[-1:]
+    except OSError:
+        pass  # reported by the reader with the file's name
+    return n + (last != b"\n")
+
+
+def count_columns(path: Path, delimiter: str = ",") -> int:
+    """Fields in the first non-empty line of a CSV file (binary files: a clear error)."""
+    for lines in _line_blocks(Path(path), str(path)):
+        for line in lines:
+            if line.strip():
+                return line.count(delimiter) + 1
+    raise UserError(f"{path}: recording is empty")
+
+
+def _parse_block(
+    lines: list[str], first_row: int, cmap: ColumnMap, used: list[int], src: str
+) -> tuple[FloatArray, dict[int, str]]:
+    """Used columns of ``lines`` as (L, C) floats: numpy's C parser when every row is sound,
+    else the row-by-row parser that names each bad row."""
+    d = cmap.delimiter
+    sound = all(ln.strip() for ln in lines)
+    if sound and cmap.columns is not None:
+        sound = all(ln.count(d) == cmap.columns - 1 for ln in lines)
+    if sound:
+        try:
+            arr = np.loadtxt(
+                lines, delimiter=d, usecols=[c - 1 for c in used], ndmin=2, comments=None
+            )
+            if arr.shape == (len(lines), len(used)):
+                return arr, {}
+        except ValueError:
+            pass
+    return _parse_fields(lines, first_row, cmap, src, used)
 
 
 def load_csv(
@@ -297,14 +411,21 @@ def load_csv(
     *,
     rows: tuple[int, int] | None = None,
     bad_rows: BadRows | None = None,
+    keep_extra: bool = True,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Recording:
     """Read a CSV recording through a column map.
+
+    The file is read in blocks into preallocated float arrays (memory: the result plus one
+    block), so a recording of millions of rows costs about 8 bytes per used value.
 
     Args:
         path: the CSV file (no header unless the map says ``header_rows``).
         columns: a :class:`ColumnMap` or the path of its YAML file.
         rows: 1-based inclusive row range to read; overrides the map's ``rows``.
         bad_rows: ``refuse`` or ``drop``; overrides the map's ``bad_rows``.
+        keep_extra: read the map's ``extra`` columns (replay does not need them).
+        progress: called as ``progress(rows_read, rows_total)`` after each block.
 
     Returns:
         A :class:`Recording` with ``t`` (N,) [s], ``q``/``qd``/``tau`` (N, n) in SI units.
@@ -313,46 +434,75 @@ def load_csv(
         UserError: naming the file, row and column of the first problem.
     """
     path = Path(path)
-    cmap = columns if isinstance(columns, ColumnMap) else load_column_map(columns)
+    cmap = load_column_map(columns)
+    if not keep_extra and cmap.extra:
+        cmap = cmap.model_copy(update={"extra": {}})
     policy: BadRows = bad_rows or cmap.bad_rows
     row_range = rows if rows is not None else cmap.rows
     src = str(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise UserError(f"{src}: recording not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"{src}: cannot read recording: {exc}") from None
-    lines = text.splitlines()
-    while lines and not lines[-1].strip():
-        lines.pop()
-    first_row = cmap.header_rows + 1
-    lines = lines[cmap.header_rows :]
-    if row_range is not None:
-        lo, hi = row_range
-        last_row = first_row + len(lines) - 1
-        if hi > last_row:
-            raise UserError(f"{src}: rows {lo}-{hi} requested but the file ends at row {last_row}")
-        lines = lines[lo - first_row : hi - first_row + 1]
-        first_row = lo
-    if len(lines) < MIN_SAMPLES:
-        raise UserError(f"{src}: too short: {len(lines)} rows, at least {MIN_SAMPLES} are needed")
-    if cmap.columns is not None:
-        counts = np.array([ln.count(cmap.delimiter) + 1 for ln in lines])
-        typical = int(np.bincount(counts).argmax())
-        if typical != cmap.columns:
-            raise UserError(
-                f"{src}: rows have {typical} columns, column map '{cmap.name}' expects "
-                f"{cmap.columns} (row {first_row + int(np.argmax(counts == typical))}); "
-                f"use the column map of this layout (--columns)"
-            )
-
-    data, bad = _parse_fields(lines, first_row, cmap, src)
-    _check_values(data, first_row, cmap, bad)
-    used = sorted(set(cmap.used_columns()))
+    used = _layout(cmap)
     col = {c: i for i, c in enumerate(used)}
+    total = _count_lines(path)
+    lo, hi = row_range if row_range is not None else (1, total)
+    first_row = max(cmap.header_rows + 1, lo)
+    capacity = max(min(hi, total) - first_row + 1, 1)
+    data = np.full((capacity, len(used)), np.nan)
+    bad: dict[int, str] = {}
+    n = 0  # rows stored
+    last_nonempty = -1
+    row = 0  # 1-based number of the last line seen
+    checked_layout = False
+    for lines in _line_blocks(path, src):
+        start = row + 1
+        row += len(lines)
+        a = max(first_row - start, 0)
+        b = min(hi - start + 1, len(lines))
+        if b <= a:
+            if start > hi:
+                break
+            continue
+        block = lines[a:b]
+        block_row = start + a
+        if not checked_layout and cmap.columns is not None:
+            counts = np.array([ln.count(cmap.delimiter) + 1 for ln in block if ln.strip()])
+            if counts.size:
+                checked_layout = True
+                typical = int(np.bincount(counts).argmax())
+                if typical != cmap.columns:
+                    raise UserError(
+                        f"{src}: rows have {typical} columns, column map '{cmap.name}' expects "
+                        f"{cmap.columns} (row {block_row + int(np.argmax(counts == typical))}); "
+                        f"use the column map of this layout (--columns)"
+                    )
+        arr, block_bad = _parse_block(block, block_row, cmap, used, src)
+        if n + len(block) > data.shape[0]:  # more lines than newlines (a lone \r): grow
+            grown = np.full((max(2 * data.shape[0], n + len(block)), len(used)), np.nan)
+            grown[:n] = data[:n]
+            data = grown
+        data[n : n + len(block)] = arr
+        bad.update(block_bad)
+        last = next((i for i in range(len(block) - 1, -1, -1) if block[i].strip()), None)
+        if last is not None:
+            last_nonempty = n + last
+        n += len(block)
+        if progress is not None:
+            progress(min(row, hi) - first_row + 1, min(hi, total) - first_row + 1)
+    n_lines = last_nonempty + 1  # trailing empty lines are not rows
+    bad = {r: why for r, why in bad.items() if r < first_row + n_lines}
+    if row_range is not None and hi > first_row + n_lines - 1:
+        raise UserError(
+            f"{src}: rows {lo}-{hi} requested but the file ends at row {first_row + n_lines - 1}"
+        )
+    if n_lines < MIN_SAMPLES:
+        raise UserError(
+            f"{src}: too short: {max(n_lines, 0)} rows, at least {MIN_SAMPLES} are needed"
+        )
+    data = data[:n_lines]
+
+    _check_values(data, first_row, cmap, bad)
     t_all = data[:, col[cmap.time]] * cmap.time_scale
     _check_time(t_all, first_row, cmap.max_time_step, bad)
+    del t_all
 
     if bad:
         bad_list = sorted(bad)
@@ -365,9 +515,9 @@ def load_csv(
                 f"{src}: row {first}: {bad[first]}{more}; fix the file, choose a row range, "
                 f"or drop bad rows with a warning (bad_rows: drop / --drop-bad-rows)"
             )
-        if len(bad_list) > MAX_DROP_FRACTION * len(lines):
+        if len(bad_list) > MAX_DROP_FRACTION * n_lines:
             raise UserError(
-                f"{src}: {len(bad_list)} of {len(lines)} rows are bad (first: row {first}: "
+                f"{src}: {len(bad_list)} of {n_lines} rows are bad (first: row {first}: "
                 f"{bad[first]}); more than {MAX_DROP_FRACTION:.0%} is not dropped"
             )
         note = (
@@ -376,36 +526,40 @@ def load_csv(
         )
         log.warning(note)
         notes = [note]
+        keep = np.ones(n_lines, dtype=bool)
+        keep[[r - first_row for r in bad]] = False
+        data = data[keep]
+        row_numbers = np.arange(first_row, first_row + n_lines, dtype=np.int64)[keep]
     else:
         notes = []
-
-    keep = np.ones(len(lines), dtype=bool)
-    keep[[r - first_row for r in bad]] = False
-    data = data[keep]
-    row_numbers = np.arange(first_row, first_row + len(lines), dtype=np.int64)[keep]
+        row_numbers = np.arange(first_row, first_row + n_lines, dtype=np.int64)
     if data.shape[0] < MIN_SAMPLES:
         raise UserError(
             f"{src}: too short: {data.shape[0]} good rows, at least {MIN_SAMPLES} needed"
         )
 
+    shared = len(used) != len(cmap.used_columns())  # a column read as two quantities
+
     def cols(cs: list[int]) -> FloatArray:
-        return np.ascontiguousarray(data[:, [col[c] for c in cs]])
+        """(N, k) columns: a view of the stored block when they sit side by side (no copy:
+        rows stay contiguous for the per-sample loops), else a copy."""
+        idx = [col[c] for c in cs]
+        if not shared and idx == list(range(idx[0], idx[0] + len(idx))):
+            return data[:, idx[0] : idx[0] + len(idx)]
+        return np.ascontiguousarray(data[:, idx])
 
     if cmap.current is not None:
         assert cmap.current_to_torque is not None
-        tau = cols(cmap.current) * np.asarray(cmap.current_to_torque)
+        tau = cols(cmap.current)
+        tau *= np.asarray(cmap.current_to_torque)
     else:
         assert cmap.torque is not None
         tau = cols(cmap.torque)
+    t = data[:, col[cmap.time]] * cmap.time_scale
+    q, qd = cols(cmap.q), cols(cmap.qd)
+    extra = {name: cols(cs) for name, cs in cmap.extra.items()}
     return Recording(
-        t=np.ascontiguousarray(data[:, col[cmap.time]] * cmap.time_scale),
-        q=cols(cmap.q),
-        qd=cols(cmap.qd),
-        tau=tau,
-        source=src,
-        rows=row_numbers,
-        extra={name: cols(cs) for name, cs in cmap.extra.items()},
-        notes=notes,
+        t=t, q=q, qd=qd, tau=tau, source=src, rows=row_numbers, extra=extra, notes=notes
     )
 
 
@@ -449,6 +603,8 @@ def load_recording(
     *,
     rows: tuple[int, int] | None = None,
     bad_rows: BadRows | None = None,
+    keep_extra: bool = True,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Recording:
     """Read a recording by its extension: ``.mcap`` (our logs) or CSV (needs ``columns``)."""
     path = Path(path)
@@ -459,7 +615,9 @@ def load_recording(
         return rec
     if columns is None:
         raise UserError(f"{path}: a CSV recording needs a column map (--columns FILE)")
-    return load_csv(path, columns, rows=rows, bad_rows=bad_rows)
+    return load_csv(
+        path, columns, rows=rows, bad_rows=bad_rows, keep_extra=keep_extra, progress=progress
+    )
 
 
 # ---------------------------------------------------------------------------- conditioning

@@ -8,8 +8,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from hofto_hw.commands.args import parse_rows
 from hofto_hw.errors import UserError
-from hofto_hw.identify.data import Recording, condition, load_recording
+from hofto_hw.identify.data import (
+    ColumnMap,
+    Recording,
+    condition,
+    count_columns,
+    load_column_map,
+    load_recording,
+)
 from hofto_hw.identify.pipeline import Samples
 
 
@@ -24,19 +32,6 @@ class Conditioning:
     drop_bad_rows: bool = False
 
 
-def parse_rows(text: str | None, what: str = "--rows") -> tuple[int, int] | None:
-    """``'a:b'`` -> (a, b), 1-based inclusive; None passes through."""
-    if text is None:
-        return None
-    try:
-        a, b = (int(x) for x in text.split(":"))
-    except ValueError:
-        raise UserError(f"{what}: expected FIRST:LAST (1-based rows), got {text!r}") from None
-    if not 1 <= a <= b:
-        raise UserError(f"{what}: need 1 <= FIRST <= LAST, got {text!r}")
-    return a, b
-
-
 def split_spec(spec: str) -> tuple[Path, tuple[int, int] | None]:
     """``FILE@a:b`` -> (FILE, (a, b)); plain ``FILE`` -> (FILE, None)."""
     if "@" in spec:
@@ -47,12 +42,7 @@ def split_spec(spec: str) -> tuple[Path, tuple[int, int] | None]:
 
 def find_column_map(recording: Path, search: list[Path]) -> Path:
     """``columns_<k>.yaml`` for a CSV with k fields per row, from the ``search`` folders."""
-    try:
-        with recording.open() as fh:
-            first = fh.readline()
-    except OSError:
-        raise UserError(f"{recording}: recording not found") from None
-    k = first.count(",") + 1
+    k = count_columns(recording)
     for folder in search:
         candidate = folder / f"columns_{k}.yaml"
         if candidate.is_file():
@@ -69,14 +59,21 @@ def load_samples(
     rows: tuple[int, int] | None,
     opts: Conditioning,
     search: list[Path],
+    *,
+    robot: str | None = None,
 ) -> list[tuple[Samples, Recording]]:
-    """Load and condition every recording; (samples for the fit, the conditioned recording)."""
+    """Load and condition every recording; (samples for the fit, the conditioned recording).
+
+    With ``robot`` set, a column map written for another robot is refused (its ``robot``).
+    """
     out = []
     for spec in specs:
         path, own_rows = split_spec(spec)
-        cmap = columns
+        cmap: ColumnMap | Path | None = columns
         if cmap is None and path.suffix.lower() != ".mcap":
             cmap = find_column_map(path, search)
+        if cmap is not None:
+            cmap = load_column_map(cmap, robot=robot)
         rec = load_recording(
             path,
             cmap,
@@ -89,12 +86,3 @@ def load_samples(
         assert rec.qdd is not None
         out.append((Samples(rec.q, rec.qd, rec.qdd, rec.tau, rec.source), rec))
     return out
-
-
-def find_config(robot: str, near: Path) -> Path:
-    """The config ``<robot>.yaml`` in the parameters file's folder or the one above it."""
-    for folder in (near, near.parent):
-        candidate = folder / f"{robot}.yaml"
-        if candidate.is_file():
-            return candidate
-    raise UserError(f"unknown robot {robot!r}: no {robot}.yaml next to {near}; pass --config FILE")

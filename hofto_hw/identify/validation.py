@@ -60,7 +60,8 @@ def plot_fit(
     title: str = "",
 ) -> None:
     """Measured vs predicted torque per joint, with the error of the first prediction (the
-    paper's Fig. 2 layout: measured blue, predicted red, error green). Writes a PNG."""
+    paper's Fig. 2 layout: measured blue, predicted red, error green). Writes a PNG into an
+    existing folder; raises OSError when it cannot."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -85,6 +86,7 @@ def plot_fit(
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=110, format="png")  # exactly at path, whatever its suffix
+    finally:
+        plt.close(fig)

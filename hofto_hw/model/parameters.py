@@ -52,6 +52,7 @@ model whose M(q) is not symmetric positive definite over a sample of the workspa
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -115,14 +116,11 @@ class ParametersFile:
         return len(self.joints)
 
     def friction(self) -> FrictionParams:
-        """The friction model (with the Stribeck term when the file has one)."""
+        """The friction model (with the Stribeck term when the file has one); its own copies
+        of the arrays (FrictionParams copies what it is given)."""
+        stribeck = (self.stribeck_static, self.stribeck_velocity)
         return FrictionParams(
-            self.coulomb.copy(),
-            self.viscous.copy(),
-            self.bias.copy(),
-            None if self.stribeck_static is None else self.stribeck_static.copy(),
-            None if self.stribeck_velocity is None else self.stribeck_velocity.copy(),
-            smooth_velocity=self.smooth_velocity,
+            self.coulomb, self.viscous, self.bias, *stribeck, self.smooth_velocity
         )
 
     def base_values(self) -> np.ndarray:
@@ -285,7 +283,8 @@ def read_parameters(path: str | Path) -> ParametersFile:
         raise r.fail("model.friction.stribeck_velocity", "values must be > 0 [rad/s]")
     robot = r.get(data, "robot", "")
     sha = r.get(data, "urdf_sha256", "")
-    return ParametersFile(
+    smooth_velocity = r.number(fr.get("smooth_velocity") or 0.0, "model.friction.smooth_velocity")
+    pf = ParametersFile(
         robot=str(robot),
         joints=[str(j) for j in joints],
         urdf_sha256=str(sha),
@@ -294,9 +293,7 @@ def read_parameters(path: str | Path) -> ParametersFile:
         coulomb=r.array(r.get(fr, "coulomb", "model.friction."), "model.friction.coulomb", (n,)),
         viscous=r.array(r.get(fr, "viscous", "model.friction."), "model.friction.viscous", (n,)),
         bias=r.array(r.get(fr, "bias", "model.friction."), "model.friction.bias", (n,)),
-        smooth_velocity=r.number(
-            fr.get("smooth_velocity") or 0.0, "model.friction.smooth_velocity"
-        ),
+        smooth_velocity=smooth_velocity,
         stribeck_static=stribeck[0],
         stribeck_velocity=stribeck[1],
         urdf=str(data.get("urdf", "")),
@@ -307,6 +304,51 @@ def read_parameters(path: str | Path) -> ParametersFile:
         base=base_entries,
         fit=dict(data.get("fit") or {}),
     )
+    check_physical(pf, src)
+    return pf
+
+
+#: (field, unit) of the values that must not be negative in a physical model
+NON_NEGATIVE = (
+    ("model.rotor_inertia", "kg·m²"),
+    ("model.friction.coulomb", "N·m"),
+    ("model.friction.viscous", "N·m·s/rad"),
+)
+
+
+def check_physical(pf: ParametersFile, source: str) -> None:
+    """Raise ModelError naming file, field, joint and value for a non-physical value: a
+    negative link mass, rotor inertia, Coulomb or viscous friction (friction that feeds
+    energy in), a negative smoothing velocity, or a Stribeck static friction below Coulomb."""
+    values = {
+        "model.rotor_inertia": pf.rotor_inertia,
+        "model.friction.coulomb": pf.coulomb,
+        "model.friction.viscous": pf.viscous,
+    }
+    checks = [(f, u, values[f]) for f, u in NON_NEGATIVE]
+    checks.append(("model.inertial[:, 0] (link mass)", "kg", pf.inertial[:, 0]))
+    for where, unit, arr in checks:
+        bad = np.flatnonzero(np.asarray(arr) < 0.0)
+        if bad.size:
+            j = int(bad[0])
+            raise ModelError(
+                f"{source}: {where}: joint {j + 1} ({pf.joints[j]}): {float(arr[j]):.6g} {unit} "
+                "is negative, which is not physical (identify with --method consistent)"
+            )
+    if not (math.isfinite(pf.smooth_velocity) and pf.smooth_velocity >= 0.0):
+        raise ModelError(
+            f"{source}: model.friction.smooth_velocity: {pf.smooth_velocity!r} must be a "
+            "finite number >= 0 [rad/s]"
+        )
+    if pf.stribeck_static is not None:
+        bad = np.flatnonzero(pf.stribeck_static < pf.coulomb)
+        if bad.size:
+            j = int(bad[0])
+            raise ModelError(
+                f"{source}: model.friction.stribeck_static: joint {j + 1} ({pf.joints[j]}): "
+                f"{float(pf.stribeck_static[j]):.6g} N·m is below the Coulomb friction "
+                f"{float(pf.coulomb[j]):.6g} N·m (Fs >= Fc)"
+            )
 
 
 def workspace_samples(model: RobotModel, n_samples: int, seed: int = 0) -> np.ndarray:
@@ -358,6 +400,7 @@ def check_compatible(pf: ParametersFile, model: RobotModel, source: str) -> None
 def apply_parameters(model: RobotModel, pf: ParametersFile, source: str = "<parameters>") -> None:
     """Put ``pf`` into ``model`` (a RobotModel); on a failed M(q) check restore the old values."""
     check_compatible(pf, model, source)
+    check_physical(pf, source)
     old = (model.inertial_parameters(), model.rotor_inertia, model.friction)
     try:
         model.set_inertial_parameters(pf.inertial.reshape(-1))

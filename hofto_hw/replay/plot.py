@@ -36,7 +36,7 @@ def plot_replay(result: ReplayResult, episodes: list[Episode], path: str | Path)
     fig.tight_layout()
     path = Path(path)
     try:
-        fig.savefig(path, dpi=90)
+        fig.savefig(path, dpi=90, format="png")  # exactly at path, whatever its suffix
     except OSError as exc:
         raise UserError(f"{path}: cannot write plot: {exc.strerror}") from None
     return path

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -9,12 +10,12 @@ from typing import Any
 import numpy as np
 
 from hofto_hw.config.models import ObserverConfig
-from hofto_hw.errors import ConfigError
-from hofto_hw.identify.data import BadRows, Recording, load_recording
+from hofto_hw.errors import ConfigError, UserError
+from hofto_hw.identify.data import BadRows, Recording, load_column_map, load_recording
 from hofto_hw.observers import Observer, make_observer
 from hofto_hw.observers.stability import check_observer
 from hofto_hw.replay.episodes import Episode, find_episodes
-from hofto_hw.replay.runner import ReplayResult, replay
+from hofto_hw.replay.runner import Progress, ReplayResult, replay
 from hofto_hw.replay.setup import Setup, default_columns
 from hofto_hw.replay.thresholds import ThresholdsFile
 from safety.collision import CollisionMonitor
@@ -66,13 +67,21 @@ def load_for_replay(
     columns: Path | None,
     rows: tuple[int, int] | None = None,
     bad_rows: BadRows | None = None,
+    progress: Callable[[str], Progress | None] | None = None,
 ) -> Recording:
-    """The recording, with the robot's default column map when none is given."""
-    cmap = columns if columns is not None else default_columns(setup, path)
-    rec = load_recording(path, cmap, rows=rows, bad_rows=bad_rows)
+    """The recording, with the robot's default column map when none is given (a map for
+    another robot is refused). Replay needs no ``extra`` columns: they are not read."""
+    cmap_path = columns if columns is not None else default_columns(setup, path)
+    cmap = None if cmap_path is None else load_column_map(cmap_path, setup.config.robot.name)
+    rec = load_recording(
+        path,
+        cmap,
+        rows=rows,
+        bad_rows=bad_rows,
+        keep_extra=False,
+        progress=None if progress is None else progress("reading"),
+    )
     if rec.n_joints != setup.model.n:
-        from hofto_hw.errors import UserError
-
         raise UserError(
             f"{path}: {rec.n_joints} joints, robot {setup.config.robot.name} has {setup.model.n}"
         )
@@ -105,6 +114,7 @@ def run_replay(
     observer_name: str,
     thresholds: ThresholdsFile | None,
     merge_gap: float = 0.5,
+    progress: Callable[[str], Progress | None] | None = None,
 ) -> Report:
     """Replay ``observer_name`` over ``rec``; with thresholds also detect episodes."""
     from hofto_hw.replay.setup import observer_config
@@ -114,7 +124,7 @@ def run_replay(
     monitor = None
     if thresholds is not None and observer_name in thresholds.observers:
         monitor = CollisionMonitor(thresholds.observers[observer_name].monitor)
-    result = replay(rec, observer, monitor)
+    result = replay(rec, observer, monitor, progress)
     result.observer = observer_name
     episodes: list[Episode] = []
     if result.joints is not None and result.threshold is not None:

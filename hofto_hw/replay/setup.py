@@ -14,8 +14,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hofto_hw.config import load_config
+from hofto_hw.config.locate import find_config
 from hofto_hw.config.models import ObserverConfig, SystemConfig
 from hofto_hw.errors import ConfigError, ModelError, UserError
+from hofto_hw.identify.data import count_columns
 from hofto_hw.model import RobotModel
 from hofto_hw.model.parameters import ParametersFile, apply_parameters, read_parameters
 from hofto_hw.replay.defaults import OBSERVER_NAMES, default_observer
@@ -43,25 +45,15 @@ def sha256_of(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def find_config(params_path: Path, robot: str) -> Path:
-    """``<robot>.yaml`` in the parameters file's folder or the folder above it."""
-    for folder in (params_path.parent, params_path.parent.parent, Path("configs")):
-        candidate = folder / f"{robot}.yaml"
-        if candidate.is_file():
-            return candidate
-    raise UserError(
-        f"{params_path}: unknown robot {robot!r}: no {robot}.yaml next to the parameters "
-        f"file or in configs/; pass --config"
-    )
-
-
 def load_setup(params: str | Path, config: str | Path | None = None) -> Setup:
-    """Read the parameters file, find/load the config, build the model and apply them."""
+    """Read the parameters file, find/load the config (``config``: a path, a robot name or
+    None = by the file's robot, see :func:`hofto_hw.config.locate.find_config`), build the model
+    and apply the parameters."""
     params_path = Path(params)
     if not params_path.is_file():
         raise UserError(f"{params_path}: parameters file not found")
     pf = read_parameters(params_path)
-    config_path = Path(config) if config is not None else find_config(params_path, pf.robot)
+    config_path = find_config(config, pf.robot, params_path.parent)
     cfg = load_config(config_path)
     if cfg.robot.name != pf.robot:
         raise ModelError(
@@ -71,20 +63,6 @@ def load_setup(params: str | Path, config: str | Path | None = None) -> Setup:
     model = RobotModel.from_config(cfg.robot, apply_parameters=False)
     apply_parameters(model, pf, str(params_path))
     return Setup(model, cfg, config_path, pf, params_path)
-
-
-def count_columns(path: Path, delimiter: str = ",") -> int:
-    """Fields in the first non-empty line of a CSV file."""
-    try:
-        with path.open() as f:
-            for line in f:
-                if line.strip():
-                    return line.count(delimiter) + 1
-    except FileNotFoundError:
-        raise UserError(f"{path}: recording not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"{path}: cannot read recording: {exc}") from None
-    raise UserError(f"{path}: recording is empty")
 
 
 def default_columns(setup: Setup, recording: Path) -> Path | None:

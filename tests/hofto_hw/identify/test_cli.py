@@ -57,14 +57,16 @@ def _run(capsys, *argv: str) -> tuple[int, str, str]:
     return code, out, err
 
 
+def _identify(capsys, workspace: Path, output: Path, *args: object) -> tuple[int, str, str]:
+    """``hofto-hw identify`` with the workspace's config writing ``output``."""
+    return _run(capsys, "identify", "--config", workspace / "er3a.yaml", "-o", output, *args)
+
+
 def test_identify_then_validate(workspace: Path, capsys) -> None:
     params = workspace / "params.yaml"
-    code, out, err = _run(
+    code, out, err = _identify(
         capsys,
-        "identify",
-        "--config",
-        workspace / "er3a.yaml",
-        "-o",
+        workspace,
         params,
         "--columns",
         workspace / "columns_19.yaml",
@@ -101,34 +103,13 @@ def _one_line_error(code: int, err: str, match: str) -> None:
 
 
 def test_bad_inputs_fail_clearly(workspace: Path, capsys) -> None:
-    cfg = workspace / "er3a.yaml"
-    code, _, err = _run(
-        capsys,
-        "identify",
-        "--config",
-        cfg,
-        "-o",
-        workspace / "x.yaml",
-        workspace / "train.csv@1:30",
-    )
+    code, _, err = _identify(capsys, workspace, workspace / "x.yaml", workspace / "train.csv@1:30")
     _one_line_error(code, err, "too")
-    code, _, err = _run(
-        capsys, "identify", "--config", cfg, "-o", workspace / "x.yaml", workspace / "frozen.csv"
-    )
+    code, _, err = _identify(capsys, workspace, workspace / "x.yaml", workspace / "frozen.csv")
     _one_line_error(code, err, "joint_6")
     # a parameters file for an unknown robot
     params = workspace / "params_other.yaml"
-    code, _, err = _run(
-        capsys,
-        "identify",
-        "--config",
-        cfg,
-        "-o",
-        params,
-        "--method",
-        "wls",
-        workspace / "train.csv",
-    )
+    code, _, err = _identify(capsys, workspace, params, "--method", "wls", workspace / "train.csv")
     assert code == 0, err
     params.write_text(params.read_text().replace("robot: er3a", "robot: robot9000"))
     code, _, err = _run(capsys, "validate", params, workspace / "test.csv", "--no-plot")

@@ -15,8 +15,6 @@ SAMPLES = ROOT / "tests" / "data" / "ur10e"
 PUSH = SAMPLES / "push_pose_1_rows100-600.csv"
 EXCITATION = SAMPLES / "excitation_30sec_12harm_rows601-840.csv"
 
-pytestmark = pytest.mark.skipif(not PARAMS.is_file(), reason=f"{PARAMS} not in the tree yet")
-
 
 def _lines(path: Path) -> list[str]:
     return path.read_text().splitlines()

@@ -17,7 +17,6 @@ PUSH = DATA / "collision" / "ur-20_01_22-push_pose_1.csv"
 pytestmark = [
     pytest.mark.data,
     pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/ur10e (UR10e recordings) absent"),
-    pytest.mark.skipif(not THRESHOLDS.is_file(), reason="configs/ur10e/thresholds.yaml absent"),
 ]
 
 

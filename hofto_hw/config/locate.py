@@ -1,0 +1,69 @@
+"""Where the project's files are found: a robot config by path or robot name.
+
+One resolver for every command: ``--config`` takes a path (``configs/ur10e.yaml``) or a robot
+name (``ur10e`` -> ``configs/ur10e.yaml``); without it, the config of a parameters file's
+robot is ``<robot>.yaml`` in that file's folder, the folder above, or ``configs/``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hofto_hw.errors import UserError
+
+#: the configs/ folder shipped with the project (next to the package)
+PROJECT_CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+def config_dirs() -> list[Path]:
+    """Folders searched for ``<robot>.yaml`` by name: ./configs, then the project's."""
+    local = Path("configs")
+    dirs = [local]
+    if not (local.is_dir() and local.resolve() == PROJECT_CONFIGS):
+        dirs.append(PROJECT_CONFIGS)
+    return dirs
+
+
+def find_config(
+    spec: str | Path | None, robot: str | None = None, near: Path | None = None
+) -> Path:
+    """The config file named by ``spec`` (a path or a robot name), else the one of ``robot``.
+
+    Args:
+        spec: ``--config`` as given: an existing file, or a robot name; None to look up
+            ``robot`` instead.
+        robot: the robot name of a parameters/thresholds file (used when ``spec`` is None).
+        near: the folder of that file: ``<robot>.yaml`` there or one folder up comes first.
+
+    Raises:
+        UserError: naming what was looked for and where.
+    """
+    if spec is not None:
+        path = Path(spec)
+        if path.is_file():
+            return path
+        if path.is_dir():
+            raise UserError(f"--config: {path} is a folder, not a config file")
+        name = str(spec)
+        if "/" in name or path.suffix in (".yaml", ".yml"):
+            raise UserError(f"--config: {path}: config file not found")
+        for folder in config_dirs():
+            candidate = folder / f"{name}.yaml"
+            if candidate.is_file():
+                return candidate
+        known = sorted({p.stem for d in config_dirs() for p in d.glob("*.yaml")})
+        raise UserError(
+            f"--config: {name!r} is neither a file nor a known robot (have: "
+            f"{', '.join(known) or 'none'})"
+        )
+    if robot is None:
+        raise UserError("--config: give a config file or a robot name")
+    folders = [near, near.parent] if near is not None else []
+    for folder in [*folders, *config_dirs()]:
+        candidate = folder / f"{robot}.yaml"
+        if candidate.is_file():
+            return candidate
+    where = f"next to {near} or " if near is not None else ""
+    raise UserError(
+        f"unknown robot {robot!r}: no {robot}.yaml {where}in configs/; pass --config FILE"
+    )
