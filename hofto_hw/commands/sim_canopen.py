@@ -18,6 +18,8 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from hofto_hw.commands.args import add_config
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the command's arguments."""
@@ -30,7 +32,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--channel", default=None, help="channel (default: bus.interface of the config)"
     )
-    parser.add_argument("--config", required=True, type=Path, help="system config (YAML)")
+    add_config(parser, default="er3a_canopen")
     parser.add_argument("--control", default=None, help="Unix socket path for control/faults")
     parser.add_argument("--duration", type=float, default=None, help="stop after N seconds")
     parser.add_argument(
@@ -54,12 +56,13 @@ def run(args: argparse.Namespace) -> int:
     from drivers.sim.canopen_node import CanopenDrives
     from drivers.sim.control_socket import serve_control
     from hofto_hw.config.loader import load_config
+    from hofto_hw.config.locate import find_config
     from hofto_hw.errors import UserError
     from hofto_hw.runtime.build import build_emulated_drives
 
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise UserError(f"--duration: must be a finite number of seconds > 0 (got {args.duration})")
-    cfg = load_config(args.config)
+    cfg = load_config(find_config(args.config))
     channel = args.channel or (cfg.bus.interface if cfg.bus is not None else None)
     if not channel:
         raise UserError(f"--channel: not given and {args.config} has no bus.interface")

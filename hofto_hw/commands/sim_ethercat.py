@@ -13,14 +13,15 @@ from __future__ import annotations
 import argparse
 import math
 import signal
-from pathlib import Path
 from types import FrameType
+
+from hofto_hw.commands.args import add_config
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the command's arguments."""
     parser.add_argument("--iface", default="ecs0", help="interface to serve on (default ecs0)")
-    parser.add_argument("--config", required=True, type=Path, help="system config (YAML)")
+    add_config(parser, default="er3a")
     parser.add_argument(
         "--create-veth",
         action="store_true",
@@ -54,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from drivers.sim.esc import veth
     from drivers.sim.esc.network import serve
     from hofto_hw.config.loader import load_config
+    from hofto_hw.config.locate import find_config
     from hofto_hw.errors import UserError
     from hofto_hw.runtime.build import build_emulated_network
 
@@ -67,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     master = args.master_iface or _master_name(args.iface)
     if not args.create_veth and not veth.exists(args.iface):
         raise UserError(f"network interface {args.iface!r} does not exist (see `ip link`)")
-    cfg = load_config(args.config)
+    cfg = load_config(find_config(args.config))
     net = build_emulated_network(cfg, external=not args.quiet_arm)
     if args.create_veth:
         veth.create_pair(master, args.iface)
