@@ -26,6 +26,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "hofto_hw.commands.demo",
         "run the paper's Table II experiment on the simulated arm",
     ),
+    "run": ("hofto_hw.commands.run", "run the real-time loop (simulated arm by default)"),
     "config": ("hofto_hw.commands.config", "print the config JSON schema or check a file"),
     "excite": ("hofto_hw.commands.excite", "design an optimized excitation trajectory"),
     "identify": ("hofto_hw.commands.identify", "identify dynamic parameters from a recording"),

@@ -289,6 +289,11 @@ class LoopConfig(_Strict):
     cpus: list[Annotated[int, Field(ge=0)]] | None = Field(
         None, description="CPU affinity of the loop; None = leave as is"
     )
+    observers: dict[str, ObserverConfig] | None = Field(
+        None,
+        description="observers the loop runs (hofto, momentum), when they differ from the "
+        "top-level observers section (e.g. gains for a faster detection); None = those",
+    )
 
 
 class SystemConfig(_Strict):

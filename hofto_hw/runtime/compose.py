@@ -110,11 +110,12 @@ def build(
     """Build and start everything: drives enabled in CSP, holding; the loop not yet run."""
     rate = float(cfg.loop.rate_hz)
     model = build_model(cfg)
-    names = [name for name in LOOP_OBSERVERS if name in cfg.observers]
+    table = {**cfg.observers, **(cfg.loop.observers or {})}
+    names = [name for name in LOOP_OBSERVERS if name in table]
     if not names:
         raise ConfigError("observers: hofto-hw run needs 'hofto' and/or 'momentum'")
     # one model copy per consumer: RobotModel buffers are shared per instance
-    observers = [make_observer(cfg.observers[name], model.copy()) for name in names]
+    observers = [make_observer(table[name], model.copy()) for name in names]
     sink = sink if sink is not None else MemorySink(tick_dtype(model.n, len(names)))
 
     bus = make_sim_bus(_sim_config(cfg), external=True)

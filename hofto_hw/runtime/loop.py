@@ -89,9 +89,9 @@ class Loop:
         self.running = False
 
     def run(self, max_ticks: int | None = None, should_stop: Callable[[], bool] | None = None):
-        """Run the loop (gc frozen and off inside)."""
+        """Run up to ``max_ticks`` more ticks (gc frozen and off inside); returns the total."""
         tick, clock = self.tick, self.clock
-        limit = -1 if max_ticks is None else int(max_ticks)
+        limit = -1 if max_ticks is None else self.ticks + int(max_ticks)
         compute_us = 0.0
         perf = time.perf_counter_ns
         mono = time.monotonic_ns
