@@ -82,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.hold:
         tick.mode_request = MOVE
     n_ticks = round(duration * system.rate_hz)
+    print(f"hofto-hw run: running (pid {os.getpid()})", file=sys.stderr, flush=True)
     try:
         system.loop.run(
             max_ticks=n_ticks, should_stop=lambda: tick.stop_requested and tick.stopped_and_off()

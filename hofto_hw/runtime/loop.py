@@ -87,6 +87,7 @@ class Loop:
         self.ticks = 0
         self.alive_ns = 0  # monotonic time of the last finished tick (for the watchdog)
         self.running = False
+        self.started = False
 
     def run(self, max_ticks: int | None = None, should_stop: Callable[[], bool] | None = None):
         """Run up to ``max_ticks`` more ticks (gc frozen and off inside); returns the total."""
@@ -97,7 +98,9 @@ class Loop:
         mono = time.monotonic_ns
         self.running = True
         with quiet_gc():
-            clock.start()
+            if not self.started:
+                clock.start()  # once: later calls continue on the same deadline grid
+                self.started = True
             while self.ticks != limit:
                 late_ns, missed = clock.wait()
                 t0 = perf()
