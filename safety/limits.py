@@ -91,7 +91,8 @@ class LimitMonitor:
         """One tick of limit checks on measured q, qd, tau and last tick's command q_cmd.
 
         ``fresh``: the sample is new this tick (jumps are only checked on fresh data);
-        ``tracking``: the drives follow q_cmd (following error is checked only then).
+        ``tracking``: the drives are powered and follow q_cmd (following error and motor
+        torque are checked only then: with the power stage off the brakes hold the arm).
         """
         d, m, m2 = self._d, self._m, self._m2
         np.less(q, self.lower, out=m)
@@ -105,12 +106,12 @@ class LimitMonitor:
         if m.any():
             j = int(np.argmax(m))
             stop.report(Fault.VELOCITY_LIMIT, j, float(qd[j]))
-        np.abs(tau, out=d)
-        np.greater(d, self.torque, out=m)
-        if m.any():
-            j = int(np.argmax(m))
-            stop.report(Fault.TORQUE_LIMIT, j, float(tau[j]))
         if tracking:
+            np.abs(tau, out=d)
+            np.greater(d, self.torque, out=m)
+            if m.any():
+                j = int(np.argmax(m))
+                stop.report(Fault.TORQUE_LIMIT, j, float(tau[j]))
             np.subtract(q_cmd, q, out=d)
             np.abs(d, out=d)
             np.greater(d, self.following_error, out=m)

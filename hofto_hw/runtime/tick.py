@@ -31,6 +31,8 @@ _FRA = int(State.FAULT_REACTION_ACTIVE)
 _FAULT = int(State.FAULT)
 STANDSTILL = 0.01  # rad/s: every joint slower than this counts as stopped
 MAX_STOPS = 256  # stop episodes kept for the summary
+FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
+_DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
 
 
 def exchange_fresh(group: DriveGroup, status: int) -> bool:
@@ -88,6 +90,8 @@ class Tick:
         self.reset_requested = False
         self.reset_result = ""
         self.mode_request = -1
+        self._fault_resetting = 0
+        self._edges_tried = False
         # stop episodes: first tick, time and distance to standstill
         self.stop_tick = np.full(MAX_STOPS, -1, dtype=np.int64)
         self.stop_time = np.full(MAX_STOPS, np.nan)
@@ -147,8 +151,11 @@ class Tick:
         ok = lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau)
         for i in range(len(self.observers)):
             ok &= lim.finite(stop, self.tau_ext[i])
-        lim.check(stop, q, qd, tau, self.q_sent, good, self.expect_enabled and not self.enabling)
-        if self.collision is not None and ok:
+        powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
+        lim.check(stop, q, qd, tau, self.q_sent, good, powered)
+        if self.collision is not None and ok and self._power_on(g.states):
+            # only while the power stage is on (quick-stop ramps included): with it off the
+            # brakes act and the motor torque no longer explains the motion
             self.collision.update(stop, self.tau_ext, q, qd, motion.qdd, dt)
         self._overrun(missed)
         if self.stop_requested:
@@ -166,6 +173,8 @@ class Tick:
                 g.command_disable_voltage()
             else:
                 g.command_quick_stop()
+            if self._fault_resetting > 0:
+                self._fault_reset_edge()
             motion.start(q)  # targets follow the arm: bumpless when enabled again
         else:
             if cat == 2:
@@ -193,6 +202,14 @@ class Tick:
         if self.overrun_streak >= self.overrun_limit:
             self.stop.report(Fault.OVERRUN, -1, float(self.overrun_streak))
 
+    def _power_on(self, states: np.ndarray) -> bool:
+        if self.enabling:
+            return False
+        for s in states:  # a quick-stop ramp keeps the power on until each axis rests
+            if s == _OE or s == _QSA:
+                return True
+        return False
+
     def _measure_stop(self, q: np.ndarray, qd: np.ndarray) -> None:
         """Stopping time [s] and distance [rad, max over joints] from the latch to rest."""
         stop = self.stop
@@ -215,9 +232,19 @@ class Tick:
             self._measuring = False
 
     def _reset(self) -> None:
-        """Process a reset request (rare: may allocate the result message)."""
+        """Process a reset request (rare: may allocate the result message).
+
+        A latched drive fault whose drive still shows Fault first gets fault-reset edges for
+        FAULT_RESET_TICKS ticks (the drive leaves Fault only if its cause is gone); then the
+        reset is tried once more and refused if any cause persists."""
         self.reset_requested = False
         done, msg = self.stop.reset()
+        if not done and not self._edges_tried and self.stop.active & _DRIVE_CAUSES:
+            if not self.stop.active & self.stop.latched & ~_DRIVE_CAUSES:
+                self._fault_resetting = FAULT_RESET_TICKS
+                self.reset_result = "resetting drive faults"
+                return
+        self._edges_tried = False
         self.reset_result = msg
         if not done:
             return
@@ -247,6 +274,19 @@ class Tick:
                     self._cw[i] = sm.CW_FAULT_RESET
         np.copyto(self.controlword, self._cw)
         self.motion.start(g.q)
+
+    def _fault_reset_edge(self) -> None:
+        """Rising edges of controlword bit 7 on faulted axes; then retry the reset."""
+        self._fault_resetting -= 1
+        if self._fault_resetting == 0:
+            self._edges_tried = True
+            self.reset_requested = True
+            return
+        if self.tick & 1:
+            g = self.group
+            for i in range(self.n):
+                if g.states[i] == _FAULT:
+                    self.controlword[i] = sm.CW_FAULT_RESET
 
     def _change_mode(self) -> None:
         want = self.mode_request
