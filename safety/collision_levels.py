@@ -14,8 +14,8 @@ Rows of the estimate array are observers (e.g. hofto, momentum). The ``deciding`
 the decision (``any``: a row trips; ``all``: every deciding row trips). Every row keeps its
 own first-crossing tick so detection delays can be compared side by side.
 
-A non-finite estimate never trips nor poisons state (no filters here); the limit monitor
-reports it. Allocation-free, except the optional tool-force check (pinocchio Jacobian).
+A NaN estimate never trips nor poisons state (no filters here; the limit monitor reports it
+as NON_FINITE); an infinite one is above every threshold and trips. Allocation-free, except the optional tool-force check (pinocchio Jacobian).
 """
 
 from __future__ import annotations
