@@ -156,7 +156,10 @@ def build(
     tick.start()
     period_ns = round(1e9 / rate)
     clk: RealClock | SimClock = SimClock(period_ns) if clock == "sim" else RealClock(period_ns)
-    system = System(cfg, model, bus, group, tick, Loop(tick, clk), clk, sink, rate)
+    loop = Loop(tick, clk)
+    if not clk.sim:
+        loop.data_dt = 1.0 / rate  # SimBus in real time: one plant cycle per exchange
+    system = System(cfg, model, bus, group, tick, loop, clk, sink, rate)
     system.observer_names = names
     if contact and cfg.run.collision is not None:
         system.contact = _script_contact(system)

@@ -88,6 +88,9 @@ class Loop:
         self.alive_ns = 0  # monotonic time of the last finished tick (for the watchdog)
         self.running = False
         self.started = False
+        #: when set, the dt the tick gets whatever the clock did: a simulated bus advances its
+        #: plant one cycle per exchange, so after a stall its data is still one cycle apart
+        self.data_dt: float | None = None
 
     def run(self, max_ticks: int | None = None, should_stop: Callable[[], bool] | None = None):
         """Run up to ``max_ticks`` more ticks (gc frozen and off inside); returns the total."""
@@ -105,7 +108,7 @@ class Loop:
                 late_ns, missed = clock.wait()
                 t0 = perf()
                 wake_us = late_ns * 1e-3
-                dt = (missed + 1) * self.period
+                dt = (missed + 1) * self.period if self.data_dt is None else self.data_dt
                 tick.step(clock.elapsed(), dt, wake_us, missed, compute_us)
                 compute_us = (perf() - t0) * 1e-3
                 if not clock.sim:
