@@ -15,7 +15,8 @@ the decision (``any``: a row trips; ``all``: every deciding row trips). Every ro
 own first-crossing tick so detection delays can be compared side by side.
 
 A NaN estimate never trips nor poisons state (no filters here; the limit monitor reports it
-as NON_FINITE); an infinite one is above every threshold and trips. Allocation-free, except the optional tool-force check (pinocchio Jacobian).
+as NON_FINITE); an infinite one is above every threshold and trips. Allocation-free, except
+the optional tool-force check (pinocchio Jacobian).
 """
 
 from __future__ import annotations

@@ -72,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
 
     def _on_signal(signum: int, frame: object) -> None:
         tick.stop_requested = True
+        tick.exit_requested = True
 
     old = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     service = None
@@ -80,13 +81,19 @@ def run(args: argparse.Namespace) -> int:
 
         service = ControlServer(args.socket, system, mode=cfg.service.socket_mode)
         service.start()
+    supervisor = None
+    if os.environ.get("NOTIFY_SOCKET"):
+        from hofto_hw.runtime.service import Supervisor
+
+        supervisor = Supervisor(system, cfg.service.watchdog_fraction, cfg.service.status_interval)
+        supervisor.start()
     if not args.hold:
         tick.mode_request = MOVE
     n_ticks = round(duration * system.rate_hz)
     print(f"hofto-hw run: running (pid {os.getpid()})", file=sys.stderr, flush=True)
     try:
         system.loop.run(
-            max_ticks=n_ticks, should_stop=lambda: tick.stop_requested and tick.stopped_and_off()
+            max_ticks=n_ticks, should_stop=lambda: tick.exit_requested and tick.stopped_and_off()
         )
     finally:
         realtime.drop_realtime()
@@ -95,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
         if service is not None:
             service.close()
         system.close()
+        if supervisor is not None:
+            supervisor.stop()
     log = None
     if not args.no_log:
         folder = args.log_dir or _log_dir(cfg, args.config)

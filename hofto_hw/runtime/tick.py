@@ -86,7 +86,8 @@ class Tick:
         self.overrun_streak = 0
         self.overruns = 0
         # requests from other threads (one writer each)
-        self.stop_requested = False
+        self.stop_requested = False  # operator stop or SIGTERM: a STOP_REQUEST fault
+        self.exit_requested = False  # SIGTERM/SIGINT: the process ends once stopped
         self.reset_requested = False
         self.reset_result = ""
         self.mode_request = -1
