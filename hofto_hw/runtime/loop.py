@@ -32,13 +32,14 @@ class RealClock:
         self.deadline = self.start_ns + self.period_ns
 
     def wait(self) -> tuple[int, int]:
-        """Sleep to the next deadline; returns (lateness [ns], deadlines missed before it)."""
+        """Sleep to the next deadline; returns (lateness [ns] after it, whole periods of that
+        lateness = deadlines missed; the next deadline is the first one still ahead)."""
         sleep_until(self.deadline)
         now = time.monotonic_ns()
         late = now - self.deadline
         missed = late // self.period_ns if late >= self.period_ns else 0
         self.deadline += (missed + 1) * self.period_ns
-        return late - missed * self.period_ns, missed
+        return late, missed
 
     def elapsed(self) -> float:
         """Loop time [s] of the deadline just served."""
