@@ -153,6 +153,7 @@ def build(
         sink,
         overrun_limit=s.overrun_streak,
     )
+    tick.diag_every = max(1, round(rate / 10.0))
     tick.start()
     period_ns = round(1e9 / rate)
     clk: RealClock | SimClock = SimClock(period_ns) if clock == "sim" else RealClock(period_ns)

@@ -204,6 +204,10 @@ class Supervisor:
                 sd_notify("STOPPING=1")
                 stopping_sent = True
             now = time.monotonic()
+            tick = getattr(self.system, "tick", None)
+            if tick is not None and hasattr(loop, "wakeup"):
+                tick.wakeup_p99_us = loop.wakeup.percentile(99.0)  # for the diag records
+                tick.compute_p99_us = loop.compute.percentile(99.0)
             if now >= next_status:
                 s = self.status(self.system)
                 sd_notify(

@@ -19,7 +19,13 @@ from drivers.cia402.state_machine import State
 from hofto_hw.control.joint_motion import MOVE, JointMotion
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers.base import Observer
-from hofto_hw.recording.record import EVENT_DTYPE, RecordSink, new_record, tick_dtype
+from hofto_hw.recording.record import (
+    DIAG_DTYPE,
+    EVENT_DTYPE,
+    RecordSink,
+    new_record,
+    tick_dtype,
+)
 from safety.bus_health import BusHealth
 from safety.collision_levels import CollisionLevels
 from safety.limits import LimitMonitor
@@ -107,6 +113,11 @@ class Tick:
         # records (preallocated; field views fetched once)
         self.tick_rec = new_record(tick_dtype(n, len(self.observers)))
         self.event_rec = new_record(EVENT_DTYPE)
+        self.diag_rec = new_record(DIAG_DTYPE)
+        self.diag_every = 100  # ticks between diagnostics records (10 Hz at 1 kHz)
+        #: percentiles for the diagnostics record, written by a slow-path thread (µs)
+        self.wakeup_p99_us = 0.0
+        self.compute_p99_us = 0.0
         r = self.tick_rec
         self._r = {k: r[k] for k in ("q", "qd", "tau", "q_cmd", "tau_ext")}
         r["wrench"][...] = np.nan
@@ -325,6 +336,19 @@ class Tick:
             e["value"] = ev.value[i]
             self.sink.push_event(e)
             self._events_pushed += 1
+        if self.tick % self.diag_every == 0:
+            self._diag()
+
+    def _diag(self) -> None:
+        d = self.diag_rec
+        d["t"] = self.t
+        d["ticks"] = self.tick
+        d["overruns"] = self.overruns
+        d["wakeup_p99_us"] = self.wakeup_p99_us
+        d["compute_p99_us"] = self.compute_p99_us
+        d["bus_errors"] = self.bus.lost_total
+        d["dropped_records"] = self.sink.dropped
+        self.sink.push_diag(d)
 
     # ------------------------------------------------------------------- queries
 

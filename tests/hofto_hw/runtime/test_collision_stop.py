@@ -29,6 +29,7 @@ def test_collision_is_stopped_in_the_tick_its_estimate_crosses(cfg: SystemConfig
     assert (system.bus.rx["controlword"] == sm.CW_QUICK_STOP).all()
     assert sink.ticks[(sink.n_ticks - 1)]["faults"] == 1 << Fault.COLLISION
     assert tick.tick >= contact.onset_tick  # not a false stop before the contact
+    assert sink.n_diags == tick.tick // 100  # diagnostics at 10 Hz
     # the arm comes to rest, the drives end disabled
     run_until(system, lambda: tick.stopped_and_off() and np.isfinite(tick.stop_time[0]), 2000)
     assert np.abs(system.group.qd).max() < 0.05
