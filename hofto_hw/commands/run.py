@@ -67,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     rt_text = rt.describe() if lc.realtime != "off" else "real-time off"
     if clock == "sim":
         realtime.drop_realtime()  # back-to-back ticks must not starve the machine
+        rt_text += "; checked, then normal priority for the sim clock"
     system = build(cfg, clock=clock, contact=not args.no_collision)
     tick = system.tick
 
