@@ -18,6 +18,8 @@ from pydantic import Field, field_validator, model_validator
 from hofto_hw.config.base import FileModel, NonNegFloat, PositiveFloat
 from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.drives import BusConfig
+from hofto_hw.config.runtime import RunConfig, ServiceConfig
+from hofto_hw.config.safety import SafetyConfig
 
 # --------------------------------------------------------------------------------- robot
 
@@ -310,6 +312,20 @@ class LoopConfig(FileModel):
         ge=10.0,
         description="loop and bus cycle rate [Hz]; the cycle time is 1 / rate_hz",
     )
+    realtime: Literal["required", "preferred", "off"] = Field(
+        "preferred",
+        description="SCHED_FIFO + mlockall: required refuses to start without them, "
+        "preferred warns once, off does not try",
+    )
+    priority: int = Field(50, ge=1, le=99, description="SCHED_FIFO priority")
+    cpus: list[Annotated[int, Field(ge=0)]] | None = Field(
+        None, description="CPU affinity of the loop; None = leave as is"
+    )
+    observers: dict[str, ObserverConfig] | None = Field(
+        None,
+        description="observers the loop runs (hofto, momentum), when they differ from the "
+        "top-level observers section (e.g. gains for a faster detection); None = those",
+    )
 
 
 class SystemConfig(FileModel):
@@ -321,6 +337,9 @@ class SystemConfig(FileModel):
     simulation: SimulationConfig | None = None
     collision: CollisionConfig | None = None
     bus: BusConfig | None = None
+    safety: SafetyConfig = Field(default_factory=SafetyConfig)
+    run: RunConfig = Field(default_factory=RunConfig)
+    service: ServiceConfig = Field(default_factory=ServiceConfig)
 
     @property
     def cycle_time(self) -> float:
@@ -343,6 +362,7 @@ class SystemConfig(FileModel):
             _check_lengths([(f"observers.{name}.{k}", v) for k, v in rows], n)
         if self.bus is not None:
             _check_lengths([("bus.drives", self.bus.drives)], n)
+        _check_runtime_lengths(self, n)
         if self.simulation is not None:
             s = self.simulation
             _check_lengths([("simulation.encoder_counts_per_rev", s.encoder_counts_per_rev)], n)
@@ -362,3 +382,26 @@ class SystemConfig(FileModel):
                     n,
                 )
         return self
+
+
+def _check_runtime_lengths(cfg: SystemConfig, n: int) -> None:
+    """Per-joint lists of the safety and run sections."""
+    checks: list[tuple[str, list | None]] = []
+    col = cfg.safety.collision
+    if col is not None:
+        checks += [
+            ("safety.collision.collision.nominal", col.collision.nominal),
+            ("safety.collision.contact.nominal", col.contact.nominal),
+        ]
+    lim = cfg.safety.limits
+    checks += [("safety.limits.velocity", lim.velocity), ("safety.limits.torque", lim.torque)]
+    path = cfg.run.path
+    if path is not None:
+        checks += [
+            ("run.path.amplitude", path.amplitude),
+            ("run.path.period", path.period),
+            ("run.path.phase", path.phase),
+        ]
+    _check_lengths(checks, n)
+    if cfg.run.collision is not None and cfg.run.collision.joint >= n:
+        raise ValueError(f"run.collision.joint = {cfg.run.collision.joint}: the arm has {n} joints")

@@ -1,5 +1,6 @@
-"""The composition root: builds plants, buses, drive groups (and the service) from config.
+"""The real-time service and the composition root: ``build`` turns a config into plants,
+buses and drive groups (so drivers/ never reads a whole SystemConfig and the plant is
+constructed in one place); loop, tick, clocks, real-time setup, control socket, notify.
 
-Application layer: may import every package. ``build`` holds the config-to-object builders,
-so drivers/ never reads a whole SystemConfig and the plant is constructed in one place.
+Application layer: may import drivers/, safety/ and the foundation.
 """

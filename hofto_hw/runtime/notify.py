@@ -88,7 +88,7 @@ class Notifier:
 
 
 class Watchdog:
-    """Pets systemd's watchdog every ``notifier.watchdog_interval`` while ``heartbeat()``
+    """Pets systemd's watchdog every ``fraction`` of WatchdogSec while ``heartbeat()``
     (e.g. the loop's tick counter) has advanced since the previous check. A hung loop stops
     the petting, and systemd then kills and restarts the service (WatchdogSec).
 
@@ -96,9 +96,12 @@ class Watchdog:
     ``pets`` and ``missed`` count petted and skipped checks, ``errors`` failed sends.
     """
 
-    def __init__(self, notifier: Notifier, heartbeat: Callable[[], int]) -> None:
+    def __init__(
+        self, notifier: Notifier, heartbeat: Callable[[], int], fraction: float = 0.5
+    ) -> None:
         self.notifier = notifier
         self.heartbeat = heartbeat
+        self.fraction = fraction
         self.pets = 0
         self.missed = 0
         self.errors = 0
@@ -106,6 +109,12 @@ class Watchdog:
         self._last: int | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+
+    @property
+    def interval(self) -> float | None:
+        """Seconds between checks: ``fraction`` of WatchdogSec; None when the watchdog is off."""
+        n = self.notifier
+        return n.watchdog_usec * 1e-6 * self.fraction if n.enabled and n.watchdog_usec else None
 
     def check(self) -> bool:
         """One check: pet if the heartbeat advanced. Returns whether it petted."""
@@ -126,7 +135,7 @@ class Watchdog:
 
     def start(self) -> Watchdog:
         """Start the petting thread (nothing when the watchdog is off). Returns self."""
-        interval = self.notifier.watchdog_interval
+        interval = self.interval
         if interval is None or self._thread is not None:
             return self
         self._thread = threading.Thread(

@@ -1,0 +1,163 @@
+"""``hofto-hw run``: the controller process (the fixed-rate loop on the drives).
+
+On the simulated arm (bus ``sim``, the default) the arm moves along the demo path, a scripted
+collision hits a link, the monitor stops the arm and a short summary is printed (or written
+with ``--summary-json``). SIGTERM or SIGINT: category 1 stop -> drives disabled -> log
+closed -> exit 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "er3a.yaml"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="system config")
+    parser.add_argument("--duration", type=float, default=None, help="run time [s]")
+    parser.add_argument(
+        "--clock", choices=("sim", "real"), default=None, help="sim: ticks back to back"
+    )
+    parser.add_argument("--summary-json", type=Path, default=None, help="write the summary")
+    parser.add_argument(
+        "--log-dir", type=Path, default=None, help="folder for the MCAP flight log (run.log_dir)"
+    )
+    parser.add_argument("--no-log", action="store_true", help="record no flight log")
+    parser.add_argument("--no-collision", action="store_true", help="no scripted collision")
+    parser.add_argument(
+        "--socket", type=Path, default=None, help="serve the control socket at this path"
+    )
+    parser.add_argument("--hold", action="store_true", help="start in hold, not move")
+
+
+def _check_duration(value: float | None) -> None:
+    from hofto_hw.errors import UserError
+
+    if value is not None and (not math.isfinite(value) or value <= 0.0):
+        raise UserError(f"--duration: must be a finite number of seconds > 0, got {value}")
+
+
+def _check_output(path: Path | None, what: str) -> None:
+    from hofto_hw.errors import UserError
+
+    if path is not None and path.is_dir():
+        raise UserError(f"{what}: {path} is a directory, expected a file name")
+
+
+def run(args: argparse.Namespace) -> int:
+    from hofto_hw.config import load_config
+    from hofto_hw.control.joint_motion import MOVE
+    from hofto_hw.runtime import realtime
+    from hofto_hw.runtime.compose import build
+    from hofto_hw.runtime.summary import build_summary, format_summary
+
+    _check_duration(args.duration)
+    _check_output(args.summary_json, "--summary-json")
+    cfg = load_config(args.config)
+    duration = args.duration if args.duration is not None else cfg.run.duration
+    clock = args.clock or cfg.run.clock
+    lc = cfg.loop
+    rt = realtime.setup(lc.realtime, lc.priority, lc.cpus)
+    rt_text = rt.describe() if lc.realtime != "off" else "real-time off"
+    if clock == "sim":
+        realtime.drop_realtime()  # back-to-back ticks must not starve the machine
+        rt_text += "; checked, then normal priority for the sim clock"
+    recorder = None if args.no_log else _start_recorder(cfg, args)
+    try:
+        system = build(cfg, clock=clock, sink=recorder, contact=not args.no_collision)
+    except BaseException:
+        if recorder is not None:
+            recorder.close()
+        raise
+    tick = system.tick
+
+    def _on_signal(signum: int, frame: object) -> None:
+        tick.stop_requested = True
+        tick.exit_requested = True
+
+    old = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
+    service = None
+    if args.socket is not None:
+        from hofto_hw.runtime.service import ControlServer
+
+        service = ControlServer(args.socket, system, mode=cfg.service.socket_mode)
+        service.start()
+    supervisor = None
+    if os.environ.get("NOTIFY_SOCKET"):
+        from hofto_hw.runtime.service import Supervisor
+
+        supervisor = Supervisor(system, cfg.service.watchdog_fraction, cfg.service.status_interval)
+        supervisor.start()
+    if not args.hold:
+        tick.mode_request = MOVE
+    n_ticks = round(duration * system.rate_hz)
+    print(f"hofto-hw run: running (pid {os.getpid()})", file=sys.stderr, flush=True)
+    try:
+        system.loop.run(
+            max_ticks=n_ticks, should_stop=lambda: tick.exit_requested and tick.stopped_and_off()
+        )
+    finally:
+        realtime.drop_realtime()
+        for s, h in old.items():
+            signal.signal(s, h)
+        if service is not None:
+            service.close()
+        system.close()
+        health = recorder.close() if recorder is not None else None
+        if supervisor is not None:
+            supervisor.stop()
+    log = None
+    if health is not None:
+        log = str(health.current_file or recorder.spec.path)
+        if health.dropped or health.records_lost or health.write_errors:
+            print(
+                f"hofto-hw run: flight recorder: {health.dropped} records dropped (ring full), "
+                f"{health.records_lost} lost, {health.write_errors} write errors",
+                file=sys.stderr,
+            )
+    summary = build_summary(system, log, rt_text)
+    if args.summary_json is not None:
+        args.summary_json.parent.mkdir(parents=True, exist_ok=True)
+        args.summary_json.write_text(json.dumps(summary, indent=2) + "\n")
+    print(format_summary(summary))
+    sys.stdout.flush()
+    return 0
+
+
+def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
+    """The MCAP flight recorder (its writer process started) for this run's log file."""
+    from hofto_hw.errors import UserError
+    from hofto_hw.recording.attachments import run_attachments, run_metadata
+    from hofto_hw.recording.flight_file import LogSpec
+    from hofto_hw.recording.recorder import FlightRecorder
+    from hofto_hw.runtime.compose import loop_observer_names
+    from safety.stop import EVENT_NAMES
+
+    folder = args.log_dir or _log_dir(cfg, args.config)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"run.log_dir: cannot create {folder}: {exc.strerror}") from None
+    names = loop_observer_names(cfg)  # type: ignore[arg-type]
+    spec = LogSpec(
+        path=folder / f"run-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.mcap",
+        joint_names=list(cfg.robot.joints),  # type: ignore[attr-defined]
+        observers=names,
+        attachments=run_attachments(args.config, cfg),  # type: ignore[arg-type]
+        metadata=run_metadata(args.config, cfg, names[0]),  # type: ignore[arg-type]
+        event_kinds=dict(EVENT_NAMES),
+    )
+    return FlightRecorder(spec).start()
+
+
+def _log_dir(cfg: object, config_path: Path) -> Path:
+    d = cfg.run.log_dir  # type: ignore[attr-defined]
+    return d if d.is_absolute() else (config_path.resolve().parent / d).resolve()

@@ -1,0 +1,32 @@
+"""``hofto-hw status``: state, latched faults, timing and log file of the running service."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from hofto_hw.runtime.control_client import add_socket_argument, request
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    add_socket_argument(parser)
+    parser.add_argument("--json", action="store_true", help="print the raw JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    s = request(args.socket, "status")
+    if args.json:
+        print(json.dumps(s, indent=2))
+        return 0
+    c = s["timing_us"]["compute"]
+    w = s["timing_us"]["wakeup"]
+    print(f"state: {s['state']} (mode {s['mode']}), {s['ticks']} ticks, {s['overruns']} missed")
+    faults = ", ".join(s["faults"]) or "none"
+    still = f" (cause present: {', '.join(s['persisting'])})" if s["persisting"] else ""
+    print(f"faults: {faults}{still}; stop category {s['category'] if s['category'] >= 0 else '-'}")
+    print(
+        f"compute median {c['median']:.0f} µs, p99 {c['p99']:.0f} µs; "
+        f"wake-up median {w['median']:.0f} µs, p99 {w['p99']:.0f} µs"
+    )
+    print(f"log: {s['log'] or 'not yet written'}")
+    return 0

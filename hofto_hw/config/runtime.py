@@ -1,0 +1,68 @@
+"""Pydantic models of the ``run:`` and ``service:`` sections (the ``hofto-hw run`` process).
+
+``run`` describes the demo job on the simulated arm: the joint path the arm moves along, the
+scripted collision and the held load; ``service`` the control socket and sd_notify. Units SI.
+Loading and checking only: nothing here runs in the tick.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import Field
+
+from hofto_hw.config.base import FileModel
+from hofto_hw.config.safety import PayloadConfig
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+NonNeg = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+
+
+class DemoPathConfig(FileModel):
+    """Smooth periodic joint motion about the home pose:
+    q_ref = home + amplitude·sin(2π·t/period + phase)·fade(t), fade a quintic over ``ramp``."""
+
+    amplitude: list[Finite] = Field(description="per joint [rad]")
+    period: list[Positive] = Field(description="per joint [s]")
+    phase: list[Finite] | None = Field(None, description="per joint [rad]")
+    ramp: Positive = Field(1.0, description="fade-in time [s]")
+
+
+class ScriptedCollisionConfig(FileModel):
+    """A contact on the simulated arm: the torque on ``joint`` ramps linearly to ``peak``
+    [N·m] in ``rise_time`` [s] from ``start`` [s] and stays for ``hold`` [s]."""
+
+    joint: Annotated[int, Field(ge=0)] = 1
+    peak: Finite = 20.0
+    rise_time: Positive = 0.01
+    start: NonNeg = 3.0
+    hold: Positive = 0.3
+
+
+class RunConfig(FileModel):
+    """The ``run:`` section: what ``hofto-hw run`` does on the simulated arm."""
+
+    duration: Positive = Field(5.0, description="default run time [s]")
+    clock: Literal["sim", "real"] = "real"
+    path: DemoPathConfig | None = None
+    collision: ScriptedCollisionConfig | None = Field(default_factory=ScriptedCollisionConfig)
+    simulated_payload: PayloadConfig | None = Field(
+        None, description="load the simulated arm really holds; None = safety.payload"
+    )
+    model_error: NonNeg | None = Field(
+        None, description="override simulation.model_error for the run (relative, 1 sigma)"
+    )
+    log_dir: Path = Field(Path("out/logs"), description="folder of the flight-recorder logs")
+
+
+class ServiceConfig(FileModel):
+    """The ``service:`` section: local control socket and systemd integration."""
+
+    socket: Path = Field(Path("/run/hofto-hw/control.sock"), description="AF_UNIX control socket")
+    socket_mode: Annotated[int, Field(ge=0, le=0o777)] = 0o660
+    watchdog_fraction: Annotated[float, Field(gt=0.0, lt=1.0)] = Field(
+        0.5, description="pet the systemd watchdog every fraction·WatchdogSec"
+    )
+    status_interval: Positive = Field(1.0, description="sd_notify STATUS update period [s]")

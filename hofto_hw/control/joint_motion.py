@@ -1,0 +1,135 @@
+"""Joint-space motion for the real-time loop: hold, a smooth demo path, a ramp to standstill.
+
+:class:`DemoPath` gives q_ref(t) = q0 + A·sin(2π·t/T + φ)·s(t) - A·sin(φ)·s(t), with s a
+quintic fade-in over ``ramp`` seconds, so the path starts at rest at q0 and moves smoothly.
+:class:`JointMotion` is the controller's motion generator: ``hold`` (command a fixed position),
+``move`` (follow the demo path from where the arm is), and a ramp to standstill at the
+acceleration limits (used for mode changes to hold and for stop category 2).
+
+Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+HOLD, MOVE, RAMP_DOWN = 0, 1, 2
+MODE_NAMES = {HOLD: "hold", MOVE: "move", RAMP_DOWN: "stopping"}
+
+
+class DemoPath:
+    """Smooth periodic joint motion about a start pose (see module docstring)."""
+
+    def __init__(
+        self,
+        amplitude: np.ndarray,
+        period: np.ndarray,
+        phase: np.ndarray | None = None,
+        ramp: float = 1.0,
+    ) -> None:
+        self.a = np.asarray(amplitude, dtype=float).copy()
+        self.w = 2.0 * math.pi / np.asarray(period, dtype=float)
+        self.phi = np.zeros_like(self.a) if phase is None else np.asarray(phase, float).copy()
+        self.offset = self.a * np.sin(self.phi)
+        self.ramp = float(ramp)
+        n = self.a.shape[0]
+        self._s = np.zeros(n)
+        self._c = np.zeros(n)
+        self._arg = np.zeros(n)
+
+    def evaluate(
+        self, t: float, q0: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+    ) -> None:
+        """Reference at time ``t`` [s] since the start into q, qd, qdd (n,)."""
+        x = min(max(t / self.ramp, 0.0), 1.0)
+        b = x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
+        bd = 30.0 * x * x * (1.0 - x) ** 2 / self.ramp
+        bdd = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / (self.ramp * self.ramp)
+        s, c, arg = self._s, self._c, self._arg
+        np.multiply(self.w, t, out=arg)
+        arg += self.phi
+        np.sin(arg, out=s)
+        np.cos(arg, out=c)
+        # f = a·sin - offset; f' = a·w·cos; f'' = -a·w²·sin
+        np.multiply(self.a, s, out=q)
+        q -= self.offset  # q = f
+        np.multiply(self.a, self.w, out=qd)
+        qd *= c  # qd = f'
+        # qdd = f''·b + 2·f'·bd + f·bdd
+        np.multiply(self.a, self.w, out=qdd)
+        qdd *= self.w
+        qdd *= s
+        qdd *= -b
+        np.multiply(qd, 2.0 * bd, out=arg)
+        qdd += arg
+        np.multiply(q, bdd, out=arg)
+        qdd += arg
+        # qd = f'·b + f·bd
+        qd *= b
+        np.multiply(q, bd, out=arg)
+        qd += arg
+        q *= b
+        q += q0
+
+
+class JointMotion:
+    """Reference generator: ``q``, ``qd``, ``qdd`` (n,) after :meth:`update`; ``mode``."""
+
+    def __init__(self, n: int, accel_limit: np.ndarray, path: DemoPath | None) -> None:
+        self.n = n
+        self.accel = np.asarray(accel_limit, dtype=float).copy()
+        self.path = path
+        self.q = np.zeros(n)
+        self.qd = np.zeros(n)
+        self.qdd = np.zeros(n)
+        self.q0 = np.zeros(n)
+        self.mode = HOLD
+        self.t0 = 0.0
+        self._step = np.zeros(n)
+        self._sign = np.zeros(n)
+
+    def start(self, q: np.ndarray) -> None:
+        """Hold the measured position ``q``."""
+        np.copyto(self.q, q)
+        self.qd.fill(0.0)
+        self.qdd.fill(0.0)
+        self.mode = HOLD
+
+    def move(self, t: float) -> bool:
+        """Follow the demo path from the current command (only from standstill)."""
+        if self.path is None or self.mode == MOVE or self.qd.any():
+            return False
+        np.copyto(self.q0, self.q)
+        self.t0 = t
+        self.mode = MOVE
+        return True
+
+    def ramp_down(self) -> None:
+        """Decelerate at the acceleration limits to standstill, then hold."""
+        if self.mode != HOLD:
+            self.mode = RAMP_DOWN
+
+    def update(self, t: float, dt: float) -> None:
+        """Advance the reference to time ``t`` [s] (``dt`` [s] since the last update)."""
+        if self.mode == MOVE:
+            assert self.path is not None
+            self.path.evaluate(t - self.t0, self.q0, self.q, self.qd, self.qdd)
+        elif self.mode == RAMP_DOWN:
+            step, sign = self._step, self._sign
+            np.multiply(self.accel, dt, out=step)
+            np.abs(self.qd, out=sign)
+            np.minimum(step, sign, out=step)
+            np.sign(self.qd, out=sign)
+            step *= sign
+            self.qd -= step
+            np.multiply(step, -1.0 / dt, out=self.qdd)
+            np.multiply(self.qd, dt, out=step)
+            self.q += step
+            if not self.qd.any():
+                self.mode = HOLD
+                self.qdd.fill(0.0)
+        else:
+            self.qd.fill(0.0)
+            self.qdd.fill(0.0)

@@ -1,0 +1,208 @@
+"""Composition root of ``hofto-hw run``: config -> model, bus, drives, observers, safety,
+controller, tick, loop. The only place that knows how the parts fit together.
+
+The simulated bus comes from :func:`hofto_hw.runtime.build.build_sim_bus`; every observer is
+checked for discrete-time stability at ``loop.rate_hz`` before it is built, and every model
+consumer owns its workspace (``model.create_data()``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from drivers.cia402.drive_group import DriveGroup
+from drivers.cia402.state_machine import Mode, State
+from drivers.sim.simbus import SimBus
+from hofto_hw.config.models import ExternalTorqueConfig, SystemConfig
+from hofto_hw.control.joint_motion import DemoPath, JointMotion
+from hofto_hw.errors import ConfigError
+from hofto_hw.model.payload import add_payload
+from hofto_hw.model.robot import RobotModel
+from hofto_hw.observers import make_observer
+from hofto_hw.observers.stability import check_observer
+from hofto_hw.recording.record import MemorySink, RecordSink, tick_dtype
+from hofto_hw.runtime.build import build_sim_bus
+from hofto_hw.runtime.loop import Loop, RealClock, SimClock
+from hofto_hw.runtime.tick import Tick
+from safety.bus_health import BusHealth
+from safety.collision_levels import CollisionLevels
+from safety.limits import LimitMonitor
+from safety.stop import StopController
+
+#: observers the loop runs, in record order (those present in the config)
+LOOP_OBSERVERS = ("hofto", "momentum")
+
+
+@dataclass
+class ScriptedContact:
+    """The scripted collision of ``run.collision`` in loop terms: onset tick and time."""
+
+    joint: int
+    peak: float
+    start: float  # [s] loop time of the contact onset
+    onset_tick: int  # first tick whose exchange includes the contact
+
+
+@dataclass
+class System:
+    """Everything ``hofto-hw run`` drives (built by :func:`build`)."""
+
+    cfg: SystemConfig
+    model: RobotModel
+    bus: SimBus
+    group: DriveGroup
+    tick: Tick
+    loop: Loop
+    clock: RealClock | SimClock
+    sink: RecordSink
+    rate_hz: float
+    contact: ScriptedContact | None = None
+    observer_names: list[str] = field(default_factory=list)
+
+    def close(self) -> None:
+        """Stop the drives (category 1 if still powered), disable them, close the bus."""
+        g = self.group
+        try:
+            g.cycle()
+            if (g.states == State.OPERATION_ENABLED).any():
+                g.quick_stop()
+            g.disable()
+        finally:
+            self.bus.close()
+
+
+def _sim_config(cfg: SystemConfig) -> SystemConfig:
+    """The config the simulated bus is built from: no scripted world torques (the run adds
+    its own contact) and the run's model error."""
+    if cfg.bus is None:
+        raise ConfigError("bus: section missing; hofto-hw run needs the drive data")
+    if cfg.bus.transport != "sim":
+        raise ConfigError(
+            f"bus.transport: {cfg.bus.transport!r} is not supported by hofto-hw run yet "
+            "(only 'sim'; EtherCAT plugs in through the same Transport)"
+        )
+    sim = None
+    if cfg.simulation is not None:
+        update: dict = {"external": []}
+        if cfg.run.model_error is not None:
+            update["model_error"] = cfg.run.model_error
+        sim = cfg.simulation.model_copy(update=update)
+    return cfg.model_copy(update={"simulation": sim})
+
+
+def loop_observer_table(cfg: SystemConfig) -> dict:
+    """Observer configs the loop uses: ``loop.observers`` over the top-level ``observers``."""
+    return {**cfg.observers, **(cfg.loop.observers or {})}
+
+
+def loop_observer_names(cfg: SystemConfig) -> list[str]:
+    """The observers the loop runs, in record order (rows of ``tau_ext``)."""
+    table = loop_observer_table(cfg)
+    names = [name for name in LOOP_OBSERVERS if name in table]
+    if not names:
+        raise ConfigError("observers: hofto-hw run needs 'hofto' and/or 'momentum'")
+    return names
+
+
+def build_model(cfg: SystemConfig) -> RobotModel:
+    """The identified model with the configured payload."""
+    model = RobotModel.from_config(cfg.robot)
+    p = cfg.safety.payload
+    return add_payload(model, p.mass, p.com)
+
+
+def build(
+    cfg: SystemConfig,
+    *,
+    clock: str = "sim",
+    sink: RecordSink | None = None,
+    contact: bool = True,
+) -> System:
+    """Build and start everything: drives enabled in CSP, holding; the loop not yet run."""
+    rate = float(cfg.loop.rate_hz)
+    model = build_model(cfg)
+    table = loop_observer_table(cfg)
+    names = loop_observer_names(cfg)
+    for name in names:
+        check_observer(name, table[name], model, rate)
+    observers = [make_observer(table[name], model) for name in names]
+    sink = sink if sink is not None else MemorySink(tick_dtype(model.n, len(names)))
+
+    bus = build_sim_bus(_sim_config(cfg), external=True)
+    true_load = cfg.run.simulated_payload or cfg.safety.payload
+    add_payload(bus.plant.true_model, true_load.mass, true_load.com)
+    group = DriveGroup.from_config(bus, cfg.bus)
+    bus.open()
+    group.configure(cfg.bus.drives)
+    group.set_mode(Mode.CSP)
+    group.enable()
+
+    s = cfg.safety
+    stop = StopController.from_config(s.categories)
+    limits = LimitMonitor.from_config(s.limits, model.limits)
+    health = BusHealth(
+        model.n,
+        s.bus.lost_cycles,
+        int(State.OPERATION_ENABLED),
+        (int(State.FAULT_REACTION_ACTIVE), int(State.FAULT), int(State.UNKNOWN)),
+    )
+    collision = CollisionLevels(s.collision, names, model) if s.collision else None
+    accel = np.where(np.isfinite(model.limits.acceleration), model.limits.acceleration, 10.0)
+    p = cfg.run.path
+    path = DemoPath(p.amplitude, p.period, p.phase, p.ramp) if p is not None else None
+    motion = JointMotion(model.n, accel, path)
+    tick = Tick(
+        group,
+        observers,
+        stop,
+        limits,
+        health,
+        collision,
+        motion,
+        model.create_data(),
+        sink,
+        overrun_limit=s.overrun_streak,
+    )
+    tick.diag_every = max(1, round(rate / 10.0))
+    tick.start()
+    period_ns = round(1e9 / rate)
+    clk: RealClock | SimClock = SimClock(period_ns) if clock == "sim" else RealClock(period_ns)
+    loop = Loop(tick, clk)
+    if not clk.sim:
+        loop.data_dt = 1.0 / rate  # SimBus in real time: one plant cycle per exchange
+    system = System(cfg, model, bus, group, tick, loop, clk, sink, rate)
+    system.observer_names = names
+    if contact and cfg.run.collision is not None:
+        system.contact = _script_contact(system)
+    return system
+
+
+def _script_contact(system: System) -> ScriptedContact:
+    """Add run.collision to the simulated world, timed from now (the loop's t = 0)."""
+    c = system.cfg.run.collision
+    assert c is not None
+    plant = system.bus.plant
+    n = system.model.n
+    start = plant.t + c.start
+    amp = [0.0] * n
+    slope = [0.0] * n
+    slope[c.joint] = c.peak / c.rise_time
+    amp_hold = [0.0] * n
+    amp_hold[c.joint] = c.peak
+    comps = plant.external.components
+    comps.append(
+        ExternalTorqueConfig(
+            kind="ramp", start=start, duration=c.rise_time, amplitude=amp, slope=slope
+        )
+    )
+    comps.append(
+        ExternalTorqueConfig(
+            kind="constant", start=start + c.rise_time, duration=c.hold, amplitude=amp_hold
+        )
+    )
+    dt = 1.0 / system.rate_hz
+    onset_tick = math.floor(c.start / dt + 1e-9) + 1
+    return ScriptedContact(c.joint, c.peak, c.start, onset_tick)

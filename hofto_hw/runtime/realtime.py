@@ -1,0 +1,145 @@
+"""Real-time setup of the loop thread and absolute-deadline sleeping.
+
+- :func:`sleep_until` sleeps to an absolute CLOCK_MONOTONIC deadline with libc's
+  clock_nanosleep(TIMER_ABSTIME) through ctypes (Python has no time.clock_nanosleep), so a
+  late wake-up does not shift later deadlines.
+- :func:`setup` applies ``loop.realtime``: SCHED_FIFO at ``loop.priority`` for the calling
+  thread, mlockall(MCL_CURRENT | MCL_FUTURE), CPU affinity. ``required`` raises ConfigError
+  naming the missing capability; ``preferred`` warns once and goes on; ``off`` tries nothing.
+- :func:`quiet_gc` freezes the objects built at start-up and disables the collector for the
+  loop (no collection pause inside a tick).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import gc
+import os
+import sys
+from dataclasses import dataclass, field
+
+from hofto_hw.errors import ConfigError
+
+CLOCK_MONOTONIC = 1
+TIMER_ABSTIME = 1
+MCL_CURRENT, MCL_FUTURE = 1, 2
+EINTR = 4
+
+_libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+
+
+class _Timespec(ctypes.Structure):
+    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+
+_clock_nanosleep = _libc.clock_nanosleep
+_clock_nanosleep.argtypes = [
+    ctypes.c_int,
+    ctypes.c_int,
+    ctypes.POINTER(_Timespec),
+    ctypes.POINTER(_Timespec),
+]
+_clock_nanosleep.restype = ctypes.c_int
+_deadline = _Timespec()
+_deadline_ref = ctypes.byref(_deadline)
+
+
+def sleep_until(deadline_ns: int) -> None:
+    """Sleep until CLOCK_MONOTONIC reaches ``deadline_ns`` (time.monotonic_ns() scale)."""
+    _deadline.tv_sec = deadline_ns // 1_000_000_000
+    _deadline.tv_nsec = deadline_ns % 1_000_000_000
+    while _clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, _deadline_ref, None) == EINTR:
+        pass  # a signal handler ran; the deadline is absolute, so simply sleep again
+
+
+@dataclass
+class RealtimeReport:
+    """What :func:`setup` achieved; ``missing`` names what could not be had."""
+
+    fifo: bool = False
+    locked: bool = False
+    cpus: list[int] | None = None
+    missing: list[str] = field(default_factory=list)
+
+    def describe(self) -> str:
+        parts = [
+            "SCHED_FIFO" if self.fifo else "SCHED_OTHER",
+            "memory locked" if self.locked else "memory not locked",
+        ]
+        if self.cpus is not None:
+            parts.append(f"CPUs {self.cpus}")
+        return ", ".join(parts)
+
+
+def _try_fifo(priority: int) -> str | None:
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except PermissionError:
+        return f"CAP_SYS_NICE (or RLIMIT_RTPRIO >= {priority}) for SCHED_FIFO priority {priority}"
+    except OSError as exc:
+        return f"SCHED_FIFO priority {priority}: {exc.strerror}"
+    return None
+
+
+def _try_mlockall() -> str | None:
+    if _libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
+        err = ctypes.get_errno()
+        if err in (1, 12):  # EPERM, ENOMEM (RLIMIT_MEMLOCK too small)
+            return "CAP_IPC_LOCK (or RLIMIT_MEMLOCK unlimited) for mlockall"
+        return f"mlockall: {os.strerror(err)}"
+    return None
+
+
+def setup(mode: str, priority: int, cpus: list[int] | None) -> RealtimeReport:
+    """Apply ``loop.realtime`` to the calling thread (see module docstring)."""
+    rep = RealtimeReport()
+    if mode == "off":
+        return rep
+    for problem in (_try_fifo(priority), _try_mlockall()):
+        if problem is not None:
+            rep.missing.append(problem)
+    rep.fifo = os.sched_getscheduler(0) == os.SCHED_FIFO
+    rep.locked = not any("mlockall" in m for m in rep.missing)
+    if cpus:
+        try:
+            os.sched_setaffinity(0, cpus)
+            rep.cpus = sorted(os.sched_getaffinity(0))
+        except OSError as exc:
+            rep.missing.append(f"CPU affinity {cpus}: {exc.strerror}")
+    if rep.missing and mode == "required":
+        raise ConfigError(
+            "loop.realtime: required, but this process lacks "
+            + "; ".join(rep.missing)
+            + " (run as the service user with AmbientCapabilities, or set loop.realtime: "
+            "preferred)"
+        )
+    if rep.missing:
+        print(
+            "hofto-hw: warning: real-time setup incomplete, running without "
+            + "; ".join(rep.missing),
+            file=sys.stderr,
+        )
+    return rep
+
+
+def drop_realtime() -> None:
+    """Back to SCHED_OTHER (after the loop, for the slow shutdown work)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except OSError:
+        pass
+
+
+class quiet_gc:
+    """Context: gc.freeze() + gc.disable() inside, gc.enable() after."""
+
+    def __enter__(self) -> quiet_gc:
+        gc.collect()
+        gc.freeze()
+        gc.disable()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        gc.enable()
+        gc.unfreeze()

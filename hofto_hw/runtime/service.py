@@ -1,0 +1,230 @@
+"""The service side of ``hofto-hw run``: the local control socket and the systemd supervisor.
+
+:class:`ControlServer` serves an AF_UNIX stream socket (mode 0660, no network listener) in a
+daemon thread: one request line, one JSON reply line. Requests: ``status``, ``reset``,
+``stop``, ``mode hold|move``. The thread only reads the tick's state and sets its request
+flags (one writer each), so it cannot stall a tick. A path that exists and is not a stale
+socket is refused: the server never unlinks anything else.
+
+:class:`Supervisor` sends sd_notify READY once, STATUS every ``status_interval``, WATCHDOG at
+the interval systemd asked for but only while the loop finished a tick since the last pet
+(a hung loop stops the pets and systemd kills the service), and STOPPING at the end.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import stat
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from hofto_hw.control.joint_motion import HOLD, MODE_NAMES, MOVE
+from hofto_hw.errors import UserError
+from hofto_hw.runtime.notify import Notifier, NotifyError, Watchdog
+
+
+def _prepare_path(path: Path) -> None:
+    """Remove a stale socket at ``path``; refuse a live one or anything that is not a socket."""
+    try:
+        st = path.lstat()
+    except FileNotFoundError:
+        return
+    if not stat.S_ISSOCK(st.st_mode):
+        raise UserError(f"control socket {path}: exists and is not a socket; not touching it")
+    probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        probe.connect(str(path))
+    except OSError:
+        path.unlink()  # a socket nobody listens on: stale
+        return
+    finally:
+        probe.close()
+    raise UserError(f"control socket {path}: another hofto-hw run is serving it")
+
+
+def status_of(system: Any) -> dict[str, Any]:
+    """The state a ``status`` request answers (slow path)."""
+    tick, loop = system.tick, system.loop
+    stop = tick.stop
+    if tick.exit_requested:
+        state = "stopping"
+    elif stop.stopping():
+        state = "stopped"
+    elif tick.enabling:
+        state = "enabling"
+    else:
+        state = "running"
+    return {
+        "state": state,
+        "mode": MODE_NAMES.get(tick.motion.mode, "?"),
+        "category": int(stop.category),
+        "faults": stop.latched_names(),
+        "persisting": stop.persisting(),
+        "ticks": int(loop.ticks),
+        "overruns": int(tick.overruns),
+        "timing_us": {"compute": loop.compute.summary(), "wakeup": loop.wakeup.summary()},
+        "log": getattr(system, "log_path", None),
+    }
+
+
+class ControlServer:
+    """See the module docstring."""
+
+    def __init__(self, path: Path, system: Any, mode: int = 0o660) -> None:
+        self.path = Path(path)
+        self.system = system
+        if not self.path.parent.is_dir():
+            raise UserError(f"control socket {path}: folder {self.path.parent} does not exist")
+        _prepare_path(self.path)
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
+        old = os.umask(0o177)  # never world-accessible, not even between bind and chmod
+        try:
+            self.sock.bind(str(self.path))
+        finally:
+            os.umask(old)
+        os.chmod(self.path, mode)
+        self.sock.listen(4)
+        self.sock.settimeout(0.2)
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._serve, name="hofto-control", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def close(self) -> None:
+        self._done.set()
+        self._thread.join(timeout=2.0)
+        self.sock.close()
+        try:
+            if stat.S_ISSOCK(self.path.lstat().st_mode):
+                self.path.unlink()
+        except FileNotFoundError:
+            pass
+
+    def _serve(self) -> None:
+        while not self._done.is_set():
+            try:
+                conn, _ = self.sock.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            with conn:
+                conn.settimeout(2.0)
+                try:
+                    line = conn.makefile("r").readline().strip()
+                    reply = self.handle(line)
+                    conn.sendall((json.dumps(reply) + "\n").encode())
+                except OSError:
+                    continue
+
+    def handle(self, line: str) -> dict[str, Any]:
+        """Answer one request line."""
+        tick = self.system.tick
+        words = line.split()
+        if not words:
+            return {"ok": False, "error": "empty request"}
+        cmd = words[0]
+        if cmd == "status":
+            return {"ok": True, **status_of(self.system)}
+        if cmd == "stop":
+            tick.stop_requested = True
+            return {"ok": True, "message": "stop requested"}
+        if cmd == "reset":
+            if not tick.exit_requested and tick.stop_requested:
+                tick.stop_requested = False  # an operator stop ends with its reset
+                seen = self.system.loop.ticks
+                end = time.monotonic() + 2.0
+                while self.system.loop.ticks < seen + 2 and time.monotonic() < end:
+                    time.sleep(0.002)  # two ticks: the request is no longer a present cause
+            tick.reset_result = ""
+            tick.reset_requested = True
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline:
+                r = tick.reset_result
+                if r and r != "resetting drive faults":
+                    return {"ok": not r.startswith("reset refused"), "message": r}
+                time.sleep(0.005)
+            return {"ok": False, "message": "the loop did not answer the reset"}
+        if cmd == "mode" and len(words) == 2 and words[1] in ("hold", "move"):
+            if tick.stop.stopping():
+                return {"ok": False, "message": "a stop is latched: reset first"}
+            tick.mode_request = MOVE if words[1] == "move" else HOLD
+            return {"ok": True, "message": f"mode {words[1]} requested"}
+        return {
+            "ok": False,
+            "error": f"unknown request {line!r} (status, reset, stop, mode hold|move)",
+        }
+
+
+class Supervisor:
+    """sd_notify READY/STATUS/WATCHDOG/STOPPING for ``loop`` (see the module docstring).
+
+    Sending is :class:`~hofto_hw.runtime.notify.Notifier`'s, petting is
+    :class:`~hofto_hw.runtime.notify.Watchdog`'s with the loop's ``alive_ns`` as heartbeat;
+    a failed send is counted (``errors``, ``last_error``), never raised into the service.
+    """
+
+    def __init__(
+        self,
+        system: Any,
+        fraction: float = 0.5,
+        status_interval: float = 1.0,
+        status: Any = status_of,
+    ):
+        self.system = system
+        self.status = status
+        self.notifier = Notifier()
+        self.watchdog = Watchdog(self.notifier, lambda: system.loop.alive_ns, fraction)
+        self.interval = self.watchdog.interval
+        self.status_interval = status_interval
+        self.errors = 0
+        self.last_error = ""
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="hofto-notify", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._done.set()
+        self._thread.join(timeout=2.0)
+        self.watchdog.stop()
+        self._send("STOPPING=1")
+
+    def _send(self, message: str) -> None:
+        try:
+            self.notifier.send(message)
+        except NotifyError as exc:
+            self.errors += 1
+            self.last_error = str(exc)
+
+    def _run(self) -> None:
+        loop = self.system.loop
+        while loop.alive_ns == 0 and not self._done.wait(0.01):
+            pass  # READY only once the loop has run a tick
+        self._send("READY=1")
+        self.watchdog.start()  # pets only while the loop finished a tick since the last pet
+        next_status = 0.0
+        stopping_sent = False
+        step = min(self.interval or self.status_interval, self.status_interval)
+        while not self._done.wait(step):
+            if self.system.tick.exit_requested and not stopping_sent:
+                self._send("STOPPING=1")
+                stopping_sent = True
+            now = time.monotonic()
+            tick = getattr(self.system, "tick", None)
+            if tick is not None and hasattr(loop, "wakeup"):
+                tick.wakeup_p99_us = loop.wakeup.percentile(99.0)  # for the diag records
+                tick.compute_p99_us = loop.compute.percentile(99.0)
+            if now >= next_status:
+                s = self.status(self.system)
+                self._send(
+                    f"STATUS={s['state']}, {s['ticks']} ticks, faults: "
+                    f"{', '.join(s['faults']) or 'none'}"
+                )
+                next_status = now + self.status_interval

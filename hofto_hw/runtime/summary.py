@@ -1,0 +1,129 @@
+"""The run summary (slow path, after the loop): the keys of ``--summary-json`` and the words.
+
+Keys: ticks, rate_hz, overruns, timing_us.{compute,wakeup}.{median,p99,p999,max}, events
+[{t, tick, kind, joint, category, detection_delay_ms, stopping_time_ms,
+stopping_distance_rad}], observers {name: detection delay [ms] of the scripted collision},
+log (path), plus realtime and clock.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from drivers.cia402.codes import describe_error_code
+from safety.stop import EventKind, Fault, kind_name
+
+_CATEGORY_WORDS = {
+    0: "category 0 (power removed at once)",
+    1: "category 1 (quick-stop ramp, then power removed)",
+    2: "category 2 (controlled stop, power kept)",
+}
+
+
+def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]:
+    """The summary dictionary of a finished run of ``system`` (hofto_hw.runtime.compose)."""
+    tick, loop = system.tick, system.loop
+    dt = 1.0 / system.rate_hz
+    contact = system.contact
+    mon = tick.collision
+    observers: dict[str, float | None] = {}
+    for r, name in enumerate(system.observer_names):
+        first = -1 if mon is None else int(mon.first_tick[r])
+        observers[name] = (
+            None
+            if contact is None or first < 0
+            else round((first * dt - contact.start) * 1000.0, 3)
+        )
+    ev = tick.stop.events
+    stops = {
+        int(tick.stop_tick[i]): (float(tick.stop_time[i]), float(tick.stop_distance[i]))
+        for i in range(tick.n_stops)
+    }
+    episode: tuple[float, float] | None = None
+    events = []
+    for i in range(max(0, ev.count - ev.capacity), ev.count):
+        j = i % ev.capacity
+        kind, k = int(ev.kind[j]), int(ev.tick[j])
+        if kind == EventKind.STANDSTILL:
+            continue
+        if k in stops:
+            episode = stops[k]
+        entry: dict[str, Any] = {
+            "t": round(k * dt, 6),
+            "tick": k,
+            "kind": kind_name(kind),
+            "joint": int(ev.joint[j]),
+            "category": int(ev.category[j]),
+            "detection_delay_ms": None,
+            "stopping_time_ms": None,
+            "stopping_distance_rad": None,
+            "value": float(ev.value[j]),
+        }
+        if kind == Fault.COLLISION and contact is not None and k * dt >= contact.start:
+            entry["detection_delay_ms"] = round((k * dt - contact.start) * 1000.0, 3)
+        if kind == Fault.DRIVE_FAULT:
+            entry["detail"] = describe_error_code(int(ev.value[j]))
+        if kind < len(Fault) and entry["category"] >= 0 and episode is not None:
+            t_stop, d_stop = episode
+            if np.isfinite(t_stop):
+                entry["stopping_time_ms"] = round(t_stop * 1000.0, 1)
+                entry["stopping_distance_rad"] = round(d_stop, 5)
+        events.append(entry)
+    return {
+        "ticks": int(loop.ticks),
+        "rate_hz": float(system.rate_hz),
+        "clock": "sim" if system.clock.sim else "real",
+        "realtime": realtime,
+        "overruns": int(tick.overruns),
+        "timing_us": {"compute": loop.compute.summary(), "wakeup": loop.wakeup.summary()},
+        "events": events,
+        "observers": observers,
+        "latched": tick.stop.latched_names(),
+        "log": log,
+    }
+
+
+def format_summary(s: dict[str, Any]) -> str:
+    """The same summary in words."""
+    lines = [
+        f"ran {s['ticks']} ticks at {s['rate_hz']:.0f} Hz ({s['clock']} clock; {s['realtime']}), "
+        f"{s['overruns']} missed deadlines"
+    ]
+    obs = s["observers"]
+    if obs:
+        shown = ", ".join(
+            f"{name} {'not detected' if d is None else f'{d:.1f} ms'}" for name, d in obs.items()
+        )
+        lines.append(f"detection delay after contact onset: {shown}")
+    for e in s["events"]:
+        if e["kind"] in ("contact", "reset"):
+            continue
+        where = f" on joint {e['joint'] + 1}" if e["joint"] >= 0 else ""
+        text = f"t = {e['t']:.3f} s: {e['kind'].replace('_', ' ')}{where}"
+        if e["category"] >= 0:
+            text += f", {_CATEGORY_WORDS[e['category']]}"
+        if e.get("detail"):
+            text += f" ({e['detail']})"
+        if e["detection_delay_ms"] is not None:
+            text += f", detected {e['detection_delay_ms']:.1f} ms after onset"
+        if e["stopping_time_ms"] is not None:
+            text += (
+                f"; stopped in {e['stopping_time_ms']:.0f} ms over "
+                f"{e['stopping_distance_rad']:.4f} rad"
+            )
+        lines.append(text)
+    if not s["events"]:
+        lines.append("no safety events")
+    c, w = s["timing_us"]["compute"], s["timing_us"]["wakeup"]
+    lines.append(
+        f"tick compute median {c['median']:.0f} µs, p99 {c['p99']:.0f} µs, max {c['max']:.0f} µs"
+    )
+    if s["clock"] == "real":
+        lines.append(
+            f"wake-up latency median {w['median']:.0f} µs, p99 {w['p99']:.0f} µs, "
+            f"p99.9 {w['p999']:.0f} µs, max {w['max']:.0f} µs"
+        )
+    lines.append(f"log: {s['log'] or 'not written'}")
+    return "\n".join(lines)

@@ -1,0 +1,356 @@
+"""One control tick, top to bottom (hot path: no allocation, no formatting, no I/O):
+
+exchange -> joint state (SI) -> observers -> safety -> controller -> command -> record.
+
+The :class:`Tick` owns every buffer it writes; the loop (hofto_hw/runtime/loop.py) calls
+:meth:`Tick.step` once per cycle with the real dt. Requests from other threads (stop, reset,
+mode) are plain attributes the tick reads: one writer each, no locks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from drivers.cia402 import state_machine as sm
+from drivers.cia402.drive_group import DriveGroup
+from drivers.cia402.state_machine import State
+from hofto_hw.control.joint_motion import MOVE, JointMotion
+from hofto_hw.model.data import ModelData
+from hofto_hw.observers.base import Observer
+from hofto_hw.recording.record import (
+    DIAG_DTYPE,
+    EVENT_DTYPE,
+    RecordSink,
+    new_record,
+    tick_dtype,
+)
+from safety.bus_health import BusHealth
+from safety.collision_levels import CollisionLevels
+from safety.limits import LimitMonitor
+from safety.stop import NO_CATEGORY, EventKind, Fault, StopController
+
+_OE = int(State.OPERATION_ENABLED)
+_QSA = int(State.QUICK_STOP_ACTIVE)
+_FRA = int(State.FAULT_REACTION_ACTIVE)
+_FAULT = int(State.FAULT)
+STANDSTILL = 0.01  # rad/s: every joint slower than this counts as stopped
+MAX_STOPS = 256  # stop episodes kept for the summary
+FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
+_DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
+
+
+class Tick:
+    """See the module docstring. ``observers`` are evaluated in order; their estimates are
+    rows of ``tau_ext`` (k, n) and of the tick record."""
+
+    def __init__(
+        self,
+        group: DriveGroup,
+        observers: Sequence[Observer],
+        stop: StopController,
+        limits: LimitMonitor,
+        bus: BusHealth,
+        collision: CollisionLevels | None,
+        motion: JointMotion,
+        feedforward: ModelData,
+        sink: RecordSink,
+        overrun_limit: int = 20,
+    ) -> None:
+        n = group.n
+        self.n = n
+        self.group = group
+        self.observers = list(observers)
+        self.names = [o.name for o in self.observers]
+        self.stop = stop
+        self.limits = limits
+        self.bus = bus
+        self.collision = collision
+        self.motion = motion
+        self.feedforward = feedforward
+        self.sink = sink
+        self.overrun_limit = int(overrun_limit)
+        self.tick = 0
+        self.t = 0.0
+        self.tau_ext = np.zeros((max(1, len(self.observers)), n))
+        self.tau_ff = np.zeros(n)
+        self.q_sent = np.zeros(n)  # position target of the last command [rad]
+        self.err_codes = group.transport.tx["error_code"]
+        self.controlword = group.transport.rx["controlword"]
+        self.expect_enabled = False
+        self.enabling = False
+        self.overrun_streak = 0
+        self.overruns = 0
+        # requests from other threads (one writer each)
+        self.stop_requested = False  # operator stop or SIGTERM: a STOP_REQUEST fault
+        self.exit_requested = False  # SIGTERM/SIGINT: the process ends once stopped
+        self.reset_requested = False
+        self.reset_result = ""
+        self.mode_request = -1
+        self._fault_resetting = 0
+        self._edges_tried = False
+        # stop episodes: first tick, time and distance to standstill
+        self.stop_tick = np.full(MAX_STOPS, -1, dtype=np.int64)
+        self.stop_time = np.full(MAX_STOPS, np.nan)
+        self.stop_distance = np.full(MAX_STOPS, np.nan)
+        self.n_stops = 0
+        self._measuring = False
+        self._t_detect = 0.0
+        self._q_detect = np.zeros(n)
+        self._d = np.zeros(n)
+        self._cw = np.zeros(n, dtype=np.uint16)
+        self._fin = np.zeros(n, dtype=bool)
+        # records (preallocated; field views fetched once)
+        self.tick_rec = new_record(tick_dtype(n, len(self.observers)))
+        self.event_rec = new_record(EVENT_DTYPE)
+        self.diag_rec = new_record(DIAG_DTYPE)
+        self.diag_every = 100  # ticks between diagnostics records (10 Hz at 1 kHz)
+        #: percentiles for the diagnostics record, written by a slow-path thread (µs)
+        self.wakeup_p99_us = 0.0
+        self.compute_p99_us = 0.0
+        r = self.tick_rec
+        self._r = {k: r[k] for k in ("q", "qd", "tau", "q_cmd", "tau_ext")}
+        r["wrench"][...] = np.nan
+        self._events_pushed = 0
+
+    # --------------------------------------------------------------- start-up
+
+    def start(self) -> None:
+        """After the drives are enabled: hold the measured position, reset every estimator."""
+        g = self.group
+        g.cycle()
+        self.motion.start(g.q)
+        np.copyto(self.q_sent, g.q)
+        for obs in self.observers:
+            obs.reset(g.q, g.qd)
+        self.limits.reset(g.q)
+        if self.collision is not None:
+            self.collision.reset()
+        self.expect_enabled = g.all_in(State.OPERATION_ENABLED)
+
+    # ------------------------------------------------------------------ the tick
+
+    def step(self, t: float, dt: float, wakeup_us: float, missed: int, compute_us: float) -> None:
+        """One cycle at loop time ``t`` [s], ``dt`` [s] since the last tick (the real one after a
+        stall), ``missed`` deadlines before this tick, timings of the loop [µs]."""
+        g, stop, motion = self.group, self.stop, self.motion
+        self.tick += 1
+        self.t = t
+        stop.begin_tick(self.tick)
+
+        # 1. exchange and 2. joint state in SI (views of the drive group's buffers)
+        status = g.cycle()
+        fresh = g.fresh
+        q, qd, tau = g.q, g.qd, g.tau
+
+        # 3. observers (HOFTO, momentum): each writes its own row
+        for i, obs in enumerate(self.observers):
+            np.copyto(self.tau_ext[i], obs.update(q, qd, tau, dt))
+
+        # 4. safety: decides, latches, picks the stop category
+        good = self.bus.check(stop, status, fresh, g.states, self.err_codes, self.expect_enabled)
+        lim = self.limits
+        ok = lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau)
+        for i in range(len(self.observers)):
+            ok &= lim.finite(stop, self.tau_ext[i])
+        powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
+        lim.check(stop, q, qd, tau, self.q_sent, good, powered)
+        if self.collision is not None and ok and self._power_on(g.states):
+            # only while the power stage is on (quick-stop ramps included): with it off the
+            # brakes act and the motor torque no longer explains the motion
+            self.collision.update(stop, self.tau_ext, q, qd, motion.qdd, dt)
+        self._overrun(missed)
+        if self.stop_requested:
+            stop.report(Fault.STOP_REQUEST)
+        if self.reset_requested:
+            self._reset()
+        self._measure_stop(q, qd)
+
+        # 5. controller and 6. command (acting the stop category)
+        cat = stop.category
+        if cat == 0 or cat == 1:
+            self.expect_enabled = False
+            self.enabling = False
+            if cat == 0:
+                g.command_disable_voltage()
+            else:
+                g.command_quick_stop()
+            if self._fault_resetting > 0:
+                self._fault_reset_edge()
+            motion.start(q)  # targets follow the arm: bumpless when enabled again
+        else:
+            if cat == 2:
+                motion.ramp_down()
+            elif self.mode_request >= 0:
+                self._change_mode()
+            if self.enabling:
+                self._enable_step()
+            motion.update(t, dt)
+        self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
+        g.command_position(motion.q, self.tau_ff)
+        np.copyto(self.q_sent, motion.q)
+
+        # 7. copy into the log sink
+        self._record(status, wakeup_us, compute_us)
+
+    # ------------------------------------------------------------- tick helpers
+
+    def _overrun(self, missed: int) -> None:
+        if missed > 0:
+            self.overruns += missed
+            self.overrun_streak += missed
+        else:
+            self.overrun_streak = 0
+        if self.overrun_streak >= self.overrun_limit:
+            self.stop.report(Fault.OVERRUN, -1, float(self.overrun_streak))
+
+    def _power_on(self, states: np.ndarray) -> bool:
+        if self.enabling:
+            return False
+        for s in states:  # a quick-stop ramp keeps the power on until each axis rests
+            if s == _OE or s == _QSA:
+                return True
+        return False
+
+    def _measure_stop(self, q: np.ndarray, qd: np.ndarray) -> None:
+        """Stopping time [s] and distance [rad, max over joints] from the latch to rest."""
+        stop = self.stop
+        if stop.first_tick == self.tick and self.n_stops < MAX_STOPS:
+            self._measuring = True
+            self._t_detect = self.t
+            np.copyto(self._q_detect, q)
+            self.stop_tick[self.n_stops] = self.tick
+            self.n_stops += 1
+        if not self._measuring:
+            return
+        np.abs(qd, out=self._d)
+        if self._d.max() < STANDSTILL:
+            i = self.n_stops - 1
+            self.stop_time[i] = self.t - self._t_detect
+            np.subtract(q, self._q_detect, out=self._d)
+            np.abs(self._d, out=self._d)
+            self.stop_distance[i] = self._d.max()
+            stop.note(EventKind.STANDSTILL, -1, self.stop_time[i])
+            self._measuring = False
+
+    def _reset(self) -> None:
+        """Process a reset request (rare: may allocate the result message).
+
+        A latched drive fault whose drive still shows Fault first gets fault-reset edges for
+        FAULT_RESET_TICKS ticks (the drive leaves Fault only if its cause is gone); then the
+        reset is tried once more and refused if any cause persists."""
+        self.reset_requested = False
+        done, msg = self.stop.reset()
+        if not done and not self._edges_tried and self.stop.active & _DRIVE_CAUSES:
+            if not self.stop.active & self.stop.latched & ~_DRIVE_CAUSES:
+                self._fault_resetting = FAULT_RESET_TICKS
+                self.reset_result = "resetting drive faults"
+                return
+        self._edges_tried = False
+        self.reset_result = msg
+        if not done:
+            return
+        g = self.group
+        for obs in self.observers:
+            obs.reset(g.q, g.qd)
+        self.limits.reset(g.q)
+        if self.collision is not None:
+            self.collision.reset()
+        self.motion.start(g.q)
+        if not g.all_in(State.OPERATION_ENABLED):
+            self.enabling = True
+
+    def _enable_step(self) -> None:
+        """Walk every axis toward Operation enabled, one controlword per tick (bumpless:
+        targets hold the measured position); a faulted axis gets a fault-reset edge."""
+        g = self.group
+        if g.all_in(State.OPERATION_ENABLED):
+            self.enabling = False
+            self.expect_enabled = True
+            self.motion.start(g.q)
+            return
+        sm.controlwords_toward_no_reset(g.states, State.OPERATION_ENABLED, self._cw)
+        if self.tick & 1:
+            for i in range(self.n):
+                if g.states[i] == _FAULT:
+                    self._cw[i] = sm.CW_FAULT_RESET
+        np.copyto(self.controlword, self._cw)
+        self.motion.start(g.q)
+
+    def _fault_reset_edge(self) -> None:
+        """Rising edges of controlword bit 7 on faulted axes; then retry the reset."""
+        self._fault_resetting -= 1
+        if self._fault_resetting == 0:
+            self._edges_tried = True
+            self.reset_requested = True
+            return
+        if self.tick & 1:
+            g = self.group
+            for i in range(self.n):
+                if g.states[i] == _FAULT:
+                    self.controlword[i] = sm.CW_FAULT_RESET
+
+    def _change_mode(self) -> None:
+        want = self.mode_request
+        self.mode_request = -1
+        if want == MOVE:
+            if self.expect_enabled and not self.enabling:
+                self.motion.move(self.t)
+        else:
+            self.motion.ramp_down()
+
+    def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
+        r, v = self.tick_rec, self._r
+        r["t"] = self.t
+        r["tick"] = self.tick
+        np.copyto(v["q"], self.group.q)
+        np.copyto(v["qd"], self.group.qd)
+        np.copyto(v["tau"], self.group.tau)
+        np.copyto(v["q_cmd"], self.motion.q)
+        np.copyto(v["tau_ext"], self.tau_ext)
+        r["mode"] = self.motion.mode
+        r["faults"] = self.stop.latched
+        r["bus_status"] = status
+        r["wakeup_us"] = wakeup_us
+        r["compute_us"] = compute_us
+        self.sink.push_tick(r)
+        ev = self.stop.events
+        while self._events_pushed < ev.count:
+            i = self._events_pushed % ev.capacity
+            e = self.event_rec
+            e["t"] = self.t
+            e["tick"] = ev.tick[i]
+            e["kind"] = ev.kind[i]
+            e["joint"] = ev.joint[i]
+            e["category"] = ev.category[i]
+            e["value"] = ev.value[i]
+            self.sink.push_event(e)
+            self._events_pushed += 1
+        if self.tick % self.diag_every == 0:
+            self._diag()
+
+    def _diag(self) -> None:
+        d = self.diag_rec
+        d["t"] = self.t
+        d["ticks"] = self.tick
+        d["overruns"] = self.overruns
+        d["wakeup_p99_us"] = self.wakeup_p99_us
+        d["compute_p99_us"] = self.compute_p99_us
+        d["bus_errors"] = self.bus.lost_total
+        d["dropped_records"] = self.sink.dropped
+        self.sink.push_diag(d)
+
+    # ------------------------------------------------------------------- queries
+
+    def stopped_and_off(self) -> bool:
+        """True when a category 0/1 stop has taken every drive out of its powered states."""
+        if self.stop.category not in (0, 1):
+            return False
+        for s in self.group.states:
+            if s == _OE or s == _QSA or s == _FRA:
+                return False
+        return True
+
+    def category(self) -> int:
+        return int(self.stop.category) if self.stop.category != NO_CATEGORY else -1

@@ -1,0 +1,63 @@
+"""Bus supervision: lost or stale exchanges, drive faults and drives that left Operation
+enabled. Decides only: the loop reads the drive states and passes them in.
+
+- bus loss: ``lost_cycles`` consecutive exchanges whose status is not ok or whose data is not
+  fresh (lost frame, working-counter mismatch, missing TPDO, stale data);
+- drive fault: an axis in Fault or Fault reaction active (the 0x603F code from the TxPDO
+  goes into the event's value; it is decoded in words on the slow path);
+- drive disabled: an axis that is not Operation enabled while the loop expects it to be.
+
+The CiA 402 state codes come from the caller (safety does not import drivers/).
+Allocation-free per tick.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from safety.stop import Fault, StopController
+
+
+class BusHealth:
+    """``op_enabled``: the Operation-enabled state code; ``fault_states``: codes that count
+    as a drive fault (Fault, Fault reaction active, unknown)."""
+
+    def __init__(self, n: int, lost_cycles: int, op_enabled: int, fault_states: tuple[int, ...]):
+        self.n = n
+        self.lost_cycles = int(lost_cycles)
+        self.op_enabled = int(op_enabled)
+        self.fault_min = int(min(fault_states))
+        self.streak = 0
+        self.lost_total = 0
+        self._m = np.zeros(n, dtype=bool)
+
+    def check(
+        self,
+        stop: StopController,
+        status: int,
+        fresh: bool,
+        states: np.ndarray,
+        error_codes: np.ndarray,
+        expect_enabled: bool,
+    ) -> bool:
+        """One tick; returns whether this exchange brought good data."""
+        good = status == 0 and fresh
+        if good:
+            self.streak = 0
+        else:
+            self.streak += 1
+            self.lost_total += 1
+            if self.streak >= self.lost_cycles:
+                stop.report(Fault.BUS_LOSS, -1, float(status))
+            return False  # states are stale: judge the drives on fresh data only
+        m = self._m
+        np.greater_equal(states, self.fault_min, out=m)
+        if m.any():
+            j = int(np.argmax(m))
+            stop.report(Fault.DRIVE_FAULT, j, float(error_codes[j]))
+        elif expect_enabled:
+            np.not_equal(states, self.op_enabled, out=m)
+            if m.any():
+                j = int(np.argmax(m))
+                stop.report(Fault.DRIVE_DISABLED, j, float(states[j]))
+        return True

@@ -1,0 +1,94 @@
+"""LimitMonitor and BusHealth report the first offending joint to the StopController."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hofto_hw.config.safety import StopCategories
+from safety.bus_health import BusHealth
+from safety.limits import LimitMonitor
+from safety.stop import Fault, StopController
+
+N = 3
+
+
+def _mon() -> LimitMonitor:
+    return LimitMonitor(
+        np.full(N, -1.0), np.full(N, 1.0), np.full(N, 2.0), np.full(N, 10.0), 0.05, 0.02
+    )
+
+
+def _check(mon: LimitMonitor, q, qd=None, tau=None, q_cmd=None, tracking=True) -> StopController:
+    s = StopController.from_config(StopCategories())
+    s.begin_tick(1)
+    z = np.zeros(N)
+    q = np.asarray(q, float)
+    mon.check(
+        s,
+        q,
+        z if qd is None else np.asarray(qd, float),
+        z if tau is None else np.asarray(tau, float),
+        q if q_cmd is None else np.asarray(q_cmd, float),
+        True,
+        tracking,
+    )
+    return s
+
+
+def test_each_limit_names_its_joint() -> None:
+    mon = _mon()
+    mon.reset(np.zeros(N))
+    assert _check(mon, [0.0, 0.0, 0.0]).latched == 0
+    s = _check(_mon(), [0.0, 1.2, 0.0])
+    assert s.is_latched(Fault.POSITION_LIMIT) and s.events.joint[0] == 1
+    s = _check(_mon(), [0.0] * N, qd=[0.0, 0.0, -2.5])
+    assert s.is_latched(Fault.VELOCITY_LIMIT) and s.events.joint[0] == 2
+    s = _check(_mon(), [0.0] * N, tau=[11.0, 0.0, 0.0])
+    assert s.is_latched(Fault.TORQUE_LIMIT)
+    s = _check(_mon(), [0.0] * N, tau=[11.0, 0.0, 0.0], tracking=False)
+    assert s.latched == 0  # brakes, not the motor, when unpowered
+    s = _check(_mon(), [0.0] * N, q_cmd=[0.0, 0.1, 0.0])
+    assert s.is_latched(Fault.FOLLOWING_ERROR) and s.events.value[0] > 0.05
+
+
+def test_position_jump_between_fresh_samples() -> None:
+    mon = _mon()
+    mon.reset(np.zeros(N))
+    assert _check(mon, [0.01, 0.0, 0.0]).latched == 0
+    s = _check(mon, [0.01, 0.0, 0.05], q_cmd=[0.01, 0.0, 0.05])
+    assert s.is_latched(Fault.POSITION_JUMP) and s.events.joint[0] == 2
+
+
+def test_non_finite_is_reported_and_does_not_poison() -> None:
+    mon = _mon()
+    s = StopController.from_config(StopCategories())
+    s.begin_tick(1)
+    assert not mon.finite(s, np.array([0.0, np.nan, 0.0]))
+    assert s.is_latched(Fault.NON_FINITE) and s.events.joint[0] == 1
+    assert mon.finite(s, np.zeros(N))
+
+
+def test_bus_loss_after_a_streak_and_drive_states() -> None:
+    s = StopController.from_config(StopCategories())
+    bh = BusHealth(N, 3, 4, (6, 7, 8))
+    states = np.full(N, 4, dtype=np.uint8)
+    codes = np.zeros(N, dtype=np.uint16)
+    for k in range(2):
+        s.begin_tick(k)
+        assert not bh.check(s, 2, False, states, codes, True)
+    assert s.latched == 0  # two lost cycles: tolerated
+    s.begin_tick(3)
+    assert bh.check(s, 0, True, states, codes, True)  # a good one resets the streak
+    for k in range(3):
+        s.begin_tick(4 + k)
+        bh.check(s, 0, False, states, codes, True)  # stale data counts as lost
+    assert s.is_latched(Fault.BUS_LOSS)
+    s2 = StopController.from_config(StopCategories())
+    states[1] = 7
+    codes[1] = 0x2310
+    bh.check(s2, 0, True, states, codes, True)
+    assert s2.is_latched(Fault.DRIVE_FAULT) and s2.events.value[0] == 0x2310
+    s3 = StopController.from_config(StopCategories())
+    states[1] = 1
+    bh.check(s3, 0, True, states, codes, True)
+    assert s3.is_latched(Fault.DRIVE_DISABLED) and s3.events.joint[0] == 1

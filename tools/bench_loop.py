@@ -1,0 +1,103 @@
+"""Loop timing on the simulated bus in real time: overruns, wake-up latency and tick compute
+(median / p99 / p99.9 / max), CPU % of the loop, at several rates, with and without
+SCHED_FIFO. Prints figures; ``--json`` prints them as JSON; ``--quick`` runs 3 s per case.
+
+    python tools/bench_loop.py --quick
+    python tools/bench_loop.py --seconds 60 --rates 500 1000 2000 --json
+
+Logging on/off: this measures the loop with the in-memory sink (the MCAP writer process of
+the recorder branch adds its own figures).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import resource
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def _case(conn, config: str, rate: float, seconds: float, fifo: bool) -> None:
+    from hofto_hw.config import load_config
+    from hofto_hw.control.joint_motion import MOVE
+    from hofto_hw.runtime import realtime
+    from hofto_hw.runtime.compose import build
+
+    cfg = load_config(config)
+    bus = cfg.bus.model_copy(update={"cycle_time": 1.0 / rate})
+    loop_cfg = cfg.loop.model_copy(update={"rate_hz": rate})
+    cfg = cfg.model_copy(update={"bus": bus, "loop": loop_cfg})
+    rt = realtime.setup("preferred" if fifo else "off", cfg.loop.priority, cfg.loop.cpus)
+    system = build(cfg, clock="real", contact=False)
+    system.tick.mode_request = MOVE
+    r0 = resource.getrusage(resource.RUSAGE_SELF)
+    t0 = time.monotonic()
+    system.loop.run(max_ticks=round(seconds * rate))
+    wall = time.monotonic() - t0
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
+    realtime.drop_realtime()
+    cpu = (r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime) / wall * 100.0
+    system.close()
+    conn.send(
+        {
+            "rate_hz": rate,
+            "sched_fifo": rt.fifo,
+            "seconds": round(wall, 2),
+            "ticks": system.loop.ticks,
+            "overruns": system.tick.overruns,
+            "overrun_pct": round(100.0 * system.tick.overruns / max(1, system.loop.ticks), 3),
+            "faults": system.tick.stop.latched_names(),
+            "wakeup_us": system.loop.wakeup.summary(),
+            "compute_us": system.loop.compute.summary(),
+            "cpu_pct": round(cpu, 1),
+        }
+    )
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--config", default=str(ROOT / "configs" / "er3a.yaml"))
+    p.add_argument("--seconds", type=float, default=60.0)
+    p.add_argument("--rates", type=float, nargs="+", default=[500.0, 1000.0, 2000.0])
+    p.add_argument("--quick", action="store_true", help="3 s per case")
+    p.add_argument("--json", action="store_true")
+    args = p.parse_args()
+    seconds = 3.0 if args.quick else args.seconds
+    results = []
+    for rate in args.rates:
+        for fifo in (True, False):
+            a, b = mp.Pipe()
+            proc = mp.get_context("spawn").Process(
+                target=_case, args=(b, args.config, rate, seconds, fifo)
+            )
+            proc.start()
+            results.append(a.recv())
+            proc.join()
+    if args.json:
+        print(json.dumps(results, indent=2))
+        return 0
+    for r in results:
+        w, c = r["wakeup_us"], r["compute_us"]
+        print(
+            f"{r['rate_hz']:6.0f} Hz {'FIFO ' if r['sched_fifo'] else 'OTHER'} "
+            f"{r['ticks']:7d} ticks, overruns {r['overruns']} ({r['overrun_pct']} %), "
+            f"CPU {r['cpu_pct']} %"
+        )
+        print(
+            f"    wake-up µs median {w['median']:.0f} p99 {w['p99']:.0f} "
+            f"p99.9 {w['p999']:.0f} max {w['max']:.0f}; compute µs median {c['median']:.0f} "
+            f"p99 {c['p99']:.0f} p99.9 {c['p999']:.0f} max {c['max']:.0f}"
+        )
+        if r["faults"]:
+            print(f"    latched: {', '.join(r['faults'])}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
