@@ -97,6 +97,7 @@ def _print_text(report_dict: dict, thresholds: Path | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hofto_hw.commands.backend import observer_backend
     from hofto_hw.replay.plot import plot_replay
     from hofto_hw.replay.session import load_for_replay, run_replay
     from hofto_hw.replay.setup import (
@@ -123,7 +124,9 @@ def run(args: argparse.Namespace) -> int:
         parse_rows(args.rows),
         "drop" if args.drop_bad_rows else None,
     )
-    report = run_replay(setup, rec, args.observer, thresholds, args.merge_gap)
+    report = run_replay(
+        setup, rec, args.observer, thresholds, args.merge_gap, backend=observer_backend()
+    )
     d = report.as_dict()
     if thresholds is not None and thresholds.parameters is not None:
         ref = thresholds.parameters
