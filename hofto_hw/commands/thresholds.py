@@ -61,6 +61,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def _calibrate(args: argparse.Namespace) -> int:
     from hofto_hw.config.collision import CollisionConfig
+    from hofto_hw.commands.backend import observer_backend
     from hofto_hw.replay.calibrate import calibrate
     from hofto_hw.replay.runner import run_observer
     from hofto_hw.replay.session import load_for_replay, observer_for
@@ -82,7 +83,10 @@ def _calibrate(args: argparse.Namespace) -> int:
     entries: dict[str, ObserverThresholds] = {}
     for name in args.observer or CALIBRATED_BY_DEFAULT:
         obs_cfg = observer_config(name, setup)
-        residuals = [run_observer(rec, observer_for(name, obs_cfg, setup, rec)) for rec in recs]
+        residuals = [
+            run_observer(rec, observer_for(name, obs_cfg, setup, rec, observer_backend()))
+            for rec in recs
+        ]
         cal = calibrate(recs, residuals, template, margin=args.margin)
         entries[name] = ObserverThresholds(
             observer=obs_cfg, monitor=cal.config, peak=list(cal.peak), samples=cal.samples

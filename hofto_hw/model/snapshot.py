@@ -96,7 +96,7 @@ class DynamicsSnapshot:
     it; the snapshot reads the Data storage instead).
     """
 
-    def __init__(self, model: RobotModel, needs: Needs | int) -> None:
+    def __init__(self, model: RobotModel, needs: Needs | int, backend: str = "numpy") -> None:
         needs = Needs(needs)
         if needs & Needs.ACCEL:
             needs |= Needs.FRICTION
@@ -132,6 +132,34 @@ class DynamicsSnapshot:
         self._ct = bool(needs & Needs.CORIOLIS_T)
         self._friction = bool(needs & Needs.FRICTION)
         self._accel = bool(needs & Needs.ACCEL)
+        self._kernels = None
+        if backend != "numpy":
+            # the friction and Cᵀ·qd arithmetic as compiled kernels (the observers' module
+            # holds every kernel and the numba availability logic)
+            from hofto_hw.observers import kernels
+
+            if kernels.resolve(backend) == "numba":  # type: ignore[arg-type]
+                self._kernels = kernels
+                fr = model.friction
+                zeros = np.zeros(n)
+                self._fr = (
+                    fr.coulomb,
+                    fr.viscous,
+                    fr.bias,
+                    zeros if fr._stribeck_gap is None else fr._stribeck_gap,
+                    np.ones(n) if fr.stribeck_velocity is None else fr.stribeck_velocity,
+                )
+                if not kernels.warm(self._warm):
+                    self._kernels = None
+        self.backend = "numpy" if self._kernels is None else "numba"
+
+    def _warm(self) -> None:
+        k, n = self._kernels, self.n
+        assert k is not None
+        z = np.zeros(n)
+        fr = self.model.friction
+        k.friction_and_total(z, z, *self._fr, fr.smooth_velocity, True, np.zeros(n), np.zeros(n))
+        k.transposed_mat_vec(self._C, z, np.zeros(n))
 
     def compute(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> bool:
         """Evaluate the needed terms at the sample q [rad], qd [rad/s], tau [N·m] (n,).
@@ -143,33 +171,62 @@ class DynamicsSnapshot:
         self.finite = finite = math.isfinite(_sum(q) + _sum(qd) + _sum(tau))
         if not finite:
             return False
-        pm, pd, copy = self.pin_model, self.pin_data, self._copy
+        pm, pd, fast = self.pin_model, self.pin_data, self._kernels
+        # A pinocchio call's return value (a copy) is dropped at once unless the Data views
+        # are unstable: one transient array at a time.
+        if self._copy:
+            return self._compute_copying(q, qd, tau)
+        if self._friction:
+            if fast is not None:
+                fr = self.model.friction
+                stribeck = fr._stribeck_gap is not None
+                fast.friction_and_total(
+                    qd, tau, *self._fr, fr.smooth_velocity, stribeck, self.f, self._total
+                )
+            else:
+                self.data.friction_torque(qd, out=self.f)
+                np.subtract(tau, self.f, out=self._total)
+        if self._accel:
+            pin.aba(pm, pd, q, qd, self._total)
+        if self._mass:
+            if self._symmetrise:
+                self._symmetric(pin.crba(pm, pd, q))
+            else:
+                pin.crba(pm, pd, q)
+        if self._ct:
+            pin.computeCoriolisMatrix(pm, pd, q, qd)
+            if fast is not None:
+                fast.transposed_mat_vec(self._C, qd, self.ct_qd)
+            else:
+                np.dot(self._C.T, qd, out=self.ct_qd)
+        if self._gravity:
+            pin.computeGeneralizedGravity(pm, pd, q)
+        if self._nle:
+            pin.nonLinearEffects(pm, pd, q, qd)
+        return True
+
+    def _symmetric(self, r: np.ndarray) -> None:
+        M = self.M
+        np.copyto(M, r)
+        np.copyto(self._Mt, M.T)
+        np.copyto(M, self._Mt, where=self._lower)
+
+    def _compute_copying(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> bool:
+        """The same terms for a pinocchio whose Data attributes are no stable views."""
+        pm, pd = self.pin_model, self.pin_data
         if self._friction:
             self.data.friction_torque(qd, out=self.f)
+            np.subtract(tau, self.f, out=self._total)
         if self._accel:
-            total = self._total
-            np.subtract(tau, self.f, out=total)
-            r = pin.aba(pm, pd, q, qd, total)
-            if copy:
-                np.copyto(self.accel, r)
+            np.copyto(self.accel, pin.aba(pm, pd, q, qd, self._total))
         if self._mass:
-            r = pin.crba(pm, pd, q)
-            if self._symmetrise:
-                M = self.M
-                np.copyto(M, r)
-                np.copyto(self._Mt, M.T)
-                np.copyto(M, self._Mt, where=self._lower)
+            self._symmetric(pin.crba(pm, pd, q))
         if self._ct:
-            r = pin.computeCoriolisMatrix(pm, pd, q, qd)
-            np.dot(r.T if copy else self._C.T, qd, out=self.ct_qd)
+            np.dot(pin.computeCoriolisMatrix(pm, pd, q, qd).T, qd, out=self.ct_qd)
         if self._gravity:
-            r = pin.computeGeneralizedGravity(pm, pd, q)
-            if copy:
-                np.copyto(self.g, r)
+            np.copyto(self.g, pin.computeGeneralizedGravity(pm, pd, q))
         if self._nle:
-            r = pin.nonLinearEffects(pm, pd, q, qd)
-            if copy:
-                np.copyto(self.nle, r)
+            np.copyto(self.nle, pin.nonLinearEffects(pm, pd, q, qd))
         return True
 
 

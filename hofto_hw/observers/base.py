@@ -83,8 +83,8 @@ class SnapshotUpdate:
     needs: Needs
     snapshot: DynamicsSnapshot
 
-    def _own_snapshot(self, model: RobotModel) -> None:
-        self.snapshot = DynamicsSnapshot(model, self.needs)
+    def _own_snapshot(self, model: RobotModel, backend: str = "numpy") -> None:
+        self.snapshot = DynamicsSnapshot(model, self.needs, backend)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
         """Advance by dt [s] with the newest samples; return tau_ext_hat [N·m], shape (n,)."""

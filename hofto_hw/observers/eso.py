@@ -115,8 +115,8 @@ class EsoObserver(SnapshotUpdate):
         )
         self._out = np.zeros(n)
         self._guard = SampleGuard(self.n)
-        self._own_snapshot(model)
         self.backend = kernels.resolve(backend)
+        self._own_snapshot(model, self.backend)
         if self.backend == "numba" and not kernels.warm(self._warm):
             self.backend = "numpy"
 

@@ -271,8 +271,8 @@ class HoftoObserver(SnapshotUpdate):
         self.order = self.core.order
         self._out = np.zeros(self.n)
         self._guard = SampleGuard(self.n)
-        self._own_snapshot(model)
         self.backend = kernels.resolve(backend)
+        self._own_snapshot(model, self.backend)
         if self.backend == "numba" and not kernels.warm(self._warm):
             self.backend = "numpy"
 

@@ -343,3 +343,46 @@ def dob_update(
         u = gq + tau[i] - nle[i] - f[i]
         w[i] = w[i] + (u - w[i]) * alpha[i]
         out[i] = gq - w[i]
+
+
+# ----------------------------------------------------------------- snapshot terms
+
+
+@_jit
+def friction_and_total(
+    qd: np.ndarray,
+    tau: np.ndarray,
+    coulomb: np.ndarray,
+    viscous: np.ndarray,
+    bias: np.ndarray,
+    gap: np.ndarray,
+    stribeck_velocity: np.ndarray,
+    smooth: float,
+    stribeck: bool,
+    f: np.ndarray,
+    total: np.ndarray,
+) -> None:
+    """Friction eq. (12) into f [N·m] (as FrictionParams.torque) and total = tau - f."""
+    for j in range(qd.shape[0]):
+        v = qd[j]
+        s = math.tanh(v / smooth) if smooth > 0.0 else _sign(v)
+        out = coulomb[j] * s
+        if stribeck:
+            t = v / stribeck_velocity[j]
+            t = math.exp(-(t * t)) * s
+            out = out + t * gap[j]
+        out = out + viscous[j] * v
+        out = out + bias[j]
+        f[j] = out
+        total[j] = tau[j] - out
+
+
+@_jit
+def transposed_mat_vec(C: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+    """out = Cᵀ·x."""
+    n = C.shape[0]
+    for i in range(n):
+        acc = 0.0
+        for k in range(n):
+            acc += C[k, i] * x[k]
+        out[i] = acc

@@ -37,9 +37,9 @@ class MomentumObserver(SnapshotUpdate):
         self._p = np.zeros(n)
         self._tmp = np.zeros(n)
         self._guard = SampleGuard(self.n)
-        self._own_snapshot(model)
         self._reset_data = model.create_data()  # reset is off the tick
         self.backend = kernels.resolve(backend)
+        self._own_snapshot(model, self.backend)
         if self.backend == "numba" and not kernels.warm(self._warm):
             self.backend = "numpy"
 

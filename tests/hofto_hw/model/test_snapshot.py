@@ -76,3 +76,22 @@ def test_nonfinite_sample_is_not_evaluated_and_terms_keep_their_values(er3a_mode
         for x, y in zip(before, after, strict=True):
             np.testing.assert_array_equal(x, y)
     assert snap.compute(q, qd, tau) and snap.finite
+
+
+def test_compiled_terms_agree_with_the_numpy_terms(er3a_model):
+    from hofto_hw.observers import kernels
+
+    if not kernels.available():
+        pytest.skip(f"compiled kernels unavailable: {kernels.unavailable_reason()}")
+    rng = np.random.default_rng(5)
+    ref = DynamicsSnapshot(er3a_model, ALL)
+    fast = DynamicsSnapshot(er3a_model, ALL, backend="numba")
+    assert ref.backend == "numpy" and fast.backend == "numba"
+    for _ in range(2000):
+        q, qd, tau = _sample(er3a_model, rng)
+        qd[rng.integers(6)] = 0.0  # friction's sign at standstill
+        ref.compute(q, qd, tau)
+        fast.compute(q, qd, tau)
+        for a, b in ((ref.f, fast.f), (ref.ct_qd, fast.ct_qd), (ref.accel, fast.accel)):
+            np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12 * np.abs(a).max())
+        np.testing.assert_array_equal(fast.M, ref.M)
