@@ -60,8 +60,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    from hofto_hw.config.collision import CollisionConfig
     from hofto_hw.commands.backend import observer_backend
+    from hofto_hw.config.collision import CollisionConfig
     from hofto_hw.replay.calibrate import calibrate
     from hofto_hw.replay.runner import run_observer
     from hofto_hw.replay.session import load_for_replay, observer_for
