@@ -52,6 +52,7 @@ def test_backend_auto_falls_back_to_numpy_when_compiled_kernels_are_off(er3a_mod
 @pytest.mark.skipif(kernels._numba is None, reason="numba is not installed")
 def test_a_failing_compilation_marks_the_compiled_path_unavailable(monkeypatch):
     monkeypatch.setattr(kernels, "_FAILED", "")
+    monkeypatch.setattr(kernels, "_DISABLED", False)
 
     def broken() -> None:
         raise TypeError("no matching definition\nsecond line")
