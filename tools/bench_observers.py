@@ -55,6 +55,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", type=Path, default=ROOT / "configs" / "er3a.yaml")
     parser.add_argument("--ticks", type=int, default=100_000)
     parser.add_argument("--json", action="store_true")
+    parser.add_argument(
+        "--backend", choices=("numpy", "numba", "auto"), default="numpy", help="observer path"
+    )
     args = parser.parse_args(argv)
 
     cfg = load_config(args.config)
@@ -90,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         us = time_calls(fn, samples, args.ticks)
         results[name] = {"median_us": float(np.median(us)), "p99_us": float(np.percentile(us, 99))}
     for name, ocfg in cfg.observers.items():
-        obs = make_observer(ocfg, model)
+        obs = make_observer(ocfg, model, backend=args.backend)
         obs.reset(q[0], qd[0])
         us = time_calls(lambda a, b, c, o=obs: o.update(a, b, c, dt), samples, args.ticks)
         label = f"observer {name} ({ocfg.type}" + (

@@ -40,6 +40,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hofto_hw.commands.backend import observer_backend
     from hofto_hw.config import load_config
     from hofto_hw.config.locate import find_config
     from hofto_hw.errors import ConfigError
@@ -65,16 +66,17 @@ def run(args: argparse.Namespace) -> int:
             check_observer(name, ocfg, model, cfg.loop.rate_hz)
         except ConfigError as exc:
             raise ConfigError(f"{args.config}: {exc} (rate: loop.rate_hz)") from None
+    backend = observer_backend()
     say(f"simulating {args.duration:.0f} s of the tracking task at {cfg.loop.rate_hz:.0f} Hz ...")
     samples = table2.simulate(cfg, model, args.duration)
     say("running the observers on the same samples ...")
     paper = table2.compare(
         "paper gains",
-        {name: make_observer(ocfg, model) for name, ocfg in cfg.observers.items()},
+        {name: make_observer(ocfg, model, backend=backend) for name, ocfg in cfg.observers.items()},
         samples,
     )
     say("measuring HOFTO's bandwidth and matching ESO and DOB to it ...")
-    matched_obs, fc, amplitude = table2.matched_observers(cfg, model, samples)
+    matched_obs, fc, amplitude = table2.matched_observers(cfg, model, samples, backend=backend)
     matched = table2.compare("matched bandwidth", matched_obs, samples)
     elapsed = time.perf_counter() - started
 

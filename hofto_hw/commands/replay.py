@@ -143,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{args.file}: not a flight-recorder log: give PARAMS FILE")
     if args.reproduce:
         raise UserError(f"{args.file}: --reproduce needs a flight-recorder log")
+    from hofto_hw.commands.backend import observer_backend
     from hofto_hw.replay.plot import plot_replay
     from hofto_hw.replay.session import load_for_replay, run_replay
     from hofto_hw.replay.setup import (
@@ -172,7 +173,13 @@ def run(args: argparse.Namespace) -> int:
         progress_for(args.file.name),
     )
     report = run_replay(
-        setup, rec, args.observer, thresholds, args.merge_gap, progress_for(args.file.name)
+        setup,
+        rec,
+        args.observer,
+        thresholds,
+        args.merge_gap,
+        progress_for(args.file.name),
+        backend=observer_backend(),
     )
     d = report.as_dict()
     if thresholds is not None and thresholds.parameters is not None:

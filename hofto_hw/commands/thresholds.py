@@ -76,6 +76,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
+    from hofto_hw.commands.backend import observer_backend
     from hofto_hw.config.collision import CollisionConfig
     from hofto_hw.replay.calibrate import calibrate
     from hofto_hw.replay.runner import run_observer
@@ -104,7 +105,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         residuals = [
             run_observer(
                 rec,
-                observer_for(name, obs_cfg, setup, rec),
+                observer_for(name, obs_cfg, setup, rec, observer_backend()),
                 progress=progress_for(Path(rec.source).name)(name),
             )
             for rec in recs

@@ -26,6 +26,7 @@ from hofto_hw.control.trajectory import cartesian_loop
 from hofto_hw.errors import ConfigError
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers import HoftoCore, make_observer
+from hofto_hw.observers.kernels import Backend
 from hofto_hw.observers.metrics import error_indices
 from hofto_hw.observers.tuning import ESO_3DB_FACTOR, bandwidth_3db, first_harmonic_gain
 
@@ -162,9 +163,14 @@ def hofto_bandwidth(cfg: HoftoConfig, amplitude: np.ndarray, dt: float) -> np.nd
 
 
 def matched_observers(
-    cfg: SystemConfig, model: RobotModel, samples: Samples, hofto_name: str = "hofto"
+    cfg: SystemConfig,
+    model: RobotModel,
+    samples: Samples,
+    hofto_name: str = "hofto",
+    backend: Backend = "numpy",
 ) -> tuple[dict[str, object], np.ndarray, np.ndarray]:
-    """ESO and DOB tuned to HOFTO's bandwidth at the scenario's amplitudes.
+    """ESO and DOB tuned to HOFTO's bandwidth at the scenario's amplitudes (observers on
+    ``backend``, see :func:`~hofto_hw.observers.make_observer`).
 
     Returns (observers, bandwidth_hz per joint, x3 amplitude per joint [rad/s²]). The x3
     amplitude is the equivalent sine amplitude √2·RMS(tau_ext_j)/M_jj(home).
@@ -179,9 +185,9 @@ def matched_observers(
     eso = EsoConfig(k1=list(3 * w0), k2=list(3 * w0**2), k3=list(w0**3))
     dob = DobConfig(cutoff=list(2.0 * np.pi * fc))
     observers = {
-        "hofto": make_observer(hcfg, model),
-        "eso": make_observer(eso, model),
-        "dob": make_observer(dob, model),
+        "hofto": make_observer(hcfg, model, backend=backend),
+        "eso": make_observer(eso, model, backend=backend),
+        "dob": make_observer(dob, model, backend=backend),
     }
     return observers, fc, amplitude
 

@@ -7,6 +7,7 @@ Build one from its config with :func:`make_observer` (the table is
 
 from __future__ import annotations
 
+from hofto_hw.observers import kernels
 from hofto_hw.observers.base import ModelTerms, Observer
 from hofto_hw.observers.direct import DirectObserver
 from hofto_hw.observers.dob import DobObserver
@@ -31,5 +32,6 @@ __all__ = [
     "Observer",
     "StaObserver",
     "error_indices",
+    "kernels",
     "make_observer",
 ]

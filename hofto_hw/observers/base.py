@@ -7,6 +7,14 @@ never read the bus and never decide to stop: safety/ does.
 ``update`` returns a view of the observer's own output buffer (valid until the next update);
 copy it to keep it. Updates allocate nothing.
 
+In a control tick the model terms are computed once for all estimators: the tick fills a
+:class:`~hofto_hw.model.snapshot.DynamicsSnapshot` with the union of the observers' ``needs``
+and calls ``update_snapshot(snap, dt)`` on each. ``update(q, qd, tau, dt)`` (replay, demo)
+fills the observer's own snapshot and does the same; both give identical results.
+
+Backends: ``backend="numpy"`` (the reference), ``"numba"`` (compiled per-joint kernels,
+:mod:`hofto_hw.observers.kernels`) or ``"auto"`` (numba when available). Both agree to 1e-12.
+
 Non-finite samples: an update whose q, qd, tau or dt holds a NaN or inf returns NaN on every
 joint (so the fault stays visible to safety/, which reports it) and leaves the observer's
 state untouched, so the next finite sample continues from the last finite state. ``reset``
@@ -21,6 +29,7 @@ from typing import Protocol
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 
 
 class Observer(Protocol):
@@ -33,8 +42,16 @@ class Observer(Protocol):
         """Start from the arm at (q, qd) with no external torque."""
         ...
 
+    #: model terms read from the snapshot
+    needs: Needs
+
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
         """Advance by dt [s] with the newest samples; return tau_ext_hat [N·m], shape (n,)."""
+        ...
+
+    def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
+        """As :meth:`update`, with the sample and model terms of ``snap`` (computed for at
+        least ``needs``)."""
         ...
 
 
@@ -59,6 +76,23 @@ class ModelTerms:
         return np.dot(self.data.mass_matrix(q), x, out=self.out)
 
 
+class SnapshotUpdate:
+    """``update(q, qd, tau, dt)`` through the observer's own snapshot, for observers that
+    define ``needs`` and ``update_snapshot``; call :meth:`_own_snapshot` in ``__init__``."""
+
+    needs: Needs
+    snapshot: DynamicsSnapshot
+
+    def _own_snapshot(self, model: RobotModel, backend: str = "numpy") -> None:
+        self.snapshot = DynamicsSnapshot(model, self.needs, backend)
+
+    def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        """Advance by dt [s] with the newest samples; return tau_ext_hat [N·m], shape (n,)."""
+        snap = self.snapshot
+        snap.compute(q, qd, tau)
+        return self.update_snapshot(snap, dt)  # type: ignore[attr-defined]
+
+
 class SampleGuard:
     """Allocation-free check that a sample (q, qd, tau, dt) is finite, and the all-NaN output
     an observer returns for one that is not."""
@@ -70,6 +104,10 @@ class SampleGuard:
         # one sum: NaN and ±inf propagate into it (a finite sum can only overflow for values
         # near 1e308, which are refused too); about 3x cheaper than np.isfinite per array
         return math.isfinite(_sum(q) + _sum(qd) + _sum(tau) + dt)
+
+    def usable(self, snap: DynamicsSnapshot, dt: float) -> bool:
+        """The snapshot's sample and dt are finite."""
+        return snap.finite and math.isfinite(dt)
 
     def nan(self) -> np.ndarray:
         """NaN on every joint (refilled each call: the caller may have written into it)."""

@@ -13,11 +13,17 @@ import math
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import SampleGuard
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+from hofto_hw.observers.base import SampleGuard, SnapshotUpdate
 
 
-class DirectObserver:
+class DirectObserver(SnapshotUpdate):
+    """Eq. (2). Its model term, RNEA at its own filtered qdd, depends on the observer's state,
+    so it needs nothing from the tick's snapshot but the sample (no compiled kernel: one
+    pinocchio call and a few array operations)."""
+
     name = "direct"
+    needs = Needs.NONE
 
     def __init__(self, model: RobotModel, accel_filter_hz: float | None = None) -> None:
         self.model = model
@@ -30,15 +36,17 @@ class DirectObserver:
         self._out = np.zeros(self.n)
         self._started = False
         self._guard = SampleGuard(self.n)
+        self._own_snapshot(model)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         np.copyto(self._qd_prev, qd)
         self._qdd.fill(0.0)
         self._started = True
 
-    def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
-        if not self._guard.finite(q, qd, tau, dt):
+    def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
+        if not self._guard.usable(snap, dt):
             return self._guard.nan()
+        q, qd, tau = snap.q, snap.qd, snap.tau
         if not self._started:
             self.reset(q, qd)
         raw = self._raw

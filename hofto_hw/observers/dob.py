@@ -20,22 +20,28 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import SampleGuard, per_joint
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+from hofto_hw.observers import kernels
+from hofto_hw.observers.base import SampleGuard, SnapshotUpdate, per_joint
 
 
-class DobObserver:
+class DobObserver(SnapshotUpdate):
     name = "dob"
+    needs = Needs.NLE | Needs.FRICTION
 
     def __init__(
-        self, model: RobotModel, cutoff: np.ndarray, nominal_inertia: np.ndarray | None = None
+        self,
+        model: RobotModel,
+        cutoff: np.ndarray,
+        nominal_inertia: np.ndarray | None = None,
+        backend: kernels.Backend = "numpy",
     ) -> None:
         n = model.n
         self.model = model
-        self.data = model.create_data()
         self.n = n
         self.cutoff = per_joint(cutoff, n, "dob.cutoff")
         if nominal_inertia is None:
-            nominal_inertia = np.diag(self.data.mass_matrix(model.home)).copy()
+            nominal_inertia = np.diag(model.create_data().mass_matrix(model.home)).copy()
         self.jn = per_joint(nominal_inertia, n, "dob.nominal_inertia")
         self._gj = self.cutoff * self.jn  # g·Jn
         self.w = np.zeros(n)
@@ -44,12 +50,20 @@ class DobObserver:
         self._dt = -1.0
         self._out = np.zeros(n)
         self._guard = SampleGuard(self.n)
+        self.backend = kernels.resolve(backend)
+        self._own_snapshot(model, self.backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+
+    def _warm(self) -> None:
+        s, n = self.snapshot, self.n
+        kernels.dob_update(self._gj, self._alpha, s.qd, s.tau, s.nle, s.f, np.zeros(n), np.zeros(n))
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         np.multiply(self._gj, qd, out=self.w)  # tau_ext_hat starts at 0
 
-    def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
-        if not self._guard.finite(q, qd, tau, dt):
+    def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
+        if not self._guard.usable(snap, dt):
             return self._guard.nan()
         if dt != self._dt:  # recompute the discrete pole only when the period changes
             np.multiply(self.cutoff, -dt, out=self._alpha)
@@ -57,10 +71,15 @@ class DobObserver:
             np.negative(self._alpha, out=self._alpha)
             self._dt = dt
         u, out = self._u, self._out
-        np.multiply(self._gj, qd, out=out)  # g·Jn·qd
-        np.add(out, tau, out=u)
-        np.subtract(u, self.data.nonlinear_effects(q, qd), out=u)
-        np.subtract(u, self.data.friction_torque(qd), out=u)
+        if self.backend == "numba":
+            kernels.dob_update(
+                self._gj, self._alpha, snap.qd, snap.tau, snap.nle, snap.f, self.w, out
+            )
+            return out
+        np.multiply(self._gj, snap.qd, out=out)  # g·Jn·qd
+        np.add(out, snap.tau, out=u)
+        np.subtract(u, snap.nle, out=u)
+        np.subtract(u, snap.f, out=u)
         np.subtract(u, self.w, out=u)
         np.multiply(u, self._alpha, out=u)
         np.add(self.w, u, out=self.w)

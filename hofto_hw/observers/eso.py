@@ -19,7 +19,9 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import LinearHold, ModelTerms, SampleGuard, per_joint
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+from hofto_hw.observers import kernels
+from hofto_hw.observers.base import LinearHold, SampleGuard, SnapshotUpdate, per_joint
 
 
 def bandwidth_gains(w0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -36,13 +38,17 @@ def error_matrices(k1: float, k2: float, k3: float) -> tuple[np.ndarray, np.ndar
 
 
 class EsoCore:
-    """ESO dynamics for independent channels (arrays of shape (joints,))."""
+    """ESO dynamics for independent channels (arrays of shape (joints,)).
+
+    States z (3, joints) (``z1``, ``z2``, ``z3`` are row views), gains k (3, joints)."""
 
     def __init__(self, k1: np.ndarray, k2: np.ndarray, k3: np.ndarray, substeps: int = 1) -> None:
-        self.k1, self.k2, self.k3 = (np.asarray(k, dtype=float).copy() for k in (k1, k2, k3))
+        self.k = np.vstack([np.asarray(k, dtype=float) for k in (k1, k2, k3)])
+        self.k1, self.k2, self.k3 = self.k
         self.substeps = int(substeps)
         j = self.k1.shape[0]
-        self.z1, self.z2, self.z3 = np.zeros(j), np.zeros(j), np.zeros(j)
+        self.z = np.zeros((3, j))
+        self.z1, self.z2, self.z3 = self.z
         self._e = np.zeros(j)
         self._d1, self._d2, self._d3 = np.zeros(j), np.zeros(j), np.zeros(j)
         self._hold = LinearHold(j)
@@ -56,30 +62,47 @@ class EsoCore:
     def step(self, y: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
         h = dt / self.substeps
         e, d1, d2, d3 = self._e, self._d1, self._d2, self._d3
+        z1, z2, z3, k1, k2, k3 = self.z1, self.z2, self.z3, self.k1, self.k2, self.k3
         self._hold.begin(y, self.substeps)
         for _ in range(self.substeps):
-            np.subtract(self._hold.next(), self.z1, out=e)
-            np.multiply(self.k1, e, out=d1)
-            np.add(d1, self.z2, out=d1)
-            np.multiply(self.k2, e, out=d2)
-            np.add(d2, self.z3, out=d2)
+            np.subtract(self._hold.next(), z1, out=e)
+            # every derivative from the old state (explicit Euler), then all states advance
+            np.multiply(k1, e, out=d1)
+            np.add(d1, z2, out=d1)
+            np.multiply(k2, e, out=d2)
+            np.add(d2, z3, out=d2)
             np.add(d2, a, out=d2)
-            np.multiply(self.k3, e, out=d3)
+            np.multiply(k3, e, out=d3)
             np.multiply(d1, h, out=d1)
-            np.add(self.z1, d1, out=self.z1)
+            np.add(z1, d1, out=z1)
             np.multiply(d2, h, out=d2)
-            np.add(self.z2, d2, out=self.z2)
+            np.add(z2, d2, out=z2)
             np.multiply(d3, h, out=d3)
-            np.add(self.z3, d3, out=self.z3)
+            np.add(z3, d3, out=z3)
         self._hold.end(y)
-        return self.z3
+        return z3
+
+    def step_compiled(
+        self, y: np.ndarray, a: np.ndarray, dt: float, M: np.ndarray, out: np.ndarray
+    ) -> None:
+        """:meth:`step` in one compiled kernel, then out = M·z3 [N·m] (numba required)."""
+        kernels.eso_update(
+            self.z, self.k, y, self._hold.prev, a, dt / self.substeps, self.substeps, M, out
+        )
 
 
-class EsoObserver:
+class EsoObserver(SnapshotUpdate):
     name = "eso"
+    needs = Needs.ACCEL | Needs.MASS
 
     def __init__(
-        self, model: RobotModel, k1: np.ndarray, k2: np.ndarray, k3: np.ndarray, substeps: int = 1
+        self,
+        model: RobotModel,
+        k1: np.ndarray,
+        k2: np.ndarray,
+        k3: np.ndarray,
+        substeps: int = 1,
+        backend: kernels.Backend = "numpy",
     ) -> None:
         n = model.n
         self.model = model
@@ -90,14 +113,25 @@ class EsoObserver:
             per_joint(k3, n, "eso.k3"),
             substeps,
         )
-        self.terms = ModelTerms(model)
+        self._out = np.zeros(n)
         self._guard = SampleGuard(self.n)
+        self.backend = kernels.resolve(backend)
+        self._own_snapshot(model, self.backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+
+    def _warm(self) -> None:
+        c, snap = self.core, self.snapshot
+        scratch = EsoCore(c.k1, c.k2, c.k3, c.substeps)
+        scratch.step_compiled(np.zeros(self.n), snap.accel, 1e-3, snap.M, np.zeros(self.n))
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.core.reset(q, qd)
 
-    def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
-        if not self._guard.finite(q, qd, tau, dt):
+    def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
+        if not self._guard.usable(snap, dt):
             return self._guard.nan()
-        a = self.terms.acceleration(q, qd, tau)
-        return self.terms.torque(q, self.core.step(q, a, dt))
+        if self.backend == "numba":
+            self.core.step_compiled(snap.q, snap.accel, dt, snap.M, self._out)
+            return self._out
+        return np.dot(snap.M, self.core.step(snap.q, snap.accel, dt), out=self._out)

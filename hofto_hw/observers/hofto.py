@@ -36,7 +36,9 @@ from typing import Literal
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import LinearHold, ModelTerms, SampleGuard
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+from hofto_hw.observers import kernels
+from hofto_hw.observers.base import LinearHold, SampleGuard, SnapshotUpdate
 
 Form = Literal["eq17", "recursive"]
 
@@ -109,6 +111,21 @@ class HoftoCore:
         self._prev = np.zeros(j)
         self._hold = LinearHold(j)
         self._T = np.eye(s)
+        self._neg_gains = -self.gains
+        # row views made once: (z_i, z_{i+1} or None, inj_i, -L_i, p_i) per stage
+        self._stages = [
+            (
+                self.z[i],
+                self.z[i + 1] if i + 1 < s else None,
+                self._inj[i],
+                self._neg_gains[i],
+                float(self.powers[i]),
+            )
+            for i in range(s)
+        ]
+        self._sign_rows = [self._inj[i] for i in range(s) if self.powers[i] == 0.0]
+        self._z1, self._tz0, self._tz1 = self.z[1], self._tz[0], self._tz[1]
+        self._col = np.zeros((2, s))
         self._h = -1.0
         self._a_h2 = 0.0  # coefficient of a in z1's update (h²/2 with Taylor terms, else 0)
 
@@ -156,25 +173,29 @@ class HoftoCore:
             np.subtract(y, self.z[0], out=e)
             np.abs(e, out=self._abs)
             np.power(self._abs, self._pow_col, out=inj)  # |e1|^p_i per stage
-            np.sign(e, out=self._d)
-            np.multiply(inj, self._d, out=inj)  # sig^p_i(e1), with sig^0(0) = sign(0) = 0
+            np.copysign(inj, e, out=inj)  # sig^p_i(e1) ...
+            for row in self._sign_rows:  # ... but sig^0 = sign, with sig^0(0) = 0
+                np.sign(e, out=row)
             np.multiply(inj, self.gains, out=inj)  # + L_i·sig^p_i(e1)
             return
         # recursive: stage i is driven by z_i minus the previous stage's output v_{i-1};
         # v_i = z_{i+1} + inj_i, and v_{-1} = y.
-        z, d, t, prev = self.z, self._d, self._t, self._prev
+        d, t, prev = self._d, self._t, self._prev
         np.copyto(prev, y)
-        last = self.stages - 1
-        for i in range(self.stages):
-            np.subtract(z[i], prev, out=d)
-            np.abs(d, out=t)
-            np.power(t, self.powers[i], out=t)
-            np.sign(d, out=d)
-            np.multiply(t, d, out=t)  # sig^p(d), with sig^0(0) = 0
-            np.multiply(t, self.gains[i], out=t)
-            np.negative(t, out=inj[i])  # - L_i·sig^p_i(z_i - v_{i-1})
-            if i < last:
-                np.add(z[i + 1], inj[i], out=prev)
+        for z_i, z_next, inj_i, ngain, p in self._stages:
+            np.subtract(z_i, prev, out=d)
+            if p == 0.0:
+                np.sign(d, out=t)  # sig^0 = sign, with sig^0(0) = 0
+                np.multiply(t, ngain, out=inj_i)
+            elif p == 1.0:
+                np.multiply(d, ngain, out=inj_i)
+            else:
+                np.abs(d, out=t)
+                np.power(t, p, out=t)
+                np.copysign(t, d, out=t)  # sig^p(d)
+                np.multiply(t, ngain, out=inj_i)  # - L_i·sig^p_i(z_i - v_{i-1})
+            if z_next is not None:
+                np.add(z_next, inj_i, out=prev)
 
     def _substep(self, y: np.ndarray, a: np.ndarray, h: float) -> None:
         z, inj, tz, tmp = self.z, self._inj, self._tz, self._t
@@ -185,25 +206,51 @@ class HoftoCore:
             np.multiply(inj, h, out=inj)
             np.add(tz, inj, out=z)
             np.multiply(a, h, out=tmp)
-            np.add(z[1], tmp, out=z[1])
+            np.add(self._z1, tmp, out=self._z1)
             return
         # taylor: predict the chain to this instant (model acceleration included), then
         # correct it with the sample of this instant, so estimate and sample share a time.
         np.dot(self._T, z, out=tz)
         np.multiply(a, h, out=tmp)
-        np.add(tz[1], tmp, out=tz[1])
+        np.add(self._tz1, tmp, out=self._tz1)
         np.multiply(a, self._a_h2, out=tmp)
-        np.add(tz[0], tmp, out=tz[0])
+        np.add(self._tz0, tmp, out=self._tz0)
         np.copyto(z, tz)
         self._injection(y)
         np.multiply(inj, h, out=inj)
         np.add(z, inj, out=z)
 
+    def step_compiled(
+        self, y: np.ndarray, a: np.ndarray, dt: float, M: np.ndarray, out: np.ndarray
+    ) -> None:
+        """:meth:`step` in one compiled kernel, then out = M·z3 [N·m] (numba required)."""
+        h = dt / self.substeps
+        if h != self._h:
+            self._set_step(h)
+        kernels.hofto_update(
+            self.z,
+            self._neg_gains,
+            self.powers,
+            self._T,
+            y,
+            self._hold.prev,
+            a,
+            h,
+            self._a_h2,
+            self.form == "recursive",
+            self.discretisation == "taylor",
+            self.substeps,
+            self._col,
+            M,
+            out,
+        )
 
-class HoftoObserver:
+
+class HoftoObserver(SnapshotUpdate):
     """HOFTO on a robot: tau_ext_hat = M(q)·z3 (eq. (17))."""
 
     name = "hofto"
+    needs = Needs.ACCEL | Needs.MASS
 
     def __init__(
         self,
@@ -213,6 +260,7 @@ class HoftoObserver:
         form: Form = "recursive",
         substeps: int = 1,
         discretisation: Literal["taylor", "euler"] = "taylor",
+        backend: kernels.Backend = "numpy",
     ) -> None:
         gains = np.asarray(gains, dtype=float)
         if gains.ndim != 2 or gains.shape[1] != model.n:
@@ -221,15 +269,28 @@ class HoftoObserver:
         self.n = model.n
         self.core = HoftoCore(gains, powers, form, substeps, discretisation)
         self.order = self.core.order
-        self.terms = ModelTerms(model)
+        self._out = np.zeros(self.n)
         self._guard = SampleGuard(self.n)
+        self.backend = kernels.resolve(backend)
+        self._own_snapshot(model, self.backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+
+    def _warm(self) -> None:
+        """Compile the kernel on scratch copies (the state is untouched)."""
+        core, snap = self.core, self.snapshot
+        scratch = HoftoCore(core.gains, core.powers, core.form, core.substeps, core.discretisation)
+        y = np.zeros(self.n)
+        scratch.step_compiled(y, snap.accel, 1e-3, snap.M, np.zeros(self.n))
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.core.reset(q, qd)
 
-    def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
-        if not self._guard.finite(q, qd, tau, dt):
+    def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
+        if not self._guard.usable(snap, dt):
             return self._guard.nan()
-        a = self.terms.acceleration(q, qd, tau)
-        z3 = self.core.step(q, a, dt)
-        return self.terms.torque(q, z3)
+        if self.backend == "numba":
+            self.core.step_compiled(snap.q, snap.accel, dt, snap.M, self._out)
+            return self._out
+        z3 = self.core.step(snap.q, snap.accel, dt)
+        return np.dot(snap.M, z3, out=self._out)

@@ -15,16 +15,20 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import SampleGuard, per_joint
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+from hofto_hw.observers import kernels
+from hofto_hw.observers.base import SampleGuard, SnapshotUpdate, per_joint
 
 
-class MomentumObserver:
+class MomentumObserver(SnapshotUpdate):
     name = "momentum"
+    needs = Needs.MASS | Needs.GRAVITY | Needs.CORIOLIS_T | Needs.FRICTION
 
-    def __init__(self, model: RobotModel, gain: np.ndarray) -> None:
+    def __init__(
+        self, model: RobotModel, gain: np.ndarray, backend: kernels.Backend = "numpy"
+    ) -> None:
         n = model.n
         self.model = model
-        self.data = model.create_data()
         self.n = n
         self.gain = per_joint(gain, n, "momentum.gain")
         self.integral = np.zeros(n)
@@ -32,27 +36,60 @@ class MomentumObserver:
         self.r = np.zeros(n)
         self._p = np.zeros(n)
         self._tmp = np.zeros(n)
-        self._ct_qd = np.zeros(n)
         self._guard = SampleGuard(self.n)
+        self._reset_data = model.create_data()  # reset is off the tick
+        self.backend = kernels.resolve(backend)
+        self._own_snapshot(model, self.backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+
+    def _warm(self) -> None:
+        s, n = self.snapshot, self.n
+        kernels.momentum_update(
+            s.M,
+            s.qd,
+            s.tau,
+            s.f,
+            s.g,
+            s.ct_qd,
+            self.gain,
+            self.p0,
+            np.zeros(n),
+            np.zeros(n),
+            1e-3,
+        )
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
-        np.dot(self.data.mass_matrix(q), qd, out=self.p0)
+        np.dot(self._reset_data.mass_matrix(q), qd, out=self.p0)
         self.integral.fill(0.0)
         self.r.fill(0.0)
 
-    def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
-        if not self._guard.finite(q, qd, tau, dt):
+    def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
+        if not self._guard.usable(snap, dt):
             return self._guard.nan()
-        m = self.data
+        if self.backend == "numba":
+            kernels.momentum_update(
+                snap.M,
+                snap.qd,
+                snap.tau,
+                snap.f,
+                snap.g,
+                snap.ct_qd,
+                self.gain,
+                self.p0,
+                self.integral,
+                self.r,
+                dt,
+            )
+            return self.r
         tmp = self._tmp
-        np.dot(m.coriolis_matrix(q, qd).T, qd, out=self._ct_qd)
-        np.subtract(tau, m.friction_torque(qd), out=tmp)
-        np.subtract(tmp, m.gravity(q), out=tmp)
-        np.add(tmp, self._ct_qd, out=tmp)  # tau - f - beta
+        np.subtract(snap.tau, snap.f, out=tmp)
+        np.subtract(tmp, snap.g, out=tmp)
+        np.add(tmp, snap.ct_qd, out=tmp)  # tau - f - beta
         np.add(tmp, self.r, out=tmp)
         np.multiply(tmp, dt, out=tmp)
         np.add(self.integral, tmp, out=self.integral)
-        np.dot(m.mass_matrix(q), qd, out=self._p)
+        np.dot(snap.M, snap.qd, out=self._p)
         np.subtract(self._p, self.p0, out=tmp)
         np.subtract(tmp, self.integral, out=tmp)
         np.multiply(self.gain, tmp, out=self.r)

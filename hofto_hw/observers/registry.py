@@ -42,6 +42,7 @@ from hofto_hw.observers.direct import DirectObserver
 from hofto_hw.observers.dob import DobObserver
 from hofto_hw.observers.eso import EsoObserver
 from hofto_hw.observers.hofto import HoftoObserver
+from hofto_hw.observers.kernels import Backend
 from hofto_hw.observers.momentum import MomentumObserver
 from hofto_hw.observers.sta import StaObserver
 
@@ -51,7 +52,7 @@ class ObserverEntry:
     """One observer type: its config class, how to build it, its ~100 Hz replay default."""
 
     config: type
-    build: Callable[[ObserverConfig, RobotModel], Observer]
+    build: Callable[[ObserverConfig, RobotModel, Backend], Observer]
     replay_default: Callable[[int], ObserverConfig]  # n_joints -> config
 
 
@@ -67,13 +68,14 @@ _W0 = 15.0  # ESO replay default: triple pole [rad/s]
 OBSERVERS: dict[str, ObserverEntry] = {
     "hofto": ObserverEntry(
         HoftoConfig,
-        lambda c, m: HoftoObserver(
+        lambda c, m, b: HoftoObserver(
             m,
             np.array(c.gains, dtype=float),
             np.array(c.stage_powers(), dtype=float),
             c.form,
             c.substeps,
             c.discretisation,
+            backend=b,
         ),
         lambda n: HoftoConfig(
             order=2,
@@ -84,27 +86,27 @@ OBSERVERS: dict[str, ObserverEntry] = {
     ),
     "momentum": ObserverEntry(
         MomentumConfig,
-        lambda c, m: MomentumObserver(m, c.gain),
+        lambda c, m, b: MomentumObserver(m, c.gain, backend=b),
         lambda n: MomentumConfig(gain=[20.0] * n),
     ),
     "eso": ObserverEntry(
         EsoConfig,
-        lambda c, m: EsoObserver(m, c.k1, c.k2, c.k3, c.substeps),
+        lambda c, m, b: EsoObserver(m, c.k1, c.k2, c.k3, c.substeps, backend=b),
         lambda n: EsoConfig(k1=[3.0 * _W0] * n, k2=[3.0 * _W0**2] * n, k3=[_W0**3] * n),
     ),
     "dob": ObserverEntry(
         DobConfig,
-        lambda c, m: DobObserver(m, c.cutoff, c.nominal_inertia),
+        lambda c, m, b: DobObserver(m, c.cutoff, c.nominal_inertia, backend=b),
         lambda n: DobConfig(cutoff=[20.0] * n),
     ),
     "sta": ObserverEntry(
         StaConfig,
-        lambda c, m: StaObserver(m, c.l1, c.l2, c.l3, c.substeps),
+        lambda c, m, b: StaObserver(m, c.l1, c.l2, c.l3, c.substeps, backend=b),
         lambda n: StaConfig(l1=[20.0] * n, l2=[60.0] * n, l3=[20.0] * n),
     ),
     "direct": ObserverEntry(
         DirectConfig,
-        lambda c, m: DirectObserver(m, c.accel_filter_hz),
+        lambda c, m, b: DirectObserver(m, c.accel_filter_hz),
         lambda n: DirectConfig(accel_filter_hz=5.0),
     ),
 }
@@ -112,12 +114,17 @@ OBSERVERS: dict[str, ObserverEntry] = {
 OBSERVER_TYPES = tuple(OBSERVERS)
 
 
-def make_observer(cfg: ObserverConfig, model: RobotModel) -> Observer:
-    """The observer a validated config section describes, on ``model``."""
+def make_observer(
+    cfg: ObserverConfig, model: RobotModel, *, backend: Backend = "numpy"
+) -> Observer:
+    """The observer a validated config section describes, on ``model``.
+
+    ``backend``: ``numpy`` (reference), ``numba`` (compiled kernels, compiled and warmed
+    here) or ``auto`` (numba when available; see :mod:`hofto_hw.observers.kernels`)."""
     entry = OBSERVERS.get(cfg.type)
     if entry is None or not isinstance(cfg, entry.config):
         raise TypeError(f"unknown observer config {type(cfg).__name__}")
-    return entry.build(cfg, model)
+    return entry.build(cfg, model, backend)
 
 
 def replay_default(name: str, n_joints: int) -> ObserverConfig:

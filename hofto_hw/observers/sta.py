@@ -19,28 +19,57 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.base import LinearHold, ModelTerms, SampleGuard, per_joint
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+from hofto_hw.observers import kernels
+from hofto_hw.observers.base import LinearHold, SampleGuard, SnapshotUpdate, per_joint
 
 
-class StaObserver:
+class StaObserver(SnapshotUpdate):
     name = "sta"
+    needs = Needs.ACCEL | Needs.MASS
 
     def __init__(
-        self, model: RobotModel, l1: np.ndarray, l2: np.ndarray, l3: np.ndarray, substeps: int = 1
+        self,
+        model: RobotModel,
+        l1: np.ndarray,
+        l2: np.ndarray,
+        l3: np.ndarray,
+        substeps: int = 1,
+        backend: kernels.Backend = "numpy",
     ) -> None:
         n = model.n
         self.model = model
         self.n = n
-        self.l1 = per_joint(l1, n, "sta.l1")
-        self.l2 = per_joint(l2, n, "sta.l2")
-        self.l3 = per_joint(l3, n, "sta.l3")
+        self.gains = np.vstack(
+            [per_joint(l1, n, "sta.l1"), per_joint(l2, n, "sta.l2"), per_joint(l3, n, "sta.l3")]
+        )
+        self.l1, self.l2, self.l3 = self.gains
         self.substeps = int(substeps)
-        self.z1, self.z2, self.z3 = np.zeros(n), np.zeros(n), np.zeros(n)
+        self.z = np.zeros((3, n))
+        self.z1, self.z2, self.z3 = self.z
         self._e, self._sqrt, self._sgn = np.zeros(n), np.zeros(n), np.zeros(n)
         self._tmp = np.zeros(n)
+        self._out = np.zeros(n)
         self._hold = LinearHold(n)
-        self.terms = ModelTerms(model)
         self._guard = SampleGuard(self.n)
+        self.backend = kernels.resolve(backend)
+        self._own_snapshot(model, self.backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+
+    def _warm(self) -> None:
+        snap, n = self.snapshot, self.n
+        kernels.sta_update(
+            self.z.copy(),
+            self.gains,
+            np.zeros(n),
+            np.zeros(n),
+            snap.accel,
+            1e-3,
+            1,
+            snap.M,
+            np.zeros(n),
+        )
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.z1[:] = q
@@ -48,31 +77,45 @@ class StaObserver:
         self.z3.fill(0.0)
         self._hold.reset(q)
 
-    def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
-        if not self._guard.finite(q, qd, tau, dt):
+    def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
+        if not self._guard.usable(snap, dt):
             return self._guard.nan()
-        a = self.terms.acceleration(q, qd, tau)
         h = dt / self.substeps
+        a = snap.accel
+        if self.backend == "numba":
+            kernels.sta_update(
+                self.z,
+                self.gains,
+                snap.q,
+                self._hold.prev,
+                a,
+                h,
+                self.substeps,
+                snap.M,
+                self._out,
+            )
+            return self._out
         e, root, sgn, tmp = self._e, self._sqrt, self._sgn, self._tmp
-        self._hold.begin(q, self.substeps)
+        z1, z2, z3, l1, l2, l3 = self.z1, self.z2, self.z3, self.l1, self.l2, self.l3
+        self._hold.begin(snap.q, self.substeps)
         for _ in range(self.substeps):
-            np.subtract(self._hold.next(), self.z1, out=e)
+            np.subtract(self._hold.next(), z1, out=e)
             np.sign(e, out=sgn)
             np.abs(e, out=root)
             np.sqrt(root, out=root)
-            np.multiply(root, sgn, out=root)  # |e|^(1/2)·sign(e)
+            np.copysign(root, e, out=root)  # |e|^(1/2)·sign(e)
             # z1, z2, z3 are advanced from the same (old) state: explicit Euler.
-            np.multiply(self.l1, root, out=tmp)
-            np.add(tmp, self.z2, out=tmp)
-            np.multiply(self.l2, root, out=root)
-            np.add(root, self.z3, out=root)
+            np.multiply(l1, root, out=tmp)
+            np.add(tmp, z2, out=tmp)
+            np.multiply(l2, root, out=root)
+            np.add(root, z3, out=root)
             np.add(root, a, out=root)
-            np.multiply(self.l3, sgn, out=sgn)
+            np.multiply(l3, sgn, out=sgn)
             np.multiply(tmp, h, out=tmp)
-            np.add(self.z1, tmp, out=self.z1)
+            np.add(z1, tmp, out=z1)
             np.multiply(root, h, out=root)
-            np.add(self.z2, root, out=self.z2)
+            np.add(z2, root, out=z2)
             np.multiply(sgn, h, out=sgn)
-            np.add(self.z3, sgn, out=self.z3)
-        self._hold.end(q)
-        return self.terms.torque(q, self.z3)
+            np.add(z3, sgn, out=z3)
+        self._hold.end(snap.q)
+        return np.dot(snap.M, z3, out=self._out)

@@ -24,6 +24,7 @@ from typing import Any, Protocol
 import numpy as np
 import yaml
 
+from hofto_hw.commands.backend import observer_backend
 from hofto_hw.config.loader import parse_config
 from hofto_hw.config.models import ObserverConfig, SystemConfig
 from hofto_hw.errors import ConfigError, UserError
@@ -185,7 +186,9 @@ def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
     replayed: dict[str, np.ndarray] = {}
     diffs: dict[str, float] = {}
     for name in log.observers:
-        obs = make_observer(observer_config(setup, name, log.path), setup.model)
+        obs = make_observer(
+            observer_config(setup, name, log.path), setup.model, backend=observer_backend()
+        )
         replayed[name] = run_observer(rec, obs)
         diffs[name] = float(np.max(np.abs(replayed[name] - log.tau_ext[name])))
     det = detector_factory(log, setup)

@@ -13,6 +13,7 @@ from hofto_hw.config.models import ObserverConfig
 from hofto_hw.errors import ConfigError, UserError
 from hofto_hw.identify.data import BadRows, Recording, load_column_map, load_recording
 from hofto_hw.observers import Observer, make_observer
+from hofto_hw.observers.kernels import Backend
 from hofto_hw.observers.stability import check_observer
 from hofto_hw.replay.episodes import Episode, find_episodes
 from hofto_hw.replay.runner import Progress, ReplayResult, replay
@@ -97,15 +98,17 @@ def recording_rate(rec: Recording) -> float:
     return 1.0 / step
 
 
-def observer_for(name: str, cfg: ObserverConfig, setup: Setup, rec: Recording) -> Observer:
-    """Observer ``name`` built from ``cfg``, refused (ConfigError) if its gains are unstable at
-    the recording's rate."""
+def observer_for(
+    name: str, cfg: ObserverConfig, setup: Setup, rec: Recording, backend: Backend = "numpy"
+) -> Observer:
+    """Observer ``name`` built from ``cfg`` on ``backend``, refused (ConfigError) if its gains
+    are unstable at the recording's rate."""
     rate = recording_rate(rec)
     try:
         check_observer(name, cfg, setup.model, rate)
     except ConfigError as exc:
         raise ConfigError(f"{rec.source} ({rate:.4g} Hz): {exc}") from None
-    return make_observer(cfg, setup.model)
+    return make_observer(cfg, setup.model, backend=backend)
 
 
 def run_replay(
@@ -115,12 +118,14 @@ def run_replay(
     thresholds: ThresholdsFile | None,
     merge_gap: float = 0.5,
     progress: Callable[[str], Progress | None] | None = None,
+    backend: Backend = "numpy",
 ) -> Report:
-    """Replay ``observer_name`` over ``rec``; with thresholds also detect episodes."""
+    """Replay ``observer_name`` (on ``backend``) over ``rec``; with thresholds also detect
+    episodes."""
     from hofto_hw.replay.setup import observer_config
 
     obs_cfg = observer_config(observer_name, setup, thresholds)
-    observer = observer_for(observer_name, obs_cfg, setup, rec)
+    observer = observer_for(observer_name, obs_cfg, setup, rec, backend)
     monitor = None
     if thresholds is not None and observer_name in thresholds.observers:
         monitor = CollisionMonitor(thresholds.observers[observer_name].monitor)

@@ -16,6 +16,7 @@ import numpy as np
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import Mode, State
 from drivers.sim.simbus import SimBus
+from hofto_hw.commands.backend import observer_backend
 from hofto_hw.config.models import ExternalTorqueConfig, SystemConfig
 from hofto_hw.control.joint_motion import DemoPath, JointMotion
 from hofto_hw.errors import ConfigError
@@ -128,7 +129,8 @@ def build(
     names = loop_observer_names(cfg)
     for name in names:
         check_observer(name, table[name], model, rate)
-    observers = [make_observer(table[name], model) for name in names]
+    backend = observer_backend()  # compiled kernels when numba is there, warmed here
+    observers = [make_observer(table[name], model, backend=backend) for name in names]
     sink = sink if sink is not None else MemorySink(tick_dtype(model.n, len(names)))
 
     bus = build_sim_bus(_sim_config(cfg), external=True)

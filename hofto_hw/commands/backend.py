@@ -1,0 +1,22 @@
+"""Which observer backend the commands use: the compiled kernels when they are available,
+else the numpy path, said once per process on stderr."""
+
+from __future__ import annotations
+
+import sys
+
+from hofto_hw.observers import kernels
+
+_said = False
+
+
+def observer_backend() -> kernels.Backend:
+    """``auto``; prints one line on stderr (once) when the compiled kernels are unavailable."""
+    global _said
+    if not kernels.available() and not _said:
+        _said = True
+        print(
+            f"hofto-hw: running the numpy observers ({kernels.unavailable_reason()})",
+            file=sys.stderr,
+        )
+    return "auto"

@@ -1,0 +1,233 @@
+"""DynamicsSnapshot: the model terms of one tick, computed once from (q, qd, tau).
+
+Every estimator of a tick reads the same dynamics at the same sample, so the tick computes
+them once, into a caller-owned workspace, and hands the snapshot to each observer
+(``observer.update_snapshot(snap, dt)``). A snapshot computes only what its consumers
+declared (:class:`Needs`, the union of their ``needs``):
+
+- ``MASS``: M(q) [kg·m²], (n, n), symmetric, rotor inertia included (CRBA);
+- ``GRAVITY``: g(q) [N·m], (n,);
+- ``NLE``: C(q, qd)·qd + g(q) [N·m], (n,);
+- ``CORIOLIS_T``: C(q, qd)ᵀ·qd [N·m], (n,) (the momentum observer's beta term);
+- ``FRICTION``: f(qd) [N·m], (n,), eq. (12);
+- ``ACCEL``: M⁻¹·(tau - C·qd - g - f) [rad/s²], (n,), the model acceleration without
+  contact (ABA; implies FRICTION).
+
+No copies: the arrays are views of pinocchio's Data storage (``data.M``, ``data.g``,
+``data.nle``, ``data.ddq``, ``data.C``) taken once at construction; pinocchio writes into that
+storage in place, so the views show each tick's values. Whether the installed pinocchio keeps
+those views stable and fills both triangles of M is checked once per process
+(:func:`pinocchio_traits`); if not, the snapshot copies (and symmetrises M) into its own
+buffers instead. ``q``, ``qd`` and ``tau`` are references to the caller's arrays (the sample
+the terms belong to), valid while the caller keeps them unchanged.
+
+A sample with a NaN or inf (or a non-finite dt, checked by the consumers) is not evaluated:
+``finite`` is False and the terms keep the last finite sample's values.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+
+if TYPE_CHECKING:
+    from hofto_hw.model.robot import RobotModel
+
+
+class Needs(enum.IntFlag):
+    """Model terms a consumer of the snapshot reads."""
+
+    NONE = 0
+    MASS = enum.auto()
+    GRAVITY = enum.auto()
+    NLE = enum.auto()
+    CORIOLIS_T = enum.auto()
+    FRICTION = enum.auto()
+    ACCEL = enum.auto()
+
+
+@dataclass(frozen=True)
+class PinocchioTraits:
+    """What the installed pinocchio guarantees (measured, not assumed)."""
+
+    version: str
+    stable_views: bool  # data.M / data.g / ... are views of storage that algorithms update
+    full_mass_matrix: bool  # crba fills both triangles of data.M, exactly symmetric
+
+
+_TRAITS: PinocchioTraits | None = None
+
+
+def pinocchio_traits(model: RobotModel) -> PinocchioTraits:
+    """Check once per process (on ``model``'s kinematic tree) how pinocchio returns results."""
+    global _TRAITS
+    if _TRAITS is None:
+        pm = model.pin_model
+        pd = pm.createData()
+        rng = np.random.default_rng(7)
+        q1 = pin.randomConfiguration(pm) if np.all(np.isfinite(pm.upperPositionLimit)) else None
+        if q1 is None:
+            q1 = rng.uniform(-1.0, 1.0, pm.nq)
+        q2 = q1 + rng.uniform(0.1, 0.5, pm.nq)
+        pin.crba(pm, pd, q1)
+        view = pd.M
+        stable = bool(np.shares_memory(view, pd.M))
+        M1 = np.array(view)
+        pin.crba(pm, pd, q2)
+        M2 = pin.crba(pm, pm.createData(), q2)
+        stable = stable and not np.array_equal(view, M1) and np.array_equal(view, M2)
+        full = bool(np.array_equal(M2, M2.T) and np.array_equal(np.asarray(pd.M), M2))
+        _TRAITS = PinocchioTraits(pin.__version__, stable, full)
+    return _TRAITS
+
+
+class DynamicsSnapshot:
+    """The model terms of one sample for a set of consumers; see the module docstring.
+
+    ``needs`` is the union of the consumers' :class:`Needs`. :meth:`compute` fills the
+    terms; read ``M``, ``g``, ``nle``, ``ct_qd``, ``f``, ``accel`` (arrays, see above), ``q``,
+    ``qd``, ``tau`` (the sample) and ``finite``. Allocation: none by this class; each
+    pinocchio call returns a transient copy that is dropped at once (the binding allocates
+    it; the snapshot reads the Data storage instead).
+    """
+
+    def __init__(self, model: RobotModel, needs: Needs | int, backend: str = "numpy") -> None:
+        needs = Needs(needs)
+        if needs & Needs.ACCEL:
+            needs |= Needs.FRICTION
+        self.needs = needs
+        self.model = model
+        self.n = n = model.n
+        self.data = model.create_data()  # friction scratch and pinocchio Data
+        self.pin_model = model.pin_model
+        pd = self.pin_data = self.data.pin_data
+        traits = self.traits = pinocchio_traits(model)
+        views = traits.stable_views
+        self._copy = not views
+        self._symmetrise = not traits.full_mass_matrix
+        own = self._copy or self._symmetrise
+        self.M = np.zeros((n, n)) if own else pd.M
+        self.g = pd.g if views else np.zeros(n)
+        self.nle = pd.nle if views else np.zeros(n)
+        self.accel = pd.ddq if views else np.zeros(n)
+        self._C = pd.C if views else np.zeros((n, n))
+        self.ct_qd = np.zeros(n)
+        self.f = np.zeros(n)
+        self._total = np.zeros(n)
+        self._lower = np.tril(np.ones((n, n), dtype=bool), -1)
+        self._Mt = np.zeros((n, n))
+        zero = np.zeros(n)
+        self.q: np.ndarray = zero
+        self.qd: np.ndarray = zero
+        self.tau: np.ndarray = zero
+        self.finite = True
+        self._mass = bool(needs & Needs.MASS)
+        self._gravity = bool(needs & Needs.GRAVITY)
+        self._nle = bool(needs & Needs.NLE)
+        self._ct = bool(needs & Needs.CORIOLIS_T)
+        self._friction = bool(needs & Needs.FRICTION)
+        self._accel = bool(needs & Needs.ACCEL)
+        self._kernels = None
+        if backend != "numpy":
+            # the friction and Cᵀ·qd arithmetic as compiled kernels (the observers' module
+            # holds every kernel and the numba availability logic)
+            from hofto_hw.observers import kernels
+
+            if kernels.resolve(backend) == "numba":  # type: ignore[arg-type]
+                self._kernels = kernels
+                fr = model.friction
+                zeros = np.zeros(n)
+                self._fr = (
+                    fr.coulomb,
+                    fr.viscous,
+                    fr.bias,
+                    zeros if fr._stribeck_gap is None else fr._stribeck_gap,
+                    np.ones(n) if fr.stribeck_velocity is None else fr.stribeck_velocity,
+                )
+                if not kernels.warm(self._warm):
+                    self._kernels = None
+        self.backend = "numpy" if self._kernels is None else "numba"
+
+    def _warm(self) -> None:
+        k, n = self._kernels, self.n
+        assert k is not None
+        z = np.zeros(n)
+        fr = self.model.friction
+        k.friction_and_total(z, z, *self._fr, fr.smooth_velocity, True, np.zeros(n), np.zeros(n))
+        k.transposed_mat_vec(self._C, z, np.zeros(n))
+
+    def compute(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> bool:
+        """Evaluate the needed terms at the sample q [rad], qd [rad/s], tau [N·m] (n,).
+
+        Returns ``finite``: False (and nothing evaluated) when the sample holds a NaN or inf.
+        """
+        self.q, self.qd, self.tau = q, qd, tau
+        # one sum: NaN and ±inf propagate into it (as SampleGuard)
+        self.finite = finite = math.isfinite(_sum(q) + _sum(qd) + _sum(tau))
+        if not finite:
+            return False
+        pm, pd, fast = self.pin_model, self.pin_data, self._kernels
+        # A pinocchio call's return value (a copy) is dropped at once unless the Data views
+        # are unstable: one transient array at a time.
+        if self._copy:
+            return self._compute_copying(q, qd, tau)
+        if self._friction:
+            if fast is not None:
+                fr = self.model.friction
+                stribeck = fr._stribeck_gap is not None
+                fast.friction_and_total(
+                    qd, tau, *self._fr, fr.smooth_velocity, stribeck, self.f, self._total
+                )
+            else:
+                self.data.friction_torque(qd, out=self.f)
+                np.subtract(tau, self.f, out=self._total)
+        if self._accel:
+            pin.aba(pm, pd, q, qd, self._total)
+        if self._mass:
+            if self._symmetrise:
+                self._symmetric(pin.crba(pm, pd, q))
+            else:
+                pin.crba(pm, pd, q)
+        if self._ct:
+            pin.computeCoriolisMatrix(pm, pd, q, qd)
+            if fast is not None:
+                fast.transposed_mat_vec(self._C, qd, self.ct_qd)
+            else:
+                np.dot(self._C.T, qd, out=self.ct_qd)
+        if self._gravity:
+            pin.computeGeneralizedGravity(pm, pd, q)
+        if self._nle:
+            pin.nonLinearEffects(pm, pd, q, qd)
+        return True
+
+    def _symmetric(self, r: np.ndarray) -> None:
+        M = self.M
+        np.copyto(M, r)
+        np.copyto(self._Mt, M.T)
+        np.copyto(M, self._Mt, where=self._lower)
+
+    def _compute_copying(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> bool:
+        """The same terms for a pinocchio whose Data attributes are no stable views."""
+        pm, pd = self.pin_model, self.pin_data
+        if self._friction:
+            self.data.friction_torque(qd, out=self.f)
+            np.subtract(tau, self.f, out=self._total)
+        if self._accel:
+            np.copyto(self.accel, pin.aba(pm, pd, q, qd, self._total))
+        if self._mass:
+            self._symmetric(pin.crba(pm, pd, q))
+        if self._ct:
+            np.dot(pin.computeCoriolisMatrix(pm, pd, q, qd).T, qd, out=self.ct_qd)
+        if self._gravity:
+            np.copyto(self.g, pin.computeGeneralizedGravity(pm, pd, q))
+        if self._nle:
+            np.copyto(self.nle, pin.nonLinearEffects(pm, pd, q, qd))
+        return True
+
+
+_sum = np.add.reduce

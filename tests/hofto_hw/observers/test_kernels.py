@@ -1,0 +1,199 @@
+"""The compiled kernels (numba) against the numpy reference path: 1e-12 over thousands of
+random steps, non-finite samples and Remark 7's equivalences included.
+
+numba is optional: these tests skip without it, except under CI (numba is in the dev extra
+there, so a missing numba is a failure, not a skip).
+"""
+
+from __future__ import annotations
+
+import os
+from math import comb
+
+import numpy as np
+import pytest
+
+from hofto_hw.observers import (
+    DobObserver,
+    EsoObserver,
+    HoftoObserver,
+    MomentumObserver,
+    StaObserver,
+    kernels,
+)
+from hofto_hw.observers.registry import levant_gains
+
+if not kernels.available():
+    if os.environ.get("CI"):
+        pytest.fail(f"CI: compiled kernels must run: {kernels.unavailable_reason()}")
+    pytest.skip(
+        f"compiled kernels unavailable: {kernels.unavailable_reason()}", allow_module_level=True
+    )
+
+STEPS = 3000
+TOL = 1e-12
+
+
+def _inputs(model, steps=STEPS, seed=11, nan_at=()):
+    rng = np.random.default_rng(seed)
+    t = np.arange(steps) * 1e-3
+    q = (
+        model.home
+        + 0.3 * np.sin(np.outer(t, rng.uniform(0.5, 4, 6)))
+        + rng.normal(0, 1e-4, (steps, 6))
+    )
+    qd = np.gradient(q, 1e-3, axis=0) + rng.normal(0, 1e-3, (steps, 6))
+    tau = rng.normal(0, 5.0, (steps, 6)) + np.array([0, 12, 5, 0, 0.1, 0])
+    for k, what, j in nan_at:
+        {"q": q, "qd": qd, "tau": tau}[what][k, j] = np.nan
+    return q, qd, tau
+
+
+def _run(obs, q, qd, tau, dt=1e-3):
+    obs.reset(q[0], qd[0])
+    return np.array([obs.update(q[k], qd[k], tau[k], dt).copy() for k in range(len(q))])
+
+
+def _agree(make, model, **kw):
+    q, qd, tau = _inputs(model, **kw)
+    ref = make("numpy")
+    fast = make("numba")
+    assert ref.backend == "numpy" and fast.backend == "numba"
+    a = _run(ref, q, qd, tau)
+    b = _run(fast, q, qd, tau)
+    finite = np.isfinite(a)
+    np.testing.assert_array_equal(finite, np.isfinite(b))
+    assert np.abs(a[finite]).max() > 1.0  # the inputs excite the observer
+    scale = np.abs(a[finite]).max()
+    np.testing.assert_allclose(b[finite], a[finite], rtol=TOL, atol=TOL * scale)
+    return a, b
+
+
+HOFTO_CASES = [
+    # (order, form, discretisation, substeps, powers)
+    (2, "recursive", "taylor", 1, [0.75, 2 / 3, 0.5, 0.0]),
+    (1, "recursive", "taylor", 1, [2 / 3, 0.5, 0.0]),
+    (3, "recursive", "taylor", 2, [0.8, 0.75, 2 / 3, 0.5, 0.0]),
+    (2, "eq17", "euler", 3, [0.9, 0.8, 0.7, 0.6]),
+    (2, "eq17", "taylor", 1, [0.75, 2 / 3, 0.5, 0.0]),
+    (2, "recursive", "euler", 1, [1.0, 1.0, 1.0, 1.0]),
+]
+
+
+@pytest.mark.parametrize(("order", "form", "disc", "substeps", "powers"), HOFTO_CASES)
+def test_hofto_kernel_matches_numpy(er3a_model, order, form, disc, substeps, powers):
+    k = order + 2
+    if form == "recursive":  # Levant's gains, L = 1000 rad/s^4
+        gains = np.array(levant_gains(1000.0, 6, (12.0, 8.0, 5.0, 3.0, 1.5, 1.1)[-k:]))
+    else:  # all poles of the linear part at -20 rad/s: binomial(k, i)·20^i
+        w0 = 20.0
+        gains = np.outer([comb(k, i) * w0**i for i in range(1, k + 1)], np.ones(6))
+
+    def make(backend):
+        return HoftoObserver(
+            er3a_model, gains, np.array(powers), form, substeps, disc, backend=backend
+        )
+
+    _agree(make, er3a_model)
+
+
+def test_eso_kernel_matches_numpy(er3a_model):
+    for substeps in (1, 3):
+        _agree(
+            lambda b, s=substeps: EsoObserver(
+                er3a_model, np.full(6, 45.0), np.full(6, 675.0), np.full(6, 3375.0), s, b
+            ),
+            er3a_model,
+        )
+
+
+def test_sta_kernel_matches_numpy(er3a_model):
+    for substeps in (1, 2):
+        _agree(
+            lambda b, s=substeps: StaObserver(
+                er3a_model, np.full(6, 20.0), np.full(6, 100.0), np.full(6, 300.0), s, b
+            ),
+            er3a_model,
+        )
+
+
+def test_momentum_kernel_matches_numpy(er3a_model):
+    _agree(lambda b: MomentumObserver(er3a_model, np.full(6, 50.0), backend=b), er3a_model)
+
+
+def test_dob_kernel_matches_numpy(er3a_model):
+    _agree(lambda b: DobObserver(er3a_model, np.full(6, 30.0), backend=b), er3a_model)
+
+
+def test_nonfinite_samples_give_nan_and_keep_state_on_both_paths(er3a_model):
+    nan_at = [(500, "q", 1), (501, "qd", 3), (1200, "tau", 0), (1201, "tau", 5)]
+    makers = [
+        lambda b: HoftoObserver(
+            er3a_model,
+            np.outer([50.0, 80.0, 60.0, 40.0], np.ones(6)),
+            np.array([0.75, 2 / 3, 0.5, 0.0]),
+            backend=b,
+        ),
+        lambda b: EsoObserver(
+            er3a_model, np.full(6, 45.0), np.full(6, 675.0), np.full(6, 3375.0), 1, b
+        ),
+        lambda b: StaObserver(
+            er3a_model, np.full(6, 20.0), np.full(6, 100.0), np.full(6, 300.0), 1, b
+        ),
+        lambda b: MomentumObserver(er3a_model, np.full(6, 50.0), backend=b),
+        lambda b: DobObserver(er3a_model, np.full(6, 30.0), backend=b),
+    ]
+    for make in makers:
+        a, b = _agree(make, er3a_model, nan_at=nan_at)
+        for k, _, _ in nan_at:
+            assert np.all(np.isnan(a[k])) and np.all(np.isnan(b[k]))
+        assert np.all(np.isfinite(b[1202:]))
+
+
+def test_remark7_equivalences_hold_on_the_compiled_path(er3a_model):
+    q, qd, tau = _inputs(er3a_model, seed=5)
+    k1, k2, k3 = np.full(6, 8.0), np.full(6, 50.0), np.full(6, 300.0)
+    for substeps in (1, 3):
+        eso = _run(EsoObserver(er3a_model, k1, k2, k3, substeps, "numba"), q, qd, tau)
+        hofto = _run(
+            HoftoObserver(
+                er3a_model,
+                np.vstack([k1, k2, k3]),
+                np.ones(3),
+                "eq17",
+                substeps,
+                "euler",
+                backend="numba",
+            ),
+            q,
+            qd,
+            tau,
+        )
+        assert np.abs(eso).max() > 1.0
+        np.testing.assert_allclose(hofto, eso, rtol=1e-9, atol=1e-9)
+    l1, l2, l3 = np.full(6, 20.0), np.full(6, 100.0), np.full(6, 300.0)
+    sta = _run(StaObserver(er3a_model, l1, l2, l3, 1, "numba"), q, qd, tau)
+    hofto = _run(
+        HoftoObserver(
+            er3a_model,
+            np.vstack([l1, l2, l3]),
+            np.array([0.5, 0.5, 0.0]),
+            "eq17",
+            1,
+            "euler",
+            backend="numba",
+        ),
+        q,
+        qd,
+        tau,
+    )
+    assert np.abs(sta).max() > 1.0
+    np.testing.assert_allclose(hofto, sta, rtol=1e-9, atol=1e-9)
+
+
+def test_backend_resolution():
+    assert kernels.resolve("numpy") == "numpy"
+    assert kernels.resolve("auto") == "numba"
+    assert kernels.resolve("numba") == "numba"
+    with pytest.raises(ValueError, match="backend"):
+        kernels.resolve("fortran")  # type: ignore[arg-type]
