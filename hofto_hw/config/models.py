@@ -17,6 +17,7 @@ from pydantic import Field, field_validator, model_validator
 
 from hofto_hw.config.base import FileModel, NonNegFloat, PositiveFloat
 from hofto_hw.config.collision import CollisionConfig
+from hofto_hw.config.drag import DragConfig
 from hofto_hw.config.drives import BusConfig
 
 # --------------------------------------------------------------------------------- robot
@@ -321,6 +322,7 @@ class SystemConfig(FileModel):
     simulation: SimulationConfig | None = None
     collision: CollisionConfig | None = None
     bus: BusConfig | None = None
+    drag: DragConfig | None = None
 
     @property
     def cycle_time(self) -> float:
@@ -343,6 +345,16 @@ class SystemConfig(FileModel):
             _check_lengths([(f"observers.{name}.{k}", v) for k, v in rows], n)
         if self.bus is not None:
             _check_lengths([("bus.drives", self.bus.drives)], n)
+        if self.drag is not None:
+            try:
+                self.drag.check_rate(self.loop.rate_hz, n)
+            except ValueError as exc:
+                raise ValueError(f"drag.{exc}") from None
+            if self.drag.observer not in self.observers:
+                raise ValueError(
+                    f"drag.observer: {self.drag.observer!r} is not in observers "
+                    f"({', '.join(self.observers) or 'none configured'})"
+                )
         if self.simulation is not None:
             s = self.simulation
             _check_lengths([("simulation.encoder_counts_per_rev", s.encoder_counts_per_rev)], n)

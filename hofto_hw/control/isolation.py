@@ -1,0 +1,100 @@
+"""Contact isolation from the estimated joint torques: tool or another link, and which.
+
+Per tick (allocation-free, :meth:`ContactIsolation.check`): does tau_ext_hat look like a
+hand at the tool? The tool hypothesis is a force f at the tool origin (plus a moment when
+rotation is unlocked for dragging); its least-squares fit leaves the residual
+
+    r = tau_ext_hat - Jᵀ·f,    mismatch = max_j |r_j|  [N·m].
+
+A 6-joint arm with a full tool wrench (force + moment) explains *any* joint torque, so the
+check is only informative with a force-only (or masked) tool hypothesis: 6 equations, 3
+unknowns. A mismatch above the threshold means "a contact not at the tool".
+
+On the event tick only (:meth:`ContactIsolation.isolate`, allocates): name the link. A
+contact on link k (the body moved by joint k) gives torques on joints 1..k only; for
+k = 1, 2, ... the hypothesis "tool force + a point force at the middle of link k" is fitted
+and the first k whose residual is below the threshold is the most likely link (the smallest
+such k: the fits of later links have more free columns and explain anything). Returns the
+1-based link number, n for "the last link / tool region", 0 when nothing is explained.
+
+Why here and not in safety/: this is estimation (which body the estimate points at), like
+the wrench; it decides nothing. The drag controller reports the mismatch as a stop
+request and the service's stop controller latches and acts, with the link in the event.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+from scipy.linalg.lapack import dposv
+
+from hofto_hw.control.wrench import ToolJacobian
+from hofto_hw.model.robot import RobotModel
+
+
+class ContactIsolation:
+    """See the module docstring. ``threshold`` [N·m]; ``rotation``: the tool hypothesis
+    includes a moment (rotation unlocked for dragging). After :meth:`check`: ``mismatch``
+    [N·m], ``tool_force`` (3,) [N] of the tool-force fit, ``residual`` (n,) [N·m]."""
+
+    def __init__(
+        self, model: RobotModel, jac: ToolJacobian, threshold: float, rotation: bool = False
+    ) -> None:
+        self.model = model
+        self.jac = jac
+        self.threshold = float(threshold)
+        self.k = 6 if rotation else 3
+        n = model.n
+        self._Jh = jac.J[: self.k]  # a view of the tool Jacobian's rows of the hypothesis
+        self._A = np.zeros((self.k, self.k))
+        self._b = np.zeros(self.k)
+        self._fit = np.zeros(n)
+        self.residual = np.zeros(n)
+        self.tool_force = np.zeros(3)
+        self.mismatch = 0.0
+        self._data = model.pin_model.createData()  # event-time kinematics
+
+    def check(self, tau_ext: np.ndarray) -> bool:
+        """True when tau_ext (n,) does not match a hand at the tool (``jac`` at this q)."""
+        Jh, A, b = self._Jh, self._A, self._b
+        np.matmul(Jh, Jh.T, out=A)
+        for i in range(self.k):
+            A[i, i] += 1e-9
+        np.matmul(Jh, tau_ext, out=b)
+        _, _, info = dposv(A.T, b, lower=0, overwrite_a=1, overwrite_b=1)
+        if info != 0:
+            b.fill(0.0)
+        np.copyto(self.tool_force, b[:3])
+        np.matmul(Jh.T, b, out=self._fit)
+        np.subtract(tau_ext, self._fit, out=self.residual)
+        np.abs(self.residual, out=self._fit)
+        self.mismatch = float(self._fit.max())
+        return self.mismatch > self.threshold
+
+    def isolate(self, q: np.ndarray, tau_ext: np.ndarray) -> int:
+        """The most likely contact link (1-based; n = last link; 0 = none). Allocates."""
+        pm, d = self.model.pin_model, self._data
+        n = self.model.n
+        pin.computeJointJacobians(pm, d, q)
+        pin.framesForwardKinematics(pm, d, q)
+        tool = pin.getFrameJacobian(pm, d, self.jac.frame_id, pin.LOCAL_WORLD_ALIGNED)[: self.k]
+        tau = np.asarray(tau_ext, dtype=float)
+        for link in range(1, n):
+            Jp = _point_jacobian(pm, d, link, link + 1)
+            A = np.hstack([tool.T, Jp.T])
+            x, *_ = np.linalg.lstsq(A, tau, rcond=1e-6)
+            if np.abs(tau - A @ x).max() <= self.threshold:
+                return link
+        return n
+
+
+def _point_jacobian(pm: pin.Model, d: pin.Data, joint: int, next_joint: int) -> np.ndarray:
+    """Positional Jacobian (3, n) of the midpoint between the origins of ``joint`` and
+    ``next_joint`` (a point on link ``joint``), world-aligned."""
+    J = pin.getJointJacobian(pm, d, joint, pin.LOCAL_WORLD_ALIGNED)
+    o = d.oMi[joint].translation
+    p = 0.5 * (o + d.oMi[next_joint].translation)
+    r = p - o
+    # v_p = v_o + w × r = v_o - r × w
+    skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    return J[:3] - skew @ J[3:]
