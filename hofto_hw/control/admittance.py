@@ -4,7 +4,8 @@ Cartesian (:class:`CartesianAdmittance`): per axis of the tool twist V (6,),
 
     M_a·V' + B_a·V = F_ext_hat      (explicit Euler at the tick: stable for B_a·dt/M_a < 1)
 
-on the unlocked axes, with a force/torque deadband (zero below the band, unity gain above twice it), then shaped into a joint velocity:
+on the unlocked axes, with a force/torque deadband (zero below the band, unity gain above
+twice it) and k-fold damping while nobody pushes, then shaped into a joint velocity: the
 tool speed limit (translation and rotation, on the state, so it cannot wind up), a
 slow-down near singularities (scale w/w0 on the output), damped least squares
 qd = Jᵀ·(J·Jᵀ + λ²·I)⁻¹·V, virtual walls of the workspace box and of the soft joint limits,
