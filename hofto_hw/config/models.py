@@ -19,6 +19,7 @@ from hofto_hw.config.base import FileModel, NonNegFloat, PositiveFloat
 from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.drag import DragConfig
 from hofto_hw.config.drives import BusConfig
+from hofto_hw.config.motion import MotionConfig
 
 # --------------------------------------------------------------------------------- robot
 
@@ -323,6 +324,7 @@ class SystemConfig(FileModel):
     collision: CollisionConfig | None = None
     bus: BusConfig | None = None
     drag: DragConfig | None = None
+    motion: MotionConfig = Field(default_factory=MotionConfig)
 
     @property
     def cycle_time(self) -> float:
@@ -345,6 +347,8 @@ class SystemConfig(FileModel):
             _check_lengths([(f"observers.{name}.{k}", v) for k, v in rows], n)
         if self.bus is not None:
             _check_lengths([("bus.drives", self.bus.drives)], n)
+        if self.motion.jerk is not None:
+            _check_lengths([("motion.jerk", self.motion.jerk)], n)
         if self.drag is not None:
             try:
                 self.drag.check_rate(self.loop.rate_hz, n)

@@ -30,6 +30,7 @@ from hofto_hw.config.drag import DragConfig
 from hofto_hw.config.loader import load_config
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.control.drag import DragController
+from hofto_hw.control.taught_path import TaughtPathRecorder
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers import make_observer
 
@@ -256,9 +257,11 @@ class DragSim:
         pressed: Callable[[float], bool] | bool = True,
         on_tick: Callable[[DragSim], None] | None = None,
         trajectory: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        recorder: TaughtPathRecorder | None = None,
     ) -> DragRun:
         """Run ``duration`` [s] of simulated time. ``pressed(t)``: the enabling input at run
-        time t. ``trajectory`` (q, qd, qdd) (K, n): follow it instead of dragging (replay)."""
+        time t. ``trajectory`` (q, qd, qdd) (K, n): follow it instead of dragging (replay).
+        ``recorder``: records the measured q of every tick while the drag is active."""
         dt = self.dt
         n = self.model.n
         N = round(duration / dt)
@@ -304,6 +307,8 @@ class DragSim:
                 rec.limited[k] = drag.limited
                 rec.wrench[k] = drag.wrench
                 rec.mode[k] = drag.enabling.state
+                if recorder is not None and drag.active:
+                    recorder.push(t, g.q)
             self.ff.inverse_dynamics(self.q_ref, self.qd_ref, self.qdd_ref, out=self.tau_ff)
             g.command_position(self.q_ref, self.tau_ff)
             if on_tick is not None:
@@ -340,3 +345,67 @@ def tool_motion(model: RobotModel, q: np.ndarray, qd: np.ndarray) -> tuple[np.nd
         p[k] = d.oMf[fid].translation
         v[k] = J[:3] @ qd[k]
     return p, v
+
+
+# ------------------------------------------------------------------------ figures
+
+
+def drag_figures(
+    run: DragRun,
+    push: ToolPush,
+    damping: float,
+    rest_fraction: float = 0.05,
+    settle: float = 0.5,
+) -> dict[str, float]:
+    """Issue 9's drag figures of a run with one constant tool push (SI; times in ms).
+
+    - steady_speed_mps: mean tool speed along the push over [start + settle, end - 0.05];
+    - expected_speed_mps: |F| / B_a;
+    - off_axis_mps: mean speed across the push over the same window (its norm);
+    - rest_time_ms: from the push's end (force zero) to the last tick the tool is faster
+      than ``rest_fraction`` of the expected speed;
+    - max_speed_mps: the highest tool speed of the run.
+    """
+    f = np.asarray(push.force, dtype=float)
+    u = f / np.linalg.norm(f)
+    w = (run.t >= push.start + settle) & (run.t <= push.end - 0.05)
+    v = run.tool_v[w]
+    along = v @ u
+    across = v - np.outer(along, u)
+    expected = float(np.linalg.norm(f) / damping)
+    speed = np.linalg.norm(run.tool_v, axis=1)
+    after = np.flatnonzero(run.t >= push.end)
+    moving = after[speed[after] > rest_fraction * expected]
+    rest = 0.0 if moving.size == 0 else float(run.t[moving[-1]] - push.end + (run.t[1] - run.t[0]))
+    return {
+        "steady_speed_mps": float(along.mean()),
+        "expected_speed_mps": expected,
+        "off_axis_mps": float(np.linalg.norm(across.mean(axis=0))),
+        "rest_time_ms": 1e3 * rest,
+        "max_speed_mps": float(speed.max()),
+    }
+
+
+def drift_mps(run: DragRun, start: float = 0.0) -> dict[str, float]:
+    """Tool drift with no push from ``start`` [s]: net displacement / time and the peak of
+    the 1 s moving-average speed [m/s]."""
+    w = run.t >= start
+    p, t = run.tool[w], run.t[w]
+    net = float(np.linalg.norm(p[-1] - p[0]) / (t[-1] - t[0]))
+    dt = t[1] - t[0]
+    m = max(1, round(1.0 / dt))
+    if p.shape[0] > m:
+        moved = np.linalg.norm(p[m:] - p[:-m], axis=1) / (m * dt)
+        peak = float(moved.max())
+    else:
+        peak = net
+    return {"drift_mps": net, "drift_peak_mps": peak}
+
+
+def path_error_mm(taught_tool: np.ndarray, replayed_tool: np.ndarray) -> float:
+    """Largest distance [mm] from a replayed tool position to the taught tool path (dense
+    samples, nearest point)."""
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(taught_tool).query(replayed_tool)
+    return float(1e3 * d.max())
