@@ -8,8 +8,8 @@
   quintic B-spline (scipy) through the recorded samples (knots every ``knot_spacing``
   seconds), padded at rest at both ends and starting and ending exactly at rest (velocity and
   acceleration zero, so it joins the ruckig move without a jump); its jerk is continuous and
-  bounded and the recorded encoder noise is not differentiated three times. The replayed geometry is the
-  taught one (the spline's fit residual, ~0.1 mm, is the only path error it adds).
+  bounded and the recorded encoder noise is not differentiated three times. The replayed
+  geometry is the taught one (the spline's fit residual, ~0.1 mm, is the only path error it adds).
 - :func:`replay_trajectory`: the move to the path's start followed by the scaled path,
   sampled at the loop period; :class:`TrajectoryPlayer` plays samples per tick.
 
