@@ -87,7 +87,9 @@ class DragConfig(FileModel):
         "a released arm stops in M_a/(k·B_a) instead of M_a/B_a",
     )
     unlock: UnlockConfig = Field(default_factory=UnlockConfig)
-    force_deadband: NonNegFloat = Field(3.0, description="|F| below this is no push [N]")
+    force_deadband: NonNegFloat = Field(
+        5.0, description="|F| below this is no push [N]; unity gain above twice it"
+    )
     torque_deadband: NonNegFloat = Field(0.5, description="|M| below this is no twist [N·m]")
     joint_deadband: NonNegFloat = Field(1.0, description="joint-space deadband [N·m]")
     max_tool_speed: PositiveFloat = Field(

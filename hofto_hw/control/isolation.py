@@ -10,12 +10,16 @@ A 6-joint arm with a full tool wrench (force + moment) explains *any* joint torq
 check is only informative with a force-only (or masked) tool hypothesis: 6 equations, 3
 unknowns. A mismatch above the threshold means "a contact not at the tool".
 
-On the event tick only (:meth:`ContactIsolation.isolate`, allocates): name the link. A
-contact on link k (the body moved by joint k) gives torques on joints 1..k only; for
-k = 1, 2, ... the hypothesis "tool force + a point force at the middle of link k" is fitted
-and the first k whose residual is below the threshold is the most likely link (the smallest
-such k: the fits of later links have more free columns and explain anything). Returns the
-1-based link number, n for "the last link / tool region", 0 when nothing is explained.
+On the event tick only (:meth:`ContactIsolation.isolate`, allocates): name the link. The
+hand's force at the tool cannot be told from a contact on links 1-3 in one sample: with the
+tool on the wrist's last axis, a tool force along the wrist-centre-to-tool line loads joints
+1-3 only. So isolation takes the hand's force as it was in the last tick that matched the
+tool hypothesis (a hand changes slowly against a contact's onset) and isolates the rest,
+tau_c = tau_ext_hat - Jᵀ·f_before. A contact on link k (the body moved by joint k) loads
+joints 1..k only; for k = 1, 2, ... the hypothesis "a point force at the middle of link k"
+is fitted to tau_c and the first k whose residual is below a tolerance (a quarter of the
+threshold or 5 % of the largest torque) is the most likely link. Returns the 1-based link
+number (n: the last link, e.g. a moment at the tool).
 
 Why here and not in safety/: this is estimation (which body the estimate points at), like
 the wrench; it decides nothing. The drag controller reports the mismatch as a stop
@@ -51,8 +55,15 @@ class ContactIsolation:
         self._fit = np.zeros(n)
         self.residual = np.zeros(n)
         self.tool_force = np.zeros(3)
+        self._fit_b = np.zeros(self.k)
+        #: the tool hypothesis's fit (force, and moment if rotation) of the last matching tick
+        self.tool_force_before = np.zeros(self.k)
         self.mismatch = 0.0
         self._data = model.pin_model.createData()  # event-time kinematics
+        #: a link hypothesis "explains" tau_c when its residual is below this fraction of the
+        #: detection threshold (or 5 % of the largest torque)
+        self.explain_fraction = 0.25
+        self.residuals = np.full(n, np.nan)
 
     def check(self, tau_ext: np.ndarray) -> bool:
         """True when tau_ext (n,) does not match a hand at the tool (``jac`` at this q)."""
@@ -65,25 +76,31 @@ class ContactIsolation:
         if info != 0:
             b.fill(0.0)
         np.copyto(self.tool_force, b[:3])
+        np.copyto(self._fit_b, b)
         np.matmul(Jh.T, b, out=self._fit)
         np.subtract(tau_ext, self._fit, out=self.residual)
         np.abs(self.residual, out=self._fit)
         self.mismatch = float(self._fit.max())
-        return self.mismatch > self.threshold
+        if self.mismatch > self.threshold:
+            return True
+        np.copyto(self.tool_force_before, self._fit_b)
+        return False
 
     def isolate(self, q: np.ndarray, tau_ext: np.ndarray) -> int:
-        """The most likely contact link (1-based; n = last link; 0 = none). Allocates."""
+        """The most likely contact link (1-based; n = last link). Allocates."""
         pm, d = self.model.pin_model, self._data
         n = self.model.n
         pin.computeJointJacobians(pm, d, q)
         pin.framesForwardKinematics(pm, d, q)
         tool = pin.getFrameJacobian(pm, d, self.jac.frame_id, pin.LOCAL_WORLD_ALIGNED)[: self.k]
-        tau = np.asarray(tau_ext, dtype=float)
+        tau = np.asarray(tau_ext, dtype=float) - tool.T @ self.tool_force_before
+        self.residuals = np.full(n, np.nan)
+        tol = max(self.explain_fraction * self.threshold, 0.05 * float(np.abs(tau).max()))
         for link in range(1, n):
             Jp = _point_jacobian(pm, d, link, link + 1)
-            A = np.hstack([tool.T, Jp.T])
-            x, *_ = np.linalg.lstsq(A, tau, rcond=1e-6)
-            if np.abs(tau - A @ x).max() <= self.threshold:
+            x, *_ = np.linalg.lstsq(Jp.T, tau, rcond=1e-6)
+            self.residuals[link - 1] = np.abs(tau - Jp.T @ x).max()
+            if self.residuals[link - 1] <= tol:
                 return link
         return n
 
