@@ -12,9 +12,7 @@ class MotionConfig(FileModel):
     """Scales of the robot's joint limits for moves and replay, and the jerk limit."""
 
     velocity_scale: float = Field(0.5, gt=0.0, le=1.0, description="of the velocity limits")
-    acceleration_scale: float = Field(
-        0.5, gt=0.0, le=1.0, description="of the acceleration limits"
-    )
+    acceleration_scale: float = Field(0.5, gt=0.0, le=1.0, description="of the acceleration limits")
     default_acceleration: PositiveFloat = Field(
         5.0, description="[rad/s²] for joints whose acceleration limit is not given"
     )

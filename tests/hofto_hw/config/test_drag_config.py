@@ -42,12 +42,12 @@ def test_bad_values_are_named() -> None:
         DragConfig(unlock={"x": False, "y": False, "z": False})
     with pytest.raises(ValidationError, match="finite"):
         DragConfig(damping=float("nan"))
-    with pytest.raises(ValidationError, match="workspace.lower.x"):
+    with pytest.raises(ValidationError, match=r"workspace\.lower\.x"):
         DragConfig(workspace={"lower": [1, 0, 0], "upper": [0, 1, 1]})
 
 
 def test_unknown_observer_and_joint_gain_lengths(er3a_config) -> None:
-    with pytest.raises(ValidationError, match="drag.observer: 'kalman' is not in observers"):
+    with pytest.raises(ValidationError, match=r"drag\.observer: 'kalman' is not in observers"):
         _system(er3a_config, observer="kalman")
     with pytest.raises(ValidationError, match="joint_mass/joint_damping have 2/2 entries"):
         _system(er3a_config, space="joint", joint_mass=[1, 1], joint_damping=[5, 5])

@@ -3,7 +3,7 @@ fault; a release while dragging is a category 2 stop request."""
 
 from __future__ import annotations
 
-from hofto_hw.control.enabling import EnableEvent, EnableInput, Enabling, EnableState
+from hofto_hw.control.enabling import EnableEvent, EnableInput, EnableState, Enabling
 
 
 def test_press_from_standstill_enters_release_stops() -> None:

@@ -57,7 +57,7 @@ def test_payload_weight_is_taken_off(er3a_model) -> None:
 
 
 def test_unknown_tool_frame_is_refused(er3a_model) -> None:
-    with pytest.raises(ModelError, match="drag.tool_frame: frame 'nope'"):
+    with pytest.raises(ModelError, match=r"drag\.tool_frame: frame 'nope'"):
         ToolJacobian(er3a_model, tool_frame="nope")
 
 
@@ -67,9 +67,7 @@ def test_other_tool_frame(er3a_model) -> None:
     jac.update(q)
     pm = er3a_model.pin_model
     d = pm.createData()
-    ref = pin.computeFrameJacobian(
-        pm, d, q, pm.getFrameId("link_6"), pin.LOCAL_WORLD_ALIGNED
-    )
+    ref = pin.computeFrameJacobian(pm, d, q, pm.getFrameId("link_6"), pin.LOCAL_WORLD_ALIGNED)
     np.testing.assert_allclose(jac.J, ref)
 
 
