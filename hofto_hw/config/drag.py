@@ -119,7 +119,9 @@ class DragConfig(FileModel):
         150.0, description="a push above this is a stop request (drag force limit) [N]"
     )
     isolation_threshold: PositiveFloat = Field(
-        3.0, description="tool-force hypothesis residual that means 'not at the tool' [N·m]"
+        1.0,
+        description="tool-force hypothesis residual that means 'not at the tool' [N·m] "
+        "(ER3A, 10 % model error: ~0.2 while dragging)",
     )
     isolation_debounce: NonNegFloat = Field(
         0.01, description="the mismatch must persist this long to count [s]"

@@ -13,8 +13,9 @@ unknowns. A mismatch above the threshold means "a contact not at the tool".
 On the event tick only (:meth:`ContactIsolation.isolate`, allocates): name the link. The
 hand's force at the tool cannot be told from a contact on links 1-3 in one sample: with the
 tool on the wrist's last axis, a tool force along the wrist-centre-to-tool line loads joints
-1-3 only. So isolation takes the hand's force as it was in the last tick that matched the
-tool hypothesis (a hand changes slowly against a contact's onset) and isolates the rest,
+1-3 only. So isolation takes the hand's force as it was ``lookback`` matching ticks before the mismatch (a
+hand changes slowly against a contact's onset, and the fit absorbs part of a contact while it
+builds up) and isolates the rest,
 tau_c = tau_ext_hat - Jᵀ·f_before. A contact on link k (the body moved by joint k) loads
 joints 1..k only; for k = 1, 2, ... the hypothesis "a point force at the middle of link k"
 is fitted to tau_c and the first k whose residual is below a tolerance (a quarter of the
@@ -39,10 +40,16 @@ from hofto_hw.model.robot import RobotModel
 class ContactIsolation:
     """See the module docstring. ``threshold`` [N·m]; ``rotation``: the tool hypothesis
     includes a moment (rotation unlocked for dragging). After :meth:`check`: ``mismatch``
-    [N·m], ``tool_force`` (3,) [N] of the tool-force fit, ``residual`` (n,) [N·m]."""
+    [N·m], ``tool_force`` (3,) [N] of the tool-force fit, ``residual`` (n,) [N·m].
+    ``lookback``: ticks of matching fits kept for :meth:`isolate`."""
 
     def __init__(
-        self, model: RobotModel, jac: ToolJacobian, threshold: float, rotation: bool = False
+        self,
+        model: RobotModel,
+        jac: ToolJacobian,
+        threshold: float,
+        rotation: bool = False,
+        lookback: int = 50,
     ) -> None:
         self.model = model
         self.jac = jac
@@ -56,8 +63,11 @@ class ContactIsolation:
         self.residual = np.zeros(n)
         self.tool_force = np.zeros(3)
         self._fit_b = np.zeros(self.k)
-        #: the tool hypothesis's fit (force, and moment if rotation) of the last matching tick
+        #: the tool hypothesis's fit (force, and moment if rotation) isolation subtracts
         self.tool_force_before = np.zeros(self.k)
+        self._ring = np.zeros((max(1, int(lookback)), self.k))
+        self._head = 0
+        self._filled = 0
         self.mismatch = 0.0
         self._data = model.pin_model.createData()  # event-time kinematics
         #: a link hypothesis "explains" tau_c when its residual is below this fraction of the
@@ -83,7 +93,11 @@ class ContactIsolation:
         self.mismatch = float(self._fit.max())
         if self.mismatch > self.threshold:
             return True
-        np.copyto(self.tool_force_before, self._fit_b)
+        # keep the fits of matching ticks: isolation takes one from `lookback` ticks before
+        # the mismatch, since the fit absorbs some of a contact while it builds up
+        self._ring[self._head] = self._fit_b
+        self._head = (self._head + 1) % self._ring.shape[0]
+        self._filled = min(self._filled + 1, self._ring.shape[0])
         return False
 
     def isolate(self, q: np.ndarray, tau_ext: np.ndarray) -> int:
@@ -93,6 +107,10 @@ class ContactIsolation:
         pin.computeJointJacobians(pm, d, q)
         pin.framesForwardKinematics(pm, d, q)
         tool = pin.getFrameJacobian(pm, d, self.jac.frame_id, pin.LOCAL_WORLD_ALIGNED)[: self.k]
+        if self._filled:
+            # the oldest kept fit: `lookback` matching ticks before the mismatch
+            oldest = (self._head - self._filled) % self._ring.shape[0]
+            self.tool_force_before[:] = self._ring[oldest]
         tau = np.asarray(tau_ext, dtype=float) - tool.T @ self.tool_force_before
         self.residuals = np.full(n, np.nan)
         tol = max(self.explain_fraction * self.threshold, 0.05 * float(np.abs(tau).max()))

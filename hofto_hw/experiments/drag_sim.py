@@ -354,6 +354,7 @@ def drag_figures(
     run: DragRun,
     push: ToolPush,
     damping: float,
+    standstill: float = 0.01,
     rest_fraction: float = 0.05,
     settle: float = 0.5,
 ) -> dict[str, float]:
@@ -361,9 +362,12 @@ def drag_figures(
 
     - steady_speed_mps: mean tool speed along the push over [start + settle, end - 0.05];
     - expected_speed_mps: |F| / B_a;
-    - off_axis_mps: mean speed across the push over the same window (its norm);
-    - rest_time_ms: from the push's end (force zero) to the last tick the tool is faster
-      than ``rest_fraction`` of the expected speed;
+    - off_axis_mps: norm of the mean tool velocity across the push over the same window;
+    - rest_time_ms: from the push's end (force zero) to the last tick any joint is faster
+      than ``standstill`` [rad/s] (drag.standstill_speed; the service's standstill too);
+    - rest_time_tool_ms: the same with the tool slower than ``rest_fraction`` of F/B_a;
+    - rest_time_command_ms: the same for the reference the controller commands (the rest
+      of the arm's time is the drives' position loop taking up its following error);
     - max_speed_mps: the highest tool speed of the run.
     """
     f = np.asarray(push.force, dtype=float)
@@ -374,14 +378,22 @@ def drag_figures(
     across = v - np.outer(along, u)
     expected = float(np.linalg.norm(f) / damping)
     speed = np.linalg.norm(run.tool_v, axis=1)
+    joint_speed = np.abs(run.qd).max(axis=1)
     after = np.flatnonzero(run.t >= push.end)
-    moving = after[speed[after] > rest_fraction * expected]
-    rest = 0.0 if moving.size == 0 else float(run.t[moving[-1]] - push.end + (run.t[1] - run.t[0]))
+    dt = float(run.t[1] - run.t[0])
+    ref_speed = np.zeros_like(joint_speed)
+    ref_speed[1:] = np.abs(np.diff(run.q_ref, axis=0)).max(axis=1) / dt
+
+    def _rest(moving: np.ndarray) -> float:
+        return 0.0 if moving.size == 0 else float(run.t[moving[-1]] - push.end + dt)
+
     return {
         "steady_speed_mps": float(along.mean()),
         "expected_speed_mps": expected,
         "off_axis_mps": float(np.linalg.norm(across.mean(axis=0))),
-        "rest_time_ms": 1e3 * rest,
+        "rest_time_ms": 1e3 * _rest(after[joint_speed[after] > standstill]),
+        "rest_time_tool_ms": 1e3 * _rest(after[speed[after] > rest_fraction * expected]),
+        "rest_time_command_ms": 1e3 * _rest(after[ref_speed[after] > standstill]),
         "max_speed_mps": float(speed.max()),
     }
 
