@@ -13,9 +13,9 @@ unknowns. A mismatch above the threshold means "a contact not at the tool".
 On the event tick only (:meth:`ContactIsolation.isolate`, allocates): name the link. The
 hand's force at the tool cannot be told from a contact on links 1-3 in one sample: with the
 tool on the wrist's last axis, a tool force along the wrist-centre-to-tool line loads joints
-1-3 only. So isolation takes the hand's force as it was ``lookback`` matching ticks before the mismatch (a
-hand changes slowly against a contact's onset, and the fit absorbs part of a contact while it
-builds up) and isolates the rest,
+1-3 only. So isolation takes the hand's force as it was ``lookback`` matching ticks before
+the mismatch (a hand changes slowly against a contact's onset, and the fit absorbs part of a
+contact while it builds up) and isolates the rest,
 tau_c = tau_ext_hat - Jᵀ·f_before. A contact on link k (the body moved by joint k) loads
 joints 1..k only; for k = 1, 2, ... the hypothesis "a point force at the middle of link k"
 is fitted to tau_c and the first k whose residual is below a tolerance (a quarter of the
