@@ -129,6 +129,12 @@ class DragConfig(FileModel):
     tare_on_enable: bool = Field(
         True, description="take the estimate at the press as zero (a force-sensor tare)"
     )
+    hand_feedforward: bool = Field(
+        True,
+        description="while dragging, add -tau_ext_hat (tared) to the drives' torque offset: "
+        "the position loop does not fight the hand (ER3A sim: the arm rests 42 ms after a "
+        "release instead of 133 ms, momentum observer)",
+    )
     standstill_speed: PositiveFloat = Field(
         0.01, description="every joint slower than this [rad/s] counts as standstill"
     )

@@ -7,6 +7,9 @@ tau_ext_hat, the enabling input and whether a fault is latched, and gives
 - ``reason`` (:class:`DragReason`), the stop request of this tick, and ``category`` (2 for a
   released enabling input, -1 otherwise: the caller's stop controller maps the force limit
   and an off-tool contact to its fault classes);
+- ``tau_offset`` (n,) [N·m] to add to the drives' torque offset (``drag.hand_feedforward``:
+  minus the tared estimate while dragging, so the position loop does not fight the hand and
+  has no following error to take up when the hand lets go; zero otherwise);
 - ``wrench`` (6,) [N, N·m] at the tool, ``contact_link`` (1-based, on an off-tool contact),
   ``mismatch`` [N·m], ``limited`` (bit mask of active walls/limits).
 
@@ -70,6 +73,7 @@ class DragController:
         self.wrench = self.estimator.wrench
         self.tau_bias = np.zeros(n)
         self.tau = np.zeros(n)  # tau_ext_hat minus the tare [N·m]
+        self.tau_offset = np.zeros(n)  # add to the drives' torque offset [N·m]
         self.reason = 0
         self.category = -1
         self.contact_link = 0
@@ -152,6 +156,10 @@ class DragController:
         else:
             qd_new = adm.update(self.tau if active else self._zero_n, self.q_cmd, dt)
         self.limited = adm.shaping.limited
+        if active and cfg.hand_feedforward:
+            np.negative(self.tau, out=self.tau_offset)
+        else:
+            self.tau_offset.fill(0.0)
         np.copyto(self.qd_cmd, qd_new)
         np.subtract(self.qd_cmd, self._qd_prev, out=self.qdd_cmd)
         self.qdd_cmd *= 1.0 / dt

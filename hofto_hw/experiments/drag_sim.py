@@ -310,6 +310,8 @@ class DragSim:
                 if recorder is not None and drag.active:
                     recorder.push(t, g.q)
             self.ff.inverse_dynamics(self.q_ref, self.qd_ref, self.qdd_ref, out=self.tau_ff)
+            if trajectory is None and self.stop_mode == RUN:
+                self.tau_ff += drag.tau_offset  # the hand's torque off the drives' offset
             g.command_position(self.q_ref, self.tau_ff)
             if on_tick is not None:
                 on_tick(self)

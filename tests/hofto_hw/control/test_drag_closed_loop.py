@@ -54,16 +54,28 @@ def test_constant_push_gives_force_over_damping(push_run) -> None:
     assert fig["off_axis_mps"] < 0.05 * fig["steady_speed_mps"], fig
 
 
-def test_at_rest_after_release(push_run) -> None:
+def test_at_rest_within_100ms_of_release(push_run) -> None:
     name, _, _, fig = push_run
-    # The controller's reference stops within 100 ms of the push's end with the momentum
-    # observer; HOFTO at the paper's gains slews its estimate at ~150 N/s (sign stage), so
-    # its reference needs ~110 ms. The arm then takes up the drives' following error
-    # (~0.5 mm at the emulated CSP loop's 37.5 1/s position gain): ~110-135 ms to joint
-    # standstill. Issue 9's 100 ms target for the arm is NOT met (docs/drag.md).
-    bound = 100.0 if name == "momentum" else 130.0
-    assert fig["rest_time_command_ms"] <= bound, (name, fig)
-    assert fig["rest_time_ms"] <= 200.0, (name, fig)
+    if name == "momentum":
+        assert fig["rest_time_ms"] <= 100.0, fig  # every joint below 0.01 rad/s
+        assert fig["rest_time_tool_ms"] <= 100.0, fig
+        return
+    # HOFTO at the paper's gains slews its estimate at ~150 N/s (its sign() stage, L =
+    # 330-440): a 20 N release reads as zero after ~110 ms, so the arm cannot rest sooner.
+    # Measured and reported (docs/drag.md); bounded here so a regression still fails.
+    assert fig["rest_time_command_ms"] <= 130.0, fig
+    assert fig["rest_time_ms"] <= 130.0, fig
+
+
+def test_hand_feedforward_is_what_makes_the_arm_rest_quickly() -> None:
+    sim = DragSim(observer="momentum", drag={"hand_feedforward": False})
+    push = ToolPush((20.0, 0.0, 0.0), 0.8, 2.0)
+    sim.world.pushes.append(push)
+    fig = drag_figures(sim.run(2.6, pressed=_pressed), push, B_A)
+    # without it the drives' position loop fights the hand and then takes up its
+    # following error after the release (~130 ms measured)
+    assert fig["rest_time_command_ms"] <= 100.0
+    assert fig["rest_time_ms"] > 100.0
 
 
 def test_no_push_with_enabling_held_does_not_drift() -> None:
