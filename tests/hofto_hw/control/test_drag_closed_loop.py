@@ -109,9 +109,13 @@ def test_releasing_mid_drag_stops_and_holds() -> None:
     assert run.reason[run.stop_tick] == DragReason.ENABLE_RELEASED
     speed = np.linalg.norm(run.tool_v, axis=1)
     assert speed[run.t < release].max() > 0.05  # it was being dragged
-    after = run.t > release + 0.1
-    assert speed[after].max() < 5e-3  # stopped, and held although the push goes on
+    # stopped, and held although the push goes on (the drives take the hand's force over
+    # from the feed-forward at the release: a few ms of yielding)
+    after = run.t > release + 0.2
+    assert speed[after].max() < 5e-3
     assert np.ptp(run.tool[after], axis=0).max() < 1e-3
+    stop_distance = np.linalg.norm(run.tool[-1] - run.tool[run.stop_tick])
+    assert stop_distance < 0.01
 
 
 def test_speed_limit_holds_under_a_hard_push() -> None:
