@@ -67,6 +67,12 @@ class DragController:
             model, self.jac, cfg.isolation_threshold, rotation=cfg.unlock.rotation
         )
         self.enabling = Enabling()
+        # plain values for the tick (no pydantic there)
+        self._standstill = float(cfg.standstill_speed)
+        self._force_limit = float(cfg.force_limit)
+        self._debounce = float(cfg.isolation_debounce)
+        self._tare = bool(cfg.tare_on_enable)
+        self._feedforward = bool(cfg.hand_feedforward)
         self.q_cmd = np.zeros(n)
         self.qd_cmd = np.zeros(n)
         self.qdd_cmd = np.zeros(n)
@@ -114,9 +120,8 @@ class DragController:
         fault_latched: bool,
     ) -> int:
         """One tick (see module docstring); returns ``reason``."""
-        cfg = self.cfg
         np.abs(qd, out=self._abs)
-        standstill = bool(self._abs.max() < cfg.standstill_speed)
+        standstill = bool(self._abs.max() < self._standstill)
         ev = self.enabling.update(pressed, standstill, fault_latched)
         self.event = ev
         self.reason = 0
@@ -124,7 +129,7 @@ class DragController:
         if ev == EnableEvent.ENTERED:
             np.copyto(self.q_cmd, q)  # bumpless: start from where the arm is
             self.admittance.reset()
-            if cfg.tare_on_enable:
+            if self._tare:
                 np.copyto(self.tau_bias, tau_ext)
             self._mismatch_time = 0.0
             self.contact_link = 0
@@ -137,11 +142,11 @@ class DragController:
         self.estimator.update(self.tau)
         active = self.enabling.state == 1
         if active:
-            if self.estimator.force_norm > cfg.force_limit:
+            if self.estimator.force_norm > self._force_limit:
                 self.reason = DragReason.FORCE_LIMIT
             if self.isolation.check(self.tau):
                 self._mismatch_time += dt
-                if self._mismatch_time >= cfg.isolation_debounce:
+                if self._mismatch_time >= self._debounce:
                     if self.contact_link == 0:  # the one allocating call, once per contact
                         self.contact_link = self.isolation.isolate(q, self.tau)
                     self.reason = DragReason.CONTACT_OFF_TOOL
@@ -156,7 +161,7 @@ class DragController:
         else:
             qd_new = adm.update(self.tau if active else self._zero_n, self.q_cmd, dt)
         self.limited = adm.shaping.limited
-        if active and cfg.hand_feedforward:
+        if active and self._feedforward:
             np.negative(self.tau, out=self.tau_offset)
         else:
             self.tau_offset.fill(0.0)

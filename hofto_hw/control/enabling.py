@@ -47,6 +47,11 @@ class EnableInput:
         self.axis = axis
         self.pressed = False
 
+    @classmethod
+    def from_config(cls, cfg: object) -> EnableInput:
+        """From a :class:`hofto_hw.config.drag.EnableInputConfig`."""
+        return cls(cfg.source, cfg.bit, cfg.axis)  # type: ignore[attr-defined]
+
     def set(self, pressed: bool) -> None:
         """Scripted / control-socket source: the operator holds (True) or releases."""
         self.pressed = bool(pressed)

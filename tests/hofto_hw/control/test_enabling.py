@@ -44,3 +44,10 @@ def test_digital_input_bit() -> None:
     src = EnableInput("digital_input", bit=17)
     assert not src.from_word(1 << 16)
     assert src.from_word((1 << 17) | (1 << 16))
+
+
+def test_input_from_config() -> None:
+    from hofto_hw.config.drag import EnableInputConfig
+
+    src = EnableInput.from_config(EnableInputConfig(source="digital_input", axis=2, bit=20))
+    assert src.axis == 2 and src.from_word(1 << 20) and not src.from_word(1 << 17)
