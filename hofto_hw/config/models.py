@@ -17,7 +17,9 @@ from pydantic import Field, field_validator, model_validator
 
 from hofto_hw.config.base import FileModel, NonNegFloat, PositiveFloat
 from hofto_hw.config.collision import CollisionConfig
+from hofto_hw.config.drag import DragConfig
 from hofto_hw.config.drives import BusConfig
+from hofto_hw.config.motion import MotionConfig
 from hofto_hw.config.runtime import RunConfig, ServiceConfig
 from hofto_hw.config.safety import SafetyConfig
 
@@ -340,6 +342,8 @@ class SystemConfig(FileModel):
     safety: SafetyConfig = Field(default_factory=SafetyConfig)
     run: RunConfig = Field(default_factory=RunConfig)
     service: ServiceConfig = Field(default_factory=ServiceConfig)
+    drag: DragConfig | None = None
+    motion: MotionConfig = Field(default_factory=MotionConfig)
 
     @property
     def cycle_time(self) -> float:
@@ -363,6 +367,18 @@ class SystemConfig(FileModel):
         if self.bus is not None:
             _check_lengths([("bus.drives", self.bus.drives)], n)
         _check_runtime_lengths(self, n)
+        if self.motion.jerk is not None:
+            _check_lengths([("motion.jerk", self.motion.jerk)], n)
+        if self.drag is not None:
+            try:
+                self.drag.check_rate(self.loop.rate_hz, n)
+            except ValueError as exc:
+                raise ValueError(f"drag.{exc}") from None
+            if self.drag.observer not in self.observers:
+                raise ValueError(
+                    f"drag.observer: {self.drag.observer!r} is not in observers "
+                    f"({', '.join(self.observers) or 'none configured'})"
+                )
         if self.simulation is not None:
             s = self.simulation
             _check_lengths([("simulation.encoder_counts_per_rev", s.encoder_counts_per_rev)], n)
