@@ -134,7 +134,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
     """The MCAP flight recorder (its writer process started) for this run's log file."""
+    from hofto_hw.commands.backend import observer_backend
     from hofto_hw.errors import UserError
+    from hofto_hw.observers import kernels
     from hofto_hw.recording.attachments import run_attachments, run_metadata
     from hofto_hw.recording.flight_file import LogSpec
     from hofto_hw.recording.recorder import FlightRecorder
@@ -152,7 +154,10 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
         joint_names=list(cfg.robot.joints),  # type: ignore[attr-defined]
         observers=names,
         attachments=run_attachments(args.config, cfg),  # type: ignore[arg-type]
-        metadata=run_metadata(args.config, cfg, names[0]),  # type: ignore[arg-type]
+        metadata={
+            **run_metadata(args.config, cfg, names[0]),  # type: ignore[arg-type]
+            "observer_backend": kernels.resolve(observer_backend()),
+        },
         event_kinds=dict(EVENT_NAMES),
     )
     return FlightRecorder(spec).start()

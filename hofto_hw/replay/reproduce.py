@@ -24,13 +24,12 @@ from typing import Any, Protocol
 import numpy as np
 import yaml
 
-from hofto_hw.commands.backend import observer_backend
 from hofto_hw.config.loader import parse_config
 from hofto_hw.config.models import ObserverConfig, SystemConfig
 from hofto_hw.errors import ConfigError, UserError
 from hofto_hw.identify.data import Recording
 from hofto_hw.model import RobotModel
-from hofto_hw.observers import make_observer
+from hofto_hw.observers import kernels, make_observer
 from hofto_hw.recording import attachments as att
 from hofto_hw.replay.flight_log import FlightLog, RecordedEvent
 from hofto_hw.replay.runner import run_observer
@@ -179,6 +178,13 @@ def first_detection(
     return None, []
 
 
+def recorded_backend(log: FlightLog) -> kernels.Backend:
+    """The observer implementation the run used (metadata ``observer_backend``; numpy when
+    absent): the same arithmetic is what makes the replay bit-exact. A run on the compiled
+    kernels replays on them; without numba here it falls back to numpy (then to ~1e-11)."""
+    return "auto" if log.metadata.get("observer_backend") == "numba" else "numpy"
+
+
 def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
     """Replay every recorded observer and the detector's monitor; compare with the log."""
     setup = run_setup(log)
@@ -187,7 +193,7 @@ def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
     diffs: dict[str, float] = {}
     for name in log.observers:
         obs = make_observer(
-            observer_config(setup, name, log.path), setup.model, backend=observer_backend()
+            observer_config(setup, name, log.path), setup.model, backend=recorded_backend(log)
         )
         replayed[name] = run_observer(rec, obs)
         diffs[name] = float(np.max(np.abs(replayed[name] - log.tau_ext[name])))
