@@ -2,7 +2,8 @@
 
 The plant integrates pinocchio forward dynamics (ABA) of a *true* arm whose link inertial
 parameters and rotor inertias may differ from the nominal model by a configurable relative
-amount, with its own friction (Coulomb, viscous, bias, Stribeck) and external torques from
+amount, with its own friction (Coulomb, viscous, bias, Stribeck, held friction with memory, quadratic; the held
+sign lives in the plant's own model workspace) and external torques from
 scripted scenarios. It measures like a drive does: encoder-quantised position, noisy velocity,
 noisy motor torque.
 
@@ -100,6 +101,7 @@ class Plant:
         self.qd[:] = 0.0 if qd0 is None else qd0
         self.qdd.fill(0.0)
         self.tau_applied.fill(0.0)
+        self.data.reset_friction_state()
         self.external.evaluate(self.t, self.q, self.qd, out=self.tau_ext)
         self._measure()
 

@@ -42,6 +42,17 @@ class FrictionConfig(FileModel):
     smooth_velocity: NonNegFloat = Field(
         0.0, description="tanh smoothing velocity for sign(qd) [rad/s]; 0 = hard sign"
     )
+    held: list[NonNegFloat] | None = Field(
+        None,
+        description="held friction Fh per joint [N·m]: Fh·h·exp(-(qd/v_h)²), h = sign of the "
+        "last velocity outside the band v_h (friction with memory at rest)",
+    )
+    held_velocity: PositiveFloat = Field(
+        0.005, description="velocity band v_h of the held friction [rad/s]"
+    )
+    quadratic: list[float] | None = Field(
+        None, description="quadratic friction Fq per joint: Fq·qd·|qd| [N·m·s²/rad²]"
+    )
 
 
 class LimitsConfig(FileModel):

@@ -25,6 +25,9 @@ Format (YAML, UTF-8; ``version`` 1). All values SI at the joint side.
         smooth_velocity: 0.02    # v_s [rad/s]: sign(qd) ~ tanh(qd / v_s); 0 = hard sign
         stribeck_static: [...]   # optional: Fs [N·m] (>= Fc), adds (Fs-Fc)·exp(-(qd/vs)²)·s(qd)
         stribeck_velocity: [...] # optional, with stribeck_static: vs [rad/s]
+        held: [...]              # optional: Fh [N·m], friction with memory at rest (model/friction.py)
+        held_velocity: 0.005     # with held: band v_h [rad/s]
+        quadratic: [...]         # optional: Fq [N·m·s²/rad²], adds Fq·qd·|qd|
     base:                        # eq. (14): mu = K·theta_s (the model above reproduces mu)
       count: 58
       parameters:
@@ -41,7 +44,8 @@ Format (YAML, UTF-8; ``version`` 1). All values SI at the joint side.
       residual_std: [...]        # per joint [N·m] (WLS weights)
 
 Standard parameter names are ``<joint>.<p>`` with p in m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz,
-Izz, Ia, Fc, Fv, B and, with Stribeck friction, S = Fs − Fc (see
+Izz, Ia, Fc, Fv, B and, with Stribeck friction, S = Fs − Fc, with held friction H = Fh, with
+quadratic friction Q = Fq (see
 ``hofto_hw.identify.regressor``).
 
 :func:`apply_parameters_file` checks robot name, joint names and URDF hash, sets the link
@@ -102,6 +106,9 @@ class ParametersFile:
     smooth_velocity: float = 0.0
     stribeck_static: np.ndarray | None = None
     stribeck_velocity: np.ndarray | None = None
+    held: np.ndarray | None = None
+    held_velocity: float = 0.005
+    quadratic: np.ndarray | None = None
     urdf: str = ""
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     created: str = ""
@@ -123,6 +130,9 @@ class ParametersFile:
             None if self.stribeck_static is None else self.stribeck_static.copy(),
             None if self.stribeck_velocity is None else self.stribeck_velocity.copy(),
             smooth_velocity=self.smooth_velocity,
+            held=None if self.held is None else self.held.copy(),
+            held_velocity=self.held_velocity,
+            quadratic=None if self.quadratic is None else self.quadratic.copy(),
         )
 
     def base_values(self) -> np.ndarray:
@@ -162,6 +172,11 @@ def to_dict(pf: ParametersFile) -> dict[str, Any]:
     if pf.stribeck_static is not None and pf.stribeck_velocity is not None:
         friction["stribeck_static"] = _floats(pf.stribeck_static)
         friction["stribeck_velocity"] = _floats(pf.stribeck_velocity)
+    if pf.held is not None:
+        friction["held"] = _floats(pf.held)
+        friction["held_velocity"] = float(pf.held_velocity)
+    if pf.quadratic is not None:
+        friction["quadratic"] = _floats(pf.quadratic)
     return {
         "format": FORMAT,
         "version": VERSION,
@@ -283,6 +298,13 @@ def read_parameters(path: str | Path) -> ParametersFile:
     )
     if stribeck[1] is not None and np.any(stribeck[1] <= 0.0):
         raise r.fail("model.friction.stribeck_velocity", "values must be > 0 [rad/s]")
+    held = r.array(fr["held"], "model.friction.held", (n,)) if "held" in fr else None
+    held_velocity = r.number(fr.get("held_velocity", 0.005), "model.friction.held_velocity")
+    if held_velocity <= 0.0:
+        raise r.fail("model.friction.held_velocity", f"must be > 0 [rad/s], got {held_velocity}")
+    quadratic = (
+        r.array(fr["quadratic"], "model.friction.quadratic", (n,)) if "quadratic" in fr else None
+    )
     robot = r.get(data, "robot", "")
     sha = r.get(data, "urdf_sha256", "")
     return ParametersFile(
@@ -299,6 +321,9 @@ def read_parameters(path: str | Path) -> ParametersFile:
         ),
         stribeck_static=stribeck[0],
         stribeck_velocity=stribeck[1],
+        held=held,
+        held_velocity=held_velocity,
+        quadratic=quadratic,
         urdf=str(data.get("urdf", "")),
         gravity=(float(gravity[0]), float(gravity[1]), float(gravity[2])),
         created=str(data.get("created", "")),
