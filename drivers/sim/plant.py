@@ -76,6 +76,8 @@ class Plant:
         self.true_model = perturbed_model(model, sim.model_error, self.rng)
         if sim.friction is not None:
             self.true_model.friction = FrictionParams.from_config(sim.friction, model.n)
+            # a simulated force must be passive: the held term only resists motion
+            self.true_model.friction.held_passive = True
         self.n = model.n
         self.data = self.true_model.create_data()  # the plant's own workspace
         self.external = ExternalTorque(sim.external, self.true_model)

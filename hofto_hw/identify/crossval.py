@@ -55,13 +55,16 @@ def leave_runs_out(
     smooth_velocity: float = 0.02,
     held_velocity: float | None = None,
     quadratic: bool = False,
+    held_passive: bool = False,
 ) -> CrossValidation:
     """Fit on all runs but each fold's, test on the fold's runs (indices into ``runs``).
 
     ``method``: ``ols``, ``wls`` or ``consistent`` (the physically consistent SDP through the
     WLS factor, as :func:`~hofto_hw.identify.pipeline.identify` does).
     """
-    reg = Regressor(model.pin_model, smooth_velocity, None, held_velocity, quadratic)
+    reg = Regressor(
+        model.pin_model, smooth_velocity, None, held_velocity, quadratic, held_passive
+    )
     base = find_base_parameters(reg, model.joint_names)
     accs = []
     for run in runs:

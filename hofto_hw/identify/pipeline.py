@@ -87,13 +87,15 @@ def identify(
     stribeck_velocity: np.ndarray | None = None,
     held_velocity: float | None = None,
     quadratic: bool = False,
+    held_passive: bool = False,
 ) -> Identification:
     """Identify ``model``'s parameters from ``recordings`` (see the module docstring).
 
     ``smooth_velocity`` [rad/s]: tanh width of the Coulomb sign; ``stribeck_velocity`` (n,)
     [rad/s]: identify a Stribeck gap Fs − Fc with these fixed Stribeck velocities;
     ``held_velocity`` v_h [rad/s]: identify held friction (memory at rest) with this band;
-    ``quadratic``: identify Fq of Fq·qd·|qd|.
+    ``quadratic``: identify Fq of Fq·qd·|qd|; ``held_passive``: the passive held term of the
+    simulated plant (see ``hofto_hw.model.friction``; the real UR10e fits the default better).
     """
     if method not in METHODS:
         raise UserError(f"identify: --method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -101,7 +103,9 @@ def identify(
         raise UserError("identify: no recordings given")
     say = progress or (lambda _msg: None)
     n = model.n
-    reg = Regressor(model.pin_model, smooth_velocity, stribeck_velocity, held_velocity, quadratic)
+    reg = Regressor(
+        model.pin_model, smooth_velocity, stribeck_velocity, held_velocity, quadratic, held_passive
+    )
     stribeck = reg.stribeck_velocity is not None
     held = reg.held_velocity is not None
     base = find_base_parameters(reg, model.joint_names)
@@ -162,6 +166,7 @@ def identify(
         held=parts.get("held"),
         held_velocity=reg.held_velocity if held else 0.005,  # type: ignore[arg-type]
         quadratic=parts.get("quadratic"),
+        held_passive=held_passive,
         urdf=urdf.name if urdf is not None else "",
         gravity=tuple(float(g) for g in model.pin_model.gravity.linear),  # type: ignore[arg-type]
         created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),

@@ -117,7 +117,8 @@ class Regressor:
     ``smooth_velocity`` v_s [rad/s]: s(qd) = tanh(qd / v_s); 0 gives the hard sign (then
     noise at standstill becomes a ±Fc square wave on real data). ``stribeck_velocity`` vs
     (n,) [rad/s] adds the Stribeck-gap columns, ``held_velocity`` v_h [rad/s] the held-friction
-    columns, ``quadratic`` the qd·|qd| columns.
+    columns (``held_passive``: zero while qd·h < 0, as ``FrictionParams.held_passive``),
+    ``quadratic`` the qd·|qd| columns.
     """
 
     def __init__(
@@ -127,6 +128,7 @@ class Regressor:
         stribeck_velocity: np.ndarray | None = None,
         held_velocity: float | None = None,
         quadratic: bool = False,
+        held_passive: bool = False,
     ) -> None:
         self.model = pin_model
         self.data = pin_model.createData()
@@ -143,6 +145,7 @@ class Regressor:
             raise UserError(f"regressor: held_velocity must be > 0 rad/s, got {held_velocity}")
         self.held_velocity = None if held_velocity is None else float(held_velocity)
         self.quadratic = bool(quadratic)
+        self.held_passive = bool(held_passive)
         self.optional = optional_names(
             self.stribeck_velocity is not None, self.held_velocity is not None, self.quadratic
         )
@@ -200,7 +203,10 @@ class Regressor:
         if self.held_velocity is not None:
             v_h = self.held_velocity
             h = held_sign_series(qd, v_h) if held is None else np.asarray(held, dtype=float)
-            H3[:, idx, col + idx] = h * np.exp(-((qd / v_h) ** 2))
+            w = np.exp(-((qd / v_h) ** 2))
+            if self.held_passive:
+                w = w * (qd * h >= 0.0)
+            H3[:, idx, col + idx] = h * w
             col += n
         if self.quadratic:
             H3[:, idx, col + idx] = qd * np.abs(qd)

@@ -14,7 +14,12 @@ Optional terms, both linear in their parameters (identification stays least squa
   direction of motion (the UR10e's joint 5 sits at -2.5 N·m for seconds while creeping at
   -3e-4 rad/s); sign(qd) or tanh(qd/v_s) predicts 0 or a random sign there. h is *state*: it
   lives in the caller's workspace (``ModelData``), never in these constant parameters, and
-  its update is idempotent for a repeated qd (several calls per tick are harmless);
+  its update is idempotent for a repeated qd (several calls per tick are harmless).
+  ``held_passive`` (the simulated plant's setting) zeroes the term while the joint moves
+  against the held sign, so that it can only resist motion: as an estimate of the motor torque
+  (identification, observers) the two-sided form fits the real arm, but as a force in a
+  simulation the two-sided form pushes a joint that creeps backwards inside the band and
+  makes a PD-held arm limit-cycle at about v_h;
 - **quadratic** ``Fq_j·qd_j·|qd_j|`` [N·m·s²/rad²].
 """
 
@@ -40,6 +45,7 @@ class FrictionParams:
     held: np.ndarray | None = None
     held_velocity: float = 0.005
     quadratic: np.ndarray | None = None
+    held_passive: bool = False
     _stribeck_gap: np.ndarray | None = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -104,6 +110,7 @@ class FrictionParams:
             None if self.held is None else self.held.copy(),
             self.held_velocity,
             None if self.quadratic is None else self.quadratic.copy(),
+            self.held_passive,
         )
 
     def update_held(self, qd: np.ndarray, state: np.ndarray, scratch: np.ndarray) -> np.ndarray:
@@ -171,6 +178,11 @@ class FrictionParams:
             np.negative(t, out=t)
             np.exp(t, out=t)
             np.multiply(t, state, out=t)
+            if self.held_passive:  # zero while moving against the held sign (qd·h < 0)
+                u = scratch[1]
+                np.multiply(qd, state, out=u)
+                np.heaviside(u, 1.0, out=u)
+                np.multiply(t, u, out=t)
             np.multiply(t, self.held, out=t)
             np.add(out, t, out=out)
         return out

@@ -27,6 +27,7 @@ Format (YAML, UTF-8; ``version`` 1). All values SI at the joint side.
         stribeck_velocity: [...] # optional, with stribeck_static: vs [rad/s]
         held: [...]              # optional: Fh [N·m], friction with memory at rest (model/friction.py)
         held_velocity: 0.005     # with held: band v_h [rad/s]
+        held_passive: false      # optional: held term zero while qd·h < 0 (simulation form)
         quadratic: [...]         # optional: Fq [N·m·s²/rad²], adds Fq·qd·|qd|
     base:                        # eq. (14): mu = K·theta_s (the model above reproduces mu)
       count: 58
@@ -109,6 +110,7 @@ class ParametersFile:
     held: np.ndarray | None = None
     held_velocity: float = 0.005
     quadratic: np.ndarray | None = None
+    held_passive: bool = False
     urdf: str = ""
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     created: str = ""
@@ -133,6 +135,7 @@ class ParametersFile:
             held=None if self.held is None else self.held.copy(),
             held_velocity=self.held_velocity,
             quadratic=None if self.quadratic is None else self.quadratic.copy(),
+            held_passive=self.held_passive,
         )
 
     def base_values(self) -> np.ndarray:
@@ -175,6 +178,8 @@ def to_dict(pf: ParametersFile) -> dict[str, Any]:
     if pf.held is not None:
         friction["held"] = _floats(pf.held)
         friction["held_velocity"] = float(pf.held_velocity)
+        if pf.held_passive:
+            friction["held_passive"] = True
     if pf.quadratic is not None:
         friction["quadratic"] = _floats(pf.quadratic)
     return {
@@ -324,6 +329,7 @@ def read_parameters(path: str | Path) -> ParametersFile:
         held=held,
         held_velocity=held_velocity,
         quadratic=quadratic,
+        held_passive=bool(fr.get("held_passive", False)),
         urdf=str(data.get("urdf", "")),
         gravity=(float(gravity[0]), float(gravity[1]), float(gravity[2])),
         created=str(data.get("created", "")),
