@@ -62,6 +62,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="PARAMS",
         help="refresh only the friction of this parameters file (rigid body kept)",
     )
+    parser.add_argument(
+        "--keep-standstill",
+        action="store_true",
+        help="keep rest periods at the ends of runs (static holds, held friction)",
+    )
     parser.add_argument("--drop-bad-rows", action="store_true", help="drop corrupt rows")
     parser.add_argument("--json", action="store_true", help="print the fit as JSON")
 
@@ -75,7 +80,9 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     model = RobotModel.from_config(cfg.robot, apply_parameters=False)
-    opts = Conditioning(args.cutoff, args.filter_torque, args.decimate, args.drop_bad_rows)
+    opts = Conditioning(
+        args.cutoff, args.filter_torque, args.decimate, args.drop_bad_rows, not args.keep_standstill
+    )
     vs = None
     if args.stribeck_velocity is not None:
         try:

@@ -43,6 +43,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     cal.add_argument(
         "--debounce", type=float, default=0.03, help="time above threshold to trip [s]"
     )
+    cal.add_argument(
+        "--standstill",
+        action="store_true",
+        help="fit a standstill term separate from the reversal term (held friction at rest)",
+    )
+    cal.add_argument(
+        "--sustained",
+        action="store_true",
+        help="fit the residuals sustained over the debounce time, not single-sample peaks",
+    )
     cal.add_argument("--json", action="store_true", help="print a summary as JSON")
     add_common(cal)
     chk = sub.add_parser("check", help="replay recordings and count alarms per file")
@@ -83,7 +93,14 @@ def _calibrate(args: argparse.Namespace) -> int:
     for name in args.observer or CALIBRATED_BY_DEFAULT:
         obs_cfg = observer_config(name, setup)
         residuals = [run_observer(rec, observer_for(name, obs_cfg, setup, rec)) for rec in recs]
-        cal = calibrate(recs, residuals, template, margin=args.margin)
+        cal = calibrate(
+            recs,
+            residuals,
+            template,
+            margin=args.margin,
+            terms=(True, True, True, True, args.standstill),
+            sustain=args.sustained,
+        )
         entries[name] = ObserverThresholds(
             observer=obs_cfg, monitor=cal.config, peak=list(cal.peak), samples=cal.samples
         )

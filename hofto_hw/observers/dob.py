@@ -46,6 +46,7 @@ class DobObserver:
         self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.data.reset_friction_state()  # held friction: a new run has no memory
         np.multiply(self._gj, qd, out=self.w)  # tau_ext_hat starts at 0
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:

@@ -225,6 +225,7 @@ class HoftoObserver:
         self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.terms.data.reset_friction_state()  # held friction: a new run has no memory
         self.core.reset(q, qd)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:

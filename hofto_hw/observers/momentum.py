@@ -36,6 +36,7 @@ class MomentumObserver:
         self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.data.reset_friction_state()  # held friction: a new run has no memory
         np.dot(self.data.mass_matrix(q), qd, out=self.p0)
         self.integral.fill(0.0)
         self.r.fill(0.0)

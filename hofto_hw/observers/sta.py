@@ -43,6 +43,7 @@ class StaObserver:
         self._guard = SampleGuard(self.n)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.terms.data.reset_friction_state()  # held friction: a new run has no memory
         self.z1[:] = q
         self.z2[:] = qd
         self.z3.fill(0.0)
