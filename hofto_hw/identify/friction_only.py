@@ -52,9 +52,9 @@ def refresh_friction(
     rhs: list[list[np.ndarray]] = [[] for _ in range(n)]
     moving = 0
     for rec in recordings:
-        tau_rigid = np.array(
-            [data.inverse_dynamics(q, qd, qdd) for q, qd, qdd in zip(rec.q, rec.qd, rec.qdd)]
-        )
+        tau_rigid = np.empty_like(rec.tau)
+        for k in range(tau_rigid.shape[0]):
+            data.inverse_dynamics(rec.q[k], rec.qd[k], rec.qdd[k], out=tau_rigid[k])
         s = np.tanh(rec.qd / v_s) if v_s > 0 else np.sign(rec.qd)
         parts = [s, rec.qd, np.ones_like(rec.qd)]
         if held_velocity is not None:
