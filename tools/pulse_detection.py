@@ -104,8 +104,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(
             json.dumps(
-                {"amplitudes": amps, "rate": rate.tolist(), "median_delay": med,
-                 "false_alarms": false_alarms}
+                {
+                    "amplitudes": amps,
+                    "rate": rate.tolist(),
+                    "median_delay": med,
+                    "false_alarms": false_alarms,
+                }
             )
         )
         return 0

@@ -2,10 +2,10 @@
 
 The plant integrates pinocchio forward dynamics (ABA) of a *true* arm whose link inertial
 parameters and rotor inertias may differ from the nominal model by a configurable relative
-amount, with its own friction (Coulomb, viscous, bias, Stribeck, held friction with memory, quadratic; the held
-sign lives in the plant's own model workspace) and external torques from
-scripted scenarios. It measures like a drive does: encoder-quantised position, noisy velocity,
-noisy motor torque.
+amount, with its own friction (Coulomb, viscous, bias, Stribeck, quadratic, and held friction
+with memory in its passive form, the held sign kept in the plant's own model workspace) and
+external torques from scripted scenarios. It measures like a drive does: encoder-quantised
+position, noisy velocity, noisy motor torque.
 
 Integration: semi-implicit (symplectic) Euler with ``substeps`` per tick; the motor torque
 is held over the tick (zero-order hold, as a drive's torque loop does between PDO updates)

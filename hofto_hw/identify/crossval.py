@@ -62,9 +62,7 @@ def leave_runs_out(
     ``method``: ``ols``, ``wls`` or ``consistent`` (the physically consistent SDP through the
     WLS factor, as :func:`~hofto_hw.identify.pipeline.identify` does).
     """
-    reg = Regressor(
-        model.pin_model, smooth_velocity, None, held_velocity, quadratic, held_passive
-    )
+    reg = Regressor(model.pin_model, smooth_velocity, None, held_velocity, quadratic, held_passive)
     base = find_base_parameters(reg, model.joint_names)
     accs = []
     for run in runs:

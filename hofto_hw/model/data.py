@@ -100,7 +100,9 @@ class ModelData:
 
     def friction_torque(self, qd: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """f(qd) [N·m], shape (n,), eq. (12)."""
-        return self.model.friction.torque(qd, self._f if out is None else out, self._fscratch, self.friction_state)
+        return self.model.friction.torque(
+            qd, self._f if out is None else out, self._fscratch, self.friction_state
+        )
 
     def inverse_dynamics(
         self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, out: np.ndarray | None = None
@@ -123,7 +125,9 @@ class ModelData:
         """qdd [rad/s²] = M⁻¹·(tau + tau_ext - C·qd - g - f), shape (n,) (ABA)."""
         m = self.model
         total = self._tau_total
-        np.subtract(tau, m.friction.torque(qd, self._f_fd, self._fscratch, self.friction_state), out=total)
+        np.subtract(
+            tau, m.friction.torque(qd, self._f_fd, self._fscratch, self.friction_state), out=total
+        )
         if tau_ext is not None:
             np.add(total, tau_ext, out=total)
         qdd = self._qdd if out is None else out

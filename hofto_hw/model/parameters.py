@@ -25,7 +25,7 @@ Format (YAML, UTF-8; ``version`` 1). All values SI at the joint side.
         smooth_velocity: 0.02    # v_s [rad/s]: sign(qd) ~ tanh(qd / v_s); 0 = hard sign
         stribeck_static: [...]   # optional: Fs [N·m] (>= Fc), adds (Fs-Fc)·exp(-(qd/vs)²)·s(qd)
         stribeck_velocity: [...] # optional, with stribeck_static: vs [rad/s]
-        held: [...]              # optional: Fh [N·m], friction with memory at rest (model/friction.py)
+        held: [...]              # optional: Fh [N·m], friction with memory (model/friction.py)
         held_velocity: 0.005     # with held: band v_h [rad/s]
         held_passive: false      # optional: held term zero while qd·h < 0 (simulation form)
         quadratic: [...]         # optional: Fq [N·m·s²/rad²], adds Fq·qd·|qd|

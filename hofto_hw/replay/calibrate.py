@@ -145,7 +145,8 @@ def calibrate(
     feats = np.concatenate([features(rec, template) for rec in recordings])
     if sustain:
         residuals = [
-            sustained(rec, r, template.debounce_time) for rec, r in zip(recordings, residuals)
+            sustained(rec, r, template.debounce_time)
+            for rec, r in zip(recordings, residuals, strict=True)
         ]
     resid = np.concatenate(residuals)
     terms = tuple(terms) + (False,) * (len(TERMS) - len(terms))

@@ -31,9 +31,7 @@ def test_identification_recovers_held_friction(er3a_config, er3a_model) -> None:
     # the held sign at the end of the run is the plant's memory, kept in its workspace
     assert np.any(run.plant.data.friction_state != 0.0)
 
-    result = identify(
-        er3a_model, [run.exact], method="ols", held_velocity=0.01, held_passive=True
-    )
+    result = identify(er3a_model, [run.exact], method="ols", held_velocity=0.01, held_passive=True)
     true = result.base.from_standard(nominal_theta(run.plant.true_model, held=True))
     rel = np.linalg.norm(result.ols.mu - true) / np.linalg.norm(true)
     assert rel < 1e-6

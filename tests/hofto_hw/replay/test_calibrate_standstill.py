@@ -14,8 +14,9 @@ def _rec() -> tuple[Recording, np.ndarray]:
     t = np.arange(0.0, 8.0, 0.01)
     qd = np.where(t < 4.0, 0.3, 0.0)[:, None] * np.ones((1, 1))
     q = np.cumsum(qd, axis=0) * 0.01
-    rec = Recording(t=t, q=q, qd=qd, tau=np.zeros_like(q), source="synthetic",
-                    rows=np.arange(1, t.size + 1))
+    rec = Recording(
+        t=t, q=q, qd=qd, tau=np.zeros_like(q), source="synthetic", rows=np.arange(1, t.size + 1)
+    )
     res = np.where(t < 4.0, 1.0, 6.0)[:, None].copy()
     return rec, res
 
@@ -24,8 +25,9 @@ def test_standstill_term_keeps_the_threshold_in_motion_low() -> None:
     rec, res = _rec()
     tmpl = CollisionConfig(base=[1.0], reversal_time=0.05, moving_time=0.05)
     plain = calibrate([rec], [res], tmpl, margin=0.0, min_base=0.5)
-    still = calibrate([rec], [res], tmpl, margin=0.0, min_base=0.5,
-                      terms=(True, True, True, True, True))
+    still = calibrate(
+        [rec], [res], tmpl, margin=0.0, min_base=0.5, terms=(True, True, True, True, True)
+    )
     assert plain.config.base[0] > 5.5  # without it the base must cover the rest residual
     assert still.config.base[0] < 1.5  # with it the threshold in motion stays near 1 N·m
     assert still.config.standstill_margin[0] > 4.0
