@@ -65,6 +65,21 @@ class LimitsConfig(FileModel):
     torque: list[PositiveFloat] | None = None
 
 
+class PayloadConfig(FileModel):
+    """A tool or load on the tool frame (see hofto_hw/model/payload.py)."""
+
+    mass: NonNegFloat = Field(description="payload mass [kg]")
+    com: list[float] = Field(
+        min_length=3, max_length=3, description="centre of mass in the tool frame [m]"
+    )
+    inertia: list[float] | None = Field(
+        None,
+        min_length=6,
+        max_length=6,
+        description="about the com, tool axes: Ixx, Ixy, Iyy, Ixz, Iyz, Izz [kg·m²]",
+    )
+
+
 class RobotConfig(FileModel):
     """One arm: kinematics and nominal dynamics from a URDF, plus drive-side data."""
 
@@ -80,6 +95,9 @@ class RobotConfig(FileModel):
     friction: FrictionConfig | None = None
     limits: LimitsConfig = Field(default_factory=LimitsConfig)
     home: list[float] | None = Field(None, description="home configuration [rad]")
+    payload: PayloadConfig | None = Field(
+        None, description="tool or load on the tool frame (hofto-hw payload identify)"
+    )
     parameters: Path | None = Field(
         None, description="identified-parameters file (hofto-hw identify); overrides URDF"
     )

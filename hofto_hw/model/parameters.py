@@ -392,6 +392,11 @@ def apply_parameters(model: RobotModel, pf: ParametersFile, source: str = "<para
     old = (model.inertial_parameters(), model.rotor_inertia, model.friction)
     try:
         model.set_inertial_parameters(pf.inertial.reshape(-1))
+        payload = getattr(model, "payload", None)
+        if payload is not None:  # the arm's links come from the file, the load stays on
+            from hofto_hw.model.payload import apply_payload
+
+            apply_payload(model, payload)
         model.rotor_inertia = pf.rotor_inertia
         model.friction = pf.friction()
         check_mass_matrix(model)

@@ -82,6 +82,7 @@ class RobotModel:
         self.limits = limits if limits is not None else _urdf_limits(pin_model)
         n = self.n
         self.home = np.zeros(n)
+        self.payload = None  # a Payload on the tool link (hofto_hw.model.payload), if any
 
     # ------------------------------------------------------------------ construction
 
@@ -165,6 +166,12 @@ class RobotModel:
             from hofto_hw.model.parameters import apply_parameters_file
 
             apply_parameters_file(robot, cfg.parameters)
+        if cfg.payload is not None:
+            from hofto_hw.model.payload import Payload, apply_payload
+
+            p = cfg.payload
+            inertia = tuple(p.inertia) if p.inertia else (0.0,) * 6
+            apply_payload(robot, Payload(p.mass, tuple(p.com), inertia))  # type: ignore[arg-type]
         return robot
 
     def copy(self) -> RobotModel:
@@ -180,6 +187,7 @@ class RobotModel:
             base_frame=self.base_frame,
         )
         other.home = self.home.copy()
+        other.payload = self.payload
         return other
 
     # ------------------------------------------------------------------ parameters
