@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "validate": ("hofto_hw.commands.validate", "check identified parameters on recordings"),
     "replay": ("hofto_hw.commands.replay", "run observers and collision thresholds offline"),
     "thresholds": ("hofto_hw.commands.thresholds", "calibrate collision thresholds"),
+    "tune": ("hofto_hw.commands.tune", "tune observer gain and thresholds with injected contacts"),
     "payload": ("hofto_hw.commands.payload", "identify a payload (tool or load) from recordings"),
     "sim-ethercat": (
         "drivers.sim.ethercat_cli",
