@@ -19,34 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
+from hofto_hw.replay.pulses import inject_pulses
 from hofto_hw.replay.runner import replay
 from hofto_hw.replay.session import load_for_replay, observer_for
 from hofto_hw.replay.setup import load_setup, load_thresholds_for, observer_config
 from safety.collision import CollisionMonitor
-
-
-def lag_response(t: np.ndarray, pulse: np.ndarray, gain: np.ndarray) -> np.ndarray:
-    """Momentum-observer response r' = K·(p − r) to an external torque p (N,) or (N, n)."""
-    r = np.zeros_like(pulse)
-    for k in range(1, t.size):
-        dt = t[k] - t[k - 1]
-        a = 1.0 - np.exp(-gain * dt)
-        r[k] = r[k - 1] + a * (pulse[k] - r[k - 1])
-    return r
-
-
-def tripped(excess: np.ndarray, t: np.ndarray, debounce: float) -> tuple[bool, float]:
-    """Whether ``excess`` (N,) bool stays true for ``debounce`` [s]; delay from t[0] [s]."""
-    start = None
-    for k in range(excess.size):
-        if excess[k]:
-            if start is None:
-                start = k
-            if t[k] - t[start] >= debounce - 1e-9:
-                return True, float(t[k] - t[0])
-        else:
-            start = None
-    return False, float("nan")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -68,39 +45,29 @@ def main(argv: list[str] | None = None) -> int:
     mcfg = th.observers[args.observer].monitor
     amps = [float(a) for a in args.amplitudes.split(",")]
     rng = np.random.default_rng(args.seed)
-    n = setup.model.n
-    hits = np.zeros((len(amps), n))
-    tries = np.zeros((len(amps), n))
-    delays: list[list[list[float]]] = [[[] for _ in range(n)] for _ in amps]
+    stats = None
     false_alarms = {}
     for f in args.files:
         rec = load_for_replay(setup, Path(f), None)
         obs = observer_for(args.observer, obs_cfg, setup, rec)
         res = replay(rec, obs, CollisionMonitor(mcfg))
         false_alarms[Path(f).name] = int(np.sum(np.diff(res.detected.astype(int)) == 1))
-        t, est, thr = rec.t, res.tau_ext, res.threshold
-        for ai, amp in enumerate(amps):
-            for j in range(n):
-                for _ in range(args.pulses):
-                    t0 = rng.uniform(t[0] + 1.0, t[-1] - args.width - 1.0)
-                    sel = (t >= t0 - 0.5) & (t <= t0 + args.width + 0.2)
-                    tt = t[sel]
-                    p = np.where(
-                        (tt >= t0) & (tt <= t0 + args.width),
-                        amp * np.sin(np.pi * np.clip((tt - t0) / args.width, 0, 1)),
-                        0.0,
-                    )
-                    sign = rng.choice([-1.0, 1.0])
-                    r = lag_response(tt, sign * p, np.array(gain[j]))
-                    e = np.abs(est[sel, j] + r) > thr[sel, j]
-                    after = tt >= t0
-                    ok, d = tripped(e[after], tt[after], mcfg.debounce_time)
-                    tries[ai, j] += 1
-                    if ok:
-                        hits[ai, j] += 1
-                        delays[ai][j].append(d)
-    rate = hits / np.maximum(tries, 1)
-    med = [[float(np.median(d)) if d else float("nan") for d in row] for row in delays]
+        stats = inject_pulses(
+            rec.t,
+            res.tau_ext,
+            res.threshold,
+            gain,
+            mcfg.debounce_time,
+            amps,
+            args.pulses,
+            rng,
+            args.width,
+            stats,
+        )
+    assert stats is not None
+    n = setup.model.n
+    rate = stats.rate
+    med = stats.median_delay().tolist()
     if args.json:
         print(
             json.dumps(
