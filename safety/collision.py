@@ -64,6 +64,7 @@ class CollisionMonitor:
         self.v_rev = cfg.reversal_velocity
         self.ks = _per_joint(cfg.standstill_margin, n)
         self.still = np.zeros(n)
+        self._still_now = np.zeros(n)
         self.detected = False
         self.joints = np.zeros(n, dtype=bool)
         self.threshold = self.base.copy()
@@ -160,14 +161,26 @@ class CollisionMonitor:
         tmp *= self.moving
         self.reversal *= math.exp(-dt / self.cfg.reversal_time)
         np.maximum(self.reversal, tmp, out=self.reversal)
-        self._standstill(qd)
+        self._standstill(qd, dt)
 
-    def _standstill(self, qd: np.ndarray) -> None:
-        """s = exp(-(qd/v_s)²): 1 at rest, ~0 in motion (non-finite qd never gets here)."""
-        np.multiply(qd, 1.0 / self.cfg.standstill_velocity, out=self.still)
-        np.square(self.still, out=self.still)
-        np.negative(self.still, out=self.still)
-        np.exp(self.still, out=self.still)
+    def _standstill(self, qd: np.ndarray, dt: float) -> None:
+        """s = exp(-(qd/v_s)²): 1 at rest, ~0 in motion (non-finite qd never gets here); with
+        ``standstill_time`` T > 0 it rises with time constant T after a stop (the stop
+        transient is the reversal term's) and drops at once when the joint moves."""
+        now = self._still_now
+        np.multiply(qd, 1.0 / self.cfg.standstill_velocity, out=now)
+        np.square(now, out=now)
+        np.negative(now, out=now)
+        np.exp(now, out=now)
+        T = self.cfg.standstill_time
+        if T <= 0.0:
+            np.copyto(self.still, now)
+            return
+        tmp = self._tmp
+        np.subtract(now, self.still, out=tmp)
+        tmp *= 1.0 - math.exp(-dt / T)
+        tmp += self.still
+        np.minimum(now, tmp, out=self.still)
 
     def update(self, tau_ext: np.ndarray, qd: np.ndarray, dt: float) -> bool:
         """One tick: estimated external torque (n,) [N·m], velocity (n,) [rad/s], dt [s].

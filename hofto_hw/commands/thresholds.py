@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import json
+import math
 from pathlib import Path
 
 from hofto_hw.commands.replay import add_common, parse_rows
@@ -47,6 +48,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--standstill",
         action="store_true",
         help="fit a standstill term separate from the reversal term (held friction at rest)",
+    )
+    cal.add_argument(
+        "--standstill-time",
+        type=float,
+        default=0.0,
+        help="time constant [s] with which the standstill indicator rises after a stop",
     )
     cal.add_argument(
         "--sustained",
@@ -88,7 +95,11 @@ def _calibrate(args: argparse.Namespace) -> int:
     n = setup.model.n
     bad = "drop" if args.drop_bad_rows else None
     recs = [load_for_replay(setup, f, args.columns, parse_rows(args.rows), bad) for f in args.files]
-    template = CollisionConfig(base=[1.0] * n, debounce_time=args.debounce)
+    if not (math.isfinite(args.standstill_time) and args.standstill_time >= 0.0):
+        raise UserError(f"--standstill-time must be >= 0 s, got {args.standstill_time}")
+    template = CollisionConfig(
+        base=[1.0] * n, debounce_time=args.debounce, standstill_time=args.standstill_time
+    )
     entries: dict[str, ObserverThresholds] = {}
     for name in args.observer or CALIBRATED_BY_DEFAULT:
         obs_cfg = observer_config(name, setup)

@@ -37,6 +37,11 @@ class CollisionConfig(FileModel):
     standstill_velocity: PositiveFloat = Field(
         0.02, description="width of the standstill indicator exp(-(qd/v)²) [rad/s]"
     )
+    standstill_time: NonNegFloat = Field(
+        0.0,
+        description="the standstill indicator rises with this time constant after a stop [s] "
+        "(0 = at once); it drops at once when the joint moves",
+    )
     reversal_velocity: PositiveFloat = Field(
         0.05, description="|qd| below which a moving joint counts as reversing [rad/s]"
     )

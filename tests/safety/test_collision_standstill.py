@@ -39,3 +39,21 @@ def test_a_held_residual_at_rest_no_longer_trips_with_the_standstill_term() -> N
         for _ in range(50):
             tripped |= mon.update(held, np.zeros(2), 0.01)
         assert tripped is expected
+
+
+def test_standstill_time_lets_the_indicator_rise_after_a_stop_and_drop_at_once() -> None:
+    mon = CollisionMonitor(
+        CollisionConfig(base=[1.0], standstill_margin=[4.0], standstill_time=1.0)
+    )
+    mon.reset(np.array([0.5]))
+    for _ in range(50):
+        mon.update(np.zeros(1), np.array([0.5]), 0.01)
+    assert mon.still[0] < 1e-6
+    for _ in range(10):  # 0.1 s after the stop
+        mon.update(np.zeros(1), np.zeros(1), 0.01)
+    assert 0.05 < mon.still[0] < 0.15
+    for _ in range(500):  # 5 s at rest
+        mon.update(np.zeros(1), np.zeros(1), 0.01)
+    assert mon.threshold[0] == pytest.approx(5.0, rel=1e-2)
+    mon.update(np.zeros(1), np.array([0.5]), 0.01)
+    assert mon.threshold[0] == pytest.approx(1.0, abs=1e-6)
