@@ -40,6 +40,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("hofto_hw.commands.replay", "run observers and collision thresholds offline"),
     "thresholds": ("hofto_hw.commands.thresholds", "calibrate collision thresholds"),
     "log": ("hofto_hw.commands.log", "inspect flight-recorder logs or recover a truncated one"),
+    "tune": ("hofto_hw.commands.tune", "tune observer gain and thresholds with injected contacts"),
+    "payload": ("hofto_hw.commands.payload", "identify a payload (tool or load) from recordings"),
     "sim-ethercat": (
         "hofto_hw.commands.sim_ethercat",
         "serve emulated EtherCAT CiA-402 drives on a network interface",

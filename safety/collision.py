@@ -2,7 +2,7 @@
 
 :class:`CollisionMonitor` compares |tau_ext_hat_j| with a per-joint threshold every tick:
 
-    thr_j = base_j + kv_j·|qd_j| + ka_j·|a_j| + kr_j·r_j
+    thr_j = base_j + kv_j·|qd_j| + ka_j·|a_j| + kr_j·r_j + ks_j·s_j
 
 - ``a`` is the acceleration from differentiated velocity, first-order low-passed: model errors
   in inertia show up as a residual proportional to acceleration (acceleration steps);
@@ -10,7 +10,11 @@
   the joint last moved faster than v_rev (decaying with ``moving_time``), held with a decay of
   ``reversal_time``. Friction changes sign at a reversal and no friction model follows that
   exactly, so the residual spikes there; a joint that stands still (r -> 0) keeps its
-  sensitive resting threshold, so a push on a holding arm is still seen.
+  sensitive resting threshold, so a push on a holding arm is still seen;
+- ``s`` = exp(-(qd/v_s)²) is the standstill indicator (``standstill_margin`` ks,
+  ``standstill_velocity`` v_s; off by default): a joint at rest keeps the friction of its last
+  direction of motion, which a separate standstill term covers without raising the base, the
+  threshold in motion.
 A joint trips after staying above its threshold for ``debounce_time`` and releases after
 staying below ``release_ratio``·threshold for ``release_time`` (hysteresis).
 
@@ -58,6 +62,9 @@ class CollisionMonitor:
         self.ka = _per_joint(cfg.acceleration_gain, n)
         self.kr = _per_joint(cfg.reversal_margin, n)
         self.v_rev = cfg.reversal_velocity
+        self.ks = _per_joint(cfg.standstill_margin, n)
+        self.still = np.zeros(n)
+        self._still_now = np.zeros(n)
         self.detected = False
         self.joints = np.zeros(n, dtype=bool)
         self.threshold = self.base.copy()
@@ -93,6 +100,7 @@ class CollisionMonitor:
         self.accel[:] = 0.0
         self.moving[:] = 0.0
         self.reversal[:] = 0.0
+        self.still[:] = 0.0
         self._above_time[:] = 0.0
         self._below_time[:] = 0.0
         self.nonfinite[:] = False
@@ -153,6 +161,26 @@ class CollisionMonitor:
         tmp *= self.moving
         self.reversal *= math.exp(-dt / self.cfg.reversal_time)
         np.maximum(self.reversal, tmp, out=self.reversal)
+        self._standstill(qd, dt)
+
+    def _standstill(self, qd: np.ndarray, dt: float) -> None:
+        """s = exp(-(qd/v_s)²): 1 at rest, ~0 in motion (non-finite qd never gets here); with
+        ``standstill_time`` T > 0 it rises with time constant T after a stop (the stop
+        transient is the reversal term's) and drops at once when the joint moves."""
+        now = self._still_now
+        np.multiply(qd, 1.0 / self.cfg.standstill_velocity, out=now)
+        np.square(now, out=now)
+        np.negative(now, out=now)
+        np.exp(now, out=now)
+        T = self.cfg.standstill_time
+        if T <= 0.0:
+            np.copyto(self.still, now)
+            return
+        tmp = self._tmp
+        np.subtract(now, self.still, out=tmp)
+        tmp *= 1.0 - math.exp(-dt / T)
+        tmp += self.still
+        np.minimum(now, tmp, out=self.still)
 
     def update(self, tau_ext: np.ndarray, qd: np.ndarray, dt: float) -> bool:
         """One tick: estimated external torque (n,) [N·m], velocity (n,) [rad/s], dt [s].
@@ -176,6 +204,8 @@ class CollisionMonitor:
         tmp *= self.ka
         thr += tmp
         np.multiply(self.reversal, self.kr, out=tmp)
+        thr += tmp
+        np.multiply(self.still, self.ks, out=tmp)
         thr += tmp
         np.abs(tau_ext, out=tmp)
         np.copyto(tmp, 0.0, where=bad_tau)

@@ -2,9 +2,10 @@
 
 The plant integrates pinocchio forward dynamics (ABA) of a *true* arm whose link inertial
 parameters and rotor inertias may differ from the nominal model by a configurable relative
-amount, with its own friction (Coulomb, viscous, bias, Stribeck) and external torques from
-scripted scenarios. It measures like a drive does: encoder-quantised position, noisy velocity,
-noisy motor torque.
+amount, with its own friction (Coulomb, viscous, bias, Stribeck, quadratic, and held friction
+with memory in its passive form, the held sign kept in the plant's own model workspace) and
+external torques from scripted scenarios. It measures like a drive does: encoder-quantised
+position, noisy velocity, noisy motor torque.
 
 Integration: semi-implicit (symplectic) Euler with ``substeps`` per tick; the motor torque
 is held over the tick (zero-order hold, as a drive's torque loop does between PDO updates)
@@ -75,6 +76,8 @@ class Plant:
         self.true_model = perturbed_model(model, sim.model_error, self.rng)
         if sim.friction is not None:
             self.true_model.friction = FrictionParams.from_config(sim.friction, model.n)
+            # a simulated force must be passive: the held term only resists motion
+            self.true_model.friction.held_passive = True
         self.n = model.n
         self.data = self.true_model.create_data()  # the plant's own workspace
         self.external = ExternalTorque(sim.external, self.true_model)
@@ -100,6 +103,7 @@ class Plant:
         self.qd[:] = 0.0 if qd0 is None else qd0
         self.qdd.fill(0.0)
         self.tau_applied.fill(0.0)
+        self.data.reset_friction_state()
         self.external.evaluate(self.t, self.q, self.qd, out=self.tau_ext)
         self._measure()
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -59,6 +60,25 @@ def configure(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="low-pass the torque too (default: raw torque; filtering smears friction steps)",
     )
+    parser.add_argument(
+        "--held-velocity",
+        type=float,
+        help="identify held friction (memory at rest) with this velocity band v_h [rad/s]",
+    )
+    parser.add_argument(
+        "--quadratic", action="store_true", help="identify quadratic friction Fq·qd·|qd|"
+    )
+    parser.add_argument(
+        "--friction-only",
+        type=Path,
+        metavar="PARAMS",
+        help="refresh only the friction of this parameters file (rigid body kept)",
+    )
+    parser.add_argument(
+        "--keep-standstill",
+        action="store_true",
+        help="keep rest periods at the ends of runs (static holds, held friction)",
+    )
     parser.add_argument("--json", action="store_true", help="print the fit as JSON")
 
 
@@ -74,7 +94,9 @@ def run(args: argparse.Namespace) -> int:
     refuse_overwrite(args.output, [config_path, args.columns, *args.recordings], "--output")
     cfg = load_config(config_path)
     model = RobotModel.from_config(cfg.robot, apply_parameters=False)
-    opts = Conditioning(args.cutoff, args.filter_torque, args.decimate, args.drop_bad_rows)
+    opts = Conditioning(
+        args.cutoff, args.filter_torque, args.decimate, args.drop_bad_rows, not args.keep_standstill
+    )
     vs = None
     if args.stribeck_velocity is not None:
         try:
@@ -93,11 +115,17 @@ def run(args: argparse.Namespace) -> int:
     def say(msg: str) -> None:
         print(f"identify: {msg}", file=sys.stderr, flush=True)
 
+    if args.held_velocity is not None and not (
+        np.isfinite(args.held_velocity) and args.held_velocity > 0
+    ):
+        raise UserError(f"identify: --held-velocity must be > 0 rad/s, got {args.held_velocity}")
     loaded = load_samples(
         args.recordings, args.columns, parse_rows(args.rows), opts, search, robot=cfg.robot.name
     )
     for _s, rec in loaded:
         say(f"loaded {rec.source}: {rec.n_samples} samples, {rec.duration:.1f} s")
+    if args.friction_only is not None:
+        return _friction_only(args, model, [s for s, _ in loaded], say)
     result = identify(
         model,
         [s for s, _ in loaded],
@@ -105,6 +133,8 @@ def run(args: argparse.Namespace) -> int:
         args.smooth_velocity,
         progress=say,
         stribeck_velocity=vs,
+        held_velocity=args.held_velocity,
+        quadratic=args.quadratic,
     )
     apply_parameters(model, result.parameters, str(args.output))  # refuses a non-SPD M(q)
     try:
@@ -148,4 +178,30 @@ def run(args: argparse.Namespace) -> int:
         f"{fit['samples']} samples, condition number {fit['condition_number']:.4g}, "
         f"method {args.method}"
     )
+    return 0
+
+
+def _friction_only(args: argparse.Namespace, model, samples, say) -> int:
+    from hofto_hw.identify.friction_only import refresh_friction
+    from hofto_hw.model.parameters import apply_parameters, read_parameters, write_parameters
+
+    old = read_parameters(args.friction_only)
+    new = refresh_friction(
+        model,
+        old,
+        samples,
+        smooth_velocity=args.smooth_velocity,
+        held_velocity=args.held_velocity,
+        quadratic=True if args.quadratic else None,
+    )
+    apply_parameters(model, new, str(args.output))
+    write_parameters(args.output, new)
+    say(f"wrote {args.output} (rigid body from {args.friction_only})")
+    print(f"{'joint':<22}{'Fc old':>9}{'Fc new':>9}{'Fv old':>9}{'Fv new':>9}{'Fh new':>9}")
+    for j, name in enumerate(model.joint_names):
+        fh = "-" if new.held is None else f"{new.held[j]:.3f}"
+        print(
+            f"{name:<22}{old.coulomb[j]:9.3f}{new.coulomb[j]:9.3f}"
+            f"{old.viscous[j]:9.3f}{new.viscous[j]:9.3f}{fh:>9}"
+        )
     return 0

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import json
+import math
 from pathlib import Path
 
 from hofto_hw.commands.args import (
@@ -57,6 +58,22 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=0.03,
         help="time above threshold to trip [s]",
     )
+    cal.add_argument(
+        "--standstill",
+        action="store_true",
+        help="fit a standstill term separate from the reversal term (held friction at rest)",
+    )
+    cal.add_argument(
+        "--standstill-time",
+        type=float,
+        default=0.0,
+        help="time constant [s] with which the standstill indicator rises after a stop",
+    )
+    cal.add_argument(
+        "--sustained",
+        action="store_true",
+        help="fit the residuals sustained over the debounce time, not single-sample peaks",
+    )
     cal.add_argument("--json", action="store_true", help="print a summary as JSON")
     add_common(cal)
     chk = sub.add_parser(
@@ -98,7 +115,11 @@ def _calibrate(args: argparse.Namespace) -> int:
     recs = [
         load_for_replay(setup, f, args.columns, rows, bad, progress_for(f.name)) for f in args.files
     ]
-    template = CollisionConfig(base=[1.0] * n, debounce_time=args.debounce)
+    if not (math.isfinite(args.standstill_time) and args.standstill_time >= 0.0):
+        raise UserError(f"--standstill-time must be >= 0 s, got {args.standstill_time}")
+    template = CollisionConfig(
+        base=[1.0] * n, debounce_time=args.debounce, standstill_time=args.standstill_time
+    )
     entries: dict[str, ObserverThresholds] = {}
     for name in args.observer or CALIBRATED_BY_DEFAULT:
         obs_cfg = observer_config(name, setup)
@@ -110,7 +131,14 @@ def _calibrate(args: argparse.Namespace) -> int:
             )
             for rec in recs
         ]
-        cal = calibrate(recs, residuals, template, margin=args.margin)
+        cal = calibrate(
+            recs,
+            residuals,
+            template,
+            margin=args.margin,
+            terms=(True, True, True, True, args.standstill),
+            sustain=args.sustained,
+        )
         entries[name] = ObserverThresholds(
             observer=obs_cfg, monitor=cal.config, peak=list(cal.peak), samples=cal.samples
         )

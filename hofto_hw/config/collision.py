@@ -4,9 +4,13 @@
 Effective threshold of joint j at tick k (see safety/collision.py):
 
     thr_j = base_j + velocity_gain_j·|qd_j| + acceleration_gain_j·|a_j| + reversal_margin_j·r_j
+            + standstill_margin_j·s_j
 
-with a_j the low-passed acceleration [rad/s²] and r_j in [0, 1] the velocity-reversal
-indicator (1 while a joint that was moving passes through |qd| < reversal_velocity).
+with a_j the low-passed acceleration [rad/s²], r_j in [0, 1] the velocity-reversal
+indicator (1 while a joint that was moving passes through |qd| < reversal_velocity) and s_j
+= exp(-(qd_j/standstill_velocity)²) the standstill indicator (1 at rest however long, ~0 in
+motion): held friction at rest then no longer forces the base, i.e. the threshold in motion,
+up. Without ``standstill_margin`` the threshold is today's.
 """
 
 from __future__ import annotations
@@ -27,6 +31,17 @@ class CollisionConfig(FileModel):
     reversal_margin: list[NonNegFloat] | None = Field(
         None, description="extra threshold during a velocity reversal [N·m] per joint"
     )
+    standstill_margin: list[NonNegFloat] | None = Field(
+        None, description="extra threshold at standstill [N·m] per joint (held friction)"
+    )
+    standstill_velocity: PositiveFloat = Field(
+        0.02, description="width of the standstill indicator exp(-(qd/v)²) [rad/s]"
+    )
+    standstill_time: NonNegFloat = Field(
+        0.0,
+        description="the standstill indicator rises with this time constant after a stop [s] "
+        "(0 = at once); it drops at once when the joint moves",
+    )
     reversal_velocity: PositiveFloat = Field(
         0.05, description="|qd| below which a moving joint counts as reversing [rad/s]"
     )
@@ -46,7 +61,12 @@ class CollisionConfig(FileModel):
     @model_validator(mode="after")
     def _lengths(self) -> CollisionConfig:
         n = len(self.base)
-        for name in ("velocity_gain", "acceleration_gain", "reversal_margin"):
+        for name in (
+            "velocity_gain",
+            "acceleration_gain",
+            "reversal_margin",
+            "standstill_margin",
+        ):
             v = getattr(self, name)
             if v is not None and len(v) != n:
                 raise ValueError(f"{name} has {len(v)} entries, base has {n} (one per joint)")

@@ -13,6 +13,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from hofto_hw.config.base import FileModel, NonNegFloat, PositiveFloat
+from hofto_hw.config.payload import PayloadConfig
 
 #: ISO 10218-1 hand guiding: safety-rated reduced speed, at most 250 mm/s at the tool
 ISO_REDUCED_SPEED = 0.25
@@ -26,15 +27,6 @@ class UnlockConfig(FileModel):
     y: bool = True
     z: bool = True
     rotation: bool = False
-
-
-class PayloadConfig(FileModel):
-    """A load held at the tool that the observers' model does NOT include: ``mass`` [kg] at
-    ``com`` [m] in the tool frame. Its weight is taken off the wrench estimate. Leave it 0
-    when the loop's model already carries the payload (then the observers explain it)."""
-
-    mass: NonNegFloat = 0.0
-    com: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 class WorkspaceConfig(FileModel):

@@ -20,6 +20,7 @@ from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.drag import DragConfig
 from hofto_hw.config.drives import BusConfig
 from hofto_hw.config.motion import MotionConfig
+from hofto_hw.config.payload import PayloadConfig
 from hofto_hw.config.runtime import RunConfig, ServiceConfig
 from hofto_hw.config.safety import SafetyConfig
 
@@ -45,6 +46,17 @@ class FrictionConfig(FileModel):
     )
     smooth_velocity: NonNegFloat = Field(
         0.0, description="tanh smoothing velocity for sign(qd) [rad/s]; 0 = hard sign"
+    )
+    held: list[NonNegFloat] | None = Field(
+        None,
+        description="held friction Fh per joint [N·m]: Fh·h·exp(-(qd/v_h)²), h = sign of the "
+        "last velocity outside the band v_h (friction with memory at rest)",
+    )
+    held_velocity: PositiveFloat = Field(
+        0.005, description="velocity band v_h of the held friction [rad/s]"
+    )
+    quadratic: list[float] | None = Field(
+        None, description="quadratic friction Fq per joint: Fq·qd·|qd| [N·m·s²/rad²]"
     )
 
 
@@ -73,6 +85,9 @@ class RobotConfig(FileModel):
     friction: FrictionConfig | None = None
     limits: LimitsConfig = Field(default_factory=LimitsConfig)
     home: list[float] | None = Field(None, description="home configuration [rad]")
+    payload: PayloadConfig | None = Field(
+        None, description="tool or load on the tool frame (hofto-hw payload identify)"
+    )
     parameters: Path | None = Field(
         None, description="identified-parameters file (hofto-hw identify); overrides URDF"
     )

@@ -13,7 +13,7 @@ from typing import Annotated, Literal
 from pydantic import Field
 
 from hofto_hw.config.base import FileModel
-from hofto_hw.config.safety import PayloadConfig
+from hofto_hw.config.payload import PayloadConfig
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]

@@ -17,6 +17,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from hofto_hw.config.base import FileModel
+from hofto_hw.config.payload import PayloadConfig
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
@@ -65,14 +66,6 @@ class BusHealthConfig(FileModel):
     (lost frames, working-counter errors, missing TPDOs, stale data) make a bus-loss fault."""
 
     lost_cycles: Annotated[int, Field(ge=1, le=1000)] = 3
-
-
-class PayloadConfig(FileModel):
-    """A load held at the tool: ``mass`` [kg] with its centre of mass ``com`` [m] given in
-    the tool frame (point mass; added to the last link of the model)."""
-
-    mass: NonNeg = 0.0
-    com: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
 
 
 class ThresholdSet(FileModel):

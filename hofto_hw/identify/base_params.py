@@ -86,7 +86,14 @@ def find_base_parameters(
     """
     rng = np.random.default_rng(seed)
     q, qd, qdd = random_samples(regressor.n, n_samples, rng)
-    W = regressor.stack(q, qd, qdd)
+    held = None
+    if regressor.held_velocity is not None:
+        # The held columns only live inside the velocity band: put a third of the samples
+        # there, with a random held sign.
+        k = n_samples // 3
+        qd[-k:] *= 0.5 * regressor.held_velocity / 2.0
+        held = np.sign(rng.uniform(-1.0, 1.0, qd.shape))
+    W = regressor.stack(q, qd, qdd, held=held)
     norms = np.linalg.norm(W, axis=0)
     nonzero = norms > rtol * norms.max()
     Ws = np.where(nonzero, W / np.where(nonzero, norms, 1.0), 0.0)
@@ -114,5 +121,10 @@ def find_base_parameters(
     resid = np.linalg.norm(Hb @ K[:, drop] - W[:, drop]) / max(np.linalg.norm(W), 1.0)
     if resid > 1e-8:
         raise ModelError(f"base parameters: regrouping residual {resid:.2e} is too large")
-    names_s = standard_names(joint_names, regressor.stribeck_velocity is not None)
+    names_s = standard_names(
+        joint_names,
+        regressor.stribeck_velocity is not None,
+        regressor.held_velocity is not None,
+        regressor.quadratic,
+    )
     return BaseParameters(keep, K, [names_s[i] for i in keep], names_s)

@@ -95,9 +95,10 @@ def consistent_fit(
     objective = (
         cp.norm(R11 @ mu - r) / r_norm + lam * cp.norm(cp.hstack(rigid) - prior_rigid) / p_norm
     )
-    constraints = [extra[: 3 * n] >= 0.0]  # Ia, Fc, Fv
-    if n_extra > 4 * n:
-        constraints.append(extra[4 * n :] >= 0.0)  # Fs >= Fc
+    # Ia, Fc, Fv, the Stribeck gap (Fs >= Fc) and held friction are >= 0; B and Q are free.
+    kinds = [nm.rsplit(".", 1)[1] for nm in base.standard_names[N_RIGID * n :]]
+    nonneg = [i for i, k in enumerate(kinds) if k in ("Ia", "Fc", "Fv", "S", "H")]
+    constraints = [extra[nonneg] >= 0.0]
     problem = cp.Problem(cp.Minimize(objective), constraints)
     try:
         with warnings.catch_warnings():

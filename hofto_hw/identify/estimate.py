@@ -15,7 +15,7 @@ import scipy.linalg
 
 from hofto_hw.errors import UserError
 from hofto_hw.identify.base_params import BaseParameters
-from hofto_hw.identify.regressor import Regressor
+from hofto_hw.identify.regressor import Regressor, held_sign_series
 from hofto_hw.identify.threads import one_blas_thread
 
 MAX_CONDITION = 1e6  # above this the data do not determine every base parameter
@@ -42,10 +42,20 @@ class Accumulator:
         tau = np.asarray(tau, dtype=float)
         if tau.shape != np.shape(q):
             raise UserError(f"identify: tau has shape {tau.shape}, q has {np.shape(q)}")
+        reg = self.regressor
+        held = None
+        if reg.held_velocity is not None:  # the memory runs over the whole recording
+            held = held_sign_series(np.asarray(qd, dtype=float), reg.held_velocity)
         for start in range(0, tau.shape[0], self.chunk):
             sl = slice(start, start + self.chunk)
             m = tau[sl].shape[0]
-            H = self.regressor.stack(q[sl], qd[sl], qdd[sl], out=self._H[: m * self.n])
+            H = reg.stack(
+                q[sl],
+                qd[sl],
+                qdd[sl],
+                out=self._H[: m * self.n],
+                held=None if held is None else held[sl],
+            )
             Hb = H[:, self.base.columns].reshape(m, self.n, self.p)
             for j in range(self.n):
                 A = np.empty((self.p + 1 + m, self.p + 1))

@@ -24,12 +24,14 @@ from hofto_hw.identify.pipeline import Samples
 @dataclass
 class Conditioning:
     """Offline conditioning options: low-pass ``cutoff_hz`` [Hz], torque filtering,
-    decimation factor, bad-row policy."""
+    decimation factor, bad-row policy, trimming of standstill at the ends (off to keep the
+    rest periods that identify held friction and static holds)."""
 
     cutoff_hz: float = 5.0
     filter_torque: bool = True
     decimation: int = 1
     drop_bad_rows: bool = False
+    trim: bool = True
 
 
 def split_spec(spec: str) -> tuple[Path, tuple[int, int] | None]:
@@ -81,7 +83,11 @@ def load_samples(
             bad_rows="drop" if opts.drop_bad_rows else None,
         )
         rec = condition(
-            rec, opts.cutoff_hz, filter_torque=opts.filter_torque, decimation=opts.decimation
+            rec,
+            opts.cutoff_hz,
+            filter_torque=opts.filter_torque,
+            decimation=opts.decimation,
+            trim=opts.trim,
         )
         assert rec.qdd is not None
         out.append((Samples(rec.q, rec.qd, rec.qdd, rec.tau, rec.source), rec))

@@ -23,7 +23,7 @@ from hofto_hw.errors import UserError
 from hofto_hw.identify.base_params import BaseParameters, find_base_parameters
 from hofto_hw.identify.consistent import consistent_fit
 from hofto_hw.identify.estimate import Accumulator, Estimate, least_squares
-from hofto_hw.identify.regressor import Regressor, split_standard, standard_parameters
+from hofto_hw.identify.regressor import Regressor, split_optional, standard_parameters
 from hofto_hw.identify.threads import one_blas_thread
 from hofto_hw.model.parameters import BaseParameterEntry, ParametersFile, urdf_sha256
 
@@ -57,16 +57,24 @@ class Identification:
     mu: np.ndarray  # base parameters of that set (p,)
 
 
-def nominal_theta(model: RobotModel, stribeck: bool = False) -> np.ndarray:
-    """The model's current standard parameters (14·n,; 15·n with ``stribeck``): URDF links,
-    rotor, friction (Stribeck gap Fs − Fc, 0 when the model has none)."""
+def nominal_theta(
+    model: RobotModel, stribeck: bool = False, held: bool = False, quadratic: bool = False
+) -> np.ndarray:
+    """The model's current standard parameters (14·n,; +n per optional block): URDF links,
+    rotor, friction (Stribeck gap Fs − Fc, held Fh, quadratic Fq; 0 when the model has none)."""
     f = model.friction
+    n = model.n
     gap = None
     if stribeck:
-        gap = np.zeros(model.n) if f.stribeck_static is None else f.stribeck_static - f.coulomb
-    return standard_parameters(
+        gap = np.zeros(n) if f.stribeck_static is None else f.stribeck_static - f.coulomb
+    theta = standard_parameters(
         model.inertial_parameters(), model.rotor_inertia, f.coulomb, f.viscous, f.bias, gap
     )
+    if held:
+        theta = np.concatenate([theta, np.zeros(n) if f.held is None else f.held])
+    if quadratic:
+        theta = np.concatenate([theta, np.zeros(n) if f.quadratic is None else f.quadratic])
+    return theta
 
 
 @one_blas_thread
@@ -77,11 +85,17 @@ def identify(
     smooth_velocity: float = 0.02,
     progress: Callable[[str], None] | None = None,
     stribeck_velocity: np.ndarray | None = None,
+    held_velocity: float | None = None,
+    quadratic: bool = False,
+    held_passive: bool = False,
 ) -> Identification:
     """Identify ``model``'s parameters from ``recordings`` (see the module docstring).
 
     ``smooth_velocity`` [rad/s]: tanh width of the Coulomb sign; ``stribeck_velocity`` (n,)
-    [rad/s]: identify a Stribeck gap Fs − Fc with these fixed Stribeck velocities.
+    [rad/s]: identify a Stribeck gap Fs − Fc with these fixed Stribeck velocities;
+    ``held_velocity`` v_h [rad/s]: identify held friction (memory at rest) with this band;
+    ``quadratic``: identify Fq of Fq·qd·|qd|; ``held_passive``: the passive held term of the
+    simulated plant (see ``hofto_hw.model.friction``; the real UR10e fits the default better).
     """
     if method not in METHODS:
         raise UserError(f"identify: --method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -89,8 +103,11 @@ def identify(
         raise UserError("identify: no recordings given")
     say = progress or (lambda _msg: None)
     n = model.n
-    reg = Regressor(model.pin_model, smooth_velocity, stribeck_velocity)
+    reg = Regressor(
+        model.pin_model, smooth_velocity, stribeck_velocity, held_velocity, quadratic, held_passive
+    )
     stribeck = reg.stribeck_velocity is not None
+    held = reg.held_velocity is not None
     base = find_base_parameters(reg, model.joint_names)
     say(f"{base.p} base parameters out of {reg.n_std} standard ones")
     acc = Accumulator(reg, base)
@@ -104,7 +121,7 @@ def identify(
     ols = least_squares(acc)
     wls = least_squares(acc, weighted=True)
     say(f"least squares done (condition number {ols.condition_number:.4g})")
-    prior = nominal_theta(model, stribeck)
+    prior = nominal_theta(model, stribeck, held, reg.quadratic)
     if method == "consistent":
         w = 1.0 / np.maximum(ols.residual_std, 1e-9)
         theta = consistent_fit(acc.combined(w), base, prior, n)
@@ -123,7 +140,7 @@ def identify(
         "residual_std": wls.residual_std,
         "ols_rmse": ols.rmse,
     }
-    parts = split_standard(theta, n)
+    parts = split_optional(theta, n, reg.optional)
     entries = [
         BaseParameterEntry(
             base.names[i],
@@ -146,6 +163,10 @@ def identify(
         smooth_velocity=smooth_velocity,
         stribeck_static=parts["coulomb"] + parts["stribeck_gap"] if stribeck else None,
         stribeck_velocity=reg.stribeck_velocity.copy() if stribeck else None,  # type: ignore[union-attr]
+        held=parts.get("held"),
+        held_velocity=reg.held_velocity if held else 0.005,  # type: ignore[arg-type]
+        quadratic=parts.get("quadratic"),
+        held_passive=held_passive,
         urdf=urdf.name if urdf is not None else "",
         gravity=tuple(float(g) for g in model.pin_model.gravity.linear),  # type: ignore[arg-type]
         created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),

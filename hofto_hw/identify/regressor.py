@@ -9,7 +9,11 @@ Standard parameters, 14 per joint (Remark 2), laid out in blocks, s = 14·n colu
 - ``[12n, 13n)``: viscous friction Fv_j [N·m·s/rad] (column qd_j);
 - ``[13n, 14n)``: torque offset B_j [N·m] (column 1);
 - optional ``[14n, 15n)``: Stribeck gap S_j = Fs_j − Fc_j [N·m] (column
-  exp(−(qd_j/vs_j)²)·s(qd_j), vs_j the given Stribeck velocity [rad/s]).
+  exp(−(qd_j/vs_j)²)·s(qd_j), vs_j the given Stribeck velocity [rad/s]);
+- optional next block: held friction H_j = Fh_j [N·m] (column h_j·exp(−(qd_j/v_h)²), h the
+  held sign of the last velocity outside the band v_h, computed causally over each recording:
+  :func:`held_sign_series`; see ``hofto_hw.model.friction``);
+- optional last block: quadratic friction Q_j = Fq_j [N·m·s²/rad²] (column qd_j·|qd_j|).
 
 Stacked regressors are sample-major: row ``k·n + j`` is joint j at sample k.
 """
@@ -26,15 +30,43 @@ N_PER_JOINT = 14
 RIGID_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 EXTRA_NAMES = ("Ia", "Fc", "Fv", "B")
 STRIBECK_NAME = "S"
+HELD_NAME = "H"
+QUADRATIC_NAME = "Q"
 
 
-def standard_names(joint_names: list[str], stribeck: bool = False) -> list[str]:
-    """Names of the 14·n (15·n with Stribeck) standard parameters, e.g. ``elbow_joint.Ixx``,
-    ``elbow_joint.Fc``, ``elbow_joint.S``."""
+def optional_names(stribeck: bool = False, held: bool = False, quadratic: bool = False) -> tuple:
+    """The optional friction blocks present, in their standard order."""
+    return (
+        ((STRIBECK_NAME,) if stribeck else ())
+        + ((HELD_NAME,) if held else ())
+        + ((QUADRATIC_NAME,) if quadratic else ())
+    )
+
+
+def standard_names(
+    joint_names: list[str], stribeck: bool = False, held: bool = False, quadratic: bool = False
+) -> list[str]:
+    """Names of the 14·n (+n per optional block) standard parameters, e.g.
+    ``elbow_joint.Ixx``, ``elbow_joint.Fc``, ``elbow_joint.S``, ``elbow_joint.H``."""
     names = [f"{j}.{p}" for j in joint_names for p in RIGID_NAMES]
-    for p in EXTRA_NAMES + ((STRIBECK_NAME,) if stribeck else ()):
+    for p in EXTRA_NAMES + optional_names(stribeck, held, quadratic):
         names += [f"{j}.{p}" for j in joint_names]
     return names
+
+
+def held_sign_series(qd: np.ndarray, band: float, initial: np.ndarray | None = None) -> np.ndarray:
+    """Held sign h (N, n) of a velocity sequence qd (N, n) [rad/s], in time order: h_k =
+    sign(qd_k) where |qd_k| > ``band``, else h_{k-1} (``initial`` (n,), default 0). The same
+    rule as ``FrictionParams.update_held``."""
+    qd = np.asarray(qd, dtype=float)
+    h = np.zeros_like(qd)
+    last = np.zeros(qd.shape[1]) if initial is None else np.array(initial, dtype=float)
+    outside = np.abs(qd) > band
+    sgn = np.sign(qd)
+    for k in range(qd.shape[0]):
+        np.copyto(last, sgn[k], where=outside[k])
+        h[k] = last
+    return h
 
 
 def standard_parameters(
@@ -68,12 +100,25 @@ def split_standard(theta: np.ndarray, n: int) -> dict[str, np.ndarray]:
     return out
 
 
+def split_optional(theta: np.ndarray, n: int, optional: tuple) -> dict[str, np.ndarray]:
+    """Like :func:`split_standard` for an explicit list of optional blocks (``optional_names``
+    order): adds ``stribeck_gap``, ``held``, ``quadratic`` (n,) as present."""
+    r = N_RIGID * n
+    out = split_standard(theta[: r + 4 * n], n)
+    keys = {STRIBECK_NAME: "stribeck_gap", HELD_NAME: "held", QUADRATIC_NAME: "quadratic"}
+    for i, name in enumerate(optional):
+        out[keys[name]] = theta[r + (4 + i) * n : r + (5 + i) * n].copy()
+    return out
+
+
 class Regressor:
     """Evaluates H_s for one pinocchio model (own ``Data``), friction sign smoothed by v_s.
 
     ``smooth_velocity`` v_s [rad/s]: s(qd) = tanh(qd / v_s); 0 gives the hard sign (then
     noise at standstill becomes a ±Fc square wave on real data). ``stribeck_velocity`` vs
-    (n,) [rad/s] adds the Stribeck-gap columns.
+    (n,) [rad/s] adds the Stribeck-gap columns, ``held_velocity`` v_h [rad/s] the held-friction
+    columns (``held_passive``: zero while qd·h < 0, as ``FrictionParams.held_passive``),
+    ``quadratic`` the qd·|qd| columns.
     """
 
     def __init__(
@@ -81,6 +126,9 @@ class Regressor:
         pin_model: pin.Model,
         smooth_velocity: float = 0.0,
         stribeck_velocity: np.ndarray | None = None,
+        held_velocity: float | None = None,
+        quadratic: bool = False,
+        held_passive: bool = False,
     ) -> None:
         self.model = pin_model
         self.data = pin_model.createData()
@@ -93,7 +141,15 @@ class Regressor:
             self.stribeck_velocity.shape != (self.n,) or np.any(self.stribeck_velocity <= 0)
         ):
             raise UserError(f"regressor: stribeck_velocity needs {self.n} values > 0 [rad/s]")
-        self.n_std = (N_PER_JOINT + (self.stribeck_velocity is not None)) * self.n
+        if held_velocity is not None and not held_velocity > 0.0:
+            raise UserError(f"regressor: held_velocity must be > 0 rad/s, got {held_velocity}")
+        self.held_velocity = None if held_velocity is None else float(held_velocity)
+        self.quadratic = bool(quadratic)
+        self.held_passive = bool(held_passive)
+        self.optional = optional_names(
+            self.stribeck_velocity is not None, self.held_velocity is not None, self.quadratic
+        )
+        self.n_std = (N_PER_JOINT + len(self.optional)) * self.n
 
     def friction_sign(self, qd: np.ndarray) -> np.ndarray:
         """s(qd), same shape as ``qd``."""
@@ -107,10 +163,13 @@ class Regressor:
         qd: np.ndarray,
         qdd: np.ndarray,
         out: np.ndarray | None = None,
+        held: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Stacked H_s over N samples: q, qd, qdd of shape (N, n) -> (N·n, 14·n).
+        """Stacked H_s over N samples: q, qd, qdd of shape (N, n) -> (N·n, n_std).
 
-        ``out`` (N·n, 14·n) is filled in place when given.
+        ``out`` (N·n, n_std) is filled in place when given. ``held`` (N, n): the held sign of
+        each sample (default: :func:`held_sign_series` of ``qd`` from 0), for the held
+        columns; pass it when a recording is split into chunks.
         """
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
@@ -137,6 +196,18 @@ class Regressor:
         H3[:, idx, r + n + idx] = sgn
         H3[:, idx, r + 2 * n + idx] = qd
         H3[:, idx, r + 3 * n + idx] = 1.0
+        col = r + 4 * n
         if self.stribeck_velocity is not None:
-            H3[:, idx, r + 4 * n + idx] = np.exp(-((qd / self.stribeck_velocity) ** 2)) * sgn
+            H3[:, idx, col + idx] = np.exp(-((qd / self.stribeck_velocity) ** 2)) * sgn
+            col += n
+        if self.held_velocity is not None:
+            v_h = self.held_velocity
+            h = held_sign_series(qd, v_h) if held is None else np.asarray(held, dtype=float)
+            w = np.exp(-((qd / v_h) ** 2))
+            if self.held_passive:
+                w = w * (qd * h >= 0.0)
+            H3[:, idx, col + idx] = h * w
+            col += n
+        if self.quadratic:
+            H3[:, idx, col + idx] = qd * np.abs(qd)
         return H

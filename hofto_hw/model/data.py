@@ -49,7 +49,8 @@ class ModelData:
         self._f = np.zeros(n)
         self._f_id = np.zeros(n)  # friction inside inverse_dynamics
         self._f_fd = np.zeros(n)  # friction inside forward_dynamics
-        self._fscratch = np.zeros((2, n))
+        self._fscratch = np.zeros((3, n))
+        self.friction_state = np.zeros(n)  # held-friction sign (memory), see model.friction
         self._tau_id = np.zeros(n)
         self._qdd = np.zeros(n)
         self._tau_total = np.zeros(n)
@@ -99,7 +100,9 @@ class ModelData:
 
     def friction_torque(self, qd: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """f(qd) [N·m], shape (n,), eq. (12)."""
-        return self.model.friction.torque(qd, self._f if out is None else out, self._fscratch)
+        return self.model.friction.torque(
+            qd, self._f if out is None else out, self._fscratch, self.friction_state
+        )
 
     def inverse_dynamics(
         self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, out: np.ndarray | None = None
@@ -108,7 +111,7 @@ class ModelData:
         m = self.model
         tau = self._tau_id if out is None else out
         np.copyto(tau, pin.rnea(m.pin_model, self.pin_data, q, qd, qdd))
-        np.add(tau, m.friction.torque(qd, self._f_id, self._fscratch), out=tau)
+        np.add(tau, m.friction.torque(qd, self._f_id, self._fscratch, self.friction_state), out=tau)
         return tau
 
     def forward_dynamics(
@@ -122,12 +125,22 @@ class ModelData:
         """qdd [rad/s²] = M⁻¹·(tau + tau_ext - C·qd - g - f), shape (n,) (ABA)."""
         m = self.model
         total = self._tau_total
-        np.subtract(tau, m.friction.torque(qd, self._f_fd, self._fscratch), out=total)
+        np.subtract(
+            tau, m.friction.torque(qd, self._f_fd, self._fscratch, self.friction_state), out=total
+        )
         if tau_ext is not None:
             np.add(total, tau_ext, out=total)
         qdd = self._qdd if out is None else out
         np.copyto(qdd, pin.aba(m.pin_model, self.pin_data, q, qd, total))
         return qdd
+
+    def reset_friction_state(self, held_sign: np.ndarray | None = None) -> None:
+        """Forget the held-friction memory (0 = no held direction) or set it to ``held_sign``
+        (n,) of -1/0/+1 (e.g. the direction of the last motion before a restart)."""
+        if held_sign is None:
+            self.friction_state.fill(0.0)
+        else:
+            np.copyto(self.friction_state, held_sign)
 
     # ------------------------------------------------------------------ kinematics
 

@@ -25,6 +25,10 @@ Format (YAML, UTF-8; ``version`` 1). All values SI at the joint side.
         smooth_velocity: 0.02    # v_s [rad/s]: sign(qd) ~ tanh(qd / v_s); 0 = hard sign
         stribeck_static: [...]   # optional: Fs [N·m] (>= Fc), adds (Fs-Fc)·exp(-(qd/vs)²)·s(qd)
         stribeck_velocity: [...] # optional, with stribeck_static: vs [rad/s]
+        held: [...]              # optional: Fh [N·m], friction with memory (model/friction.py)
+        held_velocity: 0.005     # with held: band v_h [rad/s]
+        held_passive: false      # optional: held term zero while qd·h < 0 (simulation form)
+        quadratic: [...]         # optional: Fq [N·m·s²/rad²], adds Fq·qd·|qd|
     base:                        # eq. (14): mu = K·theta_s (the model above reproduces mu)
       count: 58
       parameters:
@@ -41,7 +45,8 @@ Format (YAML, UTF-8; ``version`` 1). All values SI at the joint side.
       residual_std: [...]        # per joint [N·m] (WLS weights)
 
 Standard parameter names are ``<joint>.<p>`` with p in m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz,
-Izz, Ia, Fc, Fv, B and, with Stribeck friction, S = Fs − Fc (see
+Izz, Ia, Fc, Fv, B and, with Stribeck friction, S = Fs − Fc, with held friction H = Fh, with
+quadratic friction Q = Fq (see
 ``hofto_hw.identify.regressor``).
 
 :func:`apply_parameters_file` checks robot name, joint names and URDF hash, sets the link
@@ -103,6 +108,10 @@ class ParametersFile:
     smooth_velocity: float = 0.0
     stribeck_static: np.ndarray | None = None
     stribeck_velocity: np.ndarray | None = None
+    held: np.ndarray | None = None
+    held_velocity: float = 0.005
+    quadratic: np.ndarray | None = None
+    held_passive: bool = False
     urdf: str = ""
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     created: str = ""
@@ -120,7 +129,15 @@ class ParametersFile:
         of the arrays (FrictionParams copies what it is given)."""
         stribeck = (self.stribeck_static, self.stribeck_velocity)
         return FrictionParams(
-            self.coulomb, self.viscous, self.bias, *stribeck, self.smooth_velocity
+            self.coulomb,
+            self.viscous,
+            self.bias,
+            *stribeck,
+            self.smooth_velocity,
+            held=self.held,
+            held_velocity=self.held_velocity,
+            quadratic=self.quadratic,
+            held_passive=self.held_passive,
         )
 
     def base_values(self) -> np.ndarray:
@@ -160,6 +177,13 @@ def to_dict(pf: ParametersFile) -> dict[str, Any]:
     if pf.stribeck_static is not None and pf.stribeck_velocity is not None:
         friction["stribeck_static"] = _floats(pf.stribeck_static)
         friction["stribeck_velocity"] = _floats(pf.stribeck_velocity)
+    if pf.held is not None:
+        friction["held"] = _floats(pf.held)
+        friction["held_velocity"] = float(pf.held_velocity)
+        if pf.held_passive:
+            friction["held_passive"] = True
+    if pf.quadratic is not None:
+        friction["quadratic"] = _floats(pf.quadratic)
     return {
         "format": FORMAT,
         "version": VERSION,
@@ -281,6 +305,13 @@ def read_parameters(path: str | Path) -> ParametersFile:
     )
     if stribeck[1] is not None and np.any(stribeck[1] <= 0.0):
         raise r.fail("model.friction.stribeck_velocity", "values must be > 0 [rad/s]")
+    held = r.array(fr["held"], "model.friction.held", (n,)) if "held" in fr else None
+    held_velocity = r.number(fr.get("held_velocity", 0.005), "model.friction.held_velocity")
+    if held_velocity <= 0.0:
+        raise r.fail("model.friction.held_velocity", f"must be > 0 [rad/s], got {held_velocity}")
+    quadratic = (
+        r.array(fr["quadratic"], "model.friction.quadratic", (n,)) if "quadratic" in fr else None
+    )
     robot = r.get(data, "robot", "")
     sha = r.get(data, "urdf_sha256", "")
     smooth_velocity = r.number(fr.get("smooth_velocity") or 0.0, "model.friction.smooth_velocity")
@@ -296,6 +327,10 @@ def read_parameters(path: str | Path) -> ParametersFile:
         smooth_velocity=smooth_velocity,
         stribeck_static=stribeck[0],
         stribeck_velocity=stribeck[1],
+        held=held,
+        held_velocity=held_velocity,
+        quadratic=quadratic,
+        held_passive=bool(fr.get("held_passive", False)),
         urdf=str(data.get("urdf", "")),
         gravity=(float(gravity[0]), float(gravity[1]), float(gravity[2])),
         created=str(data.get("created", "")),
@@ -404,6 +439,11 @@ def apply_parameters(model: RobotModel, pf: ParametersFile, source: str = "<para
     old = (model.inertial_parameters(), model.rotor_inertia, model.friction)
     try:
         model.set_inertial_parameters(pf.inertial.reshape(-1))
+        payload = getattr(model, "payload", None)
+        if payload is not None:  # the arm's links come from the file, the load stays on
+            from hofto_hw.model.payload import apply_payload
+
+            apply_payload(model, payload)
         model.rotor_inertia = pf.rotor_inertia
         model.friction = pf.friction()
         check_mass_matrix(model)

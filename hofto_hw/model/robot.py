@@ -82,6 +82,7 @@ class RobotModel:
         self.limits = limits if limits is not None else _urdf_limits(pin_model)
         n = self.n
         self.home = np.zeros(n)
+        self.payload = None  # a Payload on the tool link (hofto_hw.model.payload), if any
 
     # ------------------------------------------------------------------ construction
 
@@ -165,6 +166,10 @@ class RobotModel:
             from hofto_hw.model.parameters import apply_parameters_file
 
             apply_parameters_file(robot, cfg.parameters)
+        if cfg.payload is not None:
+            from hofto_hw.model.payload import apply_payload, payload_from_config
+
+            apply_payload(robot, payload_from_config(cfg.payload))
         return robot
 
     def copy(self) -> RobotModel:
@@ -180,6 +185,7 @@ class RobotModel:
             base_frame=self.base_frame,
         )
         other.home = self.home.copy()
+        other.payload = self.payload
         return other
 
     # ------------------------------------------------------------------ parameters

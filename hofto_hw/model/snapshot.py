@@ -138,7 +138,10 @@ class DynamicsSnapshot:
             # holds every kernel and the numba availability logic)
             from hofto_hw.observers import kernels
 
-            if kernels.resolve(backend) == "numba":  # type: ignore[arg-type]
+            memory = model.friction.held is not None or model.friction.quadratic is not None
+            # the friction kernel has no held-friction memory or quadratic term: such a model
+            # takes the numpy friction of this snapshot's workspace (which keeps the memory)
+            if kernels.resolve(backend) == "numba" and not memory:  # type: ignore[arg-type]
                 self._kernels = kernels
                 fr = model.friction
                 zeros = np.zeros(n)
@@ -160,6 +163,10 @@ class DynamicsSnapshot:
         fr = self.model.friction
         k.friction_and_total(z, z, *self._fr, fr.smooth_velocity, True, np.zeros(n), np.zeros(n))
         k.transposed_mat_vec(self._C, z, np.zeros(n))
+
+    def reset_memory(self) -> None:
+        """Forget the held-friction memory of this snapshot's workspace (a new run)."""
+        self.data.reset_friction_state()
 
     def compute(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> bool:
         """Evaluate the needed terms at the sample q [rad], qd [rad/s], tau [N·m] (n,).

@@ -39,6 +39,7 @@ class DirectObserver(SnapshotUpdate):
         self._own_snapshot(model)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.data.reset_friction_state()  # held friction: a new run has no memory
         np.copyto(self._qd_prev, qd)
         self._qdd.fill(0.0)
         self._started = True

@@ -60,6 +60,7 @@ class DobObserver(SnapshotUpdate):
         kernels.dob_update(self._gj, self._alpha, s.qd, s.tau, s.nle, s.f, np.zeros(n), np.zeros(n))
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.snapshot.reset_memory()  # held friction: a new run has no memory
         np.multiply(self._gj, qd, out=self.w)  # tau_ext_hat starts at 0
 
     def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:

@@ -126,6 +126,7 @@ class EsoObserver(SnapshotUpdate):
         scratch.step_compiled(np.zeros(self.n), snap.accel, 1e-3, snap.M, np.zeros(self.n))
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.snapshot.reset_memory()  # held friction: a new run has no memory
         self.core.reset(q, qd)
 
     def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:

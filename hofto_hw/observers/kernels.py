@@ -40,7 +40,12 @@ _FAILED: str = ""  # first compilation failure, if any
 def _jit(fn: Callable[..., Any]) -> Callable[..., Any]:
     if _numba is None:
         return fn  # never called through the compiled path; keeps the module importable
-    return _numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    try:
+        return _numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    except RuntimeError:
+        # no writable cache folder (a service user under ProtectSystem=strict, a read-only
+        # install): compile at start-up every time instead (NUMBA_CACHE_DIR points elsewhere)
+        return _numba.njit(cache=False, nogil=True, error_model="numpy")(fn)
 
 
 def available() -> bool:

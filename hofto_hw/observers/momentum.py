@@ -60,6 +60,7 @@ class MomentumObserver(SnapshotUpdate):
         )
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.snapshot.reset_memory()  # held friction: a new run has no memory
         np.dot(self._reset_data.mass_matrix(q), qd, out=self.p0)
         self.integral.fill(0.0)
         self.r.fill(0.0)

@@ -72,6 +72,7 @@ class StaObserver(SnapshotUpdate):
         )
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
+        self.snapshot.reset_memory()  # held friction: a new run has no memory
         self.z1[:] = q
         self.z2[:] = qd
         self.z3.fill(0.0)

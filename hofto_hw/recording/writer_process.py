@@ -103,6 +103,7 @@ class _Writer:
         if self.file is None:
             self.ctl[sh.LOST] += n
             return n
+        counted = False
         try:
             if len(ticks):
                 self.file.write_ticks(ticks)
@@ -111,12 +112,17 @@ class _Writer:
             if len(diags):
                 self.file.write_diags(diags, self.counters())
             self.ctl[sh.RECORDS] += n
+            counted = True
             if now - self.flushed_at >= self.spec.flush_seconds:
                 self.file.flush()
                 self.flushed_at = now
                 self.ctl[sh.FLUSHED] = self.ctl[sh.RECORDS]
         except OSError:
-            self.ctl[sh.LOST] += n
+            # what is not in a closed chunk goes with the abandoned file: the records counted
+            # since the last flush and this batch (counted once, whichever step failed)
+            unflushed = int(self.ctl[sh.RECORDS] - self.ctl[sh.FLUSHED])
+            self.ctl[sh.RECORDS] = self.ctl[sh.FLUSHED]
+            self.ctl[sh.LOST] += unflushed + (0 if counted else n)
             self._fail(now)
         if self.file is not None:
             try:

@@ -1,7 +1,8 @@
 """Collision-threshold calibration from free-motion recordings (no contact anywhere).
 
-For each joint j the threshold is linear in four features of the motion,
-``thr = c0 + c1·|qd| + c2·|a| + c3·r`` (see safety/collision.py), with c >= 0. Calibration
+For each joint j the threshold is linear in five features of the motion,
+``thr = c0 + c1·|qd| + c2·|a| + c3·r + c4·s`` (see safety/collision.py), with c >= 0; the
+standstill term c4·s is off unless asked for (``terms``). Calibration
 finds the smallest such envelope over the free-motion residuals by a linear program,
 
     minimise  mean_k thr_k    subject to  thr_k >= |tau_ext_hat_k|  for every sample k,
@@ -10,6 +11,11 @@ then scales it by ``1 + margin``. Minimising the mean threshold keeps the restin
 c0 as low as the recordings allow (sensitivity to pushes on a still arm) while the other
 terms absorb what motion adds: acceleration steps (inertia errors) and velocity reversals
 (Coulomb friction switching).
+
+``sustained=True`` fits the envelope to the residual *sustained over the debounce window*
+(the running minimum of |tau_ext_hat| over the last ``debounce_time``) instead of single
+samples: the monitor only trips on a residual that stays above the threshold that long, so
+covering single-sample peaks adds margin no detection needs.
 """
 
 from __future__ import annotations
@@ -26,7 +32,8 @@ from hofto_hw.identify.data import Recording
 from safety.collision import CollisionMonitor
 
 FloatArray = NDArray[np.float64]
-TERMS = ("base", "velocity_gain", "acceleration_gain", "reversal_margin")
+TERMS = ("base", "velocity_gain", "acceleration_gain", "reversal_margin", "standstill_margin")
+DEFAULT_TERMS = (True, True, True, True, False)
 
 
 @dataclass
@@ -44,7 +51,7 @@ class Calibration:
 
 
 def features(rec: Recording, template: CollisionConfig) -> FloatArray:
-    """(N, n, 4) threshold features [1, |qd|, |a|, r] of ``rec`` under ``template``'s
+    """(N, n, 5) threshold features [1, |qd|, |a|, r, s] of ``rec`` under ``template``'s
     filter settings, computed by the monitor's own per-tick code (so they match replay)."""
     n = rec.n_joints
     unit = template.model_copy(
@@ -53,10 +60,11 @@ def features(rec: Recording, template: CollisionConfig) -> FloatArray:
             "velocity_gain": None,
             "acceleration_gain": None,
             "reversal_margin": None,
+            "standstill_margin": None,
         }
     )
     mon = CollisionMonitor(unit)
-    out = np.zeros((rec.n_samples, n, 4))
+    out = np.zeros((rec.n_samples, n, 5))
     out[:, :, 0] = 1.0
     out[:, :, 1] = np.abs(rec.qd)
     mon.reset(rec.qd[0])
@@ -65,33 +73,52 @@ def features(rec: Recording, template: CollisionConfig) -> FloatArray:
         mon.features(qd[k], t[k] - t[k - 1])
         out[k, :, 2] = np.abs(mon.accel)
         out[k, :, 3] = mon.reversal
+        out[k, :, 4] = mon.still
     out[0, :, 2:] = 0.0
+    out[0, :, 4] = np.exp(-((rec.qd[0] / template.standstill_velocity) ** 2))
     return out
 
 
 def fit_envelope(
-    feats: FloatArray, residual: FloatArray, use: tuple[bool, bool, bool, bool], min_base: float
+    feats: FloatArray, residual: FloatArray, use: tuple[bool, ...], min_base: float
 ) -> FloatArray:
-    """Coefficients (4,) >= 0 of the smallest-mean envelope of |residual| for one joint.
+    """Coefficients (5,) >= 0 of the smallest-mean envelope of |residual| for one joint.
 
-    ``feats`` (N, 4), ``residual`` (N,) [N·m]; ``use`` switches terms on; c0 >= min_base.
+    ``feats`` (N, 5), ``residual`` (N,) [N·m]; ``use`` (4 or 5 flags) switches terms on;
+    c0 >= min_base.
     """
-    cols = [i for i in range(4) if use[i]]
+    m = feats.shape[1]
+    cols = [i for i in range(m) if i < len(use) and use[i]]
     F = feats[:, cols]
     r = np.abs(residual)
     # c0 >= min_base and features >= 0: rows with |r| <= min_base cannot bind.
     keep = r > min_base
     F, r = F[keep], r[keep]
     if r.size == 0:
-        out = np.zeros(4)
+        out = np.zeros(m)
         out[0] = min_base
         return out
     bounds = [(min_base, None)] + [(0.0, None)] * (len(cols) - 1)
     res = linprog(c=F.mean(axis=0), A_ub=-F, b_ub=-r, bounds=bounds, method="highs")
     if res.status != 0:
         raise UserError(f"threshold calibration failed: {res.message}")
-    out = np.zeros(4)
+    out = np.zeros(m)
     out[cols] = res.x
+    return out
+
+
+def sustained(rec: Recording, residual: FloatArray, window: float) -> FloatArray:
+    """Running minimum of |residual| (N, n) over the last ``window`` seconds of ``rec.t``
+    (the sample itself included): what stays above a level for the debounce time."""
+    r = np.abs(residual)
+    out = r.copy()
+    if window <= 0.0:
+        return out
+    t = rec.t
+    start = np.searchsorted(t, t - window + 1e-9, side="left")
+    for k in range(r.shape[0]):
+        if start[k] < k:
+            out[k] = r[start[k] : k + 1].min(axis=0)
     return out
 
 
@@ -102,18 +129,27 @@ def calibrate(
     *,
     margin: float = 0.5,
     min_base: float = 1.0,
-    terms: tuple[bool, bool, bool, bool] = (True, True, True, True),
+    terms: tuple[bool, ...] = DEFAULT_TERMS,
+    sustain: bool = False,
 ) -> Calibration:
     """Thresholds covering every sample of ``residuals`` (each (N_i, n) [N·m]) with a margin.
 
     ``template`` gives the filter, debounce and hysteresis settings; its per-joint values are
-    replaced. ``margin`` 0.5 puts the thresholds 50 % above the envelope.
+    replaced. ``margin`` 0.5 puts the thresholds 50 % above the envelope. ``terms``: which of
+    base, velocity, acceleration, reversal, standstill to fit; ``sustain``: fit the residuals
+    sustained over ``template.debounce_time`` (see :func:`sustained`).
     """
     if not recordings:
         raise UserError("thresholds calibrate: no recordings given")
     n = recordings[0].n_joints
     feats = np.concatenate([features(rec, template) for rec in recordings])
+    if sustain:
+        residuals = [
+            sustained(rec, r, template.debounce_time)
+            for rec, r in zip(recordings, residuals, strict=True)
+        ]
     resid = np.concatenate(residuals)
+    terms = tuple(terms) + (False,) * (len(TERMS) - len(terms))
     env = np.stack([fit_envelope(feats[:, j], resid[:, j], terms, min_base) for j in range(n)])
     scaled = env * (1.0 + margin)
     values = {name: [float(v) for v in scaled[:, i]] for i, name in enumerate(TERMS)}

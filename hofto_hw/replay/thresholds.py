@@ -24,7 +24,7 @@ and the file names the parameters file (with its sha256) behind the model.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import yaml
 from pydantic import Field
@@ -64,6 +64,9 @@ class ThresholdsFile(FileModel):
     margin: float = 0.0
     calibrated_on: list[str] = Field(default_factory=list)
     observers: dict[str, ObserverThresholds]
+    provenance: dict[str, Any] | None = Field(
+        None, description="how the file was made (hofto-hw tune: files, sha256, settings)"
+    )
 
 
 def read_thresholds(path: str | Path) -> ThresholdsFile:

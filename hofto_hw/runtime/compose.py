@@ -20,7 +20,7 @@ from hofto_hw.commands.backend import observer_backend
 from hofto_hw.config.models import ExternalTorqueConfig, SystemConfig
 from hofto_hw.control.joint_motion import DemoPath, JointMotion
 from hofto_hw.errors import ConfigError
-from hofto_hw.model.payload import add_payload
+from hofto_hw.model.payload import apply_payload, payload_from_config
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers import make_observer
 from hofto_hw.observers.stability import check_observer
@@ -111,8 +111,9 @@ def loop_observer_names(cfg: SystemConfig) -> list[str]:
 def build_model(cfg: SystemConfig) -> RobotModel:
     """The identified model with the configured payload."""
     model = RobotModel.from_config(cfg.robot)
-    p = cfg.safety.payload
-    return add_payload(model, p.mass, p.com)
+    if cfg.safety.payload.mass > 0.0:
+        apply_payload(model, payload_from_config(cfg.safety.payload))
+    return model
 
 
 def build(
@@ -135,7 +136,8 @@ def build(
 
     bus = build_sim_bus(_sim_config(cfg), external=True)
     true_load = cfg.run.simulated_payload or cfg.safety.payload
-    add_payload(bus.plant.true_model, true_load.mass, true_load.com)
+    if true_load.mass > 0.0:
+        apply_payload(bus.plant.true_model, payload_from_config(true_load))
     group = DriveGroup.from_config(bus, cfg.bus)
     bus.open()
     group.configure(cfg.bus.drives)

@@ -99,3 +99,33 @@ def test_model_error_perturbs_but_keeps_physics(er3a_model):
     rel = np.abs(pi1 - pi0)[::10] / pi0[::10]  # masses
     assert rel.max() > 0.01 and rel.max() < 0.25
     assert np.linalg.eigvalsh(true.create_data().mass_matrix(er3a_model.home)).min() > 0
+
+
+def test_plant_holds_friction_of_the_last_direction(er3a_config, er3a_model):
+    """With held friction the torque that holds the arm still depends on the direction it
+    last moved in (hysteresis); without it, it does not."""
+    from hofto_hw.config.models import FrictionConfig
+
+    def holding(held: list[float] | None, direction: float) -> tuple[np.ndarray, np.ndarray]:
+        fr = FrictionConfig(coulomb=[0.0] * 6, viscous=[0.5] * 6, held=held, held_velocity=0.01)
+        plant = Plant(er3a_model, SimulationConfig(substeps=2, friction=fr), 1e-3)
+        plant.reset(er3a_model.home, qd0=np.full(6, 0.2 * direction))
+        data = plant.true_model.create_data()
+        m = np.diag(data.mass_matrix(er3a_model.home)).copy()
+        f = np.zeros(6)
+        for k in range(1500):  # a PD brings the arm back to home (last motion: -direction)
+            pd = 400.0 * m * (er3a_model.home - plant.q) - 40.0 * m * plant.qd
+            plant.step(data.gravity(plant.q) + pd)
+            if k >= 1000:  # at rest tau = g + f: the PD holds against the friction
+                f += (plant.tau_applied - data.gravity(plant.q)) / 500
+        assert np.abs(plant.q - er3a_model.home).max() < 0.01
+        return plant.data.friction_state.copy(), f
+
+    held = np.array([3.0, 2.0, 1.5, 0.6, 0.5, 0.4])
+    s_pos, f_pos = holding(held.tolist(), 1.0)
+    s_neg, f_neg = holding(held.tolist(), -1.0)
+    assert s_pos.tolist() == [-1.0] * 6 and s_neg.tolist() == [1.0] * 6
+    assert np.all(f_neg - f_pos > 0.4 * held)  # the held friction of the last direction
+    _, g_pos = holding(None, 1.0)
+    _, g_neg = holding(None, -1.0)
+    assert np.allclose(g_pos - g_neg, 0.0, atol=0.01)

@@ -67,7 +67,8 @@ def test_an_old_config_with_bus_cycle_time_is_one_line(
 def test_an_infinite_gain_is_one_line_naming_field_and_value(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    path = _config(tmp_path, ("gain: [30.0,", "gain: [.inf,"))
+    # the top-level observers.momentum (4 spaces), not loop.observers.momentum (6)
+    path = _config(tmp_path, ("\n    gain: [30.0,", "\n    gain: [.inf,"))
     err = _refused(path, capsys)
     assert f"{path}: observers.momentum.momentum.gain[0]: " in err and "(got inf)" in err
 

@@ -91,5 +91,9 @@ def test_shipped_parameters_file_validates_by_itself(held_out, capsys, tmp_path)
 def test_shipped_file_is_the_ur10e_urdf(ur10e_model) -> None:
     model = ur10e_model.copy()
     pf = apply_parameters_file(model, CONFIGS / "ur10e" / "parameters.yaml")
-    assert pf.robot == "ur10e" and len(pf.base) == 58
+    # 58 base parameters of eq. (12)'s structure, plus the optional held (H) and quadratic (Q)
+    # friction blocks when the file has them (one per joint each)
+    plain = [b for b in pf.base if not b.name.endswith((".H", ".Q"))]
+    extra = (pf.held is not None) * 6 + (pf.quadratic is not None) * 6
+    assert pf.robot == "ur10e" and len(plain) == 58 and len(pf.base) == 58 + extra
     assert pf.fit["samples"] > 1000

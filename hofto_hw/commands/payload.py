@@ -1,0 +1,73 @@
+"""``hofto-hw payload identify PARAMS FILE...``: mass and centre of mass of a load on the tool
+frame, with standard deviations; ``-o`` writes the ``payload:`` block for the robot config.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import yaml
+
+from hofto_hw.commands.args import HelpFormatter, finite_positive_float
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    idp = sub.add_parser(
+        "identify",
+        help="estimate a payload from recordings with it attached",
+        formatter_class=HelpFormatter,
+    )
+    idp.add_argument("params", type=Path, help="identified-parameters file of the arm")
+    idp.add_argument("files", nargs="+", metavar="FILE[@FIRST:LAST]")
+    idp.add_argument("-o", "--output", type=Path, help="write the payload: block (YAML)")
+    idp.add_argument("--config", type=Path, help="robot config (default: <robot>.yaml)")
+    idp.add_argument("--columns", type=Path, help="CSV column map (default: by column count)")
+    idp.add_argument(
+        "--cutoff", type=finite_positive_float, default=5.0, help="low-pass cut-off [Hz]"
+    )
+    idp.add_argument("--drop-bad-rows", action="store_true", help="drop corrupt rows")
+    idp.add_argument("--json", action="store_true", help="print the estimate as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from hofto_hw.identify.inputs import Conditioning, load_samples
+    from hofto_hw.identify.payload import identify_payload
+    from hofto_hw.replay.setup import load_setup
+
+    setup = load_setup(args.params, args.config)
+    opts = Conditioning(args.cutoff, False, 1, args.drop_bad_rows, trim=False)
+    search = [setup.robot_dir, setup.config.robot.urdf.parent]
+    loaded = load_samples(args.files, args.columns, None, opts, search)
+    est = identify_payload(setup.model, [s for s, _ in loaded])
+    block = {"payload": est.as_config()}
+    if args.output is not None:
+        text = "# written by hofto-hw payload identify from " + ", ".join(
+            Path(s.source).name for s, _ in loaded
+        )
+        args.output.write_text(text + "\n" + yaml.safe_dump(block, sort_keys=False))
+    if args.json:
+        out = {
+            "mass": est.mass,
+            "mass_std": est.mass_std,
+            "com": est.com.tolist(),
+            "com_std": est.com_std.tolist(),
+            "samples": est.samples,
+            "rmse_before": est.rmse_before.tolist(),
+            "rmse_after": est.rmse_after.tolist(),
+        }
+        print(json.dumps(out))
+        return 0
+    print(f"mass {est.mass:.3f} ± {est.mass_std:.3f} kg")
+    com = ", ".join(f"{c:.4f} ± {s:.4f}" for c, s in zip(est.com, est.com_std, strict=True))
+    print(f"com (tool frame) [m]: {com}")
+    print("residual RMSE [N·m] without -> with payload:")
+    print(
+        "  "
+        + " ".join(
+            f"{a:.2f}->{b:.2f}" for a, b in zip(est.rmse_before, est.rmse_after, strict=True)
+        )
+    )
+    return 0

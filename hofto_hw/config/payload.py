@@ -1,0 +1,27 @@
+"""The one payload model of every config section that names a load at the tool.
+
+``robot.payload`` is the tool permanently mounted (identified by ``hofto-hw payload
+identify``; every command's model carries it), ``safety.payload`` the load the controller
+holds during a run, ``run.simulated_payload`` what the simulated arm really holds, and
+``drag.payload`` a load the observers' model does not include (its weight is taken off the
+drag wrench). The model side is hofto_hw/model/payload.py.
+"""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from hofto_hw.config.base import FileModel, NonNegFloat
+
+
+class PayloadConfig(FileModel):
+    """``mass`` [kg] at ``com`` [m] in the tool frame; optional ``inertia`` about the com in
+    tool axes, pinocchio order Ixx, Ixy, Iyy, Ixz, Iyz, Izz [kg·m²] (None = point mass)."""
+
+    mass: NonNegFloat = Field(0.0, description="payload mass [kg]")
+    com: tuple[float, float, float] = Field(
+        (0.0, 0.0, 0.0), description="centre of mass in the tool frame [m]"
+    )
+    inertia: tuple[float, float, float, float, float, float] | None = Field(
+        None, description="about the com, tool axes: Ixx, Ixy, Iyy, Ixz, Iyz, Izz [kg·m²]"
+    )
