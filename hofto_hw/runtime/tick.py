@@ -84,6 +84,8 @@ class Tick:
         self.overruns = 0
         # requests from other threads (one writer each)
         self.stop_requested = False  # operator stop or SIGTERM: a STOP_REQUEST fault
+        self.log_failure = False  # the flight recorder is failing (runtime/log_watch.py)
+        self.log_failure_value = 0.0  # records dropped + lost so far
         self.exit_requested = False  # SIGTERM/SIGINT: the process ends once stopped
         self.reset_requested = False
         self.reset_result = ""
@@ -166,6 +168,8 @@ class Tick:
         self._overrun(missed)
         if self.stop_requested:
             stop.report(Fault.STOP_REQUEST)
+        if self.log_failure:
+            stop.report(Fault.LOG_FAILURE, -1, self.log_failure_value)
         if self.reset_requested:
             self._reset()
         self._measure_stop(q, qd)
