@@ -1,12 +1,11 @@
 """Loop timing on the simulated bus in real time: overruns, wake-up latency and tick compute
 (median / p99 / p99.9 / max), CPU % of the loop, at several rates, with and without
-SCHED_FIFO. Prints figures; ``--json`` prints them as JSON; ``--quick`` runs 3 s per case.
+SCHED_FIFO, with logging off (in-memory sink) and on (the MCAP FlightRecorder as the sink:
+its writer process's CPU % and the records dropped/lost are reported too). Prints figures;
+``--json`` prints them as JSON; ``--quick`` runs 3 s per case.
 
     python tools/bench_loop.py --quick
-    python tools/bench_loop.py --seconds 60 --rates 500 1000 2000 --json
-
-Logging on/off: this measures the loop with the in-memory sink (the MCAP writer process of
-the recorder branch adds its own figures).
+    python tools/bench_loop.py --seconds 60 --rates 1000 --fifo on --log both --json
 """
 
 from __future__ import annotations
@@ -14,8 +13,10 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing as mp
+import os
 import resource
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -23,7 +24,23 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def _case(conn, config: str, rate: float, seconds: float, fifo: bool) -> None:
+def _proc_cpu_s(pid: int) -> float:
+    """User + system CPU seconds of process ``pid`` so far (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _recorder(cfg, folder: str):
+    from hofto_hw.recording.flight_file import LogSpec
+    from hofto_hw.recording.recorder import FlightRecorder
+    from hofto_hw.runtime.compose import loop_observer_names
+
+    names = loop_observer_names(cfg)
+    spec = LogSpec(Path(folder) / "bench.mcap", list(cfg.robot.joints), names)
+    return FlightRecorder(spec).start()
+
+
+def _case(conn, config: str, rate: float, seconds: float, fifo: bool, log: bool) -> None:
     from hofto_hw.config import load_config
     from hofto_hw.control.joint_motion import MOVE
     from hofto_hw.runtime import realtime
@@ -34,16 +51,22 @@ def _case(conn, config: str, rate: float, seconds: float, fifo: bool) -> None:
     loop_cfg = cfg.loop.model_copy(update={"rate_hz": rate})
     cfg = cfg.model_copy(update={"bus": bus, "loop": loop_cfg})
     rt = realtime.setup("preferred" if fifo else "off", cfg.loop.priority, cfg.loop.cpus)
-    system = build(cfg, clock="real", contact=False)
+    tmp = tempfile.TemporaryDirectory(prefix="bench-loop-")
+    rec = _recorder(cfg, tmp.name) if log else None
+    system = build(cfg, clock="real", sink=rec, contact=False)
     system.tick.mode_request = MOVE
+    w0 = _proc_cpu_s(rec.writer_pid) if rec is not None else 0.0
     r0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.monotonic()
     system.loop.run(max_ticks=round(seconds * rate))
     wall = time.monotonic() - t0
     r1 = resource.getrusage(resource.RUSAGE_SELF)
+    w1 = _proc_cpu_s(rec.writer_pid) if rec is not None else 0.0
     realtime.drop_realtime()
     cpu = (r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime) / wall * 100.0
     system.close()
+    health = rec.close() if rec is not None else None
+    tmp.cleanup()
     conn.send(
         {
             "rate_hz": rate,
@@ -56,6 +79,9 @@ def _case(conn, config: str, rate: float, seconds: float, fifo: bool) -> None:
             "wakeup_us": system.loop.wakeup.summary(),
             "compute_us": system.loop.compute.summary(),
             "cpu_pct": round(cpu, 1),
+            "log": log,
+            "writer_cpu_pct": round((w1 - w0) / wall * 100.0, 1) if log else None,
+            "log_dropped": None if health is None else health.dropped + health.records_lost,
         }
     )
 
@@ -65,20 +91,28 @@ def main() -> int:
     p.add_argument("--config", default=str(ROOT / "configs" / "er3a.yaml"))
     p.add_argument("--seconds", type=float, default=60.0)
     p.add_argument("--rates", type=float, nargs="+", default=[500.0, 1000.0, 2000.0])
+    p.add_argument("--fifo", choices=("on", "off", "both"), default="both", help="SCHED_FIFO")
+    p.add_argument("--log", choices=("on", "off", "both"), default="both", help="MCAP recorder")
     p.add_argument("--quick", action="store_true", help="3 s per case")
     p.add_argument("--json", action="store_true")
     args = p.parse_args()
     seconds = 3.0 if args.quick else args.seconds
     results = []
-    for rate in args.rates:
-        for fifo in (True, False):
-            a, b = mp.Pipe()
-            proc = mp.get_context("spawn").Process(
-                target=_case, args=(b, args.config, rate, seconds, fifo)
-            )
-            proc.start()
-            results.append(a.recv())
-            proc.join()
+    choice = {"on": (True,), "off": (False,), "both": (True, False)}
+    cases = [
+        (rate, fifo, log)
+        for rate in args.rates
+        for fifo in choice[args.fifo]
+        for log in choice[args.log][::-1]
+    ]
+    for rate, fifo, log in cases:
+        a, b = mp.Pipe()
+        proc = mp.get_context("spawn").Process(
+            target=_case, args=(b, args.config, rate, seconds, fifo, log)
+        )
+        proc.start()
+        results.append(a.recv())
+        proc.join()
     if args.json:
         print(json.dumps(results, indent=2))
         return 0
@@ -86,8 +120,14 @@ def main() -> int:
         w, c = r["wakeup_us"], r["compute_us"]
         print(
             f"{r['rate_hz']:6.0f} Hz {'FIFO ' if r['sched_fifo'] else 'OTHER'} "
+            f"log {'on ' if r['log'] else 'off'} "
             f"{r['ticks']:7d} ticks, overruns {r['overruns']} ({r['overrun_pct']} %), "
-            f"CPU {r['cpu_pct']} %"
+            f"CPU loop {r['cpu_pct']} %"
+            + (
+                f", writer {r['writer_cpu_pct']} %, log records dropped/lost {r['log_dropped']}"
+                if r["log"]
+                else ""
+            )
         )
         print(
             f"    wake-up µs median {w['median']:.0f} p99 {w['p99']:.0f} "

@@ -96,6 +96,11 @@ def run(args: argparse.Namespace) -> int:
 
         supervisor = Supervisor(system, cfg.service.watchdog_fraction, cfg.service.status_interval)
         supervisor.start()
+    watch = None
+    if recorder is not None:
+        from hofto_hw.runtime.log_watch import LogWatch
+
+        watch = LogWatch(recorder, tick).start()
     if not args.hold:
         tick.mode_request = MOVE
     n_ticks = round(duration * system.rate_hz)
@@ -111,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
         if service is not None:
             service.close()
         system.close()
+        if watch is not None:
+            watch.stop()
         health = recorder.close() if recorder is not None else None
         if supervisor is not None:
             supervisor.stop()

@@ -31,6 +31,17 @@ from hofto_hw.recording import cdr
 from hofto_hw.recording import schemas as s
 
 CHUNK_BYTES = 64 * 1024
+#: tick-record fields copied into /loop/status
+_STATUS_FIELDS = (
+    "tick",
+    "mode",
+    "faults",
+    "bus_status",
+    "wakeup_us",
+    "compute_us",
+    "monitored",
+    "qdd_cmd",
+)
 
 
 @dataclass
@@ -147,7 +158,7 @@ class FlightFile:
         self.lay_cmd = cdr.joint_state_layout(names, position=True, velocity=False, effort=False)
         self.lay_obs = cdr.joint_state_layout(names, position=False, velocity=False, effort=True)
         self.lay_wrench = cdr.wrench_stamped_layout(spec.wrench_frame)
-        self.lay_status = cdr.tick_status_layout()
+        self.lay_status = cdr.tick_status_layout(len(names))
         self.enc_diag = serialize_dynamic(s.DIAGNOSTIC_ARRAY_TYPE, s.DIAGNOSTIC_ARRAY_MSGDEF)[
             s.DIAGNOSTIC_ARRAY_TYPE
         ]
@@ -187,7 +198,7 @@ class FlightFile:
             self._emit(ch, b, ns, seq)
         b = cdr.fill_batch(*self.lay_status, n)
         cdr.set_stamps(b, ticks["t"])
-        for name in ("tick", "mode", "faults", "bus_status", "wakeup_us", "compute_us"):
+        for name in _STATUS_FIELDS:
             b[name] = ticks[name]
         self._emit(self.ch_status, b, ns, seq)
         have = np.isfinite(ticks["wrench"]).all(axis=1)

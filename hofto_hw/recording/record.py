@@ -10,7 +10,9 @@ Record kinds (all times in seconds on the loop's monotonic clock since start, SI
   [rad] the commanded position, ``tau_ext`` (n_obs, n) [N·m] each observer's estimate in the
   order of ``observers``, ``wrench`` (6,) [N, N·m] estimated tool wrench (NaN when not
   computed), ``mode`` (u1) controller mode code, ``faults`` (u4) latched fault-class bit mask,
-  ``bus_status`` (i4) the transport's exchange status, ``wakeup_us`` / ``compute_us`` (f4).
+  ``bus_status`` (i4) the transport's exchange status, ``wakeup_us`` / ``compute_us`` (f4),
+  ``monitored`` (u1) 1 when the collision monitor judged this tick (a drive powered, finite
+  estimates), ``qdd_cmd`` (n,) [rad/s²] the commanded acceleration it used for its phase.
 - event (rare): ``t``, ``tick``, ``kind`` (u2, a fault/event class code), ``joint`` (i2, -1 =
   none), ``category`` (i1, stop category 0/1/2, -1 = none), ``value`` (f8, e.g. the ratio or
   the offending value).
@@ -53,6 +55,8 @@ def tick_dtype(n_joints: int, n_observers: int) -> np.dtype:
             ("bus_status", "<i4"),
             ("wakeup_us", "<f4"),
             ("compute_us", "<f4"),
+            ("monitored", "u1"),
+            ("qdd_cmd", "<f8", (n,)),
         ]
     )
 

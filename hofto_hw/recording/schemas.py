@@ -112,6 +112,8 @@ TICK_STATUS_MSGDEF = _msgdef(
         "int32 bus_status",
         "float32 wakeup_us",
         "float32 compute_us",
+        "uint8 monitored",
+        "float64[] qdd_cmd",
     ],
     _HEADER,
     _TIME,

@@ -57,6 +57,10 @@ class FlightLog:
     events: list[RecordedEvent] = field(default_factory=list)
     metadata: dict[str, str] = field(default_factory=dict)
     attachments: dict[str, bytes] = field(default_factory=dict)
+    #: from /loop/status of logs by `hofto-hw run` (None in older logs): 1 where the
+    #: collision monitor judged the tick, and the commanded acceleration (N, n) [rad/s²]
+    monitored: NDArray[np.uint8] | None = None
+    qdd_cmd: FloatArray | None = None
 
     @property
     def n_ticks(self) -> int:
@@ -115,7 +119,8 @@ def read_flight_log(path: Path) -> FlightLog:
         raise UserError(f"{path}: not a flight-recorder log (no {s.FLIGHT_METADATA} metadata)")
     names = meta.get("joint_names", "").split(",")
     observers = [o for o in meta.get("observers", "").split(",") if o]
-    topics = [s.JOINT_STATE_TOPIC, s.SAFETY_TOPIC] + [s.observer_topic(o) for o in observers]
+    topics = [s.JOINT_STATE_TOPIC, s.SAFETY_TOPIC, s.TICK_STATUS_TOPIC]
+    topics += [s.observer_topic(o) for o in observers]
     raw: dict[str, list[bytes]] = {t: [] for t in topics}
     seq: dict[str, list[int]] = {t: [] for t in topics}
     stamps: list[int] = []
@@ -150,6 +155,7 @@ def read_flight_log(path: Path) -> FlightLog:
         if len(est) != log.n_ticks:
             raise UserError(f"{path}: {topic}: {len(est)} messages for {log.n_ticks} ticks")
         log.tau_ext[o] = np.array(est["effort"])
+    _tick_status(log, raw[s.TICK_STATUS_TOPIC])
     kinds = json.loads(meta.get("event_kinds", "{}") or "{}")
     dec = DecoderFactory().decoder_for("cdr", _event_schema())
     assert dec is not None
@@ -167,6 +173,16 @@ def read_flight_log(path: Path) -> FlightLog:
             )
         )
     return log
+
+
+def _tick_status(log: FlightLog, raws: list[bytes]) -> None:
+    """Fill ``monitored``/``qdd_cmd`` when every status message has the current layout."""
+    dtype, _ = cdr.tick_status_layout(len(log.joint_names))
+    if len(raws) != log.n_ticks or any(len(r) != dtype.itemsize for r in raws):
+        return  # an older log (no such fields) or a cut one: replay falls back
+    st = np.frombuffer(b"".join(raws), dtype=dtype)
+    log.monitored = np.array(st["monitored"], dtype=np.uint8)
+    log.qdd_cmd = np.array(st["qdd_cmd"], dtype=float).reshape(log.n_ticks, -1)
 
 
 def _event_schema():

@@ -34,6 +34,7 @@ from hofto_hw.recording import attachments as att
 from hofto_hw.replay.flight_log import FlightLog, RecordedEvent
 from hofto_hw.replay.runner import run_observer
 from hofto_hw.replay.thresholds import ThresholdsFile, read_thresholds
+from hofto_hw.runtime.compose import build_model, loop_observer_table
 
 #: event kind name of a collision stop (the safety fault class's name in event_kinds)
 COLLISION_KIND = "collision"
@@ -51,11 +52,13 @@ class Monitor(Protocol):
 
 @dataclass
 class RunSetup:
-    """The recorded run rebuilt: config, model, thresholds (None when not attached)."""
+    """The recorded run rebuilt: config, model, thresholds (None when not attached), and the
+    model the loop of `hofto-hw run` used (with the configured payload)."""
 
     config: SystemConfig
     model: RobotModel
     thresholds: ThresholdsFile | None
+    loop_model: RobotModel | None = None
 
 
 @dataclass
@@ -125,10 +128,11 @@ def run_setup(log: FlightLog) -> RunSetup:
         data["robot"]["parameters"] = att.PARAMETERS if att.PARAMETERS in files else None
         cfg = parse_config(data, source=src, base_dir=folder)
         model = RobotModel.from_config(cfg.robot)
+        loop = build_model(cfg)
         thresholds = read_thresholds(folder / att.THRESHOLDS) if att.THRESHOLDS in files else None
     if model.n != len(log.joint_names):
         raise UserError(f"{log.path}: {len(log.joint_names)} joints, its robot has {model.n}")
-    return RunSetup(cfg, model, thresholds)
+    return RunSetup(cfg, model, thresholds, loop)
 
 
 def observer_config(setup: RunSetup, name: str, path: Path) -> ObserverConfig:
@@ -143,16 +147,60 @@ def observer_config(setup: RunSetup, name: str, path: Path) -> ObserverConfig:
 
 def make_detector(log: FlightLog, setup: RunSetup) -> Detector:
     """The monitor the run used, built from the recorded config: the ``detector`` observer
-    (metadata) with its thresholds-file monitor, else the config's ``collision`` section."""
+    (metadata) with its thresholds-file monitor; else, for logs of ``hofto-hw run`` (which
+    record ``monitored`` and ``qdd_cmd``), the two-level CollisionLevels of
+    ``safety.collision`` over every loop observer; else the config's ``collision`` section."""
     from safety.collision import CollisionMonitor
+    from safety.collision_levels import CollisionLevels
 
     name = log.metadata.get("detector") or (log.observers[0] if log.observers else "")
     th = setup.thresholds
     if th is not None and name in th.observers:
         return Detector(name, CollisionMonitor(th.observers[name].monitor))
+    levels_cfg = setup.config.safety.collision
+    if levels_cfg is not None and log.monitored is not None:
+        try:
+            levels = CollisionLevels(levels_cfg, log.observers, loop_model(setup))
+        except ValueError as exc:
+            raise UserError(f"{log.path}: safety.collision: {exc}") from None
+        return Detector(levels_cfg.observer, levels)
     if setup.config.collision is not None:
         return Detector(name, CollisionMonitor(setup.config.collision))
     raise UserError(f"{log.path}: no thresholds for detector {name!r} in the attached files")
+
+
+def loop_model(setup: RunSetup) -> RobotModel:
+    """The model the loop ran: the identified one with the configured payload."""
+    assert setup.loop_model is not None
+    return setup.loop_model
+
+
+def loop_dt(log: FlightLog, rate_hz: float) -> np.ndarray:
+    """dt (N,) [s] as the loop handed it to the tick: whole periods of 1/rate since the last
+    tick (dt[0] = one period; the loop's t is the sum of these, so stamps round to them)."""
+    period = float(np.int64(round(1e9 / rate_hz))) * 1e-9
+    periods = np.ones(log.n_ticks)
+    periods[1:] = np.maximum(1.0, np.round(np.diff(log.t) / period))
+    return periods * period
+
+
+def replay_levels(
+    levels: Any, cfg: SystemConfig, estimates: np.ndarray, log: FlightLog, dt: np.ndarray
+) -> tuple[int | None, list[int]]:
+    """First tick (index) CollisionLevels decides a collision on ``estimates`` (N, k, n),
+    judged only on the ticks the run judged (``monitored``), and its joints."""
+    from safety.stop import StopController
+
+    assert log.monitored is not None and log.qdd_cmd is not None
+    stop = StopController.from_config(cfg.safety.categories)
+    levels.reset()
+    for k in range(log.n_ticks):
+        if not log.monitored[k]:
+            continue
+        stop.begin_tick(int(log.ticks[k]))
+        if levels.update(stop, estimates[k], log.q[k], log.qd[k], log.qdd_cmd[k], dt[k]):
+            return k, [int(j) for j in np.flatnonzero(levels.collision_joints)]
+    return None, []
 
 
 def as_recording(log: FlightLog) -> Recording:
@@ -187,20 +235,35 @@ def recorded_backend(log: FlightLog) -> kernels.Backend:
 
 def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
     """Replay every recorded observer and the detector's monitor; compare with the log."""
+    from safety.collision_levels import CollisionLevels
+
     setup = run_setup(log)
-    rec = as_recording(log)
+    det = detector_factory(log, setup)
+    levels = isinstance(det.monitor, CollisionLevels)
+    dt = loop_dt(log, float(setup.config.loop.rate_hz)) if levels else None
+    model = loop_model(setup) if levels else setup.model
     replayed: dict[str, np.ndarray] = {}
     diffs: dict[str, float] = {}
     for name in log.observers:
-        obs = make_observer(
-            observer_config(setup, name, log.path), setup.model, backend=recorded_backend(log)
+        if levels:
+            table = loop_observer_table(setup.config)
+            if name not in table:
+                raise UserError(f"{log.path}: observer {name!r} is not in its config's loop")
+            ocfg = table[name]
+        else:
+            ocfg = observer_config(setup, name, log.path)
+        obs = make_observer(ocfg, model, backend=recorded_backend(log))
+        replayed[name] = (
+            run_observer(as_recording(log), obs) if dt is None else _run_with_dt(obs, log, dt)
         )
-        replayed[name] = run_observer(rec, obs)
         diffs[name] = float(np.max(np.abs(replayed[name] - log.tau_ext[name])))
-    det = detector_factory(log, setup)
-    if det.observer not in replayed:
-        raise UserError(f"{log.path}: detector observer {det.observer!r} was not recorded")
-    k, joints = first_detection(det.monitor, replayed[det.observer], log)
+    if levels:
+        est = np.stack([replayed[o] for o in log.observers], axis=1)
+        k, joints = replay_levels(det.monitor, setup.config, est, log, dt)
+    else:
+        if det.observer not in replayed:
+            raise UserError(f"{log.path}: detector observer {det.observer!r} was not recorded")
+        k, joints = first_detection(det.monitor, replayed[det.observer], log)
     collisions = [e for e in log.events if e.kind_name == COLLISION_KIND]
     return Reproduction(
         detector=det.observer,
@@ -209,3 +272,14 @@ def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
         replayed_joints=joints,
         max_abs_diff=diffs,
     )
+
+
+def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray) -> np.ndarray:
+    """Estimates (N, n) as the loop computes them: reset, then updated on every tick with the
+    loop's dt. The loop resets on the state read just before its first tick, which is not
+    recorded: the first tick's q, qd stand in (the arm holds still there)."""
+    est = np.zeros_like(log.q)
+    obs.reset(log.q[0], log.qd[0])
+    for k in range(log.n_ticks):
+        est[k] = obs.update(log.q[k], log.qd[k], log.tau[k], dt[k])
+    return est

@@ -68,6 +68,28 @@ def status_of(system: Any) -> dict[str, Any]:
         "overruns": int(tick.overruns),
         "timing_us": {"compute": loop.compute.summary(), "wakeup": loop.wakeup.summary()},
         "log": getattr(system, "log_path", None),
+        "recorder": _recorder_status(getattr(system, "sink", None)),
+    }
+
+
+def _recorder_status(sink: Any) -> dict[str, Any] | None:
+    """The flight recorder's counters (None when the run does not log to a file)."""
+    health = getattr(sink, "health", None)
+    if not callable(health):
+        return None
+    try:
+        h = health()
+    except RuntimeError:  # not started or already closed
+        return None
+    return {
+        "writer_alive": h.writer_alive,
+        "state": h.state,
+        "records_written": h.records_written,
+        "records_flushed": h.records_flushed,
+        "dropped": h.dropped,
+        "records_lost": h.records_lost,
+        "write_errors": h.write_errors,
+        "pending": h.pending,
     }
 
 

@@ -84,6 +84,8 @@ class Tick:
         self.overruns = 0
         # requests from other threads (one writer each)
         self.stop_requested = False  # operator stop or SIGTERM: a STOP_REQUEST fault
+        self.log_failure = False  # the flight recorder is failing (runtime/log_watch.py)
+        self.log_failure_value = 0.0  # records dropped + lost so far
         self.exit_requested = False  # SIGTERM/SIGINT: the process ends once stopped
         self.reset_requested = False
         self.reset_result = ""
@@ -110,7 +112,7 @@ class Tick:
         self.wakeup_p99_us = 0.0
         self.compute_p99_us = 0.0
         r = self.tick_rec
-        self._r = {k: r[k] for k in ("q", "qd", "tau", "q_cmd", "tau_ext")}
+        self._r = {k: r[k] for k in ("q", "qd", "tau", "q_cmd", "tau_ext", "qdd_cmd")}
         r["wrench"][...] = np.nan
         self._events_pushed = 0
 
@@ -156,13 +158,18 @@ class Tick:
             ok &= lim.finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
         lim.check(stop, q, qd, tau, self.q_sent, good, powered)
-        if self.collision is not None and ok and self._power_on(g.states):
+        monitored = self.collision is not None and ok and self._power_on(g.states)
+        self.tick_rec["monitored"] = monitored  # replay judges the same ticks
+        np.copyto(self._r["qdd_cmd"], motion.qdd)
+        if monitored:
             # only while the power stage is on (quick-stop ramps included): with it off the
             # brakes act and the motor torque no longer explains the motion
             self.collision.update(stop, self.tau_ext, q, qd, motion.qdd, dt)
         self._overrun(missed)
         if self.stop_requested:
             stop.report(Fault.STOP_REQUEST)
+        if self.log_failure:
+            stop.report(Fault.LOG_FAILURE, -1, self.log_failure_value)
         if self.reset_requested:
             self._reset()
         self._measure_stop(q, qd)
