@@ -65,6 +65,8 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
     # a stall of ~100 ms on the loaded machine looks like a contact to the observers: the
     # collision monitor is tested on the simulated arm; here only the bus faults stop the arm
     data["safety"]["collision"] = None
+    # the emulated slaves' 100 ms SM watchdog would take a drive out of OP after such a stall
+    data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), "pdo_watchdog": 2.0}
     path = folder / "er3a-ethercat.yaml"
     path.write_text(yaml.safe_dump(data))
     return path, data
