@@ -36,6 +36,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--socket", type=Path, default=None, help="serve the control socket at this path"
     )
     parser.add_argument("--hold", action="store_true", help="start in hold, not move")
+    parser.add_argument(
+        "--interface", default=None, help="bus.interface override (NIC for ethercat, CAN channel)"
+    )
 
 
 def _check_duration(value: float | None) -> None:
@@ -62,6 +65,10 @@ def run(args: argparse.Namespace) -> int:
     _check_duration(args.duration)
     _check_output(args.summary_json, "--summary-json")
     cfg = load_config(args.config)
+    if args.interface is not None and cfg.bus is not None:
+        cfg = cfg.model_copy(
+            update={"bus": cfg.bus.model_copy(update={"interface": args.interface})}
+        )
     duration = args.duration if args.duration is not None else cfg.run.duration
     clock = args.clock or cfg.run.clock
     lc = cfg.loop

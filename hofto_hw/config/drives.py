@@ -66,6 +66,11 @@ class EtherCATOptions(FileModel):
         None, description="wait for the process-data frame [s]; None = one bus cycle"
     )
     state_timeout: PositiveFloat = Field(3.0, description="max time per AL state change [s]")
+    pdo_watchdog: Annotated[float, Field(gt=0.0, le=6.5)] | None = Field(
+        None,
+        description="SM process-data watchdog written to every slave [s] (a gap in process "
+        "data longer than this takes the slave out of OP); None = the slave's default",
+    )
 
 
 class CANopenOptions(FileModel):

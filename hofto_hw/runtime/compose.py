@@ -16,6 +16,7 @@ import numpy as np
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import Mode, State
 from drivers.sim.simbus import SimBus
+from drivers.transport import Transport
 from hofto_hw.commands.backend import observer_backend
 from hofto_hw.config.models import ExternalTorqueConfig, SystemConfig
 from hofto_hw.control.joint_motion import DemoPath, JointMotion
@@ -25,7 +26,7 @@ from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers import make_observer
 from hofto_hw.observers.stability import check_observer
 from hofto_hw.recording.record import MemorySink, RecordSink, tick_dtype
-from hofto_hw.runtime.build import build_sim_bus
+from hofto_hw.runtime.build import build_drive_group, build_sim_bus, build_transport
 from hofto_hw.runtime.loop import Loop, RealClock, SimClock
 from hofto_hw.runtime.tick import Tick
 from safety.bus_health import BusHealth
@@ -53,7 +54,7 @@ class System:
 
     cfg: SystemConfig
     model: RobotModel
-    bus: SimBus
+    bus: Transport  # SimBus on the simulated bus
     group: DriveGroup
     tick: Tick
     loop: Loop
@@ -80,11 +81,6 @@ def _sim_config(cfg: SystemConfig) -> SystemConfig:
     its own contact) and the run's model error."""
     if cfg.bus is None:
         raise ConfigError("bus: section missing; hofto-hw run needs the drive data")
-    if cfg.bus.transport != "sim":
-        raise ConfigError(
-            f"bus.transport: {cfg.bus.transport!r} is not supported by hofto-hw run yet "
-            "(only 'sim'; EtherCAT plugs in through the same Transport)"
-        )
     sim = None
     if cfg.simulation is not None:
         update: dict = {"external": []}
@@ -134,15 +130,7 @@ def build(
     observers = [make_observer(table[name], model, backend=backend) for name in names]
     sink = sink if sink is not None else MemorySink(tick_dtype(model.n, len(names)))
 
-    bus = build_sim_bus(_sim_config(cfg), external=True)
-    true_load = cfg.run.simulated_payload or cfg.safety.payload
-    if true_load.mass > 0.0:
-        apply_payload(bus.plant.true_model, payload_from_config(true_load))
-    group = DriveGroup.from_config(bus, cfg.bus)
-    bus.open()
-    group.configure(cfg.bus.drives)
-    group.set_mode(Mode.CSP)
-    group.enable()
+    bus, group = build_bus(cfg, clock)
 
     s = cfg.safety
     stop = StopController.from_config(s.categories)
@@ -175,13 +163,49 @@ def build(
     period_ns = round(1e9 / rate)
     clk: RealClock | SimClock = SimClock(period_ns) if clock == "sim" else RealClock(period_ns)
     loop = Loop(tick, clk)
-    if not clk.sim:
+    simulated = isinstance(bus, SimBus)
+    if not clk.sim and simulated:
         loop.data_dt = 1.0 / rate  # SimBus in real time: one plant cycle per exchange
     system = System(cfg, model, bus, group, tick, loop, clk, sink, rate)
     system.observer_names = names
-    if contact and cfg.run.collision is not None:
+    if contact and simulated and cfg.run.collision is not None:
         system.contact = _script_contact(system)
     return system
+
+
+def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:
+    """The transport ``bus.transport`` names and its drive group, opened, configured, in CSP
+    and enabled (bumpless: the drive group holds the measured position).
+
+    ``sim``: the in-process plant (the run's payload and model error, no scripted world
+    torques: the run scripts its own contact). Any other registered transport (``ethercat``,
+    ``canopen``) runs on the real clock only; ConfigError for ``clock='sim'`` there.
+    """
+    if cfg.bus is None:
+        raise ConfigError("bus: section missing; hofto-hw run needs the drive data")
+    transport = str(cfg.bus.transport)
+    if transport == "sim":
+        bus: Transport = build_sim_bus(_sim_config(cfg), external=True)
+        true_load = cfg.run.simulated_payload or cfg.safety.payload
+        if true_load.mass > 0.0:
+            apply_payload(bus.plant.true_model, payload_from_config(true_load))
+    else:
+        if clock == "sim":
+            raise ConfigError(
+                f"run.clock: 'sim' needs bus.transport 'sim'; the {transport} bus runs on the "
+                "real clock (use --clock real)"
+            )
+        bus = build_transport(cfg)
+    group = build_drive_group(cfg, bus)
+    bus.open()
+    try:
+        group.configure(cfg.bus.drives)
+        group.set_mode(Mode.CSP)
+        group.enable()
+    except BaseException:
+        bus.close()
+        raise
+    return bus, group
 
 
 def _script_contact(system: System) -> ScriptedContact:

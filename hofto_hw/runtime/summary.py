@@ -64,7 +64,7 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
         if kind == Fault.COLLISION and contact is not None and k * dt >= contact.start:
             entry["detection_delay_ms"] = round((k * dt - contact.start) * 1000.0, 3)
         if kind == Fault.DRIVE_FAULT:
-            entry["detail"] = describe_error_code(int(ev.value[j]))
+            entry["detail"] = "error code (0x603F) " + describe_error_code(int(ev.value[j]))
         if kind < len(Fault) and entry["category"] >= 0 and episode is not None:
             t_stop, d_stop = episode
             if np.isfinite(t_stop):
@@ -76,6 +76,7 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
         "rate_hz": float(system.rate_hz),
         "clock": "sim" if system.clock.sim else "real",
         "realtime": realtime,
+        "bus": _bus_text(system),
         "overruns": int(tick.overruns),
         "timing_us": {"compute": loop.compute.summary(), "wakeup": loop.wakeup.summary()},
         "events": events,
@@ -85,11 +86,21 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
     }
 
 
+def _bus_text(system: Any) -> str:
+    """The transport in words; the scripted contact exists on the simulated bus only."""
+    bus = system.cfg.bus
+    name = str(bus.transport)
+    if name == "sim":
+        return "sim (simulated arm, scripted contact)"
+    return f"{name} on {bus.interface} (no scripted contact: that exists on the simulated bus only)"
+
+
 def format_summary(s: dict[str, Any]) -> str:
     """The same summary in words."""
     lines = [
         f"ran {s['ticks']} ticks at {s['rate_hz']:.0f} Hz ({s['clock']} clock; {s['realtime']}), "
-        f"{s['overruns']} missed deadlines"
+        f"{s['overruns']} missed deadlines",
+        f"bus: {s['bus']}",
     ]
     obs = s["observers"]
     if obs:
