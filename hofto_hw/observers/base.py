@@ -86,6 +86,17 @@ class SnapshotUpdate:
     def _own_snapshot(self, model: RobotModel, backend: str = "numpy") -> None:
         self.snapshot = DynamicsSnapshot(model, self.needs, backend)
 
+    def _own_backend(self, model: RobotModel, backend: str) -> None:
+        """Resolve ``backend`` (``auto`` -> numba when available), build the own snapshot and
+        compile + warm the kernel through ``self._warm``; a failed compilation falls back to
+        the numpy path (``self.backend`` says which runs)."""
+        from hofto_hw.observers import kernels
+
+        self.backend = kernels.resolve(backend)  # type: ignore[arg-type]
+        self._own_snapshot(model, self.backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):  # type: ignore[attr-defined]
+            self.backend = "numpy"
+
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
         """Advance by dt [s] with the newest samples; return tau_ext_hat [N·m], shape (n,)."""
         snap = self.snapshot

@@ -50,10 +50,7 @@ class DobObserver(SnapshotUpdate):
         self._dt = -1.0
         self._out = np.zeros(n)
         self._guard = SampleGuard(self.n)
-        self.backend = kernels.resolve(backend)
-        self._own_snapshot(model, self.backend)
-        if self.backend == "numba" and not kernels.warm(self._warm):
-            self.backend = "numpy"
+        self._own_backend(model, backend)
 
     def _warm(self) -> None:
         s, n = self.snapshot, self.n

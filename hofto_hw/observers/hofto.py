@@ -271,10 +271,7 @@ class HoftoObserver(SnapshotUpdate):
         self.order = self.core.order
         self._out = np.zeros(self.n)
         self._guard = SampleGuard(self.n)
-        self.backend = kernels.resolve(backend)
-        self._own_snapshot(model, self.backend)
-        if self.backend == "numba" and not kernels.warm(self._warm):
-            self.backend = "numpy"
+        self._own_backend(model, backend)
 
     def _warm(self) -> None:
         """Compile the kernel on scratch copies (the state is untouched)."""

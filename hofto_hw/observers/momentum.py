@@ -38,10 +38,7 @@ class MomentumObserver(SnapshotUpdate):
         self._tmp = np.zeros(n)
         self._guard = SampleGuard(self.n)
         self._reset_data = model.create_data()  # reset is off the tick
-        self.backend = kernels.resolve(backend)
-        self._own_snapshot(model, self.backend)
-        if self.backend == "numba" and not kernels.warm(self._warm):
-            self.backend = "numpy"
+        self._own_backend(model, backend)
 
     def _warm(self) -> None:
         s, n = self.snapshot, self.n
