@@ -55,9 +55,12 @@ class ChainedExternal:
 class DragScript:
     """See the module docstring; built when the loop's t = 0 is the plant's now. ``rate_hz``:
     loop rate. Samples (true q, qd, commanded q) are kept from ``reset`` to 1 s after
-    ``release``."""
+    ``release``. ``enable``: False leaves the enabling input alone (tests)."""
 
-    def __init__(self, cfg: ScriptedDragConfig, plant: Any, rate_hz: float) -> None:
+    def __init__(
+        self, cfg: ScriptedDragConfig, plant: Any, rate_hz: float, enable: bool = True
+    ) -> None:
+        self.enable = enable
         self.cfg = cfg
         self.plant = plant
         n = plant.true_model.n
@@ -87,7 +90,7 @@ class DragScript:
             elif s == _MODE:
                 tick.mode_request = DRAG
             elif s == _PRESS:
-                tick.enable_input.pressed = True
+                tick.enable_input.pressed = self.enable
             else:
                 tick.enable_input.pressed = False
             self.stage = s + 1
