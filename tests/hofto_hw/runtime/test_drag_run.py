@@ -7,6 +7,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 import tracemalloc
 from pathlib import Path
 
@@ -146,3 +147,46 @@ def test_run_summary_has_the_drag_keys(tmp_path: Path) -> None:
     assert stops == ["collision", "enabling_released"], stops  # the collision, then the drag
     assert s["observers"]["hofto"] is not None  # the scripted collision's delay survives
     assert "drag: steady tool speed" in r.stdout
+
+
+def test_control_socket_mode_drag_and_enable(cfg: SystemConfig, tmp_path: Path) -> None:
+    import threading
+
+    from hofto_hw.runtime.control_client import request
+    from hofto_hw.runtime.service import ControlServer
+
+    drag = cfg.drag.model_copy(
+        update={"enable_input": cfg.drag.enable_input.model_copy(update={"source": "socket"})}
+    )
+    system = build(cfg.model_copy(update={"drag": drag}), clock="sim", contact=False)
+    tick = system.tick
+    done = threading.Event()
+    sock = tmp_path / "control.sock"
+    server = ControlServer(sock, system)
+    server.start()
+    runner = threading.Thread(target=lambda: system.loop.run(should_stop=done.is_set))
+    runner.start()
+    try:
+        end = time.monotonic() + 30.0
+        while system.loop.ticks < 600 and time.monotonic() < end:
+            time.sleep(0.01)  # the arm settles in hold after the drives are enabled
+        r = request(sock, "mode drag")
+        assert r["ok"], r
+        assert request(sock, "status")["mode"] == "drag"
+        assert request(sock, "enable on")["ok"]
+        end = time.monotonic() + 30.0
+        while not tick.drag.active and time.monotonic() < end:
+            time.sleep(0.01)
+        assert tick.drag.active
+        assert request(sock, "enable off")["ok"]
+        end = time.monotonic() + 30.0
+        while not tick.stop.latched and time.monotonic() < end:
+            time.sleep(0.01)
+        assert tick.stop.latched_names() == ["enabling_released"]
+        r = request(sock, "mode drag")
+        assert not r["ok"] and "reset" in r["message"]
+    finally:
+        done.set()
+        runner.join()
+        server.close()
+        system.close()
