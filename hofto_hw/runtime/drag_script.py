@@ -39,6 +39,8 @@ class ChainedExternal:
         self.second = second
         self._tmp = np.zeros(n)
         self.components = getattr(first, "components", [])
+        #: ``active(t)``: whether ``second`` can be non-zero at plant time t (None: always)
+        self.active: Any = None
 
     def joint_space_only(self) -> bool:
         return False
@@ -47,8 +49,9 @@ class ChainedExternal:
         self, t: float, q: np.ndarray, qd: np.ndarray, out: np.ndarray | None = None
     ) -> np.ndarray:
         out = self.first.evaluate(t, q, qd, out=out)
-        self.second.evaluate(t, q, qd, out=self._tmp)
-        out += self._tmp
+        if self.active is None or self.active(t):  # the hand's kinematics only while it pushes
+            self.second.evaluate(t, q, qd, out=self._tmp)
+            out += self._tmp
         return out
 
 
@@ -69,7 +72,9 @@ class DragScript:
         )
         self.hand = HandForces(plant.true_model)
         self.hand.pushes.append(self.push)
-        plant.external = ChainedExternal(plant.external, self.hand, n)
+        chained = ChainedExternal(plant.external, self.hand, n)
+        chained.active = self._pushing
+        plant.external = chained
         self._times = (cfg.reset, cfg.mode, cfg.press, cfg.release)
         self.stage = _RESET
         self.mode_result = ""
@@ -79,6 +84,9 @@ class DragScript:
         self.qd = np.zeros((cap, n))
         self.q_ref = np.zeros((cap, n))
         self.k = 0
+
+    def _pushing(self, t: float) -> bool:
+        return any(p.start < t < p.end for p in self.hand.pushes)
 
     def step(self, tick: Any) -> None:
         """Called by the tick first thing every tick (hot path)."""
