@@ -50,6 +50,8 @@ def test_push_with_enabling_drags_at_f_over_ba_and_release_holds(cfg: SystemConf
     system.loop.run(max_ticks=1000)
     assert system.tick.motion.mode == DRAG, system.tick.mode_result
     assert system.tick.drag.active
+    w = system.tick.tick_rec["wrench"]  # the WrenchStamped record while dragging [N, N·m]
+    assert abs(np.linalg.norm(w[:3]) - 20.0) < 2.0, w  # |F| (frame-independent)
     system.loop.run(max_ticks=1500)  # push ends at 1.5 s, release at 1.7 s, rest
     fig = drag_summary(script, cfg.drag.damping, cfg.drag.standstill_speed)
     expected = 20.0 / cfg.drag.damping
