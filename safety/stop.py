@@ -35,6 +35,7 @@ class Fault(IntEnum):
     OVERRUN = 10
     STOP_REQUEST = 11
     LOG_FAILURE = 12
+    ENABLING_RELEASED = 13  # hand guiding: the enabling input let go while dragging
 
 
 class EventKind(IntEnum):

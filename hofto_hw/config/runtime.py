@@ -7,10 +7,11 @@ Loading and checking only: nothing here runs in the tick.
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from hofto_hw.config.base import FileModel
 from hofto_hw.config.payload import PayloadConfig
@@ -41,6 +42,37 @@ class ScriptedCollisionConfig(FileModel):
     hold: Positive = 0.3
 
 
+class ScriptedDragConfig(FileModel):
+    """The scripted hand of the run (after the collision stop), loop times [s]: ``reset``
+    the latched stop, request drag mode at ``mode``, hold the enabling input from ``press``
+    to ``release``; a hand pushes the tool with ``force`` [N] (world frame) from
+    ``push_start`` to ``push_end`` with linear ramps of ``ramp`` [s]."""
+
+    reset: NonNeg = 3.5
+    mode: NonNeg = 3.9
+    press: NonNeg = 4.0
+    push_start: NonNeg = 4.5
+    push_end: NonNeg = 5.7
+    release: NonNeg = 5.9
+    force: tuple[Finite, Finite, Finite] = (20.0, 0.0, 0.0)
+    ramp: Positive = 0.02
+    settle: Positive = Field(0.5, description="steady speed measured from push_start + this")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> ScriptedDragConfig:
+        order = ("reset", "mode", "press", "push_start", "push_end", "release")
+        for a, b in itertools.pairwise(order):
+            ta, tb = getattr(self, a), getattr(self, b)
+            if tb <= ta:
+                raise ValueError(f"drag.{b} = {tb} s must come after drag.{a} = {ta} s")
+        if self.push_end - self.push_start <= self.settle + 0.05:
+            raise ValueError(
+                f"drag.push_end - push_start = {self.push_end - self.push_start:g} s leaves no "
+                f"steady window after settle = {self.settle:g} s"
+            )
+        return self
+
+
 class RunConfig(FileModel):
     """The ``run:`` section: what ``hofto-hw run`` does on the simulated arm."""
 
@@ -55,6 +87,9 @@ class RunConfig(FileModel):
         None, description="override simulation.model_error for the run (relative, 1 sigma)"
     )
     log_dir: Path = Field(Path("out/logs"), description="folder of the flight-recorder logs")
+    drag: ScriptedDragConfig | None = Field(
+        None, description="scripted drag after the collision stop (needs a drag: section)"
+    )
 
 
 class ServiceConfig(FileModel):

@@ -41,6 +41,7 @@ class StopCategories(FileModel):
     overrun: Category = 1
     stop_request: Category = 1
     log_failure: Category | None = None
+    enabling_released: Category = 2  # ISO 10218-1 hand guiding: a release holds
 
 
 class LimitsSafetyConfig(FileModel):

@@ -15,8 +15,9 @@ import math
 
 import numpy as np
 
-HOLD, MOVE, RAMP_DOWN = 0, 1, 2
-MODE_NAMES = {HOLD: "hold", MOVE: "move", RAMP_DOWN: "stopping"}
+HOLD, MOVE, RAMP_DOWN, DRAG = 0, 1, 2, 3
+#: DRAG: the reference comes from hofto_hw.control.drag.DragController (the tick copies it)
+MODE_NAMES = {HOLD: "hold", MOVE: "move", RAMP_DOWN: "stopping", DRAG: "drag"}
 
 
 class DemoPath:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -19,6 +20,8 @@ from drivers.sim.simbus import SimBus
 from drivers.transport import Transport
 from hofto_hw.commands.backend import observer_backend
 from hofto_hw.config.models import ExternalTorqueConfig, SystemConfig
+from hofto_hw.control.drag import DragController
+from hofto_hw.control.enabling import EnableInput
 from hofto_hw.control.joint_motion import DemoPath, JointMotion
 from hofto_hw.errors import ConfigError
 from hofto_hw.model.payload import apply_payload, payload_from_config
@@ -63,6 +66,7 @@ class System:
     rate_hz: float
     contact: ScriptedContact | None = None
     observer_names: list[str] = field(default_factory=list)
+    drag_script: Any = None  # hofto_hw.runtime.drag_script.DragScript of run.drag
 
     def close(self) -> None:
         """Stop the drives (category 1 if still powered), disable them, close the bus."""
@@ -146,6 +150,7 @@ def build(
     p = cfg.run.path
     path = DemoPath(p.amplitude, p.period, p.phase, p.ramp) if p is not None else None
     motion = JointMotion(model.n, accel, path)
+    drag, enable, drag_row = _build_drag(cfg, model, names)
     tick = Tick(
         group,
         observers,
@@ -157,6 +162,9 @@ def build(
         model.create_data(),
         sink,
         overrun_limit=s.overrun_streak,
+        drag=drag,
+        enable_input=enable,
+        drag_row=drag_row,
     )
     tick.diag_every = max(1, round(rate / 10.0))
     tick.start()
@@ -170,6 +178,10 @@ def build(
     system.observer_names = names
     if contact and simulated and cfg.run.collision is not None:
         system.contact = _script_contact(system)
+        if cfg.run.drag is not None and drag is not None:
+            from hofto_hw.runtime.drag_script import DragScript
+
+            tick.script = system.drag_script = DragScript(cfg.run.drag, bus.plant, rate)
     return system
 
 
@@ -206,6 +218,24 @@ def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:
         bus.close()
         raise
     return bus, group
+
+
+def _build_drag(
+    cfg: SystemConfig, model: RobotModel, names: list[str]
+) -> tuple[DragController | None, EnableInput | None, int]:
+    """The drag controller of the ``drag:`` section, its enabling input and the row of
+    ``tau_ext`` (observer) that drives it; (None, None, 0) without the section."""
+    d = cfg.drag
+    if d is None:
+        if cfg.run.drag is not None:
+            raise ConfigError("run.drag: needs a drag: section (the controller's settings)")
+        return None, None, 0
+    if d.observer not in names:
+        raise ConfigError(
+            f"drag.observer: {d.observer!r} is not one of the loop's observers {names}"
+        )
+    ctrl = DragController(d, model, cfg.robot.gravity)
+    return ctrl, EnableInput.from_config(d.enable_input), names.index(d.observer)
 
 
 def _script_contact(system: System) -> ScriptedContact:

@@ -2,9 +2,10 @@
 
 :class:`ControlServer` serves an AF_UNIX stream socket (mode 0660, no network listener) in a
 daemon thread: one request line, one JSON reply line. Requests: ``status``, ``reset``,
-``stop``, ``mode hold|move``. The thread only reads the tick's state and sets its request
-flags (one writer each), so it cannot stall a tick. A path that exists and is not a stale
-socket is refused: the server never unlinks anything else.
+``stop``, ``mode hold|move|drag``, ``enable on|off`` (the enabling input of hand guiding
+when ``drag.enable_input.source`` is ``socket``). The thread only reads the tick's state and
+sets its request flags (one writer each), so it cannot stall a tick. A path that exists and
+is not a stale socket is refused: the server never unlinks anything else.
 
 :class:`Supervisor` sends sd_notify READY once, STATUS every ``status_interval``, WATCHDOG at
 the interval systemd asked for but only while the loop finished a tick since the last pet
@@ -22,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from hofto_hw.control.joint_motion import HOLD, MODE_NAMES, MOVE
+from hofto_hw.control.joint_motion import DRAG, HOLD, MODE_NAMES, MOVE
 from hofto_hw.errors import UserError
 from hofto_hw.runtime.notify import Notifier, NotifyError, Watchdog
 
@@ -172,15 +173,42 @@ class ControlServer:
                     return {"ok": not r.startswith("reset refused"), "message": r}
                 time.sleep(0.005)
             return {"ok": False, "message": "the loop did not answer the reset"}
-        if cmd == "mode" and len(words) == 2 and words[1] in ("hold", "move"):
+        if cmd == "mode" and len(words) == 2 and words[1] in ("hold", "move", "drag"):
             if tick.stop.stopping():
                 return {"ok": False, "message": "a stop is latched: reset first"}
+            if words[1] == "drag":
+                return self._enter_drag()
             tick.mode_request = MOVE if words[1] == "move" else HOLD
             return {"ok": True, "message": f"mode {words[1]} requested"}
+        if cmd == "enable" and len(words) == 2 and words[1] in ("on", "off"):
+            inp = tick.enable_input
+            if inp.source != "socket":
+                return {
+                    "ok": False,
+                    "message": f"drag.enable_input.source is {inp.source!r}, not 'socket'",
+                }
+            inp.set(words[1] == "on")  # one writer: this thread
+            return {"ok": True, "message": f"enabling input {words[1]}"}
         return {
             "ok": False,
-            "error": f"unknown request {line!r} (status, reset, stop, mode hold|move)",
+            "error": f"unknown request {line!r} (status, reset, stop, mode hold|move|drag, "
+            "enable on|off)",
         }
+
+    def _enter_drag(self) -> dict[str, Any]:
+        """Request drag mode and wait (a few ticks) for the tick's answer."""
+        tick = self.system.tick
+        if tick.drag is None:
+            return {"ok": False, "message": "no drag: section in the config"}
+        tick.mode_result = ""
+        tick.mode_request = DRAG
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            r = tick.mode_result
+            if r:
+                return {"ok": r == "drag", "message": "mode drag" if r == "drag" else r}
+            time.sleep(0.002)
+        return {"ok": False, "message": "the loop did not answer the mode request"}
 
 
 class Supervisor:

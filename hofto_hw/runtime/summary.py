@@ -3,7 +3,8 @@
 Keys: ticks, rate_hz, overruns, timing_us.{compute,wakeup}.{median,p99,p999,max}, events
 [{t, tick, kind, joint, category, detection_delay_ms, stopping_time_ms,
 stopping_distance_rad}], observers {name: detection delay [ms] of the scripted collision},
-log (path), plus realtime and clock.
+log (path), plus realtime and clock; with ``run.drag``: drag.{steady_speed_mps, expected_speed_mps,
+rest_time_ms, max_speed_mps, drift_mps}.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
     observers: dict[str, float | None] = {}
     for r, name in enumerate(system.observer_names):
         first = -1 if mon is None else int(mon.first_tick[r])
+        if int(tick.first_detect[r]) >= 0:  # crossed before a reset (the scripted drag's)
+            first = int(tick.first_detect[r])
         observers[name] = (
             None
             if contact is None or first < 0
@@ -71,7 +74,7 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
                 entry["stopping_time_ms"] = round(t_stop * 1000.0, 1)
                 entry["stopping_distance_rad"] = round(d_stop, 5)
         events.append(entry)
-    return {
+    out = {
         "ticks": int(loop.ticks),
         "rate_hz": float(system.rate_hz),
         "clock": "sim" if system.clock.sim else "real",
@@ -84,6 +87,13 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
         "latched": tick.stop.latched_names(),
         "log": log,
     }
+    script = getattr(system, "drag_script", None)
+    if script is not None:
+        from hofto_hw.runtime.drag_script import drag_summary
+
+        d = system.cfg.drag
+        out["drag"] = drag_summary(script, d.damping, d.standstill_speed)
+    return out
 
 
 def _bus_text(system: Any) -> str:
@@ -127,6 +137,17 @@ def format_summary(s: dict[str, Any]) -> str:
         lines.append(text)
     if not s["events"]:
         lines.append("no safety events")
+    d = s.get("drag")
+    if d is not None:
+        if d["steady_speed_mps"] is None:
+            lines.append("drag: the run ended before the scripted push did")
+        else:
+            lines.append(
+                f"drag: steady tool speed {1e3 * d['steady_speed_mps']:.1f} mm/s "
+                f"(F/B_a {1e3 * d['expected_speed_mps']:.1f} mm/s), max "
+                f"{1e3 * d['max_speed_mps']:.1f} mm/s, at rest {d['rest_time_ms']:.0f} ms after "
+                f"the push, drift {1e3 * (d['drift_mps'] or 0.0):.2f} mm/s with no push"
+            )
     c, w = s["timing_us"]["compute"], s["timing_us"]["wakeup"]
     lines.append(
         f"tick compute median {c['median']:.0f} µs, p99 {c['p99']:.0f} µs, max {c['max']:.0f} µs"

@@ -16,7 +16,9 @@ import numpy as np
 from drivers.cia402 import state_machine as sm
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import State
-from hofto_hw.control.joint_motion import MOVE, JointMotion
+from hofto_hw.control.drag import DragController, DragReason
+from hofto_hw.control.enabling import EnableInput
+from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, JointMotion
 from hofto_hw.model.data import ModelData
 from hofto_hw.observers.base import Observer
 from hofto_hw.recording.record import (
@@ -57,6 +59,9 @@ class Tick:
         feedforward: ModelData,
         sink: RecordSink,
         overrun_limit: int = 20,
+        drag: DragController | None = None,
+        enable_input: EnableInput | None = None,
+        drag_row: int = 0,
     ) -> None:
         n = group.n
         self.n = n
@@ -115,6 +120,20 @@ class Tick:
         self._r = {k: r[k] for k in ("q", "qd", "tau", "q_cmd", "tau_ext", "qdd_cmd")}
         r["wrench"][...] = np.nan
         self._events_pushed = 0
+        # drag (hand guiding): controller, enabling input, the observer row that drives it
+        self.drag = drag
+        self.enable_input = enable_input if enable_input is not None else EnableInput()
+        self._din = group.transport.tx["digital_inputs"]
+        self.drag_row = int(drag_row)
+        self.drag_reason = 0
+        self.mode_result = ""  # answer to the last mode request (constant strings)
+        self.script = None  # simulation script: .step(tick) at the start of every tick
+        self._tau_mon = np.zeros_like(self.tau_ext)  # the collision monitor's input
+        self._hand = np.zeros(n)  # the hand's torque at the tool, taken off that input
+        self._wrench = r["wrench"]
+        #: first collision-level crossing per observer row over the whole run (the monitor's
+        #: own first_tick is cleared by a reset) [tick, -1 = none]
+        self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
 
     # --------------------------------------------------------------- start-up
 
@@ -140,6 +159,8 @@ class Tick:
         self.tick += 1
         self.t = t
         stop.begin_tick(self.tick)
+        if self.script is not None:
+            self.script.step(self)
 
         # 1. exchange and 2. joint state in SI (views of the drive group's buffers)
         status = g.cycle()
@@ -149,6 +170,14 @@ class Tick:
         # 3. observers (HOFTO, momentum): each writes its own row
         for i, obs in enumerate(self.observers):
             np.copyto(self.tau_ext[i], obs.update(q, qd, tau, dt))
+
+        # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
+        # safety's to latch below); the reference it integrates is used in step 5
+        dragging = motion.mode == DRAG
+        if dragging:
+            self._drag_observe(q, qd, dt)
+        else:
+            self._wrench.fill(np.nan)
 
         # 4. safety: decides, latches, picks the stop category
         good = self.bus.check(stop, status, fresh, g.states, self.err_codes, self.expect_enabled)
@@ -164,12 +193,14 @@ class Tick:
         if monitored:
             # only while the power stage is on (quick-stop ramps included): with it off the
             # brakes act and the motor torque no longer explains the motion
-            self.collision.update(stop, self.tau_ext, q, qd, motion.qdd, dt)
+            self.collision.update(stop, self._monitored(dragging), q, qd, motion.qdd, dt)
         self._overrun(missed)
         if self.stop_requested:
             stop.report(Fault.STOP_REQUEST)
         if self.log_failure:
             stop.report(Fault.LOG_FAILURE, -1, self.log_failure_value)
+        if self.drag_reason:
+            self._drag_report()
         if self.reset_requested:
             self._reset()
         self._measure_stop(q, qd)
@@ -190,11 +221,19 @@ class Tick:
             if cat == 2:
                 motion.ramp_down()
             elif self.mode_request >= 0:
-                self._change_mode()
+                self._change_mode(qd)
             if self.enabling:
                 self._enable_step()
-            motion.update(t, dt)
+            if motion.mode == DRAG:
+                d = self.drag
+                np.copyto(motion.q, d.q_cmd)
+                np.copyto(motion.qd, d.qd_cmd)
+                np.copyto(motion.qdd, d.qdd_cmd)
+            else:
+                motion.update(t, dt)
         self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
+        if motion.mode == DRAG:
+            self.tau_ff += self.drag.tau_offset  # the hand's torque off the drives' offset
         g.command_position(motion.q, self.tau_ff)
         np.copyto(self.q_sent, motion.q)
 
@@ -263,6 +302,10 @@ class Tick:
             obs.reset(g.q, g.qd)
         self.limits.reset(g.q)
         if self.collision is not None:
+            first = self.collision.first_tick
+            for r in range(self.first_detect.shape[0]):
+                if self.first_detect[r] < 0:
+                    self.first_detect[r] = first[r]
             self.collision.reset()
         self.motion.start(g.q)
         if not g.all_in(State.OPERATION_ENABLED):
@@ -298,14 +341,70 @@ class Tick:
                 if g.states[i] == _FAULT:
                     self.controlword[i] = sm.CW_FAULT_RESET
 
-    def _change_mode(self) -> None:
+    def _change_mode(self, qd: np.ndarray) -> None:
         want = self.mode_request
         self.mode_request = -1
-        if want == MOVE:
+        motion = self.motion
+        if want == DRAG:
+            self.mode_result = self._enter_drag(qd)
+        elif want == MOVE and motion.mode != DRAG:
             if self.expect_enabled and not self.enabling:
-                self.motion.move(self.t)
-        else:
-            self.motion.ramp_down()
+                motion.move(self.t)
+        else:  # hold, or move while dragging: ramp the drag's velocity down first
+            motion.ramp_down()
+
+    def _enter_drag(self, qd: np.ndarray) -> str:
+        """Drag mode only from standstill, powered, with no latched fault."""
+        motion = self.motion
+        if self.drag is None:
+            return "refused: no drag section in the config"
+        if self.stop.latched:
+            return "refused: a fault is latched, reset first"
+        if not self.expect_enabled or self.enabling:
+            return "refused: drives not enabled"
+        np.abs(qd, out=self._d)
+        if motion.mode != HOLD or self._d.max() >= STANDSTILL:
+            return "refused: the arm is not at standstill"
+        self.drag.start(motion.q)
+        motion.mode = DRAG
+        return "drag"
+
+    def _drag_observe(self, q: np.ndarray, qd: np.ndarray, dt: float) -> None:
+        """The drag controller's tick: reads the enabling input, estimates the tool wrench
+        from the configured observer row, checks the force limit and the off-tool contact."""
+        inp = self.enable_input
+        if inp.source == "digital_input":
+            inp.from_word(int(self._din[inp.axis]))
+        d = self.drag
+        self.drag_reason = d.update(
+            q, qd, self.tau_ext[self.drag_row], dt, inp.pressed, self.stop.latched != 0
+        )
+        if d.category == 2:
+            self.drag_reason = DragReason.ENABLE_RELEASED
+        np.copyto(self._wrench, d.wrench)
+
+    def _monitored(self, dragging: bool) -> np.ndarray:
+        """The collision monitor's input: the estimates, minus (while the hand drags) the
+        torque of the tool-force fit, so the monitor stays armed for contacts off the tool
+        while the hand's own push is the drag force limit's to judge."""
+        if not (dragging and self.drag.active):
+            return self.tau_ext
+        iso = self.drag.isolation
+        np.subtract(self.drag.tau, iso.residual, out=self._hand)
+        np.subtract(self.tau_ext, self._hand, out=self._tau_mon)
+        return self._tau_mon
+
+    def _drag_report(self) -> None:
+        """Map the drag's stop request to a fault class (safety latches, the loop acts)."""
+        reason, d, stop = self.drag_reason, self.drag, self.stop
+        self.drag_reason = 0
+        if reason == DragReason.ENABLE_RELEASED:
+            stop.report(Fault.ENABLING_RELEASED)
+        elif reason == DragReason.FORCE_LIMIT:
+            stop.report(Fault.COLLISION, -1, d.estimator.force_norm)
+        elif reason == DragReason.CONTACT_OFF_TOOL:
+            # joint = link index (the link after joint j is link j + 1, 1-based)
+            stop.report(Fault.COLLISION, d.contact_link - 1, d.mismatch)
 
     def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
         r, v = self.tick_rec, self._r
