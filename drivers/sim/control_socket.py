@@ -84,6 +84,28 @@ def remove_own_socket(path: str, ident: tuple[int, int]) -> None:
             os.unlink(path)
 
 
+def answer(conn: socket.socket, handler: Callable[[dict[str, Any]], dict[str, Any]]) -> None:
+    """One request on an accepted connection: read a JSON line, reply with ``handler``'s JSON
+    line (a bad request gets ``{"ok": false, "error": ...}``); closes ``conn``."""
+    with conn:
+        conn.settimeout(2.0)
+        data = b""
+        try:
+            while not data.endswith(b"\n"):
+                chunk = conn.recv(4096)
+                if not chunk:
+                    break
+                data += chunk
+            try:
+                request = json.loads(data.decode() or "{}")
+                reply = handler(request if isinstance(request, dict) else {})
+            except json.JSONDecodeError as exc:
+                reply = {"ok": False, "error": f"bad JSON: {exc}"}
+            conn.sendall(json.dumps(reply).encode() + b"\n")
+        except OSError:
+            pass
+
+
 def serve_control(
     path: str, handler: Callable[[dict[str, Any]], dict[str, Any]], stop: threading.Event
 ) -> threading.Thread:
@@ -101,23 +123,7 @@ def serve_control(
                     conn, _ = srv.accept()
                 except TimeoutError:
                     continue
-                with conn:
-                    conn.settimeout(2.0)
-                    data = b""
-                    try:
-                        while not data.endswith(b"\n"):
-                            chunk = conn.recv(4096)
-                            if not chunk:
-                                break
-                            data += chunk
-                        try:
-                            request = json.loads(data.decode() or "{}")
-                            reply = handler(request if isinstance(request, dict) else {})
-                        except json.JSONDecodeError as exc:
-                            reply = {"ok": False, "error": f"bad JSON: {exc}"}
-                        conn.sendall(json.dumps(reply).encode() + b"\n")
-                    except OSError:
-                        pass
+                answer(conn, handler)
         finally:
             srv.close()
             remove_own_socket(path, ident)

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from drivers.cia402 import pdo
-from drivers.sim.control_socket import open_control_socket, remove_own_socket
+from drivers.sim.control_socket import answer, open_control_socket, remove_own_socket
 from drivers.sim.drive import FAULTS, EmulatedDrives
 from drivers.sim.esc import datagram
 from drivers.sim.esc.description import SlaveDescription
@@ -286,23 +286,7 @@ def _serve_control(net: EmulatedNetwork, srv: socket.socket) -> None:
         conn, _ = srv.accept()
     except BlockingIOError:
         return
-    with conn:
-        conn.settimeout(2.0)
-        data = b""
-        try:
-            while not data.endswith(b"\n"):
-                chunk = conn.recv(4096)
-                if not chunk:
-                    break
-                data += chunk
-            try:
-                request = json.loads(data.decode() or "{}")
-                reply = net.control(request if isinstance(request, dict) else {})
-            except json.JSONDecodeError as exc:
-                reply = {"ok": False, "error": f"bad JSON: {exc}"}
-            conn.sendall(json.dumps(reply).encode() + b"\n")
-        except OSError:
-            pass
+    answer(conn, net.control)
 
 
 def serve(
