@@ -122,6 +122,11 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(s, h)
         if service is not None:
             service.close()
+        from hofto_hw.runtime.teach import save_finished
+
+        saved = save_finished(tick, at_end=True)  # a drag --record still open at the end
+        if saved:
+            print(f"hofto-hw run: {saved}", file=sys.stderr)
         system.close()
         if watch is not None:
             watch.stop()
