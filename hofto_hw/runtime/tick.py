@@ -224,9 +224,13 @@ class Tick:
             if self._fault_resetting > 0:
                 self._fault_reset_edge()
             motion.start(q)  # targets follow the arm: bumpless when enabled again
+            if self.mode_request >= 0:
+                self._refuse_mode()
         else:
             if cat == 2:
                 motion.ramp_down()
+                if self.mode_request >= 0:
+                    self._refuse_mode()
             elif self.mode_request >= 0:
                 self._change_mode(qd)
             if self.enabling:
@@ -365,6 +369,13 @@ class Tick:
                 motion.move(self.t)
         else:  # hold, or move while dragging: ramp the drag's velocity down first
             motion.ramp_down()
+
+    def _refuse_mode(self) -> None:
+        """A mode request during a stop is answered, not kept for after the reset."""
+        self.mode_request = -1
+        self.record_request = None
+        self.play_request = None
+        self.mode_result = "refused: a fault is latched, reset first"
 
     def _enter_drag(self, qd: np.ndarray) -> str:
         """Drag mode only from standstill, powered, with no latched fault."""
