@@ -74,8 +74,8 @@ class Recording:
     """A taught path to record while dragging, saved to ``file`` when the drag ends.
     ``capacity`` samples are allocated here, off the tick (later samples are dropped)."""
 
-    def __init__(self, file: Path, force: bool, model: RobotModel, capacity: int) -> None:
-        self.file = Path(file)
+    def __init__(self, file: Path | None, force: bool, model: RobotModel, capacity: int) -> None:
+        self.file = None if file is None else Path(file)
         self.force = force
         self.model = model
         self.recorder = TaughtPathRecorder(model.n, capacity)
@@ -87,6 +87,10 @@ class Recording:
         the message. Without ``force`` the file is created exclusively, so a file that
         appeared since the request is never replaced."""
         rec = self.recorder
+        if self.file is None:  # kept in memory (the scripted replay of hofto-hw run)
+            self.state = SAVED
+            self.message = f"taught path: {rec.count} samples (in memory)"
+            return self.message
         if rec.count < 2:
             self.state = FAILED
             self.message = (
@@ -121,7 +125,7 @@ class Recording:
 
     def status(self) -> dict[str, Any]:
         return {
-            "file": str(self.file),
+            "file": None if self.file is None else str(self.file),
             "state": STATE_NAMES[self.state],
             "samples": int(self.recorder.count),
             "message": self.message,
@@ -132,7 +136,7 @@ def save_finished(tick: Any, at_end: bool = False) -> str:
     """Save the tick's recording once the drag has ended (or, ``at_end`` of the run, whatever
     was recorded); returns the message, "" when there is nothing to save."""
     rec = tick.recording
-    if rec is None:
+    if rec is None or rec.file is None:
         return ""
     if rec.state == FINISHED or (at_end and rec.state in (ARMED, RECORDING)):
         return rec.save()
@@ -215,8 +219,15 @@ def plan_replay(
     """Load and check the taught path (one-line UserError: missing, binary, truncated,
     another robot, out of limits), plan the move to its start and the time-scaled path."""
     path = load_taught_path(file, model)
+    return plan_path(path, q_now, limits, dt, file=Path(file))
+
+
+def plan_path(
+    path: TaughtPath, q_now: np.ndarray, limits: Limits, dt: float, file: Path | None = None
+) -> Playback:
+    """The move from ``q_now`` to the taught path's start, then the time-scaled path."""
     traj = replay_trajectory(q_now, path.t, path.q, limits, dt)
-    return Playback("replay", traj, limits, taught=path, file=Path(file))
+    return Playback("replay", traj, limits, taught=path, file=file)
 
 
 def parse_joints(text: str, degrees: bool = False) -> np.ndarray:
