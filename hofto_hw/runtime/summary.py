@@ -97,7 +97,7 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
         out["drag"] = drag_summary(script, d.damping, d.standstill_speed)
     pb = tick.playback
     if pb is not None:
-        fig = pb.figures(system.model)
+        fig = pb.figures(system.model, system.group.q)
         del fig["kind"]
         out[pb.kind] = fig
     return out

@@ -177,11 +177,13 @@ class Playback:
     def completed(self) -> bool:
         return self.player.done
 
-    def figures(self, model: RobotModel) -> dict[str, Any]:
+    def figures(self, model: RobotModel, q_now: np.ndarray | None = None) -> dict[str, Any]:
         """Replay figures (slow path): ``max_path_error_mm`` = largest distance from an
         executed tool position (measured q, after the move to the path's start) to the taught
         tool path (its samples, nearest point), ``duration_s`` (planned: move + path),
-        ``max_jerk_ratio`` (planned jerk over its limit), ``completed``, ``time_scale``."""
+        ``max_jerk_ratio`` (planned jerk over its limit), ``completed``, ``time_scale``; for a
+        move ``final_error_rad``: max |q - target| of ``q_now`` (measured, after the run) or
+        of the last played tick."""
         from hofto_hw.experiments.drag_sim import path_error_mm
 
         out: dict[str, Any] = {
@@ -199,11 +201,10 @@ class Playback:
             taught = np.array([data.tool_pose(q)[0] for q in self.taught.q])
             done = np.array([data.tool_pose(q)[0] for q in ex.q[start : ex.count]])
             out["max_path_error_mm"] = round(path_error_mm(taught, done), 4)
-        if self.kind == "move":
-            out["final_error_rad"] = round(
-                float(np.abs(ex.q[ex.count - 1] - self.traj.q[-1]).max()) if ex.count else math.nan,
-                6,
-            )
+        if self.kind == "move":  # the arm now (``q_now``), else at the last played tick
+            q_end = q_now if q_now is not None else (ex.q[ex.count - 1] if ex.count else None)
+            err = math.nan if q_end is None else float(np.abs(q_end - self.traj.q[-1]).max())
+            out["final_error_rad"] = round(err, 6)
         return out
 
 

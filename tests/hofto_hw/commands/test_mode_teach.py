@@ -14,7 +14,12 @@ import pytest
 from hofto_hw.cli import main
 from hofto_hw.config.loader import load_config
 from hofto_hw.control.joint_motion import HOLD
-from hofto_hw.control.taught_path import TaughtPath, TaughtPathRecorder, save_taught_path
+from hofto_hw.control.taught_path import (
+    TaughtPath,
+    TaughtPathRecorder,
+    load_taught_path,
+    save_taught_path,
+)
 from hofto_hw.runtime.compose import build
 from hofto_hw.runtime.service import ControlServer
 
@@ -33,6 +38,8 @@ def _wait(cond, seconds: float = 60.0) -> None:
 def service(tmp_path_factory: pytest.TempPathFactory):
     """The loop running back to back in a thread with the control socket served."""
     cfg = load_config(CONFIG)
+    enable = cfg.drag.enable_input.model_copy(update={"source": "socket"})
+    cfg = cfg.model_copy(update={"drag": cfg.drag.model_copy(update={"enable_input": enable})})
     system = build(cfg, clock="sim", contact=False)
     sock = tmp_path_factory.mktemp("sock") / "control.sock"
     server = ControlServer(sock, system)
@@ -155,7 +162,7 @@ def test_drag_record_with_nothing_taught_writes_no_file(service, capsys, tmp_pat
     assert code == 0, err
     assert f"recording the taught path to {out}" in stdout
     assert system.tick.recording is not None
-    # the enabling input is never pressed (source: scripted): leaving drag saves nothing
+    # the enabling input is never pressed: leaving drag saves nothing
     code, stdout, err = _run(capsys, sock, "hold")
     assert code == 0, err
     assert "nothing was taught" in stdout
@@ -193,3 +200,28 @@ def test_move_joints_and_replay_play_through_the_loop(service, capsys, tmp_path:
     _wait(lambda: tick.motion.mode == HOLD)
     fig = pb.figures(model)
     assert fig["completed"] and fig["max_path_error_mm"] <= 2.0, fig
+
+
+def test_drag_record_then_hold_saves_the_taught_path(service, capsys, tmp_path: Path) -> None:
+    system, sock = service
+    tick = system.tick
+    _wait(lambda: tick.motion.mode == HOLD and np.abs(system.group.qd).max() < 0.01)
+    out = tmp_path / "held.csv"
+    code, stdout, err = _run(capsys, sock, "drag", "--record", out)
+    assert code == 0, (stdout, err)
+    assert main(["enable", "on", "--socket", str(sock)]) == 0
+    _wait(lambda: tick.recording.recorder.count > 500)  # held, nobody pushes: it still records
+    code, stdout, err = _run(capsys, sock, "hold")
+    assert code == 0, err
+    assert f"saved to {out}" in stdout, stdout
+    assert main(["enable", "off", "--socket", str(sock)]) == 0
+    capsys.readouterr()
+    path = load_taught_path(out, system.model)
+    assert path.t.shape[0] == tick.recording.recorder.count > 500
+    np.testing.assert_allclose(path.q[0], path.q[-1], atol=1e-3)  # no push: no motion
+    # the same name again: refused, the file kept
+    before = out.read_bytes()
+    _wait(lambda: tick.motion.mode == HOLD)
+    code, _, err = _run(capsys, sock, "drag", "--record", out)
+    _one_line(code, err, "exists; not overwriting it")
+    assert out.read_bytes() == before

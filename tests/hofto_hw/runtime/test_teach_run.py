@@ -49,8 +49,9 @@ def _events(system, kind: int) -> list[tuple[int, int, int]]:
 
 @pytest.fixture(scope="module")
 def taught(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
-    """10 s of scripted drag through the loop with ``record_request`` set, as ``mode drag
-    --record FILE`` does; the file is saved off the tick once the drag ended."""
+    """10 s of scripted drag through the loop with a Recording handed over with the drag
+    request, as ``mode drag --record FILE`` does; the file is saved off the tick once the
+    drag ended."""
     cfg = load_config(CONFIG)
     system = build(cfg, clock="sim", contact=False)
     plant, tick = system.bus.plant, system.tick
@@ -60,7 +61,7 @@ def taught(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     tick.script = script
     file = teach.check_output(tmp_path_factory.mktemp("teach") / "taught.csv", force=False)
     rec = teach.Recording(file, False, system.model, capacity=12000)
-    tick.record_request = rec
+    script.recording = rec  # handed to the tick as record_request with the drag request
     run_until(system, lambda: tick.motion.mode == DRAG, 200)
     assert tick.recording is rec and tick.record_request is None
     states = set()
