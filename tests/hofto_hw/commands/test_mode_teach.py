@@ -200,6 +200,8 @@ def test_move_joints_and_replay_play_through_the_loop(service, capsys, tmp_path:
     _wait(lambda: tick.motion.mode == HOLD)
     fig = pb.figures(model)
     assert fig["completed"] and fig["max_path_error_mm"] <= 2.0, fig
+    assert main(["status", "--socket", str(sock)]) == 0
+    assert f"last trajectory: replay of {file}, " in capsys.readouterr().out
 
 
 def test_drag_record_then_hold_saves_the_taught_path(service, capsys, tmp_path: Path) -> None:
@@ -219,6 +221,8 @@ def test_drag_record_then_hold_saves_the_taught_path(service, capsys, tmp_path: 
     path = load_taught_path(out, system.model)
     assert path.t.shape[0] == tick.recording.recorder.count > 500
     np.testing.assert_allclose(path.q[0], path.q[-1], atol=1e-3)  # no push: no motion
+    assert main(["status", "--socket", str(sock)]) == 0
+    assert "taught path: saved" in capsys.readouterr().out
     # the same name again: refused, the file kept
     before = out.read_bytes()
     _wait(lambda: tick.motion.mode == HOLD)
