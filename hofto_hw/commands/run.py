@@ -60,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.control.joint_motion import MOVE
     from hofto_hw.runtime import realtime
     from hofto_hw.runtime.compose import build
+    from hofto_hw.runtime.drag_script import run_loop
     from hofto_hw.runtime.summary import build_summary, format_summary
 
     _check_duration(args.duration)
@@ -113,15 +114,18 @@ def run(args: argparse.Namespace) -> int:
     n_ticks = round(duration * system.rate_hz)
     print(f"hofto-hw run: running (pid {os.getpid()})", file=sys.stderr, flush=True)
     try:
-        system.loop.run(
-            max_ticks=n_ticks, should_stop=lambda: tick.exit_requested and tick.stopped_and_off()
-        )
+        run_loop(system, n_ticks, lambda: tick.exit_requested and tick.stopped_and_off())
     finally:
         realtime.drop_realtime()
         for s, h in old.items():
             signal.signal(s, h)
         if service is not None:
             service.close()
+        from hofto_hw.runtime.teach import save_finished
+
+        saved = save_finished(tick, at_end=True)  # a drag --record still open at the end
+        if saved:
+            print(f"hofto-hw run: {saved}", file=sys.stderr)
         system.close()
         if watch is not None:
             watch.stop()

@@ -1,4 +1,6 @@
-"""``hofto-hw status``: state, latched faults, timing and log file of the running service."""
+"""``hofto-hw status``: state, latched faults, timing and log file of the running service,
+and the taught-path recording and last trajectory played (``mode drag --record``,
+``mode replay``, ``mode move --joints``)."""
 
 from __future__ import annotations
 
@@ -29,4 +31,14 @@ def run(args: argparse.Namespace) -> int:
         f"wake-up median {w['median']:.0f} µs, p99 {w['p99']:.0f} µs"
     )
     print(f"log: {s['log'] or 'not yet written'}")
+    rec = s.get("teach")
+    if rec:
+        print(f"taught path: {rec['state']}, {rec['samples']} samples -> {rec['file']}")
+        if rec["message"]:
+            print(f"  {rec['message']}")
+    pb = s.get("playback")
+    if pb:
+        what = "replay of " + pb["file"] if pb["kind"] == "replay" else "move to joint target"
+        done = "done" if pb["completed"] else f"{100.0 * pb['progress']:.0f} %"
+        print(f"last trajectory: {what}, {pb['duration_s']:.2f} s, {done}")
     return 0

@@ -1,5 +1,6 @@
 """Pydantic model of the optional ``motion:`` section: limits of jerk-limited moves and of
-taught-path replay (``hofto-hw mode move|replay``). Loading and checking only."""
+taught-path replay (``hofto-hw mode move|replay``), and the recording buffer of
+``mode drag --record``. Loading and checking only."""
 
 from __future__ import annotations
 
@@ -18,6 +19,12 @@ class MotionConfig(FileModel):
     )
     jerk: list[PositiveFloat] | None = Field(
         None, description="[rad/s³] per joint; None = 10 x the scaled acceleration limit"
+    )
+    record_seconds: PositiveFloat = Field(
+        300.0,
+        le=3600.0,
+        description="[s] longest taught path `mode drag --record` keeps (allocated per request: "
+        "(n + 1) x 8 bytes per tick, 16.8 MB for 300 s of six joints at 1 kHz)",
     )
 
     def limits(self, model: object) -> tuple[list[float], list[float], list[float]]:

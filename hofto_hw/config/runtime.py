@@ -57,6 +57,11 @@ class ScriptedDragConfig(FileModel):
     force: tuple[Finite, Finite, Finite] = (20.0, 0.0, 0.0)
     ramp: Positive = 0.02
     settle: Positive = Field(0.5, description="steady speed measured from push_start + this")
+    replay: NonNeg | None = Field(
+        None,
+        description="loop time [s] to replay the path taught from press to release (recorded "
+        "by the tick; the release's stop is reset 0.2 s before); None = no replay. Sim clock only",
+    )
 
     @model_validator(mode="after")
     def _ordered(self) -> ScriptedDragConfig:
@@ -65,6 +70,11 @@ class ScriptedDragConfig(FileModel):
             ta, tb = getattr(self, a), getattr(self, b)
             if tb <= ta:
                 raise ValueError(f"drag.{b} = {tb} s must come after drag.{a} = {ta} s")
+        if self.replay is not None and self.replay < self.release + 1.0:
+            raise ValueError(
+                f"drag.replay = {self.replay} s must come at least 1 s after drag.release = "
+                f"{self.release} s (the drag figures' window: rest and drift after the release)"
+            )
         if self.push_end - self.push_start <= self.settle + 0.05:
             raise ValueError(
                 f"drag.push_end - push_start = {self.push_end - self.push_start:g} s leaves no "

@@ -3,8 +3,10 @@
 :class:`DemoPath` gives q_ref(t) = q0 + A·sin(2π·t/T + φ)·s(t) - A·sin(φ)·s(t), with s a
 quintic fade-in over ``ramp`` seconds, so the path starts at rest at q0 and moves smoothly.
 :class:`JointMotion` is the controller's motion generator: ``hold`` (command a fixed position),
-``move`` (follow the demo path from where the arm is), and a ramp to standstill at the
-acceleration limits (used for mode changes to hold and for stop category 2).
+``move`` (follow the demo path from where the arm is), ``play`` (a precomputed jerk-limited
+trajectory: a taught-path replay or a move to a joint target, planned outside the tick by
+hofto_hw.control.path_timing), and a ramp to standstill at the acceleration limits (used for
+mode changes to hold and for stop category 2).
 
 Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick.
 """
@@ -12,12 +14,25 @@ Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-HOLD, MOVE, RAMP_DOWN, DRAG = 0, 1, 2, 3
-#: DRAG: the reference comes from hofto_hw.control.drag.DragController (the tick copies it)
-MODE_NAMES = {HOLD: "hold", MOVE: "move", RAMP_DOWN: "stopping", DRAG: "drag"}
+if TYPE_CHECKING:
+    from hofto_hw.control.path_timing import TrajectoryPlayer
+
+HOLD, MOVE, RAMP_DOWN, DRAG, REPLAY, MOVE_TO = 0, 1, 2, 3, 4, 5
+#: DRAG: the reference comes from hofto_hw.control.drag.DragController (the tick copies it);
+#: REPLAY (taught path) and MOVE_TO (joint target): a TrajectoryPlayer, one row per tick
+MODE_NAMES = {
+    HOLD: "hold",
+    MOVE: "move",
+    RAMP_DOWN: "stopping",
+    DRAG: "drag",
+    REPLAY: "replay",
+    MOVE_TO: "move_to",
+}
+PLAYING = (REPLAY, MOVE_TO)
 
 
 class DemoPath:
@@ -88,6 +103,7 @@ class JointMotion:
         self.q0 = np.zeros(n)
         self.mode = HOLD
         self.t0 = 0.0
+        self.player: TrajectoryPlayer | None = None
         self._step = np.zeros(n)
         self._sign = np.zeros(n)
 
@@ -107,6 +123,15 @@ class JointMotion:
         self.mode = MOVE
         return True
 
+    def play(self, player: TrajectoryPlayer, mode: int = REPLAY) -> bool:
+        """Play ``player`` (REPLAY or MOVE_TO) from the next update; only from HOLD. The
+        trajectory must start at the held position (the caller checks)."""
+        if self.mode != HOLD or mode not in PLAYING:
+            return False
+        self.player = player
+        self.mode = mode
+        return True
+
     def ramp_down(self) -> None:
         """Decelerate at the acceleration limits to standstill, then hold."""
         if self.mode != HOLD:
@@ -117,6 +142,10 @@ class JointMotion:
         if self.mode == MOVE:
             assert self.path is not None
             self.path.evaluate(t - self.t0, self.q0, self.q, self.qd, self.qdd)
+        elif self.mode == REPLAY or self.mode == MOVE_TO:
+            assert self.player is not None
+            if self.player.step(self.q, self.qd, self.qdd):
+                self.mode = HOLD  # the last sample is at rest: hold it
         elif self.mode == RAMP_DOWN:
             step, sign = self._step, self._sign
             np.multiply(self.accel, dt, out=step)

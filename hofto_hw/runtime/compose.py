@@ -181,7 +181,10 @@ def build(
         if cfg.run.drag is not None and drag is not None:
             from hofto_hw.runtime.drag_script import DragScript
 
-            tick.script = system.drag_script = DragScript(cfg.run.drag, bus.plant, rate)
+            model_for_replay = model if clk.sim else None  # the replay needs the sim clock
+            tick.script = system.drag_script = DragScript(
+                cfg.run.drag, bus.plant, rate, model=model_for_replay
+            )
     return system
 
 

@@ -37,6 +37,9 @@ def request(path: Path, line: str, timeout: float = 10.0) -> dict[str, Any]:
 
 
 def answer(reply: dict[str, Any]) -> int:
-    """Print a reply's message; exit code 0 if ok, 1 if refused."""
+    """Print a reply's message; exit code 0 if ok, 1 if refused; UserError (the CLI prints
+    it, exit 2) when the service refused bad input (``input_error``)."""
+    if reply.get("input_error"):
+        raise UserError(str(reply.get("message")))
     print(reply.get("message") or reply.get("error") or json.dumps(reply))
     return 0 if reply.get("ok") else 1

@@ -8,10 +8,17 @@ rows: allocation-free). The hand is a :class:`HandForces` of the drag harness ch
 plant's own external torques (simulation only: the plant is not the tick's hot path on a real
 bus). :func:`drag_summary` computes the figures as ``drag_figures`` of
 hofto_hw/experiments/drag_sim.py does, after the run.
+
+With ``run.drag.replay`` (sim clock): the tick records the taught path from press to release
+(a :class:`~hofto_hw.runtime.teach.Recording` handed over with the drag request, as ``mode
+drag --record`` does), the release's stop is reset 0.2 s before ``replay``, and at ``replay``
+the script asks for a plan: :func:`run_loop` ends that stretch of the loop, plans the replay
+off the tick (:meth:`DragScript.start_replay`) and goes on, so the run stays deterministic.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -27,7 +34,8 @@ from hofto_hw.experiments.drag_sim import (
     tool_motion,
 )
 
-_RESET, _MODE, _PRESS, _RELEASE, _DONE = range(5)
+_RESET, _MODE, _PRESS, _RELEASE, _REPLAY_RESET, _REPLAY, _DONE = range(7)
+REPLAY_RESET_LEAD = 0.2  # [s] the release's stop is reset this long before the replay
 
 
 class ChainedExternal:
@@ -58,10 +66,16 @@ class ChainedExternal:
 class DragScript:
     """See the module docstring; built when the loop's t = 0 is the plant's now. ``rate_hz``:
     loop rate. Samples (true q, qd, commanded q) are kept from ``reset`` to 1 s after
-    ``release``. ``enable``: False leaves the enabling input alone (tests)."""
+    ``release``. ``enable``: False leaves the enabling input alone (tests). ``model``: the
+    loop's model, needed for ``cfg.replay`` (None: no replay)."""
 
     def __init__(
-        self, cfg: ScriptedDragConfig, plant: Any, rate_hz: float, enable: bool = True
+        self,
+        cfg: ScriptedDragConfig,
+        plant: Any,
+        rate_hz: float,
+        enable: bool = True,
+        model: Any = None,
     ) -> None:
         self.enable = enable
         self.cfg = cfg
@@ -75,7 +89,16 @@ class DragScript:
         chained = ChainedExternal(plant.external, self.hand, n)
         chained.active = self._pushing
         plant.external = chained
-        self._times = (cfg.reset, cfg.mode, cfg.press, cfg.release)
+        self._times: tuple[float, ...] = (cfg.reset, cfg.mode, cfg.press, cfg.release)
+        self.recording = None
+        self.wants_plan = False  # set by the tick at cfg.replay; run_loop plans off the tick
+        self.replay_result = ""
+        if cfg.replay is not None and model is not None:
+            from hofto_hw.runtime.teach import Recording
+
+            cap = round((cfg.release - cfg.press + 0.5) * rate_hz)
+            self.recording = Recording(None, False, model, cap)
+            self._times += (cfg.replay - REPLAY_RESET_LEAD, cfg.replay)
         self.stage = _RESET
         self.mode_result = ""
         cap = round((cfg.release + 1.0 - cfg.reset) * rate_hz) + 2
@@ -92,15 +115,18 @@ class DragScript:
         """Called by the tick first thing every tick (hot path)."""
         t = tick.t
         s = self.stage
-        if s < _DONE and t >= self._times[s]:
-            if s == _RESET:
+        if s < len(self._times) and t >= self._times[s]:
+            if s == _RESET or s == _REPLAY_RESET:
                 tick.reset_requested = True
             elif s == _MODE:
+                tick.record_request = self.recording
                 tick.mode_request = DRAG
             elif s == _PRESS:
                 tick.enable_input.pressed = self.enable
-            else:
+            elif s == _RELEASE:
                 tick.enable_input.pressed = False
+            else:
+                self.wants_plan = True
             self.stage = s + 1
         if t >= self._times[0] and self.k < self.t.shape[0]:
             k = self.k
@@ -109,6 +135,47 @@ class DragScript:
             np.copyto(self.qd[k], self.plant.qd)
             np.copyto(self.q_ref[k], tick.motion.q)
             self.k = k + 1
+
+    def start_replay(self, system: Any) -> str:
+        """Plan the replay of the taught path from the held position and hand it to the tick
+        (slow path, between two stretches of the loop); returns why not, or ""."""
+        from hofto_hw.errors import UserError
+        from hofto_hw.runtime import teach
+
+        self.wants_plan = False
+        tick, model = system.tick, system.model
+        rec = self.recording
+        if rec is None or rec.recorder.count < 10:
+            self.replay_result = "no taught path recorded"
+            return self.replay_result
+        path = rec.recorder.path(model)
+        limits = teach.motion_limits(system.cfg, model)
+        try:
+            pb = teach.plan_path(path, tick.motion.q.copy(), limits, 1.0 / system.rate_hz)
+        except UserError as exc:  # the summary says why; the run goes on
+            self.replay_result = f"not planned: {exc}"
+            return self.replay_result
+        tick.mode_result = ""
+        tick.play_request = pb
+        tick.mode_request = pb.mode
+        return ""
+
+
+def run_loop(system: Any, n_ticks: int, should_stop: Callable[[], bool]) -> None:
+    """``system.loop.run(max_ticks=n_ticks, should_stop=...)``; with a scripted replay, the
+    loop stops where the script asks for a plan, plans off the tick and goes on (sim clock:
+    the loop time does not advance meanwhile, so the run stays deterministic)."""
+    script = system.drag_script
+    loop = system.loop
+    if script is None or script.recording is None:
+        loop.run(max_ticks=n_ticks, should_stop=should_stop)
+        return
+    end = loop.ticks + n_ticks
+    while loop.ticks < end:
+        loop.run(max_ticks=end - loop.ticks, should_stop=lambda: should_stop() or script.wants_plan)
+        if not script.wants_plan or should_stop():
+            return
+        script.start_replay(system)
 
 
 def drag_summary(script: DragScript, damping: float, standstill: float) -> dict[str, Any]:

@@ -1,10 +1,15 @@
 """The service side of ``hofto-hw run``: the local control socket and the systemd supervisor.
 
 :class:`ControlServer` serves an AF_UNIX stream socket (mode 0660, no network listener) in a
-daemon thread: one request line, one JSON reply line. Requests: ``status``, ``reset``,
-``stop``, ``mode hold|move|drag``, ``enable on|off`` (the enabling input of hand guiding
+daemon thread: one request line (words split as a shell does, so a quoted path may hold
+spaces), one JSON reply line. Requests: ``status``, ``reset``, ``stop``,
+``mode hold|move|drag``, ``mode drag --record FILE [--force]``, ``mode replay FILE``,
+``mode move-to q1,...,qn`` [rad], ``enable on|off`` (the enabling input of hand guiding
 when ``drag.enable_input.source`` is ``socket``). The thread only reads the tick's state and
-sets its request flags (one writer each), so it cannot stall a tick. A path that exists and
+sets its request flags (one writer each), so it cannot stall a tick; the slow work of teach
+and play (checking the output file, loading and planning a trajectory, saving the taught path
+when the drag ends) happens here (hofto_hw/runtime/teach.py). A reply with
+``"input_error": true`` refuses bad input (the client exits 2). A path that exists and
 is not a stale socket is refused: the server never unlinks anything else.
 
 :class:`Supervisor` sends sd_notify READY once, STATUS every ``status_interval``, WATCHDOG at
@@ -16,8 +21,10 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import socket
 import stat
+import sys
 import threading
 import time
 from pathlib import Path
@@ -25,6 +32,7 @@ from typing import Any
 
 from hofto_hw.control.joint_motion import DRAG, HOLD, MODE_NAMES, MOVE
 from hofto_hw.errors import UserError
+from hofto_hw.runtime import teach
 from hofto_hw.runtime.notify import Notifier, NotifyError, Watchdog
 
 
@@ -70,6 +78,21 @@ def status_of(system: Any) -> dict[str, Any]:
         "timing_us": {"compute": loop.compute.summary(), "wakeup": loop.wakeup.summary()},
         "log": getattr(system, "log_path", None),
         "recorder": _recorder_status(getattr(system, "sink", None)),
+        "teach": None if tick.recording is None else tick.recording.status(),
+        "playback": _playback_status(tick.playback),
+    }
+
+
+def _playback_status(pb: Any) -> dict[str, Any] | None:
+    if pb is None:
+        return None
+    k, total = pb.player.k, pb.traj.q.shape[0]
+    return {
+        "kind": pb.kind,
+        "file": None if pb.file is None else str(pb.file),
+        "progress": round(min(1.0, (k + 1) / total), 4),
+        "completed": bool(pb.completed),
+        "duration_s": round(pb.traj.duration, 3),
     }
 
 
@@ -128,8 +151,16 @@ class ControlServer:
         except FileNotFoundError:
             pass
 
+    def poll(self) -> str:
+        """Save a taught path whose drag has ended (every 0.2 s and after each request)."""
+        msg = teach.save_finished(self.system.tick)
+        if msg:
+            print(f"hofto-hw run: {msg}", file=sys.stderr, flush=True)
+        return msg
+
     def _serve(self) -> None:
         while not self._done.is_set():
+            self.poll()
             try:
                 conn, _ = self.sock.accept()
             except TimeoutError:
@@ -148,7 +179,10 @@ class ControlServer:
     def handle(self, line: str) -> dict[str, Any]:
         """Answer one request line."""
         tick = self.system.tick
-        words = line.split()
+        try:
+            words = shlex.split(line)
+        except ValueError as exc:
+            return {"ok": False, "error": f"request {line!r}: {exc}"}
         if not words:
             return {"ok": False, "error": "empty request"}
         cmd = words[0]
@@ -173,13 +207,10 @@ class ControlServer:
                     return {"ok": not r.startswith("reset refused"), "message": r}
                 time.sleep(0.005)
             return {"ok": False, "message": "the loop did not answer the reset"}
-        if cmd == "mode" and len(words) == 2 and words[1] in ("hold", "move", "drag"):
-            if tick.stop.stopping():
-                return {"ok": False, "message": "a stop is latched: reset first"}
-            if words[1] == "drag":
-                return self._enter_drag()
-            tick.mode_request = MOVE if words[1] == "move" else HOLD
-            return {"ok": True, "message": f"mode {words[1]} requested"}
+        if cmd == "mode" and len(words) >= 2:
+            reply = self._mode(words[1:])
+            if reply is not None:
+                return reply
         if cmd == "enable" and len(words) == 2 and words[1] in ("on", "off"):
             inp = tick.enable_input
             if inp.source != "socket":
@@ -192,23 +223,113 @@ class ControlServer:
         return {
             "ok": False,
             "error": f"unknown request {line!r} (status, reset, stop, mode hold|move|drag, "
+            "mode drag --record FILE [--force], mode replay FILE, mode move-to q1,...,qn, "
             "enable on|off)",
         }
 
-    def _enter_drag(self) -> dict[str, Any]:
-        """Request drag mode and wait (a few ticks) for the tick's answer."""
+    def _mode(self, args: list[str]) -> dict[str, Any] | None:
+        """``mode ...`` requests; None for an unknown form."""
         tick = self.system.tick
-        if tick.drag is None:
-            return {"ok": False, "message": "no drag: section in the config"}
-        tick.mode_result = ""
-        tick.mode_request = DRAG
+        what, rest = args[0], args[1:]
+        known = (what in ("hold", "move") and not rest) or what == "drag"
+        known = known or (what in ("replay", "move-to") and len(rest) == 1)
+        if not known:
+            return None
+        if tick.stop.stopping():
+            return {"ok": False, "message": "a stop is latched: reset first"}
+        try:
+            if what == "drag":
+                return self._enter_drag(self._recording(rest))
+            if what in ("replay", "move-to"):
+                return self._play(what, rest[0])
+        except UserError as exc:
+            return {"ok": False, "input_error": True, "message": str(exc)}
+        tick.mode_request = MOVE if what == "move" else HOLD
+        msg = f"mode {what} requested"
+        if what == "hold" and tick.recording is not None and tick.recording.state < teach.SAVED:
+            saved = self._wait_saved()
+            msg += f"; {saved}" if saved else ""
+        return {"ok": True, "message": msg}
+
+    def _recording(self, rest: list[str]) -> teach.Recording | None:
+        """``--record FILE [--force]`` -> a Recording (output file checked), or None."""
+        if not rest:
+            return None
+        force = "--force" in rest
+        words = [w for w in rest if w != "--force"]
+        if len(words) != 2 or words[0] != "--record":
+            raise UserError(f"mode drag: expected --record FILE [--force], got {' '.join(rest)}")
+        file = teach.check_output(words[1], force)
+        system = self.system
+        capacity = round(system.cfg.motion.record_seconds * system.rate_hz)
+        return teach.Recording(file, force, system.model, capacity)
+
+    def _wait_saved(self) -> str:
+        """After ``mode hold``: wait (a few ticks) for the drag to end, save the taught path."""
+        tick = self.system.tick
+        rec = tick.recording
+        deadline = time.monotonic() + 2.0
+        while rec.state < teach.FINISHED and time.monotonic() < deadline:
+            time.sleep(0.002)
+        return self.poll() or rec.message
+
+    def _wait_mode(self) -> str:
+        """Wait (a few ticks) for the tick's answer to a mode request."""
+        tick = self.system.tick
         deadline = time.monotonic() + 2.0
         while time.monotonic() < deadline:
             r = tick.mode_result
             if r:
-                return {"ok": r == "drag", "message": "mode drag" if r == "drag" else r}
+                return r
             time.sleep(0.002)
-        return {"ok": False, "message": "the loop did not answer the mode request"}
+        return "the loop did not answer the mode request"
+
+    def _enter_drag(self, rec: teach.Recording | None = None) -> dict[str, Any]:
+        """Request drag mode (recording the taught path into ``rec``) and wait for the tick."""
+        tick = self.system.tick
+        if tick.drag is None:
+            return {"ok": False, "message": "no drag: section in the config"}
+        self.poll()  # a finished earlier recording is saved before the tick lets it go
+        tick.mode_result = ""
+        tick.record_request = rec
+        tick.mode_request = DRAG
+        r = self._wait_mode()
+        if r != "drag":
+            return {"ok": False, "message": r}
+        where = f", recording the taught path to {rec.file}" if rec is not None else ""
+        return {"ok": True, "message": f"mode drag{where}"}
+
+    def _play(self, what: str, arg: str) -> dict[str, Any]:
+        """Plan (here, off the tick) a taught-path replay or a move to a joint target from the
+        held position and hand it to the tick."""
+        system = self.system
+        tick, model = system.tick, system.model
+        if tick.motion.mode != HOLD:
+            name = MODE_NAMES.get(tick.motion.mode, "?")
+            return {"ok": False, "message": f"refused: the arm is in mode {name}: mode hold first"}
+        q_now = tick.motion.q.copy()
+        limits = teach.motion_limits(system.cfg, model)
+        dt = 1.0 / system.rate_hz
+        if what == "replay":
+            pb = teach.plan_replay(Path(arg), q_now, model, limits, dt)
+        else:
+            pb = teach.plan_move(teach.parse_joints(arg), q_now, model, limits, dt)
+        tick.mode_result = ""
+        tick.play_request = pb
+        tick.mode_request = pb.mode
+        r = self._wait_mode()
+        if r != "playing":
+            return {"ok": False, "message": r}
+        tr = pb.traj
+        if pb.kind == "replay":
+            to_start = tr.segments[1] * tr.dt
+            text = (
+                f"replaying {arg}: {to_start:.2f} s to its start, then {tr.duration - to_start:.2f}"
+                f" s along it (time scale {tr.scale:.2f})"
+            )
+        else:
+            text = f"moving to the joint target in {tr.duration:.2f} s"
+        return {"ok": True, "message": text}
 
 
 class Supervisor:

@@ -4,7 +4,9 @@ Keys: ticks, rate_hz, overruns, timing_us.{compute,wakeup}.{median,p99,p999,max}
 [{t, tick, kind, joint, category, detection_delay_ms, stopping_time_ms,
 stopping_distance_rad}], observers {name: detection delay [ms] of the scripted collision},
 log (path), plus realtime and clock; with ``run.drag``: drag.{steady_speed_mps, expected_speed_mps,
-rest_time_ms, max_speed_mps, drift_mps}.
+rest_time_ms, max_speed_mps, drift_mps}; after a taught-path replay (the last trajectory the
+loop played): replay.{max_path_error_mm, duration_s, max_jerk_ratio, time_scale, completed};
+after a ``mode move --joints``: move.{final_error_rad, duration_s, max_jerk_ratio, completed}.
 """
 
 from __future__ import annotations
@@ -93,6 +95,11 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
 
         d = system.cfg.drag
         out["drag"] = drag_summary(script, d.damping, d.standstill_speed)
+    pb = tick.playback
+    if pb is not None:
+        fig = pb.figures(system.model, system.group.q)
+        del fig["kind"]
+        out[pb.kind] = fig
     return out
 
 
@@ -148,6 +155,22 @@ def format_summary(s: dict[str, Any]) -> str:
                 f"{1e3 * d['max_speed_mps']:.1f} mm/s, at rest {d['rest_time_ms']:.0f} ms after "
                 f"the push, drift {1e3 * (d['drift_mps'] or 0.0):.2f} mm/s with no push"
             )
+    r = s.get("replay")
+    if r is not None:
+        err = r["max_path_error_mm"]
+        lines.append(
+            f"replay of the taught path: {'' if r['completed'] else 'stopped before the end, '}"
+            f"max tool path error {'n/a' if err is None else f'{err:.2f} mm'}, "
+            f"{r['duration_s']:.2f} s (move to the start + path at time scale "
+            f"{r['time_scale']:.2f}), jerk at {r['max_jerk_ratio']:.3f} of its limit"
+        )
+    m = s.get("move")
+    if m is not None:
+        lines.append(
+            f"move to joint target: {'reached' if m['completed'] else 'stopped before the end'}"
+            f" in {m['duration_s']:.2f} s, final error {m['final_error_rad']:.5f} rad, jerk at "
+            f"{m['max_jerk_ratio']:.3f} of its limit"
+        )
     c, w = s["timing_us"]["compute"], s["timing_us"]["wakeup"]
     lines.append(
         f"tick compute median {c['median']:.0f} µs, p99 {c['p99']:.0f} µs, max {c['max']:.0f} µs"

@@ -18,7 +18,7 @@ from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import State
 from hofto_hw.control.drag import DragController, DragReason
 from hofto_hw.control.enabling import EnableInput
-from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, JointMotion
+from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, PLAYING, JointMotion
 from hofto_hw.model.data import ModelData
 from hofto_hw.observers.base import Observer
 from hofto_hw.recording.record import (
@@ -28,6 +28,7 @@ from hofto_hw.recording.record import (
     new_record,
     tick_dtype,
 )
+from hofto_hw.runtime.teach import FINISHED, RECORDING
 from safety.bus_health import BusHealth
 from safety.collision_levels import CollisionLevels
 from safety.limits import LimitMonitor
@@ -127,6 +128,12 @@ class Tick:
         self.drag_row = int(drag_row)
         self.drag_reason = 0
         self.mode_result = ""  # answer to the last mode request (constant strings)
+        # teach and play (hofto_hw/runtime/teach.py; planned and saved off the tick): the
+        # control thread sets a request before mode_request, the tick takes it on entry
+        self.record_request = None  # Recording for the next drag request (or None)
+        self.recording = None  # the Recording of the drag mode entered with it
+        self.play_request = None  # Playback for the next REPLAY/MOVE_TO request
+        self.playback = None  # the last Playback started (the summary's replay figures)
         self.script = None  # simulation script: .step(tick) at the start of every tick
         self._tau_mon = np.zeros_like(self.tau_ext)  # the collision monitor's input
         self._hand = np.zeros(n)  # the hand's torque at the tool, taken off that input
@@ -217,9 +224,13 @@ class Tick:
             if self._fault_resetting > 0:
                 self._fault_reset_edge()
             motion.start(q)  # targets follow the arm: bumpless when enabled again
+            if self.mode_request >= 0:
+                self._refuse_mode()
         else:
             if cat == 2:
                 motion.ramp_down()
+                if self.mode_request >= 0:
+                    self._refuse_mode()
             elif self.mode_request >= 0:
                 self._change_mode(qd)
             if self.enabling:
@@ -231,6 +242,8 @@ class Tick:
                 np.copyto(motion.qdd, d.qdd_cmd)
             else:
                 motion.update(t, dt)
+        if self.recording is not None or self.playback is not None:
+            self._teach_record(q)
         self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
         if motion.mode == DRAG:
             self.tau_ff += self.drag.tau_offset  # the hand's torque off the drives' offset
@@ -347,11 +360,22 @@ class Tick:
         motion = self.motion
         if want == DRAG:
             self.mode_result = self._enter_drag(qd)
+            self.record_request = None
+        elif want in PLAYING:
+            self.mode_result = self._enter_play(want, qd)
+            self.play_request = None
         elif want == MOVE and motion.mode != DRAG:
             if self.expect_enabled and not self.enabling:
                 motion.move(self.t)
         else:  # hold, or move while dragging: ramp the drag's velocity down first
             motion.ramp_down()
+
+    def _refuse_mode(self) -> None:
+        """A mode request during a stop is answered, not kept for after the reset."""
+        self.mode_request = -1
+        self.record_request = None
+        self.play_request = None
+        self.mode_result = "refused: a fault is latched, reset first"
 
     def _enter_drag(self, qd: np.ndarray) -> str:
         """Drag mode only from standstill, powered, with no latched fault."""
@@ -367,7 +391,43 @@ class Tick:
             return "refused: the arm is not at standstill"
         self.drag.start(motion.q)
         motion.mode = DRAG
+        self.recording = self.record_request
         return "drag"
+
+    def _enter_play(self, want: int, qd: np.ndarray) -> str:
+        """Play the planned trajectory of ``play_request``: from HOLD at standstill, powered,
+        nothing latched, and only if it starts where the hold is (planned from it)."""
+        pb, motion = self.play_request, self.motion
+        if pb is None or pb.mode != want:
+            return "refused: no trajectory planned"
+        if self.stop.latched:
+            return "refused: a fault is latched, reset first"
+        if not self.expect_enabled or self.enabling:
+            return "refused: drives not enabled"
+        np.abs(qd, out=self._d)
+        if motion.mode != HOLD or self._d.max() >= STANDSTILL:
+            return "refused: the arm is not holding at standstill"
+        np.subtract(motion.q, pb.start, out=self._d)
+        np.abs(self._d, out=self._d)
+        if self._d.max() > 1e-9:
+            return "refused: the hold moved while the trajectory was planned; try again"
+        motion.play(pb.player, want)
+        self.playback = pb
+        return "playing"
+
+    def _teach_record(self, q: np.ndarray) -> None:
+        """Taught path while the hand drags (its drag ends: FINISHED, saved off the tick);
+        the measured q of every played tick (the replay figures)."""
+        rec, mode = self.recording, self.motion.mode
+        if rec is not None and rec.state <= RECORDING:
+            if mode == DRAG and self.drag.active:
+                rec.recorder.push(self.t, q)
+                rec.state = RECORDING
+            elif rec.state == RECORDING or mode != DRAG:
+                rec.state = FINISHED
+        pb = self.playback
+        if pb is not None and (mode == pb.mode and self.motion.player is pb.player):
+            pb.executed.push(self.t, q)
 
     def _drag_observe(self, q: np.ndarray, qd: np.ndarray, dt: float) -> None:
         """The drag controller's tick: reads the enabling input, estimates the tool wrench

@@ -149,6 +149,12 @@ def test_run_summary_has_the_drag_keys(tmp_path: Path) -> None:
     assert stops == ["collision", "enabling_released"], stops  # the collision, then the drag
     assert s["observers"]["hofto"] is not None  # the scripted collision's delay survives
     assert "drag: steady tool speed" in r.stdout
+    # run.drag.replay: the path taught from press to release, replayed through the loop
+    rp = s["replay"]
+    assert rp["completed"] is True, rp
+    assert 0.0 < rp["max_path_error_mm"] <= 2.0, rp
+    assert rp["max_jerk_ratio"] <= 1.01, rp
+    assert "replay of the taught path: max tool path error" in r.stdout
 
 
 def test_control_socket_mode_drag_and_enable(cfg: SystemConfig, tmp_path: Path) -> None:
