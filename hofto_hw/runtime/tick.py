@@ -29,7 +29,7 @@ from hofto_hw.recording.record import (
     tick_dtype,
 )
 from safety.bus_health import BusHealth
-from safety.collision_levels import CollisionLevels
+from safety.collision import CollisionLevels
 from safety.limits import LimitMonitor
 from safety.stop import NO_CATEGORY, EventKind, Fault, StopController
 
