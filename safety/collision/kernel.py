@@ -20,10 +20,56 @@ from hofto_hw.observers.kernels import _jit  # one jit policy (cache, read-only 
 S_V_REV, S_TAU_A, S_MOVING_TIME, S_REVERSAL_TIME, S_V_STILL, S_STILL_TIME = 0, 1, 2, 3, 4, 5
 S_ACCEL_LEVEL, S_PHASE_HOLD, S_TRIP_AFTER, S_RELEASE_AFTER, S_RELEASE_RATIO = 6, 7, 8, 9, 10
 S_LOGIC = 11
+N_SCAL = 12
 F_QD_PREV, F_ACCEL, F_MOVING, F_REVERSAL, F_STILL, F_QD_OK = 0, 1, 2, 3, 4, 5
 ST_STARTED, ST_PHASE_LEFT, ST_ACCEL_PHASE = 0, 1, 2
 L_THR, L_RATIO, L_ABOVE, L_BELOW = 0, 1, 2, 3
 LOGIC_ANY, LOGIC_ALL, LOGIC_MEAN = 0, 1, 2
+
+
+@_jit
+def monitor_tick(
+    fbuf: np.ndarray,
+    bbuf: np.ndarray,
+    first_tick: np.ndarray,
+    tau: np.ndarray,
+    qd: np.ndarray,
+    qdd: np.ndarray,
+    dt: float,
+    tick: int,
+) -> None:
+    """One tick on the packed state (safety/collision/state.py MonitorState.fbuf/bbuf):
+    tau (k, n) [N·m], qd (n,) [rad/s], qdd (n,) [rad/s²], dt [s], tick (first crossings)."""
+    k = tau.shape[0]
+    n = qd.shape[0]
+    per_level = 6 * k * n + 4 * (k + 1) * n
+    L = (fbuf.shape[0] - N_SCAL - 6 * n - 3) // per_level
+    a = 0
+    par = fbuf[a : a + L * 6 * k * n].reshape((L, 6, k, n))
+    a += L * 6 * k * n
+    scal = fbuf[a : a + N_SCAL]
+    a += N_SCAL
+    feat = fbuf[a : a + 6 * n].reshape((6, n))
+    a += 6 * n
+    sst = fbuf[a : a + 3]
+    a += 3
+    lev = fbuf[a : a + L * 4 * (k + 1) * n].reshape((L, 4, k + 1, n))
+    b = 0
+    deciding = bbuf[b : b + k]
+    b += k
+    joints = bbuf[b : b + L * (k + 1) * n].reshape((L, k + 1, n))
+    b += L * (k + 1) * n
+    bad = bbuf[b : b + (k + 3) * n].reshape((k + 3, n))
+    b += (k + 3) * n
+    row_hit = bbuf[b : b + L * (k + 1)].reshape((L, k + 1))
+    b += L * (k + 1)
+    level_joints = bbuf[b : b + L * n].reshape((L, n))
+    b += L * n
+    hits = bbuf[b : b + L + 1]
+    monitor_step(
+        par, scal, deciding, feat, sst, lev, joints, bad, row_hit, level_joints, hits,
+        first_tick, tau, qd, qdd, dt, tick,
+    )  # fmt: skip
 
 
 @_jit

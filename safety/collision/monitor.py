@@ -10,7 +10,7 @@ import numpy as np
 
 from hofto_hw.observers import kernels
 from safety.collision import params as P
-from safety.collision.kernel import monitor_step as _kernel
+from safety.collision.kernel import monitor_tick as _kernel
 from safety.collision.params import MonitorParams
 from safety.collision.reference import NumpyStep
 from safety.collision.state import F_ACCEL, F_MOVING, F_REVERSAL, F_STILL, MonitorState
@@ -80,7 +80,10 @@ class CollisionLevels:
         self.deciding = p.deciding
         self.logic = p.logic
         self.v_rev = float(p.scal[P.S_V_REV])
-        self.state = s = MonitorState(L, k, n)
+        self.state = s = MonitorState(L, k, n, P.N_SCAL)
+        np.copyto(s.par, p.par)
+        np.copyto(s.scal, p.scal)
+        np.copyto(s.deciding, p.deciding)
         self._numpy = NumpyStep(p, s)
         self.tool_force = tool_force
         self.tool_force_value = 0.0
@@ -158,11 +161,8 @@ class CollisionLevels:
         recorded in ``first_tick``. Returns ``collision``."""
         qdd = self._zero_qdd if qdd_ref is None else qdd_ref
         if self._use_kernel:
-            s, p = self.state, self.params
-            _kernel(
-                p.par, p.scal, p.deciding, s.feat, s.sst, s.lev, s.joints, s.bad, s.row_hit,
-                s.level_joints, s.hits, s.first_tick, tau_ext, qd, qdd, dt, tick,
-            )  # fmt: skip
+            s = self.state
+            _kernel(s.fbuf, s.bbuf, s.first_tick, tau_ext, qd, qdd, dt, tick)
         else:
             self._numpy(tau_ext, qd, qdd, dt, tick)
         return bool(self._hits[self.L - 1])
@@ -220,9 +220,9 @@ class CollisionLevels:
         """Compile the kernel on scratch state (the real state stays untouched)."""
         p = self.params
         L, _, k, n = p.par.shape
-        s = MonitorState(L, k, n)
+        s = MonitorState(L, k, n, P.N_SCAL)
+        np.copyto(s.par, p.par)
+        np.copyto(s.scal, p.scal)
+        np.copyto(s.deciding, p.deciding)
         z = np.zeros(n)
-        _kernel(
-            p.par, p.scal, p.deciding, s.feat, s.sst, s.lev, s.joints, s.bad, s.row_hit,
-            s.level_joints, s.hits, s.first_tick, np.zeros((k, n)), z, z, 1e-3, 0,
-        )  # fmt: skip
+        _kernel(s.fbuf, s.bbuf, s.first_tick, np.zeros((k, n)), z, z, 1e-3, 0)

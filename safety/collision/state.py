@@ -31,17 +31,36 @@ L_THR, L_RATIO, L_ABOVE, L_BELOW = range(4)
 
 
 class MonitorState:
-    """See the module docstring."""
+    """See the module docstring. Every float array (with a copy of the constant ``par`` (L, 6,
+    k, n) and ``scal``) is a view of one buffer ``fbuf``, every bool array (with a copy of
+    ``deciding`` (k,)) a view of ``bbuf``: the compiled kernel then takes two arrays instead of
+    fifteen (numba's per-argument call cost dominates a tick this small)."""
 
-    def __init__(self, levels: int, k: int, n: int) -> None:
-        self.feat = np.zeros((6, n))
-        self.sst = np.zeros(3)
-        self.lev = np.zeros((levels, 4, k + 1, n))
-        self.joints = np.zeros((levels, k + 1, n), dtype=bool)
-        self.bad = np.zeros((k + 3, n), dtype=bool)
-        self.row_hit = np.zeros((levels, k + 1), dtype=bool)
-        self.level_joints = np.zeros((levels, n), dtype=bool)
-        self.hits = np.zeros(levels + 1, dtype=bool)
+    def __init__(self, levels: int, k: int, n: int, n_scal: int = 12) -> None:
+        L = levels
+        fshapes = {
+            "par": (L, 6, k, n),
+            "scal": (n_scal,),
+            "feat": (6, n),
+            "sst": (3,),
+            "lev": (L, 4, k + 1, n),
+        }
+        bshapes = {
+            "deciding": (k,),
+            "joints": (L, k + 1, n),
+            "bad": (k + 3, n),
+            "row_hit": (L, k + 1),
+            "level_joints": (L, n),
+            "hits": (L + 1,),
+        }
+        self.fbuf = np.zeros(sum(int(np.prod(v)) for v in fshapes.values()))
+        self.bbuf = np.zeros(sum(int(np.prod(v)) for v in bshapes.values()), dtype=bool)
+        for buf, shapes in ((self.fbuf, fshapes), (self.bbuf, bshapes)):
+            at = 0
+            for name, shape in shapes.items():
+                size = int(np.prod(shape))
+                setattr(self, name, buf[at : at + size].reshape(shape))
+                at += size
         self.first_tick = np.full(k, -1, dtype=np.int64)
 
     def reset(self, par: np.ndarray, qd: np.ndarray | None, v_rev: float) -> None:

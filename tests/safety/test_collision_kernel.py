@@ -161,6 +161,7 @@ def test_kernel_indices_match_the_layouts() -> None:
         S.ST_ACCEL_PHASE,
     )
     assert (K.L_THR, K.L_RATIO, K.L_ABOVE, K.L_BELOW) == (S.L_THR, S.L_RATIO, S.L_ABOVE, S.L_BELOW)
+    assert K.N_SCAL == P.N_SCAL
     assert [K.LOGIC_ANY, K.LOGIC_ALL, K.LOGIC_MEAN] == [P.LOGICS.index(x) for x in P.LOGICS]
 
 
