@@ -137,7 +137,8 @@ def monitor_step(
         else:
             s = feat[F_STILL, j]
             feat[F_STILL, j] = min(now, (now - s) * rise + s)
-    # ---- non-finite estimates
+    # ---- non-finite estimates (the fused row's only for the mean fusion)
+    logic = int(scal[S_LOGIC])
     any_bad = False
     for j in range(n):
         nf = bad[k + 1, j]
@@ -148,7 +149,7 @@ def monitor_step(
             nf = nf or b
             if deciding[r]:
                 bf = bf or b
-        bad[k, j] = bf
+        bad[k, j] = bf and logic == LOGIC_MEAN
         bad[k + 2, j] = nf
         any_bad = any_bad or nf
     hits[L] = any_bad
@@ -164,7 +165,6 @@ def monitor_step(
     phase = 1 if sst[ST_PHASE_LEFT] > 0.0 else 0
     sst[ST_ACCEL_PHASE] = phase
     # ---- thresholds, ratios, fused row, debounce and hysteresis
-    logic = int(scal[S_LOGIC])
     trip_after = scal[S_TRIP_AFTER]
     release_after = scal[S_RELEASE_AFTER]
     release_ratio = scal[S_RELEASE_RATIO]

@@ -62,6 +62,7 @@ class NumpyStep:
         self.release_after = float(sc[S_RELEASE_AFTER])
         self.release_ratio = float(sc[S_RELEASE_RATIO])
         self.logic = LOGICS[int(sc[S_LOGIC])]
+        self.phased = self.accel_level != math.inf  # thresholds-file monitors have one phase
         self.dec = [r for r in range(k) if p.deciding[r]]
         f = s.feat
         self.qd_prev, self.accel, self.moving = f[F_QD_PREV], f[F_ACCEL], f[F_MOVING]
@@ -101,6 +102,9 @@ class NumpyStep:
             s.sst[ST_STARTED] = 1.0
         qd_ok = self.qd_ok
         np.copyto(qd_ok, qd)
+        if not bad.any():  # the common case: nothing to hold
+            self._advance(qd_ok, dt)
+            return
         np.copyto(qd_ok, self.qd_prev, where=bad)
         saved = self.saved
         np.copyto(saved[0], self.accel)
@@ -162,14 +166,19 @@ class NumpyStep:
         np.logical_not(bad_tau, out=bad_tau)
         np.logical_or.reduce(bad_tau, axis=0, out=self.nonfinite)
         np.logical_or(self.nonfinite, self.bad_qd, out=self.nonfinite)
-        s.hits[L] = self.nonfinite.any()
-        self.bad_fused.fill(False)
-        for r in self.dec:
-            np.logical_or(self.bad_fused, bad_tau[r], out=self.bad_fused)
+        any_bad = bool(self.nonfinite.any())
+        s.hits[L] = any_bad
+        if self.logic == "mean":
+            self.bad_fused.fill(False)
+            for r in self.dec:
+                np.logical_or(self.bad_fused, bad_tau[r], out=self.bad_fused)
         # phase: acceleration while any |qdd_ref| > level, and phase_hold after
-        np.abs(qdd, out=self.tmp)
-        np.greater(self.tmp, self.accel_level, out=self.mask)
-        if self.mask.any():
+        fast = False
+        if self.phased:
+            np.abs(qdd, out=self.tmp)
+            np.greater(self.tmp, self.accel_level, out=self.mask)
+            fast = bool(self.mask.any())
+        if fast:
             s.sst[ST_PHASE_LEFT] = self.phase_hold
         else:
             s.sst[ST_PHASE_LEFT] -= dt
@@ -189,7 +198,8 @@ class NumpyStep:
         thr += t
         # ratios (0 where the estimate is not finite), the fused mean row
         np.abs(tau, out=self.tmp_kn)
-        np.copyto(self.tmp_kn, 0.0, where=bad_tau)
+        if any_bad:
+            np.copyto(self.tmp_kn, 0.0, where=bad_tau)
         np.divide(self.tmp_kn, thr, out=self.ratio_rows)
         if self.logic == "mean":
             fused = self.fused
@@ -200,16 +210,18 @@ class NumpyStep:
             np.copyto(fused, 0.0, where=self.bad_fused)
         # debounce and hysteresis; a non-finite estimate neither trips nor releases
         above, below, m, saved = self.above, self.below, self.m_lkn, self.saved_time
-        np.copyto(saved[0], above)
-        np.copyto(saved[1], below)
+        if any_bad:
+            np.copyto(saved[0], above)
+            np.copyto(saved[1], below)
         np.greater(self.ratio, 1.0, out=m)
         above += dt
         above *= m
         np.less(self.ratio, self.release_ratio, out=m)
         below += dt
         below *= m
-        np.copyto(above, saved[0], where=self.bad_rows)
-        np.copyto(below, saved[1], where=self.bad_rows)
+        if any_bad:
+            np.copyto(above, saved[0], where=self.bad_rows)
+            np.copyto(below, saved[1], where=self.bad_rows)
         joints = s.joints
         np.greater_equal(above, self.trip_after, out=m)
         np.logical_or(joints, m, out=joints)
