@@ -6,7 +6,8 @@ Cases (six joints): ``loop`` = the loop's monitor from configs/er3a.yaml ``safet
 (contact + collision levels, hofto + momentum rows) through ``update(stop, ...)`` as the tick
 calls it; ``loop_mean`` the same with ``logic: mean`` and full threshold terms;
 ``thresholds`` = the one-row CollisionMonitor of configs/ur10e/thresholds.yaml (momentum) as
-replay calls it; ``tool_force`` = ``loop`` with the tool-force limit on. Inputs: a slow motion
+replay calls it; ``tool_force`` = ``loop`` with the tool-force limit on (the loop cases include
+the stop controller's begin_tick and its reports, as in the tick). Inputs: a slow motion
 with noise and occasional contacts (trips and releases happen). Prints median / p99 [µs] per
 update, the allocation per update (tracemalloc, bytes of growth over all updates) and the
 compile time of the kernel. Figures only: no timing is asserted anywhere.

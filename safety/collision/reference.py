@@ -1,6 +1,6 @@
 """The numpy reference implementation of one monitor tick (allocation-free: every array is
 preallocated and written with ``out=``). safety/collision/kernel.py is its compiled twin;
-tests/safety/test_collision_kernel.py checks that both agree."""
+tests/safety/collision/test_kernel.py checks that both agree."""
 
 from __future__ import annotations
 

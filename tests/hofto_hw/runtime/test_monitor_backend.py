@@ -1,5 +1,5 @@
 """The loop runs the one collision monitor (safety/collision/) on the compiled path when numba
-is there (issue 12); tests/safety/test_collision_kernel.py checks both paths agree."""
+is there (issue 12); tests/safety/collision/test_kernel.py checks both paths agree."""
 
 from __future__ import annotations
 
