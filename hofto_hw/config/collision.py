@@ -63,12 +63,13 @@ class ThresholdTerms(FileModel):
         """Number of joints (the length of the base thresholds)."""
         raise NotImplementedError
 
-    def _check_terms(self) -> None:
+    def _check_terms(self, against: str) -> None:
+        """Every per-joint list has as many entries as ``against`` (the field giving n)."""
         n = self.joints()
         for name in TERM_LISTS:
             v = getattr(self, name)
             if v is not None and len(v) != n:
-                raise ValueError(f"{name} has {len(v)} entries, base has {n} (one per joint)")
+                raise ValueError(f"{name} has {len(v)} entries, {against} has {n} (one per joint)")
 
 
 class CollisionConfig(ThresholdTerms):
@@ -85,5 +86,5 @@ class CollisionConfig(ThresholdTerms):
 
     @model_validator(mode="after")
     def _lengths(self) -> CollisionConfig:
-        self._check_terms()
+        self._check_terms("base")
         return self

@@ -121,7 +121,7 @@ class CollisionLevelsConfig(ThresholdTerms):
         n = len(self.collision.nominal)
         if len(self.contact.nominal) != n:
             raise ValueError(f"contact has {len(self.contact.nominal)} joints, collision has {n}")
-        self._check_terms()
+        self._check_terms("collision.nominal")
         for phase in ("nominal", "acceleration"):
             lo, hi = getattr(self.contact, phase), getattr(self.collision, phase)
             bad = [j for j in range(n) if lo[j] > hi[j]]

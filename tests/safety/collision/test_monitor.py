@@ -7,6 +7,7 @@ import tracemalloc
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.safety import CollisionLevelsConfig, StopCategories
@@ -181,3 +182,11 @@ def test_tool_force_check_allocates_nothing(er3a_model) -> None:
     grown = tracemalloc.get_traced_memory()[1] - before
     tracemalloc.stop()
     assert grown < 4000  # bytes: transient pinocchio/LAPACK temporaries, no array per tick
+
+
+def test_levels_config_checks_the_new_terms_and_logics() -> None:
+    with pytest.raises(ValidationError, match=r"reversal_margin has 1 entries, collision\.nominal"):
+        _levels(reversal_margin=[1.0])
+    with pytest.raises(ValidationError, match="logic"):
+        _levels(logic="median")
+    assert _levels(logic="mean", standstill_margin=[1.0, 2.0]).logic == "mean"
