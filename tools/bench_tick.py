@@ -3,7 +3,7 @@
     python tools/bench_tick.py [--config configs/er3a.yaml] [--quick] [--json]
 
 One tick: DriveGroup.read (TxPDO -> SI) -> DynamicsSnapshot.compute -> HOFTO (n = 2) and
-momentum observer (update_snapshot) -> CollisionMonitor (safety/collision.py as it is) ->
+momentum observer (update_snapshot) -> CollisionMonitor (safety/collision/, same backend) ->
 command (CSP hold). The SimBus exchange (plant + emulated drives) runs before each tick but is
 not part of it (on hardware the bus does that work); its cost is printed separately.
 
@@ -15,8 +15,8 @@ Figures (µs; median / p99 / p99.9):
 - ratio of the tick's median to the floor;
 - tracemalloc over 10,000 ticks after warm-up (growth) and the transient peak of each part;
 - start-up: compiling the kernels cold (empty NUMBA_CACHE_DIR) and from the cache;
-- a compiled prototype of the collision monitor's arithmetic (here only, safety/ untouched),
-  checked against CollisionMonitor on the same inputs, to show what a lean monitor saves.
+- the collision monitor's compiled kernel checked against its numpy reference on the same
+  inputs, timed side by side (tools/bench_monitor.py times the loop's two-level monitor).
 The machine is shared and noisy: compare medians and ratios, not single runs.
 """
 
@@ -130,7 +130,7 @@ class Rig:
         self.momentum = make_observer(mcfg, model, backend=backend)
         self.backend = self.hofto.backend
         self.snap = DynamicsSnapshot(model, self.hofto.needs | self.momentum.needs, self.backend)
-        self.monitor = CollisionMonitor(make_collision_config(n))
+        self.monitor = CollisionMonitor(make_collision_config(n), backend=self.backend)
         self.hofto.reset(g.q, g.qd)
         self.momentum.reset(g.q, g.qd)
         self.monitor.reset(g.qd)
@@ -352,32 +352,17 @@ def startup(config: Path) -> dict:
 
 
 def monitor_prototype(rig: Rig, ticks: int) -> dict:
-    """Compiled prototype of CollisionMonitor.update (same arithmetic), checked against the
-    monitor on the rig's samples, timed next to it. Nothing in safety/ changes."""
+    """The monitor's compiled kernel (safety/collision/kernel.py) against its numpy reference
+    on the rig's samples, timed side by side (keys kept from the prototype's time)."""
     from hofto_hw.observers import kernels
     from safety.collision import CollisionMonitor
 
     if not kernels.available():
         return {"available": False}
-    from tools_monitor_kernel import monitor_update
-
     cfg = make_collision_config(rig.model.n)
-    ref = CollisionMonitor(cfg)
+    ref = CollisionMonitor(cfg, backend="numpy")
+    new = CollisionMonitor(cfg, backend="numba")
     n = rig.model.n
-    st = np.zeros((9, n))  # accel, moving, reversal, qd_prev, above, below, joints, thr, ratio
-    par = np.vstack([ref.base, ref.kv, ref.ka, ref.kr])
-    scal = np.array(
-        [
-            ref.v_rev,
-            1.0 / (2.0 * math.pi * cfg.accel_filter_hz),
-            cfg.moving_time,
-            cfg.reversal_time,
-            cfg.release_ratio,
-            ref._trip_after,
-            ref._release_after,
-        ]
-    )
-    started = np.zeros(1)
     rng = np.random.default_rng(0)
     samples = []
     for k in range(ticks):
@@ -389,9 +374,9 @@ def monitor_prototype(rig: Rig, ticks: int) -> dict:
     mismatch = 0
     for tau, qd in samples:
         d_ref = ref.update(tau, qd, rig.dt)
-        d_new = monitor_update(st, par, scal, started, tau, qd, rig.dt)
-        worst = max(worst, float(np.abs(st[7] - ref.threshold).max()))
-        mismatch += int(bool(d_new) != d_ref or not np.array_equal(st[6] != 0, ref.joints))
+        d_new = new.update(tau, qd, rig.dt)
+        worst = max(worst, float(np.abs(new.threshold - ref.threshold).max()))
+        mismatch += int(d_new != d_ref or not np.array_equal(new.joints, ref.joints))
     clock = time.perf_counter_ns
     t_ref = np.zeros(ticks)
     t_new = np.zeros(ticks)
@@ -400,7 +385,7 @@ def monitor_prototype(rig: Rig, ticks: int) -> dict:
         t0 = clock()
         ref.update(tau, qd, rig.dt)
         t1 = clock()
-        monitor_update(st, par, scal, started, tau, qd, rig.dt)
+        new.update(tau, qd, rig.dt)
         t2 = clock()
         t_ref[k], t_new[k] = t1 - t0, t2 - t1
     gc.enable()

@@ -17,6 +17,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from hofto_hw.config.base import FileModel
+from hofto_hw.config.collision import ThresholdTerms
 from hofto_hw.config.payload import PayloadConfig
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -85,39 +86,42 @@ class ThresholdSet(FileModel):
         return self
 
 
-class CollisionLevelsConfig(FileModel):
+class CollisionLevelsConfig(ThresholdTerms):
     """Two-level collision detection on the estimated external torque (see
-    safety/collision_levels.py).
+    safety/collision/__init__.py, the one monitor replay and the loop share).
 
     ``contact``: reported, clears itself; ``collision``: a stop (latched by the stop
-    controller). Each level's effective threshold is its phase's value plus
-    ``velocity_gain``·|qd|; the acceleration phase holds while any joint's reference
-    acceleration exceeds ``acceleration_phase`` [rad/s²] and ``phase_hold`` [s] after.
+    controller). Each level's effective threshold is its phase's value plus the terms of
+    :class:`~hofto_hw.config.collision.ThresholdTerms` (``velocity_gain``·|qd| and, when
+    given, acceleration, reversal and standstill terms; shared by both levels); the
+    acceleration phase holds while any joint's reference acceleration exceeds
+    ``acceleration_phase`` [rad/s²] and ``phase_hold`` [s] after.
     ``observer``: which estimate decides; ``both`` combines hofto and momentum with
-    ``logic`` (any: the first to cross; all: both must cross).
-    ``tool_force`` [N]: optional limit on the tool force F = J⁺ᵀ·tau_ext (allocates a few
-    small arrays per tick in pinocchio; off by default).
+    ``logic`` (any: the first to cross; all: both must cross; mean: the mean of their
+    ratios |tau_ext|/threshold must cross).
+    ``tool_force`` [N]: optional limit on the tool force |F| of the damped
+    F = (Jᵀ)⁺·tau_ext of the first deciding observer (off by default).
     """
 
     observer: Literal["hofto", "momentum", "both"] = "hofto"
-    logic: Literal["any", "all"] = "any"
+    logic: Literal["any", "all", "mean"] = "any"
     contact: ThresholdSet
     collision: ThresholdSet
-    velocity_gain: list[NonNeg] | None = None
     acceleration_phase: Positive = 2.0
     phase_hold: NonNeg = 0.1
     debounce_time: NonNeg = 0.0
-    release_ratio: Annotated[float, Field(gt=0.0, le=1.0)] = 0.8
     release_time: NonNeg = 0.05
     tool_force: Positive | None = None
+
+    def joints(self) -> int:
+        return len(self.collision.nominal)
 
     @model_validator(mode="after")
     def _check(self) -> CollisionLevelsConfig:
         n = len(self.collision.nominal)
         if len(self.contact.nominal) != n:
             raise ValueError(f"contact has {len(self.contact.nominal)} joints, collision has {n}")
-        if self.velocity_gain is not None and len(self.velocity_gain) != n:
-            raise ValueError(f"velocity_gain has {len(self.velocity_gain)} entries, expected {n}")
+        self._check_terms("collision.nominal")
         for phase in ("nominal", "acceleration"):
             lo, hi = getattr(self.contact, phase), getattr(self.collision, phase)
             bad = [j for j in range(n) if lo[j] > hi[j]]

@@ -150,8 +150,7 @@ def make_detector(log: FlightLog, setup: RunSetup) -> Detector:
     (metadata) with its thresholds-file monitor; else, for logs of ``hofto-hw run`` (which
     record ``monitored`` and ``qdd_cmd``), the two-level CollisionLevels of
     ``safety.collision`` over every loop observer; else the config's ``collision`` section."""
-    from safety.collision import CollisionMonitor
-    from safety.collision_levels import CollisionLevels
+    from safety.collision import CollisionLevels, CollisionMonitor
 
     name = log.metadata.get("detector") or (log.observers[0] if log.observers else "")
     th = setup.thresholds
@@ -160,7 +159,9 @@ def make_detector(log: FlightLog, setup: RunSetup) -> Detector:
     levels_cfg = setup.config.safety.collision
     if levels_cfg is not None and log.monitored is not None:
         try:
-            levels = CollisionLevels(levels_cfg, log.observers, loop_model(setup))
+            levels = CollisionLevels(
+                levels_cfg, log.observers, loop_model(setup), backend=recorded_backend(log)
+            )
         except ValueError as exc:
             raise UserError(f"{log.path}: safety.collision: {exc}") from None
         return Detector(levels_cfg.observer, levels)
@@ -235,7 +236,7 @@ def recorded_backend(log: FlightLog) -> kernels.Backend:
 
 def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
     """Replay every recorded observer and the detector's monitor; compare with the log."""
-    from safety.collision_levels import CollisionLevels
+    from safety.collision import CollisionLevels
 
     setup = run_setup(log)
     det = detector_factory(log, setup)

@@ -33,7 +33,7 @@ from hofto_hw.runtime.build import build_drive_group, build_sim_bus, build_trans
 from hofto_hw.runtime.loop import Loop, RealClock, SimClock
 from hofto_hw.runtime.tick import Tick
 from safety.bus_health import BusHealth
-from safety.collision_levels import CollisionLevels
+from safety.collision import CollisionLevels
 from safety.limits import LimitMonitor
 from safety.stop import StopController
 
@@ -145,7 +145,7 @@ def build(
         int(State.OPERATION_ENABLED),
         (int(State.FAULT_REACTION_ACTIVE), int(State.FAULT), int(State.UNKNOWN)),
     )
-    collision = CollisionLevels(s.collision, names, model) if s.collision else None
+    collision = CollisionLevels(s.collision, names, model, backend=backend) if s.collision else None
     accel = np.where(np.isfinite(model.limits.acceleration), model.limits.acceleration, 10.0)
     p = cfg.run.path
     path = DemoPath(p.amplitude, p.period, p.phase, p.ramp) if p is not None else None

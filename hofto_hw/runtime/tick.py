@@ -30,7 +30,7 @@ from hofto_hw.recording.record import (
 )
 from hofto_hw.runtime.teach import FINISHED, RECORDING
 from safety.bus_health import BusHealth
-from safety.collision_levels import CollisionLevels
+from safety.collision import CollisionLevels
 from safety.limits import LimitMonitor
 from safety.stop import NO_CATEGORY, EventKind, Fault, StopController
 

@@ -10,7 +10,7 @@ import pytest
 from pydantic import ValidationError
 
 from hofto_hw.config.safety import CollisionLevelsConfig, StopCategories
-from safety.collision_levels import CollisionLevels
+from safety.collision import CollisionLevels
 from safety.stop import EventKind, Fault, StopController
 
 DT = 1e-3
@@ -86,8 +86,11 @@ def test_non_finite_estimate_does_not_poison() -> None:
     _run(mon, stop, [[6.0, 0.0]])
     assert mon.collision  # no state was poisoned
     mon2 = CollisionLevels(_cfg(), ["hofto"])
-    _run(mon2, StopController.from_config(StopCategories()), [[0.0, np.inf]])
-    assert mon2.collision and mon2.collision_joints[1]  # inf is above any threshold
+    stop2 = StopController.from_config(StopCategories())
+    _run(mon2, stop2, [[0.0, np.inf]])
+    # one monitor with CollisionMonitor's rule (issue 11): an infinite estimate is the
+    # NON_FINITE fault (category 0 by default, stronger than a collision stop), not a ratio
+    assert stop2.is_latched(Fault.NON_FINITE) and mon2.nonfinite[1] and not mon2.collision
 
 
 def test_config_checks() -> None:

@@ -1,0 +1,233 @@
+"""The compiled twin of safety/collision/reference.py: one monitor tick in one call (numba).
+
+Same arithmetic in the same order as the numpy reference, joint by joint (no fastmath, so no
+fused multiply-add); exp may differ from numpy's by an ulp on some machines (bit-identical
+here), so the test allows 1e-12 (tests/safety/collision/test_kernel.py). Writes only into
+the arrays passed in; allocates nothing. The compilation conventions (``cache=True``,
+warmed when the monitor is built, numpy fallback, HOFTO_HW_NO_NUMBA) are the observers'
+(hofto_hw/observers/kernels.py).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hofto_hw.observers.kernels import _jit  # one jit policy (cache, read-only fallback)
+
+# indices repeated from params.py / state.py as plain ints (numba reads module globals as
+# compile-time constants); tests/safety/collision/test_kernel.py checks they agree
+S_V_REV, S_TAU_A, S_MOVING_TIME, S_REVERSAL_TIME, S_V_STILL, S_STILL_TIME = 0, 1, 2, 3, 4, 5
+S_ACCEL_LEVEL, S_PHASE_HOLD, S_TRIP_AFTER, S_RELEASE_AFTER, S_RELEASE_RATIO = 6, 7, 8, 9, 10
+S_LOGIC = 11
+N_SCAL = 12
+F_QD_PREV, F_ACCEL, F_MOVING, F_REVERSAL, F_STILL, F_QD_OK = 0, 1, 2, 3, 4, 5
+ST_STARTED, ST_PHASE_LEFT, ST_ACCEL_PHASE = 0, 1, 2
+L_THR, L_RATIO, L_ABOVE, L_BELOW = 0, 1, 2, 3
+LOGIC_ANY, LOGIC_ALL, LOGIC_MEAN = 0, 1, 2
+
+
+@_jit
+def monitor_tick(
+    fbuf: np.ndarray,
+    bbuf: np.ndarray,
+    first_tick: np.ndarray,
+    tau: np.ndarray,
+    qd: np.ndarray,
+    qdd: np.ndarray,
+    dt: float,
+    tick: int,
+) -> None:
+    """One tick on the packed state (safety/collision/state.py MonitorState.fbuf/bbuf):
+    tau (k, n) [N·m], qd (n,) [rad/s], qdd (n,) [rad/s²], dt [s], tick (first crossings)."""
+    k = tau.shape[0]
+    n = qd.shape[0]
+    per_level = 6 * k * n + 4 * (k + 1) * n
+    L = (fbuf.shape[0] - N_SCAL - 6 * n - 3) // per_level
+    a = 0
+    par = fbuf[a : a + L * 6 * k * n].reshape((L, 6, k, n))
+    a += L * 6 * k * n
+    scal = fbuf[a : a + N_SCAL]
+    a += N_SCAL
+    feat = fbuf[a : a + 6 * n].reshape((6, n))
+    a += 6 * n
+    sst = fbuf[a : a + 3]
+    a += 3
+    lev = fbuf[a : a + L * 4 * (k + 1) * n].reshape((L, 4, k + 1, n))
+    b = 0
+    deciding = bbuf[b : b + k]
+    b += k
+    joints = bbuf[b : b + L * (k + 1) * n].reshape((L, k + 1, n))
+    b += L * (k + 1) * n
+    bad = bbuf[b : b + (k + 3) * n].reshape((k + 3, n))
+    b += (k + 3) * n
+    row_hit = bbuf[b : b + L * (k + 1)].reshape((L, k + 1))
+    b += L * (k + 1)
+    level_joints = bbuf[b : b + L * n].reshape((L, n))
+    b += L * n
+    hits = bbuf[b : b + L + 1]
+    monitor_step(
+        par, scal, deciding, feat, sst, lev, joints, bad, row_hit, level_joints, hits,
+        first_tick, tau, qd, qdd, dt, tick,
+    )  # fmt: skip
+
+
+@_jit
+def monitor_step(
+    par: np.ndarray,
+    scal: np.ndarray,
+    deciding: np.ndarray,
+    feat: np.ndarray,
+    sst: np.ndarray,
+    lev: np.ndarray,
+    joints: np.ndarray,
+    bad: np.ndarray,
+    row_hit: np.ndarray,
+    level_joints: np.ndarray,
+    hits: np.ndarray,
+    first_tick: np.ndarray,
+    tau: np.ndarray,
+    qd: np.ndarray,
+    qdd: np.ndarray,
+    dt: float,
+    tick: int,
+) -> None:
+    """One tick; arrays as in safety/collision/state.py and params.py."""
+    L = par.shape[0]
+    k = par.shape[2]
+    n = par.shape[3]
+    # ---- features (joints with a non-finite qd keep accel/moving/reversal)
+    if sst[ST_STARTED] == 0.0:
+        for j in range(n):
+            feat[F_QD_PREV, j] = qd[j] if math.isfinite(qd[j]) else 0.0
+        sst[ST_STARTED] = 1.0
+    v_rev = scal[S_V_REV]
+    alpha = dt / (scal[S_TAU_A] + dt)
+    inv_dt = 1.0 / dt
+    inv_v_rev = 1.0 / v_rev
+    inv_v_still = 1.0 / scal[S_V_STILL]
+    decay_moving = math.exp(-dt / scal[S_MOVING_TIME])
+    decay_rev = math.exp(-dt / scal[S_REVERSAL_TIME])
+    T = scal[S_STILL_TIME]
+    rise = 1.0 - math.exp(-dt / T) if T > 0.0 else 1.0
+    for j in range(n):
+        bq = not math.isfinite(qd[j])
+        bad[k + 1, j] = bq
+        v = feat[F_QD_PREV, j] if bq else qd[j]
+        feat[F_QD_OK, j] = v
+        x = (v - feat[F_QD_PREV, j]) * inv_dt
+        x = x - feat[F_ACCEL, j]
+        x = x * alpha
+        accel = feat[F_ACCEL, j] + x
+        feat[F_QD_PREV, j] = v
+        moving = feat[F_MOVING, j] * decay_moving
+        if abs(v) > v_rev:
+            moving = max(moving, 1.0)
+        y = v * inv_v_rev
+        rev_now = math.exp(-(y * y)) * moving
+        rev = max(feat[F_REVERSAL, j] * decay_rev, rev_now)
+        if not bq:
+            feat[F_ACCEL, j] = accel
+            feat[F_MOVING, j] = moving
+            feat[F_REVERSAL, j] = rev
+        z = v * inv_v_still
+        now = math.exp(-(z * z))
+        if T <= 0.0:
+            feat[F_STILL, j] = now
+        else:
+            s = feat[F_STILL, j]
+            feat[F_STILL, j] = min(now, (now - s) * rise + s)
+    # ---- non-finite estimates (the fused row's only for the mean fusion)
+    logic = int(scal[S_LOGIC])
+    any_bad = False
+    for j in range(n):
+        nf = bad[k + 1, j]
+        bf = False
+        for r in range(k):
+            b = not math.isfinite(tau[r, j])
+            bad[r, j] = b
+            nf = nf or b
+            if deciding[r]:
+                bf = bf or b
+        bad[k, j] = bf and logic == LOGIC_MEAN
+        bad[k + 2, j] = nf
+        any_bad = any_bad or nf
+    hits[L] = any_bad
+    # ---- phase
+    fast = False
+    for j in range(n):
+        if abs(qdd[j]) > scal[S_ACCEL_LEVEL]:
+            fast = True
+    if fast:
+        sst[ST_PHASE_LEFT] = scal[S_PHASE_HOLD]
+    else:
+        sst[ST_PHASE_LEFT] -= dt
+    phase = 1 if sst[ST_PHASE_LEFT] > 0.0 else 0
+    sst[ST_ACCEL_PHASE] = phase
+    # ---- thresholds, ratios, fused row, debounce and hysteresis
+    trip_after = scal[S_TRIP_AFTER]
+    release_after = scal[S_RELEASE_AFTER]
+    release_ratio = scal[S_RELEASE_RATIO]
+    n_dec = 0
+    for r in range(k):
+        if deciding[r]:
+            n_dec += 1
+    for lv in range(L):
+        for j in range(n):
+            aq = abs(feat[F_QD_OK, j])
+            aa = abs(feat[F_ACCEL, j])
+            fused = 0.0
+            for r in range(k):
+                t = aq * par[lv, 2, r, j]
+                t = t + par[lv, phase, r, j]
+                t = t + aa * par[lv, 3, r, j]
+                t = t + feat[F_REVERSAL, j] * par[lv, 4, r, j]
+                t = t + feat[F_STILL, j] * par[lv, 5, r, j]
+                lev[lv, L_THR, r, j] = t
+                a = 0.0 if bad[r, j] else abs(tau[r, j])
+                ratio = a / t
+                lev[lv, L_RATIO, r, j] = ratio
+                if deciding[r]:
+                    fused += ratio
+            if logic == LOGIC_MEAN:
+                fused = fused / n_dec
+                lev[lv, L_RATIO, k, j] = 0.0 if bad[k, j] else fused
+            for r in range(k + 1):
+                if not bad[r, j]:
+                    ratio = lev[lv, L_RATIO, r, j]
+                    above = lev[lv, L_ABOVE, r, j] + dt
+                    lev[lv, L_ABOVE, r, j] = above if ratio > 1.0 else 0.0
+                    below = lev[lv, L_BELOW, r, j] + dt
+                    lev[lv, L_BELOW, r, j] = below if ratio < release_ratio else 0.0
+                on = joints[lv, r, j] or lev[lv, L_ABOVE, r, j] >= trip_after
+                joints[lv, r, j] = on and not lev[lv, L_BELOW, r, j] >= release_after
+    # ---- decisions and first crossings
+    for lv in range(L):
+        for r in range(k + 1):
+            h = False
+            for j in range(n):
+                h = h or joints[lv, r, j]
+            row_hit[lv, r] = h
+        if logic == LOGIC_MEAN:
+            hits[lv] = row_hit[lv, k]
+            for j in range(n):
+                level_joints[lv, j] = joints[lv, k, j]
+        else:
+            hit = False
+            every = True
+            for j in range(n):
+                level_joints[lv, j] = False
+            for r in range(k):
+                if not deciding[r]:
+                    continue
+                for j in range(n):
+                    level_joints[lv, j] = level_joints[lv, j] or joints[lv, r, j]
+                if row_hit[lv, r]:
+                    hit = True
+                else:
+                    every = False
+            hits[lv] = hit and (every or logic == LOGIC_ANY)
+    for r in range(k):
+        if row_hit[L - 1, r] and first_tick[r] < 0:
+            first_tick[r] = tick

@@ -1,0 +1,228 @@
+"""The collision monitor: levels × phases × observer rows, one implementation for the loop,
+flight-log replay and recordings (see safety/collision/__init__.py for the rules)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Literal
+
+import numpy as np
+
+from hofto_hw.observers import kernels
+from safety.collision import params as P
+from safety.collision.kernel import monitor_tick as _kernel
+from safety.collision.params import MonitorParams
+from safety.collision.reference import NumpyStep
+from safety.collision.state import F_ACCEL, F_MOVING, F_REVERSAL, F_STILL, MonitorState
+from safety.stop import EventKind, Fault, StopController
+
+Backend = Literal["numpy", "numba", "auto"]
+
+
+class CollisionLevels:
+    """Contact and collision levels (or one collision level) over k observer rows.
+
+    Build with :meth:`from_config` (the loop's ``safety.collision``), :meth:`from_params`
+    (e.g. :func:`safety.collision.params.from_thresholds`), or ``CollisionLevels(cfg, rows,
+    model, backend=...)`` (= from_config). ``backend``: ``numpy`` (the reference), ``numba``
+    (compiled; RuntimeError when unavailable) or ``auto`` (compiled when available, else
+    numpy; ``backend`` then says which runs).
+
+    Public state after :meth:`step`/:meth:`update` (views, valid until the next call):
+    ``collision`` / ``contact`` (bool), ``collision_joints`` / ``contact_joints`` (n,) bool
+    over the deciding rows (the fused row for ``mean``), ``threshold`` (L, k, n) [N·m],
+    ``ratios`` (L, k + 1, n) (row k: the fused mean), ``ratio`` (k, n) / ``contact_ratio``
+    (k, n) the collision / contact level's row ratios, ``joints`` (L, k + 1, n) tripped
+    joints per level and row, ``first_tick`` (k,) int64 first tick each row tripped the
+    collision level (-1 = never), ``accel_phase`` (bool), ``nonfinite`` (n,) bool,
+    ``fault_nonfinite`` (bool), ``accel``, ``moving``, ``reversal``, ``still`` (n,) features.
+    """
+
+    def __init__(
+        self,
+        cfg: object,
+        rows: Sequence[str],
+        model: object | None = None,
+        backend: Backend = "numpy",
+    ) -> None:
+        self._build(P.from_levels_config(cfg, rows), model, cfg.tool_force, backend)  # type: ignore[attr-defined]
+
+    @classmethod
+    def from_config(
+        cls,
+        cfg: object,
+        rows: Sequence[str],
+        model: object | None = None,
+        backend: Backend = "numpy",
+    ) -> CollisionLevels:
+        """From a CollisionLevelsConfig; ``model`` (RobotModel) only for ``tool_force``."""
+        return cls(cfg, rows, model, backend)
+
+    @classmethod
+    def from_params(
+        cls,
+        p: MonitorParams,
+        model: object | None = None,
+        tool_force: float | None = None,
+        backend: Backend = "numpy",
+    ) -> CollisionLevels:
+        self = cls.__new__(cls)
+        self._build(p, model, tool_force, backend)
+        return self
+
+    def _build(
+        self, p: MonitorParams, model: object | None, tool_force: float | None, backend: Backend
+    ) -> None:
+        L, _, k, n = p.par.shape
+        self.params = p
+        self.levels, self.rows = p.levels, list(p.rows)
+        self.L, self.k, self.n = L, k, n
+        self.deciding = p.deciding
+        self.logic = p.logic
+        self.v_rev = float(p.scal[P.S_V_REV])
+        self.state = s = MonitorState(L, k, n, P.N_SCAL)
+        np.copyto(s.par, p.par)
+        np.copyto(s.scal, p.scal)
+        np.copyto(s.deciding, p.deciding)
+        self._numpy = NumpyStep(p, s)
+        self.tool_force = tool_force
+        self.tool_force_value = 0.0
+        self._tool = None
+        if tool_force is not None:
+            if model is None:
+                raise ValueError("safety.collision.tool_force needs the robot model")
+            from safety.collision.tool_force import ToolForce
+
+            self._tool = ToolForce(model, int(np.argmax(p.deciding)))
+        # public views
+        self.threshold = s.lev[:, 0, :k]
+        self.ratios = s.lev[:, 1]
+        self.ratio = s.lev[L - 1, 1, :k]
+        self.contact_ratio = s.lev[0, 1, :k]
+        self.thr_collision = s.lev[L - 1, 0, 0]
+        self.thr_contact = s.lev[0, 0, 0]
+        self.joints = s.joints
+        self.collision_joints = s.level_joints[L - 1]
+        self.contact_joints = s.level_joints[0]
+        self.first_tick = s.first_tick
+        self.nonfinite = s.bad[k + 2]
+        self.accel = s.feat[F_ACCEL]
+        self.moving = s.feat[F_MOVING]
+        self.reversal = s.feat[F_REVERSAL]
+        self.still = s.feat[F_STILL]
+        self._hits = s.hits
+        self._contact_level = 0 if L > 1 else -1
+        self._was_contact = False
+        self._zero_qdd = np.zeros(n)
+        self._tick = 0
+        self.backend = kernels.resolve(backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+        self._use_kernel = self.backend == "numba"
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def collision(self) -> bool:
+        return bool(self._hits[self.L - 1])
+
+    @property
+    def contact(self) -> bool:
+        return self._contact_level >= 0 and bool(self._hits[self._contact_level])
+
+    @property
+    def fault_nonfinite(self) -> bool:
+        return bool(self._hits[self.L])
+
+    @property
+    def accel_phase(self) -> bool:
+        return bool(self.state.sst[2])
+
+    def reset(self, qd: np.ndarray | None = None) -> None:
+        """Forget all state (after a reset of the stop controller); a finite ``qd`` (n,)
+        [rad/s] seeds the acceleration estimate."""
+        self.state.reset(self.params.par, qd, self.v_rev)
+        self._was_contact = False
+        self.tool_force_value = 0.0
+
+    def features(self, qd: np.ndarray, dt: float) -> None:
+        """Advance only the threshold features (accel, moving, reversal, still) by dt [s]
+        (numpy reference; calibration reads them)."""
+        self._numpy.features(qd, dt)
+
+    # ------------------------------------------------------------------ one tick
+
+    def step(
+        self, tau_ext: np.ndarray, qd: np.ndarray, qdd_ref: np.ndarray | None, dt: float, tick: int
+    ) -> bool:
+        """One tick without a stop controller: estimates (k, n) [N·m], velocity (n,) [rad/s],
+        reference acceleration (n,) [rad/s²] (None: nominal phase), dt [s], the tick number
+        recorded in ``first_tick``. Returns ``collision``."""
+        qdd = self._zero_qdd if qdd_ref is None else qdd_ref
+        if self._use_kernel:
+            s = self.state
+            _kernel(s.fbuf, s.bbuf, s.first_tick, tau_ext, qd, qdd, dt, tick)
+        else:
+            self._numpy(tau_ext, qd, qdd, dt, tick)
+        return bool(self._hits[self.L - 1])
+
+    def update(
+        self,
+        stop: StopController,
+        tau_ext: np.ndarray,
+        q: np.ndarray,
+        qd: np.ndarray,
+        qdd_ref: np.ndarray,
+        dt: float,
+    ) -> bool:
+        """One loop tick: estimates (k, n) [N·m], measured q, qd, reference acceleration (n,),
+        dt [s]. Reports COLLISION (latched by ``stop``), NON_FINITE and CONTACT (rising edge)
+        events; returns ``collision``."""
+        hits = self._hits
+        collision = self.step(tau_ext, qd, qdd_ref, dt, stop.tick)
+        contact = self._contact_level >= 0 and (hits[0] or self._was_contact)
+        if collision or hits[self.L] or contact:
+            self._report(stop, collision)
+        if self._tool is not None:
+            self.tool_force_value = self._tool.check(tau_ext, q)
+            if self.tool_force_value > self.tool_force:  # type: ignore[operator]
+                stop.report(Fault.COLLISION, -1, self.tool_force_value)
+        return collision
+
+    def _report(self, stop: StopController, collision: bool) -> None:
+        """Something happened: tell the stop controller (Python, off the common path)."""
+        hits, L = self._hits, self.L
+        if hits[L]:
+            j = int(np.argmax(self.nonfinite))
+            stop.report(Fault.NON_FINITE, j, float("nan"))
+        if collision:
+            j = int(np.argmax(self.collision_joints))
+            stop.report(Fault.COLLISION, j, self._max_ratio(L - 1, j))
+        if self._contact_level >= 0:
+            contact = bool(hits[0])
+            if contact and not self._was_contact:
+                j = int(np.argmax(self.contact_joints))
+                stop.note(EventKind.CONTACT, j, self._max_ratio(0, j))
+            self._was_contact = contact
+
+    def _max_ratio(self, lv: int, j: int) -> float:
+        r = self.state.lev[lv, 1]
+        if self.logic == "mean":
+            return float(r[self.k, j])
+        best = 0.0
+        for i in range(self.k):
+            if self.deciding[i] and r[i, j] > best:
+                best = float(r[i, j])
+        return best
+
+    def _warm(self) -> None:
+        """Compile the kernel on scratch state (the real state stays untouched)."""
+        p = self.params
+        L, _, k, n = p.par.shape
+        s = MonitorState(L, k, n, P.N_SCAL)
+        np.copyto(s.par, p.par)
+        np.copyto(s.scal, p.scal)
+        np.copyto(s.deciding, p.deciding)
+        z = np.zeros(n)
+        _kernel(s.fbuf, s.bbuf, s.first_tick, np.zeros((k, n)), z, z, 1e-3, 0)
