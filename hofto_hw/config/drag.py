@@ -145,9 +145,10 @@ class DragConfig(FileModel):
     )
     isolation_force_ratio: NonNegFloat = Field(
         0.01,
-        description="the isolation threshold grows by this per N of the peak tool force of "
-        "the last isolation_hold_time [N·m/N]: with model error a real hand's residual "
-        "grows with its force and the deceleration after it lets go",
+        description="the isolation threshold grows by this per N of tool force let go of "
+        "(the peak of the last isolation_hold_time minus now) [N·m/N]: with model error the "
+        "residual grows with the arm's deceleration after a hand lets go; a contact adds "
+        "to the fitted force and leaves the threshold alone",
     )
     isolation_hold_time: NonNegFloat = Field(0.3, description="decay time of that force peak [s]")
     isolation_debounce: NonNegFloat = Field(
@@ -183,9 +184,10 @@ class DragConfig(FileModel):
     )
     tare_time: NonNegFloat = Field(
         0.2,
-        description="the tare is the estimate low-passed with this time constant [s] up to "
-        "the press (0 = the filtered estimate of the press tick): at standstill the "
-        "estimate wanders ~1 N over ~0.1 s (held friction), one instant of it is no zero",
+        description="the tare is the mean of the estimate since drag mode began, then its "
+        "exponential mean over this time [s], up to the press (0 = the press tick's "
+        "sample): at standstill the estimate wanders ~1 N over ~0.1 s (held friction), one "
+        "instant of it is no zero",
     )
     hand_feedforward: bool = Field(
         True,

@@ -110,6 +110,7 @@ class DragController:
         self._slow = np.zeros(n)  # the estimate low-passed over tare_time: the tare [N·m]
         self._filtering = False  # False: the next update starts the filters at their input
         self._tare_time = float(cfg.tare_time)
+        self._tare_n = 0  # samples in the tare's mean so far
 
     def start(self, q: np.ndarray) -> None:
         """Enter drag mode holding the measured position ``q`` (n,) [rad]."""
@@ -121,6 +122,7 @@ class DragController:
         self.tau_bias.fill(0.0)
         self.tau.fill(0.0)
         self._filtering = False
+        self._tare_n = 0
         self.reason = 0
         self.category = -1
         self.contact_link = 0
@@ -170,8 +172,12 @@ class DragController:
         self._raw *= alpha
         self._fiso += self._raw
         if self.enabling.state != 1:  # the tare filter runs until the press
-            beta = 1.0 - math.exp(-dt / tt) if on and tt > 0.0 else 1.0
-            np.subtract(self._filt, self._slow, out=self._raw)
+            # the mean of the raw estimate since the mode began, then an exponential mean
+            # over tare_time (a short wait before the press still averages every sample)
+            self._tare_n += 1
+            beta = 1.0 - math.exp(-dt / tt) if tt > 0.0 else 1.0
+            beta = max(beta, 1.0 / self._tare_n)
+            np.subtract(tau_ext, self._slow, out=self._raw)
             self._raw *= beta
             self._slow += self._raw
         ev = self.enabling.update(pressed, standstill, fault_latched)

@@ -8,11 +8,11 @@ rotation is unlocked for dragging); its least-squares fit leaves the residual
 
 A 6-joint arm with a full tool wrench (force + moment) explains *any* joint torque, so the
 check is only informative with a force-only (or masked) tool hypothesis: 6 equations, 3
-unknowns. A mismatch above the threshold means "a contact not at the tool". The threshold grows with
-the peak tool force of the last ``hold_time`` (``force_ratio`` N·m per N): with model error
-the residual of a real hand grows with its force and with the arm's deceleration after it
-lets go (ER3A, 10 % model error: ~0.2 N·m at 20 N, ~0.5 at 80 N, up to 1.2 after an 80 N
-release).
+unknowns. A mismatch above the threshold means "a contact not at the tool". The threshold grows by
+``force_ratio`` N·m per N of tool force let go of (the peak of the last ``hold_time`` minus
+now): with model error the residual grows with the arm's deceleration after a hand lets go
+(ER3A, 10 % model error: ~0.2 N·m at 20 N, ~0.5 at 80 N, up to 1.2 after an 80 N release),
+while a contact adds to the fitted force and leaves the threshold where it is.
 
 On the event tick only (:meth:`ContactIsolation.isolate`, allocates): name the link. The
 hand's force at the tool cannot be told from a contact on links 1-3 in one sample: with the
@@ -62,8 +62,8 @@ class ContactIsolation:
         self.model = model
         self.jac = jac
         self.threshold = float(threshold)
-        #: the threshold grows by this per N of the tool force [N·m/N]: the fit's residual of
-        #: a real hand grows with its force and the arm's acceleration (model error)
+        #: the threshold grows by this per N of tool force let go of [N·m/N] (the fit's
+        #: residual grows with the arm's deceleration after a release: model error)
         self.force_ratio = float(force_ratio)
         self.hold_time = float(hold_time)
         self.force_peak = 0.0  # |tool force| peak, decaying over hold_time [N]
@@ -117,7 +117,9 @@ class ContactIsolation:
         norm = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
         peak = self.force_peak * math.exp(-dt / self.hold_time) if self.hold_time > 0.0 else 0.0
         self.force_peak = max(norm, peak)
-        self.level = self.threshold + self.force_ratio * self.force_peak
+        # raised by the force the hand has let go of: a contact adds to the fitted force
+        # (no raise), a release takes it away while the arm decelerates (model error)
+        self.level = self.threshold + self.force_ratio * (self.force_peak - norm)
         if self.mismatch > self.level:
             return True
         # keep the fits of matching ticks: isolation takes one from `lookback` ticks before
