@@ -8,10 +8,19 @@ tau_ext_hat, the enabling input and whether a fault is latched, and gives
   released enabling input, -1 otherwise: the caller's stop controller maps the force limit
   and an off-tool contact to its fault classes);
 - ``tau_offset`` (n,) [N·m] to add to the drives' torque offset (``drag.hand_feedforward``:
-  minus the tared estimate while dragging, so the position loop does not fight the hand and
-  has no following error to take up when the hand lets go; zero otherwise);
+  minus ``tau`` while dragging, so the position loop does not fight the hand and has no
+  following error to take up when the hand lets go; zero otherwise);
 - ``wrench`` (6,) [N, N·m] at the tool, ``contact_link`` (1-based, on an off-tool contact),
   ``mismatch`` [N·m], ``limited`` (bit mask of active walls/limits).
+
+The observer's estimate is low-passed twice: ``force_filter_hz`` (5 Hz) for the admittance
+and the feed-forward (``tau``: a hand pushes below a few Hz, a collision-tuned observer
+chatters and rings with the admittance above), ``isolation_filter_hz`` (50 Hz) for the
+off-tool check (``tau_iso``: a contact's onset must stay sharp). A release detector scales
+``tau`` down while ``tau_iso`` falls below ``release_ratio`` of it (the hand letting go is
+seen at the fast filter's speed). The tare is the mean of the raw estimate from the mode's
+start to the press (``tare_time``). :meth:`monitor_input` gives the collision monitor each
+observer row minus that row's own hand share.
 
 It never stops the arm itself: while not ACTIVE it feeds no force into the admittance (its
 state decays with M_a/B_a) and reports; the loop's stop controller ramps to standstill. It
