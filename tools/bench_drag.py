@@ -1,14 +1,20 @@
 """Sensorless drag on the simulated arm (issue 9): drag figures and the "virtual hand"
 transparency of HOFTO vs the momentum observer, closed loop in simulated time.
 
-    python tools/bench_drag.py [--observers hofto momentum] [--drift 10] [--replay] [--json]
+    python tools/bench_drag.py [--observers hofto momentum] [--drift 10] [--replay]
+                               [--gains loop|paper] [--hofto-lipschitz L] [--config F] [--json]
 
 Per observer (the ER3A config, true arm 10 % off the model, sensor noise, SimBus + emulated
-CSP drives, see hofto_hw/experiments/drag_sim.py):
+CSP drives, see hofto_hw/experiments/drag_sim.py; ``--gains loop``: the observer gains the
+service's loop runs, ``paper``: the paper's; ``--hofto-lipschitz``: the loop HOFTO's
+Lipschitz constant L replaced in a scratch copy of the config):
 
 - push: a constant 20 N push at the tool along x for 1.2 s: steady tool speed vs F/B_a,
-  off-axis speed, time from the push's end to rest (the command's, the arm's joints below
-  0.01 rad/s, the tool below 5 % of F/B_a), the highest tool speed;
+  off-axis speed, time from the push's end (the hand's force is zero) to rest: the tool
+  slower than 5 % of the steady speed and every joint below 0.01 rad/s (each criterion
+  and the command's also printed), the highest tool speed;
+- hard push: 80 N along y released at once: the highest tool speed (the limit is
+  0.25 m/s) and whether the drag stopped (an off-tool contact names a link);
 - drift: ``--drift S`` seconds with the enabling input held and no push (0 = skip);
 - virtual hand: the tool pulled by a spring-damper (500 N/m, 40 N·s/m) toward a hand that
   moves 0.3 m along x at 0.15 m/s: mean and peak interaction force while the hand moves
@@ -50,26 +56,66 @@ from hofto_hw.experiments.drag_sim import (  # noqa: E402
 PRESS = 0.3
 
 
+SIM: dict = {}  # DragSim keyword arguments from the command line (config, gains)
+
+
 def _pressed(t: float) -> bool:
     return t > PRESS
 
 
+def _sim(observer: str, **kw) -> DragSim:
+    return DragSim(observer=observer, **SIM, **kw)
+
+
+def _scratch_config(config: Path, lipschitz: float, folder: Path) -> Path:
+    """A copy of ``config`` in ``folder`` whose loop HOFTO's last gain row (its Lipschitz
+    constant) is ``lipschitz``; relative paths keep working through links."""
+    import yaml
+
+    data = yaml.safe_load(config.read_text())
+    hofto = (data.get("loop") or {}).get("observers", {}).get("hofto")
+    if hofto is None:
+        raise SystemExit(f"{config}: loop.observers.hofto: missing (--hofto-lipschitz)")
+    hofto["gains"][-1] = [float(lipschitz)] * len(hofto["gains"][-1])
+    for item in config.parent.iterdir():
+        if item != config:
+            (folder / item.name).symlink_to(item.resolve())
+    out = folder / config.name
+    out.write_text(yaml.safe_dump(data, sort_keys=False))
+    return out
+
+
 def push_figures(observer: str) -> dict:
-    sim = DragSim(observer=observer)
+    sim = _sim(observer)
     push = ToolPush((20.0, 0.0, 0.0), 0.8, 2.0)
     sim.world.pushes.append(push)
     run = sim.run(2.6, pressed=_pressed)
     return drag_figures(run, push, sim.drag_cfg.damping, sim.drag_cfg.standstill_speed)
 
 
+def hard_push(observer: str) -> dict:
+    sim = _sim(observer)
+    push = ToolPush((0.0, 80.0, 0.0), 0.8, 2.0)
+    sim.world.pushes.append(push)
+    run = sim.run(2.6, pressed=_pressed)
+    speed = np.linalg.norm(run.tool_v, axis=1)
+    return {
+        "max_speed_mps": float(speed.max()),
+        "limit_mps": sim.drag_cfg.max_tool_speed,
+        "stopped": bool(run.stop_tick >= 0),
+        "stop_reason": int(run.reason[run.stop_tick]) if run.stop_tick >= 0 else 0,
+        "contact_link": int(run.contact_link),
+    }
+
+
 def drift_figures(observer: str, seconds: float) -> dict:
-    sim = DragSim(observer=observer)
+    sim = _sim(observer)
     run = sim.run(PRESS + 0.1 + seconds, pressed=_pressed)
     return drift_mps(run, start=PRESS + 0.1)
 
 
 def virtual_hand(observer: str) -> dict:
-    sim = DragSim(observer=observer)
+    sim = _sim(observer)
     hand = VirtualHand(start=0.8)
     sim.world.hand = hand
     run = sim.run(hand.start + hand.length / hand.speed + 1.0, pressed=_pressed)
@@ -88,7 +134,7 @@ def virtual_hand(observer: str) -> dict:
 
 
 def replay_figures(observer: str) -> dict:
-    sim = DragSim(observer=observer)
+    sim = _sim(observer)
     sim.world.pushes += [
         ToolPush((20.0, 0.0, 0.0), 0.5, 3.5, 0.1),
         ToolPush((0.0, 20.0, 0.0), 3.5, 6.5, 0.1),
@@ -114,7 +160,7 @@ def replay_figures(observer: str) -> dict:
 
 
 def cost(observer: str, ticks: int = 3000) -> dict:
-    sim = DragSim(observer=observer, drag={"force_deadband": 0.0})
+    sim = _sim(observer, drag={"force_deadband": 0.0})
     drag, g = sim.drag, sim.group
     q, qd = g.q.copy(), np.zeros(sim.model.n)
     tau = np.full(sim.model.n, 0.5)
@@ -139,10 +185,28 @@ def main() -> int:
     parser.add_argument("--drift", type=float, default=10.0, help="seconds; 0 = skip")
     parser.add_argument("--replay", action="store_true", help="also teach and replay 10 s")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--gains", choices=("loop", "paper"), default="loop")
+    parser.add_argument("--config", type=Path, default=None, help="system config (ER3A)")
+    parser.add_argument(
+        "--hofto-lipschitz", type=float, default=None, help="loop HOFTO's L in a scratch copy"
+    )
     args = parser.parse_args()
+    import tempfile
+
+    from hofto_hw.experiments.drag_sim import ER3A
+
+    scratch = tempfile.TemporaryDirectory()
+    config = args.config or ER3A
+    if args.hofto_lipschitz is not None:
+        config = _scratch_config(config, args.hofto_lipschitz, Path(scratch.name))
+    SIM.update(config=config, gains=args.gains)
     results: dict[str, dict] = {}
     for name in args.observers:
-        r: dict[str, dict] = {"push": push_figures(name), "virtual_hand": virtual_hand(name)}
+        r: dict[str, dict] = {
+            "push": push_figures(name),
+            "hard_push": hard_push(name),
+            "virtual_hand": virtual_hand(name),
+        }
         if args.drift > 0:
             r["drift"] = drift_figures(name, args.drift)
         if args.replay:
@@ -152,8 +216,11 @@ def main() -> int:
     first = results[args.observers[0]]
     summary = {
         "drag.observer": args.observers[0],
+        "drag.gains": args.gains,
+        "drag.hofto_lipschitz": args.hofto_lipschitz,
         "drag.steady_speed_mps": first["push"]["steady_speed_mps"],
         "drag.expected_speed_mps": first["push"]["expected_speed_mps"],
+        "drag.off_axis_mps": first["push"]["off_axis_mps"],
         "drag.rest_time_ms": first["push"]["rest_time_ms"],
         "drag.max_speed_mps": first["push"]["max_speed_mps"],
     }
@@ -164,6 +231,8 @@ def main() -> int:
     if args.json:
         print(json.dumps({"summary": summary, "results": results}, indent=2))
         return 0
+    lip = f", HOFTO L = {args.hofto_lipschitz:g}" if args.hofto_lipschitz is not None else ""
+    print(f"observer gains: {args.gains}{lip}")
     for name, r in results.items():
         p, h = r["push"], r["virtual_hand"]
         print(f"{name}:")
@@ -173,8 +242,15 @@ def main() -> int:
             f"{p['off_axis_mps'] * 1e3:.2f} mm/s, max {p['max_speed_mps'] * 1e3:.1f} mm/s"
         )
         print(
-            f"  rest after release: command {p['rest_time_command_ms']:.0f} ms, joints "
-            f"{p['rest_time_ms']:.0f} ms, tool<5% {p['rest_time_tool_ms']:.0f} ms"
+            f"  rest after release: {p['rest_time_ms']:.0f} ms (tool<5% of steady "
+            f"{p['rest_time_tool_ms']:.0f} ms, joints<0.01 rad/s {p['rest_time_joints_ms']:.0f} "
+            f"ms, command {p['rest_time_command_ms']:.0f} ms)"
+        )
+        hp = r["hard_push"]
+        stop = f"stopped (reason {hp['stop_reason']}, link {hp['contact_link']})"
+        print(
+            f"  80 N released: max {hp['max_speed_mps'] * 1e3:.1f} mm/s (limit "
+            f"{hp['limit_mps'] * 1e3:.0f}), {stop if hp['stopped'] else 'no stop'}"
         )
         print(
             f"  virtual hand: mean {h['mean_force_n']:.1f} N (admittance alone "

@@ -88,6 +88,34 @@ class DragConfig(FileModel):
         ISO_REDUCED_SPEED, description="tool speed limit [m/s] (ISO 10218: <= 0.25)"
     )
     max_tool_rotation_speed: PositiveFloat = Field(1.0, description="[rad/s]")
+    tool_speed_margin: float = Field(
+        0.1,
+        ge=0.0,
+        lt=1.0,
+        description="the command stays this fraction below the tool speed limits: the "
+        "drives' position loop overshoots the command while it takes up its following error "
+        "after a hand lets go (ER3A sim, 80 N release: +3 % HOFTO, +8 % momentum)",
+    )
+
+    @property
+    def command_tool_speed(self) -> float:
+        """The tool speed the admittance commands at most [m/s]."""
+        return self.max_tool_speed * (1.0 - self.tool_speed_margin)
+
+    @property
+    def command_tool_rotation_speed(self) -> float:
+        """The tool rotation speed the admittance commands at most [rad/s]."""
+        return self.max_tool_rotation_speed * (1.0 - self.tool_speed_margin)
+
+    max_tool_acceleration: PositiveFloat = Field(
+        2.5,
+        description="limit of the admittance's tool acceleration [m/s²]: a released arm "
+        "decelerates at most this hard, so the estimate's inertia error (model error x "
+        "acceleration) stays inside the deadband instead of pushing the arm back",
+    )
+    max_tool_angular_acceleration: PositiveFloat = Field(
+        10.0, description="the same for rotation [rad/s²]"
+    )
     joint_speed_scale: float = Field(
         0.5, gt=0.0, le=1.0, description="fraction of the model's joint velocity limits"
     )
@@ -115,11 +143,51 @@ class DragConfig(FileModel):
         description="tool-force hypothesis residual that means 'not at the tool' [N·m] "
         "(ER3A, 10 % model error: ~0.2 while dragging)",
     )
+    isolation_force_ratio: NonNegFloat = Field(
+        0.01,
+        description="the isolation threshold grows by this per N of tool force let go of "
+        "(the peak of the last isolation_hold_time minus now) [N·m/N]: with model error the "
+        "residual grows with the arm's deceleration after a hand lets go; a contact adds "
+        "to the fitted force and leaves the threshold alone",
+    )
+    isolation_hold_time: NonNegFloat = Field(0.3, description="decay time of that force peak [s]")
     isolation_debounce: NonNegFloat = Field(
         0.01, description="the mismatch must persist this long to count [s]"
     )
+    force_filter_hz: NonNegFloat = Field(
+        5.0,
+        description="first-order low-pass on the observer's estimate before the drag uses "
+        "it [Hz] (0 = off): a hand pushes below a few Hz, a fast collision observer chatters "
+        "and rings with the admittance well above",
+    )
+    isolation_filter_hz: NonNegFloat = Field(
+        50.0,
+        description="first-order low-pass on the estimate for the off-tool contact check "
+        "[Hz] (0 = off): faster than force_filter_hz, since a contact's onset must not be "
+        "smeared into the tool-force fit the isolation subtracts, yet it takes the chatter "
+        "of a high-gain observer off",
+    )
+    release_ratio: float = Field(
+        0.8,
+        ge=0.0,
+        lt=1.0,
+        description="release detector (0 = off): when the isolation-filtered estimate falls "
+        "below this fraction of the force-filtered one, the drag's force is scaled down to "
+        "follow it (a letting-go hand is seen at the fast filter's speed, a push still comes "
+        "in smoothly)",
+    )
     tare_on_enable: bool = Field(
-        True, description="take the estimate at the press as zero (a force-sensor tare)"
+        True,
+        description="take the estimate at the press as zero (a force-sensor tare, as UR and "
+        "Franka zero the wrench on entering hand guiding): the model's gravity error at "
+        "the pose where dragging starts reads as no push",
+    )
+    tare_time: NonNegFloat = Field(
+        0.2,
+        description="the tare is the mean of the estimate since drag mode began, then its "
+        "exponential mean over this time [s], up to the press (0 = the press tick's "
+        "sample): at standstill the estimate wanders ~1 N over ~0.1 s (held friction), one "
+        "instant of it is no zero",
     )
     hand_feedforward: bool = Field(
         True,

@@ -47,8 +47,8 @@ class JointShaping:
         self.box = cfg.workspace is not None
         self.box_lo = np.array(cfg.workspace.lower if cfg.workspace else (-1e9,) * 3)
         self.box_hi = np.array(cfg.workspace.upper if cfg.workspace else (1e9,) * 3)
-        self.v_tool = cfg.max_tool_speed
-        self.w_tool = cfg.max_tool_rotation_speed
+        self.v_tool = cfg.command_tool_speed
+        self.w_tool = cfg.command_tool_rotation_speed
         self._hi = np.zeros(n)
         self._lo = np.zeros(n)
         self._ratio = np.zeros(n)
@@ -139,8 +139,10 @@ class CartesianAdmittance:
         self.release = cfg.release_damping
         self.f_dead = cfg.force_deadband
         self.m_dead = cfg.torque_deadband
-        self.v_max = cfg.max_tool_speed
-        self.w_max = cfg.max_tool_rotation_speed
+        self.v_max = cfg.command_tool_speed
+        self.w_max = cfg.command_tool_rotation_speed
+        self.a_max = cfg.max_tool_acceleration
+        self.alpha_max = cfg.max_tool_angular_acceleration
         self.w0 = cfg.singular_manipulability
         self.min_scale = cfg.singular_min_scale
         self.twist = np.zeros(6)
@@ -169,6 +171,8 @@ class CartesianAdmittance:
         np.subtract(f, a, out=a)
         a *= self.inv_mass
         a *= dt
+        _limit_norm(a, 0, self.a_max * dt)
+        _limit_norm(a, 3, self.alpha_max * dt)
         v += a
         v *= self.mask
         _limit_norm(v, 0, self.v_max)

@@ -8,10 +8,19 @@ tau_ext_hat, the enabling input and whether a fault is latched, and gives
   released enabling input, -1 otherwise: the caller's stop controller maps the force limit
   and an off-tool contact to its fault classes);
 - ``tau_offset`` (n,) [N·m] to add to the drives' torque offset (``drag.hand_feedforward``:
-  minus the tared estimate while dragging, so the position loop does not fight the hand and
-  has no following error to take up when the hand lets go; zero otherwise);
+  minus ``tau`` while dragging, so the position loop does not fight the hand and has no
+  following error to take up when the hand lets go; zero otherwise);
 - ``wrench`` (6,) [N, N·m] at the tool, ``contact_link`` (1-based, on an off-tool contact),
   ``mismatch`` [N·m], ``limited`` (bit mask of active walls/limits).
+
+The observer's estimate is low-passed twice: ``force_filter_hz`` (5 Hz) for the admittance
+and the feed-forward (``tau``: a hand pushes below a few Hz, a collision-tuned observer
+chatters and rings with the admittance above), ``isolation_filter_hz`` (50 Hz) for the
+off-tool check (``tau_iso``: a contact's onset must stay sharp). A release detector scales
+``tau`` down while ``tau_iso`` falls below ``release_ratio`` of it (the hand letting go is
+seen at the fast filter's speed). The tare is the mean of the raw estimate from the mode's
+start to the press (``tare_time``). :meth:`monitor_input` gives the collision monitor each
+observer row minus that row's own hand share.
 
 It never stops the arm itself: while not ACTIVE it feeds no force into the admittance (its
 state decays with M_a/B_a) and reports; the loop's stop controller ramps to standstill. It
@@ -21,6 +30,7 @@ tick an off-tool contact is first detected. Units SI.
 
 from __future__ import annotations
 
+import math
 from enum import IntEnum
 
 import numpy as np
@@ -64,7 +74,12 @@ class DragController:
             else JointAdmittance(cfg, model, self.jac)
         )
         self.isolation = ContactIsolation(
-            model, self.jac, cfg.isolation_threshold, rotation=cfg.unlock.rotation
+            model,
+            self.jac,
+            cfg.isolation_threshold,
+            rotation=cfg.unlock.rotation,
+            force_ratio=cfg.isolation_force_ratio,
+            hold_time=cfg.isolation_hold_time,
         )
         self.enabling = Enabling()
         # plain values for the tick (no pydantic there)
@@ -73,12 +88,13 @@ class DragController:
         self._debounce = float(cfg.isolation_debounce)
         self._tare = bool(cfg.tare_on_enable)
         self._feedforward = bool(cfg.hand_feedforward)
+        self._filter_hz = float(cfg.force_filter_hz)
         self.q_cmd = np.zeros(n)
         self.qd_cmd = np.zeros(n)
         self.qdd_cmd = np.zeros(n)
         self.wrench = self.estimator.wrench
         self.tau_bias = np.zeros(n)
-        self.tau = np.zeros(n)  # tau_ext_hat minus the tare [N·m]
+        self.tau = np.zeros(n)  # tau_ext_hat minus the tare, low-passed [N·m]
         self.tau_offset = np.zeros(n)  # add to the drives' torque offset [N·m]
         self.reason = 0
         self.category = -1
@@ -91,6 +107,19 @@ class DragController:
         self._zero_n = np.zeros(n)
         self._qd_prev = np.zeros(n)
         self._abs = np.zeros(n)
+        self._raw = np.zeros(n)
+        self._row = np.zeros(n)
+        self._share = np.zeros(n)
+        self._filt = np.zeros(n)  # the observer's estimate, low-passed [N·m]
+        self._fiso = np.zeros(n)  # the same, low-passed for the isolation [N·m]
+        self.tau_iso = np.zeros(n)  # _fiso minus the tare: what the isolation checks [N·m]
+        self._iso_hz = float(cfg.isolation_filter_hz)
+        self._release = float(cfg.release_ratio)
+        self.release_scale = 1.0  # the slow estimate's scale by the release detector
+        self._slow = np.zeros(n)  # the estimate low-passed over tare_time: the tare [N·m]
+        self._filtering = False  # False: the next update starts the filters at their input
+        self._tare_time = float(cfg.tare_time)
+        self._tare_n = 0  # samples in the tare's mean so far
 
     def start(self, q: np.ndarray) -> None:
         """Enter drag mode holding the measured position ``q`` (n,) [rad]."""
@@ -100,10 +129,27 @@ class DragController:
         self.admittance.reset()
         self.enabling.reset()
         self.tau_bias.fill(0.0)
+        self.tau.fill(0.0)
+        self._filtering = False
+        self._tare_n = 0
         self.reason = 0
         self.category = -1
         self.contact_link = 0
         self._mismatch_time = 0.0
+
+    def monitor_input(self, tau_ext: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """The collision monitor's input while the hand drags: each observer's row of
+        ``tau_ext`` (m, n) [N·m] minus the hand's share of *that row* (its own tool-force fit,
+        tare off), into ``out`` (m, n). Per row, because the rows react to the hand at their
+        own speed: the share of the drag's (filtered, or slower) estimate subtracted from a
+        faster row leaves the hand's onset as a false collision. After :meth:`update` (the
+        Jacobian at this tick's q_cmd); allocation-free."""
+        share, row = self._share, self._row
+        for i in range(tau_ext.shape[0]):
+            np.subtract(tau_ext[i], self.tau_bias, out=row)
+            self.isolation.tool_share(row, share)
+            np.subtract(tau_ext[i], share, out=out[i])
+        return out
 
     @property
     def active(self) -> bool:
@@ -122,6 +168,27 @@ class DragController:
         """One tick (see module docstring); returns ``reason``."""
         np.abs(qd, out=self._abs)
         standstill = bool(self._abs.max() < self._standstill)
+        # the estimate low-passed (first order; alpha = 1: off), then the tare off
+        hz, tt, on = self._filter_hz, self._tare_time, self._filtering
+        alpha = 1.0 - math.exp(-2.0 * math.pi * hz * dt) if on and hz > 0.0 else 1.0
+        self._filtering = True
+        np.subtract(tau_ext, self._filt, out=self._raw)
+        self._raw *= alpha
+        self._filt += self._raw
+        hz = self._iso_hz
+        alpha = 1.0 - math.exp(-2.0 * math.pi * hz * dt) if on and hz > 0.0 else 1.0
+        np.subtract(tau_ext, self._fiso, out=self._raw)
+        self._raw *= alpha
+        self._fiso += self._raw
+        if self.enabling.state != 1:  # the tare filter runs until the press
+            # the mean of the raw estimate since the mode began, then an exponential mean
+            # over tare_time (a short wait before the press still averages every sample)
+            self._tare_n += 1
+            beta = 1.0 - math.exp(-dt / tt) if tt > 0.0 else 1.0
+            beta = max(beta, 1.0 / self._tare_n)
+            np.subtract(tau_ext, self._slow, out=self._raw)
+            self._raw *= beta
+            self._slow += self._raw
         ev = self.enabling.update(pressed, standstill, fault_latched)
         self.event = ev
         self.reason = 0
@@ -130,13 +197,24 @@ class DragController:
             np.copyto(self.q_cmd, q)  # bumpless: start from where the arm is
             self.admittance.reset()
             if self._tare:
-                np.copyto(self.tau_bias, tau_ext)
+                np.copyto(self.tau_bias, self._slow)
             self._mismatch_time = 0.0
             self.contact_link = 0
+            self.isolation.reset()
         elif ev == EnableEvent.RELEASED:
             self.reason = DragReason.ENABLE_RELEASED
             self.category = 2
-        np.subtract(tau_ext, self.tau_bias, out=self.tau)
+        np.subtract(self._filt, self.tau_bias, out=self.tau)
+        np.subtract(self._fiso, self.tau_bias, out=self.tau_iso)
+        # release: the fast estimate falls before the slow one; follow it down (never up:
+        # a new push still comes in through the slow, smooth path)
+        self.release_scale = 1.0
+        if self._release > 0.0:
+            slow = float(np.dot(self.tau, self.tau))
+            fast = float(np.dot(self.tau_iso, self.tau_iso))
+            if slow > 0.0 and fast < self._release * self._release * slow:
+                self.release_scale = math.sqrt(fast / slow) / self._release
+                self.tau *= self.release_scale
         jac = self.jac
         jac.update(self.q_cmd)
         self.estimator.update(self.tau)
@@ -144,11 +222,11 @@ class DragController:
         if active:
             if self.estimator.force_norm > self._force_limit:
                 self.reason = DragReason.FORCE_LIMIT
-            if self.isolation.check(self.tau):
+            if self.isolation.check(self.tau_iso, dt):
                 self._mismatch_time += dt
                 if self._mismatch_time >= self._debounce:
                     if self.contact_link == 0:  # the one allocating call, once per contact
-                        self.contact_link = self.isolation.isolate(q, self.tau)
+                        self.contact_link = self.isolation.isolate(q, self.tau_iso)
                     self.reason = DragReason.CONTACT_OFF_TOOL
             else:
                 self._mismatch_time = 0.0

@@ -8,7 +8,11 @@ rotation is unlocked for dragging); its least-squares fit leaves the residual
 
 A 6-joint arm with a full tool wrench (force + moment) explains *any* joint torque, so the
 check is only informative with a force-only (or masked) tool hypothesis: 6 equations, 3
-unknowns. A mismatch above the threshold means "a contact not at the tool".
+unknowns. A mismatch above the threshold means "a contact not at the tool". The threshold grows by
+``force_ratio`` N·m per N of tool force let go of (the peak of the last ``hold_time`` minus
+now): with model error the residual grows with the arm's deceleration after a hand lets go
+(ER3A, 10 % model error: ~0.2 N·m at 20 N, ~0.5 at 80 N, up to 1.2 after an 80 N release),
+while a contact adds to the fitted force and leaves the threshold where it is.
 
 On the event tick only (:meth:`ContactIsolation.isolate`, allocates): name the link. The
 hand's force at the tool cannot be told from a contact on links 1-3 in one sample: with the
@@ -28,6 +32,8 @@ request and the service's stop controller latches and acts, with the link in the
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pinocchio as pin
@@ -50,15 +56,25 @@ class ContactIsolation:
         threshold: float,
         rotation: bool = False,
         lookback: int = 50,
+        force_ratio: float = 0.0,
+        hold_time: float = 0.3,
     ) -> None:
         self.model = model
         self.jac = jac
         self.threshold = float(threshold)
+        #: the threshold grows by this per N of tool force let go of [N·m/N] (the fit's
+        #: residual grows with the arm's deceleration after a release: model error)
+        self.force_ratio = float(force_ratio)
+        self.hold_time = float(hold_time)
+        self.force_peak = 0.0  # |tool force| peak, decaying over hold_time [N]
+        self.level = self.threshold  # this tick's threshold [N·m]
         self.k = 6 if rotation else 3
         n = model.n
         self._Jh = jac.J[: self.k]  # a view of the tool Jacobian's rows of the hypothesis
         self._A = np.zeros((self.k, self.k))
         self._b = np.zeros(self.k)
+        self._A2 = np.zeros((self.k, self.k))
+        self._b2 = np.zeros(self.k)
         self._fit = np.zeros(n)
         self.residual = np.zeros(n)
         self.tool_force = np.zeros(3)
@@ -75,8 +91,14 @@ class ContactIsolation:
         self.explain_fraction = 0.25
         self.residuals = np.full(n, np.nan)
 
-    def check(self, tau_ext: np.ndarray) -> bool:
-        """True when tau_ext (n,) does not match a hand at the tool (``jac`` at this q)."""
+    def reset(self) -> None:
+        """Forget the force peak (a new drag)."""
+        self.force_peak = 0.0
+        self.level = self.threshold
+
+    def check(self, tau_ext: np.ndarray, dt: float = 0.001) -> bool:
+        """True when tau_ext (n,) does not match a hand at the tool (``jac`` at this q);
+        ``dt`` [s] since the last check (the force peak's decay)."""
         Jh, A, b = self._Jh, self._A, self._b
         np.matmul(Jh, Jh.T, out=A)
         for i in range(self.k):
@@ -91,7 +113,14 @@ class ContactIsolation:
         np.subtract(tau_ext, self._fit, out=self.residual)
         np.abs(self.residual, out=self._fit)
         self.mismatch = float(self._fit.max())
-        if self.mismatch > self.threshold:
+        f = self.tool_force
+        norm = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        peak = self.force_peak * math.exp(-dt / self.hold_time) if self.hold_time > 0.0 else 0.0
+        self.force_peak = max(norm, peak)
+        # raised by the force the hand has let go of: a contact adds to the fitted force
+        # (no raise), a release takes it away while the arm decelerates (model error)
+        self.level = self.threshold + self.force_ratio * (self.force_peak - norm)
+        if self.mismatch > self.level:
             return True
         # keep the fits of matching ticks: isolation takes one from `lookback` ticks before
         # the mismatch, since the fit absorbs some of a contact while it builds up
@@ -99,6 +128,21 @@ class ContactIsolation:
         self._head = (self._head + 1) % self._ring.shape[0]
         self._filled = min(self._filled + 1, self._ring.shape[0])
         return False
+
+    def tool_share(self, tau: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """The part of ``tau`` (n,) [N·m] a hand at the tool explains, Jhᵀ·f with f the
+        least-squares tool force (and moment if rotation) of ``tau``, into ``out`` (n,);
+        ``jac`` at this q. Allocation-free; leaves :meth:`check`'s results alone."""
+        Jh, A, b = self._Jh, self._A2, self._b2
+        np.matmul(Jh, Jh.T, out=A)
+        for i in range(self.k):
+            A[i, i] += 1e-9
+        np.matmul(Jh, tau, out=b)
+        _, _, info = dposv(A.T, b, lower=0, overwrite_a=1, overwrite_b=1)
+        if info != 0:
+            b.fill(0.0)
+        np.matmul(Jh.T, b, out=out)
+        return out
 
     def isolate(self, q: np.ndarray, tau_ext: np.ndarray) -> int:
         """The most likely contact link (1-based; n = last link). Allocates."""

@@ -182,7 +182,13 @@ def drag_summary(script: DragScript, damping: float, standstill: float) -> dict[
     """The ``drag.*`` summary keys (slow path, after the run); None where the run ended
     before the figure's window."""
     cfg, k = script.cfg, script.k
-    keys = ("steady_speed_mps", "expected_speed_mps", "rest_time_ms", "max_speed_mps")
+    keys = (
+        "steady_speed_mps",
+        "expected_speed_mps",
+        "off_axis_mps",
+        "rest_time_ms",
+        "max_speed_mps",
+    )
     out: dict[str, Any] = {key: None for key in (*keys, "drift_mps")}
     if k < 2 or script.t[k - 1] < cfg.push_end:
         return out

@@ -136,7 +136,6 @@ class Tick:
         self.playback = None  # the last Playback started (the summary's replay figures)
         self.script = None  # simulation script: .step(tick) at the start of every tick
         self._tau_mon = np.zeros_like(self.tau_ext)  # the collision monitor's input
-        self._hand = np.zeros(n)  # the hand's torque at the tool, taken off that input
         self._wrench = r["wrench"]
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
@@ -444,15 +443,12 @@ class Tick:
         np.copyto(self._wrench, d.wrench)
 
     def _monitored(self, dragging: bool) -> np.ndarray:
-        """The collision monitor's input: the estimates, minus (while the hand drags) the
-        torque of the tool-force fit, so the monitor stays armed for contacts off the tool
+        """The collision monitor's input: the estimates, minus (while the hand drags) each
+        row's own tool-force fit, so the monitor stays armed for contacts off the tool
         while the hand's own push is the drag force limit's to judge."""
         if not (dragging and self.drag.active):
             return self.tau_ext
-        iso = self.drag.isolation
-        np.subtract(self.drag.tau, iso.residual, out=self._hand)
-        np.subtract(self.tau_ext, self._hand, out=self._tau_mon)
-        return self._tau_mon
+        return self.drag.monitor_input(self.tau_ext, self._tau_mon)
 
     def _drag_report(self) -> None:
         """Map the drag's stop request to a fault class (safety latches, the loop acts)."""

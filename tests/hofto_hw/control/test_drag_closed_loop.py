@@ -67,8 +67,20 @@ def test_at_rest_within_100ms_of_release(push_run) -> None:
     assert fig["rest_time_ms"] <= 130.0, fig
 
 
+#: the drag as it was before the estimate filters, the release detector, the acceleration
+#: limit and the speed margin (each of them also shortens the rest without feed-forward)
+PLAIN = {
+    "force_filter_hz": 0.0,
+    "isolation_filter_hz": 0.0,
+    "release_ratio": 0.0,
+    "tare_time": 0.0,
+    "max_tool_acceleration": 1000.0,
+    "tool_speed_margin": 0.0,
+}
+
+
 def test_hand_feedforward_is_what_makes_the_arm_rest_quickly() -> None:
-    sim = DragSim(observer="momentum", drag={"hand_feedforward": False})
+    sim = DragSim(observer="momentum", drag={**PLAIN, "hand_feedforward": False})
     push = ToolPush((20.0, 0.0, 0.0), 0.8, 2.0)
     sim.world.pushes.append(push)
     fig = drag_figures(sim.run(2.6, pressed=_pressed), push, B_A)

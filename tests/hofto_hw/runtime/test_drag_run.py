@@ -198,3 +198,15 @@ def test_control_socket_mode_drag_and_enable(cfg: SystemConfig, tmp_path: Path) 
         runner.join()
         server.close()
         system.close()
+
+
+def test_momentum_drags_while_the_monitor_decides_on_hofto(cfg: SystemConfig) -> None:
+    # before: the hand's share came from the drag's (momentum) estimate and was taken off
+    # the HOFTO row too; HOFTO sees the push first, so its onset read as a collision
+    drag = cfg.drag.model_copy(update={"observer": "momentum"})
+    assert cfg.safety.collision.observer == "hofto"
+    system, script = _drag_system(cfg.model_copy(update={"drag": drag}))
+    system.loop.run(max_ticks=1600)
+    assert _events(system, Fault.COLLISION) == []
+    fig = drag_summary(script, cfg.drag.damping, cfg.drag.standstill_speed)
+    assert abs(fig["steady_speed_mps"] - 0.1) < 0.01, fig
