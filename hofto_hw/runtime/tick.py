@@ -1,6 +1,12 @@
 """One control tick, top to bottom (hot path: no allocation, no formatting, no I/O):
 
-exchange -> joint state (SI) -> observers -> safety -> controller -> command -> record.
+exchange -> joint state (SI) -> dynamics snapshot -> observers -> safety -> controller ->
+command -> record.
+
+The dynamics snapshot (:class:`~hofto_hw.model.snapshot.DynamicsSnapshot`, built by the
+composition root for the union of the observers' ``needs``) is computed once per tick; every
+observer reads it through ``update_snapshot`` (the same numbers as each observer's own
+``update``, which replay and the demo use).
 
 The :class:`Tick` owns every buffer it writes; the loop (hofto_hw/runtime/loop.py) calls
 :meth:`Tick.step` once per cycle with the real dt. Requests from other threads (stop, reset,
@@ -20,6 +26,7 @@ from hofto_hw.control.drag import DragController, DragReason
 from hofto_hw.control.enabling import EnableInput
 from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, JointMotion
 from hofto_hw.model.data import ModelData
+from hofto_hw.model.snapshot import DynamicsSnapshot
 from hofto_hw.observers.base import Observer
 from hofto_hw.recording.record import (
     DIAG_DTYPE,
@@ -45,12 +52,14 @@ _DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
 
 class Tick:
     """See the module docstring. ``observers`` are evaluated in order; their estimates are
-    rows of ``tau_ext`` (k, n) and of the tick record."""
+    rows of ``tau_ext`` (k, n) and of the tick record. ``snapshot`` is computed for at least
+    every observer's ``needs`` (:func:`hofto_hw.runtime.compose.shared_snapshot`)."""
 
     def __init__(
         self,
         group: DriveGroup,
         observers: Sequence[Observer],
+        snapshot: DynamicsSnapshot,
         stop: StopController,
         limits: LimitMonitor,
         bus: BusHealth,
@@ -68,6 +77,10 @@ class Tick:
         self.group = group
         self.observers = list(observers)
         self.names = [o.name for o in self.observers]
+        missing = [o.name for o in self.observers if o.needs & ~snapshot.needs]
+        if missing:
+            raise ValueError(f"the tick's snapshot lacks terms observers {missing} need")
+        self.snapshot = snapshot
         self.stop = stop
         self.limits = limits
         self.bus = bus
@@ -143,6 +156,7 @@ class Tick:
         g.cycle()
         self.motion.start(g.q)
         np.copyto(self.q_sent, g.q)
+        self.snapshot.reset_memory()
         for obs in self.observers:
             obs.reset(g.q, g.qd)
         self.limits.reset(g.q)
@@ -167,9 +181,13 @@ class Tick:
         fresh = g.fresh
         q, qd, tau = g.q, g.qd, g.tau
 
-        # 3. observers (HOFTO, momentum): each writes its own row
+        # 3. the model terms of this sample, once for every estimator
+        snap = self.snapshot
+        snap.compute(q, qd, tau)
+
+        # 3a. observers (HOFTO, momentum): each writes its own row
         for i, obs in enumerate(self.observers):
-            np.copyto(self.tau_ext[i], obs.update(q, qd, tau, dt))
+            np.copyto(self.tau_ext[i], obs.update_snapshot(snap, dt))
 
         # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
         # safety's to latch below); the reference it integrates is used in step 5
@@ -298,6 +316,7 @@ class Tick:
         if not done:
             return
         g = self.group
+        self.snapshot.reset_memory()
         for obs in self.observers:
             obs.reset(g.q, g.qd)
         self.limits.reset(g.q)
