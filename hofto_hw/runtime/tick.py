@@ -15,6 +15,7 @@ mode) are plain attributes the tick reads: one writer each, no locks.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -48,6 +49,7 @@ STANDSTILL = 0.01  # rad/s: every joint slower than this counts as stopped
 MAX_STOPS = 256  # stop episodes kept for the summary
 FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
 _DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
+_sum = np.add.reduce
 
 
 class Tick:
@@ -92,6 +94,7 @@ class Tick:
         self.tick = 0
         self.t = 0.0
         self.tau_ext = np.zeros((max(1, len(self.observers)), n))
+        self._tau_ext_flat = self.tau_ext.reshape(-1)  # a view: one finiteness sum
         self.tau_ff = np.zeros(n)
         self.q_sent = np.zeros(n)  # position target of the last command [rad]
         self.err_codes = group.transport.tx["error_code"]
@@ -200,9 +203,12 @@ class Tick:
         # 4. safety: decides, latches, picks the stop category
         good = self.bus.check(stop, status, fresh, g.states, self.err_codes, self.expect_enabled)
         lim = self.limits
-        ok = lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau)
-        for i in range(len(self.observers)):
-            ok &= lim.finite(stop, self.tau_ext[i])
+        # a finite snapshot sample means q, qd, tau are all finite (their sum is): the per-array
+        # checks, which name the joint, run only when something is not
+        ok = snap.finite or (lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau))
+        if not math.isfinite(_sum(self._tau_ext_flat)):
+            for i in range(len(self.observers)):
+                ok &= lim.finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
         lim.check(stop, q, qd, tau, self.q_sent, good, powered)
         monitored = self.collision is not None and ok and self._power_on(g.states)
