@@ -95,16 +95,21 @@ class Probe:
         self._cur = np.zeros(len(self.names) + 1)  # parts..., exchange
         self._peak = np.zeros(len(self.names), dtype=np.int64)
         self.trace_peaks = False
+        self._wrapped: list = []
         tick = system.tick
         self.overruns0 = int(tick.overruns)
         self._wrap(system.bus, "exchange", len(self.names))
         if parts:
             obs = {o.name: o for o in tick.observers}
+            # a tick without a shared snapshot (the code before it) updates each observer
+            # through its own: then the observer parts include their own snapshots
+            shared = getattr(tick, "snapshot", None)
+            update = "update_snapshot" if shared is not None else "update"
             targets = {
                 "read": (system.group, "read"),
-                "snapshot": (tick.snapshot, "compute"),
-                "hofto": (obs.get("hofto"), "update_snapshot"),
-                "momentum": (obs.get("momentum"), "update_snapshot"),
+                "snapshot": (shared, "compute"),
+                "hofto": (obs.get("hofto"), update),
+                "momentum": (obs.get("momentum"), update),
                 "monitor": (tick.collision, "update"),
                 "feedforward": (tick.feedforward, "inverse_dynamics"),
                 "command": (system.group, "command_position"),
@@ -117,6 +122,7 @@ class Probe:
 
     def _wrap(self, obj, method: str, i: int) -> None:
         orig = getattr(obj, method)
+        self._wrapped.append((obj, method, orig))
         clock, cur, peak = time.perf_counter_ns, self._cur, self._peak
         probe = self
 
@@ -134,8 +140,15 @@ class Probe:
 
         setattr(obj, method, timed)
 
+    def detach(self) -> None:
+        """Put the original methods back (the objects run unprobed again)."""
+        for obj, method, orig in reversed(self._wrapped):
+            setattr(obj, method, orig)
+        self._wrapped.clear()
+
     def _wrap_step(self, tick) -> None:
         orig = tick.step
+        self._wrapped.append((tick, "step", orig))
         clock = time.perf_counter_ns
         probe = self
 
@@ -184,13 +197,24 @@ class Probe:
         return res
 
 
-def run_loop(cfg, rate_hz: float, clock: str, ticks: int, parts: bool, floor: float) -> dict:
+def run_loop(cfg, rate_hz: float, clock: str, ticks: int, part_ticks: int, floor: float) -> dict:
+    """``ticks`` ticks timed as a whole, then ``part_ticks`` more with every part probed,
+    on one System (the same run continues)."""
     system = build_system(cfg, rate_hz, clock)
+    period = None if clock == "sim" else 1e6 / rate_hz
     try:
         system.loop.run(max_ticks=300)  # warm-up: caches, pages, the drive ramp
-        probe = Probe(system, ticks, parts)
+        probe = Probe(system, ticks, False)
         system.loop.run(max_ticks=ticks)
-        return probe.result(floor, None if clock == "sim" else 1e6 / rate_hz)
+        res = probe.result(floor, period)
+        probe.detach()
+        probe = Probe(system, part_ticks, True)
+        system.loop.run(max_ticks=part_ticks)
+        parts = probe.result(floor, period)
+        res["parts"] = parts["parts"]
+        res["hofto_plus_momentum"] = parts["hofto_plus_momentum"]
+        res["tick_with_part_probes"] = parts["tick"]
+        return res
     finally:
         system.close()
 
@@ -242,7 +266,10 @@ def snapshot_parts(cfg, ticks: int) -> dict:
         return False
 
     system.loop.run(max_ticks=300, should_stop=keep)
-    snap = system.tick.snapshot
+    snap = getattr(system.tick, "snapshot", None)
+    if snap is None:
+        system.close()
+        return {"backend": "none: this tick has no shared snapshot"}
     pm, pd = snap.pin_model, snap.pin_data
     fr = snap.model.friction
     k = snap._kernels
@@ -381,11 +408,7 @@ def bench_path(cfg, quick: bool, floor: float) -> dict:
     res: dict = {}
     for key in LOOPS:
         rate, clock = setups[key]
-        res[key] = run_loop(cfg, rate, clock, n[key], False, floor)
-        parts = run_loop(cfg, rate, clock, max(1000, n[key] // 4), True, floor)
-        res[key]["parts"] = parts["parts"]
-        res[key]["hofto_plus_momentum"] = parts["hofto_plus_momentum"]
-        res[key]["tick_with_part_probes"] = parts["tick"]
+        res[key] = run_loop(cfg, rate, clock, n[key], max(1000, n[key] // 4), floor)
     return res
 
 
@@ -518,6 +541,7 @@ def print_report(res: dict) -> None:
             print(
                 "  snapshot alone, back to back (median µs): "
                 + ", ".join(f"{k} {v:.1f}" for k, v in sp.items() if k != "backend")
+                + f" ({sp['backend']})"
             )
         a = path.get("alloc")
         if a is None:
