@@ -397,9 +397,7 @@ def startup(config: Path) -> dict:
 
 def bench_path(cfg, quick: bool, floor: float) -> dict:
     """The three loops (totals, then parts) for the implementation this process runs."""
-    n = {"back_to_back": 2000, "loop_1khz": 2000, "loop_2khz": 2000}
-    if not quick:
-        n = {"back_to_back": 20000, "loop_1khz": 20000, "loop_2khz": 20000}
+    ticks, part_ticks = (1500, 500) if quick else (20000, 5000)
     setups = {
         "back_to_back": (float(cfg.loop.rate_hz), "sim"),
         "loop_1khz": (1000.0, "real"),
@@ -408,7 +406,7 @@ def bench_path(cfg, quick: bool, floor: float) -> dict:
     res: dict = {}
     for key in LOOPS:
         rate, clock = setups[key]
-        res[key] = run_loop(cfg, rate, clock, n[key], max(1000, n[key] // 4), floor)
+        res[key] = run_loop(cfg, rate, clock, ticks, part_ticks, floor)
     return res
 
 
@@ -440,7 +438,7 @@ def bench(config: Path, quick: bool) -> dict:
 
     cfg = load_config(config)
     policy = realtime()
-    floor = floor_us(cfg, 2000 if quick else 20000)
+    floor = floor_us(cfg, 1000 if quick else 20000)
     f = float(np.median(floor))
     res: dict = {
         "machine": platform.platform(),
@@ -460,8 +458,8 @@ def bench(config: Path, quick: bool) -> dict:
     res["paths"]["numpy"] = numpy_path(config, quick, f)
     if kernels.available():
         res["paths"]["numba"] = bench_path(cfg, quick, f)
-        res["paths"]["numba"]["alloc"] = allocations(cfg, 2000 if quick else 10000)
-        res["paths"]["numba"]["snapshot_parts"] = snapshot_parts(cfg, 2000 if quick else 20000)
+        res["paths"]["numba"]["alloc"] = allocations(cfg, 1000 if quick else 10000)
+        res["paths"]["numba"]["snapshot_parts"] = snapshot_parts(cfg, 1000 if quick else 20000)
     else:
         res["paths"]["numba"] = {"skipped": kernels.unavailable_reason()}
     best = "numba" if "back_to_back" in res["paths"]["numba"] else "numpy"
@@ -574,8 +572,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--quick",
         action="store_true",
-        help="a short run (< 30 s): 2,000 ticks per loop, tracemalloc over 2,000 ticks, "
-        "no start-up (compilation) measurement",
+        help="a short run (< 30 s on an idle machine): 1,500 ticks per loop (+500 with part "
+        "probes), tracemalloc over 1,000 ticks, no start-up (compilation) measurement",
     )
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--path-only", action="store_true", help=argparse.SUPPRESS)
