@@ -133,3 +133,15 @@ def test_tick_with_shared_snapshot_allocates_nothing(
     # nothing kept per tick (3000 x one (6,) array would be > 300 kB), no large temporaries
     assert after - before < 4000
     assert peak - before < 16000
+
+
+def test_tick_record_and_sink_share_one_dtype_object(
+    cfg: SystemConfig, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """numpy copies between arrays of one dtype object byte-wise; between equal but distinct
+    dtype objects it builds a field-by-field cast on every copy (tens of µs in the tick)."""
+    system = _system(cfg, "numpy", monkeypatch)
+    assert system.sink.ticks.dtype is system.tick.tick_rec.dtype
+    system.loop.run(max_ticks=5)
+    kept = system.sink.last_ticks()
+    assert kept.shape[0] == 5 and np.array_equal(kept[-1]["q"], system.group.q)
