@@ -115,17 +115,19 @@ class DriveGroup(ImageFields):
         self.backend = "numpy" if self._fast is None else "numba"
 
     def _warm(self) -> None:
-        """Compile the kernels for this image's exact array types, on scratch copies."""
+        """Compile the kernels for this image's exact array types (outputs: scratch)."""
         from drivers.cia402 import kernels
 
-        tx, rx, sc = self.transport.tx.copy(), self.transport.rx.copy(), self.scaling
+        # the read only reads the TxPDO: warm it on the image itself (a read-only or
+        # differently aligned buffer is another signature); the commands on a copy of the RxPDO
+        rx, sc = self.transport.rx.copy(), self.scaling
         si, states = np.zeros_like(self._si), np.zeros_like(self.states)
         kernels.read_si(
-            tx["position"],
-            tx["velocity"],
-            tx["torque"],
-            tx["current"],
-            tx["statusword"],
+            self._tx_pos,
+            self._tx_vel,
+            self._tx_tau,
+            self._tx_cur,
+            self._tx_sw,
             sc.zero_offset,
             self._scale,
             sm.STATE_FROM_STATUS,
