@@ -1,33 +1,38 @@
-"""The controller-side control tick for six axes against its pinocchio floor.
+"""The controller-side control tick for six axes against its pinocchio floor, measured on the
+runtime's own tick: the System that ``hofto-hw run`` builds (hofto_hw.runtime.compose.build),
+its Tick.step, its Loop and clocks. Nothing of the tick is copied here.
 
     python tools/bench_tick.py [--config configs/er3a.yaml] [--quick] [--json]
 
-One tick: DriveGroup.read (TxPDO -> SI) -> DynamicsSnapshot.compute -> HOFTO (n = 2) and
-momentum observer (update_snapshot) -> CollisionMonitor (safety/collision/, same backend) ->
-command (CSP hold). The SimBus exchange (plant + emulated drives) runs before each tick but is
-not part of it (on hardware the bus does that work); its cost is printed separately.
+The arm follows the config's ``run.path`` (mode MOVE) on the simulated bus. The simulated
+bus's exchange (the plant and the emulated drives) runs inside Tick.step (DriveGroup.cycle)
+but is the bus's work, not the controller's: it is timed separately and taken off, so
+"tick" = Tick.step minus the exchange. Timing works by wrapping methods of the built
+objects (bus.exchange, tick.step; for the parts also group.read, snapshot.compute, each
+observer's update_snapshot, the collision monitor's update, group.command_position,
+feedforward.inverse_dynamics); the tick's own code runs unchanged.
 
 Figures (µs; median / p99 / p99.9):
-- floor: the pinocchio calls the tick needs (ABA, CRBA, Coriolis matrix, gravity) back to back;
-- the tick per part and in total, back to back and inside a 1 kHz and a 2 kHz loop that
-  sleeps to absolute deadlines (libc clock_nanosleep, CLOCK_MONOTONIC, TIMER_ABSTIME;
-  SCHED_FIFO 50 when permitted; gc frozen and off), for the numpy path and the compiled path;
-- ratio of the tick's median to the floor;
-- tracemalloc over 10,000 ticks after warm-up (growth) and the transient peak of each part;
-- start-up: compiling the kernels cold (empty NUMBA_CACHE_DIR) and from the cache;
-- the collision monitor's compiled kernel checked against its numpy reference on the same
-  inputs, timed side by side (tools/bench_monitor.py times the loop's two-level monitor).
+- floor: the pinocchio calls the tick's estimators need (ABA, CRBA, Coriolis matrix,
+  gravity) back to back on the tick's own samples;
+- the tick back to back (SimClock, as ``--clock sim``) and inside a 1 kHz and a 2 kHz loop
+  (RealClock: absolute CLOCK_MONOTONIC deadlines with clock_nanosleep TIMER_ABSTIME, as
+  ``--clock real``), SCHED_FIFO 50 when permitted, gc frozen and off (the Loop's own);
+- per part (a second run with every part wrapped: each wrapper costs ~0.2 µs), "other" is
+  the rest of Tick.step (safety, motion, drag, recording);
+- the numpy path (a subprocess with HOFTO_HW_NO_NUMBA=1, the official switch) and the
+  compiled path; ratio tick / floor;
+- tracemalloc over 10,000 ticks after warm-up (growth, the sites that grew) and the
+  transient peak per part; start-up of ``compose.build`` with an empty numba cache, a
+  filled one and without numba.
 The machine is shared and noisy: compare medians and ratios, not single runs.
 """
 
 from __future__ import annotations
 
 import argparse
-import ctypes
-import ctypes.util
 import gc
 import json
-import math
 import os
 import platform
 import subprocess
@@ -42,43 +47,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-PARTS = ("read", "snapshot", "hofto", "momentum", "monitor", "command")
-CLOCK_MONOTONIC = 1
-TIMER_ABSTIME = 1
-
-
-class _Timespec(ctypes.Structure):
-    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
-
-
-class AbsSleep:
-    """Sleep until an absolute CLOCK_MONOTONIC deadline [ns] (libc clock_nanosleep)."""
-
-    def __init__(self) -> None:
-        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
-        self._fn = libc.clock_nanosleep
-        self._fn.argtypes = [
-            ctypes.c_int,
-            ctypes.c_int,
-            ctypes.POINTER(_Timespec),
-            ctypes.c_void_p,
-        ]
-        self._ts = _Timespec()
-        self._ref = ctypes.byref(self._ts)
-
-    def until(self, deadline_ns: int) -> None:
-        self._ts.tv_sec, self._ts.tv_nsec = divmod(deadline_ns, 1_000_000_000)
-        while self._fn(CLOCK_MONOTONIC, TIMER_ABSTIME, self._ref, None) == 4:  # EINTR
-            pass
-
-
-def realtime() -> str:
-    """SCHED_FIFO 50 if permitted; returns the policy in use."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
-        return "SCHED_FIFO 50"
-    except (PermissionError, OSError, AttributeError):
-        return "SCHED_OTHER (SCHED_FIFO not permitted)"
+PARTS = (
+    "read",
+    "snapshot",
+    "hofto",
+    "momentum",
+    "monitor",
+    "feedforward",
+    "command",
+)
+LOOPS = ("back_to_back", "loop_1khz", "loop_2khz")
 
 
 def stats(us: np.ndarray) -> dict[str, float]:
@@ -90,371 +68,413 @@ def stats(us: np.ndarray) -> dict[str, float]:
     }
 
 
-def make_collision_config(n: int):
-    from hofto_hw.config.collision import CollisionConfig
+def build_system(cfg, rate_hz: float, clock: str):
+    """``hofto-hw run``'s System at ``rate_hz`` on the simulated bus, moving along run.path;
+    overrun stops off (a loaded machine misses deadlines; they are counted, not acted on)."""
+    from hofto_hw.control.joint_motion import MOVE
+    from hofto_hw.runtime.compose import build
 
-    return CollisionConfig(
-        base=[20.0] * n,
-        velocity_gain=[5.0] * n,
-        acceleration_gain=[1.0] * n,
-        reversal_margin=[4.0] * n,
-        debounce_time=0.002,
-    )
+    cfg = cfg.model_copy(update={"loop": cfg.loop.model_copy(update={"rate_hz": rate_hz})})
+    system = build(cfg, clock=clock, contact=False)
+    system.tick.overrun_limit = 1 << 40
+    system.tick.mode_request = MOVE
+    return system
 
 
-class Rig:
-    """SimBus + DriveGroup + snapshot + HOFTO + momentum + monitor for one backend."""
+class Probe:
+    """Per-tick timings of a built System, by wrapping methods of its objects."""
 
-    def __init__(self, cfg, backend: str) -> None:
-        from drivers.cia402.drive_group import DriveGroup
-        from drivers.cia402.state_machine import Mode
-        from drivers.sim.simbus import make_sim_bus
-        from hofto_hw.model import RobotModel
-        from hofto_hw.model.snapshot import DynamicsSnapshot
-        from hofto_hw.observers import make_observer
-        from hofto_hw.observers.registry import replay_default
-        from safety.collision import CollisionMonitor
-
-        self.dt = cfg.cycle_time
-        self.bus = make_sim_bus(cfg, external=False)
-        self.bus.open()
-        g = self.group = DriveGroup.from_config(self.bus, cfg.bus)
-        g.configure(cfg.bus.drives)
-        g.set_mode(Mode.CSP)
-        g.enable()
-        model = self.model = RobotModel.from_config(cfg.robot)
-        n = model.n
-        hcfg = cfg.observers.get("hofto") or replay_default("hofto", n)
-        mcfg = cfg.observers.get("momentum") or replay_default("momentum", n)
-        self.hofto = make_observer(hcfg, model, backend=backend)
-        self.momentum = make_observer(mcfg, model, backend=backend)
-        self.backend = self.hofto.backend
-        self.snap = DynamicsSnapshot(model, self.hofto.needs | self.momentum.needs, self.backend)
-        self.monitor = CollisionMonitor(make_collision_config(n), backend=self.backend)
-        self.hofto.reset(g.q, g.qd)
-        self.momentum.reset(g.q, g.qd)
-        self.monitor.reset(g.qd)
-        # a slow sine around the start pose keeps the arm moving (CSP targets)
-        self.q0 = g.q.copy()
-        self.target = g.q.copy()
-        self.amp = np.array([0.3, 0.2, 0.2, 0.4, 0.4, 0.5])
+    def __init__(self, system, ticks: int, parts: bool) -> None:
+        self.system = system
         self.k = 0
-        self.times = np.zeros(len(PARTS) + 1, dtype=np.int64)
+        self.ticks = ticks
+        self.step = np.zeros(ticks)
+        self.exchange = np.zeros(ticks)
+        self.names = PARTS if parts else ()
+        self.parts = np.zeros((ticks, len(self.names)))
+        self._cur = np.zeros(len(self.names) + 1)  # parts..., exchange
+        self._peak = np.zeros(len(self.names), dtype=np.int64)
+        self.trace_peaks = False
+        self._wrapped: list = []
+        tick = system.tick
+        self.overruns0 = int(tick.overruns)
+        self._wrap(system.bus, "exchange", len(self.names))
+        if parts:
+            obs = {o.name: o for o in tick.observers}
+            # a tick without a shared snapshot (the code before it) updates each observer
+            # through its own: then the observer parts include their own snapshots
+            shared = getattr(tick, "snapshot", None)
+            update = "update_snapshot" if shared is not None else "update"
+            targets = {
+                "read": (system.group, "read"),
+                "snapshot": (shared, "compute"),
+                "hofto": (obs.get("hofto"), update),
+                "momentum": (obs.get("momentum"), update),
+                "monitor": (tick.collision, "update"),
+                "feedforward": (tick.feedforward, "inverse_dynamics"),
+                "command": (system.group, "command_position"),
+            }
+            for i, name in enumerate(self.names):
+                target, method = targets[name]
+                if target is not None:
+                    self._wrap(target, method, i)
+        self._wrap_step(tick)
 
-    def exchange(self) -> None:
-        self.k += 1
-        s = math.sin(2.0 * math.pi * 0.5 * self.k * self.dt)
-        np.multiply(self.amp, s, out=self.target)
-        np.add(self.target, self.q0, out=self.target)
-        self.bus.exchange()
+    def _wrap(self, obj, method: str, i: int) -> None:
+        orig = getattr(obj, method)
+        self._wrapped.append((obj, method, orig))
+        clock, cur, peak = time.perf_counter_ns, self._cur, self._peak
+        probe = self
 
-    def tick(self) -> None:
-        """One controller-side tick; stamps self.times (ns) at each part's end."""
-        clock, t = time.perf_counter_ns, self.times
-        g, snap, dt = self.group, self.snap, self.dt
-        t[0] = clock()
-        g.read()
-        t[1] = clock()
-        snap.compute(g.q, g.qd, g.tau)
-        t[2] = clock()
-        est = self.hofto.update_snapshot(snap, dt)
-        t[3] = clock()
-        self.momentum.update_snapshot(snap, dt)
-        t[4] = clock()
-        self.monitor.update(est, g.qd, dt)
-        t[5] = clock()
-        g.command_position(self.target)
-        t[6] = clock()
+        def timed(*args, **kw):
+            if probe.trace_peaks and i < len(peak):
+                base = tracemalloc.get_traced_memory()[0]
+                tracemalloc.reset_peak()
+                r = orig(*args, **kw)
+                peak[i] = max(peak[i], tracemalloc.get_traced_memory()[1] - base)
+                return r
+            t0 = clock()
+            r = orig(*args, **kw)
+            cur[i] += clock() - t0
+            return r
+
+        setattr(obj, method, timed)
+
+    def detach(self) -> None:
+        """Put the original methods back (the objects run unprobed again)."""
+        for obj, method, orig in reversed(self._wrapped):
+            setattr(obj, method, orig)
+        self._wrapped.clear()
+
+    def _wrap_step(self, tick) -> None:
+        orig = tick.step
+        self._wrapped.append((tick, "step", orig))
+        clock = time.perf_counter_ns
+        probe = self
+
+        def step(*args):
+            t0 = clock()
+            orig(*args)
+            dt = clock() - t0
+            k = probe.k
+            if k < probe.ticks:
+                cur = probe._cur
+                probe.step[k] = dt
+                probe.exchange[k] = cur[-1]
+                if probe.names:
+                    probe.parts[k] = cur[:-1]
+                probe.k = k + 1
+            probe._cur.fill(0.0)
+
+        tick.step = step
+
+    def result(self, floor: float, period_us: float | None) -> dict:
+        k = self.k
+        tick_us = (self.step[:k] - self.exchange[:k]) / 1000.0
+        res = {
+            "ticks": int(k),
+            "tick": stats(tick_us),
+            "exchange": stats(self.exchange[:k] / 1000.0),
+        }
+        res["median"], res["p99"], res["p999"] = (
+            res["tick"]["median"],
+            res["tick"]["p99"],
+            res["tick"]["p999"],
+        )
+        res["ratio_to_floor"] = res["median"] / floor
+        if self.names:
+            parts = self.parts[:k] / 1000.0
+            res["parts"] = {n: stats(parts[:, i]) for i, n in enumerate(self.names)}
+            res["parts"]["other"] = stats(tick_us - parts.sum(axis=1))
+            i, j = self.names.index("hofto"), self.names.index("momentum")
+            res["hofto_plus_momentum"] = stats(parts[:, i] + parts[:, j])
+        if period_us is not None:
+            loop = self.system.loop
+            res["period_us"] = period_us
+            res["share_of_period"] = res["median"] / period_us
+            res["wakeup"] = loop.wakeup.summary()
+            res["overruns"] = int(self.system.tick.overruns) - self.overruns0
+        return res
 
 
-def floor_us(rig: Rig, ticks: int, cold: bool = False) -> np.ndarray:
-    """The pinocchio calls of the tick, back to back, on the rig's own samples (``cold``:
-    each after a SimBus exchange, whose plant evicts the caches as it does in the tick)."""
+def run_loop(cfg, rate_hz: float, clock: str, ticks: int, part_ticks: int, floor: float) -> dict:
+    """``ticks`` ticks timed as a whole, then ``part_ticks`` more with every part probed,
+    on one System (the same run continues)."""
+    system = build_system(cfg, rate_hz, clock)
+    period = None if clock == "sim" else 1e6 / rate_hz
+    try:
+        system.loop.run(max_ticks=300)  # warm-up: caches, pages, the drive ramp
+        probe = Probe(system, ticks, False)
+        system.loop.run(max_ticks=ticks)
+        res = probe.result(floor, period)
+        probe.detach()
+        probe = Probe(system, part_ticks, True)
+        system.loop.run(max_ticks=part_ticks)
+        parts = probe.result(floor, period)
+        res["parts"] = parts["parts"]
+        res["hofto_plus_momentum"] = parts["hofto_plus_momentum"]
+        res["tick_with_part_probes"] = parts["tick"]
+        return res
+    finally:
+        system.close()
+
+
+def floor_us(cfg, ticks: int) -> np.ndarray:
+    """The pinocchio calls the tick's estimators need, on samples of the running tick."""
     import pinocchio as pin
 
-    pm, pd = rig.model.pin_model, rig.model.pin_model.createData()
+    system = build_system(cfg, float(cfg.loop.rate_hz), "sim")
     rows = []
-    for _ in range(200):
-        rig.exchange()
-        rig.group.read()
-        rows.append((rig.group.q.copy(), rig.group.qd.copy(), rig.group.tau.copy()))
+
+    def keep() -> bool:
+        g = system.group
+        rows.append((g.q.copy(), g.qd.copy(), g.tau.copy()))
+        return False
+
+    system.loop.run(max_ticks=300, should_stop=keep)
+    pm = system.model.pin_model
+    pd = pm.createData()
     out = np.empty(ticks)
     clock = time.perf_counter_ns
     gc.disable()
-    for k in range(ticks):
-        q, qd, tau = rows[k % len(rows)]
-        if cold:
-            rig.exchange()
-        t0 = clock()
-        pin.aba(pm, pd, q, qd, tau)
-        pin.crba(pm, pd, q)
-        pin.computeCoriolisMatrix(pm, pd, q, qd)
-        pin.computeGeneralizedGravity(pm, pd, q)
-        out[k] = clock() - t0
-    gc.enable()
+    try:
+        for k in range(ticks):
+            q, qd, tau = rows[k % len(rows)]
+            t0 = clock()
+            pin.aba(pm, pd, q, qd, tau)
+            pin.crba(pm, pd, q)
+            pin.computeCoriolisMatrix(pm, pd, q, qd)
+            pin.computeGeneralizedGravity(pm, pd, q)
+            out[k] = clock() - t0
+    finally:
+        gc.enable()
+        system.close()
     return out / 1000.0
 
 
-def run_ticks(rig: Rig, ticks: int, period_ns: int | None) -> dict:
-    """``ticks`` ticks back to back (period None) or one per period at absolute deadlines."""
-    parts = np.zeros((ticks, len(PARTS)))
-    total = np.zeros(ticks)
-    exch = np.zeros(ticks)
-    wake = np.zeros(ticks)
-    sleeper = AbsSleep()
+def snapshot_parts(cfg, ticks: int) -> dict:
+    """The tick's snapshot and each of its calls alone, back to back on samples of the
+    running tick (median µs): what the snapshot costs above the floor, and where."""
+    import pinocchio as pin
+
+    system = build_system(cfg, float(cfg.loop.rate_hz), "sim")
+    rows = []
+
+    def keep() -> bool:
+        g = system.group
+        rows.append((g.q.copy(), g.qd.copy(), g.tau.copy()))
+        return False
+
+    system.loop.run(max_ticks=300, should_stop=keep)
+    snap = getattr(system.tick, "snapshot", None)
+    if snap is None:
+        system.close()
+        return {"backend": "none: this tick has no shared snapshot"}
+    pm, pd = snap.pin_model, snap.pin_data
+    fr = snap.model.friction
+    k = snap._kernels
+    calls = {"compute (all)": lambda q, qd, tau: snap.compute(q, qd, tau)}
+    if k is not None:
+        calls["finite + friction kernel"] = lambda q, qd, tau: k.snapshot_inputs(
+            q, qd, tau, *snap._fr, fr.smooth_velocity, False, True, snap.f, snap._total
+        )
+    calls["aba"] = lambda q, qd, tau: pin.aba(pm, pd, q, qd, tau)
+    calls["crba"] = lambda q, qd, tau: pin.crba(pm, pd, q)
+    calls["coriolis matrix"] = lambda q, qd, tau: pin.computeCoriolisMatrix(pm, pd, q, qd)
+    if k is not None:
+        calls["Cᵀ·qd kernel"] = lambda q, qd, tau: k.transposed_mat_vec(snap._C, qd, snap.ct_qd)
+    calls["gravity"] = lambda q, qd, tau: pin.computeGeneralizedGravity(pm, pd, q)
     clock = time.perf_counter_ns
-    mono = time.monotonic_ns
-    for _ in range(500):  # warm-up
-        rig.exchange()
-        rig.tick()
-    gc.collect()
-    gc.freeze()
+    out = {"backend": snap.backend}
     gc.disable()
-    overruns = 0
     try:
-        deadline = mono() + (period_ns or 0)
-        for k in range(ticks):
-            if period_ns is not None:
-                sleeper.until(deadline)
-                wake[k] = (mono() - deadline) / 1000.0
-                deadline += period_ns
-            t0 = clock()
-            rig.exchange()
-            exch[k] = clock() - t0
-            rig.tick()
-            t = rig.times
-            parts[k] = np.diff(t)
-            total[k] = t[-1] - t[0]
-            if period_ns is not None and mono() > deadline:
-                overruns += 1
-                deadline = mono() + period_ns  # skip missed periods
+        for name, fn in calls.items():
+            t = np.empty(ticks)
+            for i in range(ticks):
+                q, qd, tau = rows[i % len(rows)]
+                t0 = clock()
+                fn(q, qd, tau)
+                t[i] = clock() - t0
+            out[name] = float(np.median(t)) / 1000.0
     finally:
         gc.enable()
-        gc.unfreeze()
-    parts /= 1000.0
-    total /= 1000.0
-    exch /= 1000.0
-    res = {
-        "tick": stats(total),
-        "parts": {name: stats(parts[:, i]) for i, name in enumerate(PARTS)},
-        "exchange": stats(exch),
-    }
-    res["hofto_plus_momentum"] = stats(parts[:, 2] + parts[:, 3])
-    res["median"], res["p99"], res["p999"] = (
-        res["tick"]["median"],
-        res["tick"]["p99"],
-        res["tick"]["p999"],
-    )
-    if period_ns is not None:
-        res["wakeup"] = stats(wake)
-        res["overruns"] = overruns
-        res["period_us"] = period_ns / 1000.0
-    return res
+        system.close()
+    return out
 
 
-def allocations(rig: Rig, ticks: int) -> dict:
-    """tracemalloc: growth over ``ticks`` ticks after warm-up (a bus exchange every 100th
-    tick), transient peak per part."""
-    for _ in range(500):
-        rig.exchange()
-        rig.tick()
-    tracemalloc.start(10)
+def allocations(cfg, ticks: int) -> dict:
+    """tracemalloc over ``ticks`` ticks of the runtime tick after warm-up; the simulated
+    plant steps on every 100th exchange only (it is slow under tracemalloc; the tick does the
+    same work on repeated data). Growth, the sites that grew, transient peak per part."""
+    from drivers.transport import STATUS_OK
+
+    system = build_system(cfg, float(cfg.loop.rate_hz), "sim")
     try:
-        for _ in range(200):
-            rig.exchange()
-            rig.tick()
+        system.loop.run(max_ticks=500)
+        bus = system.bus
+        real_exchange = bus.exchange
+        count = [0]
+
+        def sparse_exchange() -> int:
+            count[0] += 1
+            return real_exchange() if count[0] % 100 == 0 else STATUS_OK
+
+        bus.exchange = sparse_exchange
+        probe = Probe(system, 0, parts=True)
+        system.loop.run(max_ticks=200)
+        tracemalloc.start(10)
+        system.loop.run(max_ticks=200)
         before = tracemalloc.take_snapshot()
         cur0, _ = tracemalloc.get_traced_memory()
-        tracemalloc.reset_peak()
-        for k in range(ticks):
-            if k == ticks // 2:
-                cur_mid, _ = tracemalloc.get_traced_memory()
-            if k % 100 == 0:  # the simulated plant is slow under tracemalloc; the tick is
-                rig.exchange()  # the same work on repeated TxPDO data
-            rig.tick()
-        after = tracemalloc.take_snapshot()
+        half = ticks // 2
+        system.loop.run(max_ticks=half)
+        cur_mid, _ = tracemalloc.get_traced_memory()
+        system.loop.run(max_ticks=ticks - half)
         cur1, _ = tracemalloc.get_traced_memory()
-        diffs = [
-            d
-            for d in after.compare_to(before, "lineno")
-            if d.size_diff > 0 and "tracemalloc" not in str(d.traceback)
-        ]
-        growth = [f"{d.traceback[0]}: +{d.size_diff} B ({d.count_diff:+d} blocks)" for d in diffs]
-        # transient peak per part: each part alone, peak above the level before it
-        g, snap, dt = rig.group, rig.snap, rig.dt
-        est = rig.hofto.update_snapshot(snap, dt)
-        calls = {
-            "read": g.read,
-            "snapshot": lambda: snap.compute(g.q, g.qd, g.tau),
-            "hofto": lambda: rig.hofto.update_snapshot(snap, dt),
-            "momentum": lambda: rig.momentum.update_snapshot(snap, dt),
-            "monitor": lambda: rig.monitor.update(est, g.qd, dt),
-            "command": lambda: g.command_position(rig.target),
-        }
-        transient = {}
-        for name, fn in calls.items():
-            fn()
-            base, _ = tracemalloc.get_traced_memory()
-            tracemalloc.reset_peak()
-            fn()
-            _, peak = tracemalloc.get_traced_memory()
-            transient[name] = peak - base
-    finally:
+        after = tracemalloc.take_snapshot()
+        probe.trace_peaks = True
+        system.loop.run(max_ticks=200)
+        transient = {n: int(probe._peak[i]) for i, n in enumerate(probe.names)}
         tracemalloc.stop()
+    finally:
+        system.close()
+    grew = [
+        d
+        for d in after.compare_to(before, "lineno")
+        if d.size_diff > 0 and "tracemalloc" not in str(d.traceback)
+    ]
     return {
         "ticks": ticks,
-        "growth_bytes": cur1 - cur0,
-        "growth_second_half_bytes": cur1 - cur_mid,
-        "growth_sites": growth[:10],
+        "growth_bytes": int(cur1 - cur0),
+        "growth_second_half_bytes": int(cur1 - cur_mid),
+        "growth_sites": [f"{d.traceback[0]}: +{d.size_diff} B ({d.count_diff:+d})" for d in grew][
+            :8
+        ],
         "transient_peak_bytes": transient,
     }
 
 
 _STARTUP = """
-import time, sys
+import sys, time
 t0 = time.perf_counter()
-from hofto_hw.observers import kernels
 from hofto_hw.config import load_config
-from hofto_hw.model import RobotModel
-from hofto_hw.observers import make_observer
-from hofto_hw.observers.registry import OBSERVER_TYPES, replay_default
+from hofto_hw.runtime.compose import build
 t1 = time.perf_counter()
-model = RobotModel.from_config(load_config(sys.argv[1]).robot)
+system = build(load_config(sys.argv[1]), clock="sim", contact=False)
 t2 = time.perf_counter()
-for name in OBSERVER_TYPES:
-    make_observer(replay_default(name, model.n), model, backend="numba" if name != "direct"
-                  else "numpy")
-t3 = time.perf_counter()
-print(t1 - t0, t3 - t2)
+system.close()
+print(t1 - t0, t2 - t1, system.tick.observers[0].backend, system.group.backend)
 """
 
 
 def startup(config: Path) -> dict:
-    """Seconds to import and to compile/warm all observer kernels, cold and cached."""
-    from hofto_hw.observers import kernels
-
-    if not kernels.available():
-        return {"available": False, "reason": kernels.unavailable_reason()}
-    out = {"available": True}
+    """Seconds to import and to build the System (compiling and warming every kernel):
+    with an empty numba cache, with the cache filled, and without numba."""
+    out: dict = {}
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
-        for label in ("cold", "cached"):
+        for label, extra in (
+            ("cold", {}),
+            ("cached", {}),
+            ("no_numba", {"HOFTO_HW_NO_NUMBA": "1"}),
+        ):
             r = subprocess.run(
                 [sys.executable, "-c", _STARTUP, str(config)],
-                env=env,
+                env={**env, **extra},
                 capture_output=True,
                 text=True,
                 check=True,
             )
-            imp, comp = (float(x) for x in r.stdout.split())
-            out[label] = {"import_s": imp, "build_and_warm_s": comp}
+            imp, build, obs, drives = r.stdout.split()
+            out[label] = {
+                "import_s": float(imp),
+                "build_s": float(build),
+                "observers": obs,
+                "drive_group": drives,
+            }
     return out
 
 
-def monitor_prototype(rig: Rig, ticks: int) -> dict:
-    """The monitor's compiled kernel (safety/collision/kernel.py) against its numpy reference
-    on the rig's samples, timed side by side (keys kept from the prototype's time)."""
-    from hofto_hw.observers import kernels
-    from safety.collision import CollisionMonitor
-
-    if not kernels.available():
-        return {"available": False}
-    cfg = make_collision_config(rig.model.n)
-    ref = CollisionMonitor(cfg, backend="numpy")
-    new = CollisionMonitor(cfg, backend="numba")
-    n = rig.model.n
-    rng = np.random.default_rng(0)
-    samples = []
-    for k in range(ticks):
-        rig.exchange()
-        rig.group.read()
-        tau = 25.0 * np.sin(0.01 * k + np.arange(n)) + rng.normal(0, 2.0, n)
-        samples.append((tau, rig.group.qd.copy()))
-    worst = 0.0
-    mismatch = 0
-    for tau, qd in samples:
-        d_ref = ref.update(tau, qd, rig.dt)
-        d_new = new.update(tau, qd, rig.dt)
-        worst = max(worst, float(np.abs(new.threshold - ref.threshold).max()))
-        mismatch += int(d_new != d_ref or not np.array_equal(new.joints, ref.joints))
-    clock = time.perf_counter_ns
-    t_ref = np.zeros(ticks)
-    t_new = np.zeros(ticks)
-    gc.disable()
-    for k, (tau, qd) in enumerate(samples):
-        t0 = clock()
-        ref.update(tau, qd, rig.dt)
-        t1 = clock()
-        new.update(tau, qd, rig.dt)
-        t2 = clock()
-        t_ref[k], t_new[k] = t1 - t0, t2 - t1
-    gc.enable()
-    return {
-        "available": True,
-        "numpy_monitor": stats(t_ref / 1000.0),
-        "compiled_prototype": stats(t_new / 1000.0),
-        "threshold_max_abs_diff": worst,
-        "decision_mismatches": mismatch,
-        "ticks": ticks,
+def bench_path(cfg, quick: bool, floor: float) -> dict:
+    """The three loops (totals, then parts) for the implementation this process runs."""
+    ticks, part_ticks = (1500, 500) if quick else (20000, 5000)
+    setups = {
+        "back_to_back": (float(cfg.loop.rate_hz), "sim"),
+        "loop_1khz": (1000.0, "real"),
+        "loop_2khz": (2000.0, "real"),
     }
+    res: dict = {}
+    for key in LOOPS:
+        rate, clock = setups[key]
+        res[key] = run_loop(cfg, rate, clock, ticks, part_ticks, floor)
+    return res
 
 
-def bench(cfg_path: Path, quick: bool) -> dict:
+def realtime() -> str:
+    """SCHED_FIFO 50 if permitted; returns the policy in use."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
+        return "SCHED_FIFO 50"
+    except (PermissionError, OSError, AttributeError):
+        return "SCHED_OTHER (SCHED_FIFO not permitted)"
+
+
+def numpy_path(config: Path, quick: bool, floor: float) -> dict:
+    """The numpy path in a subprocess with HOFTO_HW_NO_NUMBA=1."""
+    cmd = [sys.executable, __file__, "--config", str(config), "--path-only", "--floor", str(floor)]
+    if quick:
+        cmd.append("--quick")
+    env = dict(os.environ, HOFTO_HW_NO_NUMBA="1", PYTHONPATH=str(ROOT))
+    r = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if r.returncode != 0:
+        return {"skipped": f"numpy-path subprocess failed: {r.stderr.strip()[-300:]}"}
+    return json.loads(r.stdout)
+
+
+def bench(config: Path, quick: bool) -> dict:
     from hofto_hw.config import load_config
     from hofto_hw.model.snapshot import pinocchio_traits
     from hofto_hw.observers import kernels
 
-    cfg = load_config(cfg_path)
-    cfg2k = cfg.model_copy(update={"loop": cfg.loop.model_copy(update={"rate_hz": 2000.0})})
-    n_b2b = 2000 if quick else 20000
-    n_1k = 2000 if quick else 20000
-    n_2k = 2000 if quick else 40000
+    cfg = load_config(config)
     policy = realtime()
-    rig = Rig(cfg, "numpy")
-    floor = floor_us(rig, n_b2b)
+    floor = floor_us(cfg, 1000 if quick else 20000)
+    f = float(np.median(floor))
     res: dict = {
         "machine": platform.platform(),
         "python": platform.python_version(),
         "numpy": np.__version__,
-        "pinocchio": pinocchio_traits(rig.model).__dict__,
         "numba": kernels.available() and kernels._numba.__version__,
         "scheduler": policy,
+        "load_average": list(os.getloadavg()),
         "quick": quick,
-        "floor_us": float(np.median(floor)),
+        "floor_us": f,
         "floor": stats(floor),
-        "floor_after_exchange": stats(floor_us(rig, 1000 if quick else 10000, cold=True)),
         "paths": {},
     }
-    for backend in ("numpy", "numba"):
-        if backend == "numba" and not kernels.available():
-            res["paths"]["numba"] = {"skipped": kernels.unavailable_reason()}
-            continue
-        r = Rig(cfg, backend)
-        r2 = Rig(cfg2k, backend)
-        path = {
-            "back_to_back": run_ticks(r, n_b2b, None),
-            "loop_1khz": run_ticks(r, n_1k, 1_000_000),
-            "loop_2khz": run_ticks(r2, n_2k, 500_000),
-        }
-        for key in ("back_to_back", "loop_1khz", "loop_2khz"):
-            path[key]["ratio_to_floor"] = path[key]["median"] / res["floor_us"]
-        path["loop_2khz"]["share_of_period"] = path["loop_2khz"]["median"] / 500.0
-        if not quick or backend == "numba" or not kernels.available():
-            path["alloc"] = allocations(r, 2_000 if quick else 10_000)
-        res["paths"][backend] = path
-    best = "numba" if "back_to_back" in res["paths"].get("numba", {}) else "numpy"
+    from hofto_hw.model import RobotModel
+
+    res["pinocchio"] = pinocchio_traits(RobotModel.from_config(cfg.robot)).__dict__
+    res["paths"]["numpy"] = numpy_path(config, quick, f)
+    if kernels.available():
+        res["paths"]["numba"] = bench_path(cfg, quick, f)
+        res["paths"]["numba"]["alloc"] = allocations(cfg, 1000 if quick else 10000)
+        res["paths"]["numba"]["snapshot_parts"] = snapshot_parts(cfg, 1000 if quick else 20000)
+    else:
+        res["paths"]["numba"] = {"skipped": kernels.unavailable_reason()}
+    best = "numba" if "back_to_back" in res["paths"]["numba"] else "numpy"
     res["path"] = best
-    for key in ("back_to_back", "loop_1khz", "loop_2khz"):
+    for key in LOOPS:
         res[key] = res["paths"][best][key]
-    res["startup"] = {"skipped": "--quick"} if quick else startup(cfg_path)
-    res["monitor_prototype"] = monitor_prototype(rig, 1000 if quick else 10000)
+    res["startup"] = {"skipped": "--quick"} if quick else startup(config)
+    res["load_average_end"] = list(os.getloadavg())
     return res
 
 
 def targets(res: dict) -> list[tuple[str, str, bool]]:
     f = res["floor_us"]
     l1, l2, b = res["loop_1khz"], res["loop_2khz"], res["back_to_back"]
-    hm = res["back_to_back"]["hofto_plus_momentum"]["median"]
+    hm = l1["hofto_plus_momentum"]["median"]
     return [
         (
             "1 kHz loop median <= 3x floor",
@@ -467,7 +487,7 @@ def targets(res: dict) -> list[tuple[str, str, bool]]:
             f"{b['median']:.1f} <= {2 * f:.1f}",
             b["median"] <= 2 * f,
         ),
-        ("HOFTO n=2 + momentum median <= 15 µs", f"{hm:.1f}", hm <= 15),
+        ("HOFTO n=2 + momentum median <= 15 µs (1 kHz loop)", f"{hm:.1f}", hm <= 15),
         (
             "2 kHz tick median <= 25 % of 500 µs",
             f"{l2['median']:.1f} ({100 * l2['share_of_period']:.1f} %)",
@@ -479,64 +499,67 @@ def targets(res: dict) -> list[tuple[str, str, bool]]:
 def print_report(res: dict) -> None:
     print(
         f"{res['machine']}, python {res['python']}, numpy {res['numpy']}, "
-        f"pinocchio {res['pinocchio']['version']}, numba {res['numba']}; {res['scheduler']}"
-    )
-    tr = res["pinocchio"]
-    print(
-        f"pinocchio: stable Data views {tr['stable_views']}, full symmetric M "
-        f"{tr['full_mass_matrix']}"
+        f"pinocchio {res['pinocchio']['version']}, numba {res['numba']}; {res['scheduler']}; "
+        f"load average {res['load_average'][0]:.1f} (end {res['load_average_end'][0]:.1f})"
     )
     fl = res["floor"]
-    fc = res["floor_after_exchange"]
     print(
-        f"floor (aba+crba+coriolis+gravity): median {fl['median']:.1f}  p99 {fl['p99']:.1f} µs"
-        f"; each after a SimBus exchange (cold caches): median {fc['median']:.1f} µs"
+        f"floor (aba+crba+coriolis+gravity): median {fl['median']:.1f}  p99 {fl['p99']:.1f}  "
+        f"p99.9 {fl['p999']:.1f} µs"
     )
+    cols = (*PARTS, "other")
     for backend, path in res["paths"].items():
         if "skipped" in path:
             print(f"\n[{backend}] skipped: {path['skipped']}")
             continue
-        print(f"\n[{backend} path]   µs: median / p99 / p99.9")
-        head = f"{'':12s}" + "".join(f"{p:>22s}" for p in (*PARTS, "tick", "exchange"))
-        print(head)
-        for key in ("back_to_back", "loop_1khz", "loop_2khz"):
+        print(f"\n[{backend} path] tick = Tick.step minus the bus exchange; µs median/p99/p99.9")
+        for key in LOOPS:
             r = path[key]
-            cells = [r["parts"][p] for p in PARTS] + [r["tick"], r["exchange"]]
-            row = "".join(f"{c['median']:7.1f}/{c['p99']:6.1f}/{c['p999']:6.1f} " for c in cells)
-            print(f"{key:12s}{row}")
-            extra = f"  ratio tick/floor {r['ratio_to_floor']:.2f}"
-            extra += f", HOFTO+momentum median {r['hofto_plus_momentum']['median']:.1f}"
+            t = r["tick"]
+            line = (
+                f"{key:12s} tick {t['median']:6.1f} / {t['p99']:6.1f} / {t['p999']:6.1f}"
+                f"   ratio tick/floor {r['ratio_to_floor']:.2f}"
+                f"   exchange (plant) median {r['exchange']['median']:.0f}"
+            )
             if "wakeup" in r:
                 w = r["wakeup"]
-                extra += (
-                    f", wake-up {w['median']:.0f}/{w['p99']:.0f}/{w['p999']:.0f}, "
-                    f"overruns {r['overruns']}"
+                line += (
+                    f"   wake-up {w['median']:.0f}/{w['p99']:.0f}, overruns {r['overruns']}"
+                    f", {100 * r['share_of_period']:.1f} % of the period"
                 )
-            print(extra)
+            print(line)
+            print(
+                "             parts (median): "
+                + ", ".join(f"{c} {r['parts'][c]['median']:.1f}" for c in cols)
+                + f"; HOFTO+momentum {r['hofto_plus_momentum']['median']:.1f}"
+                + f" (tick with probes {r['tick_with_part_probes']['median']:.1f})"
+            )
+        sp = path.get("snapshot_parts")
+        if sp is not None:
+            print(
+                "  snapshot alone, back to back (median µs): "
+                + ", ".join(f"{k} {v:.1f}" for k, v in sp.items() if k != "backend")
+                + f" ({sp['backend']})"
+            )
         a = path.get("alloc")
         if a is None:
             continue
         print(
-            f"  tracemalloc over {a['ticks']} ticks (exchange included): growth "
-            f"{a['growth_bytes']} B, in the second half {a['growth_second_half_bytes']} B; "
-            f"transient peak per part [B]: {a['transient_peak_bytes']}"
+            f"  tracemalloc over {a['ticks']} ticks: growth {a['growth_bytes']} B "
+            f"(second half {a['growth_second_half_bytes']} B); transient peak per part [B]: "
+            f"{a['transient_peak_bytes']}"
         )
         for site in a["growth_sites"]:
             print(f"    {site}")
     s = res["startup"]
-    if s.get("available"):
+    if "cold" in s:
         print(
-            f"\nstart-up: import {s['cold']['import_s']:.2f} s; build + compile all kernels "
-            f"cold {s['cold']['build_and_warm_s']:.2f} s, cached "
-            f"{s['cached']['build_and_warm_s']:.2f} s"
-        )
-    m = res["monitor_prototype"]
-    if m.get("available"):
-        print(
-            f"monitor: numpy {m['numpy_monitor']['median']:.1f} µs median, compiled "
-            f"prototype {m['compiled_prototype']['median']:.1f} µs (threshold diff "
-            f"{m['threshold_max_abs_diff']:.1e}, decision mismatches "
-            f"{m['decision_mismatches']})"
+            "\nstart-up (compose.build, import excluded): "
+            + ", ".join(
+                f"{k} {v['build_s']:.2f} s ({v['observers']}/{v['drive_group']})"
+                for k, v in s.items()
+            )
+            + f"; import {s['cold']['import_s']:.2f} s"
         )
     print(f"\ntargets ({res['path']} path):")
     for name, value, ok in targets(res):
@@ -549,13 +572,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--quick",
         action="store_true",
-        help="a short run (< 30 s): fewer ticks, tracemalloc over 2,000 ticks on the compiled "
-        "path only, "
-        "no start-up (compilation) measurement",
+        help="a short run (< 30 s on an idle machine): 1,500 ticks per loop (+500 with part "
+        "probes), tracemalloc over 1,000 ticks, no start-up (compilation) measurement",
     )
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--path-only", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--floor", type=float, default=0.0, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    if args.path_only:  # the numpy-path subprocess
+        from hofto_hw.config import load_config
+
+        realtime()
+        print(json.dumps(bench_path(load_config(args.config), args.quick, args.floor)))
+        return 0
     res = bench(args.config, args.quick)
     res["targets"] = [{"target": n, "value": v, "met": ok} for n, v, ok in targets(res)]
     if args.json:

@@ -20,7 +20,7 @@ The service, the EtherCAT master and the CANopen transport all use this class un
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,6 +33,9 @@ from drivers.errors import DriveError as DriveError  # re-exported
 from drivers.errors import TransportError
 from drivers.transport import STATUS_OK, Transport, describe_status
 from hofto_hw.errors import ConfigError
+
+if TYPE_CHECKING:  # the kernels (and numba) load only when a compiled backend is asked for
+    from drivers.cia402.kernels import Backend
 
 
 class DriveTimeoutError(DriveError):
@@ -63,6 +66,7 @@ class DriveGroup(ImageFields):
         scaling: Scaling,
         *,
         transition_timeout: float = 0.5,
+        backend: Backend = "numpy",
     ) -> None:
         n = transport.n_axes
         if scaling.n != n:
@@ -73,14 +77,15 @@ class DriveGroup(ImageFields):
         self.names = transport.axis_names
         self.timeout_cycles = max(1, round(transition_timeout / transport.cycle_time))
         self.transition_timeout = transition_timeout
+        self._si = np.zeros((4, n))  # q, qd, tau, current as rows (one compiled write)
         #: joint angle [rad], (n,)
-        self.q = np.zeros(n)
+        self.q = self._si[0]
         #: joint velocity [rad/s], (n,)
-        self.qd = np.zeros(n)
+        self.qd = self._si[1]
         #: joint-side motor torque [N·m], (n,)
-        self.tau = np.zeros(n)
+        self.tau = self._si[2]
         #: motor current [A] in the joint's sense, (n,)
-        self.current = np.zeros(n)
+        self.current = self._si[3]
         #: State code per axis, uint8 (n,)
         self.states = np.zeros(n, dtype=np.uint8)
         #: status of the last exchange (0 = ok, see drivers.transport.STATUS_TEXT)
@@ -95,18 +100,79 @@ class DriveGroup(ImageFields):
         self._u16 = np.zeros(n, dtype=np.uint16)
         self._cw = np.zeros(n, dtype=np.uint16)
         self._flags = np.zeros(n, dtype=bool)
+        self._zeros = np.zeros(n)  # the velocity command's zero offset
+        # constant scale rows of the compiled read: rad/count, N·m/‰, A/‰
+        self._scale = np.vstack(
+            [scaling.rad_per_count, scaling.nm_per_permille, scaling.amp_per_permille]
+        )
+        self._fast: Any = None
+        if backend != "numpy":
+            from drivers.cia402 import kernels
+
+            if kernels.ready(backend, self._warm):
+                self._fast = kernels
+        #: the implementation of read and command: ``numpy`` (reference) or ``numba``
+        self.backend = "numpy" if self._fast is None else "numba"
+
+    def _warm(self) -> None:
+        """Compile the kernels for this image's exact array types (outputs: scratch)."""
+        from drivers.cia402 import kernels
+
+        # the read only reads the TxPDO: warm it on the image itself (a read-only or
+        # differently aligned buffer is another signature); the commands on a copy of the RxPDO
+        rx, sc = self.transport.rx.copy(), self.scaling
+        si, states = np.zeros_like(self._si), np.zeros_like(self.states)
+        kernels.read_si(
+            self._tx_pos,
+            self._tx_vel,
+            self._tx_tau,
+            self._tx_cur,
+            self._tx_sw,
+            sc.zero_offset,
+            self._scale,
+            sm.STATE_FROM_STATUS,
+            si,
+            states,
+        )
+        q = np.zeros(self.n)
+        for field in ("target_position", "target_velocity"):
+            kernels.command_raw(
+                q,
+                sc.count_per_rad,
+                sc.zero_offset,
+                rx[field],
+                q,
+                sc.permille_per_nm,
+                rx["torque_offset"],
+                True,
+            )
 
     @classmethod
-    def from_config(cls, transport: Transport, bus: Any) -> DriveGroup:
-        """From a :class:`hofto_hw.config.drives.BusConfig`."""
+    def from_config(cls, transport: Transport, bus: Any, backend: Backend = "numpy") -> DriveGroup:
+        """From a :class:`hofto_hw.config.drives.BusConfig`; ``backend`` as the constructor's
+        (``numpy``, ``numba`` or ``auto``: compiled read/command when numba is available)."""
         scaling = Scaling([AxisScaling.from_config(d) for d in bus.drives])
-        return cls(transport, scaling, transition_timeout=bus.transition_timeout)
+        return cls(transport, scaling, transition_timeout=bus.transition_timeout, backend=backend)
 
     # ------------------------------------------------------------ hot path (tick)
 
     def read(self) -> None:
         """Decode the TxPDO into q, qd, tau, current, states (no allocation)."""
         sc = self.scaling
+        if self._fast is not None:
+            self._fast.read_si(
+                self._tx_pos,
+                self._tx_vel,
+                self._tx_tau,
+                self._tx_cur,
+                self._tx_sw,
+                sc.zero_offset,
+                self._scale,
+                sm.STATE_FROM_STATUS,
+                self._si,
+                self.states,
+            )
+            return
         sc.position_to_si(self._tx_pos, self.q)
         sc.velocity_to_si(self._tx_vel, self.qd)
         sc.torque_to_si(self._tx_tau, self.tau)
@@ -130,12 +196,40 @@ class DriveGroup(ImageFields):
 
     def command_position(self, q: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
         """CSP target q [rad] (n,) and optional torque feed-forward [N·m] (n,)."""
+        if self._fast is not None:
+            sc = self.scaling
+            off = tau_offset is not None
+            self._fast.command_raw(
+                q,
+                sc.count_per_rad,
+                sc.zero_offset,
+                self._rx_pos,
+                tau_offset if off else q,
+                sc.permille_per_nm,
+                self._rx_off,
+                off,
+            )
+            return
         self.scaling.position_to_raw(q, self._rx_pos)
         if tau_offset is not None:
             self.scaling.torque_to_raw(tau_offset, self._rx_off)
 
     def command_velocity(self, qd: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
         """CSV target qd [rad/s] (n,) and optional torque feed-forward [N·m] (n,)."""
+        if self._fast is not None:
+            sc = self.scaling
+            off = tau_offset is not None
+            self._fast.command_raw(
+                qd,
+                sc.count_per_rad,
+                self._zeros,
+                self._rx_vel,
+                tau_offset if off else qd,
+                sc.permille_per_nm,
+                self._rx_off,
+                off,
+            )
+            return
         self.scaling.velocity_to_raw(qd, self._rx_vel)
         if tau_offset is not None:
             self.scaling.torque_to_raw(tau_offset, self._rx_off)

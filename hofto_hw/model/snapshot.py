@@ -133,9 +133,9 @@ class DynamicsSnapshot:
         self._friction = bool(needs & Needs.FRICTION)
         self._accel = bool(needs & Needs.ACCEL)
         self._kernels = None
-        if backend != "numpy":
-            # the friction and Cᵀ·qd arithmetic as compiled kernels (the observers' module
-            # holds every kernel and the numba availability logic)
+        if backend != "numpy" and not self._copy:
+            # the finiteness check, friction and Cᵀ·qd arithmetic as compiled kernels (the
+            # observers' module holds every kernel and the numba availability logic)
             from hofto_hw.observers import kernels
 
             memory = model.friction.held is not None or model.friction.quadratic is not None
@@ -161,7 +161,9 @@ class DynamicsSnapshot:
         assert k is not None
         z = np.zeros(n)
         fr = self.model.friction
-        k.friction_and_total(z, z, *self._fr, fr.smooth_velocity, True, np.zeros(n), np.zeros(n))
+        k.snapshot_inputs(
+            z, z, z, *self._fr, fr.smooth_velocity, True, True, np.zeros(n), np.zeros(n)
+        )
         k.transposed_mat_vec(self._C, z, np.zeros(n))
 
     def reset_memory(self) -> None:
@@ -174,23 +176,33 @@ class DynamicsSnapshot:
         Returns ``finite``: False (and nothing evaluated) when the sample holds a NaN or inf.
         """
         self.q, self.qd, self.tau = q, qd, tau
-        # one sum: NaN and ±inf propagate into it (as SampleGuard)
-        self.finite = finite = math.isfinite(_sum(q) + _sum(qd) + _sum(tau))
-        if not finite:
-            return False
         pm, pd, fast = self.pin_model, self.pin_data, self._kernels
-        # A pinocchio call's return value (a copy) is dropped at once unless the Data views
-        # are unstable: one transient array at a time.
-        if self._copy:
-            return self._compute_copying(q, qd, tau)
-        if self._friction:
-            if fast is not None:
-                fr = self.model.friction
-                stribeck = fr._stribeck_gap is not None
-                fast.friction_and_total(
-                    qd, tau, *self._fr, fr.smooth_velocity, stribeck, self.f, self._total
-                )
-            else:
+        if fast is not None:
+            # one compiled call: the finiteness check (the same sum as below) and friction
+            fr = self.model.friction
+            self.finite = finite = fast.snapshot_inputs(
+                q,
+                qd,
+                tau,
+                *self._fr,
+                fr.smooth_velocity,
+                fr._stribeck_gap is not None,
+                self._friction,
+                self.f,
+                self._total,
+            )
+            if not finite:
+                return False
+        else:
+            # one sum: NaN and ±inf propagate into it (as SampleGuard)
+            self.finite = finite = math.isfinite(_sum(q) + _sum(qd) + _sum(tau))
+            if not finite:
+                return False
+            # A pinocchio call's return value (a copy) is dropped at once unless the Data
+            # views are unstable: one transient array at a time.
+            if self._copy:
+                return self._compute_copying(q, qd, tau)
+            if self._friction:
                 self.data.friction_torque(qd, out=self.f)
                 np.subtract(tau, self.f, out=self._total)
         if self._accel:

@@ -48,6 +48,11 @@ def _jit(fn: Callable[..., Any]) -> Callable[..., Any]:
         return _numba.njit(cache=False, nogil=True, error_model="numpy")(fn)
 
 
+#: compile a function as these kernels are (cache=True, nogil, numpy's error model; the
+#: plain Python function without numba): for kernels elsewhere (drivers/cia402/kernels.py)
+jit = _jit
+
+
 def available() -> bool:
     """True when the compiled kernels can run (numba importable, not disabled, compiled)."""
     return _numba is not None and not _DISABLED and not _FAILED
@@ -380,6 +385,43 @@ def friction_and_total(
         out = out + bias[j]
         f[j] = out
         total[j] = tau[j] - out
+
+
+@_jit
+def snapshot_inputs(
+    q: np.ndarray,
+    qd: np.ndarray,
+    tau: np.ndarray,
+    coulomb: np.ndarray,
+    viscous: np.ndarray,
+    bias: np.ndarray,
+    gap: np.ndarray,
+    stribeck_velocity: np.ndarray,
+    smooth: float,
+    stribeck: bool,
+    friction: bool,
+    f: np.ndarray,
+    total: np.ndarray,
+) -> bool:
+    """The snapshot's first step: is the sample finite (the sum of q, qd and tau, as the
+    numpy path's check), then, if ``friction`` and finite, :func:`friction_and_total`.
+    Returns the finiteness; f and total are untouched for a non-finite sample."""
+    acc = 0.0
+    for j in range(q.shape[0]):
+        acc += q[j]
+    acc2 = 0.0
+    for j in range(qd.shape[0]):
+        acc2 += qd[j]
+    acc3 = 0.0
+    for j in range(tau.shape[0]):
+        acc3 += tau[j]
+    if not math.isfinite(acc + acc2 + acc3):
+        return False
+    if friction:
+        friction_and_total(
+            qd, tau, coulomb, viscous, bias, gap, stribeck_velocity, smooth, stribeck, f, total
+        )
+    return True
 
 
 @_jit

@@ -21,6 +21,7 @@ Record kinds (all times in seconds on the loop's monotonic clock since start, SI
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Protocol
 
@@ -38,8 +39,16 @@ DIAG_FIELDS = (
 
 
 def tick_dtype(n_joints: int, n_observers: int) -> np.dtype:
-    """Layout of one tick record for ``n_joints`` joints and ``n_observers`` observers."""
-    n, k = int(n_joints), max(1, int(n_observers))
+    """Layout of one tick record for ``n_joints`` joints and ``n_observers`` observers.
+
+    The same dtype OBJECT for the same sizes: numpy copies a record between arrays of one
+    dtype object in ~0.2 µs, between equal but distinct dtype objects in ~50 µs (it builds
+    a field-by-field cast each time), and the tick copies its record into the sink's ring."""
+    return _tick_dtype(int(n_joints), max(1, int(n_observers)))
+
+
+@functools.cache
+def _tick_dtype(n: int, k: int) -> np.dtype:
     return np.dtype(
         [
             ("t", "<f8"),

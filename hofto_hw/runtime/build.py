@@ -107,7 +107,11 @@ def build_transport(cfg: SystemConfig) -> Transport:
 
 
 def build_drive_group(cfg: SystemConfig, transport: Transport) -> DriveGroup:
-    """The CiA-402 drive layer for ``bus.drives`` over ``transport`` (scaling, timeouts)."""
+    """The CiA-402 drive layer for ``bus.drives`` over ``transport`` (scaling, timeouts),
+    with the compiled read/command when numba is available (the same numbers as numpy's)."""
     from drivers.cia402.drive_group import DriveGroup
+    from hofto_hw.commands.backend import observer_backend
 
-    return DriveGroup.from_config(transport, _bus(cfg, "the drive group"))
+    return DriveGroup.from_config(
+        transport, _bus(cfg, "the drive group"), backend=observer_backend()
+    )

@@ -26,7 +26,9 @@ from hofto_hw.control.joint_motion import DemoPath, JointMotion
 from hofto_hw.errors import ConfigError
 from hofto_hw.model.payload import apply_payload, payload_from_config
 from hofto_hw.model.robot import RobotModel
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import make_observer
+from hofto_hw.observers.base import Observer
 from hofto_hw.observers.stability import check_observer
 from hofto_hw.recording.record import MemorySink, RecordSink, tick_dtype
 from hofto_hw.runtime.build import build_drive_group, build_sim_bus, build_transport
@@ -116,6 +118,23 @@ def build_model(cfg: SystemConfig) -> RobotModel:
     return model
 
 
+def shared_snapshot(model: RobotModel, observers: list[Observer]) -> DynamicsSnapshot:
+    """The tick's one dynamics snapshot: the union of the observers' ``needs``, computed with
+    the implementation their own snapshots use (the compiled friction and Cᵀ·qd when every
+    observer runs compiled, else numpy), so the shared terms equal each observer's own.
+
+    Not shared with the feed-forward (inverse dynamics at the reference motion, another
+    sample) nor with the drag controller (Jacobians and frame placements, not snapshot terms).
+    """
+    needs = Needs.NONE
+    compiled = True
+    for obs in observers:
+        needs |= obs.needs
+        own = getattr(obs, "snapshot", None)
+        compiled = compiled and own is not None and own.backend == "numba"
+    return DynamicsSnapshot(model, needs, "numba" if compiled else "numpy")
+
+
 def build(
     cfg: SystemConfig,
     *,
@@ -154,6 +173,7 @@ def build(
     tick = Tick(
         group,
         observers,
+        shared_snapshot(model, observers),
         stop,
         limits,
         health,

@@ -1,6 +1,12 @@
 """One control tick, top to bottom (hot path: no allocation, no formatting, no I/O):
 
-exchange -> joint state (SI) -> observers -> safety -> controller -> command -> record.
+exchange -> joint state (SI) -> dynamics snapshot -> observers -> safety -> controller ->
+command -> record.
+
+The dynamics snapshot (:class:`~hofto_hw.model.snapshot.DynamicsSnapshot`, built by the
+composition root for the union of the observers' ``needs``) is computed once per tick; every
+observer reads it through ``update_snapshot`` (the same numbers as each observer's own
+``update``, which replay and the demo use).
 
 The :class:`Tick` owns every buffer it writes; the loop (hofto_hw/runtime/loop.py) calls
 :meth:`Tick.step` once per cycle with the real dt. Requests from other threads (stop, reset,
@@ -9,6 +15,7 @@ mode) are plain attributes the tick reads: one writer each, no locks.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -20,6 +27,7 @@ from hofto_hw.control.drag import DragController, DragReason
 from hofto_hw.control.enabling import EnableInput
 from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, PLAYING, JointMotion
 from hofto_hw.model.data import ModelData
+from hofto_hw.model.snapshot import DynamicsSnapshot
 from hofto_hw.observers.base import Observer
 from hofto_hw.recording.record import (
     DIAG_DTYPE,
@@ -42,16 +50,19 @@ STANDSTILL = 0.01  # rad/s: every joint slower than this counts as stopped
 MAX_STOPS = 256  # stop episodes kept for the summary
 FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
 _DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
+_sum = np.add.reduce
 
 
 class Tick:
     """See the module docstring. ``observers`` are evaluated in order; their estimates are
-    rows of ``tau_ext`` (k, n) and of the tick record."""
+    rows of ``tau_ext`` (k, n) and of the tick record. ``snapshot`` is computed for at least
+    every observer's ``needs`` (:func:`hofto_hw.runtime.compose.shared_snapshot`)."""
 
     def __init__(
         self,
         group: DriveGroup,
         observers: Sequence[Observer],
+        snapshot: DynamicsSnapshot,
         stop: StopController,
         limits: LimitMonitor,
         bus: BusHealth,
@@ -69,6 +80,10 @@ class Tick:
         self.group = group
         self.observers = list(observers)
         self.names = [o.name for o in self.observers]
+        missing = [o.name for o in self.observers if o.needs & ~snapshot.needs]
+        if missing:
+            raise ValueError(f"the tick's snapshot lacks terms observers {missing} need")
+        self.snapshot = snapshot
         self.stop = stop
         self.limits = limits
         self.bus = bus
@@ -80,6 +95,7 @@ class Tick:
         self.tick = 0
         self.t = 0.0
         self.tau_ext = np.zeros((max(1, len(self.observers)), n))
+        self._tau_ext_flat = self.tau_ext.reshape(-1)  # a view: one finiteness sum
         self.tau_ff = np.zeros(n)
         self.q_sent = np.zeros(n)  # position target of the last command [rad]
         self.err_codes = group.transport.tx["error_code"]
@@ -149,6 +165,7 @@ class Tick:
         g.cycle()
         self.motion.start(g.q)
         np.copyto(self.q_sent, g.q)
+        self.snapshot.reset_memory()
         for obs in self.observers:
             obs.reset(g.q, g.qd)
         self.limits.reset(g.q)
@@ -173,9 +190,13 @@ class Tick:
         fresh = g.fresh
         q, qd, tau = g.q, g.qd, g.tau
 
-        # 3. observers (HOFTO, momentum): each writes its own row
+        # 3. the model terms of this sample, once for every estimator
+        snap = self.snapshot
+        snap.compute(q, qd, tau)
+
+        # 3a. observers (HOFTO, momentum): each writes its own row
         for i, obs in enumerate(self.observers):
-            np.copyto(self.tau_ext[i], obs.update(q, qd, tau, dt))
+            np.copyto(self.tau_ext[i], obs.update_snapshot(snap, dt))
 
         # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
         # safety's to latch below); the reference it integrates is used in step 5
@@ -188,9 +209,12 @@ class Tick:
         # 4. safety: decides, latches, picks the stop category
         good = self.bus.check(stop, status, fresh, g.states, self.err_codes, self.expect_enabled)
         lim = self.limits
-        ok = lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau)
-        for i in range(len(self.observers)):
-            ok &= lim.finite(stop, self.tau_ext[i])
+        # a finite snapshot sample means q, qd, tau are all finite (their sum is): the per-array
+        # checks, which name the joint, run only when something is not
+        ok = snap.finite or (lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau))
+        if not math.isfinite(_sum(self._tau_ext_flat)):
+            for i in range(len(self.observers)):
+                ok &= lim.finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
         lim.check(stop, q, qd, tau, self.q_sent, good, powered)
         monitored = self.collision is not None and ok and self._power_on(g.states)
@@ -310,6 +334,7 @@ class Tick:
         if not done:
             return
         g = self.group
+        self.snapshot.reset_memory()
         for obs in self.observers:
             obs.reset(g.q, g.qd)
         self.limits.reset(g.q)

@@ -61,15 +61,25 @@ def test_terms_are_views_of_pinocchio_storage_when_pinocchio_allows(er3a_model):
     np.testing.assert_array_equal(snap.M, snap.M.T)
 
 
-def test_nonfinite_sample_is_not_evaluated_and_terms_keep_their_values(er3a_model):
+def _backends():
+    from hofto_hw.observers import kernels
+
+    return ["numpy"] + (["numba"] if kernels.available() else [])
+
+
+@pytest.mark.parametrize("backend", _backends())
+def test_nonfinite_sample_is_not_evaluated_and_terms_keep_their_values(er3a_model, backend):
     rng = np.random.default_rng(4)
-    snap = DynamicsSnapshot(er3a_model, ALL)
+    snap = DynamicsSnapshot(er3a_model, ALL, backend=backend)
+    assert snap.backend == backend
     q, qd, tau = _sample(er3a_model, rng)
     assert snap.compute(q, qd, tau)
     before = [a.copy() for a in (snap.M, snap.g, snap.nle, snap.f, snap.accel, snap.ct_qd)]
     for bad in ("q", "qd", "tau"):
         sample = {"q": q.copy(), "qd": qd.copy(), "tau": tau.copy()}
         sample[bad][2] = np.inf if bad == "tau" else np.nan
+        if bad == "qd":  # two infinities of opposite sign in q: still refused
+            sample["q"][0], sample["q"][1] = np.inf, -np.inf
         assert not snap.compute(sample["q"], sample["qd"], sample["tau"])
         assert not snap.finite
         after = (snap.M, snap.g, snap.nle, snap.f, snap.accel, snap.ct_qd)

@@ -95,14 +95,14 @@ def test_nan_in_measurement(cfg: SystemConfig) -> None:
 def test_nan_from_the_model(cfg: SystemConfig) -> None:
     system = _moving(cfg)
     obs = system.tick.observers[1]
-    original = obs.update
+    original = obs.update_snapshot  # the tick updates observers from its shared snapshot
     bad = np.full(6, np.nan)
 
-    def update(q: Any, qd: Any, tau: Any, dt: float) -> Any:
-        obs.update = original
+    def update_snapshot(snap: Any, dt: float) -> Any:
+        obs.update_snapshot = original
         return bad
 
-    obs.update = update
+    obs.update_snapshot = update_snapshot
     _check(system, Fault.NON_FINITE, cfg.safety.categories.non_finite)
 
 
