@@ -177,6 +177,8 @@ class Choice:
     margin: list[float]
     false: FloatArray
     stats: PulseStats
+    #: (sum of left-out detection rates over joints, amplitudes and states, -median delay)
+    score: tuple[float, float] = (0.0, 0.0)
 
 
 def choose(candidates: list[Candidate]) -> Choice:
@@ -201,7 +203,7 @@ def choose(candidates: list[Candidate]) -> Choice:
         total = sum(_joint_score(stats, j)[0] for j in range(n))
         delays = [x for a in stats.delays for s in a for row in s for x in row]
         key = (total, -float(np.median(delays)) if delays else -np.inf)
-        choice = Choice(mt, st, [c.margin for c in picks], np.zeros(n), stats)
+        choice = Choice(mt, st, [c.margin for c in picks], np.zeros(n), stats, key)
         if best is None or key > best[0]:
             best = (key, choice)
     if best is None:
