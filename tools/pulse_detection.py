@@ -34,9 +34,7 @@ from hofto_hw.replay.tuning import pulsed_runs
 from safety.collision import CollisionMonitor
 
 
-def smallest_found(
-    stats: PulseStats, false: np.ndarray, found: float
-) -> list[list[float | None]]:
+def smallest_found(stats: PulseStats, false: np.ndarray, found: float) -> list[list[float | None]]:
     """Per state (motion, rest) and joint: the smallest amplitude whose detection rate is >=
     ``found`` (and every larger one too), None when none is or the joint has false alarms;
     NaN where no pulse was tried."""
@@ -60,7 +58,7 @@ def smallest_found(
     return out
 
 
-def measure(args: argparse.Namespace, name: str, setup, th, recs) -> dict:  # noqa: ANN001
+def measure(args: argparse.Namespace, name: str, setup, th, recs) -> dict:
     obs_cfg = observer_config(name, setup, th)
     mcfg = th.observers[name].monitor
     backend = observer_backend()
@@ -142,10 +140,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {st}: detection rate / median delay [s] per joint")
             for a in args.amps:
                 key = f"{a:g}"
+                rates, delays = res["rate"][st][key], res["median_delay"][st][key]
                 cells = " ".join(
-                    "   -      "
-                    if res["rate"][st][key][j] is None
-                    else f"{res['rate'][st][key][j]:5.2f}/{(res['median_delay'][st][key][j] or 0):.2f}"
+                    "   -      " if rates[j] is None else f"{rates[j]:5.2f}/{(delays[j] or 0):.2f}"
                     for j in range(n)
                 )
                 print(f"  {a:5g} N·m {cells}")

@@ -83,23 +83,23 @@ def _floats(text: str, what: str) -> list[float]:
     return values
 
 
+def _cell(rate: float, delay: float) -> str:
+    if np.isnan(rate):
+        return "      -    "
+    return f"{rate:4.2f}/  -  " if np.isnan(delay) else f"{rate:4.2f}/{delay:5.3f}"
+
+
 def _table(stats: Any, amps: list[float], width: float) -> list[str]:
     from hofto_hw.replay.pulses import STATES
 
     n = stats.hits.shape[2]
     rate, delay = stats.rate, stats.median_delay()
     lines = [
-        f"  {'pulse':>9} {'state':6} "
-        + " ".join(f"{'joint ' + str(j + 1):>11}" for j in range(n))
+        f"  {'pulse':>9} {'state':6} " + " ".join(f"{'joint ' + str(j + 1):>11}" for j in range(n))
     ]
     for i, a in enumerate(amps):
         for s, st in enumerate(STATES):
-            cells = " ".join(
-                "      -    " if np.isnan(rate[i, s, j]) else f"{rate[i, s, j]:4.2f}/{delay[i, s, j]:5.3f}"
-                if not np.isnan(delay[i, s, j])
-                else f"{rate[i, s, j]:4.2f}/  -  "
-                for j in range(n)
-            )
+            cells = " ".join(_cell(rate[i, s, j], delay[i, s, j]) for j in range(n))
             lines.append(f"  {a:5g} N·m {st:6} {cells}")
     return lines
 
@@ -179,7 +179,9 @@ def run(args: argparse.Namespace) -> int:
                     continue
                 variants.append(cfg)
             if not variants:
-                raise UserError(f"tune: no momentum gain in {args.gains!r} is stable at {rate:.4g} Hz")
+                raise UserError(
+                    f"tune: no momentum gain in {args.gains!r} is stable at {rate:.4g} Hz"
+                )
         else:
             variants.append(base_obs)
         best = None
@@ -187,14 +189,20 @@ def run(args: argparse.Namespace) -> int:
             say(f"{name}: observer runs with pulses ({obs_cfg.model_dump(exclude_none=True)})")
             runs = pulsed_runs(
                 recs,
-                lambda r, c=obs_cfg: observer_for(name, c, setup, r, backend),
+                lambda r, c=obs_cfg, o=name: observer_for(o, c, setup, r, backend),
                 amps,
                 args.width,
                 args.pulses,
                 args.seed,
             )
             cands = cross_validate(
-                runs, template, moving, still, margins, args.folds, say=lambda m: say(f"{name}: {m}")
+                runs,
+                template,
+                moving,
+                still,
+                margins,
+                args.folds,
+                say=lambda m, o=name: say(f"{o}: {m}"),
             )
             try:
                 choice = choose(cands)

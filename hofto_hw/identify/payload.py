@@ -25,7 +25,6 @@ from hofto_hw.errors import UserError
 from hofto_hw.identify.pipeline import Samples
 from hofto_hw.model.robot import RobotModel
 
-
 #: a principal moment of inertia counts as identified when its std dev is below this share
 IDENTIFIABLE_REL_STD = 0.3
 #: condition number of the column-scaled regressor above which it counts as rank deficient

@@ -83,9 +83,7 @@ def thresholds_of(feats: FloatArray, env: FloatArray, margin: FloatArray) -> Flo
     return np.einsum("knf,nf->kn", feats, env * (1.0 + margin)[:, None])
 
 
-def judge(
-    run: PulsedRun, thr: FloatArray, debounce: float, stats: PulseStats
-) -> NDArray[np.bool_]:
+def judge(run: PulsedRun, thr: FloatArray, debounce: float, stats: PulseStats) -> NDArray[np.bool_]:
     """Tally the run's pulses against thresholds ``thr`` (N, n) into ``stats``; returns which
     joints (n,) trip on the contact-free estimate (false alarms)."""
     t = run.rec.t
