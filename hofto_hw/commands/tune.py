@@ -49,15 +49,22 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--gains", default="20", help="momentum observer gains to try [1/s]")
     parser.add_argument(
-        "--margins", default="0.2,0.4,0.6,0.8,1,1.3,1.6,2", help="calibration margins to try"
+        "--margins",
+        default="0.1,0.2,0.3,0.4,0.5,0.6,0.7,0.8,0.9,1,1.3,1.6,2",
+        help="calibration margins to try (per joint)",
     )
     parser.add_argument(
-        "--moving-times", default="0.5,1,2", help="monitor moving_time values to try [s]"
+        "--moving-times", default="1,2", help="monitor moving_time values to try [s]"
     )
     parser.add_argument(
-        "--standstill-times", default="0,0.5,1,2", help="monitor standstill_time values [s]"
+        "--standstill-times", default="0", help="monitor standstill_time values to try [s]"
     )
-    parser.add_argument("--folds", type=positive_int, default=4, help="cross-validation folds")
+    parser.add_argument(
+        "--rest-weights",
+        default="1",
+        help="weights of the rest samples in the calibration objective to try (per joint)",
+    )
+    parser.add_argument("--folds", type=positive_int, default=8, help="cross-validation folds")
     parser.add_argument("--amplitudes", default="5,10,20", help="pulse sizes [N·m]")
     parser.add_argument(
         "--width", type=finite_positive_float, default=0.4, help="half-sine width [s]"
@@ -143,6 +150,9 @@ def run(args: argparse.Namespace) -> int:
     moving = _floats(args.moving_times, "--moving-times")
     still = _floats(args.standstill_times, "--standstill-times")
     amps = _floats(args.amplitudes, "--amplitudes")
+    weights = _floats(args.rest_weights, "--rest-weights")
+    if min(weights) <= 0:
+        raise UserError(f"tune: --rest-weights must be > 0, got {args.rest_weights!r}")
     if min(moving) <= 0:
         raise UserError(f"tune: --moving-times must be > 0 s, got {args.moving_times!r}")
     names = [v.strip() for v in args.observers.split(",") if v.strip()]
@@ -203,6 +213,7 @@ def run(args: argparse.Namespace) -> int:
                 margins,
                 args.folds,
                 say=lambda m, o=name: say(f"{o}: {m}"),
+                rest_weights=tuple(weights),
             )
             try:
                 choice = choose(cands)
@@ -227,11 +238,13 @@ def run(args: argparse.Namespace) -> int:
             "moving_time": choice.moving_time,
             "standstill_time": choice.standstill_time,
             "margin": choice.margin,
+            "rest_weight": choice.rest_weight,
             "sensitivity": _sensitivity(choice.stats, amps),
         }
         tables[name] = [
             f"{name}: moving_time {choice.moving_time:g} s, standstill_time "
-            f"{choice.standstill_time:g} s, margin per joint {choice.margin}",
+            f"{choice.standstill_time:g} s, margin per joint {choice.margin}, rest weight "
+            f"{choice.rest_weight}",
             *_table(choice.stats, amps, args.width),
         ]
         if name == "momentum":
@@ -247,6 +260,8 @@ def run(args: argparse.Namespace) -> int:
             "margins": margins,
             "moving_times": moving,
             "standstill_times": still,
+            "rest_weights": weights,
+            "folds": args.folds,
             "debounce": args.debounce,
             "amplitudes": amps,
             "width": args.width,

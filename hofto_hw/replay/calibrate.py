@@ -80,12 +80,18 @@ def features(rec: Recording, template: CollisionConfig) -> FloatArray:
 
 
 def fit_envelope(
-    feats: FloatArray, residual: FloatArray, use: tuple[bool, ...], min_base: float
+    feats: FloatArray,
+    residual: FloatArray,
+    use: tuple[bool, ...],
+    min_base: float,
+    rest_weight: float = 1.0,
 ) -> FloatArray:
     """Coefficients (5,) >= 0 of the smallest-mean envelope of |residual| for one joint.
 
     ``feats`` (N, 5), ``residual`` (N,) [N·m]; ``use`` (4 or 5 flags) switches terms on;
-    c0 >= min_base.
+    c0 >= min_base. ``rest_weight`` W weighs each sample's threshold in the mean by
+    1 + (W − 1)·s (s the standstill feature): W > 1 favours a low threshold at rest, where
+    free-motion runs have few samples.
     """
     m = feats.shape[1]
     cols = [i for i in range(m) if i < len(use) and use[i]]
@@ -93,7 +99,8 @@ def fit_envelope(
     r = np.abs(residual)
     # the objective is the mean threshold over *every* sample (taken before dropping rows:
     # over the kept rows alone a term that is small where the residual is large looks cheap)
-    cost = F.mean(axis=0)
+    w = 1.0 + (rest_weight - 1.0) * feats[:, 4] if rest_weight != 1.0 else None
+    cost = F.mean(axis=0) if w is None else (w[:, None] * F).sum(axis=0) / w.sum()
     # c0 >= min_base and features >= 0: rows with |r| <= min_base cannot bind.
     keep = r > min_base
     F, r = F[keep], r[keep]

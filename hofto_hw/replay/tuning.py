@@ -31,7 +31,7 @@ from hofto_hw.observers.base import Observer
 from hofto_hw.replay.calibrate import (
     config_from_envelope,
     features,
-    fit_envelopes,
+    fit_envelope,
     sustained,
 )
 from hofto_hw.replay.pulses import Pulse, PulseStats, pulse_train, score, tally, trips
@@ -93,16 +93,27 @@ def judge(run: PulsedRun, thr: FloatArray, debounce: float, stats: PulseStats) -
     return trips(run.est, thr, t, debounce).any(axis=0)
 
 
+def envelopes(
+    feats: FloatArray, sus: FloatArray, rest_weight: FloatArray, min_base: float
+) -> FloatArray:
+    """Envelope (n, 5) of every joint, each with its own rest weight (n,)."""
+    n = sus.shape[1]
+    return np.stack(
+        [fit_envelope(feats[:, j], sus[:, j], TERMS, min_base, rest_weight[j]) for j in range(n)]
+    )
+
+
 @dataclass
 class Candidate:
-    """Cross-validated figures of one timing and margin: ``false`` (n,) left-out runs with a
-    false trip per joint, ``stats`` the left-out pulses."""
+    """Cross-validated figures of one timing, rest weight and margin: ``false`` (n,) left-out
+    runs with a false trip per joint, ``stats`` the left-out pulses."""
 
     moving_time: float
     standstill_time: float
     margin: float
     false: FloatArray
     stats: PulseStats
+    rest_weight: float = 1.0
 
 
 def folds_of(n_runs: int, folds: int) -> list[int]:
@@ -121,8 +132,11 @@ def cross_validate(
     folds: int,
     min_base: float = 1.0,
     say: Callable[[str], None] = lambda _m: None,
+    rest_weights: tuple[float, ...] = (1.0,),
 ) -> list[Candidate]:
-    """Figures on the left-out folds of every (moving_time, standstill_time, margin)."""
+    """Figures on the left-out folds of every (moving_time, standstill_time, rest weight,
+    margin); the rest weight (see :func:`hofto_hw.replay.calibrate.fit_envelope`) and the
+    margin are chosen per joint later."""
     n = runs[0].est.shape[1]
     amps = len(runs[0].pulsed)
     fold = folds_of(len(runs), folds)
@@ -132,29 +146,31 @@ def cross_validate(
         for st in standstill_times:
             tmpl = template.model_copy(update={"moving_time": mt, "standstill_time": st})
             feats = [features(r.rec, tmpl) for r in runs]
-            cands = {
-                m: Candidate(mt, st, m, np.zeros(n), PulseStats.empty([0.0] * amps, n))
-                for m in margins
-            }
-            for f in range(folds):
-                fit = [i for i in range(len(runs)) if fold[i] != f]
-                env = fit_envelopes(
-                    np.concatenate([feats[i] for i in fit]),
-                    np.concatenate([sus[i] for i in fit]),
-                    TERMS,
-                    min_base,
-                )
-                for i in (i for i in range(len(runs)) if fold[i] == f):
-                    for m, c in cands.items():
-                        thr = thresholds_of(feats[i], env, np.full(n, m))
-                        c.false += judge(runs[i], thr, template.debounce_time, c.stats)
-            for c in cands.values():
-                say(
-                    f"moving_time {mt:g} s, standstill_time {st:g} s, margin {c.margin:g}: "
-                    f"false trips per joint {c.false.astype(int).tolist()}, "
-                    f"pulses found {int(c.stats.hits.sum())}/{int(c.stats.tries.sum())}"
-                )
-            out.extend(cands.values())
+            for w in rest_weights:
+                cands = {
+                    m: Candidate(mt, st, m, np.zeros(n), PulseStats.empty([0.0] * amps, n), w)
+                    for m in margins
+                }
+                for f in range(folds):
+                    fit = [i for i in range(len(runs)) if fold[i] != f]
+                    env = envelopes(
+                        np.concatenate([feats[i] for i in fit]),
+                        np.concatenate([sus[i] for i in fit]),
+                        np.full(n, w),
+                        min_base,
+                    )
+                    for i in (i for i in range(len(runs)) if fold[i] == f):
+                        for m, c in cands.items():
+                            thr = thresholds_of(feats[i], env, np.full(n, m))
+                            c.false += judge(runs[i], thr, template.debounce_time, c.stats)
+                for c in cands.values():
+                    say(
+                        f"moving_time {mt:g} s, standstill_time {st:g} s, rest weight {w:g}, "
+                        f"margin {c.margin:g}: false trips per joint "
+                        f"{c.false.astype(int).tolist()}, pulses found "
+                        f"{int(c.stats.hits.sum())}/{int(c.stats.tries.sum())}"
+                    )
+                out.extend(cands.values())
     return out
 
 
@@ -175,6 +191,7 @@ class Choice:
     margin: list[float]
     false: FloatArray
     stats: PulseStats
+    rest_weight: list[float] = dataclasses.field(default_factory=list)
     #: (sum of left-out detection rates over joints, amplitudes and states, -median delay)
     score: tuple[float, float] = (0.0, 0.0)
 
@@ -192,7 +209,9 @@ def choose(candidates: list[Candidate]) -> Choice:
             ok = [c for c in group if c.false[j] == 0]
             if not ok:
                 break
-            picks.append(max(ok, key=lambda c: (_joint_score(c.stats, j), -c.margin)))
+            picks.append(
+                max(ok, key=lambda c: (_joint_score(c.stats, j), -c.margin, -c.rest_weight))
+            )
         if len(picks) < n:
             continue
         stats = PulseStats.empty(group[0].stats.amplitudes, n)
@@ -201,7 +220,15 @@ def choose(candidates: list[Candidate]) -> Choice:
         total = sum(_joint_score(stats, j)[0] for j in range(n))
         delays = [x for a in stats.delays for s in a for row in s for x in row]
         key = (total, -float(np.median(delays)) if delays else -np.inf)
-        choice = Choice(mt, st, [c.margin for c in picks], np.zeros(n), stats, key)
+        choice = Choice(
+            mt,
+            st,
+            [c.margin for c in picks],
+            np.zeros(n),
+            stats,
+            [c.rest_weight for c in picks],
+            key,
+        )
         if best is None or key > best[0]:
             best = (key, choice)
     if best is None:
@@ -222,7 +249,8 @@ def final_config(
     )
     feats = np.concatenate([features(r.rec, tmpl) for r in runs])
     sus = np.concatenate([sustained(r.rec, r.est, tmpl.debounce_time) for r in runs])
-    env = fit_envelopes(feats, sus, TERMS, min_base)
+    weights = np.asarray(choice.rest_weight or [1.0] * sus.shape[1])
+    env = envelopes(feats, sus, weights, min_base)
     cfg = config_from_envelope(tmpl, env, np.asarray(choice.margin), TERMS)
     peak = np.max(np.abs(np.concatenate([r.est for r in runs])), axis=0)
     return cfg, peak
