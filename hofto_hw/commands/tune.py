@@ -64,7 +64,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default="1",
         help="weights of the rest samples in the calibration objective to try (per joint)",
     )
-    parser.add_argument("--folds", type=positive_int, default=8, help="cross-validation folds")
+    parser.add_argument(
+        "--folds", type=positive_int, help="cross-validation folds (default: 8, at most 1 per file)"
+    )
     parser.add_argument("--amplitudes", default="5,10,20", help="pulse sizes [N·m]")
     parser.add_argument(
         "--width", type=finite_positive_float, default=0.4, help="half-sine width [s]"
@@ -164,6 +166,8 @@ def run(args: argparse.Namespace) -> int:
             )
     if len(args.files) < 2:
         raise UserError("tune: give at least 2 contact-free recordings (some are left out)")
+    if args.folds is None:
+        args.folds = min(8, len(args.files))
     folds_of(len(args.files), args.folds)  # refuses a bad --folds before the long work
     refuse_overwrite(args.output, [args.params, args.config, *args.files], "--output")
     setup = load_setup(args.params, args.config)

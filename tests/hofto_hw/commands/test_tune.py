@@ -19,6 +19,7 @@ pytestmark = pytest.mark.skipif(
 )
 
 
+@pytest.mark.slow
 def test_tune_writes_thresholds_with_provenance(tmp_path, capsys) -> None:
     from hofto_hw.replay.thresholds import read_thresholds
 
