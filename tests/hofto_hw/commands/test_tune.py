@@ -65,3 +65,18 @@ def test_tune_refuses_bad_gains(capsys) -> None:
     ]
     assert main(args + ["--gains", "fast"]) == 2
     assert "--gains" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("option", "named"),
+    [
+        (["--folds", "9"], "--folds"),
+        (["--observers", "momentum,sta"], "'sta'"),
+        (["--rest-weights", "0"], "--rest-weights"),
+        (["--moving-times", "0"], "--moving-times"),
+    ],
+)
+def test_tune_refuses_bad_settings_naming_them(option, named, capsys) -> None:
+    args = ["tune", str(CONFIGS / "ur10e" / "parameters.yaml"), *map(str, FILES), "-o", "x.yaml"]
+    assert main(args + option) == 2
+    assert named in capsys.readouterr().err
