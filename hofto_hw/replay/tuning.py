@@ -196,9 +196,11 @@ class Choice:
     score: tuple[float, float] = (0.0, 0.0)
 
 
-def choose(candidates: list[Candidate]) -> Choice:
-    """Per joint the margin with 0 false trips and the best score; the timing whose joints
-    score best in total (a timing where some joint has no margin without false trips loses)."""
+def choose(candidates: list[Candidate], cushion: float = 0.0) -> Choice:
+    """Per joint the margin with 0 false trips and the best score, raised by ``cushion`` (to
+    the nearest margin tried at or above it, with the same rest weight: a margin just clean
+    on the left-out runs is clean by luck as often as not); the timing whose joints score
+    best in total (a timing where some joint has no margin without false trips loses)."""
     timings = sorted({(c.moving_time, c.standstill_time) for c in candidates})
     best: tuple[tuple[float, ...], Choice] | None = None
     for mt, st in timings:
@@ -209,9 +211,13 @@ def choose(candidates: list[Candidate]) -> Choice:
             ok = [c for c in group if c.false[j] == 0]
             if not ok:
                 break
-            picks.append(
-                max(ok, key=lambda c: (_joint_score(c.stats, j), -c.margin, -c.rest_weight))
-            )
+            pick = max(ok, key=lambda c: (_joint_score(c.stats, j), -c.margin, -c.rest_weight))
+            above = [
+                c
+                for c in ok
+                if c.rest_weight == pick.rest_weight and c.margin >= pick.margin + cushion - 1e-9
+            ]
+            picks.append(min(above, key=lambda c: c.margin) if above else pick)
         if len(picks) < n:
             continue
         stats = PulseStats.empty(group[0].stats.amplitudes, n)
@@ -239,6 +245,26 @@ def choose(candidates: list[Candidate]) -> Choice:
     return best[1]
 
 
+def refit(
+    recs: list[Recording],
+    ests: list[FloatArray],
+    monitor: CollisionConfig,
+    margin: list[float],
+    rest_weight: list[float] | None = None,
+    min_base: float = 1.0,
+) -> CollisionConfig:
+    """``monitor``'s timing and filters with its per-joint terms fitted on ``recs`` (their
+    contact-free estimates ``ests`` (N_i, n) [N·m]) and scaled by the per-joint ``margin``."""
+    n = len(margin)
+    feats = np.concatenate([features(r, monitor) for r in recs])
+    sus = np.concatenate(
+        [sustained(r, e, monitor.debounce_time) for r, e in zip(recs, ests, strict=True)]
+    )
+    weights = np.asarray(rest_weight or [1.0] * n)
+    env = envelopes(feats, sus, weights, min_base)
+    return config_from_envelope(monitor, env, np.asarray(margin), TERMS)
+
+
 def final_config(
     runs: list[PulsedRun], template: CollisionConfig, choice: Choice, min_base: float = 1.0
 ) -> tuple[CollisionConfig, FloatArray]:
@@ -247,10 +273,13 @@ def final_config(
     tmpl = template.model_copy(
         update={"moving_time": choice.moving_time, "standstill_time": choice.standstill_time}
     )
-    feats = np.concatenate([features(r.rec, tmpl) for r in runs])
-    sus = np.concatenate([sustained(r.rec, r.est, tmpl.debounce_time) for r in runs])
-    weights = np.asarray(choice.rest_weight or [1.0] * sus.shape[1])
-    env = envelopes(feats, sus, weights, min_base)
-    cfg = config_from_envelope(tmpl, env, np.asarray(choice.margin), TERMS)
+    cfg = refit(
+        [r.rec for r in runs],
+        [r.est for r in runs],
+        tmpl,
+        choice.margin,
+        choice.rest_weight,
+        min_base,
+    )
     peak = np.max(np.abs(np.concatenate([r.est for r in runs])), axis=0)
     return cfg, peak
