@@ -50,3 +50,16 @@ def test_thresholds_of_scales_each_joint_by_its_margin() -> None:
     env = np.array([[1.0, 0, 0, 0, 0], [2.0, 0, 0, 0, 0]])
     thr = thresholds_of(feats, env, np.array([0.5, 1.0]))
     assert np.allclose(thr, [[1.5, 4.0]] * 4)
+
+
+def test_choose_raises_each_margin_by_the_cushion() -> None:
+    cands = [
+        _cand(0.2, [0, 0], [9, 9]),
+        _cand(0.3, [0, 0], [8, 8]),
+        _cand(0.5, [0, 0], [6, 6]),
+    ]
+    assert choose(cands).margin == [0.2, 0.2]
+    ch = choose(cands, cushion=0.1)
+    assert ch.margin == [0.3, 0.3]
+    assert ch.stats.hits[0, 0].tolist() == [8, 8]  # the figures of the margin shipped
+    assert choose(cands, cushion=0.15).margin == [0.5, 0.5]  # the next margin tried above
