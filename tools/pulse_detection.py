@@ -142,7 +142,9 @@ def main(argv: list[str] | None = None) -> int:
                 key = f"{a:g}"
                 rates, delays = res["rate"][st][key], res["median_delay"][st][key]
                 cells = " ".join(
-                    "   -      " if rates[j] is None else f"{rates[j]:5.2f}/{(delays[j] or 0):.2f}"
+                    "   -      "
+                    if rates[j] is None
+                    else f"{rates[j]:5.2f}/" + ("  -" if delays[j] is None else f"{delays[j]:.2f}")
                     for j in range(n)
                 )
                 print(f"  {a:5g} N·m {cells}")

@@ -88,6 +88,5 @@ def write_thresholds(path: str | Path, content: ThresholdsFile) -> None:
     data = content.model_dump(mode="json", exclude_none=True)
     Path(path).write_text(  # OSError: the caller names the option
         "# Collision thresholds: written by `hofto-hw thresholds calibrate` or `hofto-hw tune`"
-        " (see provenance).\n"
-        + yaml.dump(data, Dumper=_Dumper, sort_keys=False, width=100)
+        " (see provenance).\n" + yaml.dump(data, Dumper=_Dumper, sort_keys=False, width=100)
     )
