@@ -1,5 +1,8 @@
 """``hofto-hw payload identify PARAMS FILE...``: mass and centre of mass of a load on the tool
 frame, with standard deviations; ``-o`` writes the ``payload:`` block for the robot config.
+``--inertia`` also fits the inertia about the com (6 values, with std devs) and says whether
+the motion made it identifiable; only an identifiable inertia goes into the block (else the
+block keeps mass and com of the 4-parameter fit).
 """
 
 from __future__ import annotations
@@ -28,6 +31,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     idp.add_argument(
         "--cutoff", type=finite_positive_float, default=5.0, help="low-pass cut-off [Hz]"
     )
+    idp.add_argument(
+        "--inertia", action="store_true", help="also fit the inertia about the com (6 values)"
+    )
     idp.add_argument("--drop-bad-rows", action="store_true", help="drop corrupt rows")
     idp.add_argument("--json", action="store_true", help="print the estimate as JSON")
 
@@ -41,8 +47,10 @@ def run(args: argparse.Namespace) -> int:
     opts = Conditioning(args.cutoff, False, 1, args.drop_bad_rows, trim=False)
     search = [setup.robot_dir, setup.config.robot.urdf.parent]
     loaded = load_samples(args.files, args.columns, None, opts, search)
-    est = identify_payload(setup.model, [s for s, _ in loaded])
-    block = {"payload": est.as_config()}
+    samples = [s for s, _ in loaded]
+    est = identify_payload(setup.model, samples)
+    full = identify_payload(setup.model, samples, inertia=True) if args.inertia else None
+    block = {"payload": (full if full is not None and full.identifiable else est).as_config()}
     if args.output is not None:
         text = "# written by hofto-hw payload identify from " + ", ".join(
             Path(s.source).name for s, _ in loaded
@@ -58,6 +66,18 @@ def run(args: argparse.Namespace) -> int:
             "rmse_before": est.rmse_before.tolist(),
             "rmse_after": est.rmse_after.tolist(),
         }
+        if full is not None:
+            out["with_inertia"] = {
+                "mass": full.mass,
+                "mass_std": full.mass_std,
+                "com": full.com.tolist(),
+                "com_std": full.com_std.tolist(),
+                "inertia": full.inertia.tolist(),
+                "inertia_std": full.inertia_std.tolist(),
+                "condition": full.condition,
+                "identifiable": full.identifiable,
+                "rmse_after": full.rmse_after.tolist(),
+            }
         print(json.dumps(out))
         return 0
     print(f"mass {est.mass:.3f} ± {est.mass_std:.3f} kg")
@@ -70,4 +90,21 @@ def run(args: argparse.Namespace) -> int:
             f"{a:.2f}->{b:.2f}" for a, b in zip(est.rmse_before, est.rmse_after, strict=True)
         )
     )
+    if full is not None:
+        names = ("Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+        print(
+            f"with the inertia (10 parameters, condition {full.condition:.3g}): mass "
+            f"{full.mass:.3f} ± {full.mass_std:.3f} kg"
+        )
+        print(
+            "inertia about the com, tool axes [kg·m²]: "
+            + ", ".join(
+                f"{k} {v:.4f} ± {e:.4f}"
+                for k, v, e in zip(names, full.inertia, full.inertia_std, strict=True)
+            )
+        )
+        print(
+            "inertia identifiable: "
+            + ("yes (written)" if full.identifiable else "no (not written): std dev or sign")
+        )
     return 0

@@ -80,17 +80,27 @@ def features(rec: Recording, template: CollisionConfig) -> FloatArray:
 
 
 def fit_envelope(
-    feats: FloatArray, residual: FloatArray, use: tuple[bool, ...], min_base: float
+    feats: FloatArray,
+    residual: FloatArray,
+    use: tuple[bool, ...],
+    min_base: float,
+    rest_weight: float = 1.0,
 ) -> FloatArray:
     """Coefficients (5,) >= 0 of the smallest-mean envelope of |residual| for one joint.
 
     ``feats`` (N, 5), ``residual`` (N,) [N·m]; ``use`` (4 or 5 flags) switches terms on;
-    c0 >= min_base.
+    c0 >= min_base. ``rest_weight`` W weighs each sample's threshold in the mean by
+    1 + (W − 1)·s (s the standstill feature): W > 1 favours a low threshold at rest, where
+    free-motion runs have few samples.
     """
     m = feats.shape[1]
     cols = [i for i in range(m) if i < len(use) and use[i]]
     F = feats[:, cols]
     r = np.abs(residual)
+    # the objective is the mean threshold over *every* sample (taken before dropping rows:
+    # over the kept rows alone a term that is small where the residual is large looks cheap)
+    w = 1.0 + (rest_weight - 1.0) * feats[:, 4] if rest_weight != 1.0 else None
+    cost = F.mean(axis=0) if w is None else (w[:, None] * F).sum(axis=0) / w.sum()
     # c0 >= min_base and features >= 0: rows with |r| <= min_base cannot bind.
     keep = r > min_base
     F, r = F[keep], r[keep]
@@ -99,7 +109,7 @@ def fit_envelope(
         out[0] = min_base
         return out
     bounds = [(min_base, None)] + [(0.0, None)] * (len(cols) - 1)
-    res = linprog(c=F.mean(axis=0), A_ub=-F, b_ub=-r, bounds=bounds, method="highs")
+    res = linprog(c=cost, A_ub=-F, b_ub=-r, bounds=bounds, method="highs")
     if res.status != 0:
         raise UserError(f"threshold calibration failed: {res.message}")
     out = np.zeros(m)
@@ -122,26 +132,67 @@ def sustained(rec: Recording, residual: FloatArray, window: float) -> FloatArray
     return out
 
 
+def fit_envelopes(
+    feats: FloatArray,
+    residual: FloatArray,
+    terms: tuple[bool, ...] | list[tuple[bool, ...]],
+    min_base: float,
+) -> FloatArray:
+    """Envelope coefficients (n, 5) for every joint: ``feats`` (N, n, 5) from
+    :func:`features`, ``residual`` (N, n) [N·m] (already sustained if wanted); ``terms``
+    one tuple of flags for all joints or one per joint."""
+    n = residual.shape[1]
+    per_joint = terms if isinstance(terms, list) else [terms] * n
+    if len(per_joint) != n:
+        raise UserError(f"threshold calibration: {len(per_joint)} term sets for {n} joints")
+    flags = [tuple(t) + (False,) * (len(TERMS) - len(t)) for t in per_joint]
+    return np.stack(
+        [fit_envelope(feats[:, j], residual[:, j], flags[j], min_base) for j in range(n)]
+    )
+
+
+def config_from_envelope(
+    template: CollisionConfig,
+    env: FloatArray,
+    margin: float | FloatArray,
+    terms: tuple[bool, ...] | list[tuple[bool, ...]] = DEFAULT_TERMS,
+) -> CollisionConfig:
+    """``template`` with its per-joint terms set to ``env`` (n, 5) · (1 + margin); margin a
+    number or one per joint. A term off for every joint is left out (None)."""
+    n = env.shape[0]
+    per_joint = terms if isinstance(terms, list) else [terms] * n
+    flags = np.array([tuple(t) + (False,) * (len(TERMS) - len(t)) for t in per_joint])
+    scale = 1.0 + np.broadcast_to(np.asarray(margin, dtype=float), (n,))
+    scaled = env * scale[:, None]
+    values: dict[str, list[float] | None] = {
+        name: [float(v) for v in scaled[:, i]] for i, name in enumerate(TERMS)
+    }
+    for i, name in enumerate(TERMS[1:], start=1):
+        if not flags[:, i].any():
+            values[name] = None
+    return template.model_copy(update=values)
+
+
 def calibrate(
     recordings: list[Recording],
     residuals: list[FloatArray],
     template: CollisionConfig,
     *,
-    margin: float = 0.5,
+    margin: float | list[float] = 0.5,
     min_base: float = 1.0,
-    terms: tuple[bool, ...] = DEFAULT_TERMS,
+    terms: tuple[bool, ...] | list[tuple[bool, ...]] = DEFAULT_TERMS,
     sustain: bool = False,
 ) -> Calibration:
     """Thresholds covering every sample of ``residuals`` (each (N_i, n) [N·m]) with a margin.
 
-    ``template`` gives the filter, debounce and hysteresis settings; its per-joint values are
-    replaced. ``margin`` 0.5 puts the thresholds 50 % above the envelope. ``terms``: which of
-    base, velocity, acceleration, reversal, standstill to fit; ``sustain``: fit the residuals
-    sustained over ``template.debounce_time`` (see :func:`sustained`).
+    ``template`` gives the filter, debounce, hysteresis, reversal and standstill timing; its
+    per-joint values are replaced. ``margin`` 0.5 puts the thresholds 50 % above the envelope
+    (a number, or one per joint). ``terms``: which of base, velocity, acceleration, reversal,
+    standstill to fit (one tuple, or one per joint); ``sustain``: fit the residuals sustained
+    over ``template.debounce_time`` (see :func:`sustained`).
     """
     if not recordings:
         raise UserError("thresholds calibrate: no recordings given")
-    n = recordings[0].n_joints
     feats = np.concatenate([features(rec, template) for rec in recordings])
     if sustain:
         residuals = [
@@ -149,12 +200,6 @@ def calibrate(
             for rec, r in zip(recordings, residuals, strict=True)
         ]
     resid = np.concatenate(residuals)
-    terms = tuple(terms) + (False,) * (len(TERMS) - len(terms))
-    env = np.stack([fit_envelope(feats[:, j], resid[:, j], terms, min_base) for j in range(n)])
-    scaled = env * (1.0 + margin)
-    values = {name: [float(v) for v in scaled[:, i]] for i, name in enumerate(TERMS)}
-    for i, name in enumerate(TERMS[1:], start=1):
-        if not terms[i]:
-            values[name] = None  # type: ignore[assignment]
-    cfg = template.model_copy(update=values)
+    env = fit_envelopes(feats, resid, terms, min_base)
+    cfg = config_from_envelope(template, env, np.asarray(margin, dtype=float), terms)
     return Calibration(cfg, env, np.max(np.abs(resid), axis=0), int(resid.shape[0]))

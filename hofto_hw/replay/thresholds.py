@@ -87,6 +87,6 @@ def write_thresholds(path: str | Path, content: ThresholdsFile) -> None:
     _Dumper.add_representer(list, _list)
     data = content.model_dump(mode="json", exclude_none=True)
     Path(path).write_text(  # OSError: the caller names the option
-        "# Collision thresholds: written by `hofto-hw thresholds calibrate`.\n"
-        + yaml.dump(data, Dumper=_Dumper, sort_keys=False, width=100)
+        "# Collision thresholds: written by `hofto-hw thresholds calibrate` or `hofto-hw tune`"
+        " (see provenance).\n" + yaml.dump(data, Dumper=_Dumper, sort_keys=False, width=100)
     )

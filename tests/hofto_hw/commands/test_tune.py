@@ -19,12 +19,14 @@ pytestmark = pytest.mark.skipif(
 )
 
 
+@pytest.mark.slow
 def test_tune_writes_thresholds_with_provenance(tmp_path, capsys) -> None:
     from hofto_hw.replay.thresholds import read_thresholds
 
     out = tmp_path / "tuned.yaml"
     args = ["tune", str(CONFIGS / "ur10e" / "parameters.yaml"), *map(str, FILES), "-o", str(out)]
-    fast = ["--gains", "20,500", "--margins", "2", "--pulses", "2", "--amplitudes", "10,20"]
+    fast = ["--gains", "20,500", "--margins", "2", "--pulses", "1", "--amplitudes", "10,20"]
+    fast += ["--observers", "momentum", "--moving-times", "0.5", "--standstill-times", "0"]
     assert main(args + fast) == 0
     captured = capsys.readouterr()
     assert "gain 500: unstable" in captured.err  # refused by the stability check
@@ -34,9 +36,9 @@ def test_tune_writes_thresholds_with_provenance(tmp_path, capsys) -> None:
     prov = th.provenance
     assert set(prov["files"]) == {f.name for f in FILES}
     assert all(len(h) == 64 for h in prov["files"].values())
-    assert prov["settings"]["margin"] == 2.0
-    rates = prov["sensitivity"]["20"]["rate"]
-    assert len(rates) == 6 and max(rates) > 0.5  # pulses are detected on some joints
+    assert prov["observers"]["momentum"]["margin"] == [2.0] * 6
+    rates = prov["observers"]["momentum"]["sensitivity"]["motion"]["20"]["rate"]
+    assert len(rates) == 6 and max(r for r in rates if r is not None) > 0.5  # some joints find them
     # the file replays: 0 false alarms on a left-out run it was tuned against
     assert (
         main(
@@ -63,3 +65,18 @@ def test_tune_refuses_bad_gains(capsys) -> None:
     ]
     assert main(args + ["--gains", "fast"]) == 2
     assert "--gains" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("option", "named"),
+    [
+        (["--folds", "9"], "--folds"),
+        (["--observers", "momentum,sta"], "'sta'"),
+        (["--rest-weights", "0"], "--rest-weights"),
+        (["--moving-times", "0"], "--moving-times"),
+    ],
+)
+def test_tune_refuses_bad_settings_naming_them(option, named, capsys) -> None:
+    args = ["tune", str(CONFIGS / "ur10e" / "parameters.yaml"), *map(str, FILES), "-o", "x.yaml"]
+    assert main(args + option) == 2
+    assert named in capsys.readouterr().err

@@ -1,0 +1,285 @@
+"""Threshold settings chosen by cross-validation over contact-free recordings with injected
+pulses (the engine behind ``hofto-hw tune``).
+
+The recordings (free motion and static holds, no contact) are split into ``folds`` groups.
+For each candidate timing of the monitor (``moving_time``: how long after a stop the reversal
+term lasts, i.e. covers the observer's lag behind the deceleration; ``standstill_time``: how
+long after a stop the standstill term takes to rise to the held-friction margin) the envelope
+of the sustained residual is fitted (linear program, :mod:`hofto_hw.replay.calibrate`) on all
+folds but one, and the left-out fold is judged with the monitor's trip rule: a joint that
+trips on the contact-free estimate is a false alarm; injected pulses
+(:mod:`hofto_hw.replay.pulses`) give the detection rate and delay. Every calibration margin
+is judged on the same fits (the margin only scales the envelope). Per joint the margin with 0
+false alarms on every left-out fold and the most pulses found wins; the timing with the most
+pulses over all joints (each at its best margin) wins. Joints are independent in the monitor
+(each trips on its own threshold), which is why the margin can be chosen per joint.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hofto_hw.config.collision import CollisionConfig
+from hofto_hw.errors import UserError
+from hofto_hw.identify.data import Recording
+from hofto_hw.observers.base import Observer
+from hofto_hw.replay.calibrate import (
+    config_from_envelope,
+    features,
+    fit_envelope,
+    sustained,
+)
+from hofto_hw.replay.pulses import Pulse, PulseStats, pulse_train, score, tally, trips
+from hofto_hw.replay.runner import run_observer
+
+FloatArray = NDArray[np.float64]
+TERMS = (True, True, True, True, True)
+
+
+@dataclass
+class PulsedRun:
+    """One contact-free recording, its estimate ``est`` (N, n) [N·m], and per amplitude a
+    list of rounds (estimate with the pulse train (N, n), the pulses)."""
+
+    rec: Recording
+    est: FloatArray
+    pulsed: list[list[tuple[FloatArray, list[Pulse]]]]
+
+
+def pulsed_runs(
+    recs: list[Recording],
+    make_observer: Callable[[Recording], Observer],
+    amplitudes: list[float],
+    width: float,
+    rounds: int,
+    seed: int,
+) -> list[PulsedRun]:
+    """Run the observer over each recording, then once per amplitude and round with a pulse
+    train subtracted from the measured torque (same seed: same pulse times for every
+    observer and setting)."""
+    out = []
+    for i, rec in enumerate(recs):
+        est = run_observer(rec, make_observer(rec))
+        per_amp = []
+        for amp in amplitudes:
+            rng = np.random.default_rng([seed, i])  # same times for every amplitude
+            rounds_out = []
+            for _ in range(rounds):
+                p, pulses = pulse_train(rec.t, rec.qd, amp, width, rng)
+                pulsed = dataclasses.replace(rec, tau=rec.tau - p)
+                rounds_out.append((run_observer(pulsed, make_observer(rec)), pulses))
+            per_amp.append(rounds_out)
+        out.append(PulsedRun(rec, est, per_amp))
+    return out
+
+
+def thresholds_of(feats: FloatArray, env: FloatArray, margin: FloatArray) -> FloatArray:
+    """(N, n) thresholds [N·m] from features (N, n, 5) and envelope (n, 5)·(1 + margin (n,))."""
+    return np.einsum("knf,nf->kn", feats, env * (1.0 + margin)[:, None])
+
+
+def judge(run: PulsedRun, thr: FloatArray, debounce: float, stats: PulseStats) -> NDArray[np.bool_]:
+    """Tally the run's pulses against thresholds ``thr`` (N, n) into ``stats``; returns which
+    joints (n,) trip on the contact-free estimate (false alarms)."""
+    t = run.rec.t
+    for a, rounds in enumerate(run.pulsed):
+        for est, pulses in rounds:
+            tally(stats, a, pulses, score(pulses, est, thr, t, debounce))
+    return trips(run.est, thr, t, debounce).any(axis=0)
+
+
+def envelopes(
+    feats: FloatArray, sus: FloatArray, rest_weight: FloatArray, min_base: float
+) -> FloatArray:
+    """Envelope (n, 5) of every joint, each with its own rest weight (n,)."""
+    n = sus.shape[1]
+    return np.stack(
+        [fit_envelope(feats[:, j], sus[:, j], TERMS, min_base, rest_weight[j]) for j in range(n)]
+    )
+
+
+@dataclass
+class Candidate:
+    """Cross-validated figures of one timing, rest weight and margin: ``false`` (n,) left-out
+    runs with a false trip per joint, ``stats`` the left-out pulses."""
+
+    moving_time: float
+    standstill_time: float
+    margin: float
+    false: FloatArray
+    stats: PulseStats
+    rest_weight: float = 1.0
+
+
+def folds_of(n_runs: int, folds: int) -> list[int]:
+    """Fold index of each run (round robin in the order given)."""
+    if not 2 <= folds <= n_runs:
+        raise UserError(f"tune: --folds must be 2..{n_runs} (number of recordings), got {folds}")
+    return [i % folds for i in range(n_runs)]
+
+
+def cross_validate(
+    runs: list[PulsedRun],
+    template: CollisionConfig,
+    moving_times: list[float],
+    standstill_times: list[float],
+    margins: list[float],
+    folds: int,
+    min_base: float = 1.0,
+    say: Callable[[str], None] = lambda _m: None,
+    rest_weights: tuple[float, ...] = (1.0,),
+) -> list[Candidate]:
+    """Figures on the left-out folds of every (moving_time, standstill_time, rest weight,
+    margin); the rest weight (see :func:`hofto_hw.replay.calibrate.fit_envelope`) and the
+    margin are chosen per joint later."""
+    n = runs[0].est.shape[1]
+    amps = len(runs[0].pulsed)
+    fold = folds_of(len(runs), folds)
+    sus = [sustained(r.rec, r.est, template.debounce_time) for r in runs]
+    out = []
+    for mt in moving_times:
+        for st in standstill_times:
+            tmpl = template.model_copy(update={"moving_time": mt, "standstill_time": st})
+            feats = [features(r.rec, tmpl) for r in runs]
+            for w in rest_weights:
+                cands = {
+                    m: Candidate(mt, st, m, np.zeros(n), PulseStats.empty([0.0] * amps, n), w)
+                    for m in margins
+                }
+                for f in range(folds):
+                    fit = [i for i in range(len(runs)) if fold[i] != f]
+                    env = envelopes(
+                        np.concatenate([feats[i] for i in fit]),
+                        np.concatenate([sus[i] for i in fit]),
+                        np.full(n, w),
+                        min_base,
+                    )
+                    for i in (i for i in range(len(runs)) if fold[i] == f):
+                        for m, c in cands.items():
+                            thr = thresholds_of(feats[i], env, np.full(n, m))
+                            c.false += judge(runs[i], thr, template.debounce_time, c.stats)
+                for c in cands.values():
+                    say(
+                        f"moving_time {mt:g} s, standstill_time {st:g} s, rest weight {w:g}, "
+                        f"margin {c.margin:g}: false trips per joint "
+                        f"{c.false.astype(int).tolist()}, pulses found "
+                        f"{int(c.stats.hits.sum())}/{int(c.stats.tries.sum())}"
+                    )
+                out.extend(cands.values())
+    return out
+
+
+def _joint_score(stats: PulseStats, j: int) -> tuple[float, float]:
+    """(sum of detection rates over amplitudes and states, -median delay) of joint j."""
+    rate = np.nan_to_num(stats.rate[:, :, j])
+    d = [x for state in stats.delays for row in state for x in row[j]]
+    return float(rate.sum()), -float(np.median(d)) if d else -np.inf
+
+
+@dataclass
+class Choice:
+    """The chosen timing, per-joint margins and their left-out figures (``stats``, per joint
+    from that joint's chosen candidate; ``false`` (n,))."""
+
+    moving_time: float
+    standstill_time: float
+    margin: list[float]
+    false: FloatArray
+    stats: PulseStats
+    rest_weight: list[float] = dataclasses.field(default_factory=list)
+    #: (sum of left-out detection rates over joints, amplitudes and states, -median delay)
+    score: tuple[float, float] = (0.0, 0.0)
+
+
+def choose(candidates: list[Candidate], cushion: float = 0.0) -> Choice:
+    """Per joint the margin with 0 false trips and the best score, raised by ``cushion`` (to
+    the nearest margin tried at or above it, with the same rest weight: a margin just clean
+    on the left-out runs is clean by luck as often as not); the timing whose joints score
+    best in total (a timing where some joint has no margin without false trips loses)."""
+    timings = sorted({(c.moving_time, c.standstill_time) for c in candidates})
+    best: tuple[tuple[float, ...], Choice] | None = None
+    for mt, st in timings:
+        group = [c for c in candidates if (c.moving_time, c.standstill_time) == (mt, st)]
+        n = group[0].false.size
+        picks = []
+        for j in range(n):
+            ok = [c for c in group if c.false[j] == 0]
+            if not ok:
+                break
+            pick = max(ok, key=lambda c: (_joint_score(c.stats, j), -c.margin, -c.rest_weight))
+            above = [
+                c
+                for c in ok
+                if c.rest_weight == pick.rest_weight and c.margin >= pick.margin + cushion - 1e-9
+            ]
+            picks.append(min(above, key=lambda c: c.margin) if above else pick)
+        if len(picks) < n:
+            continue
+        stats = PulseStats.empty(group[0].stats.amplitudes, n)
+        for j, c in enumerate(picks):
+            stats.add(c.stats.joint(j))
+        total = sum(_joint_score(stats, j)[0] for j in range(n))
+        delays = [x for a in stats.delays for s in a for row in s for x in row]
+        key = (total, -float(np.median(delays)) if delays else -np.inf)
+        choice = Choice(
+            mt,
+            st,
+            [c.margin for c in picks],
+            np.zeros(n),
+            stats,
+            [c.rest_weight for c in picks],
+            key,
+        )
+        if best is None or key > best[0]:
+            best = (key, choice)
+    if best is None:
+        raise UserError(
+            "tune: no setting gave 0 false alarms on every joint of the left-out runs "
+            "(try larger --margins)"
+        )
+    return best[1]
+
+
+def refit(
+    recs: list[Recording],
+    ests: list[FloatArray],
+    monitor: CollisionConfig,
+    margin: list[float],
+    rest_weight: list[float] | None = None,
+    min_base: float = 1.0,
+) -> CollisionConfig:
+    """``monitor``'s timing and filters with its per-joint terms fitted on ``recs`` (their
+    contact-free estimates ``ests`` (N_i, n) [N·m]) and scaled by the per-joint ``margin``."""
+    n = len(margin)
+    feats = np.concatenate([features(r, monitor) for r in recs])
+    sus = np.concatenate(
+        [sustained(r, e, monitor.debounce_time) for r, e in zip(recs, ests, strict=True)]
+    )
+    weights = np.asarray(rest_weight or [1.0] * n)
+    env = envelopes(feats, sus, weights, min_base)
+    return config_from_envelope(monitor, env, np.asarray(margin), TERMS)
+
+
+def final_config(
+    runs: list[PulsedRun], template: CollisionConfig, choice: Choice, min_base: float = 1.0
+) -> tuple[CollisionConfig, FloatArray]:
+    """The monitor config fitted on every run with the chosen timing and margins; and the
+    peak |est| (n,) [N·m] on them."""
+    tmpl = template.model_copy(
+        update={"moving_time": choice.moving_time, "standstill_time": choice.standstill_time}
+    )
+    cfg = refit(
+        [r.rec for r in runs],
+        [r.est for r in runs],
+        tmpl,
+        choice.margin,
+        choice.rest_weight,
+        min_base,
+    )
+    peak = np.max(np.abs(np.concatenate([r.est for r in runs])), axis=0)
+    return cfg, peak
