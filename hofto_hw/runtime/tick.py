@@ -217,7 +217,11 @@ class Tick:
                 ok &= lim.finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
         lim.check(stop, q, qd, tau, self.q_sent, good, powered)
-        monitored = self.collision is not None and ok and self._power_on(g.states)
+        # judged on trustworthy data only: fresh (a lost frame repeats the last sample) and
+        # from drives that report no fault (a failed encoder freezes its position); an
+        # observer with poles at a few hundred rad/s reads either as a contact
+        trusted = good and not stop.active & _DRIVE_CAUSES
+        monitored = self.collision is not None and ok and trusted and self._power_on(g.states)
         self.tick_rec["monitored"] = monitored  # replay judges the same ticks
         np.copyto(self._r["qdd_cmd"], motion.qdd)
         if monitored:

@@ -43,5 +43,10 @@ def test_collision_is_stopped_in_the_tick_its_estimate_crosses(cfg: SystemConfig
     assert delays["hofto"] is not None and delays["momentum"] is not None
     assert 0.0 < delays["hofto"] <= delays["momentum"]
     assert delays["hofto"] <= 15.0
+    # the target for the deciding observer: <= 5 ms after the onset of a contact that
+    # builds to 20 N·m on joint 2 in 10 ms (simulated time, deterministic: not a timing test);
+    # the momentum observer's gain is pinned at its faster setting (6 ms, docs/service.md)
+    assert delays["hofto"] <= 5.0
+    assert delays["momentum"] <= 6.0
     assert ev[0]["detection_delay_ms"] == delays["hofto"]
     system.close()
