@@ -38,6 +38,7 @@ from hofto_hw.runtime.compose import build_model, loop_observer_table
 
 #: event kind name of a collision stop (the safety fault class's name in event_kinds)
 COLLISION_KIND = "collision"
+RESET_KIND = "reset"  # the loop resets its observers on the state of the tick it resets in
 
 
 class Monitor(Protocol):
@@ -282,9 +283,17 @@ def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray) -> np.ndarray:
     qd0), so that the first update predicts onto the first sample as the loop's does. A
     high-gain observer reset on the first sample itself starts from an error of qd0·dt0 and
     its estimate jumps (HOFTO with poles at -300 rad/s: -8.6 N·m on joint 2 in tick 1, where
-    the loop had -0.14); the starts differ by < 1e-6 N·m after 50 ticks either way."""
+    the loop had -0.14); the starts differ by < 1e-6 N·m after 50 ticks either way.
+
+    A reset of the stop controller (a ``reset`` event) also resets the loop's observers on
+    that tick's measured state after their update; replay does the same, so the estimates
+    after a reset are the loop's too."""
     est = np.zeros_like(log.q)
+    index = {int(tk): k for k, tk in enumerate(log.ticks)}
+    resets = {index[e.tick] for e in log.events if e.kind_name == RESET_KIND and e.tick in index}
     obs.reset(log.q[0] - log.qd[0] * dt[0], log.qd[0])
     for k in range(log.n_ticks):
         est[k] = obs.update(log.q[k], log.qd[k], log.tau[k], dt[k])
+        if k in resets:
+            obs.reset(log.q[k], log.qd[k])
     return est
