@@ -13,44 +13,26 @@ by generous timeouts.
 
 from __future__ import annotations
 
-import itertools
-import json
-import os
-import signal
-import subprocess
-import sys
-import threading
-import time
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
+from support.rootnet import (
+    ROOT,
+    Emulator,
+    ServiceRun,
+    emulator,
+    first_event,
+    sim_ethercat_args,
+    veth_pair,
+    wait_for,
+)
 
-ROOT = Path(__file__).resolve().parents[3]
 CONFIG = ROOT / "configs" / "er3a.yaml"
 LOST_CYCLES = 20  # late frames on a loaded 2-core machine are not the fault under test
-_counter = itertools.count()
-
-
-def require_root() -> None:
-    if os.geteuid() == 0:
-        return
-    if os.environ.get("CI"):
-        pytest.fail("CI is set but the tests do not run as root: veth pairs need root")
-    pytest.skip("needs root for veth pairs and raw sockets (set CI to make this a failure)")
-
-
-def _wait(cond: Callable[[], bool], timeout: float, what: str, proc: Any = None) -> None:
-    deadline = time.monotonic() + timeout
-    while not cond():
-        if proc is not None and proc.poll() is not None:
-            raise AssertionError(f"{what}: process exited with {proc.returncode}")
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what}: not reached within {timeout:.0f} s")
-        time.sleep(0.05)
 
 
 def _config(folder: Path, master: str) -> tuple[Path, dict]:
@@ -76,121 +58,53 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
 class EcatRun:
     """The emulator and one ``hofto-hw run`` on the master end of the veth pair."""
 
-    folder: Path
     config: Path
     data: dict
-    emulator: subprocess.Popen
-    control: str
-    run: subprocess.Popen | None = None
-    socket: Path | None = None
-    summary: Path | None = None
-    stderr: list[str] = field(default_factory=list)
+    emu: Emulator
+    service: ServiceRun
 
     def inject(self, **request: object) -> dict:
-        from drivers.sim.esc.network import ControlClient
-
-        reply = ControlClient(self.control).call(**request)
+        reply = self.emu.call(**request)
         assert reply.get("ok"), reply
         return reply
 
     def start_run(self) -> None:
-        self.socket = self.folder / "run.sock"
-        self.summary = self.folder / "summary.json"
-        cmd = [sys.executable, "-m", "hofto_hw.cli", "run", "--config", str(self.config)]
-        cmd += ["--clock", "real", "--hold", "--no-log", "--duration", "3600"]
-        cmd += ["--socket", str(self.socket), "--summary-json", str(self.summary)]
-        self.run = subprocess.Popen(
-            cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-        )
-        threading.Thread(target=self._read_stderr, daemon=True).start()
-        _wait(
-            lambda: any("running" in line for line in self.stderr),
-            120,
-            "the run's 'running' line",
-            self.run,
-        )
-        _wait(self.socket.exists, 30, "the run's control socket", self.run)
-
-    def _read_stderr(self) -> None:
-        assert self.run is not None and self.run.stderr is not None
-        for line in self.run.stderr:
-            self.stderr.append(line)
+        self.service.start("--hold")
 
     def status(self) -> dict[str, Any]:
-        from hofto_hw.runtime.control_client import request
-
-        assert self.socket is not None
-        return request(self.socket, "status", timeout=30.0)
+        return self.service.status()
 
     def terminate(self) -> tuple[int, dict]:
         """SIGTERM; returns the exit code and the summary."""
-        assert self.run is not None and self.summary is not None
-        self.run.send_signal(signal.SIGTERM)
-        try:
-            out, _ = self.run.communicate(timeout=120)
-        except subprocess.TimeoutExpired:
-            self.run.kill()
-            self.run.communicate()
-            raise AssertionError("run did not exit within 120 s of SIGTERM") from None
-        assert self.summary.exists(), "".join(self.stderr) + (out or "")
-        return self.run.returncode, json.loads(self.summary.read_text())
+        return self.service.terminate()
+
+    @property
+    def run(self) -> Any:
+        return self.service.proc
 
 
 @pytest.fixture()
 def ecat(tmp_path: Path) -> Iterator[EcatRun]:
-    require_root()
-    from drivers.sim.esc import veth
+    with veth_pair("rm", "rs") as (master, slave):
+        config, data = _config(tmp_path, master)
+        with emulator(sim_ethercat_args(slave, config), tmp_path) as emu:
+            service = ServiceRun(tmp_path, config)
+            try:
+                yield EcatRun(config, data, emu, service)
+            finally:
+                service.close()
 
-    k = next(_counter)
-    tag = f"{os.getpid() % 100000}{k}"
-    master, slave = f"rm{tag}"[:15], f"rs{tag}"[:15]
-    config, data = _config(tmp_path, master)
-    control = str(tmp_path / "ctl.sock")
-    ready = tmp_path / "ready"
-    veth.create_pair(master, slave)
-    cmd = [sys.executable, "-m", "hofto_hw.cli", "sim-ethercat", "--iface", slave]
-    cmd += ["--config", str(config), "--control", control, "--quiet-arm"]
-    cmd += ["--ready-file", str(ready)]
-    log = open(tmp_path / "emulator.log", "w")
-    emu = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
-    r = EcatRun(tmp_path, config, data, emu, control)
-    try:
-        try:
-            _wait(ready.exists, 60, "emulator ready file", emu)
-        except AssertionError as exc:
-            log.flush()
-            raise AssertionError(f"{exc}: {(tmp_path / 'emulator.log').read_text()}") from None
-        yield r
-    finally:
-        for p in (r.run, emu):
-            if p is not None and p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
-        log.close()
-        veth.delete_pair(master)
+
+def _wait(cond: Any, timeout: float, what: str, proc: Any = None) -> None:
+    wait_for(cond, timeout, what, proc)
 
 
 def _wait_running(r: EcatRun) -> None:
-    last: dict[str, Any] = {}
-
-    def running() -> bool:
-        last.update(r.status())
-        return last["state"] == "running"
-
-    try:
-        _wait(running, 120, "loop running", r.run)
-    except AssertionError as exc:
-        raise AssertionError(f"{exc}; last status {last}") from None
+    r.service.wait_state("running")
 
 
 def _first(summary: dict, kind: str) -> dict:
-    events = [e for e in summary["events"] if e["kind"] == kind]
-    assert events, f"no {kind} event in {[e['kind'] for e in summary['events']]}"
-    return events[0]
+    return first_event(summary, kind)
 
 
 def _latched(r: EcatRun, kind: str) -> bool:
