@@ -18,7 +18,9 @@ heartbeat producer, EMCY when the drive's 0x603F changes (code 0 = error reset).
 Each SYNC first sends the TPDOs (inputs sampled at the SYNC, CiA 301 synchronous), then
 applies the RPDOs latched before it and steps the drives and the plant by one tick: the
 answer does not wait for the plant step, and a command is seen in the TPDOs of the next
-SYNC. Simulated time is the number of SYNCs times the plant tick. Fault injection
+SYNC. Simulated time follows the wall clock in whole cycles (drivers/sim/pacing.py): one
+plant tick per SYNC while the master keeps its rate, the cycles of a master stall caught up
+at the next SYNC with the last RPDOs held. Fault injection
 (:meth:`CanopenDrives.control`): silent node, EMCY with a code, SDO abort with a code, late
 or missing TPDOs, wrong identity, bus-off.
 """
@@ -36,6 +38,7 @@ from drivers.canopen import layout
 from drivers.cia402.pdo import RXPDO_DTYPE, RXPDO_SIZE, TXPDO_DTYPE, TXPDO_SIZE, mapping_value
 from drivers.sim.drive import FAULTS, EmulatedDrives
 from drivers.sim.object_dictionary import KINDS, ObjectDictionary, OdEntry, SdoAbort
+from drivers.sim.pacing import WallCycles
 
 _FAULT_KINDS = {code: kind for kind, (code, _ramp) in FAULTS.items()}
 ABORT_COMMAND = 0x05040001
@@ -111,6 +114,8 @@ class CanopenDrives:
         self._identity_saved: dict[tuple[int, int], int] = {}
         self.syncs = 0
         self.frames = 0
+        #: plant ticks per SYNC by the wall clock (drivers/sim/pacing.py)
+        self.pacing = WallCycles(drives.dt)
         self.stopping = False
         self.lock = threading.RLock()
         self._thread: threading.Thread | None = None
@@ -224,6 +229,8 @@ class CanopenDrives:
                 self.tpdo_late[i] -= 1
         # TPDOs are sampled at the SYNC and sent first; then the RPDOs latched before this
         # SYNC take effect for one tick (the plant step does not delay the answer).
+        for _ in range(self.pacing.due(now) - 1):
+            self.drives.step(self._rx)  # cycles without a SYNC: the last RPDOs held
         self.drives.step(self._rx if self._got_rpdo else None)
         self._got_rpdo = False
         err = self.drives.tx["error_code"]
@@ -484,6 +491,7 @@ class CanopenDrives:
         plant = self.drives.plant
         return {
             "syncs": self.syncs,
+            "caught_up_ticks": self.pacing.caught_up,
             "frames": self.frames,
             "nmt": [int(s) for s in self.nmt],
             "silent": [bool(s) for s in self.silent],

@@ -39,6 +39,7 @@ _FRA = int(State.FAULT_REACTION_ACTIVE)
 _FAULT = int(State.FAULT)
 STANDSTILL = 0.01  # rad/s: every joint slower than this counts as stopped
 MAX_STOPS = 256  # stop episodes kept for the summary
+MAX_SUBSTEPS = 250  # observer steps over one stalled gap at most (cost: one step each)
 FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
 _DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
 
@@ -62,6 +63,7 @@ class Tick:
         drag: DragController | None = None,
         enable_input: EnableInput | None = None,
         drag_row: int = 0,
+        period: float = 0.0,
     ) -> None:
         n = group.n
         self.n = n
@@ -78,6 +80,15 @@ class Tick:
         self.overrun_limit = int(overrun_limit)
         self.tick = 0
         self.t = 0.0
+        #: nominal cycle [s] (0: unknown, every dt taken as one cycle). After a stall the
+        #: observers integrate the gap in steps of one cycle (:meth:`_observe`), the setpoint
+        #: time advances one cycle per tick (an interpolator that missed cycles is late, it
+        #: does not jump), and the jump check allows for the gap
+        self.period = float(period)
+        self.t_cmd = 0.0  # setpoint (path) time [s]
+        self._since_fresh = 0.0  # [s] since the last fresh sample
+        self._prev = np.zeros((3, n))  # last tick's q, qd, tau (interpolation start)
+        self._interp = np.zeros((3, n))  # one substep's q, qd, tau
         self.tau_ext = np.zeros((max(1, len(self.observers)), n))
         self.tau_ff = np.zeros(n)
         self.q_sent = np.zeros(n)  # position target of the last command [rad]
@@ -143,6 +154,7 @@ class Tick:
         g.cycle()
         self.motion.start(g.q)
         np.copyto(self.q_sent, g.q)
+        self._keep_sample(g.q, g.qd, g.tau)
         for obs in self.observers:
             obs.reset(g.q, g.qd)
         self.limits.reset(g.q)
@@ -168,14 +180,15 @@ class Tick:
         q, qd, tau = g.q, g.qd, g.tau
 
         # 3. observers (HOFTO, momentum): each writes its own row
-        for i, obs in enumerate(self.observers):
-            np.copyto(self.tau_ext[i], obs.update(q, qd, tau, dt))
+        self._observe(q, qd, tau, dt)
+        cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
+        self.t_cmd += cmd_dt
 
         # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
         # safety's to latch below); the reference it integrates is used in step 5
         dragging = motion.mode == DRAG
         if dragging:
-            self._drag_observe(q, qd, dt)
+            self._drag_observe(q, qd, cmd_dt)
         else:
             self._wrench.fill(np.nan)
 
@@ -186,7 +199,11 @@ class Tick:
         for i in range(len(self.observers)):
             ok &= lim.finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
-        lim.check(stop, q, qd, tau, self.q_sent, good, powered)
+        self._since_fresh += dt
+        gap = self._since_fresh - self.period if self.period > 0.0 else 0.0
+        lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap if gap > 1e-9 else 0.0)
+        if good:
+            self._since_fresh = 0.0
         monitored = self.collision is not None and ok and self._power_on(g.states)
         self.tick_rec["monitored"] = monitored  # replay judges the same ticks
         np.copyto(self._r["qdd_cmd"], motion.qdd)
@@ -230,7 +247,7 @@ class Tick:
                 np.copyto(motion.qd, d.qd_cmd)
                 np.copyto(motion.qdd, d.qdd_cmd)
             else:
-                motion.update(t, dt)
+                motion.update(self.t_cmd, cmd_dt)
         self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
         if motion.mode == DRAG:
             self.tau_ff += self.drag.tau_offset  # the hand's torque off the drives' offset
@@ -241,6 +258,35 @@ class Tick:
         self._record(status, wakeup_us, compute_us)
 
     # ------------------------------------------------------------- tick helpers
+
+    def _observe(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> None:
+        """Update every observer with this sample. After a stall (dt of k > 1 cycles) the
+        gap is integrated in k steps of dt/k with q, qd, tau interpolated linearly from the
+        last tick's sample: each observer is tuned (and checked stable) for one cycle, and a
+        single step of k cycles is not stable for it (forward Euler: gain·dt < 2)."""
+        k = 1
+        if self.period > 0.0 and dt > 1.5 * self.period:
+            k = min(MAX_SUBSTEPS, round(dt / self.period))
+        if k == 1:
+            for i, obs in enumerate(self.observers):
+                np.copyto(self.tau_ext[i], obs.update(q, qd, tau, dt))
+        else:
+            h = dt / k
+            prev, x = self._prev, self._interp
+            for s in range(1, k + 1):
+                a = s / k
+                for j, now in enumerate((q, qd, tau)):
+                    np.subtract(now, prev[j], out=x[j])
+                    x[j] *= a
+                    x[j] += prev[j]
+                for i, obs in enumerate(self.observers):
+                    np.copyto(self.tau_ext[i], obs.update(x[0], x[1], x[2], h))
+        self._keep_sample(q, qd, tau)
+
+    def _keep_sample(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
+        np.copyto(self._prev[0], q)
+        np.copyto(self._prev[1], qd)
+        np.copyto(self._prev[2], tau)
 
     def _overrun(self, missed: int) -> None:
         if missed > 0:
@@ -349,7 +395,7 @@ class Tick:
             self.mode_result = self._enter_drag(qd)
         elif want == MOVE and motion.mode != DRAG:
             if self.expect_enabled and not self.enabling:
-                motion.move(self.t)
+                motion.move(self.t_cmd)
         else:  # hold, or move while dragging: ramp the drag's velocity down first
             motion.ramp_down()
 

@@ -3,8 +3,10 @@
 :class:`EmulatedNetwork` joins the slave controllers (``esc.py``), the frame processor
 (``datagram.py``) and the emulated drives on the simulated arm
 (:class:`drivers.sim.drive.EmulatedDrives`). Each frame that carries process data (LRD/
-LWR/LRW) is answered first and then advances the drives and the plant by one tick: the
-simulated time is the number of process-data frames times the bus cycle time.
+LWR/LRW) is answered first and then advances the drives and the plant by the bus cycles of
+wall time since the last one (:class:`drivers.sim.pacing.WallCycles`: one per frame on a
+master that keeps its rate; after a master stall the arm has moved on, as a real one
+would, the drives holding the last outputs over the cycles no frame came for).
 
 :func:`serve` binds an AF_PACKET socket for ethertype 0x88A4 to one interface (one end of a
 veth pair; the master opens the other end) and runs the network until stopped. A Unix
@@ -14,7 +16,6 @@ socket (``control``) accepts one JSON object per line for fault injection and st
 
 from __future__ import annotations
 
-import contextlib
 import gc
 import json
 import os
@@ -33,11 +34,10 @@ from drivers.sim.drive import FAULTS, EmulatedDrives
 from drivers.sim.esc import datagram
 from drivers.sim.esc.description import SlaveDescription
 from drivers.sim.esc.esc import Esc
+from drivers.sim.pacing import WallCycles, answer_first
 from hofto_hw.errors import UserError
 
 ETH_P_ECAT = 0x88A4
-#: SCHED_FIFO priority of the emulator process (below the kernel's threaded IRQs at 50)
-_RT_PRIORITY = 40
 _FAULT_KINDS = {code: kind for kind, (code, _ramp) in FAULTS.items()}
 
 
@@ -56,6 +56,8 @@ class EmulatedNetwork:
         ]
         self.drives = drives
         self.n = n
+        #: plant ticks per process-data frame by the wall clock (see the module docstring)
+        self.pacing = WallCycles(drives.dt if drives is not None else 1e-3)
         self.frames = 0
         self.process_frames = 0
         self.dropped = 0
@@ -111,6 +113,8 @@ class EmulatedNetwork:
         self.process_frames += 1
         if self.drives is None:
             return
+        for _ in range(self.pacing.due() - 1):
+            self.drives.step(self.rx)  # cycles without a frame: the last outputs held
         rx_u8 = self._rx_u8
         for i, s in enumerate(self.slaves):
             if not s.pull_outputs(rx_u8[i]):
@@ -226,6 +230,7 @@ class EmulatedNetwork:
         out: dict[str, Any] = {
             "frames": self.frames,
             "process_frames": self.process_frames,
+            "caught_up_ticks": self.pacing.caught_up,
             "dropped": self.dropped,
             "corrupted": self.corrupted,
             "malformed": self.malformed,
@@ -265,22 +270,6 @@ def open_packet_socket(iface: str) -> socket.socket:
     return sock
 
 
-def _answer_first() -> None:
-    """Make this process answer frames before other work: real-time priority when allowed
-    (SCHED_FIFO; the loop blocks in select, so it never spins), else a better nice value;
-    and no cyclic garbage collection on the frame path (objects made at start-up are frozen
-    out of the collector, the rest is collected between control requests)."""
-    try:
-        if os.sched_getscheduler(0) not in (os.SCHED_FIFO, os.SCHED_RR):  # keep a chrt choice
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(_RT_PRIORITY))
-    except (AttributeError, OSError):
-        with contextlib.suppress(OSError):
-            os.nice(-10)
-    gc.collect()
-    gc.freeze()
-    gc.disable()
-
-
 def _serve_control(net: EmulatedNetwork, srv: socket.socket) -> None:
     try:
         conn, _ = srv.accept()
@@ -311,7 +300,7 @@ def serve(
     fds: list[Any] = [sock] + ([srv] if srv is not None else [])
     buf = bytearray(2048)
     view = memoryview(buf)
-    _answer_first()
+    answer_first()
     if ready_file:
         with open(ready_file, "w") as f:
             f.write(str(os.getpid()))

@@ -1,0 +1,76 @@
+"""How an emulator keeps up with the wall clock (both the EtherCAT and the CANopen one).
+
+A real arm keeps moving while its controller is stalled; the emulated arm used to advance
+exactly one plant tick per process-data exchange, so after a controller stall of 100 ms the
+data the controller read had moved 1 ms while its clock said 100 ms: the observers, fed the
+real dt, read the difference as an external torque. :class:`WallCycles` tells an emulator how
+many plant ticks an exchange stands for: the whole bus cycles of wall time since the last
+one (at least one; at most ``limit`` seconds' worth, beyond which the emulated world pauses,
+since catching up costs plant steps). The drives hold their last command over the cycles
+no frame came for (their communication watchdog still counts missing frames, not time).
+
+:func:`answer_first`: the emulator process answers frames before other work (SCHED_FIFO
+below the kernel's threaded IRQs when allowed, else a better nice value; no cyclic garbage
+collection on the frame path).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import math
+import os
+import time
+
+#: SCHED_FIFO priority of an emulator process (below the kernel's threaded IRQs at 50)
+RT_PRIORITY = 40
+
+
+class WallCycles:
+    """Plant ticks due per exchange by the wall clock; ``period`` [s] the bus cycle,
+    ``limit`` [s] the longest stretch of world time caught up at once."""
+
+    def __init__(self, period: float, limit: float = 0.25) -> None:
+        self.period = float(period)
+        self.max_cycles = max(1, int(limit / self.period))
+        self.anchor = -1.0  # wall time the plant's state belongs to [s, monotonic]
+        self.caught_up = 0  # ticks stepped beyond one per exchange, in total
+        self.capped = 0  # exchanges after a gap longer than ``limit``
+
+    def due(self, now: float | None = None) -> int:
+        """Plant ticks for an exchange at ``now`` (default: time.monotonic())."""
+        now = time.monotonic() if now is None else now
+        if self.anchor < 0.0:
+            self.anchor = now
+            return 1
+        n = math.floor((now - self.anchor) / self.period)
+        if n > self.max_cycles:
+            self.capped += 1
+            self.anchor = now
+            n = self.max_cycles
+        else:
+            n = max(1, n)
+            # never ahead of the wall clock: an early frame does not buy future ticks
+            self.anchor = min(self.anchor + n * self.period, now)
+        self.caught_up += n - 1
+        return n
+
+    def restart(self) -> None:
+        """Forget the anchor (the next exchange counts one tick)."""
+        self.anchor = -1.0
+
+
+def answer_first() -> None:
+    """Raise this process to SCHED_FIFO :data:`RT_PRIORITY` when allowed (its loops block
+    in select/recv, so they never spin), else to nice -10; freeze the objects made so far
+    out of the garbage collector and turn cyclic collection off (the caller collects
+    between control requests)."""
+    try:
+        if os.sched_getscheduler(0) not in (os.SCHED_FIFO, os.SCHED_RR):  # keep a chrt choice
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
+    except (AttributeError, OSError):
+        with contextlib.suppress(OSError):
+            os.nice(-10)
+    gc.collect()
+    gc.freeze()
+    gc.disable()
