@@ -221,6 +221,10 @@ class EmulatedDrives(ImageFields):
         self._neg_brake = -tuning.brake_torque
         self._inv_dt = 1.0 / self.dt
         self._encoder_ok = np.ones(n, dtype=bool)
+        #: added to the reported position 0x6064 only [rad]: an encoder or transmission
+        #: glitch the drive's own loop does not see (:meth:`jump_position`)
+        self.position_offset = np.zeros(n)
+        self._q_rep = np.zeros(n)
         self._bind_image(self.rx, self.tx)
         self._rx_mode_u8 = self._rx_mode.view(np.uint8)
         # Scratch (no allocation per cycle).
@@ -283,6 +287,13 @@ class EmulatedDrives(ImageFields):
         if kind == "encoder":
             self.encoder_failed[axis] = True
             self._encoder_ok[axis] = False
+
+    def jump_position(self, axis: int, offset: float) -> None:
+        """From now on report drive ``axis``'s position ``offset`` [rad] away from the true
+        one (a position jump in the TxPDO; 0 puts it back)."""
+        if not 0 <= axis < self.n:
+            raise ValueError(f"axis {axis} does not exist ({self.n} drives)")
+        self.position_offset[axis] = float(offset)
 
     def set_safe_torque_off(self, axis: int, active: bool) -> None:
         """Safe torque off input of drive ``axis``: while active the power stage cannot be
@@ -511,7 +522,8 @@ class EmulatedDrives(ImageFields):
 
     def _update_tx(self) -> None:
         p, sc = self.plant, self.scaling
-        sc.position_to_raw(p.q_meas, self._pos_raw)
+        np.add(p.q_meas, self.position_offset, out=self._q_rep)
+        sc.position_to_raw(self._q_rep, self._pos_raw)
         np.copyto(self._tx_pos, self._pos_raw, where=self._encoder_ok)
         sc.velocity_to_raw(p.qd_meas, self._tx_vel)
         sc.torque_to_raw(p.tau_meas, self._tx_tau)

@@ -204,7 +204,9 @@ class Tick:
         lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap if gap > 1e-9 else 0.0)
         if good:
             self._since_fresh = 0.0
-        monitored = self.collision is not None and ok and self._power_on(g.states)
+        # judged on fresh exchanges only: a stale sample (lost frame, missing TPDO) is an
+        # old position beside this tick's torque, and its gap shows up in the next one
+        monitored = self.collision is not None and ok and good and self._power_on(g.states)
         self.tick_rec["monitored"] = monitored  # replay judges the same ticks
         np.copyto(self._r["qdd_cmd"], motion.qdd)
         if monitored:

@@ -149,7 +149,9 @@ class EmulatedNetwork:
         Requests (``op``): ``status``; ``drop`` (count); ``corrupt`` (count, slave: first
         slave to see a damaged frame); ``silence`` (slave, on); ``drive_fault`` (slave,
         code: a 0x603F code of drivers.sim.drive.FAULTS, persistent); ``clear_drive_fault``
-        (slave); ``sdo_abort`` (slave, index, sub (-1 = all), code; code 0 removes);
+        (slave); ``position_jump`` (slave, offset [rad]: the reported position jumps by it
+        and stays off; 0 restores); ``sdo_abort`` (slave, index, sub (-1 = all), code; code 0
+        removes);
         ``refuse_state`` (slave, state, code; code 0 removes); ``al_error`` (slave, code:
         the slave drops to SAFE-OP, or stays lower, with the error flag and this code);
         ``restart`` (slave: power-cycled, registers reset, INIT, no station address);
@@ -170,6 +172,11 @@ class EmulatedNetwork:
                 )
             elif op == "drive_fault":
                 self._drive_fault(request)
+            elif op == "position_jump":
+                if self.drives is None:
+                    raise ValueError("no drives on this network")
+                k = self._slave_index(request["slave"])
+                self.drives.jump_position(k, float(request["offset"]))
             elif op == "clear_drive_fault":
                 if self.drives is None:
                     raise ValueError("no drives on this network")

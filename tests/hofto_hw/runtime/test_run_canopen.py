@@ -139,7 +139,8 @@ def test_sigterm_after_the_demo_path_is_category_1_drives_off_log_closed(canrun:
     stop = first_event(s, "stop_request")
     assert stop["category"] == canrun.category("stop_request") == 1
     # no false stop on the way: monitor armed, the arm moving, the machine loaded
-    assert [e["kind"] for e in s["events"]] == ["stop_request"], s["events"]
+    stops = [e["kind"] for e in s["events"] if e["category"] >= 0]
+    assert stops == ["stop_request"], s["events"]  # contact-level reports may come and go
     states = canrun.inject(op="status")["drive_state"]
     powered = (OE, int(State.QUICK_STOP_ACTIVE))
     assert not [x for x in states if x in powered], states

@@ -174,3 +174,90 @@ def test_sim_clock_is_refused_on_a_real_bus(tmp_path: Path) -> None:
     path, _ = _config(tmp_path, "nonexistent0")
     with pytest.raises(ConfigError, match=r"run\.clock: 'sim' needs bus\.transport 'sim'"):
         build(load_config(path), clock="sim")
+
+
+def _rewrite(r: EcatRun, **safety: Any) -> None:
+    """Change ``safety`` settings of the run's config (before :meth:`EcatRun.start_run`)."""
+    r.data["safety"].update(safety)
+    r.config.write_text(yaml.safe_dump(r.data))
+
+
+def test_sdo_abort_at_start_up_refuses_the_run_in_one_line(ecat: EcatRun) -> None:
+    """The loop does SDO at start-up only (identity, ratings, limits): an abort there ends
+    the run before any drive is powered, exit 2, one line naming axis, object and code."""
+    import subprocess
+    import sys
+
+    from drivers.cia402.state_machine import State
+
+    ecat.inject(op="sdo_abort", slave=3, index=0x6072, code=0x06090030)
+    cmd = [sys.executable, "-m", "hofto_hw.cli", "run", "--config", str(ecat.config)]
+    cmd += ["--clock", "real", "--no-log", "--duration", "5"]
+    res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert "axis 3" in lines[0] and "0x6072" in lines[0] and "0x06090030" in lines[0], lines
+    states = [State(x) for x in ecat.inject(op="status")["drive_state"]]
+    assert State.OPERATION_ENABLED not in states, states
+    print(f"FIGURE sdo_abort refused: {lines[0]}")
+
+
+def test_position_jump_is_category_0(ecat: EcatRun) -> None:
+    ecat.start_run()
+    _wait_running(ecat)
+    before = ecat.status()["ticks"]
+    ecat.inject(op="position_jump", slave=4, offset=0.1)  # rad, 5x the allowance
+    _wait(lambda: _latched(ecat, "position_jump"), 60, "position_jump latched", ecat.run)
+    assert ecat.status()["category"] == 0
+    code, s = ecat.terminate()
+    assert code == 0
+    e = _first(s, "position_jump")
+    assert e["tick"] > before
+    assert e["category"] == ecat.data["safety"]["categories"]["position_jump"] == 0
+    assert e["joint"] == 4
+    assert abs(e["value"] - 0.1) < 0.02, e
+    assert "position_jump" in s["latched"]
+    print(f"FIGURE position_jump category=0 ticks_after_status={e['tick'] - before}")
+
+
+def test_overrun_streak_from_a_stopped_loop_is_category_1(ecat: EcatRun) -> None:
+    """SIGSTOP the loop process for 0.5 s (500 cycles, the streak limit 100), SIGCONT."""
+    import os
+    import signal
+    import time
+
+    _rewrite(ecat, overrun_streak=100)
+    ecat.start_run()
+    _wait_running(ecat)
+    # past the loop's start-up grace (its first 0.1 s of missed deadlines start no streak)
+    _wait(lambda: ecat.status()["ticks"] > 500, 60, "500 ticks", ecat.run)
+    before = ecat.status()
+    assert before["faults"] == [], before
+    pid = ecat.run.pid
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        _wait(lambda: _proc_state(pid) == "T", 10, "loop process stopped")
+        time.sleep(0.5)  # the injected stall itself, not a wait for a state
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    try:
+        _wait(lambda: _latched(ecat, "overrun"), 60, "overrun latched", ecat.run)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}: {before} -> {ecat.status()}") from None
+    assert ecat.status()["category"] == 1
+    code, s = ecat.terminate()
+    assert code == 0
+    e = _first(s, "overrun")
+    assert e["tick"] > before["ticks"]
+    assert e["category"] == ecat.data["safety"]["categories"]["overrun"] == 1
+    assert e["value"] >= 100  # the streak that latched it [missed deadlines]
+    assert s["overruns"] - before["overruns"] >= 400
+    # the stall is an overrun, not a bus fault: the bus and drives rode it out
+    assert not [x for x in s["events"] if x["kind"] in ("bus_loss", "drive_fault")], s
+    print(f"FIGURE overrun category=1 streak={e['value']} overruns={s['overruns']}")
+
+
+def _proc_state(pid: int) -> str:
+    with open(f"/proc/{pid}/stat") as f:
+        return f.read().rsplit(")", 1)[1].split()[0]
