@@ -19,8 +19,8 @@ Each SYNC first sends the TPDOs (inputs sampled at the SYNC, CiA 301 synchronous
 applies the RPDOs latched before it and steps the drives and the plant by one tick: the
 answer does not wait for the plant step, and a command is seen in the TPDOs of the next
 SYNC. Simulated time follows the wall clock in whole cycles (drivers/sim/pacing.py): one
-plant tick per SYNC while the master keeps its rate, the cycles of a master stall caught up
-at the next SYNC with the last RPDOs held. Fault injection
+plant tick per SYNC while the master keeps its rate; the cycles of a master stall are
+stepped at the next SYNC, the last RPDOs held, before its TPDOs are sampled. Fault injection
 (:meth:`CanopenDrives.control`): silent node, heartbeat stopped, EMCY with a code, SDO abort
 with a code, late or missing TPDOs, wrong identity, bus-off.
 """
@@ -209,6 +209,10 @@ class CanopenDrives:
     def _sync(self) -> None:
         self.syncs += 1
         now = time.monotonic()
+        for _ in range(self.pacing.due(now) - 1):
+            # cycles no SYNC came for (a stalled master): stepped with the last RPDOs
+            # held before the inputs are sampled, so the TPDOs show the arm as it is now
+            self.drives.step(self.drives.rx)
         for i in range(self.n):
             if self.nmt[i] != layout.NMT_OPERATIONAL or not self._talks(i):
                 continue
@@ -230,8 +234,6 @@ class CanopenDrives:
                 self.tpdo_late[i] -= 1
         # TPDOs are sampled at the SYNC and sent first; then the RPDOs latched before this
         # SYNC take effect for one tick (the plant step does not delay the answer).
-        for _ in range(self.pacing.due(now) - 1):
-            self.drives.step(self._rx)  # cycles without a SYNC: the last RPDOs held
         self.drives.step(self._rx if self._got_rpdo else None)
         self._got_rpdo = False
         err = self.drives.tx["error_code"]

@@ -4,9 +4,10 @@
 (``datagram.py``) and the emulated drives on the simulated arm
 (:class:`drivers.sim.drive.EmulatedDrives`). Each frame that carries process data (LRD/
 LWR/LRW) is answered first and then advances the drives and the plant by the bus cycles of
-wall time since the last one (:class:`drivers.sim.pacing.WallCycles`: one per frame on a
-master that keeps its rate; after a master stall the arm has moved on, as a real one
-would, the drives holding the last outputs over the cycles no frame came for).
+wall time since the last frame (:class:`drivers.sim.pacing.WallCycles`: one per frame on a
+master that keeps its rate; after a master stall the missed cycles are stepped before the
+frame is processed, the drives holding the last outputs, so the answer shows the arm moved
+on as a real one would).
 
 :func:`serve` binds an AF_PACKET socket for ethertype 0x88A4 to one interface (one end of a
 veth pair; the master opens the other end) and runs the network until stopped. A Unix
@@ -87,6 +88,7 @@ class EmulatedNetwork:
         """
         self.frames += 1
         self.pending_step = False
+        self._catch_up()
         if self.drop_next > 0:
             self.drop_next -= 1
             self.dropped += 1
@@ -113,16 +115,12 @@ class EmulatedNetwork:
         self.process_frames += 1
         if self.drives is None:
             return
-        for _ in range(self.pacing.due() - 1):
-            self.drives.step(self.rx)  # cycles without a frame: the last outputs held
         rx_u8 = self._rx_u8
         for i, s in enumerate(self.slaves):
             if not s.pull_outputs(rx_u8[i]):
                 rx_u8[i] = 0
         self.drives.step(self.rx)
-        tx_u8 = self._tx_u8
-        for i, s in enumerate(self.slaves):
-            s.push_inputs(tx_u8[i])
+        self._push_inputs()
         codes = self.drives.tx["error_code"]
         np.not_equal(codes, self._last_error, out=self._changed)
         if self._changed.any():
@@ -133,6 +131,23 @@ class EmulatedNetwork:
                     reg = int(self.drives.error_register[i])
                     s.queue_mailbox(s.coe.emergency(code, reg))
             np.copyto(self._last_error, codes)
+
+    def _push_inputs(self) -> None:
+        tx_u8 = self._tx_u8
+        for i, s in enumerate(self.slaves):
+            s.push_inputs(tx_u8[i])
+
+    def _catch_up(self) -> None:
+        """Before a frame is processed: the cycles of wall time no frame came for, stepped
+        with the last outputs held, so the frame reads the arm as it is now."""
+        if self.drives is None:
+            return
+        k = self.pacing.due() - 1
+        if k <= 0:
+            return
+        for _ in range(k):
+            self.drives.step(self.rx)
+        self._push_inputs()
 
     def check_watchdogs(self) -> None:
         """Run every slave's SyncManager watchdog."""
