@@ -19,6 +19,7 @@ Per drive (all in joint-side SI internally, raw units only at the process image)
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -31,6 +32,7 @@ from drivers.cia402.units import AxisScaling, Scaling
 from drivers.sim.object_dictionary import DriveObjects, ObjectDictionary, cia402_dictionary
 from drivers.sim.plant import Plant
 from hofto_hw.config.drives import DriveConfig
+from hofto_hw.config.models import ExternalTorqueConfig
 
 #: injectable faults -> (0x603F error code, reaction: True = ramp down first, False = torque off)
 FAULTS: dict[str, tuple[int, bool]] = {
@@ -294,6 +296,19 @@ class EmulatedDrives(ImageFields):
         if not 0 <= axis < self.n:
             raise ValueError(f"axis {axis} does not exist ({self.n} drives)")
         self.position_offset[axis] = float(offset)
+
+    def push_tool(self, force: Sequence[float], duration: float, ramp: float = 0.02) -> None:
+        """A hand pushes the true arm's tool with ``force`` (3,) [N, world frame] from now
+        for ``duration`` [s] of plant time, ramping in and out over ``ramp`` [s]."""
+        f = tuple(float(x) for x in force)
+        if len(f) != 3 or not all(math.isfinite(x) for x in f):
+            raise ValueError(f"force must be 3 finite numbers [N], got {force!r}")
+        if not (math.isfinite(duration) and duration > 0.0 and 0.0 < ramp <= duration / 2):
+            raise ValueError(f"need duration > 0, 0 < ramp <= duration/2; got {duration}, {ramp}")
+        c = ExternalTorqueConfig(
+            kind="push", start=self.plant.t, duration=duration, force=f, ramp=ramp
+        )
+        self.plant.external.components.append(c)
 
     def set_safe_torque_off(self, axis: int, active: bool) -> None:
         """Safe torque off input of drive ``axis``: while active the power stage cannot be

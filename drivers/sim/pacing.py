@@ -1,14 +1,15 @@
-"""How an emulator keeps up with the wall clock (both the EtherCAT and the CANopen one).
+"""How an emulator keeps up with the wall clock, and its process priority.
 
-A real arm keeps moving while its controller is stalled; the emulated arm used to advance
-exactly one plant tick per process-data exchange, so after a controller stall of 100 ms the
-data the controller read had moved 1 ms while its clock said 100 ms: the observers, fed the
-real dt, read the difference as an external torque. :class:`WallCycles` tells an emulator how
-many plant ticks an exchange stands for: the whole bus cycles of wall time since the last
-one (at least one; a gap longer than ``limit`` is a pause of the cyclic exchange, such as
-start-up, and counts one: catching up costs a plant step per cycle, during which the next
-frames wait). The drives hold their last command over the cycles
-no frame came for (their communication watchdog still counts missing frames, not time).
+A real arm keeps moving while its controller is stalled; an emulated arm that advances
+exactly one plant tick per exchange froze with the controller, so after a controller stall
+of 100 ms the data had moved 5 ms at 200 Hz while the controller's clock said 100 ms.
+:class:`WallCycles` tells an emulator how many plant ticks an exchange stands for: the whole
+bus cycles of wall time since the last one (at least one; a gap longer than ``limit`` is a
+pause of the cyclic exchange, such as start-up, and counts one). The CANopen emulator steps
+those cycles at the SYNC, the last RPDOs held, before it samples the TPDOs (a few plant
+steps of ~0.2-0.5 ms against a 4 ms TPDO deadline at 200 Hz). The EtherCAT emulator does
+not: its master waits one 1 ms cycle for the frame, so stepping a stall's cycles before
+answering would turn every stall into a streak of lost frames.
 
 :func:`answer_first`: the emulator process answers frames before other work (SCHED_FIFO
 below the kernel's threaded IRQs when allowed, else a better nice value; no cyclic garbage

@@ -3,11 +3,11 @@
 :class:`EmulatedNetwork` joins the slave controllers (``esc.py``), the frame processor
 (``datagram.py``) and the emulated drives on the simulated arm
 (:class:`drivers.sim.drive.EmulatedDrives`). Each frame that carries process data (LRD/
-LWR/LRW) is answered first and then advances the drives and the plant by the bus cycles of
-wall time since the last frame (:class:`drivers.sim.pacing.WallCycles`: one per frame on a
-master that keeps its rate; after a master stall the missed cycles are stepped before the
-frame is processed, the drives holding the last outputs, so the answer shows the arm moved
-on as a real one would).
+LWR/LRW) is answered first and then advances the drives and the plant by one tick: the
+simulated time is the number of process-data frames times the bus cycle time. (No
+wall-clock catch-up after a master stall, unlike the CANopen emulator: the master waits
+one cycle for its frame, so the steps of a stall caught up before answering would read as
+lost frames; see drivers/sim/pacing.py.)
 
 :func:`serve` binds an AF_PACKET socket for ethertype 0x88A4 to one interface (one end of a
 veth pair; the master opens the other end) and runs the network until stopped. A Unix
@@ -35,7 +35,7 @@ from drivers.sim.drive import FAULTS, EmulatedDrives
 from drivers.sim.esc import datagram
 from drivers.sim.esc.description import SlaveDescription
 from drivers.sim.esc.esc import Esc
-from drivers.sim.pacing import WallCycles, answer_first
+from drivers.sim.pacing import answer_first
 from hofto_hw.errors import UserError
 
 ETH_P_ECAT = 0x88A4
@@ -57,8 +57,6 @@ class EmulatedNetwork:
         ]
         self.drives = drives
         self.n = n
-        #: plant ticks per process-data frame by the wall clock (see the module docstring)
-        self.pacing = WallCycles(drives.dt if drives is not None else 1e-3)
         self.frames = 0
         self.process_frames = 0
         self.dropped = 0
@@ -88,7 +86,6 @@ class EmulatedNetwork:
         """
         self.frames += 1
         self.pending_step = False
-        self._catch_up()
         if self.drop_next > 0:
             self.drop_next -= 1
             self.dropped += 1
@@ -137,18 +134,6 @@ class EmulatedNetwork:
         for i, s in enumerate(self.slaves):
             s.push_inputs(tx_u8[i])
 
-    def _catch_up(self) -> None:
-        """Before a frame is processed: the cycles of wall time no frame came for, stepped
-        with the last outputs held, so the frame reads the arm as it is now."""
-        if self.drives is None:
-            return
-        k = self.pacing.due() - 1
-        if k <= 0:
-            return
-        for _ in range(k):
-            self.drives.step(self.rx)
-        self._push_inputs()
-
     def check_watchdogs(self) -> None:
         """Run every slave's SyncManager watchdog."""
         now = time.monotonic_ns()
@@ -165,10 +150,11 @@ class EmulatedNetwork:
         slave to see a damaged frame); ``silence`` (slave, on); ``drive_fault`` (slave,
         code: a 0x603F code of drivers.sim.drive.FAULTS, persistent); ``clear_drive_fault``
         (slave); ``position_jump`` (slave, offset [rad]: the reported position jumps by it
-        and stays off; 0 restores); ``sdo_abort`` (slave, index, sub (-1 = all), code; code 0
-        removes);
-        ``refuse_state`` (slave, state, code; code 0 removes); ``al_error`` (slave, code:
-        the slave drops to SAFE-OP, or stays lower, with the error flag and this code);
+        and stays off; 0 restores); ``push`` (force [N] (3,) world frame at the tool,
+        duration [s], ramp [s]: a hand on the true arm from now); ``sdo_abort`` (slave,
+        index, sub (-1 = all), code; code 0 removes); ``refuse_state`` (slave, state, code;
+        code 0 removes); ``al_error`` (slave, code: the slave drops to SAFE-OP, or stays
+        lower, with the error flag and this code);
         ``restart`` (slave: power-cycled, registers reset, INIT, no station address);
         ``stop``. Slaves are 0-based positions on the line.
         """
@@ -187,6 +173,12 @@ class EmulatedNetwork:
                 )
             elif op == "drive_fault":
                 self._drive_fault(request)
+            elif op == "push":
+                if self.drives is None:
+                    raise ValueError("no drives on this network")
+                self.drives.push_tool(
+                    request["force"], float(request["duration"]), float(request.get("ramp", 0.02))
+                )
             elif op == "position_jump":
                 if self.drives is None:
                     raise ValueError("no drives on this network")
@@ -252,7 +244,6 @@ class EmulatedNetwork:
         out: dict[str, Any] = {
             "frames": self.frames,
             "process_frames": self.process_frames,
-            "caught_up_ticks": self.pacing.caught_up,
             "dropped": self.dropped,
             "corrupted": self.corrupted,
             "malformed": self.malformed,

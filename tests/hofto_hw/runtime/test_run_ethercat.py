@@ -45,9 +45,9 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
     data["safety"]["bus"]["lost_cycles"] = LOST_CYCLES
     data["run"]["clock"] = "real"
     # the collision monitor stays armed: a host stall of ~100 ms used to read as a contact
-    # (observers stepped once over the gap, the emulated arm one cycle further); now the
-    # observers integrate the gap in one-cycle steps and the emulator steps the arm to the
-    # wall clock (drivers/sim/pacing.py), so a stall must not stop the arm by itself
+    # (the observers took the whole gap in one step: the momentum observer's gain·dt was
+    # 3 > 2, unstable); now they integrate a gap in one-cycle steps (Tick._observe), and the
+    # arm holds still here (--hold), so a stall must not stop it by itself
     # the emulated slaves' 100 ms SM watchdog would take a drive out of OP after such a stall
     data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), "pdo_watchdog": 2.0}
     path = folder / "er3a-ethercat.yaml"
