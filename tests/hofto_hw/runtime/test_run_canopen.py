@@ -7,8 +7,9 @@ in the MCAP flight log. Needs root (network namespace): skipped when unprivilege
 under CI.
 
 The run keeps the shipped safety settings of configs/er3a.yaml (collision monitor, payload,
-limits, 3 lost cycles) except ``overrun_streak`` (100 cycles = 0.5 s: host stalls of up to
-~110 ms were measured on this shared VM; those are not the fault under test). Every wait is
+limits) except ``overrun_streak`` (100 cycles = 0.5 s: host stalls of up to ~110 ms were
+measured on this shared VM) and ``bus.lost_cycles`` (10, see LOST_CYCLES): those are not the
+faults under test. Every wait is
 for a state, bounded by generous timeouts.
 """
 
@@ -39,6 +40,9 @@ CAN_CONFIG = ROOT / "configs" / "er3a_canopen.yaml"
 ER3A = ROOT / "configs" / "er3a.yaml"
 CHANNEL = "239.74.163.2"  # inside the test's own namespace: no other test sees it
 OE = int(State.OPERATION_ENABLED)
+#: 50 ms at 200 Hz: at load 14 on 2 cores a few cycles' TPDOs came late (a spontaneous
+#: bus_loss with the shipped 3); late frames of a loaded machine are not the fault under test
+LOST_CYCLES = 10
 
 
 def _config(folder: Path) -> tuple[Path, dict]:
@@ -47,6 +51,7 @@ def _config(folder: Path) -> tuple[Path, dict]:
     data["robot"]["urdf"] = str((CAN_CONFIG.parent / data["robot"]["urdf"]).resolve())
     data["safety"] = er3a["safety"]
     data["safety"]["overrun_streak"] = 100
+    data["safety"]["bus"]["lost_cycles"] = LOST_CYCLES
     data["run"] = {"clock": "real", "model_error": er3a["run"]["model_error"]}
     data["run"]["path"] = er3a["run"]["path"]
     path = folder / "er3a-canopen-run.yaml"
@@ -87,7 +92,10 @@ def _start_moving(r: CanRun) -> dict[str, Any]:
     follows the path; returns the run's status then."""
     r.service.start(log=True)
     r.service.wait_state("running")
-    wait_for(lambda: r.service.status()["mode"] == "move", 30, "mode move", r.service.proc)
+    try:
+        wait_for(lambda: r.service.status()["mode"] == "move", 30, "mode move", r.service.proc)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}: {r.service.status()}") from None
     emu = r.inject(op="status")
     assert emu["drive_state"] == [OE] * 6, (emu, r.service.status())
     q0 = np.array(r.inject(op="status")["q"])
@@ -118,7 +126,7 @@ def _check_fault(r: CanRun, kind: str, before: int) -> dict:
     code, s = r.service.terminate()
     assert code == 0
     e = first_event(s, kind)
-    assert e["tick"] > before, (e, before)
+    assert e["tick"] > before, (e, before, s["events"])
     assert e["category"] == r.category(kind)
     assert kind in s["latched"]
     logged = _logged(r, kind)
