@@ -180,7 +180,10 @@ def test_emcy_drive_fault_names_its_code(canrun: CanRun) -> None:
 def test_missing_or_late_tpdo_streak_is_bus_loss(canrun: CanRun, mode: str) -> None:
     lost = canrun.data["safety"]["bus"]["lost_cycles"]
     before = _start_moving(canrun)["ticks"]
-    canrun.inject(op="tpdo", node=4, mode=mode, count=20 * lost, delay=0.05)
+    # late: 4.5 ms after the SYNC, past the master's 4 ms TPDO deadline and before the next
+    # SYNC. A stream delayed by whole cycles cannot be told from a fresh one on CAN (frames
+    # carry no sequence number): each cycle would get one frame, just an old one
+    canrun.inject(op="tpdo", node=4, mode=mode, count=20 * lost, delay=0.0045)
     e = _check_fault(canrun, "bus_loss", before)
     assert e["tick"] - before >= lost
     assert "TPDO" in e["detail"] or "did not answer" in e["detail"], e
