@@ -141,6 +141,8 @@ def _check_fault(r: CanRun, kind: str, before: int) -> dict:
 
 def test_sigterm_after_the_demo_path_is_category_1_drives_off_log_closed(canrun: CanRun) -> None:
     _start_moving(canrun)
+    # 5 s of the demo path (1000 ticks at 200 Hz): no stop on the way
+    wait_for(lambda: canrun.service.status()["ticks"] > 1000, 120, "1000 ticks", None)
     code, s = canrun.service.terminate()
     assert code == 0
     assert s["bus"].startswith("canopen")
