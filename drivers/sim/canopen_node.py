@@ -206,10 +206,13 @@ class CanopenDrives:
 
     # --------------------------------------------------------------------- SYNC
 
-    def _sync(self) -> None:
+    def _sync(self, stamp: float = 0.0) -> None:
+        """``stamp``: the SYNC's receive time [s, time.time() base; python-can's kernel
+        timestamp], so the emulator's own delays in handling it are not taken for a stall
+        of the master."""
         self.syncs += 1
         now = time.monotonic()
-        for _ in range(self.pacing.due(now) - 1):
+        for _ in range(self.pacing.due(stamp or time.time()) - 1):
             # cycles no SYNC came for (a stalled master): stepped with the last RPDOs
             # held before the inputs are sampled, so the TPDOs show the arm as it is now
             self.drives.step(self.drives.rx)
@@ -335,7 +338,7 @@ class CanopenDrives:
         if cob == layout.NMT_COB_ID:
             self._nmt(data)
         elif cob == layout.SYNC_COB_ID and len(data) <= 1:
-            self._sync()
+            self._sync(msg.timestamp)
         elif cob in self._rpdo:
             i, idx, size = self._rpdo[cob]
             if self.bus_off[i]:

@@ -97,7 +97,12 @@ def _start_moving(r: CanRun) -> dict[str, Any]:
     except AssertionError as exc:
         raise AssertionError(f"{exc}: {r.service.status()}") from None
     emu = r.inject(op="status")
-    assert emu["drive_state"] == [OE] * 6, (emu, r.service.status())
+    if emu["drive_state"] != [OE] * 6:
+        st = r.service.status()
+        raise AssertionError(
+            f"drives {emu['drive_state']}, faults {st['faults']}, ticks {st['ticks']}: "
+            f"{r.service.terminate()[1]['events']}"
+        )
     q0 = np.array(r.inject(op="status")["q"])
 
     def moved() -> bool:
