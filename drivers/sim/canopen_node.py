@@ -18,9 +18,8 @@ heartbeat producer, EMCY when the drive's 0x603F changes (code 0 = error reset).
 Each SYNC first sends the TPDOs (inputs sampled at the SYNC, CiA 301 synchronous), then
 applies the RPDOs latched before it and steps the drives and the plant by one tick: the
 answer does not wait for the plant step, and a command is seen in the TPDOs of the next
-SYNC. Simulated time follows the wall clock in whole cycles (drivers/sim/pacing.py): one
-plant tick per SYNC while the master keeps its rate; the cycles of a master stall are
-stepped at the next SYNC, the last RPDOs held, before its TPDOs are sampled. Fault injection
+SYNC. Simulated time is the number of SYNCs times the plant tick (see drivers/sim/pacing.py
+for why a wall-clock catch-up after a master stall was tried and left out). Fault injection
 (:meth:`CanopenDrives.control`): silent node, heartbeat stopped, EMCY with a code, SDO abort
 with a code, late or missing TPDOs, wrong identity, bus-off.
 """
@@ -38,7 +37,6 @@ from drivers.canopen import layout
 from drivers.cia402.pdo import RXPDO_DTYPE, RXPDO_SIZE, TXPDO_DTYPE, TXPDO_SIZE, mapping_value
 from drivers.sim.drive import FAULTS, EmulatedDrives
 from drivers.sim.object_dictionary import KINDS, ObjectDictionary, OdEntry, SdoAbort
-from drivers.sim.pacing import WallCycles
 
 _FAULT_KINDS = {code: kind for kind, (code, _ramp) in FAULTS.items()}
 ABORT_COMMAND = 0x05040001
@@ -115,8 +113,6 @@ class CanopenDrives:
         self._identity_saved: dict[tuple[int, int], int] = {}
         self.syncs = 0
         self.frames = 0
-        #: plant ticks per SYNC by the wall clock (drivers/sim/pacing.py)
-        self.pacing = WallCycles(drives.dt)
         self.stopping = False
         self.lock = threading.RLock()
         self._thread: threading.Thread | None = None
@@ -206,16 +202,9 @@ class CanopenDrives:
 
     # --------------------------------------------------------------------- SYNC
 
-    def _sync(self, stamp: float = 0.0) -> None:
-        """``stamp``: the SYNC's receive time [s, time.time() base; python-can's kernel
-        timestamp], so the emulator's own delays in handling it are not taken for a stall
-        of the master."""
+    def _sync(self) -> None:
         self.syncs += 1
         now = time.monotonic()
-        for _ in range(self.pacing.due(stamp or time.time()) - 1):
-            # cycles no SYNC came for (a stalled master): stepped with the last RPDOs
-            # held before the inputs are sampled, so the TPDOs show the arm as it is now
-            self.drives.step(self.drives.rx)
         for i in range(self.n):
             if self.nmt[i] != layout.NMT_OPERATIONAL or not self._talks(i):
                 continue
@@ -338,7 +327,7 @@ class CanopenDrives:
         if cob == layout.NMT_COB_ID:
             self._nmt(data)
         elif cob == layout.SYNC_COB_ID and len(data) <= 1:
-            self._sync(msg.timestamp)
+            self._sync()
         elif cob in self._rpdo:
             i, idx, size = self._rpdo[cob]
             if self.bus_off[i]:
@@ -500,7 +489,6 @@ class CanopenDrives:
         plant = self.drives.plant
         return {
             "syncs": self.syncs,
-            "caught_up_ticks": self.pacing.caught_up,
             "frames": self.frames,
             "nmt": [int(s) for s in self.nmt],
             "silent": [bool(s) for s in self.silent],
