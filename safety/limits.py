@@ -37,6 +37,7 @@ class LimitMonitor:
         self.q_prev = np.zeros(n)
         self._have_prev = False
         self._d = np.zeros(n)
+        self._allow = np.zeros(n)
         self._m = np.zeros(n, dtype=bool)
         self._m2 = np.zeros(n, dtype=bool)
         self._fin = np.zeros(n, dtype=bool)
@@ -87,10 +88,15 @@ class LimitMonitor:
         q_cmd: np.ndarray,
         fresh: bool,
         tracking: bool,
+        gap: float = 0.0,
     ) -> None:
         """One tick of limit checks on measured q, qd, tau and last tick's command q_cmd.
 
         ``fresh``: the sample is new this tick (jumps are only checked on fresh data);
+        ``gap`` [s]: time between the previous fresh sample and this one beyond one bus
+        cycle (a stale exchange or a stalled loop in between): the jump allowance grows by
+        what each joint's velocity limit covers in it (``position_jump`` stays the bound for
+        consecutive samples);
         ``tracking``: the drives are powered and follow q_cmd (following error and motor
         torque are checked only then: with the power stage off the brakes hold the arm).
         """
@@ -122,7 +128,12 @@ class LimitMonitor:
             if self._have_prev:
                 np.subtract(q, self.q_prev, out=d)
                 np.abs(d, out=d)
-                np.greater(d, self.position_jump, out=m)
+                if gap > 0.0:
+                    np.multiply(self.velocity, gap, out=self._allow)
+                    self._allow += self.position_jump
+                    np.greater(d, self._allow, out=m)
+                else:
+                    np.greater(d, self.position_jump, out=m)
                 if m.any():
                     j = int(np.argmax(m))
                     stop.report(Fault.POSITION_JUMP, j, float(d[j]))

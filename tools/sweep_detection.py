@@ -11,7 +11,7 @@ simulated arm of a config (``run.model_error``, noise, the payload; ``--clock si
 
 then, for each candidate setting (a ``name=value`` list of overrides of ``loop.observers`` /
 ``safety.collision``), reruns HOFTO and the momentum observer and the loop's collision monitor
-(safety.collision_levels.CollisionLevels) over both recordings and prints per setting the
+(safety.collision.CollisionLevels) over both recordings and prints per setting the
 detection delay after contact onset per observer, and the largest free-motion estimate /
 collision threshold per joint (a stop happens at 1.0). Every candidate's gains pass the loop
 rate's stability check (hofto_hw.observers.stability) first; an unstable one is reported.
@@ -224,7 +224,7 @@ def monitor(cfg: SystemConfig, names: list[str], est: np.ndarray, rec: Recording
     """Run CollisionLevels over the estimates: first collision tick per row (each row judged
     on its own) and the largest estimate/threshold ratio per row and joint."""
     from hofto_hw.runtime.compose import build_model
-    from safety.collision_levels import CollisionLevels
+    from safety.collision import CollisionLevels
     from safety.stop import StopController
 
     out: dict = {"first_tick": {}, "max_ratio": {}}

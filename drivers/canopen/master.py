@@ -21,9 +21,9 @@ PDO communication and mapping parameters by SDO (CiA 301 order: PDO invalid, map
 wait for every node's operational heartbeat.
 
 Every cycle (:meth:`exchange`, never raises): late TPDOs of the last cycle are taken first
-(and counted), RPDOs then SYNC are sent, TPDOs collected until ``tpdo_deadline`` (a second
-frame of one PDO in one cycle counts as late and is dropped: CAN frames carry no sequence
-number, so which of the two is stale cannot be told); missing
+(and counted), RPDOs then SYNC are sent, TPDOs collected until ``tpdo_deadline`` (of two
+frames of one PDO in one cycle the first is counted late and the second kept: one node
+sends each COB-ID and CAN delivers in order); missing
 TPDOs give :data:`~drivers.transport.STATUS_PARTIAL` (:meth:`missing_nodes` names them), a
 heartbeat older than ``heartbeat_timeout`` gives :data:`STATUS_HEARTBEAT_LOST`, a node that
 left operational :data:`STATUS_NOT_OPERATIONAL`, a send failure (bus-off, buffer full)
@@ -411,9 +411,12 @@ class CANopenTransport(Transport):
                 if slot is None:
                     continue
                 if self._got[slot]:
-                    # Second frame of one PDO in one cycle: one of the two is late (CAN
-                    # frames carry no sequence number); keep the first.
+                    # Second frame of one PDO in one cycle: the first was the last cycle's,
+                    # late. One node sends each COB-ID and CAN delivers in order, so the
+                    # second is the newer: keep it (the first kept made the next cycle's
+                    # data two cycles newer than this one's: a false position jump).
                     self.late_frames += 1
+                    self._store(m)
                     continue
                 self._store(m)
                 self._got[slot] = True

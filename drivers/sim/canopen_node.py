@@ -18,9 +18,10 @@ heartbeat producer, EMCY when the drive's 0x603F changes (code 0 = error reset).
 Each SYNC first sends the TPDOs (inputs sampled at the SYNC, CiA 301 synchronous), then
 applies the RPDOs latched before it and steps the drives and the plant by one tick: the
 answer does not wait for the plant step, and a command is seen in the TPDOs of the next
-SYNC. Simulated time is the number of SYNCs times the plant tick. Fault injection
-(:meth:`CanopenDrives.control`): silent node, EMCY with a code, SDO abort with a code, late
-or missing TPDOs, wrong identity, bus-off.
+SYNC. Simulated time is the number of SYNCs times the plant tick (see drivers/sim/pacing.py
+for why a wall-clock catch-up after a master stall was tried and left out). Fault injection
+(:meth:`CanopenDrives.control`): silent node, heartbeat stopped, EMCY with a code, SDO abort
+with a code, late or missing TPDOs, wrong identity, bus-off.
 """
 
 from __future__ import annotations
@@ -103,6 +104,7 @@ class CanopenDrives:
             add_canopen_objects(od, nid)
         self.nmt = np.full(n, layout.NMT_PRE_OPERATIONAL, dtype=np.uint8)
         self.silent = np.zeros(n, dtype=bool)
+        self.no_heartbeat = np.zeros(n, dtype=bool)
         self.bus_off = np.zeros(n, dtype=bool)
         self.tpdo_drop = np.zeros(n, dtype=np.int64)
         self.tpdo_late = np.zeros(n, dtype=np.int64)
@@ -345,7 +347,7 @@ class CanopenDrives:
         nxt = 0.05
         for i in range(self.n):
             period = self.ods[i].get(0x1017, 0) / 1000.0
-            if period <= 0 or not self._talks(i):
+            if period <= 0 or not self._talks(i) or self.no_heartbeat[i]:
                 continue
             if now >= self._hb_next[i]:
                 self._send(layout.HEARTBEAT_BASE + self.node_ids[i], bytes([int(self.nmt[i])]))
@@ -412,7 +414,8 @@ class CanopenDrives:
         """Apply one control request; ``{"ok": True, ...}`` or ``{"ok": False, "error": ...}``.
 
         ``node`` is the 0-based drive position. Requests (``op``): ``status``; ``silence``
-        (node, on: no frame sent, heartbeat stops); ``emcy`` (node, code: a 0x603F code of
+        (node, on: no frame sent, heartbeat stops); ``heartbeat`` (node, on: false stops
+        only the heartbeat producer, PDOs go on); ``emcy`` (node, code: a 0x603F code of
         drivers.sim.drive.FAULTS faults the drive, which then sends the EMCY; any other code
         is sent as a bare EMCY; persistent); ``clear_drive_fault`` (node); ``sdo_abort``
         (node, index, sub (-1 = all), code; 0 removes); ``tpdo`` (node, mode "drop" or
@@ -428,6 +431,8 @@ class CanopenDrives:
                     return {"ok": True, **self.status()}
                 if op == "silence":
                     self.silent[self._node(request)] = bool(request.get("on", True))
+                elif op == "heartbeat":
+                    self.no_heartbeat[self._node(request)] = not bool(request.get("on", True))
                 elif op == "emcy":
                     i, code = self._node(request), int(request["code"])
                     kind = _FAULT_KINDS.get(code)

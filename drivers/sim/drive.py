@@ -19,6 +19,7 @@ Per drive (all in joint-side SI internally, raw units only at the process image)
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -31,6 +32,7 @@ from drivers.cia402.units import AxisScaling, Scaling
 from drivers.sim.object_dictionary import DriveObjects, ObjectDictionary, cia402_dictionary
 from drivers.sim.plant import Plant
 from hofto_hw.config.drives import DriveConfig
+from hofto_hw.config.models import ExternalTorqueConfig
 
 #: injectable faults -> (0x603F error code, reaction: True = ramp down first, False = torque off)
 FAULTS: dict[str, tuple[int, bool]] = {
@@ -221,6 +223,10 @@ class EmulatedDrives(ImageFields):
         self._neg_brake = -tuning.brake_torque
         self._inv_dt = 1.0 / self.dt
         self._encoder_ok = np.ones(n, dtype=bool)
+        #: added to the reported position 0x6064 only [rad]: an encoder or transmission
+        #: glitch the drive's own loop does not see (:meth:`jump_position`)
+        self.position_offset = np.zeros(n)
+        self._q_rep = np.zeros(n)
         self._bind_image(self.rx, self.tx)
         self._rx_mode_u8 = self._rx_mode.view(np.uint8)
         # Scratch (no allocation per cycle).
@@ -283,6 +289,26 @@ class EmulatedDrives(ImageFields):
         if kind == "encoder":
             self.encoder_failed[axis] = True
             self._encoder_ok[axis] = False
+
+    def jump_position(self, axis: int, offset: float) -> None:
+        """From now on report drive ``axis``'s position ``offset`` [rad] away from the true
+        one (a position jump in the TxPDO; 0 puts it back)."""
+        if not 0 <= axis < self.n:
+            raise ValueError(f"axis {axis} does not exist ({self.n} drives)")
+        self.position_offset[axis] = float(offset)
+
+    def push_tool(self, force: Sequence[float], duration: float, ramp: float = 0.02) -> None:
+        """A hand pushes the true arm's tool with ``force`` (3,) [N, world frame] from now
+        for ``duration`` [s] of plant time, ramping in and out over ``ramp`` [s]."""
+        f = tuple(float(x) for x in force)
+        if len(f) != 3 or not all(math.isfinite(x) for x in f):
+            raise ValueError(f"force must be 3 finite numbers [N], got {force!r}")
+        if not (math.isfinite(duration) and duration > 0.0 and 0.0 < ramp <= duration / 2):
+            raise ValueError(f"need duration > 0, 0 < ramp <= duration/2; got {duration}, {ramp}")
+        c = ExternalTorqueConfig(
+            kind="push", start=self.plant.t, duration=duration, force=f, ramp=ramp
+        )
+        self.plant.external.components.append(c)
 
     def set_safe_torque_off(self, axis: int, active: bool) -> None:
         """Safe torque off input of drive ``axis``: while active the power stage cannot be
@@ -511,7 +537,8 @@ class EmulatedDrives(ImageFields):
 
     def _update_tx(self) -> None:
         p, sc = self.plant, self.scaling
-        sc.position_to_raw(p.q_meas, self._pos_raw)
+        np.add(p.q_meas, self.position_offset, out=self._q_rep)
+        sc.position_to_raw(self._q_rep, self._pos_raw)
         np.copyto(self._tx_pos, self._pos_raw, where=self._encoder_ok)
         sc.velocity_to_raw(p.qd_meas, self._tx_vel)
         sc.torque_to_raw(p.tau_meas, self._tx_tau)

@@ -109,7 +109,10 @@ def _add_component(
         tau += _vec(c.amplitude, n) * np.sin(phase)
     elif c.kind == "push":
         assert c.duration is not None and c.force is not None
-        profile = 0.5 * (1.0 - math.cos(2.0 * math.pi * tau_rel / c.duration))
+        if c.ramp is None:
+            profile = 0.5 * (1.0 - math.cos(2.0 * math.pi * tau_rel / c.duration))
+        else:  # trapezoid: a held push
+            profile = min(1.0, tau_rel / c.ramp, (c.duration - tau_rel) / c.ramp)
         frame = c.frame or data.model.tool_frame
         J = data.frame_jacobian(q, frame)
         tau += J[:3].T @ (profile * np.asarray(c.force, dtype=float))

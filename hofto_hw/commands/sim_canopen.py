@@ -11,6 +11,7 @@ with ``--control`` (one JSON object per line, see
 from __future__ import annotations
 
 import argparse
+import gc
 import math
 import signal
 import threading
@@ -49,12 +50,26 @@ def node_ids(cfg: Any) -> list[int]:
     return list(range(1, len(cfg.bus.drives) + 1))
 
 
+def _collecting(handler: Any) -> Any:
+    """``handler`` followed by a garbage collection: the frame path runs with the cyclic
+    collector off (drivers.sim.pacing.answer_first), so collect between control requests."""
+
+    def handle(request: dict[str, Any]) -> dict[str, Any]:
+        try:
+            return handler(request)
+        finally:
+            gc.collect()
+
+    return handle
+
+
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGTERM/SIGINT, a ``stop`` request or ``--duration``."""
     import can
 
     from drivers.sim.canopen_node import CanopenDrives
     from drivers.sim.control_socket import serve_control
+    from drivers.sim.pacing import answer_first
     from hofto_hw.config.loader import load_config
     from hofto_hw.config.locate import find_config
     from hofto_hw.errors import UserError
@@ -66,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     channel = args.channel or (cfg.bus.interface if cfg.bus is not None else None)
     if not channel:
         raise UserError(f"--channel: not given and {args.config} has no bus.interface")
-    drives = build_emulated_drives(cfg, external=not args.quiet_arm)
+    drives = build_emulated_drives(cfg, external=not args.quiet_arm, load=True)
     try:
         bus = can.Bus(interface=args.interface, channel=channel)
     except (can.CanError, OSError, ValueError) as exc:
@@ -76,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     ctl = None
     if args.control:
         try:
-            ctl = serve_control(args.control, net.control, stop_control)
+            ctl = serve_control(args.control, _collecting(net.control), stop_control)
         except BaseException:
             bus.shutdown()
             raise
@@ -92,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
         f"{args.interface}:{channel}",
         flush=True,
     )
+    answer_first()  # frames before other work, as the EtherCAT emulator
     if args.ready_file:
         Path(args.ready_file).write_text("ready\n")
     try:

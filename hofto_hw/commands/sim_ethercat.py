@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.create_veth and not veth.exists(args.iface):
         raise UserError(f"network interface {args.iface!r} does not exist (see `ip link`)")
     cfg = load_config(find_config(args.config))
-    net = build_emulated_network(cfg, external=not args.quiet_arm)
+    net = build_emulated_network(cfg, external=not args.quiet_arm, load=True)
     if args.create_veth:
         veth.create_pair(master, args.iface)
 

@@ -281,7 +281,8 @@ class ExternalTorqueConfig(FileModel):
     - ``contact``: stiff spring-damper wall on the Cartesian position of ``frame`` (see
       drivers/sim/scenarios.py);
     - ``push``: Cartesian force at the tool (``force`` [N]) mapped to joints by J^T, with a
-      smooth raised-cosine profile over ``duration``.
+      smooth raised-cosine profile over ``duration``, or with ``ramp`` [s] set, linear ramps
+      of that length at both ends and the full force in between (a hand holding a push).
     Each component is active on [start, start + duration) (duration None = forever).
     """
 
@@ -300,6 +301,7 @@ class ExternalTorqueConfig(FileModel):
     wall_normal: tuple[float, float, float] | None = None
     stiffness: PositiveFloat | None = Field(None, description="contact stiffness [N/m]")
     damping: NonNegFloat | None = Field(None, description="contact damping [N·s/m]")
+    ramp: PositiveFloat | None = Field(None, description="push: linear ramp time [s]")
 
 
 class SimulationConfig(FileModel):

@@ -35,6 +35,7 @@ from hofto_hw.replay.flight_log import FlightLog, RecordedEvent
 from hofto_hw.replay.runner import run_observer
 from hofto_hw.replay.thresholds import ThresholdsFile, read_thresholds
 from hofto_hw.runtime.compose import build_model, loop_observer_table
+from hofto_hw.runtime.tick import gap_steps
 
 #: event kind name of a collision stop (the safety fault class's name in event_kinds)
 COLLISION_KIND = "collision"
@@ -256,7 +257,9 @@ def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
             ocfg = observer_config(setup, name, log.path)
         obs = make_observer(ocfg, model, backend=recorded_backend(log))
         replayed[name] = (
-            run_observer(as_recording(log), obs) if dt is None else _run_with_dt(obs, log, dt)
+            run_observer(as_recording(log), obs)
+            if dt is None
+            else _run_with_dt(obs, log, dt, 1.0 / float(setup.config.loop.rate_hz))
         )
         diffs[name] = float(np.max(np.abs(replayed[name] - log.tau_ext[name])))
     if levels:
@@ -276,7 +279,7 @@ def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
     )
 
 
-def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray) -> np.ndarray:
+def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray, period: float = 0.0) -> np.ndarray:
     """Estimates (N, n) as the loop computes them: reset, then updated on every tick with the
     loop's dt. The loop resets on the state read just before its first tick, which is not
     recorded: it is taken one period back along the first tick's velocity (q0 - qd0·dt0,
@@ -285,6 +288,9 @@ def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray) -> np.ndarray:
     its estimate jumps (HOFTO with poles at -300 rad/s: -8.6 N·m on joint 2 in tick 1, where
     the loop had -0.14); the starts differ by < 1e-6 N·m after 50 ticks either way.
 
+    A stall (a tick more than 1.5 periods after the last) is integrated in one-cycle steps
+    over the interpolated samples, as the loop does (``gap_steps``).
+
     A reset of the stop controller (a ``reset`` event) also resets the loop's observers on
     that tick's measured state after their update; replay does the same, so the estimates
     after a reset are the loop's too."""
@@ -292,8 +298,26 @@ def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray) -> np.ndarray:
     index = {int(tk): k for k, tk in enumerate(log.ticks)}
     resets = {index[e.tick] for e in log.events if e.kind_name == RESET_KIND and e.tick in index}
     obs.reset(log.q[0] - log.qd[0] * dt[0], log.qd[0])
+    x = np.zeros((3, log.q.shape[1]))
     for k in range(log.n_ticks):
-        est[k] = obs.update(log.q[k], log.qd[k], log.tau[k], dt[k])
+        steps = gap_steps(float(dt[k]), period) if k > 0 else 1
+        if steps == 1:
+            est[k] = obs.update(log.q[k], log.qd[k], log.tau[k], dt[k])
+        else:  # a stall: the loop integrated the gap in one-cycle steps (Tick._observe)
+            h = dt[k] / steps
+            for s in range(1, steps + 1):
+                a = s / steps
+                for j, (now, prev) in enumerate(
+                    (
+                        (log.q[k], log.q[k - 1]),
+                        (log.qd[k], log.qd[k - 1]),
+                        (log.tau[k], log.tau[k - 1]),
+                    )
+                ):
+                    np.subtract(now, prev, out=x[j])
+                    x[j] *= a
+                    x[j] += prev
+                est[k] = obs.update(x[0], x[1], x[2], h)
         if k in resets:
             obs.reset(log.q[k], log.qd[k])
     return est

@@ -64,23 +64,42 @@ def build_sim_bus(cfg: SystemConfig, *, external: bool = True) -> SimBus:
     return SimBus.from_config(bus, plant, axis_names=list(cfg.robot.joints))
 
 
-def build_emulated_drives(cfg: SystemConfig, *, external: bool = True) -> EmulatedDrives:
+def apply_true_load(plant: Plant, cfg: SystemConfig) -> None:
+    """Put the load the simulated arm really holds on ``plant``'s true arm:
+    ``run.simulated_payload``, else the configured ``safety.payload`` (none when its mass is
+    0). The run's model carries ``safety.payload``; without the same load on the emulated
+    arm, its weight reads as a contact."""
+    from hofto_hw.model.payload import apply_payload, payload_from_config
+
+    load = cfg.run.simulated_payload or cfg.safety.payload
+    if load.mass > 0.0:
+        apply_payload(plant.true_model, payload_from_config(load))
+
+
+def build_emulated_drives(
+    cfg: SystemConfig, *, external: bool = True, load: bool = False
+) -> EmulatedDrives:
     """Emulated CiA-402 drives (``bus.drives``) on :func:`build_plant`: what the EtherCAT and
-    CANopen emulators serve."""
+    CANopen emulators serve; ``load``: the arm holds the run's load
+    (:func:`apply_true_load`; the emulator commands set it)."""
     from drivers.sim.drive import EmulatedDrives
 
     bus = _bus(cfg, "the emulated drives")
     plant = build_plant(cfg, external=external)
+    if load:
+        apply_true_load(plant, cfg)
     return EmulatedDrives(plant, bus.drives, names=list(cfg.robot.joints))
 
 
-def build_emulated_network(cfg: SystemConfig, *, external: bool = True) -> EmulatedNetwork:
+def build_emulated_network(
+    cfg: SystemConfig, *, external: bool = True, load: bool = False
+) -> EmulatedNetwork:
     """Emulated EtherCAT slaves (identity from ``bus.drives[i].identity``) serving
     :func:`build_emulated_drives`: what ``hofto-hw sim-ethercat`` serves."""
     from drivers.sim.esc.description import slave_descriptions
     from drivers.sim.esc.network import EmulatedNetwork
 
-    drives = build_emulated_drives(cfg, external=external)
+    drives = build_emulated_drives(cfg, external=external, load=load)
     return EmulatedNetwork(slave_descriptions(_bus(cfg, "the network").drives), drives)
 
 

@@ -31,7 +31,12 @@ from hofto_hw.observers import make_observer
 from hofto_hw.observers.base import Observer
 from hofto_hw.observers.stability import check_observer
 from hofto_hw.recording.record import MemorySink, RecordSink, tick_dtype
-from hofto_hw.runtime.build import build_drive_group, build_sim_bus, build_transport
+from hofto_hw.runtime.build import (
+    apply_true_load,
+    build_drive_group,
+    build_sim_bus,
+    build_transport,
+)
 from hofto_hw.runtime.loop import Loop, RealClock, SimClock
 from hofto_hw.runtime.tick import Tick
 from safety.bus_health import BusHealth
@@ -185,6 +190,7 @@ def build(
         drag=drag,
         enable_input=enable,
         drag_row=drag_row,
+        period=1.0 / rate,
     )
     tick.diag_every = max(1, round(rate / 10.0))
     tick.start()
@@ -221,9 +227,7 @@ def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:
     transport = str(cfg.bus.transport)
     if transport == "sim":
         bus: Transport = build_sim_bus(_sim_config(cfg), external=True)
-        true_load = cfg.run.simulated_payload or cfg.safety.payload
-        if true_load.mass > 0.0:
-            apply_payload(bus.plant.true_model, payload_from_config(true_load))
+        apply_true_load(bus.plant, cfg)
     else:
         if clock == "sim":
             raise ConfigError(

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from drivers.cia402.codes import describe_error_code
+from drivers.transport import describe_status
 from safety.stop import EventKind, Fault, kind_name
 
 _CATEGORY_WORDS = {
@@ -70,6 +71,8 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
             entry["detection_delay_ms"] = round((k * dt - contact.start) * 1000.0, 3)
         if kind == Fault.DRIVE_FAULT:
             entry["detail"] = "error code (0x603F) " + describe_error_code(int(ev.value[j]))
+        elif kind == Fault.BUS_LOSS:
+            entry["detail"] = describe_status(int(ev.value[j]))
         if kind < len(Fault) and entry["category"] >= 0 and episode is not None:
             t_stop, d_stop = episode
             if np.isfinite(t_stop):

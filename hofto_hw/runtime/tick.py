@@ -48,9 +48,18 @@ _FRA = int(State.FAULT_REACTION_ACTIVE)
 _FAULT = int(State.FAULT)
 STANDSTILL = 0.01  # rad/s: every joint slower than this counts as stopped
 MAX_STOPS = 256  # stop episodes kept for the summary
+MAX_SUBSTEPS = 250  # observer steps over one stalled gap at most (cost: one step each)
 FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
 _DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
 _sum = np.add.reduce
+
+
+def gap_steps(dt: float, period: float) -> int:
+    """Observer steps for a tick ``dt`` [s] after the last one: 1, or after a stall (more than
+    1.5 periods) one per period, at most MAX_SUBSTEPS (flight-log replay uses the same)."""
+    if period > 0.0 and dt > 1.5 * period:
+        return min(MAX_SUBSTEPS, round(dt / period))
+    return 1
 
 
 class Tick:
@@ -74,6 +83,7 @@ class Tick:
         drag: DragController | None = None,
         enable_input: EnableInput | None = None,
         drag_row: int = 0,
+        period: float = 0.0,
     ) -> None:
         n = group.n
         self.n = n
@@ -94,6 +104,15 @@ class Tick:
         self.overrun_limit = int(overrun_limit)
         self.tick = 0
         self.t = 0.0
+        #: nominal cycle [s] (0: unknown, every dt taken as one cycle). After a stall the
+        #: observers integrate the gap in steps of one cycle (:meth:`_observe`), the setpoint
+        #: time advances one cycle per tick (an interpolator that missed cycles is late, it
+        #: does not jump), and the jump check allows for the gap
+        self.period = float(period)
+        self.t_cmd = 0.0  # setpoint (path) time [s]
+        self._since_fresh = 0.0  # [s] since the last fresh sample
+        self._prev = np.zeros((3, n))  # last tick's q, qd, tau (interpolation start)
+        self._interp = np.zeros((3, n))  # one substep's q, qd, tau
         self.tau_ext = np.zeros((max(1, len(self.observers)), n))
         self._tau_ext_flat = self.tau_ext.reshape(-1)  # a view: one finiteness sum
         self.tau_ff = np.zeros(n)
@@ -166,6 +185,7 @@ class Tick:
         self.motion.start(g.q)
         np.copyto(self.q_sent, g.q)
         self.snapshot.reset_memory()
+        self._keep_sample(g.q, g.qd, g.tau)
         for obs in self.observers:
             obs.reset(g.q, g.qd)
         self.limits.reset(g.q)
@@ -190,19 +210,18 @@ class Tick:
         fresh = g.fresh
         q, qd, tau = g.q, g.qd, g.tau
 
-        # 3. the model terms of this sample, once for every estimator
+        # 3. the model terms of this sample, once for every estimator, and 3a. the observers
+        # (HOFTO, momentum), each writing its own row; a stall's gap in one-cycle steps
         snap = self.snapshot
-        snap.compute(q, qd, tau)
-
-        # 3a. observers (HOFTO, momentum): each writes its own row
-        for i, obs in enumerate(self.observers):
-            np.copyto(self.tau_ext[i], obs.update_snapshot(snap, dt))
+        self._observe(snap, q, qd, tau, dt)
+        cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
+        self.t_cmd += cmd_dt
 
         # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
         # safety's to latch below); the reference it integrates is used in step 5
         dragging = motion.mode == DRAG
         if dragging:
-            self._drag_observe(q, qd, dt)
+            self._drag_observe(q, qd, cmd_dt)
         else:
             self._wrench.fill(np.nan)
 
@@ -216,7 +235,11 @@ class Tick:
             for i in range(len(self.observers)):
                 ok &= lim.finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
-        lim.check(stop, q, qd, tau, self.q_sent, good, powered)
+        self._since_fresh += dt
+        gap = self._since_fresh - self.period if self.period > 0.0 else 0.0
+        lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap if gap > 1e-9 else 0.0)
+        if good:
+            self._since_fresh = 0.0
         # judged on trustworthy data only: fresh (a lost frame repeats the last sample) and
         # from drives that report no fault (a failed encoder freezes its position); an
         # observer with poles at a few hundred rad/s reads either as a contact
@@ -268,7 +291,7 @@ class Tick:
                 np.copyto(motion.qd, d.qd_cmd)
                 np.copyto(motion.qdd, d.qdd_cmd)
             else:
-                motion.update(t, dt)
+                motion.update(self.t_cmd, cmd_dt)
         if self.recording is not None or self.playback is not None:
             self._teach_record(q)
         self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
@@ -281,6 +304,38 @@ class Tick:
         self._record(status, wakeup_us, compute_us)
 
     # ------------------------------------------------------------- tick helpers
+
+    def _observe(
+        self, snap: DynamicsSnapshot, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float
+    ) -> None:
+        """Compute the snapshot of this sample and update every observer from it. After a
+        stall (dt of k > 1 cycles) the gap is integrated in k steps of dt/k with q, qd, tau
+        interpolated linearly from the last tick's sample: each observer is tuned (and
+        checked stable) for one cycle, and a single step of k cycles is not stable for it
+        (forward Euler: gain·dt < 2)."""
+        k = gap_steps(dt, self.period)
+        if k == 1:
+            snap.compute(q, qd, tau)
+            for i, obs in enumerate(self.observers):
+                np.copyto(self.tau_ext[i], obs.update_snapshot(snap, dt))
+        else:
+            h = dt / k
+            prev, x = self._prev, self._interp
+            for s in range(1, k + 1):
+                a = s / k
+                for j, now in enumerate((q, qd, tau)):
+                    np.subtract(now, prev[j], out=x[j])
+                    x[j] *= a
+                    x[j] += prev[j]
+                snap.compute(x[0], x[1], x[2])
+                for i, obs in enumerate(self.observers):
+                    np.copyto(self.tau_ext[i], obs.update_snapshot(snap, h))
+        self._keep_sample(q, qd, tau)
+
+    def _keep_sample(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
+        np.copyto(self._prev[0], q)
+        np.copyto(self._prev[1], qd)
+        np.copyto(self._prev[2], tau)
 
     def _overrun(self, missed: int) -> None:
         if missed > 0:
@@ -394,7 +449,7 @@ class Tick:
             self.play_request = None
         elif want == MOVE and motion.mode != DRAG:
             if self.expect_enabled and not self.enabling:
-                motion.move(self.t)
+                motion.move(self.t_cmd)
         else:  # hold, or move while dragging: ramp the drag's velocity down first
             motion.ramp_down()
 

@@ -59,6 +59,23 @@ def test_position_jump_between_fresh_samples() -> None:
     assert s.is_latched(Fault.POSITION_JUMP) and s.events.joint[0] == 2
 
 
+def test_position_jump_allowance_grows_with_the_gap_since_the_last_fresh_sample() -> None:
+    """A gap of 10 ms beyond one cycle allows the velocity limit (2 rad/s) x 0.01 s more."""
+
+    def jumped(step: float, gap: float) -> bool:
+        mon = _mon()
+        mon.reset(np.zeros(N))
+        s = StopController.from_config(StopCategories())
+        s.begin_tick(1)
+        q = np.array([0.0, step, 0.0])
+        mon.check(s, q, np.zeros(N), np.zeros(N), q, True, True, gap)
+        return s.is_latched(Fault.POSITION_JUMP)
+
+    assert jumped(0.03, 0.0)  # consecutive samples: the bound is position_jump (0.02)
+    assert not jumped(0.03, 0.01)  # 0.02 + 2 rad/s x 0.01 s = 0.04
+    assert jumped(0.05, 0.01)
+
+
 def test_non_finite_is_reported_and_does_not_poison() -> None:
     mon = _mon()
     s = StopController.from_config(StopCategories())

@@ -4,7 +4,10 @@
 (``datagram.py``) and the emulated drives on the simulated arm
 (:class:`drivers.sim.drive.EmulatedDrives`). Each frame that carries process data (LRD/
 LWR/LRW) is answered first and then advances the drives and the plant by one tick: the
-simulated time is the number of process-data frames times the bus cycle time.
+simulated time is the number of process-data frames times the bus cycle time. (No
+wall-clock catch-up after a master stall, unlike the CANopen emulator: the master waits
+one cycle for its frame, so the steps of a stall caught up before answering would read as
+lost frames; see drivers/sim/pacing.py.)
 
 :func:`serve` binds an AF_PACKET socket for ethertype 0x88A4 to one interface (one end of a
 veth pair; the master opens the other end) and runs the network until stopped. A Unix
@@ -14,7 +17,6 @@ socket (``control``) accepts one JSON object per line for fault injection and st
 
 from __future__ import annotations
 
-import contextlib
 import gc
 import json
 import os
@@ -33,11 +35,10 @@ from drivers.sim.drive import FAULTS, EmulatedDrives
 from drivers.sim.esc import datagram
 from drivers.sim.esc.description import SlaveDescription
 from drivers.sim.esc.esc import Esc
+from drivers.sim.pacing import answer_first
 from hofto_hw.errors import UserError
 
 ETH_P_ECAT = 0x88A4
-#: SCHED_FIFO priority of the emulator process (below the kernel's threaded IRQs at 50)
-_RT_PRIORITY = 40
 _FAULT_KINDS = {code: kind for kind, (code, _ramp) in FAULTS.items()}
 
 
@@ -116,9 +117,7 @@ class EmulatedNetwork:
             if not s.pull_outputs(rx_u8[i]):
                 rx_u8[i] = 0
         self.drives.step(self.rx)
-        tx_u8 = self._tx_u8
-        for i, s in enumerate(self.slaves):
-            s.push_inputs(tx_u8[i])
+        self._push_inputs()
         codes = self.drives.tx["error_code"]
         np.not_equal(codes, self._last_error, out=self._changed)
         if self._changed.any():
@@ -129,6 +128,11 @@ class EmulatedNetwork:
                     reg = int(self.drives.error_register[i])
                     s.queue_mailbox(s.coe.emergency(code, reg))
             np.copyto(self._last_error, codes)
+
+    def _push_inputs(self) -> None:
+        tx_u8 = self._tx_u8
+        for i, s in enumerate(self.slaves):
+            s.push_inputs(tx_u8[i])
 
     def check_watchdogs(self) -> None:
         """Run every slave's SyncManager watchdog."""
@@ -145,9 +149,12 @@ class EmulatedNetwork:
         Requests (``op``): ``status``; ``drop`` (count); ``corrupt`` (count, slave: first
         slave to see a damaged frame); ``silence`` (slave, on); ``drive_fault`` (slave,
         code: a 0x603F code of drivers.sim.drive.FAULTS, persistent); ``clear_drive_fault``
-        (slave); ``sdo_abort`` (slave, index, sub (-1 = all), code; code 0 removes);
-        ``refuse_state`` (slave, state, code; code 0 removes); ``al_error`` (slave, code:
-        the slave drops to SAFE-OP, or stays lower, with the error flag and this code);
+        (slave); ``position_jump`` (slave, offset [rad]: the reported position jumps by it
+        and stays off; 0 restores); ``push`` (force [N] (3,) world frame at the tool,
+        duration [s], ramp [s]: a hand on the true arm from now); ``sdo_abort`` (slave,
+        index, sub (-1 = all), code; code 0 removes); ``refuse_state`` (slave, state, code;
+        code 0 removes); ``al_error`` (slave, code: the slave drops to SAFE-OP, or stays
+        lower, with the error flag and this code);
         ``restart`` (slave: power-cycled, registers reset, INIT, no station address);
         ``stop``. Slaves are 0-based positions on the line.
         """
@@ -166,6 +173,17 @@ class EmulatedNetwork:
                 )
             elif op == "drive_fault":
                 self._drive_fault(request)
+            elif op == "push":
+                if self.drives is None:
+                    raise ValueError("no drives on this network")
+                self.drives.push_tool(
+                    request["force"], float(request["duration"]), float(request.get("ramp", 0.02))
+                )
+            elif op == "position_jump":
+                if self.drives is None:
+                    raise ValueError("no drives on this network")
+                k = self._slave_index(request["slave"])
+                self.drives.jump_position(k, float(request["offset"]))
             elif op == "clear_drive_fault":
                 if self.drives is None:
                     raise ValueError("no drives on this network")
@@ -265,22 +283,6 @@ def open_packet_socket(iface: str) -> socket.socket:
     return sock
 
 
-def _answer_first() -> None:
-    """Make this process answer frames before other work: real-time priority when allowed
-    (SCHED_FIFO; the loop blocks in select, so it never spins), else a better nice value;
-    and no cyclic garbage collection on the frame path (objects made at start-up are frozen
-    out of the collector, the rest is collected between control requests)."""
-    try:
-        if os.sched_getscheduler(0) not in (os.SCHED_FIFO, os.SCHED_RR):  # keep a chrt choice
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(_RT_PRIORITY))
-    except (AttributeError, OSError):
-        with contextlib.suppress(OSError):
-            os.nice(-10)
-    gc.collect()
-    gc.freeze()
-    gc.disable()
-
-
 def _serve_control(net: EmulatedNetwork, srv: socket.socket) -> None:
     try:
         conn, _ = srv.accept()
@@ -311,7 +313,7 @@ def serve(
     fds: list[Any] = [sock] + ([srv] if srv is not None else [])
     buf = bytearray(2048)
     view = memoryview(buf)
-    _answer_first()
+    answer_first()
     if ready_file:
         with open(ready_file, "w") as f:
             f.write(str(os.getpid()))

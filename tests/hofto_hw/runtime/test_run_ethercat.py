@@ -5,52 +5,34 @@ exit 0. Needs root (veth, raw sockets): skipped when unprivileged, a failure und
 
 The loop runs at the shipped 1 kHz on a loaded machine, so the test config tolerates
 overruns (``safety.overrun_streak`` at its maximum) and a few late frames
-(``safety.bus.lost_cycles``), and runs without the collision monitor (a 100 ms stall reads
-as a contact): only the injected fault may stop the arm. Every wait is for a
+(``safety.bus.lost_cycles``), with the collision monitor armed (see _config): only the
+injected fault may stop the arm. Every wait is for a
 state (ready file, the run's "running" line, its control socket's status, its exit), bounded
 by generous timeouts.
 """
 
 from __future__ import annotations
 
-import itertools
-import json
-import os
-import signal
-import subprocess
-import sys
-import threading
-import time
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
+from support.rootnet import (
+    ROOT,
+    Emulator,
+    ServiceRun,
+    emulator,
+    first_event,
+    sim_ethercat_args,
+    veth_pair,
+    wait_for,
+)
 
-ROOT = Path(__file__).resolve().parents[3]
 CONFIG = ROOT / "configs" / "er3a.yaml"
 LOST_CYCLES = 20  # late frames on a loaded 2-core machine are not the fault under test
-_counter = itertools.count()
-
-
-def require_root() -> None:
-    if os.geteuid() == 0:
-        return
-    if os.environ.get("CI"):
-        pytest.fail("CI is set but the tests do not run as root: veth pairs need root")
-    pytest.skip("needs root for veth pairs and raw sockets (set CI to make this a failure)")
-
-
-def _wait(cond: Callable[[], bool], timeout: float, what: str, proc: Any = None) -> None:
-    deadline = time.monotonic() + timeout
-    while not cond():
-        if proc is not None and proc.poll() is not None:
-            raise AssertionError(f"{what}: process exited with {proc.returncode}")
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what}: not reached within {timeout:.0f} s")
-        time.sleep(0.05)
 
 
 def _config(folder: Path, master: str) -> tuple[Path, dict]:
@@ -62,9 +44,10 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
     data["safety"]["overrun_streak"] = 100_000
     data["safety"]["bus"]["lost_cycles"] = LOST_CYCLES
     data["run"]["clock"] = "real"
-    # a stall of ~100 ms on the loaded machine looks like a contact to the observers: the
-    # collision monitor is tested on the simulated arm; here only the bus faults stop the arm
-    data["safety"]["collision"] = None
+    # the collision monitor stays armed: a host stall of ~100 ms used to read as a contact
+    # (the observers took the whole gap in one step: the momentum observer's gain·dt was
+    # 3 > 2, unstable); now they integrate a gap in one-cycle steps (Tick._observe), and the
+    # arm holds still here (--hold), so a stall must not stop it by itself
     # the emulated slaves' 100 ms SM watchdog would take a drive out of OP after such a stall
     data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), "pdo_watchdog": 2.0}
     path = folder / "er3a-ethercat.yaml"
@@ -76,121 +59,53 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
 class EcatRun:
     """The emulator and one ``hofto-hw run`` on the master end of the veth pair."""
 
-    folder: Path
     config: Path
     data: dict
-    emulator: subprocess.Popen
-    control: str
-    run: subprocess.Popen | None = None
-    socket: Path | None = None
-    summary: Path | None = None
-    stderr: list[str] = field(default_factory=list)
+    emu: Emulator
+    service: ServiceRun
 
     def inject(self, **request: object) -> dict:
-        from drivers.sim.esc.network import ControlClient
-
-        reply = ControlClient(self.control).call(**request)
+        reply = self.emu.call(**request)
         assert reply.get("ok"), reply
         return reply
 
     def start_run(self) -> None:
-        self.socket = self.folder / "run.sock"
-        self.summary = self.folder / "summary.json"
-        cmd = [sys.executable, "-m", "hofto_hw.cli", "run", "--config", str(self.config)]
-        cmd += ["--clock", "real", "--hold", "--no-log", "--duration", "3600"]
-        cmd += ["--socket", str(self.socket), "--summary-json", str(self.summary)]
-        self.run = subprocess.Popen(
-            cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-        )
-        threading.Thread(target=self._read_stderr, daemon=True).start()
-        _wait(
-            lambda: any("running" in line for line in self.stderr),
-            120,
-            "the run's 'running' line",
-            self.run,
-        )
-        _wait(self.socket.exists, 30, "the run's control socket", self.run)
-
-    def _read_stderr(self) -> None:
-        assert self.run is not None and self.run.stderr is not None
-        for line in self.run.stderr:
-            self.stderr.append(line)
+        self.service.start("--hold")
 
     def status(self) -> dict[str, Any]:
-        from hofto_hw.runtime.control_client import request
-
-        assert self.socket is not None
-        return request(self.socket, "status", timeout=30.0)
+        return self.service.status()
 
     def terminate(self) -> tuple[int, dict]:
         """SIGTERM; returns the exit code and the summary."""
-        assert self.run is not None and self.summary is not None
-        self.run.send_signal(signal.SIGTERM)
-        try:
-            out, _ = self.run.communicate(timeout=120)
-        except subprocess.TimeoutExpired:
-            self.run.kill()
-            self.run.communicate()
-            raise AssertionError("run did not exit within 120 s of SIGTERM") from None
-        assert self.summary.exists(), "".join(self.stderr) + (out or "")
-        return self.run.returncode, json.loads(self.summary.read_text())
+        return self.service.terminate()
+
+    @property
+    def run(self) -> Any:
+        return self.service.proc
 
 
 @pytest.fixture()
 def ecat(tmp_path: Path) -> Iterator[EcatRun]:
-    require_root()
-    from drivers.sim.esc import veth
+    with veth_pair("rm", "rs") as (master, slave):
+        config, data = _config(tmp_path, master)
+        with emulator(sim_ethercat_args(slave, config), tmp_path) as emu:
+            service = ServiceRun(tmp_path, config)
+            try:
+                yield EcatRun(config, data, emu, service)
+            finally:
+                service.close()
 
-    k = next(_counter)
-    tag = f"{os.getpid() % 100000}{k}"
-    master, slave = f"rm{tag}"[:15], f"rs{tag}"[:15]
-    config, data = _config(tmp_path, master)
-    control = str(tmp_path / "ctl.sock")
-    ready = tmp_path / "ready"
-    veth.create_pair(master, slave)
-    cmd = [sys.executable, "-m", "hofto_hw.cli", "sim-ethercat", "--iface", slave]
-    cmd += ["--config", str(config), "--control", control, "--quiet-arm"]
-    cmd += ["--ready-file", str(ready)]
-    log = open(tmp_path / "emulator.log", "w")
-    emu = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
-    r = EcatRun(tmp_path, config, data, emu, control)
-    try:
-        try:
-            _wait(ready.exists, 60, "emulator ready file", emu)
-        except AssertionError as exc:
-            log.flush()
-            raise AssertionError(f"{exc}: {(tmp_path / 'emulator.log').read_text()}") from None
-        yield r
-    finally:
-        for p in (r.run, emu):
-            if p is not None and p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
-        log.close()
-        veth.delete_pair(master)
+
+def _wait(cond: Any, timeout: float, what: str, proc: Any = None) -> None:
+    wait_for(cond, timeout, what, proc)
 
 
 def _wait_running(r: EcatRun) -> None:
-    last: dict[str, Any] = {}
-
-    def running() -> bool:
-        last.update(r.status())
-        return last["state"] == "running"
-
-    try:
-        _wait(running, 120, "loop running", r.run)
-    except AssertionError as exc:
-        raise AssertionError(f"{exc}; last status {last}") from None
+    r.service.wait_state("running")
 
 
 def _first(summary: dict, kind: str) -> dict:
-    events = [e for e in summary["events"] if e["kind"] == kind]
-    assert events, f"no {kind} event in {[e['kind'] for e in summary['events']]}"
-    return events[0]
+    return first_event(summary, kind)
 
 
 def _latched(r: EcatRun, kind: str) -> bool:
@@ -209,7 +124,9 @@ def test_sigterm_is_category_1_with_drives_disabled(ecat: EcatRun) -> None:
         f"overruns={s['overruns']} stopping_time_ms={stop['stopping_time_ms']}"
     )
     assert stop["category"] == ecat.data["safety"]["categories"]["stop_request"] == 1
-    assert not [e for e in s["events"] if e["kind"] in ("bus_loss", "drive_fault", "overrun")]
+    assert not [
+        e for e in s["events"] if e["kind"] in ("bus_loss", "drive_fault", "overrun", "collision")
+    ]
     # drives disabled: no emulated drive is left in Operation enabled or a stop ramp
     from drivers.cia402.state_machine import State
 
@@ -260,3 +177,90 @@ def test_sim_clock_is_refused_on_a_real_bus(tmp_path: Path) -> None:
     path, _ = _config(tmp_path, "nonexistent0")
     with pytest.raises(ConfigError, match=r"run\.clock: 'sim' needs bus\.transport 'sim'"):
         build(load_config(path), clock="sim")
+
+
+def _rewrite(r: EcatRun, **safety: Any) -> None:
+    """Change ``safety`` settings of the run's config (before :meth:`EcatRun.start_run`)."""
+    r.data["safety"].update(safety)
+    r.config.write_text(yaml.safe_dump(r.data))
+
+
+def test_sdo_abort_at_start_up_refuses_the_run_in_one_line(ecat: EcatRun) -> None:
+    """The loop does SDO at start-up only (identity, ratings, limits): an abort there ends
+    the run before any drive is powered, exit 2, one line naming axis, object and code."""
+    import subprocess
+    import sys
+
+    from drivers.cia402.state_machine import State
+
+    ecat.inject(op="sdo_abort", slave=3, index=0x6072, code=0x06090030)
+    cmd = [sys.executable, "-m", "hofto_hw.cli", "run", "--config", str(ecat.config)]
+    cmd += ["--clock", "real", "--no-log", "--duration", "5"]
+    res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert "axis 3" in lines[0] and "0x6072" in lines[0] and "0x06090030" in lines[0], lines
+    states = [State(x) for x in ecat.inject(op="status")["drive_state"]]
+    assert State.OPERATION_ENABLED not in states, states
+    print(f"FIGURE sdo_abort refused: {lines[0]}")
+
+
+def test_position_jump_is_category_0(ecat: EcatRun) -> None:
+    ecat.start_run()
+    _wait_running(ecat)
+    before = ecat.status()["ticks"]
+    ecat.inject(op="position_jump", slave=4, offset=0.1)  # rad, 5x the allowance
+    _wait(lambda: _latched(ecat, "position_jump"), 60, "position_jump latched", ecat.run)
+    assert ecat.status()["category"] == 0
+    code, s = ecat.terminate()
+    assert code == 0
+    e = _first(s, "position_jump")
+    assert e["tick"] > before
+    assert e["category"] == ecat.data["safety"]["categories"]["position_jump"] == 0
+    assert e["joint"] == 4
+    assert abs(e["value"] - 0.1) < 0.02, e
+    assert "position_jump" in s["latched"]
+    print(f"FIGURE position_jump category=0 ticks_after_status={e['tick'] - before}")
+
+
+def test_overrun_streak_from_a_stopped_loop_is_category_1(ecat: EcatRun) -> None:
+    """SIGSTOP the loop process for 0.5 s (500 cycles, the streak limit 100), SIGCONT."""
+    import os
+    import signal
+    import time
+
+    _rewrite(ecat, overrun_streak=100)
+    ecat.start_run()
+    _wait_running(ecat)
+    # past the loop's start-up grace (its first 0.1 s of missed deadlines start no streak)
+    _wait(lambda: ecat.status()["ticks"] > 500, 60, "500 ticks", ecat.run)
+    before = ecat.status()
+    assert before["faults"] == [], before
+    pid = ecat.run.pid
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        _wait(lambda: _proc_state(pid) == "T", 10, "loop process stopped")
+        time.sleep(0.5)  # the injected stall itself, not a wait for a state
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    try:
+        _wait(lambda: _latched(ecat, "overrun"), 60, "overrun latched", ecat.run)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}: {before} -> {ecat.status()}") from None
+    assert ecat.status()["category"] == 1
+    code, s = ecat.terminate()
+    assert code == 0
+    e = _first(s, "overrun")
+    assert e["tick"] > before["ticks"]
+    assert e["category"] == ecat.data["safety"]["categories"]["overrun"] == 1
+    assert e["value"] >= 100  # the streak that latched it [missed deadlines]
+    assert s["overruns"] - before["overruns"] >= 400
+    # the stall is an overrun, not a bus fault: the bus and drives rode it out
+    assert not [x for x in s["events"] if x["kind"] in ("bus_loss", "drive_fault")], s
+    print(f"FIGURE overrun category=1 streak={e['value']} overruns={s['overruns']}")
+
+
+def _proc_state(pid: int) -> str:
+    with open(f"/proc/{pid}/stat") as f:
+        return f.read().rsplit(")", 1)[1].split()[0]

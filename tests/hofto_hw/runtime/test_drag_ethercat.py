@@ -1,0 +1,173 @@
+"""Issue 9's drag test over the EtherCAT emulator on a veth pair: ``hofto-hw run`` (1 kHz,
+configs/er3a.yaml with the bus on the veth pair) holds the arm; a hand (the emulator's
+``push`` request, a force on its own true arm) hits the tool hard enough for a collision
+stop; after a reset, drag mode and the enabling input (the run's control socket), a 20 N
+push along x drags the tool at F/B_a within 10 %; releasing the enabling input stops the arm
+(enabling_released, category 2). The speed is the true arm's tool speed (the emulator's
+state, as the simulated drag script's figures).
+Needs root (veth, raw sockets): skipped when unprivileged, a failure under CI.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from support.rootnet import (
+    ROOT,
+    Emulator,
+    ServiceRun,
+    emulator,
+    first_event,
+    sim_ethercat_args,
+    veth_pair,
+    wait_for,
+)
+
+CONFIG = ROOT / "configs" / "er3a.yaml"
+PUSH = 20.0  # N along x, world frame
+PUSH_TIME = 1.8  # s
+SETTLE = 0.5  # s from the push's start to the steady window (drag_figures' settle)
+RAMP = 0.2  # s: the hand builds its push up (not a 20 ms step)
+
+
+def _config(folder: Path, master: str) -> tuple[Path, dict]:
+    data = yaml.safe_load(CONFIG.read_text())
+    data["robot"]["urdf"] = str((CONFIG.parent / data["robot"]["urdf"]).resolve())
+    data["bus"]["transport"] = "ethercat"
+    data["bus"]["interface"] = master
+    data["safety"]["overrun_streak"] = 100_000  # host stalls are not under test here
+    data["safety"]["bus"]["lost_cycles"] = 20
+    data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), "pdo_watchdog": 2.0}
+    data["run"] = {"clock": "real", "model_error": data["run"]["model_error"]}
+    data["drag"]["enable_input"] = {"source": "socket"}  # the test holds the button
+    path = folder / "er3a-ethercat-drag.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path, data
+
+
+@dataclass
+class DragRig:
+    data: dict
+    emu: Emulator
+    service: ServiceRun
+
+    def push(self, force: tuple[float, float, float], duration: float, ramp: float = 0.02) -> float:
+        """Start a push on the emulated arm; returns the emulator's plant time then."""
+        reply = self.emu.call(op="push", force=list(force), duration=duration, ramp=ramp)
+        assert reply["ok"], reply
+        return float(self.emu.call(op="status")["t"])
+
+    def plant_time(self) -> float:
+        return float(self.emu.call(op="status")["t"])
+
+    def ask(self, line: str) -> dict[str, Any]:
+        return self.service.request(line)
+
+
+@pytest.fixture()
+def rig(tmp_path: Path) -> Iterator[DragRig]:
+    with veth_pair("dm", "ds") as (master, slave):
+        config, data = _config(tmp_path, master)
+        with emulator(sim_ethercat_args(slave, config), tmp_path) as emu:
+            service = ServiceRun(tmp_path, config)
+            try:
+                yield DragRig(data, emu, service)
+            finally:
+                service.close()
+
+
+def _until_ok(r: DragRig, line: str, timeout: float = 30.0) -> dict[str, Any]:
+    """Repeat a control request until it is accepted (e.g. drag mode once at standstill)."""
+    last: dict[str, Any] = {}
+
+    def accepted() -> bool:
+        last.clear()
+        last.update(r.ask(line))
+        return bool(last.get("ok"))
+
+    try:
+        wait_for(accepted, timeout, f"{line!r} accepted", r.service.proc)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}: last answer {last}") from None
+    return dict(last)
+
+
+@pytest.mark.xfail(
+    reason="open (issue 9): during the push the collision monitor stops the arm on joint 5 "
+    "(estimate minus the hand's share 1.1-1.6x the threshold) over EtherCAT, not on the "
+    "simulated bus; not yet understood (candidates: host stalls while accelerating, with "
+    "no wall-clock catch-up in the EtherCAT emulator; the emulated arm's own model error)",
+    strict=False,
+)
+def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
+    from hofto_hw.config.loader import load_config
+    from hofto_hw.experiments.drag_sim import tool_motion
+    from hofto_hw.model import RobotModel
+
+    r = rig.service
+    r.start("--hold")
+    r.wait_state("running")
+    wait_for(lambda: r.status()["ticks"] > 500, 60, "500 ticks", r.proc)
+    # a hard knock at the tool: the monitor stops the arm (category 1)
+    rig.push((0.0, 0.0, -80.0), 0.3)
+    r.wait_latched("collision")
+    assert r.status()["category"] == rig.data["safety"]["categories"]["collision"]
+    wait_for(lambda: r.status()["state"] == "stopped", 30, "stopped", r.proc)
+    t_knock_end = rig.plant_time() + 0.35
+    wait_for(lambda: rig.plant_time() > t_knock_end, 30, "the knock over", r.proc)
+    answer = _until_ok(rig, "reset")
+    assert answer["message"].startswith("reset"), answer
+    r.wait_state("running")
+    _until_ok(rig, "mode drag")
+    _until_ok(rig, "enable on")
+    t0 = rig.push((PUSH, 0.0, 0.0), PUSH_TIME, ramp=RAMP)
+    t_end = t0 + PUSH_TIME
+    # the true arm's state over the steady window, sampled through the emulator's socket
+    samples: list[tuple[list[float], list[float]]] = []
+
+    def sample() -> bool:
+        st = rig.emu.call(op="status")
+        if t0 + SETTLE <= st["t"] <= t_end - 0.1:
+            samples.append((st["q"], st["qd"]))
+        return st["t"] > t_end + 0.2
+
+    wait_for(sample, 60, "the push over", r.proc)
+    st = r.status()
+    if st["mode"] != "drag":
+        _, s = r.terminate()
+        raise AssertionError(f"left drag mode during the push: {st}; events {s['events']}")
+    _until_ok(rig, "enable off")
+    r.wait_latched("enabling_released")
+    status = r.status()
+    assert status["category"] == 2 == rig.data["safety"]["categories"]["enabling_released"]
+
+    def at_rest() -> bool:
+        return float(np.abs(rig.emu.call(op="status")["qd"]).max()) < 0.01
+
+    wait_for(at_rest, 30, "the arm at rest after the release", r.proc)
+    code, s = r.terminate()
+    assert code == 0
+    kinds = [e["kind"] for e in s["events"] if e["category"] >= 0 or e["kind"] == "reset"]
+    assert kinds[:4] == ["collision", "reset", "enabling_released", "stop_request"], s["events"]
+    released = first_event(s, "enabling_released")
+    assert released["category"] == 2
+
+    cfg = load_config(CONFIG)
+    assert len(samples) >= 10, len(samples)
+    q = np.array([x[0] for x in samples])
+    qd = np.array([x[1] for x in samples])
+    _, tool_v = tool_motion(RobotModel.from_config(cfg.robot), q, qd)
+    steady = float(tool_v[:, 0].mean())
+    expected = PUSH / cfg.drag.damping
+    print(
+        f"FIGURE drag over ethercat steady={steady * 1e3:.1f} mm/s expected="
+        f"{expected * 1e3:.1f} mm/s off_axis={np.linalg.norm(tool_v[:, 1:].mean(axis=0)) * 1e3:.2f}"
+        f" mm/s samples={len(samples)} overruns={s['overruns']}"
+    )
+    assert abs(steady - expected) < 0.1 * expected, (steady, expected)

@@ -1,0 +1,39 @@
+"""A stalled loop (missed deadlines) on the simulated arm holding still: the observers take
+the gap in one-cycle steps, so the stall itself reads as no contact, and the setpoint does
+not jump ahead by the stall."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hofto_hw.config.models import SystemConfig
+from hofto_hw.control.joint_motion import MOVE
+from hofto_hw.runtime.compose import build
+from safety.stop import Fault
+
+
+def test_a_100_ms_stall_in_hold_is_no_contact(cfg: SystemConfig) -> None:
+    system = build(cfg, clock="sim", contact=False)
+    tick = system.tick
+    system.loop.run(max_ticks=500)  # settle in hold
+    before = np.abs(tick.tau_ext).max()
+    system.clock.stall(99)  # the next tick comes 100 cycles after the last one
+    system.loop.run(max_ticks=1)
+    # one step of 0.1 s (before): HOFTO read up to 165 N·m (joint 2), the momentum observer
+    # ~1 N·m after one step (gain·dt = 3 > 2, unstable); the collision level is 4 N·m
+    assert np.abs(tick.tau_ext).max() < max(1.0, 2.0 * before), tick.tau_ext
+    system.loop.run(max_ticks=200)
+    assert np.abs(tick.tau_ext).max() < max(1.0, 2.0 * before), tick.tau_ext
+    assert not tick.stop.is_latched(Fault.COLLISION)
+
+
+def test_the_setpoint_advances_one_cycle_per_tick_after_a_stall(cfg: SystemConfig) -> None:
+    system = build(cfg, clock="sim", contact=False)
+    tick = system.tick
+    tick.mode_request = MOVE
+    system.loop.run(max_ticks=300)
+    t_cmd = tick.t_cmd
+    system.clock.stall(50)
+    system.loop.run(max_ticks=1)
+    assert abs(tick.t_cmd - t_cmd - tick.period) < 1e-12
+    assert tick.t - t_cmd > 0.05  # while the loop's own clock took the 51 cycles
