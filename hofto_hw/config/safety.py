@@ -101,6 +101,9 @@ class CollisionLevelsConfig(ThresholdTerms):
     ratios |tau_ext|/threshold must cross).
     ``tool_force`` [N]: optional limit on the tool force |F| of the damped
     F = (Jᵀ)⁺·tau_ext of the first deciding observer (off by default).
+    ``settle_time`` [s]: the monitor does not judge for this long after the observers are
+    (re)started and after the drives are (re)enabled: the estimate first converges and the
+    arm settles into its position loop (a fast observer reads that settling as a contact).
     """
 
     observer: Literal["hofto", "momentum", "both"] = "hofto"
@@ -112,6 +115,7 @@ class CollisionLevelsConfig(ThresholdTerms):
     debounce_time: NonNeg = 0.0
     release_time: NonNeg = 0.05
     tool_force: Positive | None = None
+    settle_time: NonNeg = 0.0
 
     def joints(self) -> int:
         return len(self.collision.nominal)

@@ -193,6 +193,8 @@ def build(
         period=1.0 / rate,
     )
     tick.diag_every = max(1, round(rate / 10.0))
+    if s.collision is not None:
+        tick.settle_ticks = round(s.collision.settle_time * rate)
     tick.start()
     period_ns = round(1e9 / rate)
     clk: RealClock | SimClock = SimClock(period_ns) if clock == "sim" else RealClock(period_ns)

@@ -102,6 +102,10 @@ class Tick:
         self.feedforward = feedforward
         self.sink = sink
         self.overrun_limit = int(overrun_limit)
+        #: ticks the collision monitor stays blind after a (re)start of the observers or an
+        #: enable (safety.collision.settle_time); the tick it judges again
+        self.settle_ticks = 0
+        self._judge_from = 0
         self.tick = 0
         self.t = 0.0
         #: nominal cycle [s] (0: unknown, every dt taken as one cycle). After a stall the
@@ -192,6 +196,7 @@ class Tick:
         if self.collision is not None:
             self.collision.reset()
         self.expect_enabled = g.all_in(State.OPERATION_ENABLED)
+        self._judge_from = self.tick + 1 + self.settle_ticks
 
     # ------------------------------------------------------------------ the tick
 
@@ -244,7 +249,10 @@ class Tick:
         # from drives that report no fault (a failed encoder freezes its position); an
         # observer with poles at a few hundred rad/s reads either as a contact
         trusted = good and not stop.active & _DRIVE_CAUSES
-        monitored = self.collision is not None and ok and trusted and self._power_on(g.states)
+        settled = self.tick >= self._judge_from
+        monitored = (
+            self.collision is not None and ok and trusted and settled and self._power_on(g.states)
+        )
         self.tick_rec["monitored"] = monitored  # replay judges the same ticks
         np.copyto(self._r["qdd_cmd"], motion.qdd)
         if monitored:
@@ -396,6 +404,7 @@ class Tick:
         self.snapshot.reset_memory()
         for obs in self.observers:
             obs.reset(g.q, g.qd)
+        self._judge_from = self.tick + 1 + self.settle_ticks
         self.limits.reset(g.q)
         if self.collision is not None:
             first = self.collision.first_tick
@@ -414,6 +423,7 @@ class Tick:
         if g.all_in(State.OPERATION_ENABLED):
             self.enabling = False
             self.expect_enabled = True
+            self._judge_from = self.tick + self.settle_ticks
             self.motion.start(g.q)
             return
         sm.controlwords_toward_no_reset(g.states, State.OPERATION_ENABLED, self._cw)

@@ -99,10 +99,12 @@ def _until_ok(r: DragRig, line: str, timeout: float = 30.0) -> dict[str, Any]:
 
 
 @pytest.mark.xfail(
-    reason="open (issue 9): during the push the collision monitor stops the arm on joint 5 "
-    "(estimate minus the hand's share 1.1-1.6x the threshold) over EtherCAT, not on the "
-    "simulated bus; not yet understood (candidates: host stalls while accelerating, with "
-    "no wall-clock catch-up in the EtherCAT emulator; the emulated arm's own model error)",
+    reason="open (issue 9): over EtherCAT on this loaded VM the run does not reliably reach "
+    "the steady drag: at the last stop the monitor stopped the push on joint 5; after the "
+    "merge (faster HOFTO, settle time) the knock and reset work, but the re-enable after the "
+    "reset intermittently hits joint 2's torque limit (-120 N·m, once in three runs), and the "
+    "push was not yet seen through; candidates: host stalls during enable and acceleration "
+    "while the emulated arm advances one cycle per exchange",
     strict=False,
 )
 def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
