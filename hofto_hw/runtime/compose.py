@@ -186,6 +186,7 @@ def build(
         drag=drag,
         enable_input=enable,
         drag_row=drag_row,
+        backend=backend,
     )
     tick.diag_every = max(1, round(rate / 10.0))
     tick.start()
