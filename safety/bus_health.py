@@ -8,21 +8,33 @@ enabled. Decides only: the loop reads the drive states and passes them in.
 - drive disabled: an axis that is not Operation enabled while the loop expects it to be.
 
 The CiA 402 state codes come from the caller (safety does not import drivers/).
-Allocation-free per tick.
+Allocation-free per tick. ``backend``: ``numpy`` (the reference) or the compiled drive-state
+scan of :mod:`safety.kernels` (``numba``/``auto``, the observers' conventions).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from hofto_hw.observers import kernels
+from hofto_hw.observers.kernels import Backend
+from safety.kernels import drive_scan
 from safety.stop import Fault, StopController
 
 
 class BusHealth:
     """``op_enabled``: the Operation-enabled state code; ``fault_states``: codes that count
-    as a drive fault (Fault, Fault reaction active, unknown)."""
+    as a drive fault (Fault, Fault reaction active, unknown); ``backend``: numpy (the
+    reference), numba or auto (compiled when available, warmed here)."""
 
-    def __init__(self, n: int, lost_cycles: int, op_enabled: int, fault_states: tuple[int, ...]):
+    def __init__(
+        self,
+        n: int,
+        lost_cycles: int,
+        op_enabled: int,
+        fault_states: tuple[int, ...],
+        backend: Backend = "numpy",
+    ):
         self.n = n
         self.lost_cycles = int(lost_cycles)
         self.op_enabled = int(op_enabled)
@@ -30,6 +42,15 @@ class BusHealth:
         self.streak = 0
         self.lost_total = 0
         self._m = np.zeros(n, dtype=bool)
+        self.backend = kernels.resolve(backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+        self._use_kernel = self.backend == "numba"
+
+    def _warm(self) -> None:
+        # the drive group's state codes are uint8 (drivers/cia402/drive_group.py)
+        for dtype in (np.uint8, np.int64):
+            drive_scan(np.zeros(self.n, dtype=dtype), self.fault_min, self.op_enabled, True)
 
     def check(
         self,
@@ -50,6 +71,15 @@ class BusHealth:
             if self.streak >= self.lost_cycles:
                 stop.report(Fault.BUS_LOSS, -1, float(status))
             return False  # states are stale: judge the drives on fresh data only
+        if self._use_kernel:
+            j = drive_scan(states, self.fault_min, self.op_enabled, expect_enabled)
+            if j >= 0:
+                n = self.n
+                if j < n:
+                    stop.report(Fault.DRIVE_FAULT, j, float(error_codes[j]))
+                else:
+                    stop.report(Fault.DRIVE_DISABLED, j - n, float(states[j - n]))
+            return True
         m = self._m
         np.greater_equal(states, self.fault_min, out=m)
         if m.any():

@@ -4,12 +4,19 @@ error, position jumps between ticks and non-finite values anywhere in the tick.
 Each check reports the first offending joint and its value to the
 :class:`~safety.stop.StopController`; the controller latches and decides. Allocation-free
 (preallocated masks, ``out=`` everywhere). Units: rad, rad/s, N·m.
+
+``backend`` ``numba``/``auto`` (the observers' conventions): a compiled scan
+(:func:`safety.kernels.limits_quiet`) settles the usual tick where nothing is to be reported;
+when anything is, the numpy reference path runs and reports, so reports are identical.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from hofto_hw.observers import kernels
+from hofto_hw.observers.kernels import Backend
+from safety.kernels import limits_quiet
 from safety.stop import Fault, StopController
 
 
@@ -25,6 +32,7 @@ class LimitMonitor:
         torque: np.ndarray,
         following_error: float,
         position_jump: float,
+        backend: Backend = "numpy",
     ) -> None:
         n = len(lower)
         self.n = n
@@ -41,9 +49,21 @@ class LimitMonitor:
         self._m = np.zeros(n, dtype=bool)
         self._m2 = np.zeros(n, dtype=bool)
         self._fin = np.zeros(n, dtype=bool)
+        self.backend = kernels.resolve(backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+        self._use_kernel = self.backend == "numba"
+
+    def _warm(self) -> None:
+        z = np.zeros(self.n)
+        for on in (False, True):  # have_prev, fresh, tracking
+            limits_quiet(
+                z, z, z, z, self.lower, self.upper, self.velocity, self.torque,
+                self.following_error, self.position_jump, z.copy(), on, on, on, 0.0,
+            )  # fmt: skip
 
     @classmethod
-    def from_config(cls, cfg: object, limits: object) -> LimitMonitor:
+    def from_config(cls, cfg: object, limits: object, backend: Backend = "numpy") -> LimitMonitor:
         """From ``safety.limits`` (LimitsSafetyConfig) and the model's JointLimits."""
         margin = cfg.position_margin  # type: ignore[attr-defined]
         vel = np.asarray(limits.velocity, dtype=float) * cfg.velocity_scale  # type: ignore[attr-defined]
@@ -59,6 +79,7 @@ class LimitMonitor:
             tau,
             cfg.following_error,  # type: ignore[attr-defined]
             cfg.position_jump,  # type: ignore[attr-defined]
+            backend,
         )
 
     def reset(self, q: np.ndarray) -> None:
@@ -100,6 +121,30 @@ class LimitMonitor:
         ``tracking``: the drives are powered and follow q_cmd (following error and motor
         torque are checked only then: with the power stage off the brakes hold the arm).
         """
+        if self._use_kernel:
+            r = limits_quiet(
+                q, qd, tau, q_cmd, self.lower, self.upper, self.velocity, self.torque,
+                self.following_error, self.position_jump, self.q_prev, self._have_prev,
+                fresh, tracking, gap,
+            )  # fmt: skip
+            if r:
+                if r == 2:
+                    self._have_prev = True
+                return
+        self._check_numpy(stop, q, qd, tau, q_cmd, fresh, tracking, gap)
+
+    def _check_numpy(
+        self,
+        stop: StopController,
+        q: np.ndarray,
+        qd: np.ndarray,
+        tau: np.ndarray,
+        q_cmd: np.ndarray,
+        fresh: bool,
+        tracking: bool,
+        gap: float = 0.0,
+    ) -> None:
+        """The reference path of :meth:`check` (it reports)."""
         d, m, m2 = self._d, self._m, self._m2
         np.less(q, self.lower, out=m)
         np.greater(q, self.upper, out=m2)

@@ -19,7 +19,8 @@ Figures (µs; median / p99 / p99.9):
   (RealClock: absolute CLOCK_MONOTONIC deadlines with clock_nanosleep TIMER_ABSTIME, as
   ``--clock real``), SCHED_FIFO 50 when permitted, gc frozen and off (the Loop's own);
 - per part (a second run with every part wrapped: each wrapper costs ~0.2 µs), "other" is
-  the rest of Tick.step (safety, motion, drag, recording);
+  the rest of Tick.step; safety's bus and limit checks, the motion update and the
+  recording are parts of their own;
 - the numpy path (a subprocess with HOFTO_HW_NO_NUMBA=1, the official switch) and the
   compiled path; ratio tick / floor;
 - tracemalloc over 10,000 ticks after warm-up (growth, the sites that grew) and the
@@ -55,6 +56,10 @@ PARTS = (
     "monitor",
     "feedforward",
     "command",
+    "bus",
+    "limits",
+    "motion",
+    "record",
 )
 LOOPS = ("back_to_back", "loop_1khz", "loop_2khz")
 
@@ -113,6 +118,10 @@ class Probe:
                 "monitor": (tick.collision, "update"),
                 "feedforward": (tick.feedforward, "inverse_dynamics"),
                 "command": (system.group, "command_position"),
+                "bus": (tick.bus, "check"),
+                "limits": (tick.limits, "check"),
+                "motion": (tick.motion, "update"),
+                "record": (tick, "_record"),
             }
             for i, name in enumerate(self.names):
                 target, method = targets[name]

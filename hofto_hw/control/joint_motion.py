@@ -8,7 +8,9 @@ trajectory: a taught-path replay or a move to a joint target, planned outside th
 hofto_hw.control.path_timing), and a ramp to standstill at the acceleration limits (used for
 mode changes to hold and for stop category 2).
 
-Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick.
+Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick. ``backend``: numpy (the
+reference) or the compiled kernels of :mod:`hofto_hw.control.kernels` (numba/auto, the
+observers' conventions), bit-identical to it.
 """
 
 from __future__ import annotations
@@ -17,6 +19,10 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from hofto_hw.control.kernels import path_arg, path_blend, ramp_step
+from hofto_hw.observers import kernels
+from hofto_hw.observers.kernels import Backend
 
 if TYPE_CHECKING:
     from hofto_hw.control.path_timing import TrajectoryPlayer
@@ -44,6 +50,7 @@ class DemoPath:
         period: np.ndarray,
         phase: np.ndarray | None = None,
         ramp: float = 1.0,
+        backend: Backend = "numpy",
     ) -> None:
         self.a = np.asarray(amplitude, dtype=float).copy()
         self.w = 2.0 * math.pi / np.asarray(period, dtype=float)
@@ -54,6 +61,18 @@ class DemoPath:
         self._s = np.zeros(n)
         self._c = np.zeros(n)
         self._arg = np.zeros(n)
+        self.backend = kernels.resolve(backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+        self._use_kernel = self.backend == "numba"
+
+    def _warm(self) -> None:
+        z = np.zeros(self.a.shape[0])
+        path_arg(self.w, self.phi, 0.5, self._arg)
+        path_blend(self.a, self.w, self.offset, z, z, 0.5, 0.5, 0.5, z, self._s, self._c, self._arg)
+        self._arg.fill(0.0)
+        self._s.fill(0.0)
+        self._c.fill(0.0)
 
     def evaluate(
         self, t: float, q0: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
@@ -64,6 +83,12 @@ class DemoPath:
         bd = 30.0 * x * x * (1.0 - x) ** 2 / self.ramp
         bdd = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / (self.ramp * self.ramp)
         s, c, arg = self._s, self._c, self._arg
+        if self._use_kernel:
+            path_arg(self.w, self.phi, t, arg)
+            np.sin(arg, out=s)
+            np.cos(arg, out=c)
+            path_blend(self.a, self.w, self.offset, s, c, b, bd, bdd, q0, q, qd, qdd)
+            return
         np.multiply(self.w, t, out=arg)
         arg += self.phi
         np.sin(arg, out=s)
@@ -93,7 +118,13 @@ class DemoPath:
 class JointMotion:
     """Reference generator: ``q``, ``qd``, ``qdd`` (n,) after :meth:`update`; ``mode``."""
 
-    def __init__(self, n: int, accel_limit: np.ndarray, path: DemoPath | None) -> None:
+    def __init__(
+        self,
+        n: int,
+        accel_limit: np.ndarray,
+        path: DemoPath | None,
+        backend: Backend = "numpy",
+    ) -> None:
         self.n = n
         self.accel = np.asarray(accel_limit, dtype=float).copy()
         self.path = path
@@ -106,6 +137,14 @@ class JointMotion:
         self.player: TrajectoryPlayer | None = None
         self._step = np.zeros(n)
         self._sign = np.zeros(n)
+        self.backend = kernels.resolve(backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+        self._use_kernel = self.backend == "numba"
+
+    def _warm(self) -> None:
+        z = np.zeros(self.n)
+        ramp_step(self.accel, 1e-3, z, z.copy(), z.copy())
 
     def start(self, q: np.ndarray) -> None:
         """Hold the measured position ``q``."""
@@ -147,6 +186,10 @@ class JointMotion:
             if self.player.step(self.q, self.qd, self.qdd):
                 self.mode = HOLD  # the last sample is at rest: hold it
         elif self.mode == RAMP_DOWN:
+            if self._use_kernel:
+                if ramp_step(self.accel, dt, self.q, self.qd, self.qdd):
+                    self.mode = HOLD
+                return
             step, sign = self._step, self._sign
             np.multiply(self.accel, dt, out=step)
             np.abs(self.qd, out=sign)

@@ -162,18 +162,19 @@ def build(
 
     s = cfg.safety
     stop = StopController.from_config(s.categories)
-    limits = LimitMonitor.from_config(s.limits, model.limits)
+    limits = LimitMonitor.from_config(s.limits, model.limits, backend=backend)
     health = BusHealth(
         model.n,
         s.bus.lost_cycles,
         int(State.OPERATION_ENABLED),
         (int(State.FAULT_REACTION_ACTIVE), int(State.FAULT), int(State.UNKNOWN)),
+        backend=backend,
     )
     collision = CollisionLevels(s.collision, names, model, backend=backend) if s.collision else None
     accel = np.where(np.isfinite(model.limits.acceleration), model.limits.acceleration, 10.0)
     p = cfg.run.path
-    path = DemoPath(p.amplitude, p.period, p.phase, p.ramp) if p is not None else None
-    motion = JointMotion(model.n, accel, path)
+    path = DemoPath(p.amplitude, p.period, p.phase, p.ramp, backend) if p is not None else None
+    motion = JointMotion(model.n, accel, path, backend=backend)
     drag, enable, drag_row = _build_drag(cfg, model, names)
     tick = Tick(
         group,
@@ -191,6 +192,7 @@ def build(
         enable_input=enable,
         drag_row=drag_row,
         period=1.0 / rate,
+        backend=backend,
     )
     tick.diag_every = max(1, round(rate / 10.0))
     if s.collision is not None:

@@ -28,7 +28,10 @@ from hofto_hw.control.enabling import EnableInput
 from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, PLAYING, JointMotion
 from hofto_hw.model.data import ModelData
 from hofto_hw.model.snapshot import DynamicsSnapshot
+from hofto_hw.observers import kernels
 from hofto_hw.observers.base import Observer
+from hofto_hw.observers.kernels import Backend
+from hofto_hw.recording.kernels import fill_tick
 from hofto_hw.recording.record import (
     DIAG_DTYPE,
     EVENT_DTYPE,
@@ -84,6 +87,7 @@ class Tick:
         enable_input: EnableInput | None = None,
         drag_row: int = 0,
         period: float = 0.0,
+        backend: Backend = "numpy",
     ) -> None:
         n = group.n
         self.n = n
@@ -160,6 +164,12 @@ class Tick:
         self._r = {k: r[k] for k in ("q", "qd", "tau", "q_cmd", "tau_ext", "qdd_cmd")}
         r["wrench"][...] = np.nan
         self._events_pushed = 0
+        #: the record fill: numpy (the reference) or one compiled call (recording/kernels.py)
+        self.backend = kernels.resolve(backend)
+        self._rec1 = r.reshape(1)  # the same memory as a one-element array, for the kernel
+        if self.backend == "numba" and not kernels.warm(self._warm_record):
+            self.backend = "numpy"
+        self._fill_kernel = self.backend == "numba"
         # drag (hand guiding): controller, enabling input, the observer row that drives it
         self.drag = drag
         self.enable_input = enable_input if enable_input is not None else EnableInput()
@@ -556,20 +566,21 @@ class Tick:
             # joint = link index (the link after joint j is link j + 1, 1-based)
             stop.report(Fault.COLLISION, d.contact_link - 1, d.mismatch)
 
+    def _warm_record(self) -> None:
+        g, scratch = self.group, np.zeros(1, dtype=self.tick_rec.dtype)
+        fill_tick(scratch, 0.0, 0, g.q, g.qd, g.tau, self.motion.q, self.tau_ext, 0, 0, 0, 0.0, 0.0)
+
     def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
-        r, v = self.tick_rec, self._r
-        r["t"] = self.t
-        r["tick"] = self.tick
-        np.copyto(v["q"], self.group.q)
-        np.copyto(v["qd"], self.group.qd)
-        np.copyto(v["tau"], self.group.tau)
-        np.copyto(v["q_cmd"], self.motion.q)
-        np.copyto(v["tau_ext"], self.tau_ext)
-        r["mode"] = self.motion.mode
-        r["faults"] = self.stop.latched
-        r["bus_status"] = status
-        r["wakeup_us"] = wakeup_us
-        r["compute_us"] = compute_us
+        r = self.tick_rec
+        if self._fill_kernel:
+            g, m = self.group, self.motion
+            # the casts keep the kernel on its warmed signature whatever numbers callers pass
+            fill_tick(
+                self._rec1, float(self.t), self.tick, g.q, g.qd, g.tau, m.q, self.tau_ext,
+                m.mode, self.stop.latched, int(status), float(wakeup_us), float(compute_us),
+            )  # fmt: skip
+        else:
+            self._fill_numpy(status, wakeup_us, compute_us)
         self.sink.push_tick(r)
         ev = self.stop.events
         while self._events_pushed < ev.count:
@@ -585,6 +596,22 @@ class Tick:
             self._events_pushed += 1
         if self.tick % self.diag_every == 0:
             self._diag()
+
+    def _fill_numpy(self, status: int, wakeup_us: float, compute_us: float) -> None:
+        """The reference fill of the tick record (field by field)."""
+        r, v = self.tick_rec, self._r
+        r["t"] = self.t
+        r["tick"] = self.tick
+        np.copyto(v["q"], self.group.q)
+        np.copyto(v["qd"], self.group.qd)
+        np.copyto(v["tau"], self.group.tau)
+        np.copyto(v["q_cmd"], self.motion.q)
+        np.copyto(v["tau_ext"], self.tau_ext)
+        r["mode"] = self.motion.mode
+        r["faults"] = self.stop.latched
+        r["bus_status"] = status
+        r["wakeup_us"] = wakeup_us
+        r["compute_us"] = compute_us
 
     def _diag(self) -> None:
         d = self.diag_rec

@@ -1,0 +1,97 @@
+"""The compiled joint-motion kernels (hofto_hw.control.kernels) are bit-identical to the numpy
+reference: the demo path and the ramp to standstill, over random mode changes and step sizes,
+non-finite velocities included. numba is optional: these tests skip without it, except under
+CI (a missing numba is then a failure).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from hofto_hw.control.joint_motion import MOVE, RAMP_DOWN, DemoPath, JointMotion
+from hofto_hw.observers import kernels
+
+if not kernels.available():
+    if os.environ.get("CI"):
+        pytest.fail(f"CI: compiled kernels must run: {kernels.unavailable_reason()}")
+    pytest.skip(
+        f"compiled kernels unavailable: {kernels.unavailable_reason()}", allow_module_level=True
+    )
+
+N = 6
+
+
+def _identical(a: np.ndarray, b: np.ndarray) -> bool:
+    """Same values, NaN where NaN, and the same sign of every zero."""
+    nan = np.isnan(a)
+    return bool(
+        np.array_equal(nan, np.isnan(b))
+        and np.array_equal(a[~nan], b[~nan])
+        and np.array_equal(np.signbit(a[~nan]), np.signbit(b[~nan]))
+    )
+
+
+def _motion(backend: str) -> JointMotion:
+    path = DemoPath(
+        np.linspace(0.1, 0.6, N),
+        np.linspace(1.5, 4.0, N),
+        np.linspace(-1.0, 2.0, N),
+        ramp=0.7,
+        backend=backend,  # type: ignore[arg-type]
+    )
+    return JointMotion(N, np.linspace(2.0, 7.0, N), path, backend=backend)  # type: ignore[arg-type]
+
+
+def test_demo_path_is_bit_identical() -> None:
+    rng = np.random.default_rng(3)
+    ref, fast = _motion("numpy").path, _motion("numba").path
+    assert ref is not None and fast is not None
+    assert ref.backend == "numpy" and fast.backend == "numba"
+    q0 = rng.normal(0.0, 1.0, N)
+    out_ref = [np.zeros(N) for _ in range(3)]
+    out_fast = [np.zeros(N) for _ in range(3)]
+    times = np.concatenate([np.linspace(-0.1, 1.0, 1101), rng.uniform(0.0, 100.0, 2000)])
+    for t in times:
+        ref.evaluate(float(t), q0, *out_ref)
+        fast.evaluate(float(t), q0, *out_fast)
+        for a, b in zip(out_ref, out_fast, strict=True):
+            assert _identical(a, b), t
+
+
+def test_motion_update_is_bit_identical_through_mode_changes() -> None:
+    rng = np.random.default_rng(5)
+    ref, fast = _motion("numpy"), _motion("numba")
+    assert ref.backend == "numpy" and fast.backend == "numba"
+    start = rng.normal(0.0, 0.5, N)
+    ref.start(start)
+    fast.start(start)
+    t = 0.0
+    ramps = moves = 0
+    for k in range(6000):
+        dt = float(rng.choice([1e-3, 5e-4, 2e-3, rng.uniform(1e-4, 5e-3)]))
+        t += dt
+        r = rng.random()
+        if r < 0.01:
+            assert ref.move(t) == fast.move(t)
+        elif r < 0.02:
+            ref.ramp_down()
+            fast.ramp_down()
+        elif r < 0.022 and ref.mode == RAMP_DOWN:
+            bad = rng.choice([np.nan, 0.0, -0.0])  # a non-finite or signed-zero velocity
+            j = int(rng.integers(0, N))
+            ref.qd[j] = bad
+            fast.qd[j] = bad
+        ramps += ref.mode == RAMP_DOWN
+        moves += ref.mode == MOVE
+        ref.update(t, dt)
+        fast.update(t, dt)
+        assert ref.mode == fast.mode, k
+        for a, b in zip((ref.q, ref.qd, ref.qdd), (fast.q, fast.qd, fast.qdd), strict=True):
+            assert _identical(a, b), k
+        if not np.all(np.isfinite(ref.qd)):  # seen once: start again from rest
+            ref.start(start)
+            fast.start(start)
+    assert ramps > 100 and moves > 100

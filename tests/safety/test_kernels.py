@@ -1,0 +1,153 @@
+"""The compiled bus and limit scans (safety.kernels) give the numpy reference's reports.
+
+Every ``stop.report`` call (fault, joint, value, tick) is compared, not only the latched
+events, over thousands of random ticks with limits crossed, non-finite samples, stale data
+and drives in and out of Operation enabled. numba is optional: these tests skip without it,
+except under CI (a missing numba is then a failure).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from hofto_hw.config.safety import StopCategories
+from hofto_hw.observers import kernels
+from safety.bus_health import BusHealth
+from safety.limits import LimitMonitor
+from safety.stop import StopController
+
+if not kernels.available():
+    if os.environ.get("CI"):
+        pytest.fail(f"CI: compiled kernels must run: {kernels.unavailable_reason()}")
+    pytest.skip(
+        f"compiled kernels unavailable: {kernels.unavailable_reason()}", allow_module_level=True
+    )
+
+N = 6
+TICKS = 4000
+OP_ENABLED, FAULT_STATES = 6, (7, 8, 9)  # any codes: safety takes them from the caller
+
+
+class Recorder(StopController):
+    """A stop controller that also keeps every report call."""
+
+    def __init__(self) -> None:
+        c = StopCategories()
+        super().__init__([getattr(c, n) for n in _names()])
+        self.calls: list[tuple[int, int, int, float]] = []
+
+    def report(self, fault: int, joint: int = -1, value: float = 0.0) -> None:
+        self.calls.append((self.tick, int(fault), int(joint), float(value)))
+        super().report(fault, joint, value)
+
+
+def _names() -> list[str]:
+    from safety.stop import FAULT_NAMES, Fault
+
+    return [FAULT_NAMES[int(f)] for f in Fault]
+
+
+def _same(a: list[tuple[int, int, int, float]], b: list[tuple[int, int, int, float]]) -> bool:
+    if len(a) != len(b):
+        return False
+    for x, y in zip(a, b, strict=True):
+        if x[:3] != y[:3]:
+            return False
+        if not (x[3] == y[3] or (np.isnan(x[3]) and np.isnan(y[3]))):
+            return False
+    return True
+
+
+def _limit_monitor(backend: str) -> LimitMonitor:
+    return LimitMonitor(
+        np.full(N, -1.0),
+        np.linspace(0.8, 1.2, N),
+        np.linspace(1.5, 2.5, N),
+        np.linspace(8.0, 12.0, N),
+        0.05,
+        0.02,
+        backend=backend,  # type: ignore[arg-type]
+    )
+
+
+def test_limit_monitor_backends_report_the_same() -> None:
+    rng = np.random.default_rng(7)
+    ref, fast = _limit_monitor("numpy"), _limit_monitor("numba")
+    assert ref.backend == "numpy" and fast.backend == "numba"
+    s_ref, s_fast = Recorder(), Recorder()
+    q = np.zeros(N)
+    start = q.copy()
+    ref.reset(start)
+    fast.reset(start)
+    reported = 0
+    for k in range(TICKS):
+        if k % 500 == 0:  # a reset, as the tick does after a fault reset
+            s_ref, s_fast = Recorder(), Recorder()
+        s_ref.begin_tick(k)
+        s_fast.begin_tick(k)
+        # mostly quiet ticks, sometimes one limit crossed, sometimes a non-finite entry
+        q = q + rng.normal(0.0, 0.004, N)
+        q = np.clip(q, -0.9, 0.9)
+        qd = rng.normal(0.0, 0.5, N)
+        tau = rng.normal(0.0, 3.0, N)
+        q_cmd = q + rng.normal(0.0, 0.01, N)
+        event = rng.integers(0, 12)
+        j = int(rng.integers(0, N))
+        x = (q, qd, tau, q_cmd)[int(rng.integers(0, 4))]
+        if event == 0:
+            x[j] = rng.choice([np.nan, np.inf, -np.inf])
+        elif event == 1:
+            x[j] = rng.choice([-1.0, 1.0]) * rng.uniform(1.0, 20.0)
+        elif event == 2:
+            q_sample = q.copy()
+            q_sample[j] += rng.choice([-1.0, 1.0]) * rng.uniform(0.0, 0.1)
+            q = q_sample
+        fresh = bool(rng.random() < 0.9)
+        tracking = bool(rng.random() < 0.8)
+        gap = float(rng.choice([0.0, 0.0, rng.uniform(0.0, 0.05)]))  # a stall's allowance
+        ref.check(s_ref, q, qd, tau, q_cmd, fresh, tracking, gap)
+        fast.check(s_fast, q.copy(), qd.copy(), tau.copy(), q_cmd.copy(), fresh, tracking, gap)
+        assert _same(s_ref.calls, s_fast.calls), k
+        assert s_ref.latched == s_fast.latched and s_ref.category == s_fast.category
+        np.testing.assert_array_equal(ref.q_prev, fast.q_prev)
+        assert ref._have_prev == fast._have_prev
+        reported += len(s_ref.calls)
+        if not np.all(np.isfinite(q)):
+            q = np.zeros(N)
+    assert reported > 100  # the run did cross limits
+
+
+def _bus(backend: str) -> BusHealth:
+    return BusHealth(N, 3, OP_ENABLED, FAULT_STATES, backend=backend)  # type: ignore[arg-type]
+
+
+def test_bus_health_backends_report_the_same() -> None:
+    rng = np.random.default_rng(11)
+    ref, fast = _bus("numpy"), _bus("numba")
+    assert ref.backend == "numpy" and fast.backend == "numba"
+    s_ref, s_fast = Recorder(), Recorder()
+    codes = np.array([0, 1, 2, 3, 4, 5, 6, 6, 6, 6, 7, 8, 9], dtype=np.uint8)
+    for k in range(TICKS):
+        s_ref.begin_tick(k)
+        s_fast.begin_tick(k)
+        states = np.full(N, OP_ENABLED, dtype=np.uint8)
+        if rng.random() < 0.3:
+            states[rng.integers(0, N, size=rng.integers(1, 3))] = rng.choice(codes)
+        errors = rng.integers(0, 0xFFFF, N).astype(np.uint16)
+        status = int(rng.random() < 0.1)
+        fresh = bool(rng.random() < 0.95)
+        expect = bool(rng.random() < 0.7)
+        a = ref.check(s_ref, status, fresh, states, errors, expect)
+        b = fast.check(s_fast, status, fresh, states.copy(), errors.copy(), expect)
+        assert a == b
+        assert s_ref.calls == s_fast.calls, k
+        assert (ref.streak, ref.lost_total) == (fast.streak, fast.lost_total)
+    assert len({c[1] for c in s_ref.calls}) == 3  # bus loss, drive fault, drive disabled
+
+
+def test_numpy_switch_selects_the_reference() -> None:
+    assert _bus("numpy").backend == "numpy"
+    assert _limit_monitor("numpy")._use_kernel is False
