@@ -89,7 +89,10 @@ def test_an_overflowing_literal_in_the_file_is_refused(tmp_path: Path) -> None:
 
 def test_thresholds_and_column_map_refuse_non_finite(tmp_path: Path) -> None:
     shipped = read_thresholds(CONFIGS / "ur10e" / "thresholds.yaml").model_dump(mode="python")
-    leaves = list(_float_leaves(shipped))
+    # every number the monitor uses; ``provenance`` is a free-form record of how the file
+    # was made (tune's grids and measured sensitivity: a rate or delay may legitimately be
+    # missing), read by people, never by the monitor
+    leaves = [leaf for leaf in _float_leaves(shipped) if not str(leaf[0]).startswith("provenance")]
     assert len(leaves) > 50
     for path, (container, key) in leaves:
         good = container[key]

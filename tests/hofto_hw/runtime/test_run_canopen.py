@@ -52,6 +52,12 @@ def _config(folder: Path) -> tuple[Path, dict]:
     data["safety"] = er3a["safety"]
     data["safety"]["overrun_streak"] = 100
     data["safety"]["bus"]["lost_cycles"] = LOST_CYCLES
+    # er3a.yaml's position_jump (0.02 rad between fresh samples) is the bound for 1 kHz; the
+    # same joint speed covers 5x that between two samples at 200 Hz, and a CAN sample's age
+    # is uncertain by a cycle (SYNC jitter): seen once under load as a false jump on joint 6
+    rate = float(data["loop"]["rate_hz"])
+    jump = er3a["safety"]["limits"]["position_jump"] * float(er3a["loop"]["rate_hz"]) / rate
+    data["safety"]["limits"]["position_jump"] = jump
     data["run"] = {"clock": "real", "model_error": er3a["run"]["model_error"]}
     data["run"]["path"] = er3a["run"]["path"]
     path = folder / "er3a-canopen-run.yaml"
