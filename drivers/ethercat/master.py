@@ -122,6 +122,8 @@ class EtherCATTransport(Transport):
         self.interface = interface
         self.drives = list(drives)
         self.dc_sync = dc_sync
+        self._cycle_ns = max(1, round(cycle_time * 1e9))
+        self._dc_prev = -1  # DC system time of the last good exchange [ns]; -1: none
         self.recover = recover
         self.state_timeout = state_timeout
         self.mailbox_retries = max(0, int(mailbox_retries))
@@ -246,6 +248,8 @@ class EtherCATTransport(Transport):
                 raise EtherCATError(f"{self.interface}: no slave supports distributed clocks")
             for s in self.slaves:
                 s.dc_sync(True, round(self.cycle_time * 1e9))
+        self._dc_prev = -1
+        self.sample_dt = 0.0
         self._request(STATE_SAFEOP)
         self.expected_wkc = m.expected_wkc
         self.rx.fill(0)
@@ -396,6 +400,9 @@ class EtherCATTransport(Transport):
         except Exception:
             return STATUS_BUS_ERROR
         self.last_wkc = wkc
+        if wkc != self.expected_wkc:
+            self._dc_prev = -1  # the next good sample's interval is unknown
+            self.sample_dt = 0.0
         if wkc < 0:
             self.lost_frames += 1
             return STATUS_NO_RESPONSE
@@ -404,7 +411,21 @@ class EtherCATTransport(Transport):
             return STATUS_WKC_MISMATCH
         for row, s in zip(self._tx_rows, self.slaves, strict=False):
             row[:] = s.input
+        if self.dc_sync:
+            self._sample_interval(self.master.dc_time)
         return STATUS_OK
+
+    def _sample_interval(self, dc_now: int) -> None:
+        """Set :attr:`sample_dt` from the reference clock's system time ``dc_now`` [ns] (read
+        in this cycle's frame). The drives latch their inputs at SYNC0, on the multiples of
+        the cycle in DC time, so the samples moved by the whole cycles between the two
+        frames (at least one: a frame within the same cycle repeats nothing new)."""
+        prev, cyc = self._dc_prev, self._cycle_ns
+        self._dc_prev = dc_now
+        if prev < 0 or dc_now <= prev:
+            self.sample_dt = 0.0
+            return
+        self.sample_dt = max(1, dc_now // cyc - prev // cyc) * self.cycle_time
 
     # ------------------------------------------------------------- supervision
 

@@ -43,7 +43,13 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
     data["bus"]["interface"] = master
     data["safety"]["overrun_streak"] = 100_000  # host stalls are not under test here
     data["safety"]["bus"]["lost_cycles"] = 20
-    data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), "pdo_watchdog": 2.0}
+    # DC: the observers integrate over the drives' sample interval (the reference clock's
+    # time), not over the master's late wake-ups on this loaded machine
+    data["bus"]["ethercat"] = {
+        **(data["bus"].get("ethercat") or {}),
+        "pdo_watchdog": 2.0,
+        "dc_sync": True,
+    }
     data["run"] = {"clock": "real", "model_error": data["run"]["model_error"]}
     data["drag"]["enable_input"] = {"source": "socket"}  # the test holds the button
     path = folder / "er3a-ethercat-drag.yaml"
