@@ -197,7 +197,8 @@ class DriveGroup(ImageFields):
     @property
     def sample_dt(self) -> float:
         """How far the drives' samples moved since the last cycle [s] when the bus knows it
-        (the transport's :attr:`~drivers.transport.Transport.sample_dt`), else 0.0."""
+        (the transport's :attr:`~drivers.transport.Transport.sample_dt`), else 0.0; -1.0 when
+        the bus knows the clock and this cycle brought no new sample."""
         return self.transport.sample_dt
 
     def command_position(self, q: np.ndarray, tau_offset: np.ndarray | None = None) -> None:

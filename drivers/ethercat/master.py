@@ -390,6 +390,9 @@ class EtherCATTransport(Transport):
 
     def exchange(self) -> int:
         """One cycle: outputs out, inputs in, WKC checked. Returns a status; never raises."""
+        # until a good frame says otherwise: no new sample (the next good frame's DC time
+        # spans the gap), or unknown without DC
+        self.sample_dt = -1.0 if self.dc_sync and self._dc_prev >= 0 else 0.0
         if not self.is_open:
             return STATUS_NOT_OPEN
         if self.stopped:
@@ -400,9 +403,6 @@ class EtherCATTransport(Transport):
         except Exception:
             return STATUS_BUS_ERROR
         self.last_wkc = wkc
-        if wkc != self.expected_wkc:
-            self._dc_prev = -1  # the next good sample's interval is unknown
-            self.sample_dt = 0.0
         if wkc < 0:
             self.lost_frames += 1
             return STATUS_NO_RESPONSE

@@ -219,10 +219,12 @@ class Tick:
         # (HOFTO, momentum), each writing its own row; a stall's gap in one-cycle steps
         # over the sample interval: the bus's when it knows it (DC: the drives sample at their
         # own clock, and an emulated arm moves one cycle per exchange however late the master
-        # wakes), else the master's dt
+        # wakes; a lost frame brings no sample, the next one spans the gap), else the master's
+        # dt. A repeated sample integrated as new reads as a contact to HOFTO
         snap = self.snapshot
         sample_dt = g.sample_dt
-        self._observe(snap, q, qd, tau, sample_dt if sample_dt > 0.0 else dt)
+        if sample_dt >= 0.0:
+            self._observe(snap, q, qd, tau, sample_dt if sample_dt > 0.0 else dt)
         cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
         self.t_cmd += cmd_dt
 
