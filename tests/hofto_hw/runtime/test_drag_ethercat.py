@@ -111,9 +111,9 @@ def _at_rest(r: DragRig, speed: float) -> bool:
 
 @pytest.mark.xfail(
     reason="open (issue 9): with DC (observers on the drives' sample interval, held over lost "
-    "frames) and the press after the arm is at rest it passed 3 of 3 runs on this VM, but "
-    "with two busy processes beside it the 80 N knock latched no collision within 60 s "
-    "(once; the same happened before these changes on a loaded machine): not yet explained",
+    "frames) and the press after the arm is at rest it passed 3 of 3 runs unloaded and 3 of 4 "
+    "beside two busy processes; the failure: the 80 N knock latched no collision within 60 s "
+    "(the same happened before these changes on a loaded machine), not yet explained",
     strict=False,
 )
 def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
