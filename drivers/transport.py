@@ -69,6 +69,11 @@ class Transport(ABC):
         self.n_axes = n_axes
         self.cycle_time = float(cycle_time)
         self.axis_names = list(axis_names) if axis_names else [f"axis{i}" for i in range(n_axes)]
+        #: how far the drives' sampling clock moved since the last new sample [s], when the
+        #: bus knows it (EtherCAT with DC: the reference clock's system time); 0.0 when it does
+        #: not (then the master's own cycle-to-cycle time is the best estimate); -1.0 when the
+        #: bus knows the clock and this cycle brought no new sample (a lost frame)
+        self.sample_dt = 0.0
         if len(self.axis_names) != n_axes:
             raise ValueError(f"{len(self.axis_names)} axis names for {n_axes} axes")
         #: RxPDO image, master -> drives, shape (n_axes,)

@@ -194,6 +194,13 @@ class DriveGroup(ImageFields):
         self.read()
         return status
 
+    @property
+    def sample_dt(self) -> float:
+        """How far the drives' samples moved since the last cycle [s] when the bus knows it
+        (the transport's :attr:`~drivers.transport.Transport.sample_dt`), else 0.0; -1.0 when
+        the bus knows the clock and this cycle brought no new sample."""
+        return self.transport.sample_dt
+
     def command_position(self, q: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
         """CSP target q [rad] (n,) and optional torque feed-forward [N·m] (n,)."""
         if self._fast is not None:

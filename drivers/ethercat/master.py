@@ -122,6 +122,8 @@ class EtherCATTransport(Transport):
         self.interface = interface
         self.drives = list(drives)
         self.dc_sync = dc_sync
+        self._cycle_ns = max(1, round(cycle_time * 1e9))
+        self._dc_prev = -1  # DC system time of the last good exchange [ns]; -1: none
         self.recover = recover
         self.state_timeout = state_timeout
         self.mailbox_retries = max(0, int(mailbox_retries))
@@ -246,6 +248,8 @@ class EtherCATTransport(Transport):
                 raise EtherCATError(f"{self.interface}: no slave supports distributed clocks")
             for s in self.slaves:
                 s.dc_sync(True, round(self.cycle_time * 1e9))
+        self._dc_prev = -1
+        self.sample_dt = 0.0
         self._request(STATE_SAFEOP)
         self.expected_wkc = m.expected_wkc
         self.rx.fill(0)
@@ -386,6 +390,9 @@ class EtherCATTransport(Transport):
 
     def exchange(self) -> int:
         """One cycle: outputs out, inputs in, WKC checked. Returns a status; never raises."""
+        # until a good frame says otherwise: no new sample (the next good frame's DC time
+        # spans the gap), or unknown without DC
+        self.sample_dt = -1.0 if self.dc_sync and self._dc_prev >= 0 else 0.0
         if not self.is_open:
             return STATUS_NOT_OPEN
         if self.stopped:
@@ -404,7 +411,21 @@ class EtherCATTransport(Transport):
             return STATUS_WKC_MISMATCH
         for row, s in zip(self._tx_rows, self.slaves, strict=False):
             row[:] = s.input
+        if self.dc_sync:
+            self._sample_interval(self.master.dc_time)
         return STATUS_OK
+
+    def _sample_interval(self, dc_now: int) -> None:
+        """Set :attr:`sample_dt` from the reference clock's system time ``dc_now`` [ns] (read
+        in this cycle's frame). The drives latch their inputs at SYNC0, on the multiples of
+        the cycle in DC time, so the samples moved by the whole cycles between the two
+        frames (at least one: a frame within the same cycle repeats nothing new)."""
+        prev, cyc = self._dc_prev, self._cycle_ns
+        self._dc_prev = dc_now
+        if prev < 0 or dc_now <= prev:
+            self.sample_dt = 0.0
+            return
+        self.sample_dt = max(1, dc_now // cyc - prev // cyc) * self.cycle_time
 
     # ------------------------------------------------------------- supervision
 

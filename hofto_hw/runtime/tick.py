@@ -227,8 +227,14 @@ class Tick:
 
         # 3. the model terms of this sample, once for every estimator, and 3a. the observers
         # (HOFTO, momentum), each writing its own row; a stall's gap in one-cycle steps
+        # over the sample interval: the bus's when it knows it (DC: the drives sample at their
+        # own clock, and an emulated arm moves one cycle per exchange however late the master
+        # wakes; a lost frame brings no sample, the next one spans the gap), else the master's
+        # dt. A repeated sample integrated as new reads as a contact to HOFTO
         snap = self.snapshot
-        self._observe(snap, q, qd, tau, dt)
+        sample_dt = g.sample_dt
+        if sample_dt >= 0.0:
+            self._observe(snap, q, qd, tau, sample_dt if sample_dt > 0.0 else dt)
         cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
         self.t_cmd += cmd_dt
 

@@ -105,7 +105,9 @@ class Esc:
     ``od`` is the drive's object dictionary served over CoE (``None``: a slave without an
     application, for unit tests). ``position`` is the slave's place on the line (0-based)
     and ``n_slaves`` the line length (for the DL status port bits). ``clock`` returns the
-    local time [ns] (DC).
+    local time [ns] (the PDO watchdog's); ``dc_clock`` the DC local time [ns] (receive-time
+    latches, system time 0x0910), ``clock`` when None: the network sets it to its drives'
+    simulated time, so that the DC time advances with the samples as a drive's own clock does.
     """
 
     def __init__(
@@ -115,11 +117,13 @@ class Esc:
         position: int = 0,
         n_slaves: int = 1,
         clock: Callable[[], int] = time.monotonic_ns,
+        dc_clock: Callable[[], int] | None = None,
     ) -> None:
         self.desc = desc
         self.od = od
         self.position = position
         self.clock = clock
+        self.dc_clock = dc_clock if dc_clock is not None else clock
         self.mem = bytearray(r.ADDRESS_SPACE)
         self.mem_np = np.frombuffer(self.mem, dtype=np.uint8)
         self.sii = bytearray(build_image(desc))
@@ -438,10 +442,10 @@ class Esc:
     def system_time(self) -> int:
         """DC system time [ns]: local clock plus the offset the master wrote (0x0920)."""
         offset = struct.unpack_from("<q", self.mem, r.DC_SYSTEM_TIME_OFFSET)[0]
-        return (self.clock() + offset) & 0xFFFFFFFFFFFFFFFF
+        return (self.dc_clock() + offset) & 0xFFFFFFFFFFFFFFFF
 
     def _latch_receive_times(self) -> None:
-        now = self.clock()
+        now = self.dc_clock()
         self._latched_ns = now
         # port 0 sees the frame first; port 1 when it comes back from the slaves behind
         behind = 0 if self.mem[r.DL_STATUS] & 0x20 == 0 else 1

@@ -7,7 +7,9 @@ LWR/LRW) is answered first and then advances the drives and the plant by one tic
 simulated time is the number of process-data frames times the bus cycle time. (No
 wall-clock catch-up after a master stall, unlike the CANopen emulator: the master waits
 one cycle for its frame, so the steps of a stall caught up before answering would read as
-lost frames; see drivers/sim/pacing.py.)
+lost frames; see drivers/sim/pacing.py.) With drives, the slaves' DC clock is that
+simulated time too (a start offset plus one cycle per step), so the master's DC time tells
+it how far the drives' samples moved, as the SYNC0-latched samples of real drives do.
 
 :func:`serve` binds an AF_PACKET socket for ethertype 0x88A4 to one interface (one end of a
 veth pair; the master opens the other end) and runs the network until stopped. A Unix
@@ -52,8 +54,13 @@ class EmulatedNetwork:
         if drives is not None and drives.n != n:
             raise ValueError(f"{n} slave descriptions for {drives.n} drives")
         ods = drives.ods if drives is not None else [None] * n
+        #: the DC local time [ns] with drives: a start offset plus one cycle per plant step
+        self.dc_ns = time.monotonic_ns()
+        self._cycle_ns = round(drives.dt * 1e9) if drives is not None else 0
+        self._dc_clock = self._dc_time if drives is not None else None
         self.slaves = [
-            Esc(d, od, i, n) for i, (d, od) in enumerate(zip(descriptions, ods, strict=True))
+            Esc(d, od, i, n, dc_clock=self._dc_clock)
+            for i, (d, od) in enumerate(zip(descriptions, ods, strict=True))
         ]
         self.drives = drives
         self.n = n
@@ -112,6 +119,7 @@ class EmulatedNetwork:
         self.process_frames += 1
         if self.drives is None:
             return
+        self.dc_ns += self._cycle_ns
         rx_u8 = self._rx_u8
         for i, s in enumerate(self.slaves):
             if not s.pull_outputs(rx_u8[i]):
@@ -128,6 +136,9 @@ class EmulatedNetwork:
                     reg = int(self.drives.error_register[i])
                     s.queue_mailbox(s.coe.emergency(code, reg))
             np.copyto(self._last_error, codes)
+
+    def _dc_time(self) -> int:
+        return self.dc_ns
 
     def _push_inputs(self) -> None:
         tx_u8 = self._tx_u8
@@ -212,7 +223,7 @@ class EmulatedNetwork:
             elif op == "restart":
                 k = self._slave_index(request["slave"])
                 old = self.slaves[k]
-                self.slaves[k] = Esc(old.desc, old.od, k, self.n)
+                self.slaves[k] = Esc(old.desc, old.od, k, self.n, dc_clock=self._dc_clock)
             elif op == "stop":
                 self.stopping = True
             else:

@@ -328,6 +328,47 @@ def test_dc_sync0_start_up(emulated_bus) -> None:
         t.close()
 
 
+def test_dc_time_gives_the_sample_interval_not_the_master_wake_up(emulated_bus) -> None:
+    """With DC the transport reports how far the drives' samples moved: the emulated arm
+    moves one cycle per exchange, so a master that oversleeps still gets one cycle."""
+    t = _transport(emulated_bus, dc_sync=True)
+    try:
+        t.open()
+        assert set(_cycles(t, 5)) == {STATUS_OK}
+        assert t.sample_dt == pytest.approx(t.cycle_time, abs=1e-12)
+        time.sleep(10 * t.cycle_time)  # a stall of the master
+        assert t.exchange() == STATUS_OK
+        assert t.sample_dt == pytest.approx(t.cycle_time, abs=1e-12)
+    finally:
+        t.close()
+
+
+def test_dc_a_lost_frame_brings_no_sample_and_the_next_spans_the_gap(emulated_bus) -> None:
+    t = _transport(emulated_bus, dc_sync=True)
+    try:
+        t.open()
+        assert set(_cycles(t, 5)) == {STATUS_OK}
+        emulated_bus.call(op="drop", count=1)
+        assert t.exchange() != STATUS_OK
+        assert t.sample_dt == -1.0
+        t.wait_next_cycle()
+        assert t.exchange() == STATUS_OK
+        # the dropped frame did not reach the drives: their samples moved one cycle
+        assert t.sample_dt == pytest.approx(t.cycle_time, abs=1e-12)
+    finally:
+        t.close()
+
+
+def test_without_dc_the_sample_interval_is_unknown(emulated_bus) -> None:
+    t = _transport(emulated_bus)
+    try:
+        t.open()
+        assert set(_cycles(t, 5)) == {STATUS_OK}
+        assert t.sample_dt == 0.0
+    finally:
+        t.close()
+
+
 def test_scapy_decodes_the_live_process_data_frame(emulated_bus) -> None:
     """Capture the cyclic frame on the master's interface and decode it independently."""
     scapy_all = pytest.importorskip("scapy.all", reason="scapy (dev extra) not installed")

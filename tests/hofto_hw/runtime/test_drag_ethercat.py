@@ -43,7 +43,13 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
     data["bus"]["interface"] = master
     data["safety"]["overrun_streak"] = 100_000  # host stalls are not under test here
     data["safety"]["bus"]["lost_cycles"] = 20
-    data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), "pdo_watchdog": 2.0}
+    # DC: the observers integrate over the drives' sample interval (the reference clock's
+    # time), not over the master's late wake-ups on this loaded machine
+    data["bus"]["ethercat"] = {
+        **(data["bus"].get("ethercat") or {}),
+        "pdo_watchdog": 2.0,
+        "dc_sync": True,
+    }
     data["run"] = {"clock": "real", "model_error": data["run"]["model_error"]}
     data["drag"]["enable_input"] = {"source": "socket"}  # the test holds the button
     path = folder / "er3a-ethercat-drag.yaml"
@@ -98,13 +104,16 @@ def _until_ok(r: DragRig, line: str, timeout: float = 30.0) -> dict[str, Any]:
     return dict(last)
 
 
+def _at_rest(r: DragRig, speed: float) -> bool:
+    """Every joint of the true arm slower than ``speed`` [rad/s]."""
+    return float(np.abs(r.emu.call(op="status")["qd"]).max()) < speed
+
+
 @pytest.mark.xfail(
-    reason="open (issue 9): over EtherCAT on this loaded VM the run does not reliably reach "
-    "the steady drag: at the last stop the monitor stopped the push on joint 5; after the "
-    "merge (faster HOFTO, settle time) the knock and reset work, but the re-enable after the "
-    "reset intermittently hits joint 2's torque limit (-120 N·m, once in three runs), and the "
-    "push was not yet seen through; candidates: host stalls during enable and acceleration "
-    "while the emulated arm advances one cycle per exchange",
+    reason="open (issue 9): with DC (observers on the drives' sample interval, held over lost "
+    "frames) and the press after the arm is at rest it passed 3 of 3 runs unloaded and 3 of 4 "
+    "beside two busy processes; the failure: the 80 N knock latched no collision within 60 s "
+    "(the same happened before these changes on a loaded machine), not yet explained",
     strict=False,
 )
 def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
@@ -127,6 +136,9 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     assert answer["message"].startswith("reset"), answer
     r.wait_state("running")
     _until_ok(rig, "mode drag")
+    # the press enters dragging only from standstill (else it is refused, and the push would
+    # meet an arm that holds): the re-enabled arm settles first
+    wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest before the press", r.proc)
     _until_ok(rig, "enable on")
     t0 = rig.push((PUSH, 0.0, 0.0), PUSH_TIME, ramp=RAMP)
     t_end = t0 + PUSH_TIME
@@ -147,12 +159,10 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     _until_ok(rig, "enable off")
     r.wait_latched("enabling_released")
     status = r.status()
-    assert status["category"] == 2 == rig.data["safety"]["categories"]["enabling_released"]
+    # the file leaves this class at the schema's default
+    assert status["category"] == 2 == load_config(CONFIG).safety.categories.enabling_released
 
-    def at_rest() -> bool:
-        return float(np.abs(rig.emu.call(op="status")["qd"]).max()) < 0.01
-
-    wait_for(at_rest, 30, "the arm at rest after the release", r.proc)
+    wait_for(lambda: _at_rest(rig, 0.01), 30, "the arm at rest after the release", r.proc)
     code, s = r.terminate()
     assert code == 0
     kinds = [e["kind"] for e in s["events"] if e["category"] >= 0 or e["kind"] == "reset"]

@@ -37,3 +37,21 @@ def test_the_setpoint_advances_one_cycle_per_tick_after_a_stall(cfg: SystemConfi
     system.loop.run(max_ticks=1)
     assert abs(tick.t_cmd - t_cmd - tick.period) < 1e-12
     assert tick.t - t_cmd > 0.05  # while the loop's own clock took the 51 cycles
+
+
+def test_the_observers_hold_while_the_bus_reports_no_new_sample(cfg: SystemConfig) -> None:
+    """A DC bus that lost a frame reports ``sample_dt == -1``: the repeated sample is not
+    integrated as a new one (HOFTO read a repeated sample of the moving arm as ~30 N·m);
+    with 0.0 (the simulated bus: interval unknown) they run on the loop's dt as before."""
+    system = build(cfg, clock="sim", contact=False)
+    tick, transport = system.tick, system.group.transport
+    tick.mode_request = MOVE
+    system.loop.run(max_ticks=400)
+    assert transport.sample_dt == 0.0
+    held = tick.tau_ext.copy()
+    transport.sample_dt = -1.0
+    system.loop.run(max_ticks=3)
+    np.testing.assert_array_equal(tick.tau_ext, held)
+    transport.sample_dt = 0.0
+    system.loop.run(max_ticks=1)
+    assert not np.array_equal(tick.tau_ext, held)
