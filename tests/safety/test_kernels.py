@@ -8,23 +8,15 @@ except under CI (a missing numba is then a failure).
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
-import pytest
+from support.compiled import require_compiled_kernels
 
 from hofto_hw.config.safety import StopCategories
-from hofto_hw.observers import kernels
 from safety.bus_health import BusHealth
 from safety.limits import LimitMonitor
 from safety.stop import StopController
 
-if not kernels.available():
-    if os.environ.get("CI"):
-        pytest.fail(f"CI: compiled kernels must run: {kernels.unavailable_reason()}")
-    pytest.skip(
-        f"compiled kernels unavailable: {kernels.unavailable_reason()}", allow_module_level=True
-    )
+require_compiled_kernels()
 
 N = 6
 TICKS = 4000

@@ -7,11 +7,11 @@ there, so a missing numba is a failure, not a skip).
 
 from __future__ import annotations
 
-import os
 from math import comb
 
 import numpy as np
 import pytest
+from support.compiled import require_compiled_kernels
 
 from hofto_hw.observers import (
     DobObserver,
@@ -23,12 +23,7 @@ from hofto_hw.observers import (
 )
 from hofto_hw.observers.registry import levant_gains
 
-if not kernels.available():
-    if os.environ.get("CI"):
-        pytest.fail(f"CI: compiled kernels must run: {kernels.unavailable_reason()}")
-    pytest.skip(
-        f"compiled kernels unavailable: {kernels.unavailable_reason()}", allow_module_level=True
-    )
+require_compiled_kernels()
 
 STEPS = 3000
 TOL = 1e-12

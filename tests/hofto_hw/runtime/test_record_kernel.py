@@ -4,23 +4,16 @@ bytes as the numpy reference fill, tick by tick in the running loop and on odd v
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import pytest
+from support.compiled import require_compiled_kernels
 
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.control.joint_motion import MOVE
-from hofto_hw.observers import kernels
 from hofto_hw.runtime import compose
 from hofto_hw.runtime.compose import build
 
-if not kernels.available():
-    if os.environ.get("CI"):
-        pytest.fail(f"CI: compiled kernels must run: {kernels.unavailable_reason()}")
-    pytest.skip(
-        f"compiled kernels unavailable: {kernels.unavailable_reason()}", allow_module_level=True
-    )
+require_compiled_kernels()
 
 
 def test_kernel_fill_equals_numpy_fill(cfg: SystemConfig, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -5,27 +5,21 @@ optional: these tests skip without it, except under CI."""
 
 from __future__ import annotations
 
-import os
 import tracemalloc
 
 import numpy as np
 import pytest
+from support.compiled import require_compiled_kernels
 
 from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.safety import CollisionLevelsConfig, StopCategories
-from hofto_hw.observers import kernels
 from safety.collision import CollisionLevels, from_thresholds
 from safety.collision import kernel as K
 from safety.collision import params as P
 from safety.collision import state as S
 from safety.stop import StopController
 
-if not kernels.available():
-    if os.environ.get("CI"):
-        pytest.fail(f"CI: compiled kernels must run: {kernels.unavailable_reason()}")
-    pytest.skip(
-        f"compiled kernels unavailable: {kernels.unavailable_reason()}", allow_module_level=True
-    )
+require_compiled_kernels()
 
 N = 6
 STEPS = 4000
