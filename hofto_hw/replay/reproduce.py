@@ -35,7 +35,7 @@ from hofto_hw.replay.flight_log import FlightLog, RecordedEvent
 from hofto_hw.replay.runner import run_observer
 from hofto_hw.replay.thresholds import ThresholdsFile, read_thresholds
 from hofto_hw.runtime.compose import build_model, loop_observer_table
-from hofto_hw.runtime.tick import gap_steps
+from hofto_hw.runtime.tick import gap_steps, lerp
 
 #: event kind name of a collision stop (the safety fault class's name in event_kinds)
 COLLISION_KIND = "collision"
@@ -307,16 +307,8 @@ def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray, period: float = 0.0) 
             h = dt[k] / steps
             for s in range(1, steps + 1):
                 a = s / steps
-                for j, (now, prev) in enumerate(
-                    (
-                        (log.q[k], log.q[k - 1]),
-                        (log.qd[k], log.qd[k - 1]),
-                        (log.tau[k], log.tau[k - 1]),
-                    )
-                ):
-                    np.subtract(now, prev, out=x[j])
-                    x[j] *= a
-                    x[j] += prev
+                for j, series in enumerate((log.q, log.qd, log.tau)):
+                    lerp(series[k - 1], series[k], a, x[j])
                 est[k] = obs.update(x[0], x[1], x[2], h)
         if k in resets:
             obs.reset(log.q[k], log.qd[k])

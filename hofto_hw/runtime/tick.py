@@ -65,6 +65,14 @@ def gap_steps(dt: float, period: float) -> int:
     return 1
 
 
+def lerp(prev: np.ndarray, now: np.ndarray, a: float, out: np.ndarray) -> None:
+    """``out = prev + a·(now - prev)`` in place: a stall's sub-step sample (flight-log replay
+    interpolates with the same operations, so its estimates are the loop's bit for bit)."""
+    np.subtract(now, prev, out=out)
+    out *= a
+    out += prev
+
+
 class Tick:
     """See the module docstring. ``observers`` are evaluated in order; their estimates are
     rows of ``tau_ext`` (k, n) and of the tick record. ``snapshot`` is computed for at least
@@ -348,9 +356,7 @@ class Tick:
             for s in range(1, k + 1):
                 a = s / k
                 for j, now in enumerate((q, qd, tau)):
-                    np.subtract(now, prev[j], out=x[j])
-                    x[j] *= a
-                    x[j] += prev[j]
+                    lerp(prev[j], now, a, x[j])
                 snap.compute(x[0], x[1], x[2])
                 for i, obs in enumerate(self.observers):
                     np.copyto(self.tau_ext[i], obs.update_snapshot(snap, h))
