@@ -264,7 +264,6 @@ def floor_us(cfg, ticks: int) -> np.ndarray:
 def snapshot_parts(cfg, ticks: int) -> dict:
     """The tick's snapshot and each of its calls alone, back to back on samples of the
     running tick (median µs): what the snapshot costs above the floor, and where."""
-    import pinocchio as pin
 
     system = build_system(cfg, float(cfg.loop.rate_hz), "sim")
     rows = []
@@ -279,20 +278,7 @@ def snapshot_parts(cfg, ticks: int) -> dict:
     if snap is None:
         system.close()
         return {"backend": "none: this tick has no shared snapshot"}
-    pm, pd = snap.pin_model, snap.pin_data
-    fr = snap.model.friction
-    k = snap._kernels
-    calls = {"compute (all)": lambda q, qd, tau: snap.compute(q, qd, tau)}
-    if k is not None:
-        calls["finite + friction kernel"] = lambda q, qd, tau: k.snapshot_inputs(
-            q, qd, tau, *snap._fr, fr.smooth_velocity, False, True, snap.f, snap._total
-        )
-    calls["aba"] = lambda q, qd, tau: pin.aba(pm, pd, q, qd, tau)
-    calls["crba"] = lambda q, qd, tau: pin.crba(pm, pd, q)
-    calls["coriolis matrix"] = lambda q, qd, tau: pin.computeCoriolisMatrix(pm, pd, q, qd)
-    if k is not None:
-        calls["Cᵀ·qd kernel"] = lambda q, qd, tau: k.transposed_mat_vec(snap._C, qd, snap.ct_qd)
-    calls["gravity"] = lambda q, qd, tau: pin.computeGeneralizedGravity(pm, pd, q)
+    calls = {"compute (all)": lambda q, qd, tau: snap.compute(q, qd, tau), **snap.parts()}
     clock = time.perf_counter_ns
     out = {"backend": snap.backend}
     gc.disable()

@@ -32,9 +32,15 @@ if TYPE_CHECKING:
 
 class ModelData:
     """Workspace of one consumer: pinocchio Data and every buffer. Arrays float64, shape (n,)
-    or (n, n); q [rad], qd [rad/s], qdd [rad/s²], torques [N·m]."""
+    or (n, n); q [rad], qd [rad/s], qdd [rad/s²], torques [N·m].
 
-    def __init__(self, model: RobotModel) -> None:
+    ``backend`` "numpy" (default, the reference) or "numba"/"auto": then
+    :meth:`inverse_dynamics` (the tick's feed-forward) is RNEA plus one compiled call for the
+    friction and the sum (:func:`hofto_hw.model.kernels.add_friction`; equal to the numpy
+    path within 1e-12), its held-friction memory ``friction_state`` a row of the kernel's
+    workspace. ``backend`` says which path runs (numpy when numba is unavailable)."""
+
+    def __init__(self, model: RobotModel, backend: str = "numpy") -> None:
         self.model = model
         self.pin_data = model.pin_model.createData()
         n = model.n
@@ -55,6 +61,27 @@ class ModelData:
         self._qdd = np.zeros(n)
         self._tau_total = np.zeros(n)
         self._J = np.zeros((6, n))
+        self._fast = False
+        if backend != "numpy":
+            self._compile(backend)
+        #: "numba": :meth:`inverse_dynamics` adds friction in one compiled call
+        self.backend = "numba" if self._fast else "numpy"
+
+    def _compile(self, backend: str) -> None:
+        # numba availability is the observers' module's (one switch for every kernel)
+        from hofto_hw.model import kernels as mk
+        from hofto_hw.observers import kernels
+
+        if kernels.resolve(backend) != "numba":  # type: ignore[arg-type]
+            return
+        self._add_friction = mk.add_friction
+        self._pack = mk.pack_friction
+        W = self._W = mk.workspace(self.n)
+        self.friction_state = W[mk.STATE]  # the held-friction memory lives in the workspace
+        self._fr_src = self.model.friction
+        mk.pack_friction(self._fr_src, W)
+        z = np.zeros(self.n)
+        self._fast = kernels.warm(lambda: mk.add_friction(z, z, W.copy(), np.zeros(self.n)))
 
     # ------------------------------------------------------------------ dynamics
 
@@ -110,6 +137,13 @@ class ModelData:
         """M·qdd + C·qd + g + f [N·m]: the motor torque that produces qdd with no contact."""
         m = self.model
         tau = self._tau_id if out is None else out
+        if self._fast:
+            # pinocchio's return (a transient copy of data.tau) is the kernel's input
+            if m.friction is not self._fr_src:
+                self._fr_src = m.friction
+                self._pack(self._fr_src, self._W)
+            self._add_friction(_rnea(m.pin_model, self.pin_data, q, qd, qdd), qd, self._W, tau)
+            return tau
         np.copyto(tau, pin.rnea(m.pin_model, self.pin_data, q, qd, qdd))
         np.add(tau, m.friction.torque(qd, self._f_id, self._fscratch, self.friction_state), out=tau)
         return tau
@@ -184,3 +218,6 @@ class ModelData:
         pin.forwardKinematics(m.pin_model, self.pin_data, q)
         placement = pin.updateFramePlacement(m.pin_model, self.pin_data, m.tool_frame_id)
         return placement.translation.copy(), placement.rotation.copy()
+
+
+_rnea = pin.rnea

@@ -227,9 +227,11 @@ class RobotModel:
 
     # ------------------------------------------------------------------ workspaces
 
-    def create_data(self) -> ModelData:
-        """A new caller-owned workspace for this model's dynamics (pinocchio Data + buffers)."""
-        return ModelData(self)
+    def create_data(self, backend: str = "numpy") -> ModelData:
+        """A new caller-owned workspace for this model's dynamics (pinocchio Data + buffers);
+        ``backend`` "numba"/"auto": its inverse dynamics adds friction in one compiled call
+        (:class:`~hofto_hw.model.data.ModelData`)."""
+        return ModelData(self, backend)
 
 
 def _check_link_inertias(urdf: Path) -> None:

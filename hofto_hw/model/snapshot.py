@@ -23,12 +23,20 @@ the terms belong to), valid while the caller keeps them unchanged.
 
 A sample with a NaN or inf (or a non-finite dt, checked by the consumers) is not evaluated:
 ``finite`` is False and the terms keep the last finite sample's values.
+
+Cost: the pinocchio algorithms the needs ask for (the tick's HOFTO + momentum: ABA, CRBA,
+Coriolis matrix, gravity — the floor) and, with ``backend="numba"``, one compiled call for
+everything else (finiteness, friction with its held memory, tau - f, Cᵀ·qd;
+:mod:`hofto_hw.model.kernels`). Inside a loop whose other work flushes the caches each call
+costs ~2.5-4 µs more than back to back, whatever it computes, so the number of calls is what
+counts; the numpy path (the reference) makes ~8 numpy calls more.
 """
 
 from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -132,39 +140,33 @@ class DynamicsSnapshot:
         self._ct = bool(needs & Needs.CORIOLIS_T)
         self._friction = bool(needs & Needs.FRICTION)
         self._accel = bool(needs & Needs.ACCEL)
-        self._kernels = None
+        self._fast = False
         if backend != "numpy" and not self._copy:
-            # the finiteness check, friction and Cᵀ·qd arithmetic as compiled kernels (the
-            # observers' module holds every kernel and the numba availability logic)
+            # the finiteness check, friction and Cᵀ·qd as one compiled call (hofto_hw.model.
+            # kernels; numba availability is the observers' module's)
+            from hofto_hw.model import kernels as mk
             from hofto_hw.observers import kernels
 
-            memory = model.friction.held is not None or model.friction.quadratic is not None
-            # the friction kernel has no held-friction memory or quadratic term: such a model
-            # takes the numpy friction of this snapshot's workspace (which keeps the memory)
-            if kernels.resolve(backend) == "numba" and not memory:  # type: ignore[arg-type]
-                self._kernels = kernels
-                fr = model.friction
-                zeros = np.zeros(n)
-                self._fr = (
-                    fr.coulomb,
-                    fr.viscous,
-                    fr.bias,
-                    zeros if fr._stribeck_gap is None else fr._stribeck_gap,
-                    np.ones(n) if fr.stribeck_velocity is None else fr.stribeck_velocity,
+            if kernels.resolve(backend) == "numba":  # type: ignore[arg-type]
+                self._terms = mk.snapshot_terms
+                self._pack = mk.pack_friction
+                W = self._W = mk.workspace(n)
+                self.f, self._total, self.ct_qd = W[mk.F], W[mk.TOTAL], W[mk.CT]
+                # the workspace's held-friction memory lives in W (reset_memory still works)
+                np.copyto(W[mk.STATE], self.data.friction_state)
+                self.data.friction_state = W[mk.STATE]
+                W[mk.FLAGS] = (mk.FRICTION_TERM if self._friction else 0) | (
+                    mk.CORIOLIS_T_TERM if self._ct else 0
                 )
-                if not kernels.warm(self._warm):
-                    self._kernels = None
-        self.backend = "numpy" if self._kernels is None else "numba"
+                self._fr_src = model.friction
+                mk.pack_friction(model.friction, W)
+                self._fast = kernels.warm(self._warm)
+        self.backend = "numba" if self._fast else "numpy"
 
     def _warm(self) -> None:
-        k, n = self._kernels, self.n
-        assert k is not None
-        z = np.zeros(n)
-        fr = self.model.friction
-        k.snapshot_inputs(
-            z, z, z, *self._fr, fr.smooth_velocity, True, True, np.zeros(n), np.zeros(n)
-        )
-        k.transposed_mat_vec(self._C, z, np.zeros(n))
+        z = np.zeros(self.n)
+        W = self._W.copy()  # scratch: the held-friction memory stays untouched
+        self._terms(z, z, z, self._C, W)
 
     def reset_memory(self) -> None:
         """Forget the held-friction memory of this snapshot's workspace (a new run)."""
@@ -176,53 +178,85 @@ class DynamicsSnapshot:
         Returns ``finite``: False (and nothing evaluated) when the sample holds a NaN or inf.
         """
         self.q, self.qd, self.tau = q, qd, tau
-        pm, pd, fast = self.pin_model, self.pin_data, self._kernels
-        if fast is not None:
-            # one compiled call: the finiteness check (the same sum as below) and friction
-            fr = self.model.friction
-            self.finite = finite = fast.snapshot_inputs(
-                q,
-                qd,
-                tau,
-                *self._fr,
-                fr.smooth_velocity,
-                fr._stribeck_gap is not None,
-                self._friction,
-                self.f,
-                self._total,
-            )
+        pm, pd = self.pin_model, self.pin_data
+        if self._fast:
+            # Coriolis first: its matrix is no term of the snapshot (only Cᵀ·qd is), so a
+            # non-finite sample may pass through it; then one compiled call checks the sample
+            # and does every bit of arithmetic (friction, tau - f, Cᵀ·qd); then the pinocchio
+            # algorithms whose storage the snapshot's terms are, in any order (each one
+            # evaluates its own kinematics from q)
+            if self._ct:
+                _coriolis(pm, pd, q, qd)
+            if self.model.friction is not self._fr_src:
+                self._repack()
+            self.finite = finite = self._terms(q, qd, tau, self._C, self._W)
             if not finite:
                 return False
-        else:
-            # one sum: NaN and ±inf propagate into it (as SampleGuard)
-            self.finite = finite = math.isfinite(_sum(q) + _sum(qd) + _sum(tau))
-            if not finite:
-                return False
-            # A pinocchio call's return value (a copy) is dropped at once unless the Data
-            # views are unstable: one transient array at a time.
-            if self._copy:
-                return self._compute_copying(q, qd, tau)
-            if self._friction:
-                self.data.friction_torque(qd, out=self.f)
-                np.subtract(tau, self.f, out=self._total)
+            if self._accel:
+                _aba(pm, pd, q, qd, self._total)
+            if self._mass:
+                _crba(pm, pd, q)
+            if self._gravity:
+                _gravity(pm, pd, q)
+            if self._nle:
+                _nle(pm, pd, q, qd)
+            return True
+        # the numpy path (the reference): one sum, NaN and ±inf propagate into it
+        self.finite = finite = math.isfinite(_sum(q) + _sum(qd) + _sum(tau))
+        if not finite:
+            return False
+        # A pinocchio call's return value (a copy) is dropped at once unless the Data
+        # views are unstable: one transient array at a time.
+        if self._copy:
+            return self._compute_copying(q, qd, tau)
+        if self._friction:
+            self.data.friction_torque(qd, out=self.f)
+            np.subtract(tau, self.f, out=self._total)
         if self._accel:
-            pin.aba(pm, pd, q, qd, self._total)
+            _aba(pm, pd, q, qd, self._total)
         if self._mass:
             if self._symmetrise:
-                self._symmetric(pin.crba(pm, pd, q))
+                self._symmetric(_crba(pm, pd, q))
             else:
-                pin.crba(pm, pd, q)
+                _crba(pm, pd, q)
         if self._ct:
-            pin.computeCoriolisMatrix(pm, pd, q, qd)
-            if fast is not None:
-                fast.transposed_mat_vec(self._C, qd, self.ct_qd)
-            else:
-                np.dot(self._C.T, qd, out=self.ct_qd)
+            _coriolis(pm, pd, q, qd)
+            np.dot(self._C.T, qd, out=self.ct_qd)
         if self._gravity:
-            pin.computeGeneralizedGravity(pm, pd, q)
+            _gravity(pm, pd, q)
         if self._nle:
-            pin.nonLinearEffects(pm, pd, q, qd)
+            _nle(pm, pd, q, qd)
         return True
+
+    def _repack(self) -> None:
+        """``model.friction`` was replaced (a new parameter set): the kernel's copy follows."""
+        self._fr_src = fr = self.model.friction
+        self._pack(fr, self._W)
+
+    def parts(self) -> dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], object]]:
+        """The calls :meth:`compute` makes, by name, each callable alone as f(q, qd, tau) (for
+        benchmarks; the compiled arithmetic advances the held-friction memory as compute
+        does)."""
+        pm, pd = self.pin_model, self.pin_data
+        calls: dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], object]] = {}
+        if self._fast and self._ct:
+            calls["coriolis matrix"] = lambda q, qd, tau: _coriolis(pm, pd, q, qd)
+        if self._fast:
+            W, C = self._W, self._C
+            calls["kernel: finite, friction, Cᵀ·qd"] = lambda q, qd, tau: self._terms(
+                q, qd, tau, C, W
+            )
+        if self._accel:
+            calls["aba"] = lambda q, qd, tau: _aba(pm, pd, q, qd, tau)
+        if self._mass:
+            calls["crba"] = lambda q, qd, tau: _crba(pm, pd, q)
+        if self._ct and not self._fast:
+            calls["coriolis matrix"] = lambda q, qd, tau: _coriolis(pm, pd, q, qd)
+        if self._gravity:
+            calls["gravity"] = lambda q, qd, tau: _gravity(pm, pd, q)
+        if self._nle:
+            calls["nle"] = lambda q, qd, tau: _nle(pm, pd, q, qd)
+        return calls
 
     def _symmetric(self, r: np.ndarray) -> None:
         M = self.M
@@ -250,3 +284,9 @@ class DynamicsSnapshot:
 
 
 _sum = np.add.reduce
+# module globals: one dictionary lookup per call instead of a module attribute's two
+_aba = pin.aba
+_crba = pin.crba
+_coriolis = pin.computeCoriolisMatrix
+_gravity = pin.computeGeneralizedGravity
+_nle = pin.nonLinearEffects

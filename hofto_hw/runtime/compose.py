@@ -185,7 +185,7 @@ def build(
         health,
         collision,
         motion,
-        model.create_data(),
+        model.create_data(backend),  # the feed-forward: compiled friction
         sink,
         overrun_limit=s.overrun_streak,
         drag=drag,

@@ -1,0 +1,166 @@
+"""Compiled kernels of the model's per-tick arithmetic (numba): friction eq. (12), the
+snapshot's inputs and the inverse dynamics' friction, each one call between pinocchio calls.
+
+On six joints this arithmetic is a few dozen floating-point operations; as numpy calls on
+six-element arrays the time goes to the ~0.5 µs each call costs (and to its cold caches
+inside a loop), so each use is one compiled call. The numpy code stays the reference
+(:meth:`hofto_hw.model.friction.FrictionParams.torque`, the numpy path of
+:class:`~hofto_hw.model.snapshot.DynamicsSnapshot` and of
+:class:`~hofto_hw.model.data.ModelData`); tests/hofto_hw/model/test_kernels.py checks that both
+agree to 1e-12 over thousands of random steps, held-friction memory and NaN included.
+
+Arguments are few (a compiled call costs ~0.1 µs per argument, more with cold caches): the
+friction parameters, the held-friction memory and the outputs travel in one workspace array
+``W`` (:data:`ROWS`, n) made by :func:`workspace` and filled by :func:`pack_friction`.
+Availability, compilation and warming are those of :mod:`hofto_hw.observers.kernels` (one
+switch, ``HOFTO_HW_NO_NUMBA``). Kernels write only into the arrays passed in; none allocates.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hofto_hw.model.friction import FrictionParams
+from hofto_hw.observers.kernels import jit
+
+# rows of the workspace W (ROWS, n): outputs, the held-friction memory, then the friction
+# parameters per joint (a scalar parameter or flag is repeated on every joint)
+F, TOTAL, CT, STATE = range(4)  # f [N·m], tau - f [N·m], Cᵀ·qd [N·m], held sign (-1/0/+1)
+COULOMB, VISCOUS, BIAS, STRIBECK_GAP, STRIBECK_VELOCITY, QUADRATIC, HELD = range(4, 11)
+SMOOTH, HELD_VELOCITY, HAS_STRIBECK, HAS_QUADRATIC, HAS_HELD, HELD_PASSIVE = range(11, 17)
+FLAGS = 17  # what snapshot_terms computes: FRICTION_TERM | CORIOLIS_T_TERM
+ROWS = 18
+
+FRICTION_TERM = 1
+CORIOLIS_T_TERM = 2
+
+
+def workspace(n: int) -> np.ndarray:
+    """A zeroed workspace W (ROWS, n) float64 for the kernels of this module."""
+    return np.zeros((ROWS, n))
+
+
+def pack_friction(fr: FrictionParams, W: np.ndarray) -> None:
+    """Write ``fr`` into the parameter rows of W: Fc, Fv, B [N·m(·s/rad)], Fs - Fc [N·m],
+    vs [rad/s] (1 without Stribeck), Fq [N·m·s²/rad²], Fh [N·m] (0 for an absent term), v_s
+    [rad/s] (0 = hard sign), v_h [rad/s], then 1.0/0.0 flags: Stribeck, quadratic, held, held
+    passive. A copy: FrictionParams are constant once built (new parameters are a new object;
+    callers repack when ``model.friction`` is replaced)."""
+    W[COULOMB] = fr.coulomb
+    W[VISCOUS] = fr.viscous
+    W[BIAS] = fr.bias
+    stribeck = fr._stribeck_gap is not None
+    W[STRIBECK_GAP] = fr._stribeck_gap if stribeck else 0.0
+    W[STRIBECK_VELOCITY] = fr.stribeck_velocity if stribeck else 1.0
+    W[QUADRATIC] = fr.quadratic if fr.quadratic is not None else 0.0
+    W[HELD] = fr.held if fr.held is not None else 0.0
+    W[SMOOTH] = fr.smooth_velocity
+    W[HELD_VELOCITY] = fr.held_velocity
+    W[HAS_STRIBECK] = float(stribeck)
+    W[HAS_QUADRATIC] = float(fr.quadratic is not None)
+    W[HAS_HELD] = float(fr.held is not None)
+    W[HELD_PASSIVE] = float(fr.held_passive)
+
+
+@jit
+def _sign(x: float) -> float:
+    """np.sign for one float: -1, 0, 1 (NaN stays NaN)."""
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return x * 0.0
+
+
+@jit
+def _step(x: float, at_zero: float) -> float:
+    """np.heaviside(x, at_zero) for one float (NaN stays NaN)."""
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return 0.0
+    if x == 0.0:
+        return at_zero
+    return x
+
+
+@jit
+def friction_joint(v: float, j: int, W: np.ndarray) -> float:
+    """f_j(v) [N·m] of eq. (12) with every optional term, in FrictionParams.torque's order of
+    operations; advances the held sign ``W[STATE, j]`` when the model has held friction."""
+    smooth = W[SMOOTH, j]
+    s = math.tanh(v / smooth) if smooth > 0.0 else _sign(v)
+    out = W[COULOMB, j] * s
+    if W[HAS_STRIBECK, j] != 0.0:
+        t = v / W[STRIBECK_VELOCITY, j]
+        out = out + math.exp(-(t * t)) * s * W[STRIBECK_GAP, j]
+    out = out + W[VISCOUS, j] * v
+    out = out + W[BIAS, j]
+    if W[HAS_QUADRATIC, j] != 0.0:
+        out = out + abs(v) * v * W[QUADRATIC, j]
+    if W[HAS_HELD, j] != 0.0:
+        hv = W[HELD_VELOCITY, j]
+        h = W[STATE, j]
+        h = h + (_sign(v) - h) * _step(abs(v) - hv, 0.0)
+        W[STATE, j] = h
+        t = v / hv
+        t = math.exp(-(t * t)) * h
+        if W[HELD_PASSIVE, j] != 0.0:
+            t = t * _step(v * h, 1.0)
+        out = out + t * W[HELD, j]
+    return out
+
+
+@jit
+def friction(qd: np.ndarray, W: np.ndarray) -> None:
+    """W[F] = f(qd) [N·m], (n,), as FrictionParams.torque(qd, out, state=W[STATE])."""
+    for j in range(qd.shape[0]):
+        W[F, j] = friction_joint(qd[j], j, W)
+
+
+@jit
+def snapshot_terms(
+    q: np.ndarray, qd: np.ndarray, tau: np.ndarray, C: np.ndarray, W: np.ndarray
+) -> bool:
+    """The snapshot's arithmetic around pinocchio: is the sample finite (the sum of q, qd and
+    tau, as the numpy path's check); if so, with ``W[FLAGS] & FRICTION_TERM`` the friction
+    ``W[F]`` = f(qd) and ``W[TOTAL]`` = tau - f, with ``& CORIOLIS_T_TERM`` ``W[CT]`` = Cᵀ·qd
+    (C (n, n) evaluated at this sample). Returns the finiteness; W is untouched (held-friction
+    memory included) for a non-finite sample."""
+    acc = 0.0
+    for j in range(q.shape[0]):
+        acc += q[j]
+    acc2 = 0.0
+    for j in range(qd.shape[0]):
+        acc2 += qd[j]
+    acc3 = 0.0
+    for j in range(tau.shape[0]):
+        acc3 += tau[j]
+    if not math.isfinite(acc + acc2 + acc3):
+        return False
+    n = qd.shape[0]
+    flags = int(W[FLAGS, 0])
+    if flags & FRICTION_TERM:
+        for j in range(n):
+            f = friction_joint(qd[j], j, W)
+            W[F, j] = f
+            W[TOTAL, j] = tau[j] - f
+    if flags & CORIOLIS_T_TERM:
+        for i in range(n):
+            acc = 0.0
+            for k in range(n):
+                acc += C[k, i] * qd[k]
+            W[CT, i] = acc
+    return True
+
+
+@jit
+def add_friction(base: np.ndarray, qd: np.ndarray, W: np.ndarray, out: np.ndarray) -> None:
+    """W[F] = f(qd) and out = base + f [N·m], (n,): the inverse dynamics' friction added to
+    the rigid-body torque ``base`` (RNEA)."""
+    for j in range(qd.shape[0]):
+        fj = friction_joint(qd[j], j, W)
+        W[F, j] = fj
+        out[j] = base[j] + fj
