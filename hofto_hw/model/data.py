@@ -48,6 +48,7 @@ class ModelData:
         self._M = np.zeros((n, n))
         self._Mt = np.zeros((n, n))
         self._lower = np.tril(np.ones((n, n), dtype=bool), -1)
+        self._symmetrise: bool | None = None
         self._C = np.zeros((n, n))
         self._Cqd = np.zeros(n)
         self._g = np.zeros(n)
@@ -88,11 +89,15 @@ class ModelData:
     def mass_matrix(self, q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """M(q) [kg·m²], symmetric, shape (n, n), rotor inertia included."""
         m = self.model
-        pin.crba(m.pin_model, self.pin_data, q)
         M = self._M if out is None else out
-        np.copyto(M, self.pin_data.M)
-        np.copyto(self._Mt, M.T)
-        np.copyto(M, self._Mt, where=self._lower)
+        np.copyto(M, pin.crba(m.pin_model, self.pin_data, q))
+        if self._symmetrise is None:  # measured once per process (snapshot.pinocchio_traits)
+            from hofto_hw.model.snapshot import pinocchio_traits
+
+            self._symmetrise = not pinocchio_traits(m).full_mass_matrix
+        if self._symmetrise:  # a pinocchio that fills the upper triangle only
+            np.copyto(self._Mt, M.T)
+            np.copyto(M, self._Mt, where=self._lower)
         return M
 
     def coriolis_matrix(
