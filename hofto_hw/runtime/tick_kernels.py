@@ -50,7 +50,7 @@ def tick_flags_numpy(
     """The reference of :func:`tick_flags` (the tick's code before the kernel). The finiteness
     is one sum: a sum that overflows to inf says 'not finite' where the kernel does not, and
     the tick then only runs its per-row checks, which report nothing (the same outcome)."""
-    flags = ESTIMATES_FINITE if math.isfinite(_sum(tau_ext.reshape(-1))) else 0
+    flags = ESTIMATES_FINITE if math.isfinite(_sum(tau_ext, axis=None)) else 0
     for s in states:
         if s in powered:
             flags |= POWER_ON
