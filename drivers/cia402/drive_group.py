@@ -86,6 +86,8 @@ class DriveGroup(ImageFields):
         self.tau = self._si[2]
         #: motor current [A] in the joint's sense, (n,)
         self.current = self._si[3]
+        #: q, qd, tau as the rows of one (3, n) view (one copy of the whole sample)
+        self.sample = self._si[:3]
         #: State code per axis, uint8 (n,)
         self.states = np.zeros(n, dtype=np.uint8)
         #: status of the last exchange (0 = ok, see drivers.transport.STATUS_TEXT)

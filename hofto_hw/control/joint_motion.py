@@ -41,6 +41,19 @@ MODE_NAMES = {
 PLAYING = (REPLAY, MOVE_TO)
 
 
+def fade_in(t: float, ramp: float) -> tuple[float, float, float]:
+    """The quintic fade-in s(t/ramp) and its time derivatives s', s'' [1/s, 1/s²] at ``t`` [s]
+    (``ramp`` > 0). At and after the ramp the constants its formula gives there (1, +0, -0:
+    every tick of a long run, without the arithmetic)."""
+    if t >= ramp:
+        return 1.0, 0.0, -0.0
+    x = min(max(t / ramp, 0.0), 1.0)
+    b = x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
+    bd = 30.0 * x * x * (1.0 - x) ** 2 / ramp
+    bdd = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / (ramp * ramp)
+    return b, bd, bdd
+
+
 class DemoPath:
     """Smooth periodic joint motion about a start pose (see module docstring)."""
 
@@ -78,10 +91,7 @@ class DemoPath:
         self, t: float, q0: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     ) -> None:
         """Reference at time ``t`` [s] since the start into q, qd, qdd (n,)."""
-        x = min(max(t / self.ramp, 0.0), 1.0)
-        b = x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
-        bd = 30.0 * x * x * (1.0 - x) ** 2 / self.ramp
-        bdd = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / (self.ramp * self.ramp)
+        b, bd, bdd = fade_in(t, self.ramp)
         s, c, arg = self._s, self._c, self._arg
         if self._use_kernel:
             path_arg(self.w, self.phi, t, arg)

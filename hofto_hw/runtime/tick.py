@@ -40,6 +40,7 @@ from hofto_hw.recording.record import (
     tick_dtype,
 )
 from hofto_hw.runtime.teach import FINISHED, RECORDING
+from hofto_hw.runtime.tick_kernels import ESTIMATES_FINITE, POWER_ON, tick_flags, tick_flags_numpy
 from safety.bus_health import BusHealth
 from safety.collision import CollisionLevels
 from safety.limits import LimitMonitor
@@ -54,7 +55,8 @@ MAX_STOPS = 256  # stop episodes kept for the summary
 MAX_SUBSTEPS = 250  # observer steps over one stalled gap at most (cost: one step each)
 FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
 _DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
-_sum = np.add.reduce
+#: the power stage is on (a quick-stop ramp keeps it on until each axis rests)
+_POWERED = np.array([_OE, _QSA], dtype=np.uint8)
 
 
 def gap_steps(dt: float, period: float) -> int:
@@ -125,12 +127,13 @@ class Tick:
         #: time advances one cycle per tick (an interpolator that missed cycles is late, it
         #: does not jump), and the jump check allows for the gap
         self.period = float(period)
+        self._stall_dt = 1.5 * self.period if self.period > 0.0 else math.inf  # see gap_steps
         self.t_cmd = 0.0  # setpoint (path) time [s]
         self._since_fresh = 0.0  # [s] since the last fresh sample
         self._prev = np.zeros((3, n))  # last tick's q, qd, tau (interpolation start)
         self._interp = np.zeros((3, n))  # one substep's q, qd, tau
         self.tau_ext = np.zeros((max(1, len(self.observers)), n))
-        self._tau_ext_flat = self.tau_ext.reshape(-1)  # a view: one finiteness sum
+        self._rows = [(obs, self.tau_ext[i]) for i, obs in enumerate(self.observers)]
         self.tau_ff = np.zeros(n)
         self.q_sent = np.zeros(n)  # position target of the last command [rad]
         self.err_codes = group.transport.tx["error_code"]
@@ -194,6 +197,13 @@ class Tick:
         self.script = None  # simulation script: .step(tick) at the start of every tick
         self._tau_mon = np.zeros_like(self.tau_ext)  # the collision monitor's input
         self._wrench = r["wrench"]
+        self._wrench_set = False  # the record's wrench holds a drag estimate (else all NaN)
+        self._rec_monitored = False  # the record's ``monitored`` (written when it changes)
+        self._qdd_rec = self._r["qdd_cmd"]
+        #: the tick's flags call (tick_kernels.py): compiled with the record fill, else numpy
+        self._flags = tick_flags if self._fill_kernel else tick_flags_numpy
+        if self._fill_kernel and not kernels.warm(self._warm_flags):
+            self._flags = tick_flags_numpy
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
@@ -251,8 +261,9 @@ class Tick:
         dragging = motion.mode == DRAG
         if dragging:
             self._drag_observe(q, qd, cmd_dt)
-        else:
+        elif self._wrench_set:
             self._wrench.fill(np.nan)
+            self._wrench_set = False
 
         # 4. safety: decides, latches, picks the stop category
         good = self.bus.check(stop, status, fresh, g.states, self.err_codes, self.expect_enabled)
@@ -260,7 +271,9 @@ class Tick:
         # a finite snapshot sample means q, qd, tau are all finite (their sum is): the per-array
         # checks, which name the joint, run only when something is not
         ok = snap.finite or (lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau))
-        if not math.isfinite(_sum(self._tau_ext_flat)):
+        # one call: the estimates' finiteness, the power stage, motion.qdd into the record
+        flags = self._flags(self.tau_ext, g.states, _POWERED, motion.qdd, self._qdd_rec)
+        if not flags & ESTIMATES_FINITE:
             for i in range(len(self.observers)):
                 ok &= lim.finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
@@ -274,16 +287,18 @@ class Tick:
         # observer with poles at a few hundred rad/s reads either as a contact
         trusted = good and not stop.active & _DRIVE_CAUSES
         settled = self.tick >= self._judge_from
-        monitored = (
-            self.collision is not None and ok and trusted and settled and self._power_on(g.states)
-        )
-        self.tick_rec["monitored"] = monitored  # replay judges the same ticks
-        np.copyto(self._r["qdd_cmd"], motion.qdd)
+        # only while the power stage is on (quick-stop ramps included)
+        power_on = not self.enabling and flags & POWER_ON != 0
+        monitored = self.collision is not None and ok and trusted and settled and power_on
+        if monitored != self._rec_monitored:
+            self._rec_monitored = monitored = bool(monitored)
+            self.tick_rec["monitored"] = monitored  # replay judges the same ticks
         if monitored:
             # only while the power stage is on (quick-stop ramps included): with it off the
             # brakes act and the motor torque no longer explains the motion
             self.collision.update(stop, self._monitored(dragging), q, qd, motion.qdd, dt)
-        self._overrun(missed)
+        if missed or self.overrun_streak:
+            self._overrun(missed)
         if self.stop_requested:
             stop.report(Fault.STOP_REQUEST)
         if self.log_failure:
@@ -292,7 +307,8 @@ class Tick:
             self._drag_report()
         if self.reset_requested:
             self._reset()
-        self._measure_stop(q, qd)
+        if self._measuring or stop.first_tick == self.tick:
+            self._measure_stop(q, qd)
 
         # 5. controller and 6. command (acting the stop category)
         cat = stop.category
@@ -345,11 +361,11 @@ class Tick:
         interpolated linearly from the last tick's sample: each observer is tuned (and
         checked stable) for one cycle, and a single step of k cycles is not stable for it
         (forward Euler: gain·dt < 2)."""
-        k = gap_steps(dt, self.period)
+        k = 1 if dt <= self._stall_dt else gap_steps(dt, self.period)
         if k == 1:
             snap.compute(q, qd, tau)
-            for i, obs in enumerate(self.observers):
-                np.copyto(self.tau_ext[i], obs.update_snapshot(snap, dt))
+            for obs, row in self._rows:
+                np.copyto(row, obs.update_snapshot(snap, dt))
         else:
             h = dt / k
             prev, x = self._prev, self._interp
@@ -358,11 +374,15 @@ class Tick:
                 for j, now in enumerate((q, qd, tau)):
                     lerp(prev[j], now, a, x[j])
                 snap.compute(x[0], x[1], x[2])
-                for i, obs in enumerate(self.observers):
-                    np.copyto(self.tau_ext[i], obs.update_snapshot(snap, h))
+                for obs, row in self._rows:
+                    np.copyto(row, obs.update_snapshot(snap, h))
         self._keep_sample(q, qd, tau)
 
     def _keep_sample(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
+        g = self.group
+        if q is g.q and qd is g.qd and tau is g.tau:
+            np.copyto(self._prev, g.sample)  # the group's rows: one copy
+            return
         np.copyto(self._prev[0], q)
         np.copyto(self._prev[1], qd)
         np.copyto(self._prev[2], tau)
@@ -375,14 +395,6 @@ class Tick:
             self.overrun_streak = 0
         if self.overrun_streak >= self.overrun_limit:
             self.stop.report(Fault.OVERRUN, -1, float(self.overrun_streak))
-
-    def _power_on(self, states: np.ndarray) -> bool:
-        if self.enabling:
-            return False
-        for s in states:  # a quick-stop ramp keeps the power on until each axis rests
-            if s == _OE or s == _QSA:
-                return True
-        return False
 
     def _measure_stop(self, q: np.ndarray, qd: np.ndarray) -> None:
         """Stopping time [s] and distance [rad, max over joints] from the latch to rest."""
@@ -557,6 +569,7 @@ class Tick:
         if d.category == 2:
             self.drag_reason = DragReason.ENABLE_RELEASED
         np.copyto(self._wrench, d.wrench)
+        self._wrench_set = True
 
     def _monitored(self, dragging: bool) -> np.ndarray:
         """The collision monitor's input: the estimates, minus (while the hand drags) each
@@ -577,6 +590,11 @@ class Tick:
         elif reason == DragReason.CONTACT_OFF_TOOL:
             # joint = link index (the link after joint j is link j + 1, 1-based)
             stop.report(Fault.COLLISION, d.contact_link - 1, d.mismatch)
+
+    def _warm_flags(self) -> None:
+        # on the tick's own arrays (the record's field is an unaligned view: its own signature);
+        # it copies motion.qdd into the record, as every tick does
+        tick_flags(self.tau_ext, self.group.states, _POWERED, self.motion.qdd, self._qdd_rec)
 
     def _warm_record(self) -> None:
         g, scratch = self.group, np.zeros(1, dtype=self.tick_rec.dtype)

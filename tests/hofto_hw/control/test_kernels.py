@@ -87,3 +87,23 @@ def test_motion_update_is_bit_identical_through_mode_changes() -> None:
             ref.start(start)
             fast.start(start)
     assert ramps > 100 and moves > 100
+
+
+def test_fade_in_constants_after_the_ramp_are_the_formula_s() -> None:
+    """fade_in skips the arithmetic at and after the ramp: the same bits (signed zeros too)."""
+    from hofto_hw.control.joint_motion import fade_in
+
+    def formula(t: float, ramp: float) -> tuple[float, float, float]:
+        x = min(max(t / ramp, 0.0), 1.0)
+        b = x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
+        bd = 30.0 * x * x * (1.0 - x) ** 2 / ramp
+        bdd = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / (ramp * ramp)
+        return b, bd, bdd
+
+    rng = np.random.default_rng(8)
+    for ramp in (0.7, 1.0, 3e-3, 123.4):
+        ts = [0.0, -1.0, ramp, np.nextafter(ramp, 0.0), np.nextafter(ramp, 2 * ramp), 1e9]
+        ts += list(rng.uniform(-0.1 * ramp, 3.0 * ramp, 500))
+        for t in ts:
+            got, want = np.array(fade_in(float(t), ramp)), np.array(formula(float(t), ramp))
+            assert _identical(got, want), (t, ramp)
