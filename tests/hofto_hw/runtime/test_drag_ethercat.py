@@ -122,7 +122,7 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     from hofto_hw.model import RobotModel
 
     r = rig.service
-    r.start("--hold")
+    r.start("--hold", log=True)
     r.wait_state("running")
     wait_for(lambda: r.status()["ticks"] > 500, 60, "500 ticks", r.proc)
     # a hard knock at the tool: the monitor stops the arm (category 1)
