@@ -7,8 +7,8 @@ the hand's release; releasing the enabling input stops the arm (enabling_release
 category 2). The speeds are the true arm's (the emulator's state, as the simulated drag
 script's figures). The run records a flight log (tmp folder) for a failure's post-mortem.
 
-Not asserted at the issue's 5 %: the off-axis drift. Over EtherCAT it is 8.3-8.9 mm/s
-against 100 (measured, 6 loaded runs): the estimate's sideways force (F_z -2.6 N falling to
+Not asserted at the issue's 5 %: the off-axis drift. Over EtherCAT it is 7.8-9.3 mm/s
+against 100 (median 8.8, 13 loaded runs): the estimate's sideways force (F_z -2.6 N falling to
 -1.3 N along the path; the commanded tool velocity is the measured one to 0.04 mm/s, so not
 the bus, DC or the drives) is the emulated arm's friction (Stribeck, other coefficients)
 against the model's at this pose with the 3 kg load; the in-process harness with the same
