@@ -138,10 +138,14 @@ def set_stamps(batch: np.ndarray, t: np.ndarray) -> np.ndarray:
     return ns
 
 
-def tick_status_layout(n_joints: int = 0) -> tuple[np.dtype, np.ndarray]:
+def tick_status_layout(n_joints: int = 0, sample_dt: bool = True) -> tuple[np.dtype, np.ndarray]:
     """hofto_hw_msgs/msg/TickStatus: ``tick`` u8, ``mode`` u1, ``faults`` u4, ``bus_status``
-    i4, ``wakeup_us``/``compute_us`` f4, ``monitored`` u1, ``qdd_cmd`` float64[n_joints]."""
+    i4, ``wakeup_us``/``compute_us`` f4, ``monitored`` u1, ``qdd_cmd`` float64[n_joints],
+    ``sample_dt`` f8. ``sample_dt=False``: the layout of older logs, which lack it."""
     lay = header(CdrLayout(), "").scalar("tick", "u8").scalar("mode", "u1")
     lay.scalar("faults", "u4").scalar("bus_status", "i4")
     lay.scalar("wakeup_us", "f4").scalar("compute_us", "f4").scalar("monitored", "u1")
-    return lay.doubles("qdd_cmd", n_joints).build()
+    lay.doubles("qdd_cmd", n_joints)
+    if sample_dt:
+        lay.scalar("sample_dt", "f8")
+    return lay.build()

@@ -41,6 +41,7 @@ _STATUS_FIELDS = (
     "compute_us",
     "monitored",
     "qdd_cmd",
+    "sample_dt",
 )
 
 

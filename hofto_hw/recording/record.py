@@ -12,7 +12,9 @@ Record kinds (all times in seconds on the loop's monotonic clock since start, SI
   computed), ``mode`` (u1) controller mode code, ``faults`` (u4) latched fault-class bit mask,
   ``bus_status`` (i4) the transport's exchange status, ``wakeup_us`` / ``compute_us`` (f4),
   ``monitored`` (u1) 1 when the collision monitor judged this tick (a drive powered, finite
-  estimates), ``qdd_cmd`` (n,) [rad/s²] the commanded acceleration it used for its phase.
+  estimates), ``qdd_cmd`` (n,) [rad/s²] the commanded acceleration it used for its phase,
+  ``sample_dt`` (f8) [s] the interval the observers integrated this tick (the bus's sample
+  interval with EtherCAT DC, else the loop's dt; 0 when they held over a lost sample).
 - event (rare): ``t``, ``tick``, ``kind`` (u2, a fault/event class code), ``joint`` (i2, -1 =
   none), ``category`` (i1, stop category 0/1/2, -1 = none), ``value`` (f8, e.g. the ratio or
   the offending value).
@@ -66,6 +68,7 @@ def _tick_dtype(n: int, k: int) -> np.dtype:
             ("compute_us", "<f4"),
             ("monitored", "u1"),
             ("qdd_cmd", "<f8", (n,)),
+            ("sample_dt", "<f8"),
         ]
     )
 

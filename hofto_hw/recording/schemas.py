@@ -114,6 +114,7 @@ TICK_STATUS_MSGDEF = _msgdef(
         "float32 compute_us",
         "uint8 monitored",
         "float64[] qdd_cmd",
+        "float64 sample_dt",
     ],
     _HEADER,
     _TIME,

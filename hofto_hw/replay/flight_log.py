@@ -61,6 +61,9 @@ class FlightLog:
     #: collision monitor judged the tick, and the commanded acceleration (N, n) [rad/s²]
     monitored: NDArray[np.uint8] | None = None
     qdd_cmd: FloatArray | None = None
+    #: (N,) [s] the interval the loop's observers integrated in each tick (the bus's sample
+    #: interval with EtherCAT DC; 0 where they held over a lost sample); None in older logs
+    sample_dt: FloatArray | None = None
 
     @property
     def n_ticks(self) -> int:
@@ -176,13 +179,21 @@ def read_flight_log(path: Path) -> FlightLog:
 
 
 def _tick_status(log: FlightLog, raws: list[bytes]) -> None:
-    """Fill ``monitored``/``qdd_cmd`` when every status message has the current layout."""
-    dtype, _ = cdr.tick_status_layout(len(log.joint_names))
-    if len(raws) != log.n_ticks or any(len(r) != dtype.itemsize for r in raws):
-        return  # an older log (no such fields) or a cut one: replay falls back
+    """Fill ``monitored``/``qdd_cmd`` (and ``sample_dt``) when every status message has the
+    current layout or the one before ``sample_dt`` was logged."""
+    if len(raws) != log.n_ticks:
+        return  # a cut log: replay falls back
+    for with_dt in (True, False):
+        dtype, _ = cdr.tick_status_layout(len(log.joint_names), sample_dt=with_dt)
+        if all(len(r) == dtype.itemsize for r in raws):
+            break
+    else:
+        return  # an older log (no such fields): replay falls back
     st = np.frombuffer(b"".join(raws), dtype=dtype)
     log.monitored = np.array(st["monitored"], dtype=np.uint8)
     log.qdd_cmd = np.array(st["qdd_cmd"], dtype=float).reshape(log.n_ticks, -1)
+    if with_dt:
+        log.sample_dt = np.array(st["sample_dt"], dtype=float)
 
 
 def _event_schema():

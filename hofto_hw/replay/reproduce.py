@@ -293,23 +293,36 @@ def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray, period: float = 0.0) 
 
     A reset of the stop controller (a ``reset`` event) also resets the loop's observers on
     that tick's measured state after their update; replay does the same, so the estimates
-    after a reset are the loop's too."""
+    after a reset are the loop's too.
+
+    Logs that record the observers' own interval per tick (``sample_dt``: the drives' sample
+    interval with EtherCAT DC, 0 where the loop held its observers over a lost sample) are
+    integrated over it instead of ``dt``; a held tick keeps the last estimate, and the next
+    gap is interpolated from the last sample the observers took, as the loop does."""
+    h_obs = dt if log.sample_dt is None else log.sample_dt
     est = np.zeros_like(log.q)
     index = {int(tk): k for k, tk in enumerate(log.ticks)}
     resets = {index[e.tick] for e in log.events if e.kind_name == RESET_KIND and e.tick in index}
-    obs.reset(log.q[0] - log.qd[0] * dt[0], log.qd[0])
+    h0 = float(h_obs[0]) if h_obs[0] > 0.0 else float(dt[0])
+    obs.reset(log.q[0] - log.qd[0] * h0, log.qd[0])
     x = np.zeros((3, log.q.shape[1]))
+    last = 0  # the tick of the last sample the observers took
     for k in range(log.n_ticks):
-        steps = gap_steps(float(dt[k]), period) if k > 0 else 1
-        if steps == 1:
-            est[k] = obs.update(log.q[k], log.qd[k], log.tau[k], dt[k])
+        hk = float(h_obs[k])
+        steps = gap_steps(hk, period) if k > 0 else 1
+        if hk <= 0.0:  # held over a lost sample: the loop did not update its observers
+            est[k] = est[k - 1] if k > 0 else 0.0
+        elif steps == 1:
+            est[k] = obs.update(log.q[k], log.qd[k], log.tau[k], hk)
+            last = k
         else:  # a stall: the loop integrated the gap in one-cycle steps (Tick._observe)
-            h = dt[k] / steps
+            h = hk / steps
             for s in range(1, steps + 1):
                 a = s / steps
                 for j, series in enumerate((log.q, log.qd, log.tau)):
-                    lerp(series[k - 1], series[k], a, x[j])
+                    lerp(series[last], series[k], a, x[j])
                 est[k] = obs.update(x[0], x[1], x[2], h)
+            last = k
         if k in resets:
             obs.reset(log.q[k], log.qd[k])
     return est

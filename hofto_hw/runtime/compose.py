@@ -38,6 +38,7 @@ from hofto_hw.runtime.build import (
     build_transport,
 )
 from hofto_hw.runtime.loop import Loop, RealClock, SimClock
+from hofto_hw.runtime.realtime import collect_before_loop
 from hofto_hw.runtime.tick import Tick
 from safety.bus_health import BusHealth
 from safety.collision import CollisionLevels
@@ -147,7 +148,12 @@ def build(
     sink: RecordSink | None = None,
     contact: bool = True,
 ) -> System:
-    """Build and start everything: drives enabled in CSP, holding; the loop not yet run."""
+    """Build and start everything: drives enabled in CSP, holding; the loop not yet run.
+
+    The drives are enabled last, after every compiled kernel is warmed (seconds when the
+    cache is cold): an enabled drive on a bus whose process data stops for longer than its
+    watchdog (EtherCAT SM watchdog, 100 ms by default) leaves Operation enabled, and the
+    loop's first tick would latch a disabled drive."""
     rate = float(cfg.loop.rate_hz)
     model = build_model(cfg)
     table = loop_observer_table(cfg)
@@ -197,6 +203,9 @@ def build(
     tick.diag_every = max(1, round(rate / 10.0))
     if s.collision is not None:
         tick.settle_ticks = round(s.collision.settle_time * rate)
+    if clock != "sim":
+        collect_before_loop()  # the loop's own collection then fits inside the bus watchdog
+    enable_drives(bus, group)
     tick.start()
     period_ns = round(1e9 / rate)
     clk: RealClock | SimClock = SimClock(period_ns) if clock == "sim" else RealClock(period_ns)
@@ -219,8 +228,8 @@ def build(
 
 
 def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:
-    """The transport ``bus.transport`` names and its drive group, opened, configured, in CSP
-    and enabled (bumpless: the drive group holds the measured position).
+    """The transport ``bus.transport`` names and its drive group, opened, configured and in
+    CSP, not yet enabled (:func:`enable_drives`).
 
     ``sim``: the in-process plant (the run's payload and model error, no scripted world
     torques: the run scripts its own contact). Any other registered transport (``ethercat``,
@@ -244,11 +253,20 @@ def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:
     try:
         group.configure(cfg.bus.drives)
         group.set_mode(Mode.CSP)
-        group.enable()
     except BaseException:
         bus.close()
         raise
     return bus, group
+
+
+def enable_drives(bus: Transport, group: DriveGroup) -> None:
+    """Every drive to Operation enabled (bumpless: the group holds the measured position);
+    the bus is closed if that fails."""
+    try:
+        group.enable()
+    except BaseException:
+        bus.close()
+        raise
 
 
 def _build_drag(

@@ -131,6 +131,15 @@ def drop_realtime() -> None:
         pass
 
 
+def collect_before_loop() -> None:
+    """Collect once and freeze what is left (start-up objects), so the collection that
+    :class:`quiet_gc` makes when the loop starts has almost nothing to scan (measured:
+    ~0.1-0.2 s for a built system otherwise, time in which the bus carries no process data).
+    """
+    gc.collect()
+    gc.freeze()
+
+
 class quiet_gc:
     """Context: gc.freeze() + gc.disable() inside, gc.enable() after."""
 

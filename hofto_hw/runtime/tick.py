@@ -251,8 +251,11 @@ class Tick:
         # dt. A repeated sample integrated as new reads as a contact to HOFTO
         snap = self.snapshot
         sample_dt = g.sample_dt
+        obs_dt = 0.0  # held over a lost sample (logged: flight-log replay integrates the same)
         if sample_dt >= 0.0:
-            self._observe(snap, q, qd, tau, sample_dt if sample_dt > 0.0 else dt)
+            obs_dt = sample_dt if sample_dt > 0.0 else dt
+            self._observe(snap, q, qd, tau, obs_dt)
+        self.tick_rec["sample_dt"] = obs_dt
         cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
         self.t_cmd += cmd_dt
 

@@ -162,7 +162,8 @@ class EmulatedNetwork:
         code: a 0x603F code of drivers.sim.drive.FAULTS, persistent); ``clear_drive_fault``
         (slave); ``position_jump`` (slave, offset [rad]: the reported position jumps by it
         and stays off; 0 restores); ``push`` (force [N] (3,) world frame at the tool,
-        duration [s], ramp [s]: a hand on the true arm from now); ``sdo_abort`` (slave,
+        duration [s], ramp [s]: a hand on the true arm from now; answers its start ``t`` [s]
+        of plant time); ``sdo_abort`` (slave,
         index, sub (-1 = all), code; code 0 removes); ``refuse_state`` (slave, state, code;
         code 0 removes); ``al_error`` (slave, code: the slave drops to SAFE-OP, or stays
         lower, with the error flag and this code);
@@ -190,6 +191,7 @@ class EmulatedNetwork:
                 self.drives.push_tool(
                     request["force"], float(request["duration"]), float(request.get("ramp", 0.02))
                 )
+                return {"ok": True, "t": float(self.drives.plant.t)}  # the push's start [s]
             elif op == "position_jump":
                 if self.drives is None:
                     raise ValueError("no drives on this network")

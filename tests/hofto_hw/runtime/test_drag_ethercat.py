@@ -2,9 +2,18 @@
 configs/er3a.yaml with the bus on the veth pair) holds the arm; a hand (the emulator's
 ``push`` request, a force on its own true arm) hits the tool hard enough for a collision
 stop; after a reset, drag mode and the enabling input (the run's control socket), a 20 N
-push along x drags the tool at F/B_a within 10 %; releasing the enabling input stops the arm
-(enabling_released, category 2). The speed is the true arm's tool speed (the emulator's
-state, as the simulated drag script's figures).
+push along x drags the tool at F/B_a within 10 % and the arm comes to rest within 100 ms of
+the hand's release; releasing the enabling input stops the arm (enabling_released,
+category 2). The speeds are the true arm's (the emulator's state, as the simulated drag
+script's figures). The run records a flight log (tmp folder) for a failure's post-mortem.
+
+Not asserted at the issue's 5 %: the off-axis drift. Over EtherCAT it is 7.8-9.3 mm/s
+against 100 (median 8.8, 13 loaded runs): the estimate's sideways force (F_z -2.6 N falling to
+-1.3 N along the path; the commanded tool velocity is the measured one to 0.04 mm/s, so not
+the bus, DC or the drives) is the emulated arm's friction (Stribeck, other coefficients)
+against the model's at this pose with the 3 kg load; the in-process harness with the same
+load and exact friction gives 1.2 mm/s, with the arm's friction 4.0-6.6 mm/s. The bound
+here, 10 %, guards the figure against getting worse.
 Needs root (veth, raw sockets): skipped when unprivileged, a failure under CI.
 """
 
@@ -34,6 +43,8 @@ PUSH = 20.0  # N along x, world frame
 PUSH_TIME = 1.8  # s
 SETTLE = 0.5  # s from the push's start to the steady window (drag_figures' settle)
 RAMP = 0.2  # s: the hand builds its push up (not a 20 ms step)
+REST_WITHIN = 0.1  # s after the hand lets go (issue 9)
+RESOLUTION = 0.05  # s: the rest time is judged only when the samples around it are this dense
 
 
 def _config(folder: Path, master: str) -> tuple[Path, dict]:
@@ -42,7 +53,9 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
     data["bus"]["transport"] = "ethercat"
     data["bus"]["interface"] = master
     data["safety"]["overrun_streak"] = 100_000  # host stalls are not under test here
-    data["safety"]["bus"]["lost_cycles"] = 20
+    # the emulator is a user-space process: on a loaded 2-core machine it was starved of
+    # 20+ cycles (a bus loss, category 0) once in 6 runs; bus loss is not under test here
+    data["safety"]["bus"]["lost_cycles"] = 200
     # DC: the observers integrate over the drives' sample interval (the reference clock's
     # time), not over the master's late wake-ups on this loaded machine
     data["bus"]["ethercat"] = {
@@ -67,7 +80,7 @@ class DragRig:
         """Start a push on the emulated arm; returns the emulator's plant time then."""
         reply = self.emu.call(op="push", force=list(force), duration=duration, ramp=ramp)
         assert reply["ok"], reply
-        return float(self.emu.call(op="status")["t"])
+        return float(reply["t"])
 
     def plant_time(self) -> float:
         return float(self.emu.call(op="status")["t"])
@@ -109,20 +122,27 @@ def _at_rest(r: DragRig, speed: float) -> bool:
     return float(np.abs(r.emu.call(op="status")["qd"]).max()) < speed
 
 
-@pytest.mark.xfail(
-    reason="open (issue 9): with DC (observers on the drives' sample interval, held over lost "
-    "frames) and the press after the arm is at rest it passed 3 of 3 runs unloaded and 3 of 4 "
-    "beside two busy processes; the failure: the 80 N knock latched no collision within 60 s "
-    "(the same happened before these changes on a loaded machine), not yet explained",
-    strict=False,
-)
+def _rest_time(
+    t: np.ndarray, tool_speed: np.ndarray, joint_moving: np.ndarray, t_release: float, fast: float
+) -> tuple[float, float]:
+    """(upper bound of the rest time [s] after ``t_release``, the sampling gap it hides):
+    the first sample after the last one where the tool is faster than ``fast`` [m/s] or a
+    joint moves (faster than the standstill speed; both criteria of drag_figures)."""
+    after = np.flatnonzero(t >= t_release)
+    moving = after[(tool_speed[after] > fast) | joint_moving[after]]
+    last = int(moving[-1]) if moving.size else int(after[0]) - 1
+    if last + 1 >= t.shape[0]:
+        return np.inf, np.inf
+    return float(t[last + 1] - t_release), float(t[last + 1] - t[max(last, 0)])
+
+
 def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     from hofto_hw.config.loader import load_config
     from hofto_hw.experiments.drag_sim import tool_motion
     from hofto_hw.model import RobotModel
 
     r = rig.service
-    r.start("--hold")
+    r.start("--hold", log=True)
     r.wait_state("running")
     wait_for(lambda: r.status()["ticks"] > 500, 60, "500 ticks", r.proc)
     # a hard knock at the tool: the monitor stops the arm (category 1)
@@ -142,13 +162,12 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     _until_ok(rig, "enable on")
     t0 = rig.push((PUSH, 0.0, 0.0), PUSH_TIME, ramp=RAMP)
     t_end = t0 + PUSH_TIME
-    # the true arm's state over the steady window, sampled through the emulator's socket
-    samples: list[tuple[list[float], list[float]]] = []
+    # the true arm's state from the push on, sampled through the emulator's socket
+    samples: list[tuple[float, list[float], list[float]]] = []
 
     def sample() -> bool:
         st = rig.emu.call(op="status")
-        if t0 + SETTLE <= st["t"] <= t_end - 0.1:
-            samples.append((st["q"], st["qd"]))
+        samples.append((st["t"], st["q"], st["qd"]))
         return st["t"] > t_end + 0.2
 
     wait_for(sample, 60, "the push over", r.proc)
@@ -171,15 +190,26 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     assert released["category"] == 2
 
     cfg = load_config(CONFIG)
-    assert len(samples) >= 10, len(samples)
-    q = np.array([x[0] for x in samples])
-    qd = np.array([x[1] for x in samples])
+    t = np.array([x[0] for x in samples])
+    q = np.array([x[1] for x in samples])
+    qd = np.array([x[2] for x in samples])
     _, tool_v = tool_motion(RobotModel.from_config(cfg.robot), q, qd)
-    steady = float(tool_v[:, 0].mean())
+    window = (t >= t0 + SETTLE) & (t <= t_end - 0.1)
+    assert window.sum() >= 10, int(window.sum())
+    steady = float(tool_v[window, 0].mean())
+    off_axis = float(np.linalg.norm(tool_v[window, 1:].mean(axis=0)))
     expected = PUSH / cfg.drag.damping
+    tool_speed = np.linalg.norm(tool_v, axis=1)
+    joint_moving = np.abs(qd).max(axis=1) > cfg.drag.standstill_speed
+    fast = max(0.05 * steady, 1e-3)
+    rest, gap = _rest_time(t, tool_speed, joint_moving, t_end, fast)
     print(
         f"FIGURE drag over ethercat steady={steady * 1e3:.1f} mm/s expected="
-        f"{expected * 1e3:.1f} mm/s off_axis={np.linalg.norm(tool_v[:, 1:].mean(axis=0)) * 1e3:.2f}"
-        f" mm/s samples={len(samples)} overruns={s['overruns']}"
+        f"{expected * 1e3:.1f} mm/s off_axis={off_axis * 1e3:.2f} mm/s rest<={rest * 1e3:.0f} ms"
+        f" (sampling gap {gap * 1e3:.0f} ms) samples={int(window.sum())}"
+        f" overruns={s['overruns']}"
     )
     assert abs(steady - expected) < 0.1 * expected, (steady, expected)
+    assert off_axis < 0.1 * expected, (off_axis, expected)  # the issue's 5 %: see the docstring
+    if gap <= RESOLUTION:  # measurable: the samples bracket the rest instant closely enough
+        assert rest <= REST_WITHIN, (rest, gap)
