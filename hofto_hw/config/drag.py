@@ -195,6 +195,26 @@ class DragConfig(FileModel):
         "the position loop does not fight the hand (ER3A sim: the arm rests 42 ms after a "
         "release instead of 133 ms, momentum observer)",
     )
+    friction_learning: bool = Field(
+        True,
+        description="learn the friction model's error from contact-free motion (any mode but "
+        "drag, no contact, no stop) and take it off the drag's estimate: the error switches "
+        "with the direction of motion, so the tare at rest cannot remove it (README main job, "
+        "3 kg: 1.4 N sideways at the tool, 7 mm/s off-axis; control/friction_residual.py)",
+    )
+    friction_learning_time: PositiveFloat = Field(
+        5.0, description="time constant of the learning's exponential mean [s of motion]"
+    )
+    friction_learning_speed: PositiveFloat = Field(
+        0.05, description="a tick is learned from only when some joint moves faster [rad/s]"
+    )
+    friction_learning_limit: float = Field(
+        0.25,
+        ge=0.0,
+        le=1.0,
+        description="the correction stays within this fraction of the model's own friction "
+        "at the joint's speed (a bad fit cannot become a push)",
+    )
     standstill_speed: PositiveFloat = Field(
         0.01, description="every joint slower than this [rad/s] counts as standstill"
     )

@@ -38,6 +38,7 @@ import numpy as np
 from hofto_hw.config.drag import DragConfig
 from hofto_hw.control.admittance import CartesianAdmittance, JointAdmittance
 from hofto_hw.control.enabling import EnableEvent, Enabling
+from hofto_hw.control.friction_residual import FrictionResidual
 from hofto_hw.control.isolation import ContactIsolation
 from hofto_hw.control.wrench import ToolJacobian, WrenchEstimator
 from hofto_hw.model.robot import RobotModel
@@ -82,6 +83,20 @@ class DragController:
             hold_time=cfg.isolation_hold_time,
         )
         self.enabling = Enabling()
+        #: the friction model's error, learned from contact-free motion (None: off)
+        self.friction = (
+            FrictionResidual(
+                model.friction,
+                cfg.friction_learning_time,
+                cfg.friction_learning_speed,
+                limit=cfg.friction_learning_limit,
+            )
+            if cfg.friction_learning
+            else None
+        )
+        self.friction_correction = np.zeros(n)  # taken off the estimate this tick [N·m]
+        self._tau_in = np.zeros(n)
+        self._tv = np.zeros(3)
         # plain values for the tick (no pydantic there)
         self._standstill = float(cfg.standstill_speed)
         self._force_limit = float(cfg.force_limit)
@@ -130,12 +145,21 @@ class DragController:
         self.enabling.reset()
         self.tau_bias.fill(0.0)
         self.tau.fill(0.0)
+        if self.friction is not None:
+            self.friction.solve()
         self._filtering = False
         self._tare_n = 0
         self.reason = 0
         self.category = -1
         self.contact_link = 0
         self._mismatch_time = 0.0
+
+    def learn(self, qd: np.ndarray, tau_ext: np.ndarray, dt: float) -> None:
+        """One tick of contact-free motion outside drag mode (the caller knows: no contact
+        reported, no stop, not dragging): ``qd`` (n,) [rad/s], this controller's observer row
+        ``tau_ext`` (n,) [N·m], ``dt`` [s]. Allocation-free."""
+        if self.friction is not None:
+            self.friction.learn(qd, tau_ext, dt)
 
     def monitor_input(self, tau_ext: np.ndarray, out: np.ndarray) -> np.ndarray:
         """The collision monitor's input while the hand drags: each observer's row of
@@ -168,6 +192,10 @@ class DragController:
         """One tick (see module docstring); returns ``reason``."""
         np.abs(qd, out=self._abs)
         standstill = bool(self._abs.max() < self._standstill)
+        if self.friction is not None:  # the friction model's learned error off the estimate
+            self.friction.correction(qd, self.friction_correction)
+            np.subtract(tau_ext, self.friction_correction, out=self._tau_in)
+            tau_ext = self._tau_in
         # the estimate low-passed (first order; alpha = 1: off), then the tare off
         hz, tt, on = self._filter_hz, self._tare_time, self._filtering
         alpha = 1.0 - math.exp(-2.0 * math.pi * hz * dt) if on and hz > 0.0 else 1.0
@@ -234,10 +262,14 @@ class DragController:
         # no force into the admittance unless dragging: its state then decays
         adm = self.admittance
         np.copyto(self._qd_prev, self.qd_cmd)
+        # the arm's measured tool speed: the limit holds on the arm, not only on the command
+        tv = self._tv
+        np.matmul(jac.J[:3], qd, out=tv)
+        arm = math.sqrt(tv[0] * tv[0] + tv[1] * tv[1] + tv[2] * tv[2])
         if self.cartesian:
-            qd_new = adm.update(self.wrench if active else self._zero6, self.q_cmd, dt)
+            qd_new = adm.update(self.wrench if active else self._zero6, self.q_cmd, dt, arm)
         else:
-            qd_new = adm.update(self.tau if active else self._zero_n, self.q_cmd, dt)
+            qd_new = adm.update(self.tau if active else self._zero_n, self.q_cmd, dt, arm)
         self.limited = adm.shaping.limited
         if active and self._feedforward:
             np.negative(self.tau, out=self.tau_offset)

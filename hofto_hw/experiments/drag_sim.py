@@ -31,6 +31,7 @@ from hofto_hw.config.loader import load_config
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.control.drag import DragController
 from hofto_hw.control.taught_path import TaughtPathRecorder
+from hofto_hw.model.payload import apply_payload, payload_from_config
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers import make_observer
 
@@ -177,7 +178,8 @@ class DragSim:
     section (a dict of DragConfig fields). ``q0``: start pose (default: robot.home).
     ``gains``: ``loop`` runs the observer as the service's loop does (``loop.observers``
     over the top-level ``observers``: the estimate the drag really gets), ``paper`` the
-    top-level ``observers`` (the paper's Section IV gains).
+    top-level ``observers`` (the paper's Section IV gains). ``payload``: the arm holds
+    ``safety.payload`` and the model knows it, as in ``hofto-hw run`` (the README main job).
     """
 
     def __init__(
@@ -191,6 +193,7 @@ class DragSim:
         drag: dict | None = None,
         q0: np.ndarray | list[float] | None = None,
         gains: str = "loop",
+        payload: bool = False,
     ) -> None:
         cfg = load_config(Path(config))
         base = cfg.drag.model_dump() if cfg.drag is not None else {}
@@ -215,6 +218,10 @@ class DragSim:
         self.dt = cfg.cycle_time
         self.model = RobotModel.from_config(cfg.robot)
         plant = Plant(self.model, sim, self.dt)
+        if payload and cfg.safety.payload.mass > 0.0:
+            load = payload_from_config(cfg.safety.payload)
+            apply_payload(self.model, load)
+            apply_payload(plant.true_model, load)
         if q0 is not None:
             plant.reset(np.asarray(q0, dtype=float))
         self.world = HandForces(plant.true_model)
@@ -300,6 +307,9 @@ class DragSim:
                 self.q_ref[:] = trajectory[0][i]
                 self.qd_ref[:] = trajectory[1][i]
                 self.qdd_ref[:] = trajectory[2][i]
+                # contact-free motion: the drag learns the friction model's error, as the
+                # loop's tick does outside drag mode
+                drag.learn(g.qd, tau_ext, dt)
             else:
                 reason = drag.update(g.q, g.qd, tau_ext, dt, p, latched)
                 if self.stop_mode == RUN and (reason != 0 or drag.category == 2):
