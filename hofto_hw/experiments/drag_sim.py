@@ -346,6 +346,35 @@ class DragSim:
         rec.tool, rec.tool_v = tool_motion(self.plant.true_model, rec.q, rec.qd)
         return rec
 
+    def free_motion(
+        self,
+        amplitude: np.ndarray | list[float],
+        period: np.ndarray | list[float],
+        duration: float = 3.0,
+        settle: float = 0.3,
+    ) -> DragRun:
+        """Contact-free motion before a drag, as the README main job's path: per joint
+        q0 + A·sin(2π·t/P)·sin²(π·t/T) for ``duration`` T [s] (starts and ends at the
+        present pose, at rest), then ``settle`` [s] of holding; the drag learns the friction
+        model's error meanwhile (as the loop does outside drag mode). Afterwards the drag
+        waits for a new press (:meth:`clear_stop`)."""
+        dt = self.dt
+        t = np.arange(round(duration / dt)) * dt
+        q0 = self.group.q.copy()
+        a = np.asarray(amplitude, dtype=float)
+        w = 2.0 * np.pi / np.asarray(period, dtype=float)
+        env = np.sin(np.pi * t / duration) ** 2
+        q = q0 + env[:, None] * a * np.sin(w * t[:, None])
+        qd = np.gradient(q, dt, axis=0)
+        qdd = np.gradient(qd, dt, axis=0)
+        n_hold = max(1, round(settle / dt))
+        q = np.vstack([q, np.repeat(q0[None], n_hold, axis=0)])
+        qd = np.vstack([qd, np.zeros((n_hold, q0.size))])
+        qdd = np.vstack([qdd, np.zeros((n_hold, q0.size))])
+        run = self.run(q.shape[0] * dt, trajectory=(q, qd, qdd))
+        self.clear_stop()
+        return run
+
     def clear_stop(self) -> None:
         """What an explicit reset does: run again (the drag waits for a new press)."""
         self.stop_mode = RUN
