@@ -36,6 +36,12 @@ from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers import make_observer
 
 ER3A = Path(__file__).resolve().parents[2] / "configs" / "er3a.yaml"
+#: where the README main job's arm stands after its collision stop (measured, sim clock,
+#: configs/er3a.yaml): the pose its scripted 20 N drag starts from [rad]
+MAIN_JOB_POSE = [-0.79995, -0.06658, 0.98506, 0.97171, 1.04007, 0.72998]
+#: contact-free motion before that drag: the main job's path (run.path) at 0.6 of its
+#: amplitude about that pose, (amplitude [rad], period [s]) for :meth:`DragSim.free_motion`
+MAIN_JOB_PATH = ([0.48, 0.3, 0.36, 0.6, 0.48, 0.72], [4.0, 3.5, 3.0, 2.5, 2.8, 2.2])
 #: harness stop modes
 RUN, STOPPING = 0, 1
 

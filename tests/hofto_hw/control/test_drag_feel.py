@@ -17,7 +17,14 @@ import pytest
 
 from hofto_hw.config.loader import load_config
 from hofto_hw.control.drag import DragController
-from hofto_hw.experiments.drag_sim import ER3A, DragSim, ToolPush, drag_figures
+from hofto_hw.experiments.drag_sim import (
+    ER3A,
+    MAIN_JOB_PATH,
+    MAIN_JOB_POSE,
+    DragSim,
+    ToolPush,
+    drag_figures,
+)
 from hofto_hw.model.robot import RobotModel
 
 PRESS = 0.3
@@ -106,13 +113,6 @@ def test_releasing_a_hard_push_keeps_the_arm_under_the_speed_limit(
     assert speed.max() <= limit, speed.max()
     w = (run.t > 1.3) & (run.t < push.end - 0.05)
     assert speed[w].mean() > 0.85 * limit  # still dragged near the limit
-
-
-#: where the README main job's arm stands after its collision stop (measured, sim clock):
-#: the pose its scripted 20 N drag starts from
-MAIN_JOB_POSE = [-0.79995, -0.06658, 0.98506, 0.97171, 1.04007, 0.72998]
-#: the main job's path (run.path), smaller about that pose
-MAIN_JOB_PATH = ([0.48, 0.3, 0.36, 0.6, 0.48, 0.72], [4.0, 3.5, 3.0, 2.5, 2.8, 2.2])
 
 
 def test_drag_in_the_main_jobs_conditions_stays_on_axis() -> None:
