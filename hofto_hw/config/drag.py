@@ -176,6 +176,16 @@ class DragConfig(FileModel):
         "follow it (a letting-go hand is seen at the fast filter's speed, a push still comes "
         "in smoothly)",
     )
+    release_lag_ratio: float = Field(
+        0.85,
+        ge=0.0,
+        lt=1.0,
+        description="release seen in the arm's motion (0 = off): when the measured tool "
+        "speed along a command that is not accelerating falls below this fraction of it, the "
+        "hand has let go (the feed-forward pulls the arm back) and the drag's force is zeroed "
+        "until the estimate rises again; a slow observer's estimate falls too late (paper "
+        "HOFTO: at rest 121 ms after the release without, 27 ms with)",
+    )
     tare_on_enable: bool = Field(
         True,
         description="take the estimate at the press as zero (a force-sensor tare, as UR and "
