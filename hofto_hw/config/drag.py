@@ -184,7 +184,8 @@ class DragConfig(FileModel):
         "speed along a command that is not accelerating falls below this fraction of it, the "
         "hand has let go (the feed-forward pulls the arm back) and the drag's force is zeroed "
         "until the estimate rises again; a slow observer's estimate falls too late (paper "
-        "HOFTO: at rest 121 ms after the release without, 27 ms with)",
+        "HOFTO: at rest 121 ms after the release without, 27 ms with); needs "
+        "hand_feedforward (off without it)",
     )
     tare_on_enable: bool = Field(
         True,

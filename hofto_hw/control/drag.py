@@ -107,7 +107,9 @@ class DragController:
         self._vc_i = 0
         self._released = False  # the arm's motion says the hand let go
         self._fast_at = 0.0
-        self._lag_ratio = float(cfg.release_lag_ratio)
+        # its premise is the feed-forward (without it the drives fight the hand and the arm
+        # lags any command it pushes): off without it
+        self._lag_ratio = float(cfg.release_lag_ratio) if cfg.hand_feedforward else 0.0
         self._lag_min_speed = 0.02  # [m/s] below this a lag says nothing
         # plain values for the tick (no pydantic there)
         self._standstill = float(cfg.standstill_speed)
