@@ -176,6 +176,17 @@ class DragConfig(FileModel):
         "follow it (a letting-go hand is seen at the fast filter's speed, a push still comes "
         "in smoothly)",
     )
+    release_lag_ratio: float = Field(
+        0.85,
+        ge=0.0,
+        lt=1.0,
+        description="release seen in the arm's motion (0 = off): when the measured tool "
+        "speed along a command that is not accelerating falls below this fraction of it, the "
+        "hand has let go (the feed-forward pulls the arm back) and the drag's force is zeroed "
+        "until the estimate rises again; a slow observer's estimate falls too late (paper "
+        "HOFTO: at rest 121 ms after the release without, 27 ms with); needs "
+        "hand_feedforward (off without it)",
+    )
     tare_on_enable: bool = Field(
         True,
         description="take the estimate at the press as zero (a force-sensor tare, as UR and "
@@ -194,6 +205,26 @@ class DragConfig(FileModel):
         description="while dragging, add -tau_ext_hat (tared) to the drives' torque offset: "
         "the position loop does not fight the hand (ER3A sim: the arm rests 42 ms after a "
         "release instead of 133 ms, momentum observer)",
+    )
+    friction_learning: bool = Field(
+        True,
+        description="learn the friction model's error from contact-free motion (any mode but "
+        "drag, no contact, no stop) and take it off the drag's estimate: the error switches "
+        "with the direction of motion, so the tare at rest cannot remove it (README main job, "
+        "3 kg: 1.4 N sideways at the tool, 7 mm/s off-axis; control/friction_residual.py)",
+    )
+    friction_learning_time: PositiveFloat = Field(
+        5.0, description="time constant of the learning's exponential mean [s of motion]"
+    )
+    friction_learning_speed: PositiveFloat = Field(
+        0.05, description="a tick is learned from only when some joint moves faster [rad/s]"
+    )
+    friction_learning_limit: float = Field(
+        0.25,
+        ge=0.0,
+        le=1.0,
+        description="the correction stays within this fraction of the model's own friction "
+        "at the joint's speed (a bad fit cannot become a push)",
     )
     standstill_speed: PositiveFloat = Field(
         0.01, description="every joint slower than this [rad/s] counts as standstill"

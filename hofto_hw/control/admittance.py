@@ -113,13 +113,15 @@ class JointShaping:
             qd *= 1.0 / peak  # one scale for all joints keeps the direction
             self.limited |= 2
 
-    def tool_speed(self, qd: np.ndarray) -> None:
-        """Scale ``qd`` so the tool moves at most at the tool speed limits (in place)."""
+    def tool_speed(self, qd: np.ndarray, arm_speed: float = 0.0) -> None:
+        """Scale ``qd`` so the tool moves at most at the tool speed limits (in place);
+        ``arm_speed`` [m/s]: the measured tool speed (:func:`lead_capped_speed`)."""
         tv = self._tv
         np.matmul(self.jac.J, qd, out=tv)
         v = math.sqrt(tv[0] * tv[0] + tv[1] * tv[1] + tv[2] * tv[2])
         w = math.sqrt(tv[3] * tv[3] + tv[4] * tv[4] + tv[5] * tv[5])
-        s = min(1.0, self.v_tool / v if v > 0.0 else 1.0, self.w_tool / w if w > 0.0 else 1.0)
+        v_tool = lead_capped_speed(self.v_tool, v, arm_speed)
+        s = min(1.0, v_tool / v if v > 0.0 else 1.0, self.w_tool / w if w > 0.0 else 1.0)
         if s < 1.0:
             qd *= s
             self.limited |= 8
@@ -157,9 +159,13 @@ class CartesianAdmittance:
         self.twist.fill(0.0)
         self.qd.fill(0.0)
 
-    def update(self, wrench: np.ndarray, q_cmd: np.ndarray, dt: float) -> np.ndarray:
+    def update(
+        self, wrench: np.ndarray, q_cmd: np.ndarray, dt: float, arm_speed: float = 0.0
+    ) -> np.ndarray:
         """Advance by ``dt`` [s] with the tool wrench (6,) [N, N·m]; ``jac`` must be updated
-        at ``q_cmd``. Returns the joint velocity command (n,) (a view of ``qd``)."""
+        at ``q_cmd``. ``arm_speed`` [m/s]: the measured tool speed (see
+        :func:`lead_capped_speed`; 0 = no lead). Returns the joint velocity command (n,) (a
+        view of ``qd``)."""
         f, a, v = self._f, self._a, self.twist
         np.multiply(wrench, self.mask, out=f)
         pushed = _deadband(f, 0, self.f_dead)
@@ -175,7 +181,7 @@ class CartesianAdmittance:
         _limit_norm(a, 3, self.alpha_max * dt)
         v += a
         v *= self.mask
-        _limit_norm(v, 0, self.v_max)
+        _limit_norm(v, 0, lead_capped_speed(self.v_max, _norm3(v, 0), arm_speed))
         _limit_norm(v, 3, self.w_max)
         sh = self.shaping
         sh.limited = 0
@@ -212,8 +218,11 @@ class JointAdmittance:
         """At rest."""
         self.qd.fill(0.0)
 
-    def update(self, tau_ext: np.ndarray, q_cmd: np.ndarray, dt: float) -> np.ndarray:
-        """Advance by ``dt`` [s] with tau_ext_hat (n,) [N·m]; returns qd (n,) [rad/s]."""
+    def update(
+        self, tau_ext: np.ndarray, q_cmd: np.ndarray, dt: float, arm_speed: float = 0.0
+    ) -> np.ndarray:
+        """Advance by ``dt`` [s] with tau_ext_hat (n,) [N·m]; ``arm_speed`` [m/s] the
+        measured tool speed (see :func:`lead_capped_speed`); returns qd (n,) [rad/s]."""
         t, a, qd = self._t, self._a, self.qd
         # deadband per joint (the gain of _band_gain, per joint)
         band = self.dead
@@ -232,12 +241,34 @@ class JointAdmittance:
         qd += a
         sh = self.shaping
         sh.limited = 0
-        sh.tool_speed(qd)
+        sh.tool_speed(qd, arm_speed)
         if sh.box:
             np.matmul(self.jac.J, qd, out=self._tw)
             qd *= sh.workspace_scale(self._tw)
         sh.joints(q_cmd, qd)
         return qd
+
+
+def lead_capped_speed(limit: float, command: float, arm: float) -> float:
+    """The command's tool speed limit [m/s] with the arm's lead over the command taken off:
+    ``limit`` the command's own limit, ``command`` its speed before the cap, ``arm`` the
+    measured tool speed (of the last sample).
+
+    The drives' position loop drives the arm at the command's speed plus its gain times the
+    following error: after a hand lets go of a hard push, the estimate's lag keeps the hand
+    feed-forward pulling the arm back while the command runs at the limit, and the loop then
+    takes up that error above the command (ER3A sim, 80 N release, paper gains: 263 mm/s
+    true against a 225 mm/s command). Capping the command at limit - (arm - command) keeps
+    the arm's own speed at the limit whatever the observer's lag; never below 0."""
+    lead = arm - command
+    if lead <= 0.0:
+        return limit
+    return max(limit - lead, 0.0)
+
+
+def _norm3(x: np.ndarray, i: int) -> float:
+    """Norm of x[i:i+3]."""
+    return math.sqrt(x[i] * x[i] + x[i + 1] * x[i + 1] + x[i + 2] * x[i + 2])
 
 
 def _band_gain(norm: float, band: float) -> float:

@@ -18,9 +18,14 @@ and the feed-forward (``tau``: a hand pushes below a few Hz, a collision-tuned o
 chatters and rings with the admittance above), ``isolation_filter_hz`` (50 Hz) for the
 off-tool check (``tau_iso``: a contact's onset must stay sharp). A release detector scales
 ``tau`` down while ``tau_iso`` falls below ``release_ratio`` of it (the hand letting go is
-seen at the fast filter's speed). The tare is the mean of the raw estimate from the mode's
-start to the press (``tare_time``). :meth:`monitor_input` gives the collision monitor each
-observer row minus that row's own hand share.
+seen at the fast filter's speed), and a second one zeroes it when the arm falls behind a
+steady command (``release_lag_ratio``: seen in the arm's motion, before a slow observer's
+estimate falls). The tare is the mean of the raw estimate from the mode's start to the press
+(``tare_time``). Before the estimate is used, the friction model's error learned from
+contact-free motion (:meth:`learn`, control/friction_residual.py) is taken off it. The
+admittance's tool speed cap is lowered by the measured arm's lead over the command, so the
+limit holds on the arm. :meth:`monitor_input` gives the collision monitor each observer row
+minus that row's own hand share.
 
 It never stops the arm itself: while not ACTIVE it feeds no force into the admittance (its
 state decays with M_a/B_a) and reports; the loop's stop controller ramps to standstill. It
@@ -38,6 +43,7 @@ import numpy as np
 from hofto_hw.config.drag import DragConfig
 from hofto_hw.control.admittance import CartesianAdmittance, JointAdmittance
 from hofto_hw.control.enabling import EnableEvent, Enabling
+from hofto_hw.control.friction_residual import FrictionResidual
 from hofto_hw.control.isolation import ContactIsolation
 from hofto_hw.control.wrench import ToolJacobian, WrenchEstimator
 from hofto_hw.model.robot import RobotModel
@@ -82,6 +88,29 @@ class DragController:
             hold_time=cfg.isolation_hold_time,
         )
         self.enabling = Enabling()
+        #: the friction model's error, learned from contact-free motion (None: off)
+        self.friction = (
+            FrictionResidual(
+                model.friction,
+                cfg.friction_learning_time,
+                cfg.friction_learning_speed,
+                limit=cfg.friction_learning_limit,
+            )
+            if cfg.friction_learning
+            else None
+        )
+        self.friction_correction = np.zeros(n)  # taken off the estimate this tick [N·m]
+        self._tau_in = np.zeros(n)
+        self._tv = np.zeros(3)
+        self._vc = np.zeros(3)
+        self._vc_hist = np.zeros(20)
+        self._vc_i = 0
+        self._released = False  # the arm's motion says the hand let go
+        self._fast_at = 0.0
+        # its premise is the feed-forward (without it the drives fight the hand and the arm
+        # lags any command it pushes): off without it
+        self._lag_ratio = float(cfg.release_lag_ratio) if cfg.hand_feedforward else 0.0
+        self._lag_min_speed = 0.02  # [m/s] below this a lag says nothing
         # plain values for the tick (no pydantic there)
         self._standstill = float(cfg.standstill_speed)
         self._force_limit = float(cfg.force_limit)
@@ -130,12 +159,55 @@ class DragController:
         self.enabling.reset()
         self.tau_bias.fill(0.0)
         self.tau.fill(0.0)
+        if self.friction is not None:
+            self.friction.solve()
         self._filtering = False
         self._tare_n = 0
+        self._released = False
+        self._vc_hist.fill(0.0)
         self.reason = 0
         self.category = -1
         self.contact_link = 0
         self._mismatch_time = 0.0
+
+    def _lag_release(self, qd: np.ndarray, fast: float) -> None:
+        """The release seen in the arm's motion (``release_lag_ratio``): with the hand
+        feed-forward on, the drives cancel the estimated hand, so the arm keeps up with a
+        steady command while the hand pushes as estimated; when the hand lets go, the
+        feed-forward pulls the arm back and it falls behind a command that is not
+        accelerating, within ~20 ms, long before a slow observer's estimate has fallen
+        (paper HOFTO: its estimate falls ~110 N/s at the tool). Then ``_released`` zeroes
+        the drag's force until the fast estimate rises 2 % above its lowest value since (a
+        hand pushing again). The command's own acceleration is excluded, since the arm lags
+        an accelerating command by the drives' tracking lag (0.19-0.85 of it at a push's
+        onset). ``fast``: squared norm of ``tau_iso``."""
+        vc3, tv = self._vc, self._tv
+        np.matmul(self.jac.J[:3], self.qd_cmd, out=vc3)
+        vc = math.sqrt(vc3[0] * vc3[0] + vc3[1] * vc3[1] + vc3[2] * vc3[2])
+        np.matmul(self.jac.J[:3], qd, out=tv)
+        hist = self._vc_hist
+        prev = hist[self._vc_i]  # the command's speed 20 ms ago
+        hist[self._vc_i] = vc
+        self._vc_i = (self._vc_i + 1) % hist.shape[0]
+        if self._released:
+            if fast > self._fast_at * 1.02 or fast <= 0.0:
+                self._released = False
+            elif fast < self._fast_at:
+                self._fast_at = fast
+            return
+        if vc < self._lag_min_speed or vc > prev + 0.002:
+            return
+        along = (tv[0] * vc3[0] + tv[1] * vc3[1] + tv[2] * vc3[2]) / vc
+        if along < self._lag_ratio * vc:
+            self._released = True
+            self._fast_at = fast
+
+    def learn(self, qd: np.ndarray, tau_ext: np.ndarray, dt: float) -> None:
+        """One tick of contact-free motion outside drag mode (the caller knows: no contact
+        reported, no stop, not dragging): ``qd`` (n,) [rad/s], this controller's observer row
+        ``tau_ext`` (n,) [N·m], ``dt`` [s]. Allocation-free."""
+        if self.friction is not None:
+            self.friction.learn(qd, tau_ext, dt)
 
     def monitor_input(self, tau_ext: np.ndarray, out: np.ndarray) -> np.ndarray:
         """The collision monitor's input while the hand drags: each observer's row of
@@ -168,6 +240,10 @@ class DragController:
         """One tick (see module docstring); returns ``reason``."""
         np.abs(qd, out=self._abs)
         standstill = bool(self._abs.max() < self._standstill)
+        if self.friction is not None:  # the friction model's learned error off the estimate
+            self.friction.correction(qd, self.friction_correction)
+            np.subtract(tau_ext, self.friction_correction, out=self._tau_in)
+            tau_ext = self._tau_in
         # the estimate low-passed (first order; alpha = 1: off), then the tare off
         hz, tt, on = self._filter_hz, self._tare_time, self._filtering
         alpha = 1.0 - math.exp(-2.0 * math.pi * hz * dt) if on and hz > 0.0 else 1.0
@@ -203,6 +279,8 @@ class DragController:
             self._mismatch_time = 0.0
             self.contact_link = 0
             self.isolation.reset()
+            self._released = False
+            self._vc_hist.fill(0.0)
         elif ev == EnableEvent.RELEASED:
             self.reason = DragReason.ENABLE_RELEASED
             self.category = 2
@@ -211,14 +289,18 @@ class DragController:
         # release: the fast estimate falls before the slow one; follow it down (never up:
         # a new push still comes in through the slow, smooth path)
         self.release_scale = 1.0
-        if self._release > 0.0:
-            slow = float(np.dot(self.tau, self.tau))
-            fast = float(np.dot(self.tau_iso, self.tau_iso))
-            if slow > 0.0 and fast < self._release * self._release * slow:
-                self.release_scale = math.sqrt(fast / slow) / self._release
-                self.tau *= self.release_scale
         jac = self.jac
         jac.update(self.q_cmd)
+        slow = float(np.dot(self.tau, self.tau))
+        fast = float(np.dot(self.tau_iso, self.tau_iso))
+        if self._release > 0.0 and slow > 0.0 and fast < self._release * self._release * slow:
+            self.release_scale = math.sqrt(fast / slow) / self._release
+        if self._lag_ratio > 0.0 and self.enabling.state == 1:
+            self._lag_release(qd, fast)
+            if self._released:
+                self.release_scale = 0.0
+        if self.release_scale < 1.0:
+            self.tau *= self.release_scale
         self.estimator.update(self.tau)
         active = self.enabling.state == 1
         if active:
@@ -236,10 +318,14 @@ class DragController:
         # no force into the admittance unless dragging: its state then decays
         adm = self.admittance
         np.copyto(self._qd_prev, self.qd_cmd)
+        # the arm's measured tool speed: the limit holds on the arm, not only on the command
+        tv = self._tv
+        np.matmul(jac.J[:3], qd, out=tv)
+        arm = math.sqrt(tv[0] * tv[0] + tv[1] * tv[1] + tv[2] * tv[2])
         if self.cartesian:
-            qd_new = adm.update(self.wrench if active else self._zero6, self.q_cmd, dt)
+            qd_new = adm.update(self.wrench if active else self._zero6, self.q_cmd, dt, arm)
         else:
-            qd_new = adm.update(self.tau if active else self._zero_n, self.q_cmd, dt)
+            qd_new = adm.update(self.tau if active else self._zero_n, self.q_cmd, dt, arm)
         self.limited = adm.shaping.limited
         if active and self._feedforward:
             np.negative(self.tau, out=self.tau_offset)

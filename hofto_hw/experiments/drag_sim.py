@@ -31,10 +31,17 @@ from hofto_hw.config.loader import load_config
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.control.drag import DragController
 from hofto_hw.control.taught_path import TaughtPathRecorder
+from hofto_hw.model.payload import apply_payload, payload_from_config
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers import make_observer
 
 ER3A = Path(__file__).resolve().parents[2] / "configs" / "er3a.yaml"
+#: where the README main job's arm stands after its collision stop (measured, sim clock,
+#: configs/er3a.yaml): the pose its scripted 20 N drag starts from [rad]
+MAIN_JOB_POSE = [-0.79995, -0.06658, 0.98506, 0.97171, 1.04007, 0.72998]
+#: contact-free motion before that drag: the main job's path (run.path) at 0.6 of its
+#: amplitude about that pose, (amplitude [rad], period [s]) for :meth:`DragSim.free_motion`
+MAIN_JOB_PATH = ([0.48, 0.3, 0.36, 0.6, 0.48, 0.72], [4.0, 3.5, 3.0, 2.5, 2.8, 2.2])
 #: harness stop modes
 RUN, STOPPING = 0, 1
 
@@ -177,7 +184,8 @@ class DragSim:
     section (a dict of DragConfig fields). ``q0``: start pose (default: robot.home).
     ``gains``: ``loop`` runs the observer as the service's loop does (``loop.observers``
     over the top-level ``observers``: the estimate the drag really gets), ``paper`` the
-    top-level ``observers`` (the paper's Section IV gains).
+    top-level ``observers`` (the paper's Section IV gains). ``payload``: the arm holds
+    ``safety.payload`` and the model knows it, as in ``hofto-hw run`` (the README main job).
     """
 
     def __init__(
@@ -191,6 +199,7 @@ class DragSim:
         drag: dict | None = None,
         q0: np.ndarray | list[float] | None = None,
         gains: str = "loop",
+        payload: bool = False,
     ) -> None:
         cfg = load_config(Path(config))
         base = cfg.drag.model_dump() if cfg.drag is not None else {}
@@ -215,6 +224,10 @@ class DragSim:
         self.dt = cfg.cycle_time
         self.model = RobotModel.from_config(cfg.robot)
         plant = Plant(self.model, sim, self.dt)
+        if payload and cfg.safety.payload.mass > 0.0:
+            load = payload_from_config(cfg.safety.payload)
+            apply_payload(self.model, load)
+            apply_payload(plant.true_model, load)
         if q0 is not None:
             plant.reset(np.asarray(q0, dtype=float))
         self.world = HandForces(plant.true_model)
@@ -300,6 +313,9 @@ class DragSim:
                 self.q_ref[:] = trajectory[0][i]
                 self.qd_ref[:] = trajectory[1][i]
                 self.qdd_ref[:] = trajectory[2][i]
+                # contact-free motion: the drag learns the friction model's error, as the
+                # loop's tick does outside drag mode
+                drag.learn(g.qd, tau_ext, dt)
             else:
                 reason = drag.update(g.q, g.qd, tau_ext, dt, p, latched)
                 if self.stop_mode == RUN and (reason != 0 or drag.category == 2):
@@ -335,6 +351,35 @@ class DragSim:
             self.t += dt
         rec.tool, rec.tool_v = tool_motion(self.plant.true_model, rec.q, rec.qd)
         return rec
+
+    def free_motion(
+        self,
+        amplitude: np.ndarray | list[float],
+        period: np.ndarray | list[float],
+        duration: float = 3.0,
+        settle: float = 0.3,
+    ) -> DragRun:
+        """Contact-free motion before a drag, as the README main job's path: per joint
+        q0 + A·sin(2π·t/P)·sin²(π·t/T) for ``duration`` T [s] (starts and ends at the
+        present pose, at rest), then ``settle`` [s] of holding; the drag learns the friction
+        model's error meanwhile (as the loop does outside drag mode). Afterwards the drag
+        waits for a new press (:meth:`clear_stop`)."""
+        dt = self.dt
+        t = np.arange(round(duration / dt)) * dt
+        q0 = self.group.q.copy()
+        a = np.asarray(amplitude, dtype=float)
+        w = 2.0 * np.pi / np.asarray(period, dtype=float)
+        env = np.sin(np.pi * t / duration) ** 2
+        q = q0 + env[:, None] * a * np.sin(w * t[:, None])
+        qd = np.gradient(q, dt, axis=0)
+        qdd = np.gradient(qd, dt, axis=0)
+        n_hold = max(1, round(settle / dt))
+        q = np.vstack([q, np.repeat(q0[None], n_hold, axis=0)])
+        qd = np.vstack([qd, np.zeros((n_hold, q0.size))])
+        qdd = np.vstack([qdd, np.zeros((n_hold, q0.size))])
+        run = self.run(q.shape[0] * dt, trajectory=(q, qd, qdd))
+        self.clear_stop()
+        return run
 
     def clear_stop(self) -> None:
         """What an explicit reset does: run again (the drag waits for a new press)."""

@@ -300,6 +300,10 @@ class Tick:
             # only while the power stage is on (quick-stop ramps included): with it off the
             # brakes act and the motor torque no longer explains the motion
             self.collision.update(stop, self._monitored(dragging), q, qd, motion.qdd, dt)
+            c = self.collision
+            if self.drag is not None and not dragging and stop.category == -1:
+                if not (c.contact or c.collision):  # contact-free motion: friction error
+                    self.drag.learn(qd, self.tau_ext[self.drag_row], dt)
         if missed or self.overrun_streak:
             self._overrun(missed)
         if self.stop_requested:

@@ -17,7 +17,14 @@ import pytest
 
 from hofto_hw.config.loader import load_config
 from hofto_hw.control.drag import DragController
-from hofto_hw.experiments.drag_sim import ER3A, DragSim, ToolPush, drag_figures
+from hofto_hw.experiments.drag_sim import (
+    ER3A,
+    MAIN_JOB_PATH,
+    MAIN_JOB_POSE,
+    DragSim,
+    ToolPush,
+    drag_figures,
+)
 from hofto_hw.model.robot import RobotModel
 
 PRESS = 0.3
@@ -88,21 +95,44 @@ def test_a_faster_noisier_hofto_drags_without_false_stops(tmp_path: Path) -> Non
     assert fig["rest_time_ms"] <= 100.0, fig
 
 
+@pytest.mark.parametrize("gains", ["loop", "paper"])
 @pytest.mark.parametrize("observer", ["hofto", "momentum"])
-def test_releasing_a_hard_push_keeps_the_arm_under_the_speed_limit(observer: str) -> None:
+def test_releasing_a_hard_push_keeps_the_arm_under_the_speed_limit(
+    observer: str, gains: str
+) -> None:
     # before (HOFTO): 0.298 m/s after the release (the drives took up their following error
-    # while the command still ran at the limit) and a false off-tool stop naming link 5
-    sim = DragSim(observer=observer)
+    # while the command still ran at the limit) and a false off-tool stop naming link 5;
+    # then with the paper's (slower) gains 0.263 (HOFTO) and 0.254 m/s (momentum): the
+    # estimate's lag kept the hand feed-forward pulling the arm back, and the drives took
+    # that following error up above the command. The limit holds on the true arm.
+    sim = DragSim(observer=observer, gains=gains)
     run, push, _ = _push(sim, (0.0, 80.0, 0.0))
     assert run.stop_tick == -1, (run.reason.max(), run.contact_link)
     speed = np.linalg.norm(run.tool_v, axis=1)
     limit = sim.drag_cfg.max_tool_speed
-    if observer == "hofto":
-        assert speed.max() <= limit, speed.max()
-    else:  # the momentum observer's estimate lags more at the release: within 5 %
-        assert speed.max() <= 1.05 * limit, speed.max()
+    assert speed.max() <= limit, speed.max()
     w = (run.t > 1.3) & (run.t < push.end - 0.05)
     assert speed[w].mean() > 0.85 * limit  # still dragged near the limit
+
+
+def test_drag_in_the_main_jobs_conditions_stays_on_axis() -> None:
+    # before: 7.2 mm/s off-axis here (7.3 in the main job itself, 7.7 % of the steady
+    # speed): joints 1-3's friction differs from the model's by +0.37, -0.28, -0.23 N·m
+    # once they move, a term that switches with the direction of motion which the tare at
+    # rest cannot remove; it reads as 1.4 N sideways at the tool. The drag learns it from
+    # the contact-free motion before (the main job's path) and takes it off the estimate.
+    sim = DragSim(observer="hofto", payload=True, q0=MAIN_JOB_POSE)
+    sim.free_motion(*MAIN_JOB_PATH, duration=3.0)
+    assert sim.drag.friction is not None and sim.drag.friction.seconds > 2.0
+    t0 = sim.t
+    push = ToolPush((20.0, 0.0, 0.0), t0 + 0.8, t0 + 2.0)
+    sim.world.pushes.append(push)
+    run = sim.run(2.6, pressed=lambda t: t > t0 + 0.3)
+    fig = drag_figures(run, push, sim.drag_cfg.damping, sim.drag_cfg.standstill_speed)
+    assert run.stop_tick == -1, (run.reason.max(), run.contact_link)
+    assert abs(fig["steady_speed_mps"] - 0.1) <= 0.01, fig
+    assert fig["off_axis_mps"] < 0.05 * fig["steady_speed_mps"], fig
+    assert fig["rest_time_ms"] <= 100.0, fig
 
 
 def test_tare_is_the_averaged_estimate_not_one_sample() -> None:
@@ -143,3 +173,28 @@ def test_monitor_input_takes_each_rows_own_hand_share() -> None:
     out = np.zeros_like(rows)
     drag.monitor_input(rows, out)
     np.testing.assert_allclose(out, np.zeros_like(rows), atol=1e-6)
+
+
+@pytest.mark.parametrize("observer", ["hofto", "momentum"])
+def test_paper_gains_rest_within_100_ms_and_release_is_seen_only_at_the_release(
+    observer: str,
+) -> None:
+    # before: with the paper's HOFTO gains the arm rested 121 ms after the release: the
+    # estimate of a letting-go hand falls ~110 N/s at the tool, and both filters of the
+    # estimate-based release detector see it that slowly. The arm's own motion shows it
+    # within ~20 ms (the feed-forward pulls it behind a steady command)
+    sim = DragSim(observer=observer, gains="paper")
+    push = ToolPush((20.0, 0.0, 0.0), 0.8, 2.0)
+    sim.world.pushes.append(push)
+    released: list[bool] = []
+    run = sim.run(2.6, pressed=_pressed, on_tick=lambda s: released.append(s.drag._released))
+    fig = drag_figures(run, push, sim.drag_cfg.damping, sim.drag_cfg.standstill_speed)
+    assert run.stop_tick == -1, (run.reason.max(), run.contact_link)
+    assert abs(fig["steady_speed_mps"] - 0.1) <= 0.01, fig
+    assert fig["off_axis_mps"] < 0.05 * fig["steady_speed_mps"], fig
+    assert fig["rest_time_ms"] <= 100.0, fig
+    seen = np.array(released)
+    pushing = (run.t > push.start) & (run.t < push.end - push.ramp)
+    assert not seen[pushing].any(), run.t[pushing][seen[pushing]][:5]  # no false release
+    after = (run.t >= push.end - push.ramp) & (run.t < push.end + 0.05)
+    assert seen[after].any()  # the release itself is seen

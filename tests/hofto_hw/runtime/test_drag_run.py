@@ -15,7 +15,7 @@ import numpy as np
 
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.config.runtime import ScriptedDragConfig
-from hofto_hw.control.joint_motion import DRAG, HOLD
+from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE
 from hofto_hw.experiments.drag_sim import LinkPush, tool_motion
 from hofto_hw.runtime.compose import build
 from hofto_hw.runtime.drag_script import DragScript, drag_summary
@@ -210,3 +210,30 @@ def test_momentum_drags_while_the_monitor_decides_on_hofto(cfg: SystemConfig) ->
     assert _events(system, Fault.COLLISION) == []
     fig = drag_summary(script, cfg.drag.damping, cfg.drag.standstill_speed)
     assert abs(fig["steady_speed_mps"] - 0.1) < 0.01, fig
+
+
+def test_the_loop_learns_the_friction_error_in_contact_free_motion_only(cfg: SystemConfig) -> None:
+    # the drag's friction-error estimate (control/friction_residual.py) learns from the tick
+    # outside drag mode while the arm moves with no contact and no stop: not at rest, not
+    # while a stop is active
+    system = build(cfg, clock="sim", contact=False)
+    tick = system.tick
+    fr = tick.drag.friction
+    assert fr is not None
+    system.loop.run(max_ticks=300)  # holding at rest
+    assert fr.seconds == 0.0
+    tick.mode_request = MOVE  # the demo path
+    system.loop.run(max_ticks=1500)
+    assert fr.seconds > 0.3, fr.seconds
+    tick.stop_requested = True  # category 1: the arm ramps down, nothing learned meanwhile
+    system.loop.run(max_ticks=1)  # (the request's own tick is judged before it latches)
+    learned = fr.seconds
+    system.loop.run(max_ticks=300)
+    assert tick.stop.category == 1
+    assert fr.seconds == learned
+    # what it learned is the true arm's: joint 1's Coulomb friction is 0.3 N·m above the
+    # model's, which the estimate reads as -0.3 N·m times the direction of motion
+    fr.solve()
+    true = system.bus.plant.true_model.friction
+    d_c = -(true.coulomb[0] - system.model.friction.coulomb[0])
+    assert abs(fr.coef[0, 1] - d_c) < 0.2, (fr.coef[0], d_c)

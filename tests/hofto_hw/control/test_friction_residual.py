@@ -1,0 +1,60 @@
+"""The friction model's error learned from contact-free motion (hofto_hw/control/
+friction_residual.py): recovered from a synthetic estimate, zero without motion, bounded."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hofto_hw.config.loader import load_config
+from hofto_hw.control.friction_residual import FrictionResidual
+from hofto_hw.experiments.drag_sim import ER3A
+from hofto_hw.model.robot import RobotModel
+
+
+def _model() -> RobotModel:
+    return RobotModel.from_config(load_config(ER3A).robot)
+
+
+def test_learns_the_coulomb_and_viscous_error_of_a_moving_arm() -> None:
+    model = _model()
+    fr = FrictionResidual(model.friction, time_constant=5.0)
+    d_c = np.array([-0.3, 0.2, -0.2, 0.1, -0.05, 0.0])  # the estimate's error [N·m]
+    d_v = np.array([-0.4, 0.3, -0.1, -0.05, 0.05, -0.02])  # [N·m·s/rad]
+    bias = np.array([0.0, -0.25, -0.3, 0.0, 0.02, 0.0])
+    rng = np.random.default_rng(1)
+    v_s = model.friction.smooth_velocity
+    dt = 1e-3
+    for k in range(4000):
+        t = k * dt
+        qd = np.array([1.2, 0.9, 1.1, 1.5, 1.3, 1.7]) * np.sin(
+            t * np.array([1.6, 1.8, 2.1, 2.5, 2.2, 2.9])
+        )
+        est = bias + d_c * np.tanh(qd / v_s) + d_v * qd + rng.normal(0.0, 0.05, 6)
+        fr.learn(qd, est, dt)
+    c = fr.solve()
+    np.testing.assert_allclose(c[:, 1], d_c, atol=0.03)
+    np.testing.assert_allclose(c[:, 2], d_v, atol=0.03)
+    qd = np.array([0.18, 0.27, -0.31, 0.08, -0.08, 0.1])  # a drag's joint speeds
+    out = np.zeros(6)
+    fr.correction(qd, out)
+    np.testing.assert_allclose(out, d_c * np.tanh(qd / v_s) + d_v * qd, atol=0.02)
+
+
+def test_no_motion_learns_nothing_and_the_correction_is_bounded() -> None:
+    model = _model()
+    fr = FrictionResidual(model.friction, min_speed=0.05, limit=0.25)
+    still = np.full(6, 0.01)
+    for _ in range(2000):  # below min_speed: an arm at rest (a hand may push it)
+        assert not fr.learn(still, np.full(6, 3.0), 1e-3)
+    fr.solve()
+    out = np.ones(6)
+    fr.correction(np.full(6, 0.2), out)
+    assert fr.seconds == 0.0
+    np.testing.assert_array_equal(out, np.zeros(6))
+    # a wild fit cannot become a push: at most a quarter of the model's own friction
+    fr.coef[:, 1] = 50.0
+    qd = np.full(6, 0.2)
+    f = np.zeros(6)
+    model.friction.torque(qd, f)
+    fr.correction(qd, out)
+    np.testing.assert_allclose(out, 0.25 * np.abs(f))
