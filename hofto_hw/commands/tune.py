@@ -50,7 +50,19 @@ def configure(parser: argparse.ArgumentParser) -> None:
         default=",".join(TUNED_BY_DEFAULT),
         help="observers to tune (comma-separated)",
     )
-    parser.add_argument("--gains", default="20", help="momentum observer gains to try [1/s]")
+    parser.add_argument("--gains", default="10,20,40", help="momentum observer gains to try [1/s]")
+    parser.add_argument(
+        "--hofto-poles",
+        default="20,40,80",
+        help="HOFTO eq. (17) pole placements to try besides the replay default [rad/s] "
+        "('' for none)",
+    )
+    parser.add_argument(
+        "--hofto-substeps",
+        type=positive_int,
+        default=4,
+        help="integration substeps per sample of the pole-placed HOFTO settings",
+    )
     parser.add_argument(
         "--margins",
         default="0.1,0.2,0.3,0.4,0.5,0.6,0.7,0.8,0.9,1,1.3,1.6,2",
@@ -67,6 +79,24 @@ def configure(parser: argparse.ArgumentParser) -> None:
         type=finite_nonnegative_float,
         default=0.1,
         help="added to each joint's best clean margin (to the next margin tried)",
+    )
+    parser.add_argument(
+        "--rest-margins",
+        default="",
+        help="margins of the standstill term to try with every margin (per joint; '' = the "
+        "standstill term takes the margin of the other terms)",
+    )
+    parser.add_argument(
+        "--rest-cushion",
+        type=finite_nonnegative_float,
+        help="added to each joint's best clean standstill margin (default: --cushion)",
+    )
+    parser.add_argument(
+        "--fusion",
+        choices=("mean", "none"),
+        default="mean",
+        help="also calibrate the margins on the mean of HOFTO's and the momentum observer's "
+        "ratios (when both are tuned) and report it against each alone",
     )
     parser.add_argument(
         "--rest-weights",
@@ -140,15 +170,29 @@ def _sensitivity(stats: Any, amps: list[float]) -> dict[str, Any]:
     }
 
 
+def _optional_floats(text: str, what: str) -> list[float]:
+    """Like :func:`_floats`, '' (or only spaces) giving an empty list."""
+    return [] if not text.strip() else _floats(text, what)
+
+
+def _score(choice: Any) -> dict[str, float]:
+    """A choice's cross-validated score for the provenance."""
+    return {
+        "rate_sum": round(float(choice.score[0]), 4),
+        "median_delay": round(-float(choice.score[1]), 4),
+    }
+
+
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.commands.backend import observer_backend
     from hofto_hw.config.collision import CollisionConfig
-    from hofto_hw.errors import ConfigError, UserError
-    from hofto_hw.observers.stability import check_observer
+    from hofto_hw.errors import UserError
     from hofto_hw.replay.defaults import OBSERVER_NAMES
+    from hofto_hw.replay.gains import variants
     from hofto_hw.replay.session import load_for_replay, observer_for, recording_rate
     from hofto_hw.replay.setup import load_setup, observer_config, sha256_of
     from hofto_hw.replay.thresholds import (
+        FusionThresholds,
         ObserverThresholds,
         ParametersRef,
         ThresholdsFile,
@@ -157,7 +201,9 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.replay.tuning import choose, cross_validate, final_config, folds_of, pulsed_runs
 
     gains = _floats(args.gains, "--gains")
+    poles = _optional_floats(args.hofto_poles, "--hofto-poles")
     margins = _floats(args.margins, "--margins")
+    rest_margins = _optional_floats(args.rest_margins, "--rest-margins") or None
     moving = _floats(args.moving_times, "--moving-times")
     still = _floats(args.standstill_times, "--standstill-times")
     amps = _floats(args.amplitudes, "--amplitudes")
@@ -166,6 +212,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"tune: --rest-weights must be > 0, got {args.rest_weights!r}")
     if min(moving) <= 0:
         raise UserError(f"tune: --moving-times must be > 0 s, got {args.moving_times!r}")
+    if poles and min(poles) <= 0:
+        raise UserError(f"tune: --hofto-poles must be > 0 rad/s, got {args.hofto_poles!r}")
     names = [v.strip() for v in args.observers.split(",") if v.strip()]
     for name in names:
         if name not in OBSERVER_NAMES or name == "sta":
@@ -186,30 +234,37 @@ def run(args: argparse.Namespace) -> int:
     backend = observer_backend()
     say = lambda m: print(f"tune: {m}", file=sys.stderr, flush=True)  # noqa: E731
     template = CollisionConfig(base=[1.0] * n, debounce_time=args.debounce)
+    search = {
+        "moving_times": moving,
+        "standstill_times": still,
+        "margins": margins,
+        "folds": args.folds,
+        "rest_weights": tuple(weights),
+        "rest_margins": rest_margins,
+        "feature_cache": {},  # the features depend on the recordings only: computed once
+    }
     entries: dict[str, ObserverThresholds] = {}
     chosen: dict[str, Any] = {}
     tables: dict[str, list[str]] = {}
+    kept: dict[str, Any] = {}  # name -> (choice, runs) of the chosen setting
     for name in names:
-        base_obs = observer_config(name, setup)
-        variants = []
-        if name == "momentum":
-            for gain in gains:
-                cfg = base_obs.model_copy(update={"gain": [gain] * n})
-                try:
-                    check_observer(name, cfg, setup.model, rate)
-                except ConfigError:
-                    say(f"momentum gain {gain:g}: unstable at {rate:.4g} Hz, skipped")
-                    continue
-                variants.append(cfg)
-            if not variants:
-                raise UserError(
-                    f"tune: no momentum gain in {args.gains!r} is stable at {rate:.4g} Hz"
-                )
-        else:
-            variants.append(base_obs)
+        tried, grid = variants(
+            name,
+            observer_config(name, setup),
+            setup.model,
+            rate,
+            gains,
+            poles,
+            args.hofto_substeps,
+            say,
+        )
+        if not tried:
+            what = "--gains" if name == "momentum" else "setting"
+            raise UserError(f"tune: no {name} {what} is stable at {rate:.4g} Hz")
         best = None
-        for obs_cfg in variants:
-            say(f"{name}: observer runs with pulses ({obs_cfg.model_dump(exclude_none=True)})")
+        for variant, record in zip(tried, [g for g in grid if g["stable"]], strict=True):
+            obs_cfg = variant.config
+            say(f"{name} {variant.label}: observer runs with pulses")
             runs = pulsed_runs(
                 recs,
                 lambda r, c=obs_cfg, o=name: observer_for(o, c, setup, r, backend),
@@ -221,26 +276,29 @@ def run(args: argparse.Namespace) -> int:
             cands = cross_validate(
                 runs,
                 template,
-                moving,
-                still,
-                margins,
-                args.folds,
-                say=lambda m, o=name: say(f"{o}: {m}"),
-                rest_weights=tuple(weights),
+                say=lambda m, o=f"{name} {variant.label}": say(f"{o}: {m}"),
+                **search,
             )
             try:
-                choice = choose(cands, args.cushion)
+                choice = choose(cands, args.cushion, args.rest_cushion)
             except UserError as exc:
-                say(f"{name}: {exc}")
+                say(f"{name} {variant.label}: {exc}")
+                record["clean"] = False
                 continue
+            record.update(clean=True, **_score(choice))
+            say(f"{name} {variant.label}: left-out score {record}")
             if best is None or choice.score > best[0].score:
-                best = (choice, obs_cfg, runs)
+                best = (choice, variant, runs)
         if best is None:
             raise UserError(
                 f"tune: {name}: every setting gave false alarms on the left-out runs "
                 "(try larger --margins)"
             )
-        choice, obs_cfg, runs = best
+        choice, variant, runs = best
+        for record in grid:
+            record["chosen"] = record["label"] == variant.label
+        obs_cfg = variant.config
+        kept[name] = (choice, runs)
         monitor, peak = final_config(runs, template, choice)
         samples = sum(r.rec.n_samples for r in runs)
         entries[name] = ObserverThresholds(
@@ -248,20 +306,64 @@ def run(args: argparse.Namespace) -> int:
         )
         chosen[name] = {
             "observer": obs_cfg.model_dump(mode="json", exclude_none=True),
+            "setting": variant.label,
+            "grid": grid,
+            "score": _score(choice),
             "moving_time": choice.moving_time,
             "standstill_time": choice.standstill_time,
             "margin": choice.margin,
+            "rest_margin": choice.rest_margin,
             "rest_weight": choice.rest_weight,
             "sensitivity": _sensitivity(choice.stats, amps),
         }
         tables[name] = [
-            f"{name}: moving_time {choice.moving_time:g} s, standstill_time "
-            f"{choice.standstill_time:g} s, margin per joint {choice.margin}, rest weight "
-            f"{choice.rest_weight}",
+            f"{name} ({variant.label}): moving_time {choice.moving_time:g} s, standstill_time "
+            f"{choice.standstill_time:g} s, margin per joint {choice.margin}, standstill margin "
+            f"{choice.rest_margin}, rest weight {choice.rest_weight}",
             *_table(choice.stats, amps, args.width),
         ]
-        if name == "momentum":
-            tables[name][0] += f", gain {obs_cfg.gain[0]:g}"
+    fusion = None
+    decision: dict[str, Any] | None = None
+    rows = ("hofto", "momentum")
+    if args.fusion == "mean" and all(r in kept for r in rows):
+        say("fusion (mean of hofto's and momentum's ratios): cross-validation")
+        pulsed = [kept[r][1] for r in rows]
+        cands = cross_validate(pulsed, template, say=lambda m: say(f"fusion: {m}"), **search)
+        try:
+            fchoice = choose(cands, args.cushion, args.rest_cushion)
+        except UserError as exc:
+            say(f"fusion: {exc}")
+            fchoice = None
+        if fchoice is not None:
+            monitors = {r: final_config(kept[r][1], template, fchoice)[0] for r in rows}
+            fusion = FusionThresholds(logic="mean", monitors=monitors)
+            chosen["fusion"] = {
+                "logic": "mean",
+                "rows": list(rows),
+                "score": _score(fchoice),
+                "moving_time": fchoice.moving_time,
+                "standstill_time": fchoice.standstill_time,
+                "margin": fchoice.margin,
+                "rest_margin": fchoice.rest_margin,
+                "rest_weight": fchoice.rest_weight,
+                "sensitivity": _sensitivity(fchoice.stats, amps),
+            }
+            tables["fusion"] = [
+                f"fusion (mean of {' and '.join(rows)}): moving_time {fchoice.moving_time:g} s, "
+                f"margin per joint {fchoice.margin}, standstill margin {fchoice.rest_margin}",
+                *_table(fchoice.stats, amps, args.width),
+            ]
+            kept["fusion"] = (fchoice, None)
+    if len(kept) > 1:
+        scores = {k: kept[k][0].score for k in kept}
+        winner = max(scores, key=lambda k: scores[k])
+        decision = {
+            "decides": winner,
+            "why": "most pulses found on the left-out runs with 0 false trips on every left-out "
+            "fold (sum of detection rates over joints, sizes and states), then the shortest "
+            "median delay",
+            "scores": {k: _score(kept[k][0]) for k in kept},
+        }
     fold = folds_of(len(args.files), args.folds)
     provenance = {
         "tool": "hofto-hw tune",
@@ -270,11 +372,16 @@ def run(args: argparse.Namespace) -> int:
         "settings": {
             "observers": names,
             "gains": gains,
+            "hofto_poles": poles,
+            "hofto_substeps": args.hofto_substeps,
             "margins": margins,
+            "rest_margins": rest_margins,
             "moving_times": moving,
             "standstill_times": still,
             "rest_weights": weights,
             "cushion": args.cushion,
+            "rest_cushion": args.cushion if args.rest_cushion is None else args.rest_cushion,
+            "fusion": args.fusion,
             "folds": args.folds,
             "debounce": args.debounce,
             "amplitudes": amps,
@@ -284,6 +391,8 @@ def run(args: argparse.Namespace) -> int:
         },
         "observers": chosen,
     }
+    if decision is not None:
+        provenance["decision"] = decision
     content = ThresholdsFile(
         robot=setup.config.robot.name,
         parameters=ParametersRef(file=args.params.name, sha256=sha256_of(args.params)),
@@ -291,6 +400,7 @@ def run(args: argparse.Namespace) -> int:
         margin=max(max(c["margin"]) for c in chosen.values()),
         calibrated_on=[f.name for f in args.files],
         observers=entries,
+        fusion=fusion,
         provenance=provenance,
     )
     try:
@@ -303,5 +413,15 @@ def run(args: argparse.Namespace) -> int:
     )
     for lines in tables.values():
         print("\n".join(lines))
+    if decision is not None:
+        figures = ", ".join(
+            f"{k} {v['rate_sum']:.2f} / {v['median_delay']:.3f} s"
+            for k, v in decision["scores"].items()
+        )
+        print(
+            f"decision: {decision['decides']} (left-out score, sum of detection rates / median "
+            f"delay: {figures}); every observer's own thresholds are written"
+            + (", and the fused ones under fusion:" if fusion is not None else "")
+        )
     print(f"wrote {args.output}")
     return 0
