@@ -188,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.config.collision import CollisionConfig
     from hofto_hw.errors import UserError
     from hofto_hw.replay.defaults import OBSERVER_NAMES
-    from hofto_hw.replay.gains import variants
+    from hofto_hw.replay.gains import Variant, variants
     from hofto_hw.replay.session import load_for_replay, observer_for, recording_rate
     from hofto_hw.replay.setup import load_setup, observer_config, sha256_of
     from hofto_hw.replay.thresholds import (
@@ -198,7 +198,14 @@ def run(args: argparse.Namespace) -> int:
         ThresholdsFile,
         write_thresholds,
     )
-    from hofto_hw.replay.tuning import choose, cross_validate, final_config, folds_of, pulsed_runs
+    from hofto_hw.replay.tuning import (
+        choose,
+        cross_validate,
+        final_config,
+        folds_of,
+        per_joint_best,
+        pulsed_runs,
+    )
 
     gains = _floats(args.gains, "--gains")
     poles = _optional_floats(args.hofto_poles, "--hofto-poles")
@@ -261,7 +268,7 @@ def run(args: argparse.Namespace) -> int:
         if not tried:
             what = "--gains" if name == "momentum" else "setting"
             raise UserError(f"tune: no {name} {what} is stable at {rate:.4g} Hz")
-        best = None
+        results = []
         for variant, record in zip(tried, [g for g in grid if g["stable"]], strict=True):
             obs_cfg = variant.config
             say(f"{name} {variant.label}: observer runs with pulses")
@@ -287,16 +294,29 @@ def run(args: argparse.Namespace) -> int:
                 continue
             record.update(clean=True, **_score(choice))
             say(f"{name} {variant.label}: left-out score {record}")
-            if best is None or choice.score > best[0].score:
-                best = (choice, variant, runs)
-        if best is None:
+            results.append((choice, variant, runs))
+        if not results:
             raise UserError(
                 f"tune: {name}: every setting gave false alarms on the left-out runs "
                 "(try larger --margins)"
             )
-        choice, variant, runs = best
-        for record in grid:
-            record["chosen"] = record["label"] == variant.label
+        if name == "momentum" and len(results) > 1:
+            # joint j's residual depends on joint j's gain only: the best gain per joint
+            choice, runs, pick = per_joint_best([r[0] for r in results], [r[2] for r in results])
+            labels = [results[i][1].label for i in pick]
+            gain = [results[i][1].config.gain[j] for j, i in enumerate(pick)]  # type: ignore[union-attr]
+            variant = Variant(
+                "per joint: " + ", ".join(f"{g:g}" for g in gain),
+                results[0][1].config.model_copy(update={"gain": gain}),
+            )
+            for record in grid:
+                record["chosen_for_joints"] = [
+                    j + 1 for j, lb in enumerate(labels) if lb == record["label"]
+                ]
+        else:
+            choice, variant, runs = max(results, key=lambda r: r[0].score)
+            for record in grid:
+                record["chosen"] = record["label"] == variant.label
         obs_cfg = variant.config
         kept[name] = (choice, runs)
         monitor, peak = final_config(runs, template, choice)

@@ -406,3 +406,57 @@ def final_config(
     )
     peak = np.max(np.abs(np.concatenate([r.est for r in runs])), axis=0)
     return cfg, peak
+
+
+def per_joint_best(
+    choices: list[Choice], runs: list[list[PulsedRun]]
+) -> tuple[Choice, list[PulsedRun], list[int]]:
+    """For an observer whose joints are decoupled (the momentum observer: joint j's estimate
+    depends on joint j's gain only), the best setting per joint: of each joint, the figures,
+    margins and estimates of the setting (``choices[i]`` with its ``runs[i]``, all of the same
+    recordings and pulses) that scores best on it. Returns the combined choice, runs and
+    which setting each joint took. The settings must share the monitor timing (the timing
+    is common to all joints); otherwise the best whole setting is returned."""
+    timing = {(c.moving_time, c.standstill_time) for c in choices}
+    best_whole = max(range(len(choices)), key=lambda i: choices[i].score)
+    n = choices[0].false.size
+    if len(timing) > 1:
+        return choices[best_whole], runs[best_whole], [best_whole] * n
+    pick = [
+        max(range(len(choices)), key=lambda i, j=j: (_joint_score(choices[i].stats, j), -i))
+        for j in range(n)
+    ]
+    stats = PulseStats.empty(choices[0].stats.amplitudes, n)
+    for j, i in enumerate(pick):
+        stats.add(choices[i].stats.joint(j))
+    total = sum(_joint_score(stats, j)[0] for j in range(n))
+    delays = [x for a in stats.delays for s in a for row in s for x in row]
+    first = choices[0]
+    combined = Choice(
+        first.moving_time,
+        first.standstill_time,
+        [choices[i].margin[j] for j, i in enumerate(pick)],
+        np.zeros(n),
+        stats,
+        [choices[i].rest_weight[j] for j, i in enumerate(pick)],
+        (total, -float(np.median(delays)) if delays else -np.inf),
+        [choices[i].rest_margin[j] for j, i in enumerate(pick)],
+    )
+
+    def column_mix(arrays: list[FloatArray]) -> FloatArray:
+        out = arrays[0].copy()
+        for j, i in enumerate(pick):
+            out[:, j] = arrays[i][:, j]
+        return out
+
+    mixed = []
+    for k, run in enumerate(runs[0]):
+        per_amp = [
+            [
+                (column_mix([runs[i][k].pulsed[a][r][0] for i in range(len(runs))]), pulses)
+                for r, (_, pulses) in enumerate(rounds)
+            ]
+            for a, rounds in enumerate(run.pulsed)
+        ]
+        mixed.append(PulsedRun(run.rec, column_mix([rs[k].est for rs in runs]), per_amp))
+    return combined, mixed, pick
