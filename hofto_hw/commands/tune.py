@@ -193,9 +193,10 @@ def _optional_floats(text: str, what: str) -> list[float]:
 
 def _score(choice: Any) -> dict[str, float]:
     """A choice's cross-validated score for the provenance."""
+    delay = -float(choice.score[1])  # inf when nothing was found
     return {
         "rate_sum": round(float(choice.score[0]), 4),
-        "median_delay": round(-float(choice.score[1]), 4),
+        "median_delay": round(delay, 4) if np.isfinite(delay) else None,
     }
 
 
@@ -451,7 +452,8 @@ def run(args: argparse.Namespace) -> int:
         print("\n".join(lines))
     if decision is not None:
         figures = ", ".join(
-            f"{k} {v['rate_sum']:.2f} / {v['median_delay']:.3f} s"
+            f"{k} {v['rate_sum']:.2f} / "
+            + ("-" if v["median_delay"] is None else f"{v['median_delay']:.3f} s")
             for k, v in decision["scores"].items()
         )
         print(
