@@ -8,8 +8,9 @@ dynamics (HOFTO is nonlinear: no linear response can stand in for it). Pulses ar
 3 s apart, cycling over the joints, one replay per recording and amplitude. Each variant is
 the one monitor (safety/collision/) with the thresholds file's rows: ``momentum`` and
 ``hofto`` alone, and ``mean`` (the mean of both rows' ratios must exceed 1, each row with its
-own thresholds). Detection: the monitor trips within [t0, t0 + W + 0.2 s] where it did not
-without the pulse. False alarms: trip episodes on the recordings without pulses.
+own thresholds: the file's ``fusion:`` monitors when it has them, calibrated on the fused
+ratio by ``hofto-hw tune``). Detection: the monitor trips within [t0, t0 + W + 0.2 s] where it
+did not without the pulse. False alarms: trip episodes on the recordings without pulses.
 
     python tools/fusion_detection.py PARAMS THRESHOLDS FILE... [--amplitudes 5,10,20] [--json]
 """
@@ -70,7 +71,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     setup = load_setup(args.params)
     th = load_thresholds_for(setup, Path(args.thresholds))
-    monitors = {name: th.observers[name].monitor for name in ROWS}
+    single = {name: th.observers[name].monitor for name in ROWS}
+    # ``mean`` judged with the thresholds calibrated on the fused ratio when the file has them
+    fused = single if th.fusion is None else {name: th.fusion.monitors[name] for name in ROWS}
+    per_variant = {v: fused if v == "mean" else single for v in VARIANTS}
     amps = [float(a) for a in args.amplitudes.split(",")]
     n = setup.model.n
     rng = np.random.default_rng(args.seed)
@@ -80,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     for f in args.files:
         rec = load_for_replay(setup, Path(f), None)
         base = estimates(setup, th, rec)
-        quiet = {v: detections(monitors, v, rec, base) for v in VARIANTS}
+        quiet = {v: detections(per_variant[v], v, rec, base) for v in VARIANTS}
         for v in VARIANTS:
             false_alarms[v] += int(np.sum(np.diff(quiet[v].astype(int)) == 1))
         t = rec.t
@@ -95,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
                 windows.append((j, (t >= t0) & (t <= t0 + args.width + 0.2)))
             est = estimates(setup, th, dataclasses.replace(rec, tau=tau))
             for v in VARIANTS:
-                det = detections(monitors, v, rec, est)
+                det = detections(per_variant[v], v, rec, est)
                 for j, sel in windows:
                     hits[v][ai, j] += bool(np.any(det[sel] & ~quiet[v][sel]))
             for j, _ in windows:

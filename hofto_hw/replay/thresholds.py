@@ -19,6 +19,9 @@ and the file names the parameters file (with its sha256) behind the model.
         monitor: {base: [...], velocity_gain: [...], ...}   # see hofto_hw/config/collision.py
         peak: [...]                  # largest |tau_ext_hat| on the calibration data [N·m]
         samples: 41230
+    fusion:                          # optional (hofto-hw tune): thresholds calibrated with the
+      logic: mean                    # mean of the rows' ratios as the decision
+      monitors: {hofto: {base: [...], ...}, momentum: {...}}   # rows: observers above
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from hofto_hw.config.base import FileModel
 from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.loader import read_model
 from hofto_hw.config.models import ObserverConfig
+from hofto_hw.errors import ConfigError
 
 FORMAT = "hofto-hw/collision-thresholds"
 
@@ -53,6 +57,15 @@ class ObserverThresholds(FileModel):
     samples: int = 0
 
 
+class FusionThresholds(FileModel):
+    """Thresholds calibrated for the fused decision (safety/collision ``logic: mean``: the
+    mean of the rows' ratios |est| / thr must cross 1): one monitor per row, each row an
+    observer of the file's ``observers`` (whose observer settings it uses)."""
+
+    logic: Literal["mean"] = "mean"
+    monitors: dict[str, CollisionConfig]
+
+
 class ThresholdsFile(FileModel):
     """Content of a thresholds file (see the module docstring)."""
 
@@ -64,6 +77,9 @@ class ThresholdsFile(FileModel):
     margin: float = 0.0
     calibrated_on: list[str] = Field(default_factory=list)
     observers: dict[str, ObserverThresholds]
+    fusion: FusionThresholds | None = Field(
+        None, description="thresholds for the fused ratio of two or more observers above"
+    )
     provenance: dict[str, Any] | None = Field(
         None, description="how the file was made (hofto-hw tune: files, sha256, settings)"
     )
@@ -71,7 +87,15 @@ class ThresholdsFile(FileModel):
 
 def read_thresholds(path: str | Path) -> ThresholdsFile:
     """Read and validate a thresholds file; errors name the file and the field."""
-    return read_model(path, "thresholds file", ThresholdsFile)
+    th = read_model(path, "thresholds file", ThresholdsFile)
+    if th.fusion is not None:
+        missing = [r for r in th.fusion.monitors if r not in th.observers]
+        if missing or len(th.fusion.monitors) < 2:
+            raise ConfigError(
+                f"{path}: fusion.monitors {sorted(th.fusion.monitors)}: needs two or more rows, "
+                f"each one of observers {sorted(th.observers)}"
+            )
+    return th
 
 
 def write_thresholds(path: str | Path, content: ThresholdsFile) -> None:

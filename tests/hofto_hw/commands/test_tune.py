@@ -80,3 +80,63 @@ def test_tune_refuses_bad_settings_naming_them(option, named, capsys) -> None:
     args = ["tune", str(CONFIGS / "ur10e" / "parameters.yaml"), *map(str, FILES), "-o", "x.yaml"]
     assert main(args + option) == 2
     assert named in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_tune_searches_hofto_poles_and_calibrates_the_fused_ratio(tmp_path, capsys) -> None:
+    import numpy as np
+
+    from hofto_hw.replay.thresholds import read_thresholds
+    from safety.collision import CollisionLevels, from_thresholds
+
+    out = tmp_path / "fused.yaml"
+    args = ["tune", str(CONFIGS / "ur10e" / "parameters.yaml"), *map(str, FILES), "-o", str(out)]
+    fast = ["--gains", "20", "--hofto-poles", "20,300", "--margins", "1,2", "--pulses", "1"]
+    fast += ["--amplitudes", "20", "--observers", "momentum,hofto", "--moving-times", "2"]
+    fast += ["--rest-margins", "0.5,2"]
+    assert main(args + fast) == 0
+    captured = capsys.readouterr()
+    assert "poles -300 rad/s, 4 substeps: unstable" in captured.err  # refused, not replayed
+    assert "fusion (mean of hofto and momentum)" in captured.out and "decision:" in captured.out
+    th = read_thresholds(out)
+    grid = th.provenance["observers"]["hofto"]["grid"]
+    assert [g["label"] for g in grid] == [
+        "replay default",
+        "poles -20 rad/s, 4 substeps",
+        "poles -300 rad/s, 4 substeps",
+    ]
+    assert [g["stable"] for g in grid] == [True, True, False]
+    assert sum(bool(g.get("chosen")) for g in grid) == 1 and not grid[2].get("chosen")
+    chosen = th.observers["hofto"].observer
+    if grid[1]["chosen"]:  # the pole-placed setting: the runtime's eq. (17) form
+        assert chosen.form == "eq17" and chosen.substeps == 4 and chosen.gains[0] == [80.0] * 6
+    else:
+        assert chosen.form == "recursive"
+    assert th.fusion is not None and set(th.fusion.monitors) == {"hofto", "momentum"}
+    fused = th.provenance["observers"]["fusion"]
+    assert fused["logic"] == "mean" and len(fused["margin"]) == 6
+    assert th.provenance["decision"]["decides"] in ("momentum", "hofto", "fusion")
+    # the fused thresholds are built by the one monitor and trip nowhere on a tuned-on run
+    from hofto_hw.replay.runner import run_observer
+    from hofto_hw.replay.session import load_for_replay, observer_for
+    from hofto_hw.replay.setup import load_setup
+
+    setup = load_setup(CONFIGS / "ur10e" / "parameters.yaml")
+    rec = load_for_replay(setup, FILES[0], None)
+    rows = ("hofto", "momentum")
+    est = np.stack(
+        [
+            run_observer(rec, observer_for(r, th.observers[r].observer, setup, rec, "auto"))
+            for r in rows
+        ],
+        axis=1,
+    )
+    mon = CollisionLevels.from_params(
+        from_thresholds({r: th.fusion.monitors[r] for r in rows}, logic="mean"), backend="auto"
+    )
+    mon.reset(rec.qd[0])
+    hits = [
+        mon.step(est[k], rec.qd[k], None, float(rec.t[k] - rec.t[k - 1]), k)
+        for k in range(1, rec.n_samples)
+    ]
+    assert not any(hits)

@@ -47,3 +47,19 @@ def test_errors_name_file_and_field(tmp_path: Path) -> None:
         read_thresholds(p)
     with pytest.raises(ConfigError, match="thresholds file not found"):
         read_thresholds(tmp_path / "none.yaml")
+
+
+def test_fusion_rows_must_be_observers_of_the_file(tmp_path: Path) -> None:
+    p = tmp_path / "th.yaml"
+    head = (
+        "robot: arm\nobservers:\n  momentum:\n    observer: {type: momentum, gain: [1]}\n"
+        "    monitor: {base: [1.0]}\n"
+    )
+    p.write_text(
+        head + "fusion:\n  monitors:\n    momentum: {base: [2.0]}\n    hofto: {base: [2.0]}\n"
+    )
+    with pytest.raises(ConfigError, match=r"th\.yaml: fusion\.monitors \['hofto', 'momentum'\]"):
+        read_thresholds(p)
+    p.write_text(head + "fusion:\n  logic: any\n  monitors: {momentum: {base: [2.0]}}\n")
+    with pytest.raises(ConfigError, match=r"fusion\.logic"):
+        read_thresholds(p)

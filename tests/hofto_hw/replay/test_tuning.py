@@ -5,8 +5,16 @@ from __future__ import annotations
 import numpy as np
 
 from hofto_hw.replay.calibrate import fit_envelope
-from hofto_hw.replay.pulses import PulseStats
-from hofto_hw.replay.tuning import Candidate, choose, thresholds_of
+from hofto_hw.replay.pulses import Pulse, PulseStats
+from hofto_hw.replay.tuning import (
+    Candidate,
+    PulsedRun,
+    choose,
+    judge,
+    judge_grid,
+    per_joint_best,
+    thresholds_of,
+)
 
 
 def test_envelope_objective_counts_every_sample() -> None:
@@ -63,3 +71,107 @@ def test_choose_raises_each_margin_by_the_cushion() -> None:
     assert ch.margin == [0.3, 0.3]
     assert ch.stats.hits[0, 0].tolist() == [8, 8]  # the figures of the margin shipped
     assert choose(cands, cushion=0.15).margin == [0.5, 0.5]  # the next margin tried above
+
+
+class _Rec:
+    """The part of a Recording that judging reads (the time stamps)."""
+
+    def __init__(self, t: np.ndarray) -> None:
+        self.t = t
+
+
+def _run(est: np.ndarray, pulsed: np.ndarray, t: np.ndarray, pulses: list) -> PulsedRun:
+    return PulsedRun(_Rec(t), est, [[(pulsed, pulses)]])  # type: ignore[arg-type]
+
+
+def test_judge_grid_fused_rows_decide_on_the_mean_of_their_ratios() -> None:
+    """logic: mean: row A alone crosses its threshold, row B stays far below: the mean of the
+    ratios (1.5 + 0.2)/2 < 1 neither alarms nor detects; each row judged alone, A does."""
+    t = np.arange(400) * 0.01
+    n = 2
+    quiet_a = np.zeros((t.size, n))
+    quiet_a[100:150, 0] = 1.2  # a false alarm of A alone (thr 1)
+    pulse = Pulse(1, 2.0, 200, 260, rest=True)
+    hit_a = np.zeros((t.size, n))
+    hit_a[210:240, 1] = 1.5
+    hit_b = np.zeros((t.size, n))
+    hit_b[210:240, 1] = 0.2
+    thr = np.ones((t.size, n, 1))
+    a = _run(quiet_a, hit_a, t, [pulse])
+    b = _run(np.zeros((t.size, n)), hit_b, t, [pulse])
+    alone = [PulseStats.empty([5.0], n)]
+    assert judge_grid([a], [thr], 0.03, alone)[:, 0].tolist() == [True, False]
+    assert alone[0].hits[0, 1, 1] == 1
+    fused = [PulseStats.empty([5.0], n)]
+    assert judge_grid([a, b], [thr, thr], 0.03, fused)[:, 0].tolist() == [False, False]
+    assert fused[0].tries[0, 1, 1] == 1 and fused[0].hits[0, 1, 1] == 0
+    # a second row that sees the contact too carries it over: (1.5 + 0.9)/2 > 1
+    b2 = _run(np.zeros((t.size, n)), hit_b * 4.5, t, [pulse])
+    both = [PulseStats.empty([5.0], n)]
+    judge_grid([a, b2], [thr, thr], 0.03, both)
+    assert both[0].hits[0, 1, 1] == 1
+
+
+def test_judge_grid_matches_judge_setting_by_setting() -> None:
+    rng = np.random.default_rng(5)
+    t = np.cumsum(rng.uniform(0.008, 0.016, 3000))
+    n = 3
+    est = rng.normal(0.0, 1.0, (t.size, n)).cumsum(axis=0) * 0.05
+    pulsed = est + rng.normal(0.0, 0.5, est.shape)
+    pulses = [
+        Pulse(k % n, float(t[s]), s, s + 60, rest=bool(k % 2))
+        for k, s in enumerate(range(100, 2900, 150))
+    ]
+    run = _run(est, pulsed, t, pulses)
+    levels = np.array([0.5, 1.0, 2.0, 3.0])
+    base = rng.uniform(0.8, 1.2, (t.size, n))
+    grid = [PulseStats.empty([5.0], n) for _ in levels]
+    false = judge_grid([run], [base[:, :, None] * levels], 0.03, grid)
+    for k, lv in enumerate(levels):
+        one = PulseStats.empty([5.0], n)
+        assert judge(run, base * lv, 0.03, one).tolist() == false[:, k].tolist()
+        assert np.array_equal(one.hits, grid[k].hits) and np.array_equal(one.tries, grid[k].tries)
+        assert one.delays == grid[k].delays
+
+
+def _cand2(margin: float, rest: float, false: list[int], hits: list[float]) -> Candidate:
+    c = _cand(margin, false, hits)
+    c.rest_margin = rest
+    return c
+
+
+def test_choose_raises_the_standstill_margin_by_its_own_cushion() -> None:
+    """The margin of the standstill term is chosen and cushioned apart from the others: a
+    joint whose rest pulses need a low standstill margin keeps it."""
+    cands = [
+        _cand2(m, r, [0, 0], [10 - 5 * m - 10 * r] * 2)
+        for m in (0.1, 0.2, 0.3)
+        for r in (0.0, 0.05, 0.1, 0.2)
+    ]
+    ch = choose(cands, cushion=0.1, rest_cushion=0.05)
+    assert ch.margin == [0.2, 0.2] and ch.rest_margin == [0.05, 0.05]
+    ch = choose(cands, cushion=0.1)  # the rest cushion defaults to the cushion
+    assert ch.margin == [0.2, 0.2] and ch.rest_margin == [0.1, 0.1]
+    # without rest margins the standstill term follows the margin
+    assert choose([_cand(0.3, [0, 0], [5, 5])]).rest_margin == [0.3, 0.3]
+
+
+def test_per_joint_best_takes_each_joint_from_its_best_setting() -> None:
+    """Two momentum gains: the first finds more on joint 1, the second on joint 2; the
+    combined choice takes each joint's figures, margins and estimate column from its best."""
+    t = np.arange(50) * 0.01
+    pulse = Pulse(0, 0.1, 10, 30, rest=False)
+
+    def runs(value: float) -> list[PulsedRun]:
+        est = np.full((t.size, 2), value)
+        return [_run(est, est + 1.0, t, [pulse])]
+
+    a = choose([_cand(0.3, [0, 0], [9, 4])])
+    b = choose([_cand(0.6, [0, 0], [5, 8])])
+    combined, mixed, pick = per_joint_best([a, b], [runs(1.0), runs(2.0)])
+    assert pick == [0, 1]
+    assert combined.margin == [0.3, 0.6]
+    assert combined.stats.hits[0, 0].tolist() == [9, 8]
+    assert mixed[0].est[0].tolist() == [1.0, 2.0]
+    assert mixed[0].pulsed[0][0][0][0].tolist() == [2.0, 3.0]
+    assert combined.score[0] > max(a.score[0], b.score[0])

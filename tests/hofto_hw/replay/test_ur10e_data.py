@@ -95,7 +95,14 @@ def left_out(ctx):
         entry = th.observers[obs]
         ests = [run_observer(r, observer_for(obs, entry.observer, setup, r, "auto")) for r in recs]
         chosen = prov["observers"][obs]
-        monitor = refit(recs, ests, entry.monitor, chosen["margin"], chosen.get("rest_weight"))
+        monitor = refit(
+            recs,
+            ests,
+            entry.monitor,
+            chosen["margin"],
+            chosen.get("rest_weight"),
+            rest_margin=chosen.get("rest_margin"),
+        )
         observers[obs] = entry.model_copy(update={"monitor": monitor})
     return setup, th.model_copy(update={"observers": observers, "calibrated_on": files})
 
