@@ -185,13 +185,26 @@ def test_emcy_drive_fault_names_its_code(canrun: CanRun) -> None:
 
 
 def test_missing_tpdo_streak_is_bus_loss(canrun: CanRun) -> None:
-    """Node 4's TPDOs stop for 20 x lost_cycles SYNCs. (Late TPDOs are not tested here: a
-    stream late by a cycle or more lands in a later cycle's window and reads as fresh,
-    one cycle old; CAN frames carry no sequence number to tell. Measured: the ``late``
-    request with 4.5 ms and 50 ms delays gave no bus_loss.)"""
+    """Node 4's TPDOs stop for 20 x lost_cycles SYNCs."""
     lost = canrun.data["safety"]["bus"]["lost_cycles"]
     before = _start_moving(canrun)["ticks"]
     canrun.inject(op="tpdo", node=4, mode="drop", count=20 * lost)
     e = _check_fault(canrun, "bus_loss", before)
     assert e["tick"] - before >= lost
     assert "did not answer" in e["detail"], e
+
+
+def test_a_tpdo_stream_late_by_whole_cycles_is_bus_loss(canrun: CanRun) -> None:
+    """Node 3 answers every SYNC 1.5 cycles late, so each answer lands in the next cycle's
+    window: the master counts the SYNCs each node has not answered, reads those frames as an
+    older SYNC's (never fresh) and the streak is a bus loss with its category. (Before, the
+    stream read as fresh data one cycle old and nothing stopped: measured with 4.5 ms and
+    50 ms delays.)"""
+    lost = canrun.data["safety"]["bus"]["lost_cycles"]
+    cycle = 1.0 / canrun.data["loop"]["rate_hz"]
+    before = _start_moving(canrun)["ticks"]
+    canrun.inject(op="tpdo", node=3, mode="late", count=40 * lost, delay=1.5 * cycle)
+    e = _check_fault(canrun, "bus_loss", before)
+    assert e["tick"] - before >= lost
+    # the latching tick's status: the old SYNC's answers came, or (load) not even those
+    assert "older SYNC" in e["detail"] or "did not answer" in e["detail"], e
