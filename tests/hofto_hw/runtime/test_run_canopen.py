@@ -22,14 +22,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-import yaml
 from support.rootnet import (
     ROOT,
     Emulator,
     ServiceRun,
     emulator,
+    er3a_run,
     first_event,
     private_netns,
+    run_config,
     sim_canopen_args,
     wait_for,
 )
@@ -37,7 +38,6 @@ from support.rootnet import (
 from drivers.cia402.state_machine import State
 
 CAN_CONFIG = ROOT / "configs" / "er3a_canopen.yaml"
-ER3A = ROOT / "configs" / "er3a.yaml"
 CHANNEL = "239.74.163.2"  # inside the test's own namespace: no other test sees it
 OE = int(State.OPERATION_ENABLED)
 #: 50 ms at 200 Hz: at load 14 on 2 cores a few cycles' TPDOs came late (a spontaneous
@@ -46,18 +46,16 @@ LOST_CYCLES = 10
 
 
 def _config(folder: Path) -> tuple[Path, dict]:
-    data = yaml.safe_load(CAN_CONFIG.read_text())
-    er3a = yaml.safe_load(ER3A.read_text())
-    data["robot"]["urdf"] = str((CAN_CONFIG.parent / data["robot"]["urdf"]).resolve())
     # the shipped file's own safety settings (er3a.yaml's, position_jump scaled to 200 Hz:
     # with 1 kHz's 0.02 rad a CAN sample one SYNC late read once as a jump on joint 6)
-    data["safety"]["overrun_streak"] = 100
-    data["safety"]["bus"]["lost_cycles"] = LOST_CYCLES
-    data["run"] = {"clock": "real", "model_error": er3a["run"]["model_error"]}
-    data["run"]["path"] = er3a["run"]["path"]
-    path = folder / "er3a-canopen-run.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path, data
+    return run_config(
+        folder,
+        "er3a-canopen-run.yaml",
+        base=CAN_CONFIG,
+        overrun_streak=100,
+        lost_cycles=LOST_CYCLES,
+        run=er3a_run("model_error", "path"),
+    )
 
 
 @dataclass
