@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import argparse
 import gc
-import math
 import signal
 import threading
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from hofto_hw.commands.args import add_config
+from hofto_hw.commands.args import add_config, run_seconds
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -35,7 +34,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     add_config(parser, default="er3a_canopen")
     parser.add_argument("--control", default=None, help="Unix socket path for control/faults")
-    parser.add_argument("--duration", type=float, default=None, help="stop after N seconds")
+    parser.add_argument("--duration", type=run_seconds, default=None, help="stop after N seconds")
     parser.add_argument(
         "--quiet-arm", action="store_true", help="leave out the config's scripted external torques"
     )
@@ -75,8 +74,6 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.errors import UserError
     from hofto_hw.runtime.build import build_emulated_drives
 
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise UserError(f"--duration: must be a finite number of seconds > 0 (got {args.duration})")
     cfg = load_config(find_config(args.config))
     channel = args.channel or (cfg.bus.interface if cfg.bus is not None else None)
     if not channel:
