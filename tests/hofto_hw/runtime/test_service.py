@@ -81,7 +81,7 @@ def test_socket_path_safety(tmp_path: Path) -> None:
     live.bind(str(stale))
     live.listen(1)
     try:  # another run serving it: refused naming the option, left alone
-        with pytest.raises(UserError, match="--socket: .* is in use by another process"):
+        with pytest.raises(UserError, match=r"--socket: .* is in use by another process"):
             claim_control_path(stale, "--socket")
         assert stat.S_ISSOCK(stale.lstat().st_mode)
     finally:
