@@ -52,6 +52,7 @@ import numpy as np
 from drivers.canopen import layout
 from drivers.canopen.busload import bus_load, check_bus_load
 from drivers.canopen.errors import CANopenError, IdentityMismatchError, NodeMissingError
+from drivers.canopen.socket_buffer import widen_receive_buffer
 from drivers.cia402.codes import describe_error_code
 from drivers.cia402.pdo import RXPDO_SIZE, TXPDO_SIZE, mapping_value, parse_mapping_value
 from drivers.transport import (
@@ -236,7 +237,7 @@ class CANopenTransport(Transport):
         if self.can_interface not in ("virtual", "udp_multicast"):
             kw.setdefault("bitrate", self.bitrate)
         try:
-            return can.Bus(
+            bus = can.Bus(
                 interface=self.can_interface, channel=self.channel, can_filters=filters, **kw
             )
         except (can.CanError, OSError, ValueError, ImportError) as exc:
@@ -244,6 +245,8 @@ class CANopenTransport(Transport):
                 f"bus.interface: cannot open CAN channel {self.channel!r} with python-can "
                 f"interface {self.can_interface!r}: {exc}"
             ) from None
+        widen_receive_buffer(bus)  # a UDP socket drops what a CAN controller would keep
+        return bus
 
     def open(self) -> None:
         """Bring every node to operational (see the module docstring); raises CANopenError."""

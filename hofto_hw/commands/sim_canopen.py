@@ -66,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     """Serve until SIGTERM/SIGINT, a ``stop`` request or ``--duration``."""
     import can
 
+    from drivers.canopen.socket_buffer import widen_receive_buffer
     from drivers.sim.canopen_node import CanopenDrives
     from drivers.sim.control_socket import serve_control
     from drivers.sim.pacing import answer_first
@@ -83,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
         bus = can.Bus(interface=args.interface, channel=channel)
     except (can.CanError, OSError, ValueError) as exc:
         raise UserError(f"cannot open CAN channel {channel!r} ({args.interface}): {exc}") from None
+    widen_receive_buffer(bus)  # udp_multicast: a SYNC lost to a full socket is an unanswered one
     net = CanopenDrives(drives, bus, node_ids(cfg))
     stop_control = threading.Event()
     ctl = None
