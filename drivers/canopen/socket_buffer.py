@@ -5,9 +5,9 @@ that finds its receive buffer full. On ``udp_multicast`` every process on the ch
 every frame (its own included), ~25 per 200 Hz cycle for six drives, so the kernel's default
 buffer (208 KiB here, ~200 datagrams) overflows after a stall of ~40 ms, and a lost SYNC or
 TPDO is a lost answer (:mod:`drivers.canopen.master` then counts the node one SYNC behind
-until ``tpdo_resync``). Measured under load 13 on 2 cores: 9 of 3025 SYNCs lost at the
-emulated drives, each read as a bus loss. :func:`widen_receive_buffer` asks for 4 MiB (the
-kernel caps it at ``net.core.rmem_max`` unless the process may force it).
+until ``tpdo_resync``, longer than the bus-loss streak). Measured under load 13 on 2 cores:
+9 of 3025 SYNCs never reached the emulated drives. :func:`widen_receive_buffer` asks for
+4 MiB (the kernel caps it at ``net.core.rmem_max`` unless the process may force it).
 """
 
 from __future__ import annotations
