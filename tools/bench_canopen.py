@@ -3,7 +3,8 @@
 Runs the cyclic exchange (RPDOs + SYNC, TPDOs against the per-cycle deadline) at the
 highest rate the bus-load limit allows (or ``--rate``), drives enabled in CSP holding
 position, and prints per case: cycles, partial cycles (missing/late TPDOs), late frames,
-exchange time median / p99 / p99.9 [ms], cycle overruns, CPU % of the master process.
+exchange time median / p99 / p99.9 [ms], cycle overruns, CPU % of the master process
+(``--json`` also: non-ok cycles, backlogs written off after ``tpdo_resync``).
 
 Cases: ``virtual`` (one process: emulator thread + master) and ``udp`` (two processes over
 udp_multicast inside a private network namespace; root), each without and with SCHED_FIFO.
@@ -76,6 +77,7 @@ def run_master(interface: str, channel: str, rate: float, duration: float, fifo:
         status = np.empty(n, dtype=np.int64)
         overruns = 0
         late0, partial0 = t.late_frames, t.partial_cycles
+        resync0 = getattr(t, "resyncs", 0)
         cpu0, wall0 = _cpu(), time.monotonic()
         deadline = time.monotonic()
         for k in range(n):
@@ -98,6 +100,8 @@ def run_master(interface: str, channel: str, rate: float, duration: float, fifo:
         "cycles": n,
         "partial_cycles": int(t.partial_cycles - partial0),
         "late_frames": int(t.late_frames - late0),
+        # backlogs written off (a TPDO lost on the way: stale cycles until tpdo_resync)
+        "resyncs": int(getattr(t, "resyncs", 0) - resync0),
         "non_ok_cycles": int((status != 0).sum()),
         "exchange_ms_median": float(np.median(ms)),
         "exchange_ms_p99": float(np.percentile(ms, 99)),

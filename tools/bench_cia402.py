@@ -1,7 +1,8 @@
 """Benchmark the CiA-402 drive layer and the in-process SimBus (per-cycle cost).
 
 Prints medians over repeated blocks (the machine is shared: read ratios, not absolutes):
-- master side: DriveGroup.read() + command_position() (the tick's drive-layer cost);
+- master side: DriveGroup.read() + command_position() (the tick's drive-layer cost), and
+  read() alone with the numpy and the compiled (numba) implementation;
 - emulator: EmulatedDrives.step() without the plant (drive logic only);
 - plant.step() alone, and a whole SimBus.exchange() (drives + plant + copies).
 
@@ -67,6 +68,9 @@ def main() -> int:
 
     res = {"config": Path(args.config).name, "axes": group.n}
     res["master_read_command_us"] = _median_us(master, args.cycles, args.blocks)
+    for backend in ("numpy", "numba"):
+        g = DriveGroup.from_config(bus, cfg.bus, backend=backend)  # type: ignore[arg-type]
+        res[f"read_{g.backend}_us"] = _median_us(g.read, args.cycles, args.blocks)
     res["simbus_exchange_us"] = _median_us(bus.exchange, args.cycles, args.blocks)
     res["plant_step_us"] = _median_us(
         lambda: real_step(plant.tau_applied), args.cycles, args.blocks

@@ -20,13 +20,22 @@ PDO communication and mapping parameters by SDO (CiA 301 order: PDO invalid, map
 0, entries, count, valid) read back and compared, heartbeat producer 0x1017, NMT start and
 wait for every node's operational heartbeat.
 
-Every cycle (:meth:`exchange`, never raises): late TPDOs of the last cycle are taken first
-(and counted), RPDOs then SYNC are sent, TPDOs collected until ``tpdo_deadline`` (of two
-frames of one PDO in one cycle the first is counted late and the second kept: one node
-sends each COB-ID and CAN delivers in order); missing
-TPDOs give :data:`~drivers.transport.STATUS_PARTIAL` (:meth:`missing_nodes` names them), a
-heartbeat older than ``heartbeat_timeout`` gives :data:`STATUS_HEARTBEAT_LOST`, a node that
-left operational :data:`STATUS_NOT_OPERATIONAL`, a send failure (bus-off, buffer full)
+Every cycle (:meth:`exchange`, never raises): TPDOs that arrived after the last deadline
+are drained first (counted late, not used), RPDOs then SYNC are sent, TPDOs collected until
+``tpdo_deadline``. Which SYNC a TPDO answers: CAN frames carry no sequence number, but a
+synchronous TPDO answers every SYNC once, one node sends each COB-ID and CAN delivers in
+order; so the master counts, per node and TPDO, the SYNCs not answered yet. A frame that
+arrives while an older SYNC is still unanswered is that older SYNC's answer: counted late,
+not used, and this cycle's is still missing (a stream late by whole cycles, which lands in
+a later cycle's window, reads as late every cycle, never fresh). A frame lost on the way
+reads the same as such a lag (nothing tells the two apart): after ``tpdo_resync`` of an
+unbroken backlog the backlog is written off (:attr:`resyncs` counts it), so a lost frame
+costs ``tpdo_resync`` of stale cycles, not the session. Missing TPDOs give
+:data:`~drivers.transport.STATUS_PARTIAL`, TPDOs of an older SYNC only
+:data:`STATUS_TPDO_LATE` (:meth:`missing_nodes` names the nodes; both are not ok, so a
+streak of them is a bus loss in safety.bus_health), a heartbeat older than
+``heartbeat_timeout`` gives :data:`STATUS_HEARTBEAT_LOST`, a node that left operational
+:data:`STATUS_NOT_OPERATIONAL`, a send failure (bus-off, buffer full)
 :data:`~drivers.transport.STATUS_BUS_ERROR`. The error code of each node's last EMCY is
 written to ``tx["error_code"]``; :meth:`problems` says in words what is wrong, per node.
 """
@@ -43,6 +52,7 @@ import numpy as np
 from drivers.canopen import layout
 from drivers.canopen.busload import bus_load, check_bus_load
 from drivers.canopen.errors import CANopenError, IdentityMismatchError, NodeMissingError
+from drivers.canopen.socket_buffer import widen_receive_buffer
 from drivers.cia402.codes import describe_error_code
 from drivers.cia402.pdo import RXPDO_SIZE, TXPDO_SIZE, mapping_value, parse_mapping_value
 from drivers.transport import (
@@ -57,8 +67,12 @@ from drivers.transport import (
 
 STATUS_HEARTBEAT_LOST = 100
 STATUS_NOT_OPERATIONAL = 101
+STATUS_TPDO_LATE = 102
 STATUS_TEXT.setdefault(STATUS_HEARTBEAT_LOST, "CANopen heartbeat lost (a node went silent)")
 STATUS_TEXT.setdefault(STATUS_NOT_OPERATIONAL, "a CANopen node left the operational state")
+STATUS_TEXT.setdefault(
+    STATUS_TPDO_LATE, "a CANopen node's TPDOs answer an older SYNC (late by whole cycles)"
+)
 _ABORT_TIMEOUT = 0x05040000
 
 
@@ -77,7 +91,10 @@ class CANopenTransport(Transport):
     checked); ``cycle_time`` [s]: 1 / loop rate; ``node_ids``: CANopen node ids (default
     1..n). ``heartbeat_time`` [s]: producer time written to 0x1017; ``heartbeat_timeout``
     [s]: consumer limit (default 3 x producer); ``tpdo_deadline`` [s]: how long a cycle waits
-    for TPDOs after its SYNC (default 0.8 cycle). ``bus_kwargs``: extra python-can options.
+    for TPDOs after its SYNC (default 0.8 cycle); ``tpdo_resync`` [s]: how long a node's TPDOs
+    may lag before the backlog is written off (default ``heartbeat_timeout``; see the module
+    docstring: it must be longer than the bus-loss streak, or a lag would end unreported).
+    ``bus_kwargs``: extra python-can options.
     """
 
     def __init__(
@@ -95,6 +112,7 @@ class CANopenTransport(Transport):
         heartbeat_time: float = 0.05,
         heartbeat_timeout: float | None = None,
         tpdo_deadline: float | None = None,
+        tpdo_resync: float | None = None,
         sdo_timeout: float = 0.5,
         boot_timeout: float = 3.0,
         bus_kwargs: dict[str, Any] | None = None,
@@ -113,6 +131,8 @@ class CANopenTransport(Transport):
         self.heartbeat_time = heartbeat_time
         self.heartbeat_timeout = heartbeat_timeout or 3.0 * heartbeat_time
         self.tpdo_deadline = tpdo_deadline or 0.8 * cycle_time
+        self.tpdo_resync = tpdo_resync or self.heartbeat_timeout
+        self._resync_cycles = max(1, round(self.tpdo_resync / cycle_time))
         self.sdo_timeout = sdo_timeout
         self.boot_timeout = boot_timeout
         self.bus_kwargs = dict(bus_kwargs or {})
@@ -126,6 +146,8 @@ class CANopenTransport(Transport):
         self.late_frames = 0
         self.bad_frames = 0
         self.send_errors = 0
+        #: backlogs written off after ``tpdo_resync`` (a lost frame or a lasting lag)
+        self.resyncs = 0
         #: emergencies received, newest last: (axis, error code, error register, time)
         self.emergencies: deque[tuple[int, int, int, float]] = deque(maxlen=64)
         # Per-node state written by the notifier thread (plain numpy stores).
@@ -137,6 +159,13 @@ class CANopenTransport(Transport):
         n_t = len(layout.TPDOS)
         self._got = np.zeros((n, n_t), dtype=bool)
         self._got_any = np.zeros(n, dtype=bool)
+        #: SYNCs each node's TPDO has not answered yet (1 while the cycle's answer is due)
+        self._owed = np.zeros((n, n_t), dtype=np.int64)
+        #: consecutive cycles that ended with an unanswered SYNC, per node and TPDO
+        self._behind = np.zeros((n, n_t), dtype=np.int64)
+        self._owing = np.zeros((n, n_t), dtype=bool)
+        self._old = np.zeros(n, dtype=bool)  # a frame of an older SYNC came this cycle
+        self._late_nodes = np.zeros(n, dtype=bool)
         self._age = np.zeros(n)
         self._lost = np.zeros(n, dtype=bool)
         self._missing = np.zeros(n, dtype=bool)
@@ -175,6 +204,7 @@ class CANopenTransport(Transport):
             heartbeat_time=o.heartbeat_time,
             heartbeat_timeout=o.heartbeat_timeout,
             tpdo_deadline=o.tpdo_deadline,
+            tpdo_resync=o.tpdo_resync,
             sdo_timeout=o.sdo_timeout,
             boot_timeout=o.boot_timeout,
         )
@@ -196,7 +226,7 @@ class CANopenTransport(Transport):
 
     # ---------------------------------------------------------------- start-up
 
-    def _bus(self, filters: list[dict[str, int]]) -> Any:
+    def _bus(self, filters: list[dict[str, int]] | None) -> Any:
         import can
 
         kw = dict(self.bus_kwargs)
@@ -207,7 +237,7 @@ class CANopenTransport(Transport):
         if self.can_interface not in ("virtual", "udp_multicast"):
             kw.setdefault("bitrate", self.bitrate)
         try:
-            return can.Bus(
+            bus = can.Bus(
                 interface=self.can_interface, channel=self.channel, can_filters=filters, **kw
             )
         except (can.CanError, OSError, ValueError, ImportError) as exc:
@@ -215,6 +245,8 @@ class CANopenTransport(Transport):
                 f"bus.interface: cannot open CAN channel {self.channel!r} with python-can "
                 f"interface {self.can_interface!r}: {exc}"
             ) from None
+        widen_receive_buffer(bus)  # a UDP socket drops what a CAN controller would keep
+        return bus
 
     def open(self) -> None:
         """Bring every node to operational (see the module docstring); raises CANopenError."""
@@ -235,7 +267,12 @@ class CANopenTransport(Transport):
         ]
         setup_bus = self._bus(setup_filters)
         try:
-            self._cyc = self._bus(cyc_filters)
+            # Kernel filters on socketcan. Elsewhere python-can filters in Python, and its
+            # recv(0.0) then returns None at the first foreign frame queued (an SDO answer,
+            # a heartbeat, on udp_multicast our own frames): the drain would stop short and
+            # this bus fall behind by what the setup queued (measured: udp_multicast's socket
+            # full of the SDO exchange dropped the first SYNC's answers). _slot filters.
+            self._cyc = self._bus(cyc_filters if self.can_interface == "socketcan" else None)
             net = canopen.Network(setup_bus)
             net.NOTIFIER_CYCLE = 0.1
             net.connect()
@@ -251,6 +288,8 @@ class CANopenTransport(Transport):
                 net.subscribe(layout.EMCY_BASE + nid, self._emcy_cb(i))
             self._prepare_messages(can)
             self._start(net)
+            while self._cyc.recv(0.0) is not None:  # what the setup queued: not a TPDO
+                pass
         except BaseException:
             self._shutdown()
             raise
@@ -333,6 +372,8 @@ class CANopenTransport(Transport):
                 f"NMT start: {'; '.join(bad)}"
             )
         self._hb_time.fill(time.monotonic())
+        self._owed.fill(0)
+        self._behind.fill(0)
 
     def _check_identity(self, i: int) -> None:
         ident = self.drives[i].identity
@@ -382,14 +423,18 @@ class CANopenTransport(Transport):
             return STATUS_NOT_OPEN
         self.cycles += 1
         bus = self._cyc
+        owed, got = self._owed, self._got
         try:
-            # TPDOs that missed the last deadline: newer than tx, but late.
+            # TPDOs that missed the last deadline answer an older SYNC: counted, not used
             while True:
                 m = bus.recv(0.0)
                 if m is None:
                     break
-                if self._take(m):
+                slot = self._slot(m)
+                if slot is not None:
                     self.late_frames += 1
+                    if owed[slot] > 0:
+                        owed[slot] -= 1
             rx_flat = self._rx_flat
             for msg, view, idx in zip(
                 self._rpdo_msgs, self._rpdo_views, self._rpdo_idx, strict=False
@@ -397,8 +442,10 @@ class CANopenTransport(Transport):
                 np.take(rx_flat, idx, out=view)
                 bus.send(msg)
             bus.send(self._sync_msg)
-            self._got.fill(False)
-            pending = self._got.size
+            np.add(owed, 1, out=owed)
+            got.fill(False)
+            self._old.fill(False)
+            pending = got.size
             deadline = time.monotonic() + self.tpdo_deadline
             while pending:
                 remaining = deadline - time.monotonic()
@@ -410,20 +457,23 @@ class CANopenTransport(Transport):
                 slot = self._slot(m)
                 if slot is None:
                     continue
-                if self._got[slot]:
-                    # Second frame of one PDO in one cycle: the first was the last cycle's,
-                    # late. One node sends each COB-ID and CAN delivers in order, so the
-                    # second is the newer: keep it (the first kept made the next cycle's
-                    # data two cycles newer than this one's: a false position jump).
+                if owed[slot] != 1:
+                    # >1: the answer to an older SYNC (the node's frames come in order), its
+                    # data one or more cycles old; this SYNC's answer is still to come.
+                    # 0: no SYNC left to answer (a duplicate): never data
                     self.late_frames += 1
-                    self._store(m)
+                    if owed[slot] > 1:
+                        owed[slot] -= 1
+                        self._old[slot[0]] = True
                     continue
+                owed[slot] = 0
                 self._store(m)
-                self._got[slot] = True
+                got[slot] = True
                 pending -= 1
         except Exception:  # python-can raises CanError/OSError on bus-off, buffer full
             self.send_errors += 1
             return STATUS_BUS_ERROR
+        self._write_off_backlog()
         np.copyto(self._tx_err, self._emcy_code)
         now = time.monotonic()
         np.subtract(now, self._hb_time, out=self._age)
@@ -434,11 +484,26 @@ class CANopenTransport(Transport):
             return STATUS_NOT_OPERATIONAL
         if pending:
             self.partial_cycles += 1
-            np.all(self._got, axis=1, out=self._got_any)
+            np.all(got, axis=1, out=self._got_any)
             np.logical_not(self._got_any, out=self._missing)
-            return STATUS_PARTIAL
+            np.logical_and(self._missing, self._old, out=self._late_nodes)
+            return STATUS_TPDO_LATE if self._late_nodes.any() else STATUS_PARTIAL
         self._missing.fill(False)
+        self._late_nodes.fill(False)
         return STATUS_OK
+
+    def _write_off_backlog(self) -> None:
+        """After ``tpdo_resync`` of unanswered SYNCs in a row, forget them (no allocation on
+        the usual path): a frame lost on the way would otherwise make every later answer of
+        its node read as an older SYNC's for good."""
+        np.greater(self._owed, 0, out=self._owing)
+        np.add(self._behind, 1, out=self._behind)
+        np.multiply(self._behind, self._owing, out=self._behind)
+        np.greater_equal(self._behind, self._resync_cycles, out=self._owing)
+        if self._owing.any():
+            np.copyto(self._owed, 0, where=self._owing)
+            np.copyto(self._behind, 0, where=self._owing)
+            self.resyncs += 1
 
     def _slot(self, m: Any) -> tuple[int, int] | None:
         """(axis, TPDO number) of a well-formed TPDO frame, else None."""
@@ -455,12 +520,6 @@ class CANopenTransport(Transport):
         """Scatter a TPDO frame's payload into ``tx``."""
         idx = self._tpdo_slots[m.arbitration_id][2]
         np.put(self._tx_flat, idx, np.frombuffer(m.data, dtype=np.uint8))
-
-    def _take(self, m: Any) -> tuple[int, int] | None:
-        slot = self._slot(m)
-        if slot is not None:
-            self._store(m)
-        return slot
 
     # ---------------------------------------------------------------------- NMT
 
@@ -487,7 +546,7 @@ class CANopenTransport(Transport):
     # ----------------------------------------------------------- diagnostics
 
     def missing_nodes(self) -> list[str]:
-        """Nodes whose TPDOs did not all arrive in the last cycle."""
+        """Nodes whose TPDOs of the last cycle's SYNC did not all arrive in time."""
         return [self._who(i) for i in np.flatnonzero(self._missing)]
 
     def problems(self) -> list[str]:
@@ -506,9 +565,15 @@ class CANopenTransport(Transport):
                 state = layout.NMT_STATE_NAMES.get(int(self._hb_state[i]), "unknown state")
                 out.append(f"{who}: left operational, heartbeat reports {state}")
             if self._missing[i]:
+                behind = int(self._owed[i].max())
                 out.append(
                     f"{who}: TPDOs missing or late (not within {self.tpdo_deadline * 1e3:.1f} ms "
-                    "of the SYNC)"
+                    "of the SYNC"
+                    + (
+                        f"; the last ones answered a SYNC {behind} cycle(s) older)"
+                        if self._late_nodes[i]
+                        else ")"
+                    )
                 )
             if self._emcy_code[i]:
                 out.append(f"{who}: emergency {describe_error_code(int(self._emcy_code[i]))}")

@@ -107,6 +107,19 @@ class DriveGroup(ImageFields):
         self._scale = np.vstack(
             [scaling.rad_per_count, scaling.nm_per_permille, scaling.amp_per_permille]
         )
+        #: the compiled read's inputs (TxPDO fields, count offsets, scale rows, statusword
+        #: table), one tuple for :meth:`read` and the warm-up; the outputs follow them (a
+        #: helper method around the call measured 7 % slower: one more Python call per tick)
+        self._read_args = (
+            self._tx_pos,
+            self._tx_vel,
+            self._tx_tau,
+            self._tx_cur,
+            self._tx_sw,
+            scaling.zero_offset,
+            self._scale,
+            sm.STATE_FROM_STATUS,
+        )
         self._fast: Any = None
         if backend != "numpy":
             from drivers.cia402 import kernels
@@ -123,19 +136,7 @@ class DriveGroup(ImageFields):
         # the read only reads the TxPDO: warm it on the image itself (a read-only or
         # differently aligned buffer is another signature); the commands on a copy of the RxPDO
         rx, sc = self.transport.rx.copy(), self.scaling
-        si, states = np.zeros_like(self._si), np.zeros_like(self.states)
-        kernels.read_si(
-            self._tx_pos,
-            self._tx_vel,
-            self._tx_tau,
-            self._tx_cur,
-            self._tx_sw,
-            sc.zero_offset,
-            self._scale,
-            sm.STATE_FROM_STATUS,
-            si,
-            states,
-        )
+        kernels.read_si(*self._read_args, np.zeros_like(self._si), np.zeros_like(self.states))
         q = np.zeros(self.n)
         for field in ("target_position", "target_velocity"):
             kernels.command_raw(
@@ -160,21 +161,10 @@ class DriveGroup(ImageFields):
 
     def read(self) -> None:
         """Decode the TxPDO into q, qd, tau, current, states (no allocation)."""
-        sc = self.scaling
         if self._fast is not None:
-            self._fast.read_si(
-                self._tx_pos,
-                self._tx_vel,
-                self._tx_tau,
-                self._tx_cur,
-                self._tx_sw,
-                sc.zero_offset,
-                self._scale,
-                sm.STATE_FROM_STATUS,
-                self._si,
-                self.states,
-            )
+            self._fast.read_si(*self._read_args, self._si, self.states)
             return
+        sc = self.scaling
         sc.position_to_si(self._tx_pos, self.q)
         sc.velocity_to_si(self._tx_vel, self.qd)
         sc.torque_to_si(self._tx_tau, self.tau)

@@ -124,6 +124,7 @@ class CanopenDrives:
         self._hb_next = np.zeros(n)
         self._sdo: list[dict[str, Any]] = [{} for _ in range(n)]
         self._delayed: list[tuple[float, Any]] = []
+        self._queued_until = np.zeros(n)  # [s] due time of each node's last delayed frame
         self._rpdo: dict[int, tuple[int, np.ndarray, int]] = {}
         self._tpdo: list[list[tuple[Any, np.ndarray, np.ndarray, int]]] = [[] for _ in range(n)]
         self._by_sdo = {layout.SDO_RX_BASE + nid: i for i, nid in enumerate(self.node_ids)}
@@ -205,21 +206,28 @@ class CanopenDrives:
     def _sync(self) -> None:
         self.syncs += 1
         now = time.monotonic()
+        self._send_due(now)
         for i in range(self.n):
             if self.nmt[i] != layout.NMT_OPERATIONAL or not self._talks(i):
                 continue
             if self.tpdo_drop[i] > 0:
                 self.tpdo_drop[i] -= 1
                 continue
+            # a node sends its frames in order: after a late spell, the frames of the later
+            # SYNCs queue behind the delayed ones (the backlog comes out in one burst)
+            behind = self._queued_until[i] > now
             for cob, idx, payload, every in self._tpdo[i]:
                 if self.syncs % every:
                     continue
                 np.take(self._tx_flat, idx, out=payload)
-                if self.tpdo_late[i] > 0:
+                if self.tpdo_late[i] > 0 or behind:
                     msg = self._can.Message(
                         arbitration_id=cob, data=payload.tobytes(), is_extended_id=False
                     )
-                    self._delayed.append((now + float(self.tpdo_delay[i]), msg))
+                    due = now + float(self.tpdo_delay[i]) if self.tpdo_late[i] > 0 else now
+                    due = max(due, float(self._queued_until[i]))
+                    self._queued_until[i] = due
+                    self._delayed.append((due, msg))
                 else:
                     self._send(cob, payload.tobytes())
             if self.tpdo_late[i] > 0:
@@ -353,6 +361,11 @@ class CanopenDrives:
                 self._send(layout.HEARTBEAT_BASE + self.node_ids[i], bytes([int(self.nmt[i])]))
                 self._hb_next[i] = max(self._hb_next[i] + period, now)
             nxt = min(nxt, self._hb_next[i] - now)
+        return max(0.0, min(nxt, self._send_due(now)))
+
+    def _send_due(self, now: float) -> float:
+        """Send the delayed TPDOs that are due (in order); seconds to the next one."""
+        nxt = 0.05
         if self._delayed:
             keep = []
             for due, msg in self._delayed:
@@ -365,7 +378,7 @@ class CanopenDrives:
                     keep.append((due, msg))
                     nxt = min(nxt, due - now)
             self._delayed = keep
-        return max(0.0, nxt)
+        return nxt
 
     def poll(self, timeout: float = 0.01) -> None:
         """Receive and handle one frame (waiting up to ``timeout`` s), then due timers."""

@@ -21,24 +21,35 @@ from typing import Any
 from hofto_hw.errors import UserError
 
 
-def check_control_path(path: str) -> None:
-    """Refuse a control-socket path that is not free or a stale socket (UserError, one line).
+def check_control_path(path: str | os.PathLike[str], option: str = "--control") -> None:
+    """Refuse a control-socket path that is not free or a stale socket (UserError, one line
+    naming ``option``, the command-line option that gave the path).
 
     Only a socket nobody listens on may be replaced; a regular file, a folder, a link, a
     live socket or a path in a missing folder is refused and left alone.
     """
+    path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
-        raise UserError(f"--control: folder {folder!r} for the socket {path!r} does not exist")
+        raise UserError(f"{option}: folder {folder!r} for the socket {path!r} does not exist")
     try:
         st = os.lstat(path)
     except FileNotFoundError:
         return
     if not stat.S_ISSOCK(st.st_mode):
         kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a socket"
-        raise UserError(f"--control: {path!r} exists and is {kind}; refusing to replace it")
+        raise UserError(f"{option}: {path!r} exists and is {kind}; refusing to replace it")
     if _socket_is_live(path):
-        raise UserError(f"--control: {path!r} is in use by another process; refusing to replace it")
+        raise UserError(f"{option}: {path!r} is in use by another process; refusing to replace it")
+
+
+def claim_control_path(path: str | os.PathLike[str], option: str = "--control") -> None:
+    """:func:`check_control_path`, then remove the stale socket there (the caller binds
+    next). The emulators' and ``hofto-hw run``'s control sockets both come through here."""
+    check_control_path(path, option)
+    with contextlib.suppress(FileNotFoundError):
+        if stat.S_ISSOCK(os.lstat(path).st_mode):
+            os.unlink(path)
 
 
 def _socket_is_live(path: str) -> bool:
@@ -56,11 +67,8 @@ def _socket_is_live(path: str) -> bool:
 def open_control_socket(path: str) -> socket.socket:
     """Listening Unix stream socket at ``path``, mode 0600 (owner only: it can stop the
     emulator and inject faults). A stale socket there is replaced; anything else is
-    refused (:func:`check_control_path`)."""
-    check_control_path(path)
-    with contextlib.suppress(FileNotFoundError):
-        if stat.S_ISSOCK(os.lstat(path).st_mode):
-            os.unlink(path)
+    refused (:func:`claim_control_path`)."""
+    claim_control_path(path)
     srv = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     old_mask = os.umask(0o177)  # the socket file is created with mode 0600
     try:

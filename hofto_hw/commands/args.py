@@ -51,6 +51,20 @@ def finite_positive_float(text: str) -> float:
     return value
 
 
+def run_seconds(text: str) -> float:
+    """How long a server runs (the emulators' ``--duration``): a finite number of seconds
+    > 0; nan, inf, 0 and negative values are refused naming the value."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(
+            f"must be a finite number of seconds > 0, got {text!r} (not a positive finite number)"
+        )
+    return value
+
+
 def finite_nonnegative_float(text: str) -> float:
     """A finite number >= 0 (margins, gaps)."""
     value = finite_float(text)

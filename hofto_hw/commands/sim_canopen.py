@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import argparse
 import gc
-import math
 import signal
 import threading
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from hofto_hw.commands.args import add_config
+from hofto_hw.commands.args import add_config, run_seconds
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -35,7 +34,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     add_config(parser, default="er3a_canopen")
     parser.add_argument("--control", default=None, help="Unix socket path for control/faults")
-    parser.add_argument("--duration", type=float, default=None, help="stop after N seconds")
+    parser.add_argument("--duration", type=run_seconds, default=None, help="stop after N seconds")
     parser.add_argument(
         "--quiet-arm", action="store_true", help="leave out the config's scripted external torques"
     )
@@ -67,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     """Serve until SIGTERM/SIGINT, a ``stop`` request or ``--duration``."""
     import can
 
+    from drivers.canopen.socket_buffer import widen_receive_buffer
     from drivers.sim.canopen_node import CanopenDrives
     from drivers.sim.control_socket import serve_control
     from drivers.sim.pacing import answer_first
@@ -75,8 +75,6 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.errors import UserError
     from hofto_hw.runtime.build import build_emulated_drives
 
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise UserError(f"--duration: must be a finite number of seconds > 0 (got {args.duration})")
     cfg = load_config(find_config(args.config))
     channel = args.channel or (cfg.bus.interface if cfg.bus is not None else None)
     if not channel:
@@ -86,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
         bus = can.Bus(interface=args.interface, channel=channel)
     except (can.CanError, OSError, ValueError) as exc:
         raise UserError(f"cannot open CAN channel {channel!r} ({args.interface}): {exc}") from None
+    widen_receive_buffer(bus)  # udp_multicast: a SYNC lost to a full socket is an unanswered one
     net = CanopenDrives(drives, bus, node_ids(cfg))
     stop_control = threading.Event()
     ctl = None

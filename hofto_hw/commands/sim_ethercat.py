@@ -11,11 +11,10 @@ through the Unix socket given with ``--control`` (one JSON object per line, see
 from __future__ import annotations
 
 import argparse
-import math
 import signal
 from types import FrameType
 
-from hofto_hw.commands.args import add_config
+from hofto_hw.commands.args import add_config, run_seconds
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -34,7 +33,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--control", default=None, help="Unix socket path for control/faults")
     parser.add_argument(
-        "--duration", type=float, default=None, help="stop after N seconds (default: run)"
+        "--duration", type=run_seconds, default=None, help="stop after N seconds (default: run)"
     )
     parser.add_argument(
         "--quiet-arm", action="store_true", help="leave out the config's scripted external torques"
@@ -59,11 +58,6 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.errors import UserError
     from hofto_hw.runtime.build import build_emulated_network
 
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise UserError(
-            f"--duration: {args.duration} is not a positive finite number of seconds "
-            "(leave it out to serve until stopped)"
-        )
     if args.control:
         check_control_path(args.control)
     master = args.master_iface or _master_name(args.iface)

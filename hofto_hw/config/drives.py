@@ -105,6 +105,12 @@ class CANopenOptions(FileModel):
     tpdo_deadline: PositiveFloat | None = Field(
         None, description="wait for a cycle's TPDOs [s] after the SYNC; None = 0.8 cycle"
     )
+    tpdo_resync: PositiveFloat | None = Field(
+        None,
+        description="a node's TPDOs lagging the SYNC this long [s] (or one lost on the way) are "
+        "written off and read as on time again; longer than safety.bus.lost_cycles cycles, or "
+        "a lag ends unreported; None = heartbeat_timeout",
+    )
     sdo_timeout: PositiveFloat = Field(0.5, description="SDO response timeout [s]")
     boot_timeout: PositiveFloat = Field(
         3.0, description="wait for boot-up / operational heartbeats at start-up [s]"

@@ -384,6 +384,7 @@ class SystemConfig(FileModel):
         if self.bus is not None:
             _check_lengths([("bus.drives", self.bus.drives)], n)
         _check_runtime_lengths(self, n)
+        _check_canopen_resync(self)
         if self.motion.jerk is not None:
             _check_lengths([("motion.jerk", self.motion.jerk)], n)
         if self.drag is not None:
@@ -415,6 +416,22 @@ class SystemConfig(FileModel):
                     n,
                 )
         return self
+
+
+def _check_canopen_resync(cfg: SystemConfig) -> None:
+    """A CANopen TPDO backlog must outlast the bus-loss streak before it is written off."""
+    if cfg.bus is None or cfg.bus.transport != "canopen" or cfg.bus.canopen is None:
+        return
+    o = cfg.bus.canopen
+    resync = o.tpdo_resync or o.heartbeat_timeout or 3.0 * o.heartbeat_time
+    cycles = resync * cfg.loop.rate_hz
+    lost = cfg.safety.bus.lost_cycles
+    if cycles <= lost:
+        raise ValueError(
+            f"bus.canopen.tpdo_resync = {resync:g} s is {cycles:g} cycles at "
+            f"{cfg.loop.rate_hz:g} Hz, not more than safety.bus.lost_cycles = {lost}: a TPDO "
+            "stream late by whole cycles would be written off before it is a bus loss"
+        )
 
 
 def _check_runtime_lengths(cfg: SystemConfig, n: int) -> None:

@@ -30,29 +30,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from drivers.sim.control_socket import claim_control_path
 from hofto_hw.control.joint_motion import DRAG, HOLD, MODE_NAMES, MOVE
 from hofto_hw.errors import UserError
 from hofto_hw.runtime import teach
 from hofto_hw.runtime.notify import Notifier, NotifyError, Watchdog
-
-
-def _prepare_path(path: Path) -> None:
-    """Remove a stale socket at ``path``; refuse a live one or anything that is not a socket."""
-    try:
-        st = path.lstat()
-    except FileNotFoundError:
-        return
-    if not stat.S_ISSOCK(st.st_mode):
-        raise UserError(f"control socket {path}: exists and is not a socket; not touching it")
-    probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    try:
-        probe.connect(str(path))
-    except OSError:
-        path.unlink()  # a socket nobody listens on: stale
-        return
-    finally:
-        probe.close()
-    raise UserError(f"control socket {path}: another hofto-hw run is serving it")
 
 
 def status_of(system: Any) -> dict[str, Any]:
@@ -123,9 +105,7 @@ class ControlServer:
     def __init__(self, path: Path, system: Any, mode: int = 0o660) -> None:
         self.path = Path(path)
         self.system = system
-        if not self.path.parent.is_dir():
-            raise UserError(f"control socket {path}: folder {self.path.parent} does not exist")
-        _prepare_path(self.path)
+        claim_control_path(self.path, "--socket")  # refuses anything but a stale socket
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
         old = os.umask(0o177)  # never world-accessible, not even between bind and chmod
         try:

@@ -28,6 +28,7 @@ from typing import Any
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
+ER3A = ROOT / "configs" / "er3a.yaml"
 _counter = itertools.count()
 
 
@@ -128,6 +129,82 @@ class Emulator:
         from drivers.sim.esc.network import ControlClient
 
         return ControlClient(self.control).call(**request)
+
+
+def er3a_run(*keys: str) -> dict[str, Any]:
+    """These keys of configs/er3a.yaml's ``run:`` section (e.g. the simulated arm's
+    ``model_error``, the demo ``path``), for a config that has none of its own."""
+    import yaml
+
+    run = yaml.safe_load(ER3A.read_text())["run"]
+    return {k: run[k] for k in keys}
+
+
+def run_config(
+    folder: Path,
+    name: str,
+    *,
+    base: Path = ER3A,
+    overrun_streak: int,
+    lost_cycles: int,
+    bus: dict[str, Any] | None = None,
+    ethercat: dict[str, Any] | None = None,
+    run: dict[str, Any] | None = None,
+    edit: Callable[[dict[str, Any]], None] | None = None,
+) -> tuple[Path, dict[str, Any]]:
+    """A copy of ``base`` for a ``hofto-hw run --clock real`` child, written to
+    ``folder/name``; returns its path and data.
+
+    The URDF path made absolute; ``bus`` keys set in ``bus:`` and ``ethercat`` merged into
+    ``bus.ethercat``; ``safety.overrun_streak`` and ``safety.bus.lost_cycles`` as given (the
+    host stalls and late frames of a loaded CI machine are not what these tests test);
+    ``run``: None keeps the ``run:`` section with ``clock: real``, else it becomes
+    ``{"clock": "real", **run}``; ``edit(data)`` for anything else.
+    """
+    import yaml
+
+    data = yaml.safe_load(base.read_text())
+    data["robot"]["urdf"] = str((base.parent / data["robot"]["urdf"]).resolve())
+    data["bus"].update(bus or {})
+    if ethercat is not None:
+        data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), **ethercat}
+    data["safety"]["overrun_streak"] = overrun_streak
+    data["safety"]["bus"]["lost_cycles"] = lost_cycles
+    if run is None:
+        data["run"]["clock"] = "real"
+    else:
+        data["run"] = {"clock": "real", **run}
+    if edit is not None:
+        edit(data)
+    path = folder / name
+    path.write_text(yaml.safe_dump(data))
+    return path, data
+
+
+def ethercat_run_config(
+    folder: Path,
+    master: str,
+    name: str,
+    *,
+    overrun_streak: int,
+    lost_cycles: int,
+    ethercat: dict[str, Any] | None = None,
+    run: dict[str, Any] | None = None,
+    edit: Callable[[dict[str, Any]], None] | None = None,
+) -> tuple[Path, dict[str, Any]]:
+    """:func:`run_config` of configs/er3a.yaml with the bus on ``master``, the master end of
+    a veth pair, and the emulated slaves' SM watchdog at 2 s (their 100 ms one would take a
+    drive out of OP after a host stall) updated with ``ethercat``."""
+    return run_config(
+        folder,
+        name,
+        overrun_streak=overrun_streak,
+        lost_cycles=lost_cycles,
+        bus={"transport": "ethercat", "interface": master},
+        ethercat={"pdo_watchdog": 2.0, **(ethercat or {})},
+        run=run,
+        edit=edit,
+    )
 
 
 def sim_ethercat_args(iface: str, config: Path | str) -> list[str]:

@@ -209,3 +209,58 @@ def test_from_config_takes_the_options_and_the_loop_cycle() -> None:
     assert t.heartbeat_timeout == pytest.approx(0.15)
     assert t.tpdo_deadline == pytest.approx(0.004)
     assert t.load().load == pytest.approx(0.635, abs=0.001)
+
+
+def _bus_health(cfg):
+    from safety.bus_health import BusHealth
+    from safety.stop import StopController
+
+    fault_states = (int(State.FAULT_REACTION_ACTIVE), int(State.FAULT), int(State.UNKNOWN))
+    health = BusHealth(6, cfg.safety.bus.lost_cycles, int(State.OPERATION_ENABLED), fault_states)
+    return health, StopController.from_config(cfg.safety.categories)
+
+
+def test_a_tpdo_stream_late_by_whole_cycles_is_never_fresh_and_a_bus_loss(rig) -> None:
+    """Node 1 answers each SYNC 1.5 cycles late: every answer lands in the next cycle's
+    window. Before, that read as fresh data one cycle old; now no cycle of the spell is ok,
+    the loop's bus supervision latches a bus loss with the configured category, and the
+    node's backlog (sent in order when the spell ends) makes the bus ok again."""
+    from drivers.canopen.master import STATUS_TPDO_LATE
+    from safety.stop import Fault
+
+    cycle = 1.0 / rig.cfg.loop.rate_hz
+    t, g = _group(rig, tpdo_deadline=0.8 * cycle, tpdo_resync=2.0)
+    _cycle_until(t, g, lambda: g.status == STATUS_OK, "a good cycle", 400)
+    health, stop = _bus_health(rig.cfg)
+    spell = 60
+    rig.call(op="tpdo", node=0, mode="late", count=spell, delay=1.5 * cycle)
+    _cycle_until(t, g, lambda: g.status != STATUS_OK, "the first late cycle", 100)
+    statuses = []
+    for k in range(spell // 2):  # well inside the spell, wherever it started
+        t.wait_next_cycle()
+        g.cycle()
+        stop.begin_tick(k)
+        health.check(stop, g.status, g.fresh, g.states, t.tx["error_code"], False)
+        statuses.append(g.status)
+    assert STATUS_OK not in statuses, statuses
+    assert not g.fresh
+    assert STATUS_TPDO_LATE in statuses, statuses
+    assert stop.is_latched(Fault.BUS_LOSS)
+    assert stop.category == rig.cfg.safety.categories.bus_loss
+    if g.status == STATUS_TPDO_LATE:
+        assert "node 1 (joint_1)" in t.missing_nodes()  # (others may be late on a loaded CI)
+        assert "node 1 (joint_1): TPDOs missing or late" in " | ".join(t.problems())
+    _cycle_until(t, g, lambda: g.status == STATUS_OK, "the backlog paid", 400)
+    assert t.resyncs == 0  # the frames came, late and in order: nothing written off
+
+
+def test_a_lost_tpdo_is_written_off_after_tpdo_resync(rig) -> None:
+    """Three SYNCs left unanswered (as frames lost on the way) read as a lag until
+    ``tpdo_resync`` has passed; then the backlog is written off and the node is on time."""
+    cycle = 1.0 / rig.cfg.loop.rate_hz
+    t, g = _group(rig, tpdo_deadline=0.8 * cycle, tpdo_resync=20 * cycle)
+    _cycle_until(t, g, lambda: g.status == STATUS_OK, "a good cycle", 400)
+    rig.call(op="tpdo", node=3, mode="drop", count=3)
+    _cycle_until(t, g, lambda: "node 4 (joint_4)" in t.missing_nodes(), "node 4 missing", 200)
+    _cycle_until(t, g, lambda: g.status == STATUS_OK, "written off", 400)
+    assert t.resyncs >= 1

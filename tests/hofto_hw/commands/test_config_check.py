@@ -85,3 +85,19 @@ def test_the_registry_not_the_schema_decides_which_transports_exist(
         f"{path}: bus.transport: no transport backend of that name; the backends are "
         f"{', '.join(sorted(BACKENDS))} (got 'ethercat')"
     )
+
+
+def test_a_canopen_tpdo_resync_within_the_bus_loss_streak_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # 0.01 s is 2 cycles at 200 Hz: a late TPDO stream would be written off before the 3
+    # lost cycles of safety.bus make it a bus loss
+    can = ROOT / "configs" / "er3a_canopen.yaml"
+    text = can.read_text().replace("urdf: er3a/er3a.urdf", f"urdf: {can.parent}/er3a/er3a.urdf")
+    old = "    heartbeat_time: 0.05\n"
+    assert old in text
+    path = tmp_path / "can.yaml"
+    path.write_text(text.replace(old, old + "    tpdo_resync: 0.01\n"))
+    err = _refused(path, capsys)
+    assert f"{path}: " in err and "bus.canopen.tpdo_resync = 0.01 s is 2 cycles at 200 Hz" in err
+    assert "safety.bus.lost_cycles = 3" in err

@@ -26,12 +26,13 @@ from typing import Any
 
 import numpy as np
 import pytest
-import yaml
 from support.rootnet import (
     ROOT,
     Emulator,
     ServiceRun,
     emulator,
+    er3a_run,
+    ethercat_run_config,
     first_event,
     sim_ethercat_args,
     veth_pair,
@@ -48,26 +49,21 @@ RESOLUTION = 0.05  # s: the rest time is judged only when the samples around it 
 
 
 def _config(folder: Path, master: str) -> tuple[Path, dict]:
-    data = yaml.safe_load(CONFIG.read_text())
-    data["robot"]["urdf"] = str((CONFIG.parent / data["robot"]["urdf"]).resolve())
-    data["bus"]["transport"] = "ethercat"
-    data["bus"]["interface"] = master
-    data["safety"]["overrun_streak"] = 100_000  # host stalls are not under test here
-    # the emulator is a user-space process: on a loaded 2-core machine it was starved of
-    # 20+ cycles (a bus loss, category 0) once in 6 runs; bus loss is not under test here
-    data["safety"]["bus"]["lost_cycles"] = 200
-    # DC: the observers integrate over the drives' sample interval (the reference clock's
-    # time), not over the master's late wake-ups on this loaded machine
-    data["bus"]["ethercat"] = {
-        **(data["bus"].get("ethercat") or {}),
-        "pdo_watchdog": 2.0,
-        "dc_sync": True,
-    }
-    data["run"] = {"clock": "real", "model_error": data["run"]["model_error"]}
-    data["drag"]["enable_input"] = {"source": "socket"}  # the test holds the button
-    path = folder / "er3a-ethercat-drag.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path, data
+    return ethercat_run_config(
+        folder,
+        master,
+        "er3a-ethercat-drag.yaml",
+        overrun_streak=100_000,  # host stalls are not under test here
+        # the emulator is a user-space process: on a loaded 2-core machine it was starved of
+        # 20+ cycles (a bus loss, category 0) once in 6 runs; bus loss is not under test here
+        lost_cycles=200,
+        # DC: the observers integrate over the drives' sample interval (the reference clock's
+        # time), not over the master's late wake-ups on this loaded machine
+        ethercat={"dc_sync": True},
+        run=er3a_run("model_error"),
+        # the test holds the button
+        edit=lambda data: data["drag"].update(enable_input={"source": "socket"}),
+    )
 
 
 @dataclass

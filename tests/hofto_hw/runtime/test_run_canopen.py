@@ -22,14 +22,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-import yaml
 from support.rootnet import (
     ROOT,
     Emulator,
     ServiceRun,
     emulator,
+    er3a_run,
     first_event,
     private_netns,
+    run_config,
     sim_canopen_args,
     wait_for,
 )
@@ -37,7 +38,6 @@ from support.rootnet import (
 from drivers.cia402.state_machine import State
 
 CAN_CONFIG = ROOT / "configs" / "er3a_canopen.yaml"
-ER3A = ROOT / "configs" / "er3a.yaml"
 CHANNEL = "239.74.163.2"  # inside the test's own namespace: no other test sees it
 OE = int(State.OPERATION_ENABLED)
 #: 50 ms at 200 Hz: at load 14 on 2 cores a few cycles' TPDOs came late (a spontaneous
@@ -46,18 +46,16 @@ LOST_CYCLES = 10
 
 
 def _config(folder: Path) -> tuple[Path, dict]:
-    data = yaml.safe_load(CAN_CONFIG.read_text())
-    er3a = yaml.safe_load(ER3A.read_text())
-    data["robot"]["urdf"] = str((CAN_CONFIG.parent / data["robot"]["urdf"]).resolve())
     # the shipped file's own safety settings (er3a.yaml's, position_jump scaled to 200 Hz:
     # with 1 kHz's 0.02 rad a CAN sample one SYNC late read once as a jump on joint 6)
-    data["safety"]["overrun_streak"] = 100
-    data["safety"]["bus"]["lost_cycles"] = LOST_CYCLES
-    data["run"] = {"clock": "real", "model_error": er3a["run"]["model_error"]}
-    data["run"]["path"] = er3a["run"]["path"]
-    path = folder / "er3a-canopen-run.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path, data
+    return run_config(
+        folder,
+        "er3a-canopen-run.yaml",
+        base=CAN_CONFIG,
+        overrun_streak=100,
+        lost_cycles=LOST_CYCLES,
+        run=er3a_run("model_error", "path"),
+    )
 
 
 @dataclass
@@ -185,13 +183,26 @@ def test_emcy_drive_fault_names_its_code(canrun: CanRun) -> None:
 
 
 def test_missing_tpdo_streak_is_bus_loss(canrun: CanRun) -> None:
-    """Node 4's TPDOs stop for 20 x lost_cycles SYNCs. (Late TPDOs are not tested here: a
-    stream late by a cycle or more lands in a later cycle's window and reads as fresh,
-    one cycle old; CAN frames carry no sequence number to tell. Measured: the ``late``
-    request with 4.5 ms and 50 ms delays gave no bus_loss.)"""
+    """Node 4's TPDOs stop for 20 x lost_cycles SYNCs."""
     lost = canrun.data["safety"]["bus"]["lost_cycles"]
     before = _start_moving(canrun)["ticks"]
     canrun.inject(op="tpdo", node=4, mode="drop", count=20 * lost)
     e = _check_fault(canrun, "bus_loss", before)
     assert e["tick"] - before >= lost
     assert "did not answer" in e["detail"], e
+
+
+def test_a_tpdo_stream_late_by_whole_cycles_is_bus_loss(canrun: CanRun) -> None:
+    """Node 3 answers every SYNC 1.5 cycles late, so each answer lands in the next cycle's
+    window: the master counts the SYNCs each node has not answered, reads those frames as an
+    older SYNC's (never fresh) and the streak is a bus loss with its category. (Before, the
+    stream read as fresh data one cycle old and nothing stopped: measured with 4.5 ms and
+    50 ms delays.)"""
+    lost = canrun.data["safety"]["bus"]["lost_cycles"]
+    cycle = 1.0 / canrun.data["loop"]["rate_hz"]
+    before = _start_moving(canrun)["ticks"]
+    canrun.inject(op="tpdo", node=3, mode="late", count=40 * lost, delay=1.5 * cycle)
+    e = _check_fault(canrun, "bus_loss", before)
+    assert e["tick"] - before >= lost
+    # the latching tick's status: the old SYNC's answers came, or (load) not even those
+    assert "older SYNC" in e["detail"] or "did not answer" in e["detail"], e

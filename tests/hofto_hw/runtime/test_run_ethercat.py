@@ -25,6 +25,7 @@ from support.rootnet import (
     Emulator,
     ServiceRun,
     emulator,
+    ethercat_run_config,
     first_event,
     sim_ethercat_args,
     veth_pair,
@@ -36,23 +37,18 @@ LOST_CYCLES = 20  # late frames on a loaded 2-core machine are not the fault und
 
 
 def _config(folder: Path, master: str) -> tuple[Path, dict]:
-    data = yaml.safe_load(CONFIG.read_text())
-    data["robot"]["urdf"] = str((CONFIG.parent / data["robot"]["urdf"]).resolve())
-    data["bus"]["transport"] = "ethercat"
-    data["bus"]["interface"] = master
-    data["loop"]["realtime"] = "preferred"
-    data["safety"]["overrun_streak"] = 100_000
-    data["safety"]["bus"]["lost_cycles"] = LOST_CYCLES
-    data["run"]["clock"] = "real"
     # the collision monitor stays armed: a host stall of ~100 ms used to read as a contact
     # (the observers took the whole gap in one step: the momentum observer's gain·dt was
     # 3 > 2, unstable); now they integrate a gap in one-cycle steps (Tick._observe), and the
     # arm holds still here (--hold), so a stall must not stop it by itself
-    # the emulated slaves' 100 ms SM watchdog would take a drive out of OP after such a stall
-    data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), "pdo_watchdog": 2.0}
-    path = folder / "er3a-ethercat.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path, data
+    return ethercat_run_config(
+        folder,
+        master,
+        "er3a-ethercat.yaml",
+        overrun_streak=100_000,
+        lost_cycles=LOST_CYCLES,
+        edit=lambda data: data["loop"].update(realtime="preferred"),
+    )
 
 
 @dataclass

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
+from drivers.sim.control_socket import claim_control_path
 from hofto_hw.errors import UserError
 from hofto_hw.runtime.control_client import request
-from hofto_hw.runtime.service import _prepare_path
 from tests.hofto_hw.runtime.conftest import CONFIG
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -69,14 +69,23 @@ def test_socket_path_safety(tmp_path: Path) -> None:
     plain = tmp_path / "file"
     plain.write_text("keep me")
     with pytest.raises(UserError, match="is not a socket"):
-        _prepare_path(plain)
+        claim_control_path(plain, "--socket")
     assert plain.read_text() == "keep me"
     stale = tmp_path / "stale.sock"
     s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     s.bind(str(stale))
     s.close()
-    _prepare_path(stale)  # nobody listens: removed
+    claim_control_path(stale, "--socket")  # nobody listens: removed
     assert not stale.exists()
+    live = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    live.bind(str(stale))
+    live.listen(1)
+    try:  # another run serving it: refused naming the option, left alone
+        with pytest.raises(UserError, match=r"--socket: .* is in use by another process"):
+            claim_control_path(stale, "--socket")
+        assert stat.S_ISSOCK(stale.lstat().st_mode)
+    finally:
+        live.close()
 
 
 def test_sd_notify_ready_watchdog_stopping(tmp_path: Path) -> None:
