@@ -7,13 +7,18 @@ the hand's release; releasing the enabling input stops the arm (enabling_release
 category 2). The speeds are the true arm's (the emulator's state, as the simulated drag
 script's figures). The run records a flight log (tmp folder) for a failure's post-mortem.
 
-Not asserted at the issue's 5 %: the off-axis drift. Over EtherCAT it is 7.8-9.3 mm/s
-against 100 (median 8.8, 13 loaded runs): the estimate's sideways force (F_z -2.6 N falling to
--1.3 N along the path; the commanded tool velocity is the measured one to 0.04 mm/s, so not
-the bus, DC or the drives) is the emulated arm's friction (Stribeck, other coefficients)
-against the model's at this pose with the 3 kg load; the in-process harness with the same
-load and exact friction gives 1.2 mm/s, with the arm's friction 4.0-6.6 mm/s. The bound
-here, 10 %, guards the figure against getting worse.
+Off-axis drift, the issue's 5 %: before the knock the arm runs the demo path (``mode move``,
+4 s of plant time, at 0.4 of the config's amplitude: see PATH_SCALE) and moves back home, so
+that the drag learns the friction model's error (control/friction_residual.py: ~4.7 s of
+motion). At the drag's joint speeds, 0.27/-0.41/0.15 rad/s on joints 2/3/5, far above the
+emulated arm's Stribeck velocities (0.05-0.08 rad/s), the (1, tanh, qd) features fit it: the
+learned correction 0.22/0.24/-0.07 N·m against the true error 0.28/0.24/-0.05 N·m. The arm
+then rests 1.2 s in drag mode before the press, as a person would: the tare (drag.tare_time,
+1 s) averages the estimate's standstill wander (+-0.3 N·m on joints 2-3). Measured before:
+no learning (the test's config had no ``run.path``, so ``mode move`` moved nothing) and a
+0.2 s tare left -1.9 N along z at the tool (friction -1.0 N, tare -1.0 N): 7.8-9.3 mm/s
+off-axis; learning (full-amplitude path) with the 0.2 s tare 4.7-5.0 mm/s; learning and the
+1 s tare 0.3-0.6 mm/s (full amplitude), 0.1-0.2 mm/s (0.4 amplitude).
 Needs root (veth, raw sockets): skipped when unprivileged, a failure under CI.
 """
 
@@ -45,6 +50,12 @@ SETTLE = 0.5  # s from the push's start to the steady window (drag_figures' sett
 RAMP = 0.2  # s: the hand builds its push up (not a 20 ms step)
 REST_WITHIN = 0.1  # s after the hand lets go (issue 9)
 RESOLUTION = 0.05  # s: the rest time is judged only when the samples around it are this dense
+# the demo path at 0.4 of its amplitude (joint speeds up to 0.5-1.4 rad/s, the drag's 0.15-0.45
+# inside): at full amplitude (up to 3.4 rad/s) the collision monitor stopped the arm in 2 of 5
+# runs over EtherCAT on this loaded machine (a false collision, not under test here)
+PATH_SCALE = 0.4
+MOVE_TIME = 4.0  # s of the demo path before the knock (contact-free motion)
+TARE_WAIT = 1.2  # s at rest in drag mode before the press (drag.tare_time, 1 s, and margin)
 
 
 def _config(folder: Path, master: str) -> tuple[Path, dict]:
@@ -63,7 +74,9 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
         "pdo_watchdog": 2.0,
         "dc_sync": True,
     }
-    data["run"] = {"clock": "real", "model_error": data["run"]["model_error"]}
+    run = data["run"]  # the demo path stays: the arm moves contact-free before the drag
+    path = {**run["path"], "amplitude": [PATH_SCALE * a for a in run["path"]["amplitude"]]}
+    data["run"] = {"clock": "real", "model_error": run["model_error"], "path": path}
     data["drag"]["enable_input"] = {"source": "socket"}  # the test holds the button
     path = folder / "er3a-ethercat-drag.yaml"
     path.write_text(yaml.safe_dump(data))
@@ -145,6 +158,18 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     r.start("--hold", log=True)
     r.wait_state("running")
     wait_for(lambda: r.status()["ticks"] > 500, 60, "500 ticks", r.proc)
+    # contact-free motion first (the demo path, as the main job): the drag learns the
+    # friction model's error from it (drag.friction_learning) and takes it off the estimate
+    _until_ok(rig, "mode move")
+    t_moved = rig.plant_time() + MOVE_TIME
+    wait_for(lambda: rig.plant_time() > t_moved, 60, "the demo path moved", r.proc)
+    _until_ok(rig, "mode hold")
+    wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest after the move", r.proc)
+    # back to the hold pose: the drag runs where --hold started (not where the path stopped)
+    home = ",".join(repr(float(x)) for x in rig.data["robot"]["home"])
+    _until_ok(rig, f"mode move-to {home}")
+    wait_for(lambda: r.status()["mode"] == "hold", 60, "the move home done", r.proc)
+    wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest at home", r.proc)
     # a hard knock at the tool: the monitor stops the arm (category 1)
     rig.push((0.0, 0.0, -80.0), 0.3)
     r.wait_latched("collision")
@@ -159,6 +184,8 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     # the press enters dragging only from standstill (else it is refused, and the push would
     # meet an arm that holds): the re-enabled arm settles first
     wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest before the press", r.proc)
+    t_tared = rig.plant_time() + TARE_WAIT
+    wait_for(lambda: rig.plant_time() > t_tared, 30, "the tare's wait", r.proc)
     _until_ok(rig, "enable on")
     t0 = rig.push((PUSH, 0.0, 0.0), PUSH_TIME, ramp=RAMP)
     t_end = t0 + PUSH_TIME
@@ -210,6 +237,6 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
         f" overruns={s['overruns']}"
     )
     assert abs(steady - expected) < 0.1 * expected, (steady, expected)
-    assert off_axis < 0.1 * expected, (off_axis, expected)  # the issue's 5 %: see the docstring
+    assert off_axis < 0.05 * expected, (off_axis, expected)
     if gap <= RESOLUTION:  # measurable: the samples bracket the rest instant closely enough
         assert rest <= REST_WITHIN, (rest, gap)
