@@ -149,6 +149,31 @@ def _rest_time(
     return float(t[last + 1] - t_release), float(t[last + 1] - t[max(last, 0)])
 
 
+def _free_motion(r: DragRig, attempts: int = 3) -> int:
+    """The demo path for MOVE_TIME of plant time; returns the number of collision stops it
+    met. When this 2-core machine starves the loop (50 ms stalls, thousands of overruns: not
+    under test here, as bus loss and overrun faults above) the monitor has stopped the free
+    motion (2 of 6 runs): reset and move on; the friction learning skips stopped ticks."""
+    s = r.service
+    for attempt in range(attempts):
+        _until_ok(r, "mode move")
+        t_moved = r.plant_time() + MOVE_TIME
+        wait_for(
+            lambda t=t_moved: r.plant_time() > t or bool(s.status()["faults"]),
+            60,
+            "the demo path moved",
+            s.proc,
+        )
+        st = s.status()
+        if not st["faults"]:
+            return attempt
+        assert st["faults"] == ["collision"], f"the free motion was stopped: {st}"
+        wait_for(lambda: s.status()["state"] == "stopped", 30, "stopped", s.proc)
+        _until_ok(r, "reset")
+        s.wait_state("running")
+    raise AssertionError(f"the free motion was stopped {attempts} times")
+
+
 def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     from hofto_hw.config.loader import load_config
     from hofto_hw.experiments.drag_sim import tool_motion
@@ -160,9 +185,7 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     wait_for(lambda: r.status()["ticks"] > 500, 60, "500 ticks", r.proc)
     # contact-free motion first (the demo path, as the main job): the drag learns the
     # friction model's error from it (drag.friction_learning) and takes it off the estimate
-    _until_ok(rig, "mode move")
-    t_moved = rig.plant_time() + MOVE_TIME
-    wait_for(lambda: rig.plant_time() > t_moved, 60, "the demo path moved", r.proc)
+    false_stops = _free_motion(rig)
     _until_ok(rig, "mode hold")
     wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest after the move", r.proc)
     # back to the hold pose: the drag runs where --hold started (not where the path stopped)
@@ -212,7 +235,10 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     code, s = r.terminate()
     assert code == 0
     kinds = [e["kind"] for e in s["events"] if e["category"] >= 0 or e["kind"] == "reset"]
-    assert kinds[:4] == ["collision", "reset", "enabling_released", "stop_request"], s["events"]
+    k = 2 * false_stops  # each false stop of the free motion: collision, reset
+    assert kinds[k : k + 4] == ["collision", "reset", "enabling_released", "stop_request"], s[
+        "events"
+    ]
     released = first_event(s, "enabling_released")
     assert released["category"] == 2
 
@@ -234,7 +260,7 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
         f"FIGURE drag over ethercat steady={steady * 1e3:.1f} mm/s expected="
         f"{expected * 1e3:.1f} mm/s off_axis={off_axis * 1e3:.2f} mm/s rest<={rest * 1e3:.0f} ms"
         f" (sampling gap {gap * 1e3:.0f} ms) samples={int(window.sum())}"
-        f" overruns={s['overruns']}"
+        f" overruns={s['overruns']} false_stops={false_stops}"
     )
     assert abs(steady - expected) < 0.1 * expected, (steady, expected)
     assert off_axis < 0.05 * expected, (off_axis, expected)
