@@ -152,8 +152,9 @@ def _free_motion(r: DragRig, attempts: int = 3) -> int:
     """The demo path for MOVE_TIME of plant time; returns the number of collision stops it
     met. When this 2-core machine starves the loop (50 ms stalls, thousands of overruns: not
     under test here, as bus loss and overrun faults above) the monitor has stopped the free
-    motion (full amplitude 2 of 5 runs, 0.4 amplitude 3 of 11, all with compute medians
-    above the 1 ms cycle): reset and move on; the friction learning skips stopped ticks."""
+    motion (full amplitude 2 of 5 runs, 0.4 amplitude 4 of 12; the two inspected: compute
+    median 1.2-1.6 ms, above the 1 ms cycle): reset and move on; the friction learning skips
+    stopped ticks."""
     s = r.service
     for attempt in range(attempts):
         _until_ok(r, "mode move")
