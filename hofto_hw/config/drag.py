@@ -194,11 +194,13 @@ class DragConfig(FileModel):
         "the pose where dragging starts reads as no push",
     )
     tare_time: NonNegFloat = Field(
-        0.2,
+        1.0,
         description="the tare is the mean of the estimate since drag mode began, then its "
         "exponential mean over this time [s], up to the press (0 = the press tick's "
         "sample): at standstill the estimate wanders ~1 N over ~0.1 s (held friction), one "
-        "instant of it is no zero",
+        "instant of it is no zero; 0.2 s still left 0.36 N·m on joint 2 (ER3A over "
+        "EtherCAT, 3 kg: 1 N sideways at the tool, 5 mm/s off-axis in a 100 mm/s drag; "
+        "1 s: 0.4 mm/s)",
     )
     hand_feedforward: bool = Field(
         True,

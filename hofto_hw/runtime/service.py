@@ -224,6 +224,8 @@ class ControlServer:
                 return self._play(what, rest[0])
         except UserError as exc:
             return {"ok": False, "input_error": True, "message": str(exc)}
+        if what == "move" and tick.motion.path is None:  # else accepted and nothing moves
+            return {"ok": False, "message": "mode move: the config has no demo path (run.path)"}
         tick.mode_request = MOVE if what == "move" else HOLD
         msg = f"mode {what} requested"
         if what == "hold" and tick.recording is not None and tick.recording.state < teach.SAVED:

@@ -7,13 +7,18 @@ the hand's release; releasing the enabling input stops the arm (enabling_release
 category 2). The speeds are the true arm's (the emulator's state, as the simulated drag
 script's figures). The run records a flight log (tmp folder) for a failure's post-mortem.
 
-Not asserted at the issue's 5 %: the off-axis drift. Over EtherCAT it is 7.8-9.3 mm/s
-against 100 (median 8.8, 13 loaded runs): the estimate's sideways force (F_z -2.6 N falling to
--1.3 N along the path; the commanded tool velocity is the measured one to 0.04 mm/s, so not
-the bus, DC or the drives) is the emulated arm's friction (Stribeck, other coefficients)
-against the model's at this pose with the 3 kg load; the in-process harness with the same
-load and exact friction gives 1.2 mm/s, with the arm's friction 4.0-6.6 mm/s. The bound
-here, 10 %, guards the figure against getting worse.
+Off-axis drift, the issue's 5 %: before the knock the arm runs the demo path (``mode move``,
+4 s of plant time, at 0.4 of the config's amplitude: see PATH_SCALE) and moves back home, so
+that the drag learns the friction model's error (control/friction_residual.py: ~4.7 s of
+motion). At the drag's joint speeds, 0.27/-0.41/0.15 rad/s on joints 2/3/5, far above the
+emulated arm's Stribeck velocities (0.05-0.08 rad/s), the (1, tanh, qd) features fit it: the
+learned correction 0.22/0.24/-0.07 N·m against the true error 0.28/0.24/-0.05 N·m. The arm
+then rests 1.2 s in drag mode before the press, as a person would: the tare (drag.tare_time,
+1 s) averages the estimate's standstill wander (+-0.3 N·m on joints 2-3). Measured before:
+no learning (the test's config had no ``run.path``, so ``mode move`` moved nothing) and a
+0.2 s tare left -1.9 N along z at the tool (friction -1.0 N, tare -1.0 N): 7.8-9.3 mm/s
+off-axis; learning (full-amplitude path) with the 0.2 s tare 4.7-5.0 mm/s; learning and the
+1 s tare 0.3-0.6 mm/s (full amplitude), 0.1-0.2 mm/s (0.4 amplitude).
 Needs root (veth, raw sockets): skipped when unprivileged, a failure under CI.
 """
 
@@ -46,9 +51,17 @@ SETTLE = 0.5  # s from the push's start to the steady window (drag_figures' sett
 RAMP = 0.2  # s: the hand builds its push up (not a 20 ms step)
 REST_WITHIN = 0.1  # s after the hand lets go (issue 9)
 RESOLUTION = 0.05  # s: the rest time is judged only when the samples around it are this dense
+# the demo path at 0.4 of its amplitude: joint speeds up to 0.5-1.4 rad/s (full: up to 3.4),
+# the drag's 0.15-0.45 inside; off-axis 0.1-0.4 mm/s after it against 0.3-0.6 at full amplitude
+PATH_SCALE = 0.4
+MOVE_TIME = 4.0  # s of the demo path before the knock (contact-free motion)
+TARE_WAIT = 1.2  # s at rest in drag mode before the press (drag.tare_time, 1 s, and margin)
 
 
 def _config(folder: Path, master: str) -> tuple[Path, dict]:
+    run = er3a_run("model_error", "path")
+    # the demo path stays, scaled: the arm moves contact-free before the drag
+    run["path"]["amplitude"] = [PATH_SCALE * a for a in run["path"]["amplitude"]]
     return ethercat_run_config(
         folder,
         master,
@@ -60,7 +73,7 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
         # DC: the observers integrate over the drives' sample interval (the reference clock's
         # time), not over the master's late wake-ups on this loaded machine
         ethercat={"dc_sync": True},
-        run=er3a_run("model_error"),
+        run=run,
         # the test holds the button
         edit=lambda data: data["drag"].update(enable_input={"source": "socket"}),
     )
@@ -132,6 +145,33 @@ def _rest_time(
     return float(t[last + 1] - t_release), float(t[last + 1] - t[max(last, 0)])
 
 
+def _free_motion(r: DragRig, attempts: int = 3) -> int:
+    """The demo path for MOVE_TIME of plant time; returns the number of collision stops it
+    met. When this 2-core machine starves the loop (50 ms stalls, thousands of overruns: not
+    under test here, as bus loss and overrun faults above) the monitor has stopped the free
+    motion (full amplitude 2 of 5 runs, 0.4 amplitude 4 of 12; the two inspected: compute
+    median 1.2-1.6 ms, above the 1 ms cycle): reset and move on; the friction learning skips
+    stopped ticks."""
+    s = r.service
+    for attempt in range(attempts):
+        _until_ok(r, "mode move")
+        t_moved = r.plant_time() + MOVE_TIME
+        wait_for(
+            lambda t=t_moved: r.plant_time() > t or bool(s.status()["faults"]),
+            60,
+            "the demo path moved",
+            s.proc,
+        )
+        st = s.status()
+        if not st["faults"]:
+            return attempt
+        assert st["faults"] == ["collision"], f"the free motion was stopped: {st}"
+        wait_for(lambda: s.status()["state"] == "stopped", 30, "stopped", s.proc)
+        _until_ok(r, "reset")
+        s.wait_state("running")
+    raise AssertionError(f"the free motion was stopped {attempts} times")
+
+
 def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     from hofto_hw.config.loader import load_config
     from hofto_hw.experiments.drag_sim import tool_motion
@@ -141,6 +181,16 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     r.start("--hold", log=True)
     r.wait_state("running")
     wait_for(lambda: r.status()["ticks"] > 500, 60, "500 ticks", r.proc)
+    # contact-free motion first (the demo path, as the main job): the drag learns the
+    # friction model's error from it (drag.friction_learning) and takes it off the estimate
+    false_stops = _free_motion(rig)
+    _until_ok(rig, "mode hold")
+    wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest after the move", r.proc)
+    # back to the hold pose: the drag runs where --hold started (not where the path stopped)
+    home = ",".join(repr(float(x)) for x in rig.data["robot"]["home"])
+    _until_ok(rig, f"mode move-to {home}")
+    wait_for(lambda: r.status()["mode"] == "hold", 60, "the move home done", r.proc)
+    wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest at home", r.proc)
     # a hard knock at the tool: the monitor stops the arm (category 1)
     rig.push((0.0, 0.0, -80.0), 0.3)
     r.wait_latched("collision")
@@ -155,6 +205,8 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     # the press enters dragging only from standstill (else it is refused, and the push would
     # meet an arm that holds): the re-enabled arm settles first
     wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest before the press", r.proc)
+    t_tared = rig.plant_time() + TARE_WAIT
+    wait_for(lambda: rig.plant_time() > t_tared, 30, "the tare's wait", r.proc)
     _until_ok(rig, "enable on")
     t0 = rig.push((PUSH, 0.0, 0.0), PUSH_TIME, ramp=RAMP)
     t_end = t0 + PUSH_TIME
@@ -181,7 +233,10 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     code, s = r.terminate()
     assert code == 0
     kinds = [e["kind"] for e in s["events"] if e["category"] >= 0 or e["kind"] == "reset"]
-    assert kinds[:4] == ["collision", "reset", "enabling_released", "stop_request"], s["events"]
+    k = 2 * false_stops  # each false stop of the free motion: collision, reset
+    assert kinds[k : k + 4] == ["collision", "reset", "enabling_released", "stop_request"], s[
+        "events"
+    ]
     released = first_event(s, "enabling_released")
     assert released["category"] == 2
 
@@ -203,9 +258,9 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
         f"FIGURE drag over ethercat steady={steady * 1e3:.1f} mm/s expected="
         f"{expected * 1e3:.1f} mm/s off_axis={off_axis * 1e3:.2f} mm/s rest<={rest * 1e3:.0f} ms"
         f" (sampling gap {gap * 1e3:.0f} ms) samples={int(window.sum())}"
-        f" overruns={s['overruns']}"
+        f" overruns={s['overruns']} false_stops={false_stops}"
     )
     assert abs(steady - expected) < 0.1 * expected, (steady, expected)
-    assert off_axis < 0.1 * expected, (off_axis, expected)  # the issue's 5 %: see the docstring
+    assert off_axis < 0.05 * expected, (off_axis, expected)
     if gap <= RESOLUTION:  # measurable: the samples bracket the rest instant closely enough
         assert rest <= REST_WITHIN, (rest, gap)

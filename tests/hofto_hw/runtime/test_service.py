@@ -65,6 +65,27 @@ def test_control_socket_status_stop_reset_mode(tmp_path: Path) -> None:
     assert not sock.exists()  # removed on exit
 
 
+def test_mode_move_without_a_demo_path_is_refused(tmp_path: Path) -> None:
+    """A config with no ``run.path``: ``mode move`` would be accepted and move nothing (a
+    silent success); it is refused with a line naming the missing setting."""
+    import yaml
+
+    data = yaml.safe_load(CONFIG.read_text())
+    data["robot"]["urdf"] = str((CONFIG.parent / data["robot"]["urdf"]).resolve())
+    del data["run"]["path"]
+    config = tmp_path / "no-path.yaml"
+    config.write_text(yaml.safe_dump(data))
+    sock = tmp_path / "control.sock"
+    proc = _start(tmp_path, None, "--socket", str(sock), "--hold", "--config", str(config))
+    try:
+        answer = request(sock, "mode move")
+        assert not answer["ok"] and "run.path" in answer["message"], answer
+        assert request(sock, "status")["mode"] == "hold"
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=120) == 0
+
+
 def test_socket_path_safety(tmp_path: Path) -> None:
     plain = tmp_path / "file"
     plain.write_text("keep me")
