@@ -71,31 +71,19 @@ def _rest_hits(setup, observer_cfg, monitor, name: str, recs) -> tuple[np.ndarra
 @pytest.fixture(scope="module")
 def after():
     """The shipped settings re-calibrated on every run they were tuned on but LEFT_OUT."""
-    from hofto_hw.replay.runner import run_observer
-    from hofto_hw.replay.session import load_for_replay, observer_for
+    from support.ur10e import refit_shipped
+
+    from hofto_hw.replay.session import load_for_replay
     from hofto_hw.replay.setup import load_setup
     from hofto_hw.replay.thresholds import read_thresholds
-    from hofto_hw.replay.tuning import refit
 
     setup = load_setup(CONFIGS / "ur10e" / "parameters.yaml")
     th = read_thresholds(CONFIGS / "ur10e" / "thresholds.yaml")
     left = {Path(p).name for p in LEFT_OUT}
     fit = [f for f in th.provenance["files"] if f not in left]
     recs = [load_for_replay(setup, _path(f), None) for f in fit]
-    out = {}
-    for obs in ("momentum", "hofto"):
-        entry = th.observers[obs]
-        ests = [run_observer(r, observer_for(obs, entry.observer, setup, r, "auto")) for r in recs]
-        chosen = th.provenance["observers"][obs]
-        monitor = refit(
-            recs,
-            ests,
-            entry.monitor,
-            chosen["margin"],
-            chosen.get("rest_weight"),
-            rest_margin=chosen.get("rest_margin"),
-        )
-        out[obs] = (entry.observer, monitor)
+    monitors = refit_shipped(setup, th, recs)
+    out = {obs: (th.observers[obs].observer, monitors[obs]) for obs in monitors}
     return setup, out
 
 

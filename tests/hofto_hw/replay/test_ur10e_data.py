@@ -76,9 +76,9 @@ def left_out(ctx):
     """The shipped thresholds' settings (monitor timing, per-joint margins and rest weights
     from the provenance ``hofto-hw tune`` wrote) re-calibrated on every file it was tuned on
     except LEFT_OUT: the shipped file itself is calibrated on all of them."""
-    from hofto_hw.replay.runner import run_observer
-    from hofto_hw.replay.session import load_for_replay, observer_for
-    from hofto_hw.replay.tuning import refit
+    from support.ur10e import refit_shipped
+
+    from hofto_hw.replay.session import load_for_replay
 
     setup, th = ctx
     prov = th.provenance
@@ -90,20 +90,10 @@ def left_out(ctx):
         for f in files
     ]
     recs = [load_for_replay(setup, path, None) for path in paths]
-    observers = {}
-    for obs in ("momentum", "hofto"):
-        entry = th.observers[obs]
-        ests = [run_observer(r, observer_for(obs, entry.observer, setup, r, "auto")) for r in recs]
-        chosen = prov["observers"][obs]
-        monitor = refit(
-            recs,
-            ests,
-            entry.monitor,
-            chosen["margin"],
-            chosen.get("rest_weight"),
-            rest_margin=chosen.get("rest_margin"),
-        )
-        observers[obs] = entry.model_copy(update={"monitor": monitor})
+    monitors = refit_shipped(setup, th, recs)
+    observers = {
+        obs: th.observers[obs].model_copy(update={"monitor": m}) for obs, m in monitors.items()
+    }
     return setup, th.model_copy(update={"observers": observers, "calibrated_on": files})
 
 
