@@ -47,6 +47,7 @@ from hofto_hw.control.friction_residual import FrictionResidual
 from hofto_hw.control.isolation import ContactIsolation
 from hofto_hw.control.wrench import ToolJacobian, WrenchEstimator
 from hofto_hw.model.robot import RobotModel
+from hofto_hw.observers.kernels import Backend
 
 
 class DragReason(IntEnum):
@@ -67,6 +68,7 @@ class DragController:
         cfg: DragConfig,
         model: RobotModel,
         gravity: tuple[float, float, float] = (0.0, 0.0, -9.81),
+        backend: Backend = "numpy",
     ) -> None:
         n = model.n
         self.cfg = cfg
@@ -95,6 +97,7 @@ class DragController:
                 cfg.friction_learning_time,
                 cfg.friction_learning_speed,
                 limit=cfg.friction_learning_limit,
+                backend=backend,
             )
             if cfg.friction_learning
             else None

@@ -23,7 +23,10 @@ import math
 
 import numpy as np
 
+from hofto_hw.control.kernels import friction_learn
 from hofto_hw.model.friction import FrictionParams
+from hofto_hw.observers import kernels
+from hofto_hw.observers.kernels import Backend
 
 
 class FrictionResidual:
@@ -44,6 +47,7 @@ class FrictionResidual:
         ridge: float = 0.01,
         limit: float = 0.25,
         every: int = 4,
+        backend: Backend = "numpy",
     ) -> None:
         n = friction.coulomb.shape[0]
         self.friction = friction
@@ -56,7 +60,6 @@ class FrictionResidual:
         self.S = np.zeros((n, 3, 3))  # weighted mean of x·xᵀ per joint
         self.b = np.zeros((n, 3))  # weighted mean of x·r per joint
         self.coef = np.zeros((n, 3))
-        self.seconds = 0.0
         self.every = max(1, int(every))
         self._count = 0
         self._pending = 0.0  # [s] of motion since the last sample learned from
@@ -72,20 +75,41 @@ class FrictionResidual:
         self._f = np.zeros(n)
         self._scratch = np.zeros((3, n))
         self._abs = np.zeros(n)
+        self._st = np.zeros(3)  # count, pending time (compiled path), seconds learned
+        self.backend = kernels.resolve(backend)
+        if self.backend == "numba" and not kernels.warm(self._warm):
+            self.backend = "numpy"
+        self._use_kernel = self.backend == "numba"
+
+    @property
+    def seconds(self) -> float:
+        """[s] of motion learned from."""
+        return float(self._st[2])
+
+    def _warm(self) -> None:
+        z = np.zeros(self.n)
+        S, b, st = np.zeros_like(self.S), np.zeros_like(self.b), np.zeros(3)
+        friction_learn(z, z, 0.001, self.v_s, self.tau, self.min_speed, self.every, S, b, st)
 
     def reset(self) -> None:
         """Forget everything learned (another arm, a new payload)."""
         self.S.fill(0.0)
         self.b.fill(0.0)
         self.coef.fill(0.0)
-        self.seconds = 0.0
         self._count = 0
         self._pending = 0.0
+        self._st.fill(0.0)
 
     def learn(self, qd: np.ndarray, tau_ext: np.ndarray, dt: float) -> bool:
         """One sample of contact-free motion: ``qd`` (n,) [rad/s], the estimate ``tau_ext``
         (n,) [N·m], ``dt`` [s]. Returns whether it counts (some joint above min_speed; one
         in ``every`` such samples is learned from, weighted by the time since the last)."""
+        if self._use_kernel:
+            st = self._st
+            moved = friction_learn(
+                qd, tau_ext, dt, self.v_s, self.tau, self.min_speed, self.every, self.S, self.b, st
+            )
+            return moved
         np.abs(qd, out=self._abs)
         if self._abs.max() < self.min_speed:
             return False
@@ -110,7 +134,7 @@ class FrictionResidual:
         self._xr -= self.b
         self._xr *= beta
         self.b += self._xr
-        self.seconds += dt
+        self._st[2] += dt
         return True
 
     def solve(self) -> np.ndarray:

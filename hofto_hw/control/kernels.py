@@ -88,3 +88,50 @@ def ramp_step(accel: np.ndarray, dt: float, q: np.ndarray, qd: np.ndarray, qdd: 
         for j in range(n):
             qdd[j] = 0.0
     return not moving
+
+
+@jit
+def friction_learn(
+    qd: np.ndarray,
+    tau_ext: np.ndarray,
+    dt: float,
+    v_s: float,
+    time_constant: float,
+    min_speed: float,
+    every: int,
+    S: np.ndarray,
+    b: np.ndarray,
+    st: np.ndarray,
+) -> bool:
+    """:meth:`hofto_hw.control.friction_residual.FrictionResidual.learn` in one call:
+    ``st`` = [count, pending time [s], seconds learned [s]] updated in place, ``S`` (n, 3, 3)
+    and ``b`` (n, 3) the exponentially weighted sums. Same operations in the same order as
+    the numpy path (tanh may differ from numpy's by one ulp)."""
+    n = qd.shape[0]
+    fastest = 0.0
+    for j in range(n):
+        a = abs(qd[j])
+        if a > fastest:
+            fastest = a
+    if fastest < min_speed:
+        return False
+    st[1] += dt
+    st[0] += 1.0
+    if st[0] < every:
+        return True
+    st[0] = 0.0
+    h = st[1]
+    st[1] = 0.0
+    beta = 1.0 - math.exp(-h / time_constant)
+    for j in range(n):
+        x0 = 1.0
+        x1 = math.tanh(qd[j] / v_s)
+        x2 = qd[j]
+        for r in range(3):
+            xr = x0 if r == 0 else (x1 if r == 1 else x2)
+            for c in range(3):
+                xc = x0 if c == 0 else (x1 if c == 1 else x2)
+                S[j, r, c] += (xr * xc - S[j, r, c]) * beta
+            b[j, r] += (xr * tau_ext[j] - b[j, r]) * beta
+    st[2] += h
+    return True

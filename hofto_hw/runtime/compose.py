@@ -29,6 +29,7 @@ from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import make_observer
 from hofto_hw.observers.base import Observer
+from hofto_hw.observers.kernels import Backend
 from hofto_hw.observers.stability import check_observer
 from hofto_hw.recording.record import MemorySink, RecordSink, tick_dtype
 from hofto_hw.runtime.build import (
@@ -181,7 +182,7 @@ def build(
     p = cfg.run.path
     path = DemoPath(p.amplitude, p.period, p.phase, p.ramp, backend) if p is not None else None
     motion = JointMotion(model.n, accel, path, backend=backend)
-    drag, enable, drag_row = _build_drag(cfg, model, names)
+    drag, enable, drag_row = _build_drag(cfg, model, names, backend)
     tick = Tick(
         group,
         observers,
@@ -270,7 +271,7 @@ def enable_drives(bus: Transport, group: DriveGroup) -> None:
 
 
 def _build_drag(
-    cfg: SystemConfig, model: RobotModel, names: list[str]
+    cfg: SystemConfig, model: RobotModel, names: list[str], backend: Backend
 ) -> tuple[DragController | None, EnableInput | None, int]:
     """The drag controller of the ``drag:`` section, its enabling input and the row of
     ``tau_ext`` (observer) that drives it; (None, None, 0) without the section."""
@@ -283,7 +284,7 @@ def _build_drag(
         raise ConfigError(
             f"drag.observer: {d.observer!r} is not one of the loop's observers {names}"
         )
-    ctrl = DragController(d, model, cfg.robot.gravity)
+    ctrl = DragController(d, model, cfg.robot.gravity, backend)
     return ctrl, EnableInput.from_config(d.enable_input), names.index(d.observer)
 
 

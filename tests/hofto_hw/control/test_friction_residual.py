@@ -58,3 +58,51 @@ def test_no_motion_learns_nothing_and_the_correction_is_bounded() -> None:
     model.friction.torque(qd, f)
     fr.correction(qd, out)
     np.testing.assert_allclose(out, 0.25 * np.abs(f))
+
+
+def test_compiled_learning_agrees_with_the_numpy_path() -> None:
+    """The compiled learn (one call per tick) against the numpy reference over 6000 ticks of
+    random speeds (some below min_speed, signed zeros, NaN in the estimate): same counts,
+    sums to 1e-12, same coefficients and correction; no allocation per tick."""
+    from support.compiled import require_compiled_kernels
+
+    require_compiled_kernels()
+    model = _model()
+    ref = FrictionResidual(model.friction, time_constant=0.5, backend="numpy")
+    fast = FrictionResidual(model.friction, time_constant=0.5, backend="numba")
+    assert fast.backend == "numba"
+    rng = np.random.default_rng(7)
+    for k in range(6000):
+        qd = rng.normal(0.0, 0.3, 6) * (k % 7 != 0)  # every 7th tick: an arm at rest
+        if k % 11 == 0:
+            qd[rng.integers(6)] = -0.0
+        est = rng.normal(0.0, 1.0, 6)
+        if k == 4321:
+            est[2] = np.nan  # reaches the sums in both paths alike
+        dt = 1e-3 * (1.0 + (k % 5 == 0))
+        assert ref.learn(qd, est, dt) == fast.learn(qd, est, dt)
+        if k == 4320:
+            np.testing.assert_allclose(fast.S, ref.S, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(fast.b, ref.b, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(fast.solve(), ref.solve(), rtol=0, atol=1e-9)
+    assert fast.seconds == ref.seconds > 1.0
+    np.testing.assert_array_equal(np.isnan(fast.b), np.isnan(ref.b))
+    fast.reset()
+    assert fast.seconds == 0.0 and not fast.S.any()
+
+    import tracemalloc
+
+    qd, est = np.full(6, 0.2), np.zeros(6)
+    for _ in range(100):
+        fast.learn(qd, est, 1e-3)
+    tracemalloc.start()
+    before = tracemalloc.take_snapshot()
+    for _ in range(2000):
+        fast.learn(qd, est, 1e-3)
+    grown = sum(
+        s.size_diff
+        for s in tracemalloc.take_snapshot().compare_to(before, "filename")
+        if s.size_diff > 0
+    )
+    tracemalloc.stop()
+    assert grown < 1024, grown
