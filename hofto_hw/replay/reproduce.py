@@ -191,17 +191,19 @@ def replay_levels(
     levels: Any, cfg: SystemConfig, estimates: np.ndarray, log: FlightLog, dt: np.ndarray
 ) -> tuple[int | None, list[int]]:
     """First tick (index) CollisionLevels decides a collision on ``estimates`` (N, k, n),
-    judged only on the ticks the run judged (``monitored``), and its joints."""
+    judged only on the ticks the run judged (``monitored``), and its joints; over the
+    observers' interval where the log has it (``sample_dt``), as the loop did."""
     from safety.stop import StopController
 
     assert log.monitored is not None and log.qdd_cmd is not None
     stop = StopController.from_config(cfg.safety.categories)
     levels.reset()
+    h = dt if log.sample_dt is None else np.where(log.sample_dt > 0.0, log.sample_dt, dt)
     for k in range(log.n_ticks):
         if not log.monitored[k]:
             continue
         stop.begin_tick(int(log.ticks[k]))
-        if levels.update(stop, estimates[k], log.q[k], log.qd[k], log.qdd_cmd[k], dt[k]):
+        if levels.update(stop, estimates[k], log.q[k], log.qd[k], log.qdd_cmd[k], h[k]):
             return k, [int(j) for j in np.flatnonzero(levels.collision_joints)]
     return None, []
 

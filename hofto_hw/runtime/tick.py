@@ -299,11 +299,14 @@ class Tick:
         if monitored:
             # only while the power stage is on (quick-stop ramps included): with it off the
             # brakes act and the motor torque no longer explains the motion
-            self.collision.update(stop, self._monitored(dragging), q, qd, motion.qdd, dt)
+            # over the interval the observers integrated (DC: the drives' own; a stalled
+            # master's dt made the acceleration feature, and the threshold, too small)
+            mdt = obs_dt if obs_dt > 0.0 else dt
+            self.collision.update(stop, self._monitored(dragging), q, qd, motion.qdd, mdt)
             c = self.collision
             if self.drag is not None and not dragging and stop.category == -1:
                 if not (c.contact or c.collision):  # contact-free motion: friction error
-                    self.drag.learn(qd, self.tau_ext[self.drag_row], dt)
+                    self.drag.learn(qd, self.tau_ext[self.drag_row], mdt)
         if missed or self.overrun_streak:
             self._overrun(missed)
         if self.stop_requested:

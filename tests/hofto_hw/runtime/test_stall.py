@@ -55,3 +55,40 @@ def test_the_observers_hold_while_the_bus_reports_no_new_sample(cfg: SystemConfi
     transport.sample_dt = 0.0
     system.loop.run(max_ticks=1)
     assert not np.array_equal(tick.tau_ext, held)
+
+
+def test_the_monitor_judges_over_the_interval_the_observers_integrated(
+    cfg: SystemConfig,
+) -> None:
+    """A DC bus whose drives sampled one cycle apart while the master stalled 50 cycles: the
+    collision monitor (its acceleration feature, hence the threshold) and the drag's friction
+    learning advance by the drives' interval, as the observers do, not by the master's dt
+    (a 50x too small acceleration estimate dropped the threshold while the arm accelerated)."""
+    system = build(cfg, clock="sim", contact=False)
+    tick, transport = system.tick, system.group.transport
+    assert tick.collision is not None and tick.drag is not None
+    tick.mode_request = MOVE
+    system.loop.run(max_ticks=400)
+    seen: list[float] = []
+    learned: list[float] = []
+    update, learn = tick.collision.update, tick.drag.learn
+
+    def spy_update(stop, tau_ext, q, qd, qdd, dt):  # type: ignore[no-untyped-def]
+        seen.append(dt)
+        return update(stop, tau_ext, q, qd, qdd, dt)
+
+    def spy_learn(qd, tau_ext, dt):  # type: ignore[no-untyped-def]
+        learned.append(dt)
+        return learn(qd, tau_ext, dt)
+
+    tick.collision.update = spy_update  # type: ignore[method-assign]
+    tick.drag.learn = spy_learn  # type: ignore[method-assign]
+    transport.sample_dt = tick.period  # DC: the drives sampled one cycle after the last
+    system.clock.stall(50)
+    system.loop.run(max_ticks=1)
+    assert seen == [tick.period], seen
+    assert learned in ([], [tick.period]), learned
+    transport.sample_dt = 0.0  # no DC: the loop's dt, as before
+    system.clock.stall(9)
+    system.loop.run(max_ticks=1)
+    assert abs(seen[-1] - 10 * tick.period) < 1e-9, seen
