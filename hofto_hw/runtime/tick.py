@@ -514,18 +514,27 @@ class Tick:
         self.play_request = None
         self.mode_result = "refused: a fault is latched, reset first"
 
-    def _enter_drag(self, qd: np.ndarray) -> str:
-        """Drag mode only from standstill, powered, with no latched fault."""
-        motion = self.motion
-        if self.drag is None:
-            return "refused: no drag section in the config"
+    def _refuse_entry(self, qd: np.ndarray, not_still: str) -> str:
+        """Why a mode that moves the arm may not start now ('' when it may): it starts only
+        from HOLD at standstill, powered, with no latched fault; ``not_still`` is the answer
+        when the arm is not holding still."""
         if self.stop.latched:
             return "refused: a fault is latched, reset first"
         if not self.expect_enabled or self.enabling:
             return "refused: drives not enabled"
         np.abs(qd, out=self._d)
-        if motion.mode != HOLD or self._d.max() >= STANDSTILL:
-            return "refused: the arm is not at standstill"
+        if self.motion.mode != HOLD or self._d.max() >= STANDSTILL:
+            return not_still
+        return ""
+
+    def _enter_drag(self, qd: np.ndarray) -> str:
+        """Drag mode only from standstill, powered, with no latched fault."""
+        motion = self.motion
+        if self.drag is None:
+            return "refused: no drag section in the config"
+        refused = self._refuse_entry(qd, "refused: the arm is not at standstill")
+        if refused:
+            return refused
         self.drag.start(motion.q)
         motion.mode = DRAG
         self.recording = self.record_request
@@ -537,13 +546,9 @@ class Tick:
         pb, motion = self.play_request, self.motion
         if pb is None or pb.mode != want:
             return "refused: no trajectory planned"
-        if self.stop.latched:
-            return "refused: a fault is latched, reset first"
-        if not self.expect_enabled or self.enabling:
-            return "refused: drives not enabled"
-        np.abs(qd, out=self._d)
-        if motion.mode != HOLD or self._d.max() >= STANDSTILL:
-            return "refused: the arm is not holding at standstill"
+        refused = self._refuse_entry(qd, "refused: the arm is not holding at standstill")
+        if refused:
+            return refused
         np.subtract(motion.q, pb.start, out=self._d)
         np.abs(self._d, out=self._d)
         if self._d.max() > 1e-9:
