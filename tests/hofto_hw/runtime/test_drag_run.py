@@ -8,10 +8,10 @@ import os
 import subprocess
 import sys
 import time
-import tracemalloc
 from pathlib import Path
 
 import numpy as np
+from support.alloc import tick_memory
 
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.config.runtime import ScriptedDragConfig
@@ -119,15 +119,10 @@ def test_drag_tick_allocates_nothing_after_warm_up(cfg: SystemConfig) -> None:
     tick.enable_input.pressed = True
     system.loop.run(max_ticks=1500)
     assert tick.motion.mode == DRAG and tick.drag.active
-    tracemalloc.start()
-    system.loop.run(max_ticks=10)
-    before, _ = tracemalloc.get_traced_memory()
-    system.loop.run(max_ticks=3000)
-    after, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
+    grown, peak = tick_memory(system)
     assert tick.stop.latched == 0
-    assert after - before < 4000
-    assert peak - before < 16000
+    assert grown < 4000
+    assert peak < 16000
 
 
 def test_run_summary_has_the_drag_keys(tmp_path: Path) -> None:

@@ -10,11 +10,11 @@ import signal
 import subprocess
 import sys
 import tempfile
-import tracemalloc
 from pathlib import Path
 
 import pytest
 import yaml
+from support.alloc import tick_memory
 
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.control.joint_motion import MOVE
@@ -105,14 +105,9 @@ def test_tick_allocates_nothing_after_warm_up(cfg: SystemConfig) -> None:
     system = build(cfg, clock="sim", contact=False)
     system.tick.mode_request = MOVE
     system.loop.run(max_ticks=1500)
-    tracemalloc.start()
-    system.loop.run(max_ticks=10)
-    before, _ = tracemalloc.get_traced_memory()
-    system.loop.run(max_ticks=3000)
-    after, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
+    grown, peak = tick_memory(system)
     assert system.tick.stop.latched == 0
     # nothing kept per tick (3000 ticks x one (6,) array would be > 300 kB) and no large
     # temporaries: only scalars and the short-lived wrappers pinocchio returns
-    assert after - before < 4000
-    assert peak - before < 16000
+    assert grown < 4000
+    assert peak < 16000

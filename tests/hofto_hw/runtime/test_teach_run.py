@@ -5,11 +5,11 @@ target, and the allocation-free REPLAY tick."""
 
 from __future__ import annotations
 
-import tracemalloc
 from pathlib import Path
 
 import numpy as np
 import pytest
+from support.alloc import tick_memory
 
 from hofto_hw.config.loader import load_config
 from hofto_hw.config.models import ExternalTorqueConfig, SystemConfig
@@ -222,14 +222,9 @@ def test_replay_tick_allocates_nothing(cfg: SystemConfig, taught) -> None:
     _play(system, pb)
     system.loop.run(max_ticks=pb.traj.segments[1] + 200)  # on the path
     assert tick.motion.mode == REPLAY
-    tracemalloc.start()
-    system.loop.run(max_ticks=10)
-    before, _ = tracemalloc.get_traced_memory()
-    system.loop.run(max_ticks=3000)
-    after, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
+    grown, peak = tick_memory(system)
     assert tick.motion.mode == REPLAY and tick.stop.latched == 0
     assert pb.executed.count > 3000
-    assert after - before < 4000
-    assert peak - before < 16000
+    assert grown < 4000
+    assert peak < 16000
     system.close()

@@ -3,10 +3,9 @@ estimates as each observer updating through its own snapshot, and no allocation.
 
 from __future__ import annotations
 
-import tracemalloc
-
 import numpy as np
 import pytest
+from support.alloc import tick_memory
 
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.control.joint_motion import MOVE
@@ -123,16 +122,11 @@ def test_tick_with_shared_snapshot_allocates_nothing(
 ) -> None:
     system = _system(cfg, backend, monkeypatch)
     system.loop.run(max_ticks=1500)
-    tracemalloc.start()
-    system.loop.run(max_ticks=10)
-    before, _ = tracemalloc.get_traced_memory()
-    system.loop.run(max_ticks=3000)
-    after, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
+    grown, peak = tick_memory(system)
     assert system.tick.stop.latched == 0
     # nothing kept per tick (3000 x one (6,) array would be > 300 kB), no large temporaries
-    assert after - before < 4000
-    assert peak - before < 16000
+    assert grown < 4000
+    assert peak < 16000
 
 
 def test_tick_record_and_sink_share_one_dtype_object(
