@@ -42,9 +42,7 @@ class BusHealth:
         self.streak = 0
         self.lost_total = 0
         self._m = np.zeros(n, dtype=bool)
-        self.backend = kernels.resolve(backend)
-        if self.backend == "numba" and not kernels.warm(self._warm):
-            self.backend = "numpy"
+        self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
 
     def _warm(self) -> None:

@@ -49,9 +49,7 @@ class LimitMonitor:
         self._m = np.zeros(n, dtype=bool)
         self._m2 = np.zeros(n, dtype=bool)
         self._fin = np.zeros(n, dtype=bool)
-        self.backend = kernels.resolve(backend)
-        if self.backend == "numba" and not kernels.warm(self._warm):
-            self.backend = "numpy"
+        self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
 
     def _warm(self) -> None:

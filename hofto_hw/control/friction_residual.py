@@ -76,9 +76,7 @@ class FrictionResidual:
         self._scratch = np.zeros((3, n))
         self._abs = np.zeros(n)
         self._st = np.zeros(3)  # count, pending time (compiled path), seconds learned
-        self.backend = kernels.resolve(backend)
-        if self.backend == "numba" and not kernels.warm(self._warm):
-            self.backend = "numpy"
+        self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
 
     @property

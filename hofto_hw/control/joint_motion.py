@@ -74,9 +74,7 @@ class DemoPath:
         self._s = np.zeros(n)
         self._c = np.zeros(n)
         self._arg = np.zeros(n)
-        self.backend = kernels.resolve(backend)
-        if self.backend == "numba" and not kernels.warm(self._warm):
-            self.backend = "numpy"
+        self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
 
     def _warm(self) -> None:
@@ -147,9 +145,7 @@ class JointMotion:
         self.player: TrajectoryPlayer | None = None
         self._step = np.zeros(n)
         self._sign = np.zeros(n)
-        self.backend = kernels.resolve(backend)
-        if self.backend == "numba" and not kernels.warm(self._warm):
-            self.backend = "numpy"
+        self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
 
     def _warm(self) -> None:

@@ -98,6 +98,15 @@ def warm(call: Callable[[], object]) -> bool:
     return True
 
 
+def ready(backend: Backend, warm_call: Callable[[], object]) -> Literal["numpy", "numba"]:
+    """The backend a kernel user runs: :func:`resolve`, and for numba :func:`warm` with
+    ``warm_call`` now (compiled before the loop); numpy when that compilation fails."""
+    chosen = resolve(backend)
+    if chosen == "numba" and not warm(warm_call):
+        return "numpy"
+    return chosen
+
+
 # ----------------------------------------------------------------- scalar helpers
 
 

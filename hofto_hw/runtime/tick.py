@@ -176,10 +176,8 @@ class Tick:
         r["wrench"][...] = np.nan
         self._events_pushed = 0
         #: the record fill: numpy (the reference) or one compiled call (recording/kernels.py)
-        self.backend = kernels.resolve(backend)
         self._rec1 = r.reshape(1)  # the same memory as a one-element array, for the kernel
-        if self.backend == "numba" and not kernels.warm(self._warm_record):
-            self.backend = "numpy"
+        self.backend = kernels.ready(backend, self._warm_record)
         self._fill_kernel = self.backend == "numba"
         # drag (hand guiding): controller, enabling input, the observer row that drives it
         self.drag = drag

@@ -115,9 +115,7 @@ class CollisionLevels:
         self._was_contact = False
         self._zero_qdd = np.zeros(n)
         self._tick = 0
-        self.backend = kernels.resolve(backend)
-        if self.backend == "numba" and not kernels.warm(self._warm):
-            self.backend = "numpy"
+        self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
         self.reset()
 
