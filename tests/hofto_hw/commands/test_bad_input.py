@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from support.cli import one_line_error
 
 from hofto_hw.cli import main
 
@@ -26,16 +27,6 @@ def _run(capsys: pytest.CaptureFixture[str], *argv: object) -> tuple[int, str, s
     code = main([str(a) for a in argv])
     out, err = capsys.readouterr()
     return code, out, err
-
-
-def _one_line(code: int, err: str, *needles: str) -> str:
-    assert code == 2, err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    for needle in needles:
-        assert needle in lines[0], (needle, err)
-    return lines[0]
 
 
 # ------------------------------------------------------------------------- plot paths
@@ -55,7 +46,7 @@ def test_plot_path_that_is_a_folder_is_refused(argv, tmp_path, capsys) -> None:
     folder.mkdir()
     argv = [str(a).replace("{dir}", str(folder)) for a in argv]
     code, out, err = _run(capsys, *argv)
-    _one_line(code, err, "--plot", str(folder), "is a folder")
+    one_line_error(code, err, "--plot", str(folder), "is a folder")
     assert out == ""
     assert sorted(p.name for p in tmp_path.iterdir()) == ["figs"]  # no figs.png beside it
     assert list(folder.iterdir()) == []
@@ -94,7 +85,7 @@ def test_non_physical_parameters_are_refused(field, index, value, needle, tmp_pa
     bad = tmp_path / "parameters.yaml"
     bad.write_text(yaml.safe_dump(data, sort_keys=False))
     code, _, err = _run(capsys, "replay", bad, PUSH, "--config", "ur10e")
-    line = _one_line(code, err, str(bad), needle, "not physical")
+    line = one_line_error(code, err, str(bad), needle, "not physical")
     assert f"{value:g}" in line
 
 
@@ -113,7 +104,7 @@ def test_column_map_of_another_robot_is_refused_by_identify(tmp_path, capsys) ->
         COLUMNS_31,
         EXCITATION,
     )
-    _one_line(code, err, str(COLUMNS_31), "robot 'ur10e'", "'er3a'")
+    one_line_error(code, err, str(COLUMNS_31), "robot 'ur10e'", "'er3a'")
     assert not (tmp_path / "p.yaml").exists()
 
 
@@ -123,7 +114,7 @@ def test_column_map_of_another_robot_is_refused(command, tmp_path, capsys) -> No
     other.write_text(COLUMNS_31.read_text().replace("robot: ur10e", "robot: er3a"))
     extra = ["--no-plot"] if command == "validate" else []
     code, _, err = _run(capsys, command, PARAMS, PUSH, "--columns", other, *extra)
-    _one_line(code, err, str(other), "robot 'er3a'", "'ur10e'")
+    one_line_error(code, err, str(other), "robot 'er3a'", "'ur10e'")
 
 
 # ---------------------------------------------------------------- numeric options
@@ -146,7 +137,7 @@ def test_non_finite_or_non_positive_numbers_are_refused(argv, value, tmp_path, c
     option = argv.pop()
     extra = [str(EXCITATION)] if argv[0] == "thresholds" else []
     code, out, err = _run(capsys, *argv, f"{option}={value}", *extra)  # = lets "-inf" through
-    _one_line(code, err, f"argument {option}", repr(value))
+    one_line_error(code, err, f"argument {option}", repr(value))
     assert out == ""
     assert list(tmp_path.iterdir()) == []
 
@@ -157,7 +148,7 @@ def test_non_finite_or_non_positive_numbers_are_refused(argv, value, tmp_path, c
 def test_identify_into_a_missing_folder_fails_before_the_fit(tmp_path, capsys) -> None:
     target = tmp_path / "missing" / "p.yaml"
     code, out, err = _run(capsys, "identify", "--config", "er3a", "-o", target, EXCITATION)
-    _one_line(code, err, "--output", str(target.parent), "does not exist")
+    one_line_error(code, err, "--output", str(target.parent), "does not exist")
     assert "loaded" not in err and out == ""  # refused before reading anything
     assert not target.parent.exists()  # and nothing created
 
@@ -177,7 +168,7 @@ def full_disk(monkeypatch):
 def test_validate_prints_numbers_then_reports_a_failed_figure(tmp_path, capsys):
     png = tmp_path / "fit.png"
     code, out, err = _run(capsys, "validate", PARAMS, EXCITATION, "--plot", png)
-    _one_line(code, err, str(png), "cannot write figure", "No space left on device")
+    one_line_error(code, err, str(png), "cannot write figure", "No space left on device")
     assert "all files" in out and "shoulder_pan_joint" in out  # the numbers came first
     assert not png.exists()
 
@@ -186,7 +177,7 @@ def test_validate_prints_numbers_then_reports_a_failed_figure(tmp_path, capsys):
 def test_replay_prints_report_then_reports_a_failed_figure(tmp_path, capsys):
     png = tmp_path / "push.png"
     code, out, err = _run(capsys, "replay", PARAMS, PUSH, "--plot", png)
-    _one_line(code, err, str(png), "cannot write plot")
+    one_line_error(code, err, str(png), "cannot write plot")
     assert "contact episode(s)" in out
 
 
@@ -206,12 +197,12 @@ def test_output_that_is_an_input_is_refused(tmp_path, capsys) -> None:
         params,
         EXCITATION,
     )
-    _one_line(code, err, "--output", str(params), "refusing to overwrite")
+    one_line_error(code, err, "--output", str(params), "refusing to overwrite")
     assert params.read_bytes() == before
     rec = tmp_path / "push.csv"
     rec.write_bytes(PUSH.read_bytes())
     code, _, err = _run(capsys, "replay", PARAMS, rec, "--plot", rec)
-    _one_line(code, err, "--plot", str(rec), "refusing to overwrite")
+    one_line_error(code, err, "--plot", str(rec), "refusing to overwrite")
     assert rec.read_bytes() == PUSH.read_bytes()
 
 
@@ -255,4 +246,4 @@ def test_binary_or_non_utf8_recording_is_refused(kind, command, tmp_path, capsys
         "identify": ["identify", "--config", "ur10e", "-o", tmp_path / "p.yaml", rec],
     }[command]
     code, _, err = _run(capsys, *argv)
-    _one_line(code, err, str(rec), needle)
+    one_line_error(code, err, str(rec), needle)

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.cli import one_line_error
 
 from hofto_hw.cli import main
 from hofto_hw.config.loader import load_config
@@ -74,15 +75,6 @@ def _run(capsys, sock: Path, *argv: object) -> tuple[int, str, str]:
     return code, out, err
 
 
-def _one_line(code: int, err: str, *needles: str) -> None:
-    assert code == 2, err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    for needle in needles:
-        assert needle in lines[0], (needle, err)
-
-
 def _bad_files(model, folder: Path) -> dict[str, tuple[Path, str]]:
     good = save_taught_path(_path(model), folder / "good.csv")
     text = good.read_text()
@@ -123,7 +115,7 @@ BAD_COMMANDS = [
 def test_bad_command_line_is_one_line_and_changes_nothing(service, capsys, argv, needle) -> None:
     system, sock = service
     code, _, err = _run(capsys, sock, *argv)
-    _one_line(code, err, needle)
+    one_line_error(code, err, needle)
     assert system.tick.motion.mode == HOLD and system.tick.playback is None
 
 
@@ -131,7 +123,7 @@ def test_bad_taught_path_files(service, capsys, tmp_path: Path) -> None:
     system, sock = service
     for what, (file, needle) in _bad_files(system.model, tmp_path).items():
         code, _, err = _run(capsys, sock, "replay", file)
-        _one_line(code, err, str(file), needle)
+        one_line_error(code, err, str(file), needle)
         assert system.tick.motion.mode == HOLD and system.tick.playback is None, what
 
 
@@ -142,16 +134,16 @@ def test_record_refuses_existing_file_folder_and_missing_folder(
     existing = tmp_path / "mine.csv"
     existing.write_text("the user's own data\n")
     code, _, err = _run(capsys, sock, "drag", "--record", existing)
-    _one_line(code, err, str(existing), "exists; not overwriting it", "--force")
+    one_line_error(code, err, str(existing), "exists; not overwriting it", "--force")
     assert existing.read_text() == "the user's own data\n"
     code, _, err = _run(capsys, sock, "drag", "--record", tmp_path)
-    _one_line(code, err, "is a folder")
+    one_line_error(code, err, "is a folder")
     missing = tmp_path / "no" / "such" / "x.csv"
     code, _, err = _run(capsys, sock, "drag", "--record", missing)
-    _one_line(code, err, str(missing), "does not exist")
+    one_line_error(code, err, str(missing), "does not exist")
     under_file = existing / "x.csv"  # a "folder" that is a file
     code, _, err = _run(capsys, sock, "drag", "--record", under_file)
-    _one_line(code, err, "does not exist")
+    one_line_error(code, err, "does not exist")
     assert system.tick.motion.mode == HOLD and system.tick.recording is None
 
 
@@ -227,5 +219,5 @@ def test_drag_record_then_hold_saves_the_taught_path(service, capsys, tmp_path: 
     before = out.read_bytes()
     _wait(lambda: tick.motion.mode == HOLD)
     code, _, err = _run(capsys, sock, "drag", "--record", out)
-    _one_line(code, err, "exists; not overwriting it")
+    one_line_error(code, err, "exists; not overwriting it")
     assert out.read_bytes() == before
