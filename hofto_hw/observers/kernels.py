@@ -362,3 +362,174 @@ def dob_update(
         u = gq + tau[i] - nle[i] - f[i]
         w[i] = w[i] + (u - w[i]) * alpha[i]
         out[i] = gq - w[i]
+
+
+# ----------------------------------------------------------------- the observer bank
+#
+# One call updates every observer of a tick (hofto_hw.observers.bank). A compiled call
+# costs ~0.2 µs per array argument (more with cold caches), so the arrays the bank reads
+# and writes do not travel as arguments: their addresses sit in one int64 table, made once
+# from arrays that stay allocated and in place for the bank's life (the bank keeps a
+# reference to each). Row 0 holds what every observer reads; each further row one observer.
+
+# row 0: joints, rows of the output, then addresses: output (rows, n), M (n, n), model
+# acceleration, friction, gravity, Cᵀ·qd, C·qd + g (n,)
+BANK_N, BANK_ROWS, BANK_OUT, BANK_M, BANK_ACCEL, BANK_F, BANK_G, BANK_CT, BANK_NLE = range(9)
+# observer rows: kind, output row, stages, substeps, flags, then BANK_ADDRESSES addresses
+BANK_KIND, BANK_ROW, BANK_STAGES, BANK_SUBSTEPS, BANK_FLAGS, BANK_A0 = range(6)
+BANK_ADDRESSES = 7
+BANK_COLS = BANK_A0 + BANK_ADDRESSES
+# kinds and their addresses (in order from BANK_A0):
+BANK_HOFTO = 1  # z (s, n), y_prev (n,), -L (s, n), powers (s,), [h, a_h2], T (s, s), col (2, s)
+BANK_MOMENTUM = 2  # gain, p0, integral, r (n,)
+BANK_ESO = 3  # z (3, n), k (3, n), y_prev (n,)
+BANK_STA = 4  # z (3, n), l (3, n), y_prev (n,)
+BANK_DOB = 5  # g·Jn, cutoff, w (n,), [dt of alpha] (1,), alpha (n,)
+BANK_RECURSIVE = 1  # flags of a HOFTO row
+BANK_TAYLOR = 2
+
+
+if _numba is not None:
+    from numba.core import types as _types
+    from numba.extending import intrinsic as _intrinsic
+
+    @_intrinsic
+    def _f64_at(typingctx, address):  # type: ignore[no-untyped-def]
+        """The float64 pointer at an integer address (for numba.carray)."""
+        if not isinstance(address, _types.Integer):
+            return None
+        sig = _types.CPointer(_types.float64)(address)
+
+        def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+            return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
+
+        return sig, codegen
+
+    _carray = _numba.carray
+else:  # never called without numba; keeps the module importable
+
+    def _f64_at(address: int) -> int:
+        return address
+
+    def _carray(address: int, shape: tuple[int, ...]) -> np.ndarray:
+        raise RuntimeError("numba is not available")
+
+
+@_jit
+def _vec(tab: np.ndarray, r: int, c: int, n: int) -> np.ndarray:
+    return _carray(_f64_at(tab[r, c]), (n,))
+
+
+@_jit
+def _mat(tab: np.ndarray, r: int, c: int, rows: int, cols: int) -> np.ndarray:
+    return _carray(_f64_at(tab[r, c]), (rows, cols))
+
+
+@_jit
+def _hofto_transition(T: np.ndarray, hs: np.ndarray, h: float, taylor: bool) -> None:
+    """T and [h, a_h2] for step h, as HoftoCore._set_step computes them (bit for bit)."""
+    s = T.shape[0]
+    for i in range(s):
+        for m in range(s):
+            T[i, m] = 1.0 if i == m else 0.0
+    terms = s if taylor else 2
+    coef = 1.0
+    for j in range(1, terms):
+        coef *= h / j
+        for i in range(s - j):
+            T[i, i + j] = coef
+    hs[0] = h
+    hs[1] = 0.5 * h * h if taylor else 0.0
+
+
+@_jit
+def bank_update(
+    tab: np.ndarray, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, finite: bool, dt: float
+) -> None:
+    """Every observer of the table ``tab`` (see above) advanced by dt [s] with the sample
+    q, qd, tau (n,) and the model terms at the table's addresses, each estimate written into
+    its row of the output, with the arithmetic of each observer's own kernel. A sample that is
+    not ``finite`` or a non-finite dt: NaN in every row, no state touched."""
+    n = tab[0, BANK_N]
+    out = _mat(tab, 0, BANK_OUT, tab[0, BANK_ROWS], n)
+    usable = finite and math.isfinite(dt)
+    M = _mat(tab, 0, BANK_M, n, n)
+    a = _vec(tab, 0, BANK_ACCEL, n)
+    for r in range(1, tab.shape[0]):
+        o = out[tab[r, BANK_ROW]]
+        if not usable:
+            for i in range(n):
+                o[i] = np.nan
+            continue
+        kind = tab[r, BANK_KIND]
+        sub = tab[r, BANK_SUBSTEPS]
+        c = BANK_A0
+        if kind == BANK_HOFTO:
+            s = tab[r, BANK_STAGES]
+            z = _mat(tab, r, c, s, n)
+            hs = _vec(tab, r, c + 4, 2)
+            T = _mat(tab, r, c + 5, s, s)
+            taylor = (tab[r, BANK_FLAGS] & BANK_TAYLOR) != 0
+            h = dt / sub
+            if h != hs[0]:
+                _hofto_transition(T, hs, h, taylor)
+            hofto_update(
+                z,
+                _mat(tab, r, c + 2, s, n),
+                _vec(tab, r, c + 3, s),
+                T,
+                q,
+                _vec(tab, r, c + 1, n),
+                a,
+                h,
+                hs[1],
+                (tab[r, BANK_FLAGS] & BANK_RECURSIVE) != 0,
+                taylor,
+                sub,
+                _mat(tab, r, c + 6, 2, s),
+                M,
+                o,
+            )
+        elif kind == BANK_MOMENTUM:
+            res = _vec(tab, r, c + 3, n)
+            momentum_update(
+                M,
+                qd,
+                tau,
+                _vec(tab, 0, BANK_F, n),
+                _vec(tab, 0, BANK_G, n),
+                _vec(tab, 0, BANK_CT, n),
+                _vec(tab, r, c, n),
+                _vec(tab, r, c + 1, n),
+                _vec(tab, r, c + 2, n),
+                res,
+                dt,
+            )
+            for i in range(n):
+                o[i] = res[i]
+        elif kind == BANK_ESO or kind == BANK_STA:
+            z = _mat(tab, r, c, 3, n)
+            gains = _mat(tab, r, c + 1, 3, n)
+            y_prev = _vec(tab, r, c + 2, n)
+            if kind == BANK_ESO:
+                eso_update(z, gains, q, y_prev, a, dt / sub, sub, M, o)
+            else:
+                sta_update(z, gains, q, y_prev, a, dt / sub, sub, M, o)
+        elif kind == BANK_DOB:
+            cutoff = _vec(tab, r, c + 1, n)
+            ds = _vec(tab, r, c + 3, 1)
+            alpha = _vec(tab, r, c + 4, n)
+            if dt != ds[0]:  # the discrete pole, only when the period changes
+                for i in range(n):
+                    alpha[i] = -math.expm1(cutoff[i] * -dt)
+                ds[0] = dt
+            dob_update(
+                _vec(tab, r, c, n),
+                alpha,
+                qd,
+                tau,
+                _vec(tab, 0, BANK_NLE, n),
+                _vec(tab, 0, BANK_F, n),
+                _vec(tab, r, c + 2, n),
+                o,
+            )
