@@ -29,6 +29,7 @@ from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, PLAYING, JointMotion
 from hofto_hw.model.data import ModelData
 from hofto_hw.model.snapshot import DynamicsSnapshot
 from hofto_hw.observers import kernels
+from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.observers.base import Observer
 from hofto_hw.observers.kernels import Backend
 from hofto_hw.recording.kernels import fill_tick
@@ -133,7 +134,7 @@ class Tick:
         self._prev = np.zeros((3, n))  # last tick's q, qd, tau (interpolation start)
         self._interp = np.zeros((3, n))  # one substep's q, qd, tau
         self.tau_ext = np.zeros((max(1, len(self.observers)), n))
-        self._rows = [(obs, self.tau_ext[i]) for i, obs in enumerate(self.observers)]
+        self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
         self.tau_ff = np.zeros(n)
         self.q_sent = np.zeros(n)  # position target of the last command [rad]
         self.err_codes = group.transport.tx["error_code"]
@@ -372,8 +373,7 @@ class Tick:
         k = 1 if dt <= self._stall_dt else gap_steps(dt, self.period)
         if k == 1:
             snap.compute(q, qd, tau)
-            for obs, row in self._rows:
-                np.copyto(row, obs.update_snapshot(snap, dt))
+            self._bank.update(dt)  # every estimate into its row of tau_ext
         else:
             h = dt / k
             prev, x = self._prev, self._interp
@@ -382,8 +382,7 @@ class Tick:
                 for j, now in enumerate((q, qd, tau)):
                     lerp(prev[j], now, a, x[j])
                 snap.compute(x[0], x[1], x[2])
-                for obs, row in self._rows:
-                    np.copyto(row, obs.update_snapshot(snap, h))
+                self._bank.update(h)
         self._keep_sample(q, qd, tau)
 
     def _keep_sample(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
