@@ -8,6 +8,7 @@ Build one from its config with :func:`make_observer` (the table is
 from __future__ import annotations
 
 from hofto_hw.observers import kernels
+from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.observers.base import ModelTerms, Observer
 from hofto_hw.observers.direct import DirectObserver
 from hofto_hw.observers.dob import DobObserver
@@ -30,6 +31,7 @@ __all__ = [
     "ModelTerms",
     "MomentumObserver",
     "Observer",
+    "ObserverBank",
     "StaObserver",
     "error_indices",
     "kernels",

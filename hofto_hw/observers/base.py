@@ -10,7 +10,9 @@ copy it to keep it. Updates allocate nothing.
 In a control tick the model terms are computed once for all estimators: the tick fills a
 :class:`~hofto_hw.model.snapshot.DynamicsSnapshot` with the union of the observers' ``needs``
 and calls ``update_snapshot(snap, dt)`` on each. ``update(q, qd, tau, dt)`` (replay, demo)
-fills the observer's own snapshot and does the same; both give identical results.
+fills the observer's own snapshot and does the same; both give identical results. The tick
+does it for all its observers at once through :class:`~hofto_hw.observers.bank.ObserverBank`
+(one compiled call, the same numbers).
 
 Backends: ``backend="numpy"`` (the reference), ``"numba"`` (compiled per-joint kernels,
 :mod:`hofto_hw.observers.kernels`) or ``"auto"`` (numba when available). Both agree to 1e-12.
