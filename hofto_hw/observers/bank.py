@@ -70,10 +70,15 @@ class ObserverBank:
     for observer i (``out`` is the caller's; at least one row per observer).
 
     :meth:`update` is the hot call; ``fused`` names the observers the compiled call updates,
-    ``rest`` the ones updated one by one. Allocation-free after construction."""
+    ``rest`` the ones updated one by one (all of them with ``fuse=False``: the per-observer
+    reference). Allocation-free after construction."""
 
     def __init__(
-        self, observers: Sequence[Observer], snapshot: DynamicsSnapshot, out: np.ndarray
+        self,
+        observers: Sequence[Observer],
+        snapshot: DynamicsSnapshot,
+        out: np.ndarray,
+        fuse: bool = True,
     ) -> None:
         n = snapshot.n
         if not _fit(out, out.shape) or out.ndim != 2 or out.shape[1] != n:
@@ -95,7 +100,7 @@ class ObserverBank:
             common.append(self._address(snapshot, attr, arr) if ok else 0)
         self._terms = dict(zip(_TERMS, common[3:], strict=True))
         for i, obs in enumerate(self.observers):
-            row = self._row(obs, i, n) if K.available() else None
+            row = self._row(obs, i, n) if fuse and K.available() else None
             if row is None:
                 self._rest.append((obs, out[i]))
             else:

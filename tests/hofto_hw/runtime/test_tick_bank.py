@@ -1,0 +1,45 @@
+"""The tick's observers through one ObserverBank give the per-observer estimates bit for bit,
+stall sub-steps included."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hofto_hw.config.loader import load_config
+from hofto_hw.control.joint_motion import MOVE
+from hofto_hw.observers import kernels
+from hofto_hw.observers.bank import ObserverBank
+from hofto_hw.runtime.compose import build
+
+CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
+
+
+@pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
+def test_the_banked_tick_equals_the_per_observer_tick_over_stalls() -> None:
+    cfg = load_config(CONFIG)
+    fused, alone = build(cfg, clock="sim", contact=False), build(cfg, clock="sim", contact=False)
+    try:
+        t = alone.tick
+        t._bank = ObserverBank(t.observers, t.snapshot, t.tau_ext, fuse=False)
+        assert fused.tick._bank.fused == ("hofto", "momentum") and t._bank.fused == ()
+        period = 1.0 / fused.rate_hz
+        stalls = 0
+        now = 0.0
+        for s in (fused, alone):
+            s.tick.mode_request = MOVE
+        for k in range(1, 1201):
+            # a real clock's jitter, and stalls of 2-5 cycles
+            dt = period * (1 + k % 5) if k % 97 == 0 else period * (1.0 + 0.02 * np.sin(k))
+            stalls += dt > period
+            now += dt
+            for s in (fused, alone):
+                s.tick.step(now, dt, 0.0, 0, 0.0)
+            np.testing.assert_array_equal(fused.tick.tau_ext, t.tau_ext, err_msg=f"tick {k}")
+        assert stalls >= 10
+        assert np.abs(t.tau_ext).max() > 0.0 and np.isfinite(t.tau_ext).all()
+    finally:
+        fused.close()
+        alone.close()
