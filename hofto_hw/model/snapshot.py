@@ -38,6 +38,7 @@ import enum
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -141,6 +142,7 @@ class DynamicsSnapshot:
         self._friction = bool(needs & Needs.FRICTION)
         self._accel = bool(needs & Needs.ACCEL)
         self._fast = False
+        self._native = None
         if backend != "numpy" and not self._copy:
             # the finiteness check, friction and Cᵀ·qd as one compiled call (hofto_hw.model.
             # kernels; numba availability is the observers' module's)
@@ -160,8 +162,49 @@ class DynamicsSnapshot:
                 )
                 self._fr_src = model.friction
                 mk.pack_friction(model.friction, W)
-                self._fast = kernels.warm(self._warm)
+                self._use_native(mk, kernels)
+                if self._native is None:
+                    self._fast = kernels.warm(self._warm)
+        #: "numba": compiled (one call with ``native``, else the pinocchio calls and one
+        #: compiled call); "numpy": the reference
         self.backend = "numba" if self._fast else "numpy"
+        #: True: :meth:`compute` is one compiled call with pinocchio's C++ algorithms inside
+        self.native = self._native is not None
+
+    def _use_native(self, mk: ModuleType, kernels: ModuleType) -> None:
+        """The whole snapshot as one compiled call with pinocchio's C++ algorithms inside
+        (hofto_hw.model.native), when the native library is built here; else nothing."""
+        from hofto_hw.model import native
+
+        if not native.ready():
+            return
+        n, needs = self.n, self.needs
+        try:
+            nm = native.NativeModel(self.model)
+        except ValueError as exc:  # a joint the native library does not know
+            native.say_once(f"native dynamics not used: {exc}")
+            return
+        terms = (
+            (native.MASS if needs & Needs.MASS else 0)
+            | (native.GRAVITY if needs & Needs.GRAVITY else 0)
+            | (native.NLE if needs & Needs.NLE else 0)
+            | (native.CORIOLIS_T if needs & Needs.CORIOLIS_T else 0)
+            | (native.ACCEL if needs & Needs.ACCEL else 0)
+        )
+        W = self._W
+        W[mk.FLAGS] = int(W[mk.FLAGS, 0]) | (terms << mk.NATIVE_SHIFT)
+        O = np.zeros((n + 4, n))
+        z = np.zeros(n)
+        snap = mk.snapshot_native
+        if not kernels.warm(lambda: snap(z, z, z, W.copy(), O.copy(), nm.handle)):
+            W[mk.FLAGS] = int(W[mk.FLAGS, 0]) & ((1 << mk.NATIVE_SHIFT) - 1)
+            return
+        self._O = O
+        self.M, self.g, self.nle, self.accel, self.ct_qd = O[:n], O[n], O[n + 1], O[n + 2], O[n + 3]
+        self._native = nm
+        self._snap = snap
+        self._h = nm.handle
+        self._fast = True
 
     def _warm(self) -> None:
         z = np.zeros(self.n)
@@ -178,6 +221,12 @@ class DynamicsSnapshot:
         Returns ``finite``: False (and nothing evaluated) when the sample holds a NaN or inf.
         """
         self.q, self.qd, self.tau = q, qd, tau
+        if self._native is not None:
+            m = self.model
+            if m.friction is not self._fr_src or m.revision != self._native.revision:
+                self._repack()
+            self.finite = finite = self._snap(q, qd, tau, self._W, self._O, self._h)
+            return finite
         pm, pd = self.pin_model, self.pin_data
         if self._fast:
             # Coriolis first: its matrix is no term of the snapshot (only Cᵀ·qd is), so a
@@ -232,6 +281,9 @@ class DynamicsSnapshot:
         """``model.friction`` was replaced (a new parameter set): the kernel's copy follows."""
         self._fr_src = fr = self.model.friction
         self._pack(fr, self._W)
+        if self._native is not None and self._native.stale:
+            self._native.sync()  # new inertial parameters, rotor inertia or payload
+            self._h = self._native.handle
 
     def parts(self) -> dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], object]]:
         """The calls :meth:`compute` makes, by name, each callable alone as f(q, qd, tau) (for
@@ -239,6 +291,12 @@ class DynamicsSnapshot:
         does)."""
         pm, pd = self.pin_model, self.pin_data
         calls: dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], object]] = {}
+        if self._native is not None:
+            W, O, h, snap = self._W, self._O, self._h, self._snap
+            calls["native: finite, friction, pinocchio terms, Cᵀ·qd"] = lambda q, qd, tau: snap(
+                q, qd, tau, W, O, h
+            )
+            return calls
         if self._fast and self._ct:
             calls["coriolis matrix"] = lambda q, qd, tau: _coriolis(pm, pd, q, qd)
         if self._fast:
