@@ -39,9 +39,11 @@ class ModelData:
     :meth:`inverse_dynamics` (the tick's feed-forward) is RNEA plus one compiled call for the
     friction and the sum (:func:`hofto_hw.model.kernels.add_friction`; equal to the numpy
     path within 1e-12), its held-friction memory ``friction_state`` a row of the kernel's
-    workspace. ``backend`` says which path runs (numpy when numba is unavailable)."""
+    workspace. ``backend`` says which path runs (numpy when numba is unavailable). With
+    ``native`` (and the native library built here, :mod:`hofto_hw.model.native`) the RNEA runs
+    inside that compiled call too: one call in all; ``native`` says whether it does."""
 
-    def __init__(self, model: RobotModel, backend: str = "numpy") -> None:
+    def __init__(self, model: RobotModel, backend: str = "numpy", native: bool = True) -> None:
         self.model = model
         self.pin_data = model.pin_model.createData()
         n = model.n
@@ -66,14 +68,14 @@ class ModelData:
         self._fast = False
         self._native = None
         if backend != "numpy":
-            self._compile(backend)
+            self._compile(backend, native)
         #: "numba": :meth:`inverse_dynamics` adds friction in one compiled call
         self.backend = "numba" if self._fast else "numpy"
         #: True: :meth:`inverse_dynamics` is one compiled call with pinocchio's C++ RNEA inside
         #: (hofto_hw.model.native)
         self.native = self._native is not None
 
-    def _compile(self, backend: str) -> None:
+    def _compile(self, backend: str, native: bool) -> None:
         # numba availability is the observers' module's (one switch for every kernel)
         from hofto_hw.model import kernels as mk
         from hofto_hw.observers import kernels
@@ -88,7 +90,7 @@ class ModelData:
         mk.pack_friction(self._fr_src, W)
         z = np.zeros(self.n)
         self._fast = kernels.warm(lambda: mk.add_friction(z, z, W.copy(), np.zeros(self.n)))
-        if self._fast:
+        if self._fast and native:
             self._use_native(mk, kernels)
 
     def _use_native(self, mk: ModuleType, kernels: ModuleType) -> None:

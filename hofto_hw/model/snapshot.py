@@ -13,7 +13,8 @@ declared (:class:`Needs`, the union of their ``needs``):
 - ``ACCEL``: M⁻¹·(tau - C·qd - g - f) [rad/s²], (n,), the model acceleration without
   contact (ABA; implies FRICTION).
 
-No copies: the arrays are views of pinocchio's Data storage (``data.M``, ``data.g``,
+No copies: on the native path (below) the arrays are rows of one buffer the compiled call
+writes, made once at construction; on the others they are views of pinocchio's Data storage (``data.M``, ``data.g``,
 ``data.nle``, ``data.ddq``, ``data.C``) taken once at construction; pinocchio writes into that
 storage in place, so the views show each tick's values. Whether the installed pinocchio keeps
 those views stable and fills both triangles of M is checked once per process
@@ -24,12 +25,16 @@ the terms belong to), valid while the caller keeps them unchanged.
 A sample with a NaN or inf (or a non-finite dt, checked by the consumers) is not evaluated:
 ``finite`` is False and the terms keep the last finite sample's values.
 
-Cost: the pinocchio algorithms the needs ask for (the tick's HOFTO + momentum: ABA, CRBA,
-Coriolis matrix, gravity — the floor) and, with ``backend="numba"``, one compiled call for
-everything else (finiteness, friction with its held memory, tau - f, Cᵀ·qd;
-:mod:`hofto_hw.model.kernels`). Inside a loop whose other work flushes the caches each call
-costs ~2.5-4 µs more than back to back, whatever it computes, so the number of calls is what
-counts; the numpy path (the reference) makes ~8 numpy calls more.
+Cost: inside a loop whose other work flushes the caches each call costs ~2.5-4 µs more than
+back to back, whatever it computes, so the number of calls is what counts. With
+``backend="numba"`` and the native library built on this machine (:mod:`hofto_hw.model.native`)
+:meth:`~DynamicsSnapshot.compute` is ONE compiled call: the finiteness check, friction with its
+held memory and tau - f (:func:`hofto_hw.model.kernels.snapshot_native`), then pinocchio's own
+C++ algorithms the needs ask for on a copy of the model (ABA, CRBA, Coriolis matrix with Cᵀ·qd,
+gravity, nonlinear effects) — no Python call per algorithm. Without the native library: the
+pinocchio Python calls the needs ask for (the tick's HOFTO + momentum: ABA, CRBA, Coriolis
+matrix, gravity — the floor) and one compiled call for everything else. The numpy path (the
+reference) makes ~8 numpy calls more.
 """
 
 from __future__ import annotations
@@ -98,14 +103,18 @@ def pinocchio_traits(model: RobotModel) -> PinocchioTraits:
 class DynamicsSnapshot:
     """The model terms of one sample for a set of consumers; see the module docstring.
 
-    ``needs`` is the union of the consumers' :class:`Needs`. :meth:`compute` fills the
-    terms; read ``M``, ``g``, ``nle``, ``ct_qd``, ``f``, ``accel`` (arrays, see above), ``q``,
+    ``needs`` is the union of the consumers' :class:`Needs`. ``backend`` "numba"/"auto" runs
+    compiled: with ``native`` (and the native library built here) one call in all
+    (:mod:`hofto_hw.model.native`), else the pinocchio Python calls and one kernel.
+    :meth:`compute` fills the terms; read ``M``, ``g``, ``nle``, ``ct_qd``, ``f``, ``accel`` (arrays, see above), ``q``,
     ``qd``, ``tau`` (the sample) and ``finite``. Allocation: none by this class; each
     pinocchio call returns a transient copy that is dropped at once (the binding allocates
     it; the snapshot reads the Data storage instead).
     """
 
-    def __init__(self, model: RobotModel, needs: Needs | int, backend: str = "numpy") -> None:
+    def __init__(
+        self, model: RobotModel, needs: Needs | int, backend: str = "numpy", native: bool = True
+    ) -> None:
         needs = Needs(needs)
         if needs & Needs.ACCEL:
             needs |= Needs.FRICTION
@@ -162,7 +171,8 @@ class DynamicsSnapshot:
                 )
                 self._fr_src = model.friction
                 mk.pack_friction(model.friction, W)
-                self._use_native(mk, kernels)
+                if native:
+                    self._use_native(mk, kernels)
                 if self._native is None:
                     self._fast = kernels.warm(self._warm)
         #: "numba": compiled (one call with ``native``, else the pinocchio calls and one
