@@ -14,11 +14,11 @@ declared (:class:`Needs`, the union of their ``needs``):
   contact (ABA; implies FRICTION).
 
 No copies: on the native path (below) the arrays are rows of one buffer the compiled call
-writes, made once at construction; on the others they are views of pinocchio's Data storage (``data.M``, ``data.g``,
-``data.nle``, ``data.ddq``, ``data.C``) taken once at construction; pinocchio writes into that
-storage in place, so the views show each tick's values. Whether the installed pinocchio keeps
-those views stable and fills both triangles of M is checked once per process
-(:func:`pinocchio_traits`); if not, the snapshot copies (and symmetrises M) into its own
+writes, made once at construction; on the others they are views of pinocchio's Data storage
+(``data.M``, ``data.g``, ``data.nle``, ``data.ddq``, ``data.C``) taken once at construction;
+pinocchio writes into that storage in place, so the views show each tick's values. Whether
+the installed pinocchio keeps those views stable and fills both triangles of M is checked once
+per process (:func:`pinocchio_traits`); if not, the snapshot copies (and symmetrises M) into its own
 buffers instead. ``q``, ``qd`` and ``tau`` are references to the caller's arrays (the sample
 the terms belong to), valid while the caller keeps them unchanged.
 
@@ -106,9 +106,9 @@ class DynamicsSnapshot:
     ``needs`` is the union of the consumers' :class:`Needs`. ``backend`` "numba"/"auto" runs
     compiled: with ``native`` (and the native library built here) one call in all
     (:mod:`hofto_hw.model.native`), else the pinocchio Python calls and one kernel.
-    :meth:`compute` fills the terms; read ``M``, ``g``, ``nle``, ``ct_qd``, ``f``, ``accel`` (arrays, see above), ``q``,
-    ``qd``, ``tau`` (the sample) and ``finite``. Allocation: none by this class; each
-    pinocchio call returns a transient copy that is dropped at once (the binding allocates
+    :meth:`compute` fills the terms; read ``M``, ``g``, ``nle``, ``ct_qd``, ``f``, ``accel``
+    (arrays, see above), ``q``, ``qd``, ``tau`` (the sample) and ``finite``. Allocation: none
+    by this class; each pinocchio Python call returns a transient copy that is dropped at once (the binding allocates
     it; the snapshot reads the Data storage instead).
     """
 
