@@ -108,8 +108,8 @@ class DynamicsSnapshot:
     (:mod:`hofto_hw.model.native`), else the pinocchio Python calls and one kernel.
     :meth:`compute` fills the terms; read ``M``, ``g``, ``nle``, ``ct_qd``, ``f``, ``accel``
     (arrays, see above), ``q``, ``qd``, ``tau`` (the sample) and ``finite``. Allocation: none
-    by this class; each pinocchio Python call returns a transient copy that is dropped at once (the binding allocates
-    it; the snapshot reads the Data storage instead).
+    by this class; each pinocchio Python call returns a transient copy that is dropped at
+    once (the binding allocates it; the snapshot reads the Data storage instead).
     """
 
     def __init__(
