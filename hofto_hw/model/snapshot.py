@@ -213,7 +213,6 @@ class DynamicsSnapshot:
         self.M, self.g, self.nle, self.accel, self.ct_qd = O[:n], O[n], O[n + 1], O[n + 2], O[n + 3]
         self._native = nm
         self._snap = snap
-        self._h = nm.handle
         self._fast = True
 
     def _warm(self) -> None:
@@ -231,11 +230,12 @@ class DynamicsSnapshot:
         Returns ``finite``: False (and nothing evaluated) when the sample holds a NaN or inf.
         """
         self.q, self.qd, self.tau = q, qd, tau
-        if self._native is not None:
+        nm = self._native
+        if nm is not None:
             m = self.model
-            if m.friction is not self._fr_src or m.revision != self._native.revision:
+            if m.friction is not self._fr_src or m.revision != nm.revision:
                 self._repack()
-            self.finite = finite = self._snap(q, qd, tau, self._W, self._O, self._h)
+            self.finite = finite = self._snap(q, qd, tau, self._W, self._O, nm.handle)
             return finite
         pm, pd = self.pin_model, self.pin_data
         if self._fast:
@@ -293,7 +293,6 @@ class DynamicsSnapshot:
         self._pack(fr, self._W)
         if self._native is not None and self._native.stale:
             self._native.sync()  # new inertial parameters, rotor inertia or payload
-            self._h = self._native.handle
 
     def parts(self) -> dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], object]]:
         """The calls :meth:`compute` makes, by name, each callable alone as f(q, qd, tau) (for
@@ -302,9 +301,9 @@ class DynamicsSnapshot:
         pm, pd = self.pin_model, self.pin_data
         calls: dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], object]] = {}
         if self._native is not None:
-            W, O, h, snap = self._W, self._O, self._h, self._snap
+            W, O, nm, snap = self._W, self._O, self._native, self._snap
             calls["native: finite, friction, pinocchio terms, Cᵀ·qd"] = lambda q, qd, tau: snap(
-                q, qd, tau, W, O, h
+                q, qd, tau, W, O, nm.handle
             )
             return calls
         if self._fast and self._ct:

@@ -183,6 +183,10 @@ class NativeModel:
         self._finalizer = weakref.finalize(self, lib.hofto_dyn1_destroy, ptr)
         self.revision = self.model.revision
 
+    def __reduce__(self) -> tuple:
+        # a copy (copy, deepcopy, pickle) gets its own C++ model, never the same address
+        return (NativeModel, (self.model,))
+
     @property
     def stale(self) -> bool:
         """True when the model's parameters changed since the handle was made."""

@@ -233,3 +233,23 @@ def test_disabled_native_path_runs_python_pinocchio_and_says_so_once() -> None:
         "hofto-hw: native dynamics unavailable, the pinocchio Python path runs "
         "(disabled by HOFTO_HW_NO_NATIVE)"
     ]
+
+
+def test_a_copied_workspace_gets_its_own_native_model() -> None:
+    """copy/deepcopy/pickle of a NativeModel make a new C++ model (never the same address, which
+    the original frees when it goes)."""
+    import copy
+    import pickle
+
+    model = _model("er3a")
+    a = native.NativeModel(model)
+    for b in (copy.copy(a), copy.deepcopy(a), pickle.loads(pickle.dumps(a))):
+        assert b.handle and b.handle != a.handle
+        assert b.revision == b.model.revision
+    # the copy computes on its own C++ Data
+    ff, twin = model.create_data("numba"), model.create_data("numba")
+    twin._native = copy.deepcopy(ff._native)
+    q, qd, _ = _samples(model, 1, 12)[0]
+    np.testing.assert_array_equal(
+        twin.inverse_dynamics(q, qd, qd, out=np.zeros(model.n)), ff.inverse_dynamics(q, qd, qd)
+    )
