@@ -121,12 +121,26 @@ def measure(config: Path, blocks: int, per_block: int = 300) -> dict:
             "feedforward_backend": getattr(ff, "backend", "numpy"),
             "feedforward_native": ff.native,
             "native_unavailable": unavailable_reason(),
+            "native_build": _build_info(),
             "needs": snap.needs.name,
             "calls_per_variant": blocks * per_block,
             "median_us": res,
         }
     finally:
         system.close()
+
+
+def _build_info() -> str:
+    """The native library's build record: the compile time of its cold build (cached since)."""
+    from hofto_hw.model.native import build
+
+    try:
+        lib = build.library(build=False)
+    except build.BuildError as exc:
+        return str(exc)
+    info = lib.parent / (lib.stem.removeprefix("libhofto_dyn-") + ".info")
+    lines = info.read_text().splitlines() if info.is_file() else []
+    return f"{lib.name}: {lines[-1] if lines else 'no build record'}"
 
 
 def main() -> None:
@@ -146,6 +160,7 @@ def main() -> None:
     )
     if res["native_unavailable"]:
         print(f"native dynamics unavailable: {res['native_unavailable']}")
+    print(f"native library: {res['native_build']}")
     print(f"{'call':58s} {'alone':>7s} {'flushed':>8s}")
     for name, r in res["median_us"].items():
         print(f"{name:58s} {r['alone']:7.2f} {r['flushed']:8.2f}")
