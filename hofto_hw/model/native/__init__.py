@@ -16,7 +16,7 @@ armature, gravity): exactly the same values, so the same algorithms give the sam
 (tests/hofto_hw/model/test_native.py: within 1e-12). A :class:`NativeModel` follows
 ``RobotModel.revision`` (bumped by the model's parameter setters and ``apply_payload``).
 
-Availability: the library is built once per machine (:mod:`.build`; ~1 min, cached); it needs
+Availability: the library is built once per machine (:mod:`.build`; ~40 s of CPU, cached); it needs
 numba (the caller), a C++ compiler and the headers of the ``pin``, ``cmeel-eigen`` and
 ``cmeel-boost`` wheels. Without them, when the build fails, or with ``HOFTO_HW_NO_NATIVE=1``
 (or ``HOFTO_HW_NO_NUMBA=1``), :func:`ready` is False, :func:`unavailable_reason` says why

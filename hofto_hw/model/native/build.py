@@ -121,7 +121,7 @@ def build_key(cxx_version: str, prefix: Path) -> str:
 def library(build: bool = True, say=None) -> Path:
     """The path of the built library, building it now if needed (and ``build``).
 
-    ``say(line)`` is told once, before a build starts (it takes ~1 min). Raises BuildError
+    ``say(line)`` is told once, before a build starts (~40 s of CPU). Raises BuildError
     with one line naming the reason when it cannot be had.
     """
     prefix = header_prefix()
@@ -148,7 +148,10 @@ def library(build: bool = True, say=None) -> Path:
         if failed.is_file():
             raise BuildError(f"the build failed before (see {failed})")
         if say is not None:
-            say(f"building the native dynamics once for this machine (~1 min; cached in {folder})")
+            say(
+                "building the native dynamics once for this machine (~40 s of CPU, minutes "
+                f"on a loaded machine; cached in {folder})"
+            )
         tmp = folder / f".{key}.{os.getpid()}.so"
         cmd = command(cxx, prefix, tmp)
         t0 = time.monotonic()
