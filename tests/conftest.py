@@ -11,6 +11,16 @@ CONFIGS = ROOT / "configs"
 SHARED_DATA = ROOT.parent / "shared" / "data"
 
 
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Build the native dynamics (hofto_hw/model/native) before the first test, once per
+    machine (~40 s of CPU; then a cache look-up): no test, nor a ``hofto-hw run`` a test
+    starts with a timeout, waits for the compiler. Unavailable (no numba, compiler or
+    headers): the tests run the pinocchio Python path, test_native skips (fails under CI)."""
+    from hofto_hw.model import native
+
+    native.ready()
+
+
 @pytest.fixture(scope="session")
 def er3a_config():
     """configs/er3a.yaml, loaded once for the whole run: the one fixture every test that needs

@@ -9,7 +9,10 @@ exchange (the plant and the emulated drives, ~300 µs of Python) run just before
 the tick, where it evicts the caches between two calls. Samples (q, qd, tau) are those of the
 running tick; the variants are interleaved in blocks so that the machine's load hits all
 alike. Figures: median µs. ``floor`` = ABA + CRBA + Coriolis matrix + gravity back to back
-(tools/bench_tick.py's floor). Timing goals live here, never in tests.
+(tools/bench_tick.py's floor). The tick's snapshot and feed-forward are timed beside the
+other compiled variant: native (pinocchio's C++ inside one compiled call,
+hofto_hw.model.native) and pinocchio's Python calls plus one kernel. Timing goals live here,
+never in tests.
 """
 
 from __future__ import annotations
@@ -33,6 +36,9 @@ def measure(config: Path, blocks: int, per_block: int = 300) -> dict:
     from bench_tick import build_system
 
     from hofto_hw.config import load_config
+    from hofto_hw.model.data import ModelData
+    from hofto_hw.model.native import unavailable_reason
+    from hofto_hw.model.snapshot import DynamicsSnapshot
 
     system = build_system(load_config(config), 1000.0, "sim")
     rows = []
@@ -47,9 +53,16 @@ def measure(config: Path, blocks: int, per_block: int = 300) -> dict:
         rows = rows[100:]
         tick = system.tick
         snap, ff = tick.snapshot, tick.feedforward
-        pm = system.model.pin_model
+        model = system.model
+        pm = model.pin_model
         pd = pm.createData()
-        out = np.zeros(system.model.n)
+        out = np.zeros(model.n)
+        # the other compiled variant beside the tick's: with the native library (one call) and
+        # without (pinocchio's Python calls and one kernel)
+        native = not snap.native
+        snap2 = DynamicsSnapshot(model, snap.needs, snap.backend, native=native)
+        ff2 = ModelData(model, ff.backend, native=native)
+        label = {True: "native, one call", False: "pinocchio Python + kernel"}
 
         def floor(q, qd, tau) -> None:
             pin.aba(pm, pd, q, qd, tau)
@@ -58,10 +71,17 @@ def measure(config: Path, blocks: int, per_block: int = 300) -> dict:
             pin.computeGeneralizedGravity(pm, pd, q)
 
         calls = {
-            "snapshot.compute": lambda q, qd, tau: snap.compute(q, qd, tau),
+            f"snapshot.compute ({label[snap.native]})": lambda q, qd, tau: snap.compute(q, qd, tau),
             **{f"snapshot part: {k}": f for k, f in snap.parts().items()},
+            f"snapshot.compute ({label[snap2.native]})": lambda q, qd, tau: snap2.compute(
+                q, qd, tau
+            ),
+            **{f"snapshot part: {k}": f for k, f in snap2.parts().items()},
             "floor (aba+crba+coriolis+gravity)": floor,
-            "feedforward.inverse_dynamics": lambda q, qd, tau: ff.inverse_dynamics(
+            f"feedforward ({label[ff.native]})": lambda q, qd, tau: ff.inverse_dynamics(
+                q, qd, tau, out=out
+            ),
+            f"feedforward ({label[ff2.native]})": lambda q, qd, tau: ff2.inverse_dynamics(
                 q, qd, tau, out=out
             ),
             "pin.rnea": lambda q, qd, tau: pin.rnea(pm, pd, q, qd, tau),
@@ -97,13 +117,30 @@ def measure(config: Path, blocks: int, per_block: int = 300) -> dict:
         }
         return {
             "snapshot_backend": snap.backend,
+            "snapshot_native": snap.native,
             "feedforward_backend": getattr(ff, "backend", "numpy"),
+            "feedforward_native": ff.native,
+            "native_unavailable": unavailable_reason(),
+            "native_build": _build_info(),
             "needs": snap.needs.name,
             "calls_per_variant": blocks * per_block,
             "median_us": res,
         }
     finally:
         system.close()
+
+
+def _build_info() -> str:
+    """The native library's build record: the compile time of its cold build (cached since)."""
+    from hofto_hw.model.native import build
+
+    try:
+        lib = build.library(build=False)
+    except build.BuildError as exc:
+        return str(exc)
+    info = lib.parent / (lib.stem.removeprefix("libhofto_dyn-") + ".info")
+    lines = info.read_text().splitlines() if info.is_file() else []
+    return f"{lib.name}: {lines[-1] if lines else 'no build record'}"
 
 
 def main() -> None:
@@ -117,12 +154,16 @@ def main() -> None:
         print(json.dumps(res, indent=2))
         return
     print(
-        f"snapshot {res['snapshot_backend']} ({res['needs']}), "
-        f"feed-forward {res['feedforward_backend']}; median µs of {res['calls_per_variant']}"
+        f"snapshot {res['snapshot_backend']} ({res['needs']}, native {res['snapshot_native']}), "
+        f"feed-forward {res['feedforward_backend']} (native {res['feedforward_native']}); "
+        f"median µs of {res['calls_per_variant']}"
     )
-    print(f"{'call':44s} {'alone':>7s} {'flushed':>8s}")
+    if res["native_unavailable"]:
+        print(f"native dynamics unavailable: {res['native_unavailable']}")
+    print(f"native library: {res['native_build']}")
+    print(f"{'call':58s} {'alone':>7s} {'flushed':>8s}")
     for name, r in res["median_us"].items():
-        print(f"{name:44s} {r['alone']:7.2f} {r['flushed']:8.2f}")
+        print(f"{name:58s} {r['alone']:7.2f} {r['flushed']:8.2f}")
 
 
 if __name__ == "__main__":

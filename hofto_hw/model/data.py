@@ -19,6 +19,7 @@ The workspace reads the model's parameters at every call, so a change of paramet
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -38,9 +39,11 @@ class ModelData:
     :meth:`inverse_dynamics` (the tick's feed-forward) is RNEA plus one compiled call for the
     friction and the sum (:func:`hofto_hw.model.kernels.add_friction`; equal to the numpy
     path within 1e-12), its held-friction memory ``friction_state`` a row of the kernel's
-    workspace. ``backend`` says which path runs (numpy when numba is unavailable)."""
+    workspace. ``backend`` says which path runs (numpy when numba is unavailable). With
+    ``native`` (and the native library built here, :mod:`hofto_hw.model.native`) the RNEA runs
+    inside that compiled call too: one call in all; ``native`` says whether it does."""
 
-    def __init__(self, model: RobotModel, backend: str = "numpy") -> None:
+    def __init__(self, model: RobotModel, backend: str = "numpy", native: bool = True) -> None:
         self.model = model
         self.pin_data = model.pin_model.createData()
         n = model.n
@@ -63,12 +66,16 @@ class ModelData:
         self._tau_total = np.zeros(n)
         self._J = np.zeros((6, n))
         self._fast = False
+        self._native = None
         if backend != "numpy":
-            self._compile(backend)
+            self._compile(backend, native)
         #: "numba": :meth:`inverse_dynamics` adds friction in one compiled call
         self.backend = "numba" if self._fast else "numpy"
+        #: True: :meth:`inverse_dynamics` is one compiled call with pinocchio's C++ RNEA inside
+        #: (hofto_hw.model.native)
+        self.native = self._native is not None
 
-    def _compile(self, backend: str) -> None:
+    def _compile(self, backend: str, native: bool) -> None:
         # numba availability is the observers' module's (one switch for every kernel)
         from hofto_hw.model import kernels as mk
         from hofto_hw.observers import kernels
@@ -83,6 +90,25 @@ class ModelData:
         mk.pack_friction(self._fr_src, W)
         z = np.zeros(self.n)
         self._fast = kernels.warm(lambda: mk.add_friction(z, z, W.copy(), np.zeros(self.n)))
+        if self._fast and native:
+            self._use_native(mk, kernels)
+
+    def _use_native(self, mk: ModuleType, kernels: ModuleType) -> None:
+        """RNEA and the friction as one compiled call with pinocchio's C++ RNEA inside
+        (hofto_hw.model.native), when the native library is built here; else nothing."""
+        from hofto_hw.model import native
+
+        if not native.ready():
+            return
+        try:
+            nm = native.NativeModel(self.model)
+        except ValueError as exc:  # a joint the native library does not know
+            native.say_once(f"native dynamics not used: {exc}")
+            return
+        z, W, fn = np.zeros(self.n), self._W, mk.inverse_dynamics_native
+        if kernels.warm(lambda: fn(z, z, z, W.copy(), np.zeros(self.n), nm.handle)):
+            self._native = nm
+            self._id_native = fn
 
     # ------------------------------------------------------------------ dynamics
 
@@ -142,6 +168,15 @@ class ModelData:
         """M·qdd + C·qd + g + f [N·m]: the motor torque that produces qdd with no contact."""
         m = self.model
         tau = self._tau_id if out is None else out
+        nm = self._native
+        if nm is not None:
+            if m.friction is not self._fr_src or m.revision != nm.revision:
+                self._fr_src = m.friction
+                self._pack(self._fr_src, self._W)
+                if nm.stale:
+                    nm.sync()
+            self._id_native(q, qd, qdd, self._W, tau, nm.handle)
+            return tau
         if self._fast:
             # pinocchio's return (a transient copy of data.tau) is the kernel's input
             if m.friction is not self._fr_src:

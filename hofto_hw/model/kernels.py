@@ -30,11 +30,30 @@ from hofto_hw.observers.kernels import jit
 F, TOTAL, CT, STATE = range(4)  # f [N·m], tau - f [N·m], Cᵀ·qd [N·m], held sign (-1/0/+1)
 COULOMB, VISCOUS, BIAS, STRIBECK_GAP, STRIBECK_VELOCITY, QUADRATIC, HELD = range(4, 11)
 SMOOTH, HELD_VELOCITY, HAS_STRIBECK, HAS_QUADRATIC, HAS_HELD, HELD_PASSIVE = range(11, 17)
-FLAGS = 17  # what snapshot_terms computes: FRICTION_TERM | CORIOLIS_T_TERM
-ROWS = 18
+FLAGS = 17  # what snapshot_terms computes: FRICTION_TERM | CORIOLIS_T_TERM (| native terms)
+Q_IN, QD_IN, QDD_IN, RNEA_OUT = range(18, 22)  # contiguous copies for the native library
+ROWS = 22
 
 FRICTION_TERM = 1
 CORIOLIS_T_TERM = 2
+#: W[FLAGS] >> NATIVE_SHIFT: the terms snapshot_native asks the native library for
+#: (hofto_hw.model.native MASS | GRAVITY | NLE | CORIOLIS_T | ACCEL)
+NATIVE_SHIFT = 2
+
+try:  # the native library's C functions, bound by name (hofto_hw/model/native/dynamics.cpp;
+    # loaded by hofto_hw.model.native.ready() before any kernel below is compiled or run)
+    from numba import types as _nt
+
+    _dyn_terms = _nt.ExternalFunction(
+        "hofto_dyn1_terms",
+        _nt.void(_nt.voidptr, _nt.int64, _nt.voidptr, _nt.voidptr, _nt.voidptr, _nt.voidptr),
+    )
+    _dyn_rnea = _nt.ExternalFunction(
+        "hofto_dyn1_rnea",
+        _nt.void(_nt.voidptr, _nt.voidptr, _nt.voidptr, _nt.voidptr, _nt.voidptr),
+    )
+except Exception:  # no numba: the native path is never chosen (hofto_hw.model.native.ready)
+    _dyn_terms = _dyn_rnea = None
 
 
 def workspace(n: int) -> np.ndarray:
@@ -164,3 +183,64 @@ def add_friction(base: np.ndarray, qd: np.ndarray, W: np.ndarray, out: np.ndarra
         fj = friction_joint(qd[j], j, W)
         W[F, j] = fj
         out[j] = base[j] + fj
+
+
+@jit
+def snapshot_native(
+    q: np.ndarray, qd: np.ndarray, tau: np.ndarray, W: np.ndarray, O: np.ndarray, h: int
+) -> bool:
+    """The whole snapshot in one call: :func:`snapshot_terms`'s finiteness check and friction
+    (``W[F]``, ``W[TOTAL]`` = tau - f), then the native library (handle ``h``) for the terms
+    ``W[FLAGS] >> NATIVE_SHIFT`` into O (n + 4, n): rows 0..n-1 M, n g, n+1 nle, n+2 the ABA
+    acceleration for tau - f, n+3 Cᵀ·qd. Returns the finiteness; W and O are untouched for a
+    non-finite sample."""
+    acc = 0.0
+    for j in range(q.shape[0]):
+        acc += q[j]
+    acc2 = 0.0
+    for j in range(qd.shape[0]):
+        acc2 += qd[j]
+    acc3 = 0.0
+    for j in range(tau.shape[0]):
+        acc3 += tau[j]
+    if not math.isfinite(acc + acc2 + acc3):
+        return False
+    n = qd.shape[0]
+    flags = int(W[FLAGS, 0])
+    for j in range(n):  # contiguous float64 copies: the caller's arrays may be views
+        W[Q_IN, j] = q[j]
+        W[QD_IN, j] = qd[j]
+    if flags & FRICTION_TERM:
+        for j in range(n):
+            f = friction_joint(qd[j], j, W)
+            W[F, j] = f
+            W[TOTAL, j] = tau[j] - f
+    _dyn_terms(
+        h,
+        flags >> NATIVE_SHIFT,
+        W[Q_IN].ctypes.data,
+        W[QD_IN].ctypes.data,
+        W[TOTAL].ctypes.data,
+        O.ctypes.data,
+    )
+    return True
+
+
+@jit
+def inverse_dynamics_native(
+    q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, W: np.ndarray, out: np.ndarray, h: int
+) -> None:
+    """out = RNEA(q, qd, qdd) + f(qd) [N·m], (n,), in one call: the native library's RNEA
+    (handle ``h``) and :func:`add_friction` (``W[F]`` = f, held memory advanced)."""
+    n = qd.shape[0]
+    for j in range(n):
+        W[Q_IN, j] = q[j]
+        W[QD_IN, j] = qd[j]
+        W[QDD_IN, j] = qdd[j]
+    _dyn_rnea(
+        h, W[Q_IN].ctypes.data, W[QD_IN].ctypes.data, W[QDD_IN].ctypes.data, W[RNEA_OUT].ctypes.data
+    )
+    for j in range(n):
+        fj = friction_joint(qd[j], j, W)
+        W[F, j] = fj
+        out[j] = W[RNEA_OUT, j] + fj

@@ -58,6 +58,7 @@ def apply_payload(model: RobotModel, payload: Payload) -> None:
         model, payload
     )
     model.payload = payload
+    model.mark_changed()
 
 
 def payload_from_config(cfg: object) -> Payload:

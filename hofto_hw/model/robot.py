@@ -83,6 +83,14 @@ class RobotModel:
         n = self.n
         self.home = np.zeros(n)
         self.payload = None  # a Payload on the tool link (hofto_hw.model.payload), if any
+        #: counts the parameter changes made through this class (and ``apply_payload``):
+        #: native workspaces (hofto_hw.model.native) copy pinocchio's numbers and follow it
+        self.revision = 0
+
+    def mark_changed(self) -> None:
+        """Say that ``pin_model``'s parameters were written directly (not through the setters
+        here): workspaces that copy them (the native dynamics) copy them again."""
+        self.revision += 1
 
     # ------------------------------------------------------------------ construction
 
@@ -201,6 +209,7 @@ class RobotModel:
         if value.shape != (self.n,) or np.any(value < 0) or not np.all(np.isfinite(value)):
             raise ModelError(f"{self.name}: rotor inertia must be {self.n} finite values >= 0")
         self.pin_model.armature = value.copy()
+        self.revision += 1
 
     def inertial_parameters(self) -> np.ndarray:
         """Standard inertial parameters of all links, shape (10·n,), pinocchio order per link:
@@ -224,6 +233,7 @@ class RobotModel:
             self.pin_model.inertias[j + 1] = pin.Inertia.FromDynamicParameters(
                 pi[N_INERTIAL * j : N_INERTIAL * (j + 1)]
             )
+        self.revision += 1
 
     # ------------------------------------------------------------------ workspaces
 

@@ -13,23 +13,28 @@ declared (:class:`Needs`, the union of their ``needs``):
 - ``ACCEL``: M⁻¹·(tau - C·qd - g - f) [rad/s²], (n,), the model acceleration without
   contact (ABA; implies FRICTION).
 
-No copies: the arrays are views of pinocchio's Data storage (``data.M``, ``data.g``,
-``data.nle``, ``data.ddq``, ``data.C``) taken once at construction; pinocchio writes into that
-storage in place, so the views show each tick's values. Whether the installed pinocchio keeps
-those views stable and fills both triangles of M is checked once per process
-(:func:`pinocchio_traits`); if not, the snapshot copies (and symmetrises M) into its own
+No copies: on the native path (below) the arrays are rows of one buffer the compiled call
+writes, made once at construction; on the others they are views of pinocchio's Data storage
+(``data.M``, ``data.g``, ``data.nle``, ``data.ddq``, ``data.C``) taken once at construction;
+pinocchio writes into that storage in place, so the views show each tick's values. Whether
+the installed pinocchio keeps those views stable and fills both triangles of M is checked once
+per process (:func:`pinocchio_traits`); if not, the snapshot copies (and symmetrises M) into its own
 buffers instead. ``q``, ``qd`` and ``tau`` are references to the caller's arrays (the sample
 the terms belong to), valid while the caller keeps them unchanged.
 
 A sample with a NaN or inf (or a non-finite dt, checked by the consumers) is not evaluated:
 ``finite`` is False and the terms keep the last finite sample's values.
 
-Cost: the pinocchio algorithms the needs ask for (the tick's HOFTO + momentum: ABA, CRBA,
-Coriolis matrix, gravity — the floor) and, with ``backend="numba"``, one compiled call for
-everything else (finiteness, friction with its held memory, tau - f, Cᵀ·qd;
-:mod:`hofto_hw.model.kernels`). Inside a loop whose other work flushes the caches each call
-costs ~2.5-4 µs more than back to back, whatever it computes, so the number of calls is what
-counts; the numpy path (the reference) makes ~8 numpy calls more.
+Cost: inside a loop whose other work flushes the caches each call costs ~2.5-4 µs more than
+back to back, whatever it computes, so the number of calls is what counts. With
+``backend="numba"`` and the native library built on this machine (:mod:`hofto_hw.model.native`)
+:meth:`~DynamicsSnapshot.compute` is ONE compiled call: the finiteness check, friction with its
+held memory and tau - f (:func:`hofto_hw.model.kernels.snapshot_native`), then pinocchio's own
+C++ algorithms the needs ask for on a copy of the model (ABA, CRBA, Coriolis matrix with Cᵀ·qd,
+gravity, nonlinear effects) — no Python call per algorithm. Without the native library: the
+pinocchio Python calls the needs ask for (the tick's HOFTO + momentum: ABA, CRBA, Coriolis
+matrix, gravity — the floor) and one compiled call for everything else. The numpy path (the
+reference) makes ~8 numpy calls more.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ import enum
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -97,14 +103,18 @@ def pinocchio_traits(model: RobotModel) -> PinocchioTraits:
 class DynamicsSnapshot:
     """The model terms of one sample for a set of consumers; see the module docstring.
 
-    ``needs`` is the union of the consumers' :class:`Needs`. :meth:`compute` fills the
-    terms; read ``M``, ``g``, ``nle``, ``ct_qd``, ``f``, ``accel`` (arrays, see above), ``q``,
-    ``qd``, ``tau`` (the sample) and ``finite``. Allocation: none by this class; each
-    pinocchio call returns a transient copy that is dropped at once (the binding allocates
-    it; the snapshot reads the Data storage instead).
+    ``needs`` is the union of the consumers' :class:`Needs`. ``backend`` "numba"/"auto" runs
+    compiled: with ``native`` (and the native library built here) one call in all
+    (:mod:`hofto_hw.model.native`), else the pinocchio Python calls and one kernel.
+    :meth:`compute` fills the terms; read ``M``, ``g``, ``nle``, ``ct_qd``, ``f``, ``accel``
+    (arrays, see above), ``q``, ``qd``, ``tau`` (the sample) and ``finite``. Allocation: none
+    by this class; each pinocchio Python call returns a transient copy that is dropped at
+    once (the binding allocates it; the snapshot reads the Data storage instead).
     """
 
-    def __init__(self, model: RobotModel, needs: Needs | int, backend: str = "numpy") -> None:
+    def __init__(
+        self, model: RobotModel, needs: Needs | int, backend: str = "numpy", native: bool = True
+    ) -> None:
         needs = Needs(needs)
         if needs & Needs.ACCEL:
             needs |= Needs.FRICTION
@@ -141,6 +151,7 @@ class DynamicsSnapshot:
         self._friction = bool(needs & Needs.FRICTION)
         self._accel = bool(needs & Needs.ACCEL)
         self._fast = False
+        self._native = None
         if backend != "numpy" and not self._copy:
             # the finiteness check, friction and Cᵀ·qd as one compiled call (hofto_hw.model.
             # kernels; numba availability is the observers' module's)
@@ -160,8 +171,49 @@ class DynamicsSnapshot:
                 )
                 self._fr_src = model.friction
                 mk.pack_friction(model.friction, W)
-                self._fast = kernels.warm(self._warm)
+                if native:
+                    self._use_native(mk, kernels)
+                if self._native is None:
+                    self._fast = kernels.warm(self._warm)
+        #: "numba": compiled (one call with ``native``, else the pinocchio calls and one
+        #: compiled call); "numpy": the reference
         self.backend = "numba" if self._fast else "numpy"
+        #: True: :meth:`compute` is one compiled call with pinocchio's C++ algorithms inside
+        self.native = self._native is not None
+
+    def _use_native(self, mk: ModuleType, kernels: ModuleType) -> None:
+        """The whole snapshot as one compiled call with pinocchio's C++ algorithms inside
+        (hofto_hw.model.native), when the native library is built here; else nothing."""
+        from hofto_hw.model import native
+
+        if not native.ready():
+            return
+        n, needs = self.n, self.needs
+        try:
+            nm = native.NativeModel(self.model)
+        except ValueError as exc:  # a joint the native library does not know
+            native.say_once(f"native dynamics not used: {exc}")
+            return
+        terms = (
+            (native.MASS if needs & Needs.MASS else 0)
+            | (native.GRAVITY if needs & Needs.GRAVITY else 0)
+            | (native.NLE if needs & Needs.NLE else 0)
+            | (native.CORIOLIS_T if needs & Needs.CORIOLIS_T else 0)
+            | (native.ACCEL if needs & Needs.ACCEL else 0)
+        )
+        W = self._W
+        W[mk.FLAGS] = int(W[mk.FLAGS, 0]) | (terms << mk.NATIVE_SHIFT)
+        O = np.zeros((n + 4, n))
+        z = np.zeros(n)
+        snap = mk.snapshot_native
+        if not kernels.warm(lambda: snap(z, z, z, W.copy(), O.copy(), nm.handle)):
+            W[mk.FLAGS] = int(W[mk.FLAGS, 0]) & ((1 << mk.NATIVE_SHIFT) - 1)
+            return
+        self._O = O
+        self.M, self.g, self.nle, self.accel, self.ct_qd = O[:n], O[n], O[n + 1], O[n + 2], O[n + 3]
+        self._native = nm
+        self._snap = snap
+        self._fast = True
 
     def _warm(self) -> None:
         z = np.zeros(self.n)
@@ -178,6 +230,13 @@ class DynamicsSnapshot:
         Returns ``finite``: False (and nothing evaluated) when the sample holds a NaN or inf.
         """
         self.q, self.qd, self.tau = q, qd, tau
+        nm = self._native
+        if nm is not None:
+            m = self.model
+            if m.friction is not self._fr_src or m.revision != nm.revision:
+                self._repack()
+            self.finite = finite = self._snap(q, qd, tau, self._W, self._O, nm.handle)
+            return finite
         pm, pd = self.pin_model, self.pin_data
         if self._fast:
             # Coriolis first: its matrix is no term of the snapshot (only Cᵀ·qd is), so a
@@ -232,6 +291,8 @@ class DynamicsSnapshot:
         """``model.friction`` was replaced (a new parameter set): the kernel's copy follows."""
         self._fr_src = fr = self.model.friction
         self._pack(fr, self._W)
+        if self._native is not None and self._native.stale:
+            self._native.sync()  # new inertial parameters, rotor inertia or payload
 
     def parts(self) -> dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], object]]:
         """The calls :meth:`compute` makes, by name, each callable alone as f(q, qd, tau) (for
@@ -239,6 +300,12 @@ class DynamicsSnapshot:
         does)."""
         pm, pd = self.pin_model, self.pin_data
         calls: dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], object]] = {}
+        if self._native is not None:
+            W, O, nm, snap = self._W, self._O, self._native, self._snap
+            calls["native: finite, friction, pinocchio terms, Cᵀ·qd"] = lambda q, qd, tau: snap(
+                q, qd, tau, W, O, nm.handle
+            )
+            return calls
         if self._fast and self._ct:
             calls["coriolis matrix"] = lambda q, qd, tau: _coriolis(pm, pd, q, qd)
         if self._fast:

@@ -1,0 +1,200 @@
+"""Native dynamics: pinocchio's algorithms for the robot's model, called from numba kernels.
+
+Why: inside a 1 kHz loop every Python→compiled call costs ~2.5-4 µs more than back to back
+(cold caches), whatever it computes; the snapshot made five such calls (ABA, CRBA, Coriolis
+matrix, gravity through pinocchio's Python binding, and one numba kernel) and the feed-forward
+two (RNEA, one kernel). ``dynamics.cpp`` runs the same pinocchio algorithms (pinocchio's own
+templates, compiled here against the installed pinocchio's headers, not hand-written
+dynamics) behind plain C functions, and the numba kernels of :mod:`hofto_hw.model.kernels`
+call them directly, so that :meth:`DynamicsSnapshot.compute
+<hofto_hw.model.snapshot.DynamicsSnapshot.compute>` and :meth:`ModelData.inverse_dynamics
+<hofto_hw.model.data.ModelData.inverse_dynamics>` are one call each.
+
+The C++ model is a copy, made by :class:`NativeModel` from the Python pinocchio model's own
+numbers (parents, joint kinds and axes, joint placements, link inertias with the payload,
+armature, gravity): exactly the same values, so the same algorithms give the same terms
+(tests/hofto_hw/model/test_native.py: within 1e-12). A :class:`NativeModel` follows
+``RobotModel.revision`` (bumped by the model's parameter setters and ``apply_payload``).
+
+Availability: the library is built once per machine (:mod:`.build`; ~40 s of CPU, cached); it needs
+numba (the caller), a C++ compiler and the headers of the ``pin``, ``cmeel-eigen`` and
+``cmeel-boost`` wheels. Without them, when the build fails, or with ``HOFTO_HW_NO_NATIVE=1``
+(or ``HOFTO_HW_NO_NUMBA=1``), :func:`ready` is False, :func:`unavailable_reason` says why
+(printed once per process on stderr) and the pinocchio-Python path runs.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import sys
+import weakref
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from hofto_hw.model.robot import RobotModel
+
+#: joint kinds of dynamics.cpp, by pinocchio's short name
+KINDS = {
+    "JointModelRX": 0,
+    "JointModelRY": 1,
+    "JointModelRZ": 2,
+    "JointModelRevoluteUnaligned": 3,
+}
+#: terms of hofto_dyn1_terms (dynamics.cpp's Terms)
+MASS, GRAVITY, NLE, CORIOLIS_T, ACCEL = 1, 2, 4, 8, 16
+
+_LIB: ctypes.CDLL | None = None
+_REASON = ""  # why the native path is unavailable ('' = not tried yet or fine)
+_SAID = False
+
+
+def _say(line: str) -> None:
+    print(f"hofto-hw: {line}", file=sys.stderr)
+
+
+def say_once(line: str) -> None:
+    """Print ``line`` on stderr unless this process said something about the native path."""
+    global _SAID
+    if not _SAID:
+        _SAID = True
+        _say(line)
+
+
+def ready() -> bool:
+    """True when the native library is built and loaded (building it now if needed; the first
+    call of a process decides). When False, :func:`unavailable_reason` says why and it is
+    printed once per process."""
+    global _REASON
+    if _LIB is not None:
+        return True
+    if not _REASON:
+        _REASON = _load()
+    if _LIB is None:
+        say_once(f"native dynamics unavailable, the pinocchio Python path runs ({_REASON})")
+    return _LIB is not None
+
+
+def unavailable_reason() -> str:
+    """Why :func:`ready` is False ('' when it is True or was not asked yet)."""
+    return "" if _LIB is not None else _REASON
+
+
+def _load() -> str:
+    """Build if needed and load the library; '' on success, else the reason."""
+    global _LIB
+    if os.environ.get("HOFTO_HW_NO_NATIVE", "") not in ("", "0"):
+        return "disabled by HOFTO_HW_NO_NATIVE"
+    from hofto_hw.observers import kernels
+
+    if not kernels.available():
+        return kernels.unavailable_reason() or "numba unavailable"
+    from hofto_hw.model.native import build
+
+    try:
+        path = build.library(say=_say)
+        import llvmlite.binding
+
+        # numba's kernels bind the C functions by name (hofto_hw.model.kernels)
+        llvmlite.binding.load_library_permanently(str(path))
+        lib = ctypes.CDLL(str(path))
+    except build.BuildError as exc:
+        return str(exc)
+    except (OSError, RuntimeError) as exc:
+        return f"loading the native library failed ({exc})"
+    p, i64 = ctypes.c_void_p, ctypes.c_int64
+    lib.hofto_dyn1_create.restype = p
+    lib.hofto_dyn1_create.argtypes = [i64, p, p, p, p, p, p, p]
+    lib.hofto_dyn1_destroy.restype = None
+    lib.hofto_dyn1_destroy.argtypes = [p]
+    _LIB = lib
+    return ""
+
+
+def model_numbers(model: RobotModel) -> dict[str, np.ndarray]:
+    """The Python pinocchio model's numbers as dynamics.cpp's hofto_dyn1_create reads them
+    (contiguous arrays); ValueError naming a joint dynamics.cpp does not know."""
+    pm = model.pin_model
+    n = model.n
+    parent = np.zeros(n, dtype=np.int64)
+    kind = np.zeros(n, dtype=np.int64)
+    axis = np.zeros((n, 3))
+    placement = np.zeros((n, 12))
+    inertia = np.zeros((n, 10))
+    for j in range(n):
+        jm = pm.joints[j + 1]
+        name = jm.shortname()
+        if name not in KINDS:
+            raise ValueError(f"{model.name}: joint {model.joint_names[j]} is a {name}")
+        kind[j] = KINDS[name]
+        if name.endswith("Unaligned"):
+            axis[j] = jm.extract().axis
+        parent[j] = pm.parents[j + 1]
+        M = pm.jointPlacements[j + 1]
+        placement[j, :9] = M.rotation.reshape(-1)
+        placement[j, 9:] = M.translation
+        Y = pm.inertias[j + 1]
+        Ic = Y.inertia
+        inertia[j, 0] = Y.mass
+        inertia[j, 1:4] = Y.lever
+        inertia[j, 4:] = (Ic[0, 0], Ic[1, 0], Ic[1, 1], Ic[2, 0], Ic[2, 1], Ic[2, 2])
+    return {
+        "parent": parent,
+        "kind": kind,
+        "axis": axis,
+        "placement": placement,
+        "inertia": inertia,
+        "armature": np.array(pm.armature, dtype=float),
+        "gravity": np.array(pm.gravity.linear, dtype=float),
+    }
+
+
+class NativeModel:
+    """One C++ pinocchio Model + Data for ``model`` (its own workspace, like pinocchio's Data:
+    one per consumer). ``handle`` is the address the kernels take; :meth:`sync` rebuilds it
+    when ``model.revision`` moved. Requires :func:`ready`."""
+
+    def __init__(self, model: RobotModel) -> None:
+        assert _LIB is not None, "native.ready() first"
+        self.model = model
+        self.handle = 0
+        self.revision = -1
+        self._finalizer: weakref.finalize | None = None
+        self.sync()
+
+    def sync(self) -> None:
+        """Make the C++ model the Python model's current numbers (a new handle)."""
+        lib = _LIB
+        assert lib is not None
+        v = model_numbers(self.model)
+        ptr = lib.hofto_dyn1_create(
+            self.model.n,
+            *(v[k].ctypes.data for k in ("parent", "kind", "axis", "placement", "inertia")),
+            v["armature"].ctypes.data,
+            v["gravity"].ctypes.data,
+        )
+        if not ptr:
+            raise ValueError(f"{self.model.name}: the native dynamics refused the model")
+        if self._finalizer is not None:
+            self._finalizer()  # the old handle
+        self.handle = int(ptr)
+        self._finalizer = weakref.finalize(self, lib.hofto_dyn1_destroy, ptr)
+        self.revision = self.model.revision
+
+    def __reduce__(self) -> tuple:
+        # a copy (copy, deepcopy, pickle) gets its own C++ model, never the same address
+        return (NativeModel, (self.model,))
+
+    @property
+    def stale(self) -> bool:
+        """True when the model's parameters changed since the handle was made."""
+        return self.model.revision != self.revision
+
+
+def ensure() -> None:
+    """Build (if needed) and load the library now; raise RuntimeError with the reason if it
+    cannot be had (for ``python -m hofto_hw.model.native`` and tests)."""
+    if not ready():
+        raise RuntimeError(unavailable_reason())

@@ -1,0 +1,255 @@
+"""The native dynamics (pinocchio's C++ algorithms called from one numba kernel) against the
+pinocchio-Python path: every snapshot term and the feed-forward within 1e-12, parameter
+changes followed, non-finite samples, joint kinds, the build cache and the fallback."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from hofto_hw.config import load_config
+from hofto_hw.model import native
+from hofto_hw.model.friction import FrictionParams
+from hofto_hw.model.payload import Payload, apply_payload
+from hofto_hw.model.robot import RobotModel
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+
+ROOT = Path(__file__).resolve().parents[3]
+ALL = Needs.MASS | Needs.GRAVITY | Needs.NLE | Needs.CORIOLIS_T | Needs.ACCEL
+TOL = 1e-12
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _native_built() -> None:
+    if not native.ready():
+        reason = native.unavailable_reason()
+        if os.environ.get("CI"):  # CI builds it up front (python -m hofto_hw.model.native)
+            pytest.fail(f"native dynamics unavailable in CI: {reason}")
+        pytest.skip(f"native dynamics unavailable: {reason}")
+
+
+def _model(name: str) -> RobotModel:
+    return RobotModel.from_config(load_config(ROOT / "configs" / f"{name}.yaml").robot)
+
+
+def _samples(model: RobotModel, count: int, seed: int) -> list[tuple[np.ndarray, ...]]:
+    rng = np.random.default_rng(seed)
+    n = model.n
+    out = []
+    for _ in range(count):
+        q = rng.uniform(-3.0, 3.0, n)
+        # slow and fast velocities: the held-friction band (5e-3 rad/s) and beyond
+        qd = (
+            rng.uniform(-2.0, 2.0, n)
+            * (rng.uniform(0, 1, n) < 0.7)
+            * 10.0 ** rng.integers(-4, 1, n)
+        )
+        tau = rng.uniform(-50.0, 50.0, n)
+        out.append((q, qd, tau))
+    return out
+
+
+def _agree(a: DynamicsSnapshot, b: DynamicsSnapshot) -> None:
+    for term in ("M", "g", "nle", "ct_qd", "accel", "f"):
+        x, y = getattr(a, term), getattr(b, term)
+        scale = max(1.0, float(np.max(np.abs(y))))
+        assert np.max(np.abs(x - y)) <= TOL * scale, term
+
+
+def _pair(model: RobotModel) -> tuple[DynamicsSnapshot, DynamicsSnapshot]:
+    ref = DynamicsSnapshot(model, ALL | Needs.FRICTION, "numpy")
+    fast = DynamicsSnapshot(model, ALL | Needs.FRICTION, "numba")
+    assert fast.native and not ref.native
+    return ref, fast
+
+
+@pytest.mark.parametrize("name", ["er3a", "ur10e"])
+def test_snapshot_terms_equal_the_pinocchio_python_path(name: str) -> None:
+    model = _model(name)
+    ref, fast = _pair(model)
+    for q, qd, tau in _samples(model, 400, 3):
+        assert ref.compute(q, qd, tau) and fast.compute(q, qd, tau)
+        _agree(fast, ref)
+    # the held-friction memory advanced alike
+    np.testing.assert_array_equal(fast.data.friction_state, ref.data.friction_state)
+
+
+@pytest.mark.parametrize("name", ["er3a", "ur10e"])
+def test_inverse_dynamics_equals_rnea_plus_friction(name: str) -> None:
+    model = _model(name)
+    ref, fast = model.create_data(), model.create_data("numba")
+    assert fast.native
+    rng = np.random.default_rng(5)
+    for q, qd, _ in _samples(model, 400, 4):
+        qdd = rng.uniform(-5.0, 5.0, model.n)
+        a = fast.inverse_dynamics(q, qd, qdd)
+        b = ref.inverse_dynamics(q, qd, qdd)
+        assert np.max(np.abs(a - b)) <= TOL * max(1.0, float(np.max(np.abs(b))))
+        # non-contiguous inputs (a column of a matrix) give the same numbers
+        cols = np.stack([q, qd, qdd], axis=1)
+        c = fast.inverse_dynamics(cols[:, 0], cols[:, 1], cols[:, 2], out=np.zeros(model.n))
+        np.testing.assert_array_equal(c, a)
+
+
+def test_parameter_changes_are_followed() -> None:
+    """Payload, identified inertial parameters, rotor inertia and friction changed after the
+    workspaces were made: the native copy follows each (RobotModel.revision)."""
+    model = _model("er3a")
+    ref, fast = _pair(model)
+    ff_ref, ff = model.create_data(), model.create_data("numba")
+    samples = _samples(model, 20, 9)
+    qdd = np.linspace(-1.0, 1.0, model.n)
+
+    def check() -> None:
+        for q, qd, tau in samples:
+            assert ref.compute(q, qd, tau) and fast.compute(q, qd, tau)
+            _agree(fast, ref)
+            b = ff_ref.inverse_dynamics(q, qd, qdd)
+            a = ff.inverse_dynamics(q, qd, qdd)
+            assert np.max(np.abs(a - b)) <= TOL * max(1.0, float(np.max(np.abs(b))))
+
+    check()
+    before = np.array(fast.M)
+    apply_payload(model, Payload(2.5, (0.01, -0.02, 0.06), (0.01, 0.0, 0.012, 0.0, 0.0, 0.008)))
+    check()
+    q0 = samples[-1][0]
+    fast.compute(q0, np.zeros(model.n), np.zeros(model.n))
+    assert not np.allclose(fast.M, before)  # the payload is in M now
+    model.set_inertial_parameters(model.inertial_parameters() * 1.1)
+    check()
+    model.rotor_inertia = np.linspace(0.1, 0.6, model.n)
+    check()
+    model.friction = FrictionParams(
+        np.full(model.n, 2.0), np.full(model.n, 0.5), np.zeros(model.n), held=np.ones(model.n)
+    )
+    check()
+
+
+def test_non_finite_sample_keeps_the_last_terms() -> None:
+    model = _model("ur10e")
+    ref, fast = _pair(model)
+    q, qd, tau = _samples(model, 1, 2)[0]
+    assert fast.compute(q, qd, tau) and ref.compute(q, qd, tau)
+    kept = {t: np.array(getattr(fast, t)) for t in ("M", "g", "nle", "ct_qd", "accel", "f")}
+    for bad in (np.nan, np.inf, -np.inf):
+        for arr in (q, qd, tau):
+            x = arr.copy()
+            x[2] = bad
+            args = [x if a is arr else a for a in (q, qd, tau)]
+            assert not fast.compute(*args)
+            assert not fast.finite
+            for t, v in kept.items():
+                np.testing.assert_array_equal(getattr(fast, t), v)
+    assert fast.compute(q, qd, tau)
+    _agree(fast, ref)
+
+
+def _chain(joints: list, seed: int = 11) -> RobotModel:
+    """A serial chain of ``joints`` with random placements, inertias, armature, gravity."""
+    pm = pin.Model()
+    rng = np.random.default_rng(seed)
+    parent = 0
+    for i, jm in enumerate(joints):
+        placement = pin.SE3(pin.exp3(rng.uniform(-1.0, 1.0, 3)), rng.uniform(-0.3, 0.3, 3))
+        parent = pm.addJoint(parent, jm, placement, f"j{i + 1}")
+        A = rng.uniform(-0.1, 0.1, (3, 3))
+        rot = A @ A.T + 0.01 * np.eye(3)
+        Y = pin.Inertia(rng.uniform(0.5, 3.0), rng.uniform(-0.1, 0.1, 3), rot)
+        pm.appendBodyToJoint(parent, Y, pin.SE3.Identity())
+    pm.addFrame(pin.Frame("tool", parent, 0, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+    pm.armature = rng.uniform(0.0, 0.3, pm.nv)
+    pm.gravity.linear = np.array([0.3, -0.2, -9.81])
+    return RobotModel(pm, [f"j{i + 1}" for i in range(len(joints))], "tool", name="chain")
+
+
+def test_every_joint_kind_agrees() -> None:
+    """RX, RY, RZ and unaligned revolute joints (a URDF axis off x, y, z) with non-trivial
+    placements."""
+    model = _chain(
+        [
+            pin.JointModelRZ(),
+            pin.JointModelRevoluteUnaligned(np.array([0.0, 0.6, 0.8])),
+            pin.JointModelRY(),
+            pin.JointModelRX(),
+            pin.JointModelRevoluteUnaligned(np.array([0.48, -0.6, 0.64])),
+            pin.JointModelRZ(),
+            pin.JointModelRX(),
+        ]
+    )
+    ref, fast = _pair(model)
+    for q, qd, tau in _samples(model, 300, 6):
+        assert ref.compute(q, qd, tau) and fast.compute(q, qd, tau)
+        _agree(fast, ref)
+
+
+def test_a_joint_kind_it_does_not_know_runs_the_python_path() -> None:
+    """A prismatic joint is no joint of the native library: the snapshot and the feed-forward
+    of such a model run pinocchio's Python path (same terms as the reference)."""
+    model = _chain([pin.JointModelRZ(), pin.JointModelPZ(), pin.JointModelRY()])
+    with pytest.raises(ValueError, match="j2 is a JointModelPZ"):
+        native.model_numbers(model)
+    ref = DynamicsSnapshot(model, ALL | Needs.FRICTION, "numpy")
+    fast = DynamicsSnapshot(model, ALL | Needs.FRICTION, "numba")
+    assert not fast.native and fast.backend == "numba"
+    assert not model.create_data("numba").native
+    for q, qd, tau in _samples(model, 50, 8):
+        assert ref.compute(q, qd, tau) and fast.compute(q, qd, tau)
+        _agree(fast, ref)
+
+
+def _run(code: str, **env: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT), **env},
+        timeout=300,
+    )
+
+
+def test_disabled_native_path_runs_python_pinocchio_and_says_so_once() -> None:
+    code = (
+        "from hofto_hw.config import load_config\n"
+        "from hofto_hw.model.robot import RobotModel\n"
+        "from hofto_hw.model.snapshot import DynamicsSnapshot, Needs\n"
+        "m = RobotModel.from_config(load_config('configs/er3a.yaml').robot)\n"
+        "a = DynamicsSnapshot(m, Needs.MASS | Needs.ACCEL, 'numba')\n"
+        "b = DynamicsSnapshot(m, Needs.MASS, 'numba')\n"
+        "d = m.create_data('numba')\n"
+        "print(a.native, b.native, d.native, a.backend, d.backend)\n"
+    )
+    res = _run(code, HOFTO_HW_NO_NATIVE="1")
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split() == ["False", "False", "False", "numba", "numba"]
+    lines = [ln for ln in res.stderr.splitlines() if "native" in ln]
+    assert lines == [
+        "hofto-hw: native dynamics unavailable, the pinocchio Python path runs "
+        "(disabled by HOFTO_HW_NO_NATIVE)"
+    ]
+
+
+def test_a_copied_workspace_gets_its_own_native_model() -> None:
+    """copy/deepcopy/pickle of a NativeModel make a new C++ model (never the same address, which
+    the original frees when it goes)."""
+    import copy
+    import pickle
+
+    model = _model("er3a")
+    a = native.NativeModel(model)
+    for b in (copy.copy(a), copy.deepcopy(a), pickle.loads(pickle.dumps(a))):
+        assert b.handle and b.handle != a.handle
+        assert b.revision == b.model.revision
+    # the copy computes on its own C++ Data
+    ff, twin = model.create_data("numba"), model.create_data("numba")
+    twin._native = copy.deepcopy(ff._native)
+    q, qd, _ = _samples(model, 1, 12)[0]
+    np.testing.assert_array_equal(
+        twin.inverse_dynamics(q, qd, qd, out=np.zeros(model.n)), ff.inverse_dynamics(q, qd, qd)
+    )
