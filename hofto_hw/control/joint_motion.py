@@ -8,7 +8,9 @@ trajectory: a taught-path replay or a move to a joint target, planned outside th
 hofto_hw.control.path_timing), and a ramp to standstill at the acceleration limits (used for
 mode changes to hold and for stop category 2).
 
-Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick. ``backend``: numpy (the
+Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick. ``JointMotion.version``
+changes whenever the reference (q, qd, qdd) may have changed: the tick's feed-forward, a
+function of the reference alone, is reused while it stays the same (a hold). ``backend``: numpy (the
 reference) or the compiled kernels of :mod:`hofto_hw.control.kernels` (numba/auto, the
 observers' conventions), bit-identical to it.
 """
@@ -124,7 +126,12 @@ class DemoPath:
 
 
 class JointMotion:
-    """Reference generator: ``q``, ``qd``, ``qdd`` (n,) after :meth:`update`; ``mode``."""
+    """Reference generator: ``q``, ``qd``, ``qdd`` (n,) after :meth:`update`; ``mode``.
+
+    ``version`` (int) is bumped by every method that writes q, qd or qdd (a hold writes
+    them once, on its first update): an unchanged ``version`` means q, qd, qdd hold the same
+    bits as when it was read. Write them through these methods only (:meth:`follow` for a
+    reference computed elsewhere)."""
 
     def __init__(
         self,
@@ -145,6 +152,9 @@ class JointMotion:
         self.player: TrajectoryPlayer | None = None
         self._step = np.zeros(n)
         self._sign = np.zeros(n)
+        #: bumped whenever q, qd or qdd may have changed (see the class docstring)
+        self.version = 0
+        self._still = True  # qd and qdd hold +0.0: a hold's update has nothing to write
         self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
 
@@ -158,6 +168,16 @@ class JointMotion:
         self.qd.fill(0.0)
         self.qdd.fill(0.0)
         self.mode = HOLD
+        self.version += 1
+        self._still = True
+
+    def follow(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+        """Take a reference computed elsewhere (the drag controller's) for this tick."""
+        np.copyto(self.q, q)
+        np.copyto(self.qd, qd)
+        np.copyto(self.qdd, qdd)
+        self.version += 1
+        self._still = False
 
     def move(self, t: float) -> bool:
         """Follow the demo path from the current command (only from standstill)."""
@@ -184,6 +204,15 @@ class JointMotion:
 
     def update(self, t: float, dt: float) -> None:
         """Advance the reference to time ``t`` [s] (``dt`` [s] since the last update)."""
+        if self.mode == HOLD:
+            if not self._still:  # the first tick of a hold: zero qd, qdd once
+                self.qd.fill(0.0)
+                self.qdd.fill(0.0)
+                self.version += 1
+                self._still = True
+            return
+        self.version += 1
+        self._still = False
         if self.mode == MOVE:
             assert self.path is not None
             self.path.evaluate(t - self.t0, self.q0, self.q, self.qd, self.qdd)
@@ -209,6 +238,6 @@ class JointMotion:
             if not self.qd.any():
                 self.mode = HOLD
                 self.qdd.fill(0.0)
-        else:
+        else:  # DRAG: the reference is the drag controller's (see follow)
             self.qd.fill(0.0)
             self.qdd.fill(0.0)
