@@ -43,12 +43,16 @@ MODE_NAMES = {
 PLAYING = (REPLAY, MOVE_TO)
 
 
+#: fade_in at and after the ramp: s, s', s'' as its formula gives them at x = 1
+FADED_IN = (1.0, 0.0, -0.0)
+
+
 def fade_in(t: float, ramp: float) -> tuple[float, float, float]:
     """The quintic fade-in s(t/ramp) and its time derivatives s', s'' [1/s, 1/s²] at ``t`` [s]
     (``ramp`` > 0). At and after the ramp the constants its formula gives there (1, +0, -0:
     every tick of a long run, without the arithmetic)."""
     if t >= ramp:
-        return 1.0, 0.0, -0.0
+        return FADED_IN
     x = min(max(t / ramp, 0.0), 1.0)
     b = x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
     bd = 30.0 * x * x * (1.0 - x) ** 2 / ramp
@@ -91,7 +95,8 @@ class DemoPath:
         self, t: float, q0: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     ) -> None:
         """Reference at time ``t`` [s] since the start into q, qd, qdd (n,)."""
-        b, bd, bdd = fade_in(t, self.ramp)
+        ramp = self.ramp  # after the ramp its constants without the call (every tick of a run)
+        b, bd, bdd = FADED_IN if t >= ramp else fade_in(t, ramp)
         s, c, arg = self._s, self._c, self._arg
         if self._use_kernel:
             path_arg(self.w, self.phi, t, arg)
