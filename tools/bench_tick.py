@@ -20,6 +20,8 @@ Figures (µs; median / p99 / p99.9):
 - the tick back to back (SimClock, as ``--clock sim``) and inside a 1 kHz and a 2 kHz loop
   (RealClock: absolute CLOCK_MONOTONIC deadlines with clock_nanosleep TIMER_ABSTIME, as
   ``--clock real``), SCHED_FIFO 50 when permitted, gc frozen and off (the Loop's own);
+  and back to back with the arm holding (``hold_back_to_back``: the reference does not
+  change, so the tick reuses its feed-forward);
 - per part (a second run with every part wrapped: each wrapper costs ~0.2 µs), "other" is
   the rest of Tick.step; safety's bus and limit checks, the motion update and the
   recording are parts of their own;
@@ -65,6 +67,7 @@ PARTS = (
     "record",
 )
 LOOPS = ("back_to_back", "loop_1khz", "loop_2khz")
+HOLD_LOOP = "hold_back_to_back"  # back to back, the arm holding (not in the targets)
 
 
 def stats(us: np.ndarray) -> dict[str, float]:
@@ -76,16 +79,18 @@ def stats(us: np.ndarray) -> dict[str, float]:
     }
 
 
-def build_system(cfg, rate_hz: float, clock: str):
-    """``hofto-hw run``'s System at ``rate_hz`` on the simulated bus, moving along run.path;
-    overrun stops off (a loaded machine misses deadlines; they are counted, not acted on)."""
+def build_system(cfg, rate_hz: float, clock: str, hold: bool = False):
+    """``hofto-hw run``'s System at ``rate_hz`` on the simulated bus, moving along run.path
+    (holding where it starts with ``hold``); overrun stops off (a loaded machine misses
+    deadlines; they are counted, not acted on)."""
     from hofto_hw.control.joint_motion import MOVE
     from hofto_hw.runtime.compose import build
 
     cfg = cfg.model_copy(update={"loop": cfg.loop.model_copy(update={"rate_hz": rate_hz})})
     system = build(cfg, clock=clock, contact=False)
     system.tick.overrun_limit = 1 << 40
-    system.tick.mode_request = MOVE
+    if not hold:
+        system.tick.mode_request = MOVE
     return system
 
 
@@ -220,10 +225,12 @@ class Probe:
         return res
 
 
-def run_loop(cfg, rate_hz: float, clock: str, ticks: int, part_ticks: int, floor: float) -> dict:
+def run_loop(
+    cfg, rate_hz: float, clock: str, ticks: int, part_ticks: int, floor: float, hold: bool = False
+) -> dict:
     """``ticks`` ticks timed as a whole, then ``part_ticks`` more with every part probed,
     on one System (the same run continues)."""
-    system = build_system(cfg, rate_hz, clock)
+    system = build_system(cfg, rate_hz, clock, hold)
     period = None if clock == "sim" else 1e6 / rate_hz
     try:
         system.loop.run(max_ticks=300)  # warm-up: caches, pages, the drive ramp
@@ -416,6 +423,7 @@ def bench_path(cfg, quick: bool, floor: float) -> dict:
     for key in LOOPS:
         rate, clock = setups[key]
         res[key] = run_loop(cfg, rate, clock, ticks, part_ticks, floor)
+    res[HOLD_LOOP] = run_loop(cfg, float(cfg.loop.rate_hz), "sim", ticks, part_ticks, floor, True)
     return res
 
 
@@ -473,7 +481,7 @@ def bench(config: Path, quick: bool) -> dict:
         res["paths"]["numba"] = {"skipped": kernels.unavailable_reason()}
     best = "numba" if "back_to_back" in res["paths"]["numba"] else "numpy"
     res["path"] = best
-    for key in LOOPS:
+    for key in (*LOOPS, HOLD_LOOP):
         res[key] = res["paths"][best][key]
     res["startup"] = {"skipped": "--quick"} if quick else startup(config)
     res["load_average_end"] = list(os.getloadavg())
@@ -522,8 +530,10 @@ def print_report(res: dict) -> None:
             print(f"\n[{backend}] skipped: {path['skipped']}")
             continue
         print(f"\n[{backend} path] tick = Tick.step minus the bus exchange; µs median/p99/p99.9")
-        for key in LOOPS:
-            r = path[key]
+        for key in (*LOOPS, HOLD_LOOP):
+            r = path.get(key)
+            if r is None:
+                continue
             t = r["tick"]
             line = (
                 f"{key:12s} tick {t['median']:6.1f} / {t['p99']:6.1f} / {t['p999']:6.1f}"

@@ -8,7 +8,9 @@ trajectory: a taught-path replay or a move to a joint target, planned outside th
 hofto_hw.control.path_timing), and a ramp to standstill at the acceleration limits (used for
 mode changes to hold and for stop category 2).
 
-Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick. ``backend``: numpy (the
+Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick. ``JointMotion.version``
+changes whenever the reference (q, qd, qdd) may have changed: the tick's feed-forward, a
+function of the reference alone, is reused while it stays the same (a hold). ``backend``: numpy (the
 reference) or the compiled kernels of :mod:`hofto_hw.control.kernels` (numba/auto, the
 observers' conventions), bit-identical to it.
 """
@@ -41,12 +43,16 @@ MODE_NAMES = {
 PLAYING = (REPLAY, MOVE_TO)
 
 
+#: fade_in at and after the ramp: s, s', s'' as its formula gives them at x = 1
+FADED_IN = (1.0, 0.0, -0.0)
+
+
 def fade_in(t: float, ramp: float) -> tuple[float, float, float]:
     """The quintic fade-in s(t/ramp) and its time derivatives s', s'' [1/s, 1/s²] at ``t`` [s]
     (``ramp`` > 0). At and after the ramp the constants its formula gives there (1, +0, -0:
     every tick of a long run, without the arithmetic)."""
     if t >= ramp:
-        return 1.0, 0.0, -0.0
+        return FADED_IN
     x = min(max(t / ramp, 0.0), 1.0)
     b = x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
     bd = 30.0 * x * x * (1.0 - x) ** 2 / ramp
@@ -89,7 +95,8 @@ class DemoPath:
         self, t: float, q0: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     ) -> None:
         """Reference at time ``t`` [s] since the start into q, qd, qdd (n,)."""
-        b, bd, bdd = fade_in(t, self.ramp)
+        ramp = self.ramp  # after the ramp its constants without the call (every tick of a run)
+        b, bd, bdd = FADED_IN if t >= ramp else fade_in(t, ramp)
         s, c, arg = self._s, self._c, self._arg
         if self._use_kernel:
             path_arg(self.w, self.phi, t, arg)
@@ -124,7 +131,12 @@ class DemoPath:
 
 
 class JointMotion:
-    """Reference generator: ``q``, ``qd``, ``qdd`` (n,) after :meth:`update`; ``mode``."""
+    """Reference generator: ``q``, ``qd``, ``qdd`` (n,) after :meth:`update`; ``mode``.
+
+    ``version`` (int) is bumped by every method that writes q, qd or qdd (a hold writes
+    them once, on its first update): an unchanged ``version`` means q, qd, qdd hold the same
+    bits as when it was read. Write them through these methods only (:meth:`follow` for a
+    reference computed elsewhere)."""
 
     def __init__(
         self,
@@ -145,6 +157,9 @@ class JointMotion:
         self.player: TrajectoryPlayer | None = None
         self._step = np.zeros(n)
         self._sign = np.zeros(n)
+        #: bumped whenever q, qd or qdd may have changed (see the class docstring)
+        self.version = 0
+        self._still = True  # qd and qdd hold +0.0: a hold's update has nothing to write
         self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
 
@@ -158,6 +173,16 @@ class JointMotion:
         self.qd.fill(0.0)
         self.qdd.fill(0.0)
         self.mode = HOLD
+        self.version += 1
+        self._still = True
+
+    def follow(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+        """Take a reference computed elsewhere (the drag controller's) for this tick."""
+        np.copyto(self.q, q)
+        np.copyto(self.qd, qd)
+        np.copyto(self.qdd, qdd)
+        self.version += 1
+        self._still = False
 
     def move(self, t: float) -> bool:
         """Follow the demo path from the current command (only from standstill)."""
@@ -184,6 +209,15 @@ class JointMotion:
 
     def update(self, t: float, dt: float) -> None:
         """Advance the reference to time ``t`` [s] (``dt`` [s] since the last update)."""
+        if self.mode == HOLD:
+            if not self._still:  # the first tick of a hold: zero qd, qdd once
+                self.qd.fill(0.0)
+                self.qdd.fill(0.0)
+                self.version += 1
+                self._still = True
+            return
+        self.version += 1
+        self._still = False
         if self.mode == MOVE:
             assert self.path is not None
             self.path.evaluate(t - self.t0, self.q0, self.q, self.qd, self.qdd)
@@ -209,6 +243,6 @@ class JointMotion:
             if not self.qd.any():
                 self.mode = HOLD
                 self.qdd.fill(0.0)
-        else:
+        else:  # DRAG: the reference is the drag controller's (see follow)
             self.qd.fill(0.0)
             self.qdd.fill(0.0)

@@ -136,8 +136,15 @@ class Tick:
         self.tau_ext = np.zeros((max(1, len(self.observers)), n))
         self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
         self.tau_ff = np.zeros(n)
+        #: the motion's version that tau_ff was evaluated for (-1: evaluate on the next tick),
+        #: and the model's friction and payload objects it was evaluated with
+        self._ff_version = -1
+        self._ff_model = (feedforward.model.friction, feedforward.model.payload)
+        #: the interval the observers integrated this tick [s] (the record's sample_dt)
+        self.sample_dt = 0.0
         self.q_sent = np.zeros(n)  # position target of the last command [rad]
         self.err_codes = group.transport.tx["error_code"]
+        self._transport = group.transport  # its sample_dt (DriveGroup.sample_dt forwards it)
         self.controlword = group.transport.rx["controlword"]
         self.expect_enabled = False
         self.enabling = False
@@ -178,6 +185,7 @@ class Tick:
         self._events_pushed = 0
         #: the record fill: numpy (the reference) or one compiled call (recording/kernels.py)
         self._rec1 = r.reshape(1)  # the same memory as a one-element array, for the kernel
+        self._sample = group.sample  # q, qd, tau as rows of one (3, n) view
         self.backend = kernels.ready(backend, self._warm_record)
         self._fill_kernel = self.backend == "numba"
         # drag (hand guiding): controller, enabling input, the observer row that drives it
@@ -185,6 +193,9 @@ class Tick:
         self.enable_input = enable_input if enable_input is not None else EnableInput()
         self._din = group.transport.tx["digital_inputs"]
         self.drag_row = int(drag_row)
+        self._drag_est = self.tau_ext[self.drag_row]  # the drag's observer row (a view)
+        #: the drag's friction learning outside drag mode (None: no drag or no learning)
+        self._learn = drag.learn if drag is not None else None
         self.drag_reason = 0
         self.mode_result = ""  # answer to the last mode request (constant strings)
         # teach and play (hofto_hw/runtime/teach.py; planned and saved off the tick): the
@@ -249,12 +260,12 @@ class Tick:
         # wakes; a lost frame brings no sample, the next one spans the gap), else the master's
         # dt. A repeated sample integrated as new reads as a contact to HOFTO
         snap = self.snapshot
-        sample_dt = g.sample_dt
+        sample_dt = self._transport.sample_dt
         obs_dt = 0.0  # held over a lost sample (logged: flight-log replay integrates the same)
         if sample_dt >= 0.0:
             obs_dt = sample_dt if sample_dt > 0.0 else dt
             self._observe(snap, q, qd, tau, obs_dt)
-        self.tick_rec["sample_dt"] = obs_dt
+        self.sample_dt = obs_dt  # into the record with the rest (_record)
         cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
         self.t_cmd += cmd_dt
 
@@ -301,11 +312,12 @@ class Tick:
             # over the interval the observers integrated (DC: the drives' own; a stalled
             # master's dt made the acceleration feature, and the threshold, too small)
             mdt = obs_dt if obs_dt > 0.0 else dt
-            self.collision.update(stop, self._monitored(dragging), q, qd, motion.qdd, mdt)
             c = self.collision
-            if self.drag is not None and not dragging and stop.category == -1:
-                if not (c.contact or c.collision):  # contact-free motion: friction error
-                    self.drag.learn(qd, self.tau_ext[self.drag_row], mdt)
+            est = self._monitored(True) if dragging else self.tau_ext
+            collided = c.update(stop, est, q, qd, motion.qdd, mdt)
+            if self._learn is not None and not dragging and stop.category == -1:
+                if not (collided or c.contact):  # contact-free motion: friction error
+                    self._learn(qd, self._drag_est, mdt)
         if missed or self.overrun_streak:
             self._overrun(missed)
         if self.stop_requested:
@@ -344,20 +356,21 @@ class Tick:
                 self._enable_step()
             if motion.mode == DRAG:
                 d = self.drag
-                np.copyto(motion.q, d.q_cmd)
-                np.copyto(motion.qd, d.qd_cmd)
-                np.copyto(motion.qdd, d.qdd_cmd)
+                motion.follow(d.q_cmd, d.qd_cmd, d.qdd_cmd)
             else:
                 motion.update(self.t_cmd, cmd_dt)
         if self.recording is not None or self.playback is not None:
             self._teach_record(q)
-        self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
+        # the feed-forward is a function of the reference (and the model): a hold reuses it
+        if motion.version != self._ff_version or self._ff_model_changed():
+            self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
+            self._ff_version = motion.version
         if motion.mode == DRAG:
             self.tau_ff += self.drag.tau_offset  # the hand's torque off the drives' offset
+            self._ff_version = -1  # tau_ff holds the hand's torque: evaluate it again
         g.command_position(motion.q, self.tau_ff)
-        np.copyto(self.q_sent, motion.q)
 
-        # 7. copy into the log sink
+        # 7. copy into the log sink (and motion.q into q_sent, with the record's q_cmd)
         self._record(status, wakeup_us, compute_us)
 
     # ------------------------------------------------------------- tick helpers
@@ -393,6 +406,23 @@ class Tick:
         np.copyto(self._prev[0], q)
         np.copyto(self._prev[1], qd)
         np.copyto(self._prev[2], tau)
+
+    def _ff_model_changed(self) -> bool:
+        """True (once) when the model's friction or payload object was replaced since tau_ff
+        was evaluated: what loading identified parameters (model.parameters) and
+        apply_payload do. Checked only on ticks whose reference did not change."""
+        m = self.feedforward.model
+        fr, pl = self._ff_model
+        if m.friction is fr and m.payload is pl:
+            return False
+        self._ff_model = (m.friction, m.payload)
+        return True
+
+    def invalidate_feedforward(self) -> None:
+        """Evaluate the feed-forward on the next tick even if the reference holds: for a
+        change of the model's parameters in place (set_inertial_parameters, rotor_inertia)
+        during a run, which the tick cannot see."""
+        self._ff_version = -1
 
     def _overrun(self, missed: int) -> None:
         if missed > 0:
@@ -610,16 +640,22 @@ class Tick:
 
     def _warm_record(self) -> None:
         g, scratch = self.group, np.zeros(1, dtype=self.tick_rec.dtype)
-        fill_tick(scratch, 0.0, 0, g.q, g.qd, g.tau, self.motion.q, self.tau_ext, 0, 0, 0, 0.0, 0.0)
+        q_sent = self.q_sent.copy()
+        fill_tick(
+            scratch, g.sample, self.motion.q, self.tau_ext, q_sent, 0.0, 0, 0, 0, 0, 0.0, 0.0, 0.0
+        )
 
     def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
+        """The tick record of this tick (and q_sent = motion.q, the command just sent), then
+        into the sink with the new events (and every ``diag_every`` ticks the diagnostics)."""
         r = self.tick_rec
         if self._fill_kernel:
-            g, m = self.group, self.motion
+            m = self.motion
             # the casts keep the kernel on its warmed signature whatever numbers callers pass
             fill_tick(
-                self._rec1, float(self.t), self.tick, g.q, g.qd, g.tau, m.q, self.tau_ext,
-                m.mode, self.stop.latched, int(status), float(wakeup_us), float(compute_us),
+                self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t),
+                self.tick, m.mode, self.stop.latched, int(status), float(wakeup_us),
+                float(compute_us), float(self.sample_dt),
             )  # fmt: skip
         else:
             self._fill_numpy(status, wakeup_us, compute_us)
@@ -654,6 +690,8 @@ class Tick:
         r["bus_status"] = status
         r["wakeup_us"] = wakeup_us
         r["compute_us"] = compute_us
+        r["sample_dt"] = self.sample_dt
+        np.copyto(self.q_sent, self.motion.q)
 
     def _diag(self) -> None:
         d = self.diag_rec

@@ -34,7 +34,6 @@ def test_kernel_fill_equals_numpy_fill(cfg: SystemConfig, monkeypatch: pytest.Mo
         rec["wrench"] = np.frombuffer(filled, dtype=rec.dtype)["wrench"][0]
         rec["monitored"] = np.frombuffer(filled, dtype=rec.dtype)["monitored"][0]
         rec["qdd_cmd"] = np.frombuffer(filled, dtype=rec.dtype)["qdd_cmd"][0]
-        rec["sample_dt"] = np.frombuffer(filled, dtype=rec.dtype)["sample_dt"][0]
         tick._fill_numpy(tick.group.status, wakeup, compute)
         assert rec.tobytes() == filled, k
     # odd values, written by both fills into the same record
