@@ -139,7 +139,8 @@ class Tick:
         #: the motion's version that tau_ff was evaluated for (-1: evaluate on the next tick),
         #: and the model's friction and payload objects it was evaluated with
         self._ff_version = -1
-        self._ff_model = (feedforward.model.friction, feedforward.model.payload)
+        m = feedforward.model
+        self._ff_model = (m.revision, m.friction, m.payload)
         #: the interval the observers integrated this tick [s] (the record's sample_dt)
         self.sample_dt = 0.0
         self.q_sent = np.zeros(n)  # position target of the last command [rad]
@@ -408,21 +409,15 @@ class Tick:
         np.copyto(self._prev[2], tau)
 
     def _ff_model_changed(self) -> bool:
-        """True (once) when the model's friction or payload object was replaced since tau_ff
-        was evaluated: what loading identified parameters (model.parameters) and
-        apply_payload do. Checked only on ticks whose reference did not change."""
+        """True (once) when the model changed since tau_ff was evaluated: its parameters
+        (``RobotModel.revision``: identified parameters, rotor inertia, payload) or its friction
+        or payload object replaced. Checked only on ticks whose reference did not change."""
         m = self.feedforward.model
-        fr, pl = self._ff_model
-        if m.friction is fr and m.payload is pl:
+        rev, fr, pl = self._ff_model
+        if m.revision == rev and m.friction is fr and m.payload is pl:
             return False
-        self._ff_model = (m.friction, m.payload)
+        self._ff_model = (m.revision, m.friction, m.payload)
         return True
-
-    def invalidate_feedforward(self) -> None:
-        """Evaluate the feed-forward on the next tick even if the reference holds: for a
-        change of the model's parameters in place (set_inertial_parameters, rotor_inertia)
-        during a run, which the tick cannot see."""
-        self._ff_version = -1
 
     def _overrun(self, missed: int) -> None:
         if missed > 0:

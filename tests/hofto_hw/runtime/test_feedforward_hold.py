@@ -71,8 +71,7 @@ def test_feedforward_reused_at_hold_equals_evaluating_every_tick(cfg: SystemConf
         run(400)  # the ramp to standstill, then the hold
         assert RAMP_DOWN in modes and tick.motion.mode == HOLD
         assert len(evaluated) - moving < 400  # the hold after the ramp reuses it
-        model.rotor_inertia = model.rotor_inertia * 1.5  # in place: the tick is told
-        tick.invalidate_feedforward()
+        model.rotor_inertia = model.rotor_inertia * 1.5  # the setter bumps model.revision
         run(20)
     finally:
         system.close()
