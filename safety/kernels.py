@@ -21,14 +21,16 @@ from hofto_hw.observers.kernels import jit
 
 
 @jit
-def drive_scan(states: np.ndarray, fault_min: int, op_enabled: int, expect_enabled: bool) -> int:
+def drive_scan(states: np.ndarray, fault_min: int, op_enabled: int) -> int:
     """The first joint j whose state code is >= ``fault_min`` (a drive fault): j; else, when
-    ``expect_enabled``, the first joint not in ``op_enabled``: n + j; else -1."""
+    ``op_enabled`` >= 0 (the caller expects the drives enabled; -1 when it does not), the
+    first joint not in ``op_enabled``: n + j; else -1. (No bool argument: a bool costs a
+    compiled call more to unbox than an int.)"""
     n = states.shape[0]
     for j in range(n):
         if states[j] >= fault_min:
             return j
-    if expect_enabled:
+    if op_enabled >= 0:
         for j in range(n):
             if states[j] != op_enabled:
                 return n + j
@@ -44,15 +46,16 @@ FOLLOWING_ERROR, POSITION_JUMP, HAVE_PREV = 0, 1, 2
 
 
 @jit
-def limits_quiet(
-    sample: np.ndarray, q_cmd: np.ndarray, w: np.ndarray, fresh: bool, tracking: bool, gap: float
-) -> int:
+def limits_quiet(sample: np.ndarray, q_cmd: np.ndarray, w: np.ndarray, how: int, gap: float) -> int:
     """The limit checks of :meth:`safety.limits.LimitMonitor.check` with nothing reported, on
-    ``sample`` (3, n) = rows q, qd, tau and the workspace ``w`` (rows above): 0 when some check
+    ``sample`` (3, n) = rows q, qd, tau and the workspace ``w`` (rows above); ``how`` = fresh
+    + 2·tracking (one int: bools cost a compiled call more to unbox): 0 when some check
     would report (the caller runs the reference path; nothing was written), 1 when none
     would, 2 when none would and ``q`` (fresh, all finite) was copied into the Q_PREV row
     (HAVE_PREV set). The comparisons are the reference's (NaN compares false)."""
     n = q_cmd.shape[0]
+    fresh = (how & 1) != 0
+    tracking = (how & 2) != 0
     following_error = w[PARAMS, FOLLOWING_ERROR]
     position_jump = w[PARAMS, POSITION_JUMP]
     jumps = fresh and w[PARAMS, HAVE_PREV] != 0.0

@@ -96,8 +96,7 @@ class LimitMonitor:
 
     def _warm(self) -> None:
         w = self._w.copy()  # scratch: the scan writes Q_PREV and HAVE_PREV
-        for on in (False, True):  # fresh, tracking
-            limits_quiet(self._sample, self.q_prev, w, on, on, 0.0)
+        limits_quiet(self._sample, self.q_prev, w, 3, 0.0)
 
     def _sample_block(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """q, qd, tau as the rows of one (3, n) float64 block: a view when they are
@@ -178,7 +177,7 @@ class LimitMonitor:
                 block = self._block  # the caller's rows, as last time
             else:
                 block = self._sample_block(q, qd, tau)
-            if limits_quiet(block, q_cmd, self._w, fresh, tracking, gap):
+            if limits_quiet(block, q_cmd, self._w, fresh + 2 * tracking, gap):
                 return
         self._check_numpy(stop, q, qd, tau, q_cmd, fresh, tracking, gap)
 
