@@ -22,6 +22,7 @@ only into the arrays passed in and never allocate.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable
 
@@ -38,6 +39,8 @@ __all__ = [
     "WITH_TAU",
     "Backend",
     "command_raw",
+    "image_bytes",
+    "layout_matches",
     "read_si",
     "ready",
 ]
@@ -60,18 +63,45 @@ _I32_MAX = float(np.iinfo(np.int32).max)
 _I16_MIN = float(np.iinfo(np.int16).min)
 _I16_MAX = float(np.iinfo(np.int16).max)
 
-# byte offsets of the fields in one record (compile-time constants of the kernels)
-_TX = TXPDO_SIZE
-_TX_SW = TXPDO_DTYPE.fields["statusword"][1]
-_TX_POS = TXPDO_DTYPE.fields["position"][1]
-_TX_VEL = TXPDO_DTYPE.fields["velocity"][1]
-_TX_TAU = TXPDO_DTYPE.fields["torque"][1]
-_TX_CUR = TXPDO_DTYPE.fields["current"][1]
-_RX = RXPDO_SIZE
-_RX_POS = RXPDO_DTYPE.fields["target_position"][1]
-_RX_VEL = RXPDO_DTYPE.fields["target_velocity"][1]
-_RX_OFF = RXPDO_DTYPE.fields["torque_offset"][1]
+# The PDO layout and the statusword table as the kernels' compile-time constants, written
+# out here: numba bakes globals into the cached machine code and invalidates its cache only
+# when this file changes, not when drivers/cia402/pdo.py or state_machine.py do. So they are
+# literals here, checked against those modules at import (:func:`layout_matches`; a
+# mismatch runs the numpy path, and tests/drivers/cia402/test_cia402_kernels.py fails).
+_TX = 21  # TxPDO record size [bytes]
+_TX_SW, _TX_POS, _TX_VEL, _TX_TAU, _TX_CUR = 0, 3, 7, 11, 13  # u16, i32, i32, i16, i16
+_RX = 15  # RxPDO record size [bytes]
+_RX_POS, _RX_VEL, _RX_OFF = 3, 7, 13  # i32, i32, i16
 _STATE_TABLE = STATE_FROM_STATUS
+_STATE_TABLE_SHA256 = "730f61a170b27f65"  # first 16 hex digits of its bytes' SHA-256
+
+
+def layout_matches() -> bool:
+    """True when the literals above are the PDO layout of :mod:`drivers.cia402.pdo` and the
+    statusword table of :mod:`drivers.cia402.state_machine` (else the kernels would decode
+    another layout than the images have: :func:`ready` then answers numpy)."""
+    tx, rx = TXPDO_DTYPE.fields, RXPDO_DTYPE.fields
+    want = (
+        (tx, "statusword", "<u2", _TX_SW),
+        (tx, "position", "<i4", _TX_POS),
+        (tx, "velocity", "<i4", _TX_VEL),
+        (tx, "torque", "<i2", _TX_TAU),
+        (tx, "current", "<i2", _TX_CUR),
+        (rx, "target_position", "<i4", _RX_POS),
+        (rx, "target_velocity", "<i4", _RX_VEL),
+        (rx, "torque_offset", "<i2", _RX_OFF),
+    )
+    for fields, name, dtype, offset in want:
+        got = fields.get(name)
+        if got is None or got[0] != np.dtype(dtype) or got[1] != offset:
+            return False
+    digest = hashlib.sha256(np.ascontiguousarray(_STATE_TABLE).tobytes()).hexdigest()
+    return (
+        TXPDO_SIZE == _TX
+        and RXPDO_SIZE == _RX
+        and _STATE_TABLE.dtype == np.uint8
+        and digest[:16] == _STATE_TABLE_SHA256
+    )
 
 
 def image_bytes(image: np.ndarray) -> np.ndarray:
@@ -154,6 +184,6 @@ def ready(backend: Backend, call: Callable[[], object]) -> bool:
     """True when ``backend`` resolves to the compiled kernels and ``call`` (the caller's
     kernels on scratch copies of its own arrays, so the exact signatures compile now,
     outside any loop) succeeds; False means: run the numpy path."""
-    if resolve(backend) != "numba":
+    if resolve(backend) != "numba" or not layout_matches():
         return False
     return warm(call)

@@ -160,3 +160,21 @@ def test_image_bytes_refuses_what_is_not_a_contiguous_process_image() -> None:
         image_bytes(new_rx(6)[::2])
     with pytest.raises(ValueError, match="not a contiguous process image"):
         image_bytes(np.zeros(6))
+
+
+def test_the_kernels_literal_layout_is_the_pdo_modules(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled read/command bake the PDO byte offsets and the statusword table into
+    their cached machine code (numba does not see changes in other files): the literals in
+    drivers/cia402/kernels.py must be pdo.py's and state_machine.py's, and a group whose
+    layout differs runs the numpy path instead of decoding the wrong bytes."""
+    from drivers.cia402 import kernels
+
+    assert kernels.layout_matches()
+    monkeypatch.setattr(kernels, "_TX_VEL", 8)
+    assert not kernels.layout_matches()
+    monkeypatch.undo()
+    table = kernels._STATE_TABLE.copy()
+    table[5] ^= 1
+    monkeypatch.setattr(kernels, "_STATE_TABLE", table)
+    assert not kernels.layout_matches()
+    assert not kernels.ready("numba", lambda: None)
