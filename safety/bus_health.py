@@ -38,6 +38,8 @@ class BusHealth:
         self.n = n
         self.lost_cycles = int(lost_cycles)
         self.op_enabled = int(op_enabled)
+        if self.op_enabled < 0:  # -1 tells the compiled scan "not expected enabled"
+            raise ValueError(f"op_enabled must be a state code >= 0, got {op_enabled}")
         self.fault_min = int(min(fault_states))
         self.streak = 0
         self.lost_total = 0
@@ -48,7 +50,7 @@ class BusHealth:
     def _warm(self) -> None:
         # the drive group's state codes are uint8 (drivers/cia402/drive_group.py)
         for dtype in (np.uint8, np.int64):
-            drive_scan(np.zeros(self.n, dtype=dtype), self.fault_min, self.op_enabled, True)
+            drive_scan(np.zeros(self.n, dtype=dtype), self.fault_min, self.op_enabled)
 
     def check(
         self,
@@ -70,7 +72,7 @@ class BusHealth:
                 stop.report(Fault.BUS_LOSS, -1, float(status))
             return False  # states are stale: judge the drives on fresh data only
         if self._use_kernel:
-            j = drive_scan(states, self.fault_min, self.op_enabled, expect_enabled)
+            j = drive_scan(states, self.fault_min, self.op_enabled if expect_enabled else -1)
             if j >= 0:
                 n = self.n
                 if j < n:

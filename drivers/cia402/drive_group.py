@@ -77,7 +77,9 @@ class DriveGroup(ImageFields):
         self.names = transport.axis_names
         self.timeout_cycles = max(1, round(transition_timeout / transport.cycle_time))
         self.transition_timeout = transition_timeout
-        self._si = np.zeros((4, n))  # q, qd, tau, current as rows (one compiled write)
+        # the group's SI values as the first rows of one float64 workspace, the scale rows the
+        # compiled read and command use after them (one argument: drivers/cia402/kernels.py)
+        self._si = np.zeros((10, n))
         #: joint angle [rad], (n,)
         self.q = self._si[0]
         #: joint velocity [rad/s], (n,)
@@ -86,6 +88,14 @@ class DriveGroup(ImageFields):
         self.tau = self._si[2]
         #: motor current [A] in the joint's sense, (n,)
         self.current = self._si[3]
+        self._si[4:] = (
+            scaling.zero_offset,
+            scaling.rad_per_count,
+            scaling.nm_per_permille,
+            scaling.amp_per_permille,
+            scaling.count_per_rad,
+            scaling.permille_per_nm,
+        )
         #: q, qd, tau as the rows of one (3, n) view (one copy of the whole sample)
         self.sample = self._si[:3]
         #: State code per axis, uint8 (n,)
@@ -102,28 +112,14 @@ class DriveGroup(ImageFields):
         self._u16 = np.zeros(n, dtype=np.uint16)
         self._cw = np.zeros(n, dtype=np.uint16)
         self._flags = np.zeros(n, dtype=bool)
-        self._zeros = np.zeros(n)  # the velocity command's zero offset
-        # constant scale rows of the compiled read: rad/count, N·m/‰, A/‰
-        self._scale = np.vstack(
-            [scaling.rad_per_count, scaling.nm_per_permille, scaling.amp_per_permille]
-        )
-        #: the compiled read's inputs (TxPDO fields, count offsets, scale rows, statusword
-        #: table), one tuple for :meth:`read` and the warm-up; the outputs follow them (a
-        #: helper method around the call measured 7 % slower: one more Python call per tick)
-        self._read_args = (
-            self._tx_pos,
-            self._tx_vel,
-            self._tx_tau,
-            self._tx_cur,
-            self._tx_sw,
-            scaling.zero_offset,
-            self._scale,
-            sm.STATE_FROM_STATUS,
-        )
         self._fast: Any = None
+        self._tx_bytes: Any = None  # the images' raw bytes (uint8 views) of the kernels
+        self._rx_bytes: Any = None
         if backend != "numpy":
             from drivers.cia402 import kernels
 
+            self._tx_bytes = kernels.image_bytes(transport.tx)
+            self._rx_bytes = kernels.image_bytes(transport.rx)
             if kernels.ready(backend, self._warm):
                 self._fast = kernels
         #: the implementation of read and command: ``numpy`` (reference) or ``numba``
@@ -135,20 +131,12 @@ class DriveGroup(ImageFields):
 
         # the read only reads the TxPDO: warm it on the image itself (a read-only or
         # differently aligned buffer is another signature); the commands on a copy of the RxPDO
-        rx, sc = self.transport.rx.copy(), self.scaling
-        kernels.read_si(*self._read_args, np.zeros_like(self._si), np.zeros_like(self.states))
+        si = self._si.copy()
+        kernels.read_si(self._tx_bytes, si, np.zeros_like(self.states))
+        rx = kernels.image_bytes(self.transport.rx.copy())
         q = np.zeros(self.n)
-        for field in ("target_position", "target_velocity"):
-            kernels.command_raw(
-                q,
-                sc.count_per_rad,
-                sc.zero_offset,
-                rx[field],
-                q,
-                sc.permille_per_nm,
-                rx["torque_offset"],
-                True,
-            )
+        for what in range(4):
+            kernels.command_raw(q, q, rx, si, what)
 
     @classmethod
     def from_config(cls, transport: Transport, bus: Any, backend: Backend = "numpy") -> DriveGroup:
@@ -162,7 +150,7 @@ class DriveGroup(ImageFields):
     def read(self) -> None:
         """Decode the TxPDO into q, qd, tau, current, states (no allocation)."""
         if self._fast is not None:
-            self._fast.read_si(*self._read_args, self._si, self.states)
+            self._fast.read_si(self._tx_bytes, self._si, self.states)
             return
         sc = self.scaling
         sc.position_to_si(self._tx_pos, self.q)
@@ -196,18 +184,10 @@ class DriveGroup(ImageFields):
     def command_position(self, q: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
         """CSP target q [rad] (n,) and optional torque feed-forward [N·m] (n,)."""
         if self._fast is not None:
-            sc = self.scaling
-            off = tau_offset is not None
-            self._fast.command_raw(
-                q,
-                sc.count_per_rad,
-                sc.zero_offset,
-                self._rx_pos,
-                tau_offset if off else q,
-                sc.permille_per_nm,
-                self._rx_off,
-                off,
-            )
+            if tau_offset is None:
+                self._fast.command_raw(q, q, self._rx_bytes, self._si, 0)  # POSITION
+            else:
+                self._fast.command_raw(q, tau_offset, self._rx_bytes, self._si, 2)  # + WITH_TAU
             return
         self.scaling.position_to_raw(q, self._rx_pos)
         if tau_offset is not None:
@@ -216,18 +196,10 @@ class DriveGroup(ImageFields):
     def command_velocity(self, qd: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
         """CSV target qd [rad/s] (n,) and optional torque feed-forward [N·m] (n,)."""
         if self._fast is not None:
-            sc = self.scaling
-            off = tau_offset is not None
-            self._fast.command_raw(
-                qd,
-                sc.count_per_rad,
-                self._zeros,
-                self._rx_vel,
-                tau_offset if off else qd,
-                sc.permille_per_nm,
-                self._rx_off,
-                off,
-            )
+            if tau_offset is None:
+                self._fast.command_raw(qd, qd, self._rx_bytes, self._si, 1)  # VELOCITY
+            else:
+                self._fast.command_raw(qd, tau_offset, self._rx_bytes, self._si, 3)  # + WITH_TAU
             return
         self.scaling.velocity_to_raw(qd, self._rx_vel)
         if tau_offset is not None:

@@ -7,6 +7,13 @@ a read, and a CSP/CSV command with its torque offset, is one call each, with the
 arithmetic as the numpy path (tests/drivers/cia402/test_cia402_kernels.py checks both agree
 exactly on random raw images and commands, saturation and NaN included).
 
+Few arguments: a compiled call pays per argument it unboxes (~0.1 µs alone, more with cold
+caches; tools/bench_kernel_args.py), and the process image's field views are strided views of
+a packed record array, one argument each. So the kernels take the images as their raw bytes
+(one contiguous uint8 view each; the fields are decoded at the byte offsets of the one PDO
+layout, :mod:`drivers.cia402.pdo`, little-endian as the layout says) and the drive group's
+SI values and constant scale rows as the rows of one float64 workspace (:data:`SI_ROWS`).
+
 The backend conventions are those of :mod:`hofto_hw.observers.kernels` (its availability,
 ``HOFTO_HW_NO_NUMBA``, compile options and warm-up are reused, so one switch decides whether
 compiled code runs anywhere): ``numpy`` (the reference), ``numba``, ``auto``. Kernels write
@@ -15,43 +22,131 @@ only into the arrays passed in and never allocate.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable
 
 import numpy as np
 
+from drivers.cia402.pdo import RXPDO_DTYPE, RXPDO_SIZE, TXPDO_DTYPE, TXPDO_SIZE
+from drivers.cia402.state_machine import STATE_FROM_STATUS
 from hofto_hw.observers.kernels import Backend, jit, resolve, warm
 
-__all__ = ["Backend", "command_raw", "read_si", "ready"]
+__all__ = [
+    "POSITION",
+    "SI_ROWS",
+    "VELOCITY",
+    "WITH_TAU",
+    "Backend",
+    "command_raw",
+    "image_bytes",
+    "layout_matches",
+    "read_si",
+    "ready",
+]
+
+#: rows of the drive group's float64 workspace (SI_ROWS, n): the read's outputs q [rad],
+#: qd [rad/s], tau [N·m], current [A], then the constant scale rows
+Q, QD, TAU, CURRENT = 0, 1, 2, 3
+#: zero offset [counts], rad/count, N·m/‰, A/‰, count/rad, ‰/N·m
+ZERO, RAD_PER_COUNT, NM_PER_PERMILLE, AMP_PER_PERMILLE, COUNT_PER_RAD, PERMILLE_PER_NM = range(
+    4, 10
+)
+SI_ROWS = 10
+
+#: :func:`command_raw`'s ``what``: the target is a position (CSP) or a velocity (CSV); with
+#: WITH_TAU set the torque offset is written too
+POSITION, VELOCITY, WITH_TAU = 0, 1, 2
 
 _I32_MIN = float(np.iinfo(np.int32).min)
 _I32_MAX = float(np.iinfo(np.int32).max)
 _I16_MIN = float(np.iinfo(np.int16).min)
 _I16_MAX = float(np.iinfo(np.int16).max)
 
+# The PDO layout and the statusword table as the kernels' compile-time constants, written
+# out here: numba bakes globals into the cached machine code and invalidates its cache only
+# when this file changes, not when drivers/cia402/pdo.py or state_machine.py do. So they are
+# literals here, checked against those modules at import (:func:`layout_matches`; a
+# mismatch runs the numpy path, and tests/drivers/cia402/test_cia402_kernels.py fails).
+_TX = 21  # TxPDO record size [bytes]
+_TX_SW, _TX_POS, _TX_VEL, _TX_TAU, _TX_CUR = 0, 3, 7, 11, 13  # u16, i32, i32, i16, i16
+_RX = 15  # RxPDO record size [bytes]
+_RX_POS, _RX_VEL, _RX_OFF = 3, 7, 13  # i32, i32, i16
+_STATE_TABLE = STATE_FROM_STATUS
+_STATE_TABLE_SHA256 = "730f61a170b27f65"  # first 16 hex digits of its bytes' SHA-256
+
+
+def layout_matches() -> bool:
+    """True when the literals above are the PDO layout of :mod:`drivers.cia402.pdo` and the
+    statusword table of :mod:`drivers.cia402.state_machine` (else the kernels would decode
+    another layout than the images have: :func:`ready` then answers numpy)."""
+    tx, rx = TXPDO_DTYPE.fields, RXPDO_DTYPE.fields
+    want = (
+        (tx, "statusword", "<u2", _TX_SW),
+        (tx, "position", "<i4", _TX_POS),
+        (tx, "velocity", "<i4", _TX_VEL),
+        (tx, "torque", "<i2", _TX_TAU),
+        (tx, "current", "<i2", _TX_CUR),
+        (rx, "target_position", "<i4", _RX_POS),
+        (rx, "target_velocity", "<i4", _RX_VEL),
+        (rx, "torque_offset", "<i2", _RX_OFF),
+    )
+    for fields, name, dtype, offset in want:
+        got = fields.get(name)
+        if got is None or got[0] != np.dtype(dtype) or got[1] != offset:
+            return False
+    digest = hashlib.sha256(np.ascontiguousarray(_STATE_TABLE).tobytes()).hexdigest()
+    return (
+        TXPDO_SIZE == _TX
+        and RXPDO_SIZE == _RX
+        and _STATE_TABLE.dtype == np.uint8
+        and digest[:16] == _STATE_TABLE_SHA256
+    )
+
+
+def image_bytes(image: np.ndarray) -> np.ndarray:
+    """The raw bytes of a process image (TXPDO_DTYPE or RXPDO_DTYPE records, shape (n,),
+    contiguous) as one uint8 view (n · record size,) sharing its memory."""
+    if image.dtype not in (TXPDO_DTYPE, RXPDO_DTYPE) or not image.flags.c_contiguous:
+        raise ValueError(f"not a contiguous process image: {image.dtype}")
+    return image.view(np.uint8)
+
 
 @jit
-def read_si(
-    pos: np.ndarray,
-    vel: np.ndarray,
-    tau_raw: np.ndarray,
-    cur: np.ndarray,
-    statusword: np.ndarray,
-    zero: np.ndarray,
-    scale: np.ndarray,
-    state_table: np.ndarray,
-    si: np.ndarray,
-    states: np.ndarray,
-) -> None:
-    """TxPDO -> SI for every axis: si rows q [rad], qd [rad/s], tau [N·m], current [A] from
-    the raw fields; scale rows rad/count, N·m/‰, A/‰; states = state_table[statusword & 0x7F].
-    """
-    for i in range(pos.shape[0]):
-        si[0, i] = (pos[i] - zero[i]) * scale[0, i]
-        si[1, i] = vel[i] * scale[0, i]
-        si[2, i] = tau_raw[i] * scale[1, i]
-        si[3, i] = cur[i] * scale[2, i]
-        states[i] = state_table[statusword[i] & 0x7F]
+def _u16(b: np.ndarray, o: int) -> int:
+    return np.int64(b[o]) | (np.int64(b[o + 1]) << 8)
+
+
+@jit
+def _i16(b: np.ndarray, o: int) -> int:
+    v = _u16(b, o)
+    return v - 65536 if v >= 32768 else v
+
+
+@jit
+def _i32(b: np.ndarray, o: int) -> int:
+    v = _u16(b, o) | (_u16(b, o + 2) << 16)
+    return v - 4294967296 if v >= 2147483648 else v
+
+
+@jit
+def _put(b: np.ndarray, o: int, v: int, size: int) -> None:
+    for k in range(size):
+        b[o + k] = (v >> (8 * k)) & 0xFF
+
+
+@jit
+def read_si(tx: np.ndarray, w: np.ndarray, states: np.ndarray) -> None:
+    """TxPDO bytes ``tx`` (n · 21,) -> SI for every axis: rows Q, QD, TAU, CURRENT of ``w``
+    (SI_ROWS, n) from the raw fields and w's scale rows; ``states`` (uint8, n) =
+    STATE_FROM_STATUS[statusword & 0x7F]."""
+    for i in range(states.shape[0]):
+        o = i * _TX
+        w[Q, i] = (_i32(tx, o + _TX_POS) - w[ZERO, i]) * w[RAD_PER_COUNT, i]
+        w[QD, i] = _i32(tx, o + _TX_VEL) * w[RAD_PER_COUNT, i]
+        w[TAU, i] = _i16(tx, o + _TX_TAU) * w[NM_PER_PERMILLE, i]
+        w[CURRENT, i] = _i16(tx, o + _TX_CUR) * w[AMP_PER_PERMILLE, i]
+        states[i] = _STATE_TABLE[_u16(tx, o + _TX_SW) & 0x7F]
 
 
 @jit
@@ -67,30 +162,28 @@ def _to_raw(x: float, lo: float, hi: float) -> float:
 
 @jit
 def command_raw(
-    target: np.ndarray,
-    counts_per_unit: np.ndarray,
-    zero: np.ndarray,
-    out: np.ndarray,
-    tau: np.ndarray,
-    permille_per_nm: np.ndarray,
-    out_tau: np.ndarray,
-    with_tau: bool,
+    target: np.ndarray, tau: np.ndarray, rx: np.ndarray, w: np.ndarray, what: int
 ) -> None:
-    """SI -> RxPDO: out (int32) = rint(target·counts_per_unit + zero), saturated; with_tau:
-    out_tau (int16) = rint(tau·permille_per_nm), saturated. A NaN becomes what numpy's cast
-    gives on x86-64 (int32 minimum; 0 for int16, its low 16 bits): the reference's value."""
+    """SI -> RxPDO bytes ``rx`` (n · 15,). ``what`` POSITION: target position (int32) =
+    rint(target·count/rad + zero), VELOCITY: target velocity = rint(target·count/rad + 0),
+    saturated; with WITH_TAU set also the torque offset (int16) = rint(tau·‰/N·m),
+    saturated (scale rows of ``w``). A NaN becomes what numpy's cast gives on x86-64 (int32
+    minimum; 0 for int16, its low 16 bits): the reference's value."""
+    velocity = (what & VELOCITY) != 0
+    at = _RX_VEL if velocity else _RX_POS
     for i in range(target.shape[0]):
-        v = _to_raw(target[i] * counts_per_unit[i] + zero[i], _I32_MIN, _I32_MAX)
-        out[i] = _I32_MIN if math.isnan(v) else v
-        if with_tau:
-            t = _to_raw(tau[i] * permille_per_nm[i], _I16_MIN, _I16_MAX)
-            out_tau[i] = 0.0 if math.isnan(t) else t
+        zero = 0.0 if velocity else w[ZERO, i]
+        v = _to_raw(target[i] * w[COUNT_PER_RAD, i] + zero, _I32_MIN, _I32_MAX)
+        _put(rx, i * _RX + at, np.int64(_I32_MIN) if math.isnan(v) else np.int64(v), 4)
+        if what & WITH_TAU:
+            t = _to_raw(tau[i] * w[PERMILLE_PER_NM, i], _I16_MIN, _I16_MAX)
+            _put(rx, i * _RX + _RX_OFF, 0 if math.isnan(t) else np.int64(t), 2)
 
 
 def ready(backend: Backend, call: Callable[[], object]) -> bool:
     """True when ``backend`` resolves to the compiled kernels and ``call`` (the caller's
     kernels on scratch copies of its own arrays, so the exact signatures compile now,
     outside any loop) succeeds; False means: run the numpy path."""
-    if resolve(backend) != "numba":
+    if resolve(backend) != "numba" or not layout_matches():
         return False
     return warm(call)

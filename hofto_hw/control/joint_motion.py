@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hofto_hw.control.kernels import path_arg, path_blend, ramp_step
+from hofto_hw.control.kernels import path_evaluator, path_workspace, ramp_step
 from hofto_hw.observers import kernels
 from hofto_hw.observers.kernels import Backend
 
@@ -80,13 +80,14 @@ class DemoPath:
         self._s = np.zeros(n)
         self._c = np.zeros(n)
         self._arg = np.zeros(n)
+        self._k = path_workspace(self.a, self.w, self.phi, self.offset)  # the compiled call's
         self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
 
     def _warm(self) -> None:
         z = np.zeros(self.a.shape[0])
-        path_arg(self.w, self.phi, 0.5, self._arg)
-        path_blend(self.a, self.w, self.offset, z, z, 0.5, 0.5, 0.5, z, self._s, self._c, self._arg)
+        self._eval = path_evaluator()  # one call, or four where libm's sines are not numpy's
+        self._eval(self._k.copy(), 0.5, 0.5, 0.5, 0.5, z, self._s, self._c, self._arg)
         self._arg.fill(0.0)
         self._s.fill(0.0)
         self._c.fill(0.0)
@@ -99,10 +100,7 @@ class DemoPath:
         b, bd, bdd = FADED_IN if t >= ramp else fade_in(t, ramp)
         s, c, arg = self._s, self._c, self._arg
         if self._use_kernel:
-            path_arg(self.w, self.phi, t, arg)
-            np.sin(arg, out=s)
-            np.cos(arg, out=c)
-            path_blend(self.a, self.w, self.offset, s, c, b, bd, bdd, q0, q, qd, qdd)
+            self._eval(self._k, t, b, bd, bdd, q0, q, qd, qdd)
             return
         np.multiply(self.w, t, out=arg)
         arg += self.phi

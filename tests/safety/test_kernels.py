@@ -9,6 +9,7 @@ except under CI (a missing numba is then a failure).
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from support.compiled import require_compiled_kernels
 
 from hofto_hw.config.safety import StopCategories
@@ -65,7 +66,11 @@ def _limit_monitor(backend: str) -> LimitMonitor:
     )
 
 
-def test_limit_monitor_backends_report_the_same() -> None:
+@pytest.mark.parametrize("packed", [False, True], ids=["separate arrays", "rows of one block"])
+def test_limit_monitor_backends_report_the_same(packed: bool) -> None:
+    """``packed``: q, qd, tau reach the compiled monitor as consecutive rows of one 2-D
+    array (as the drive group's are: the scan then reads that block in place), else as
+    separate arrays (the scan reads the monitor's copy)."""
     rng = np.random.default_rng(7)
     ref, fast = _limit_monitor("numpy"), _limit_monitor("numba")
     assert ref.backend == "numpy" and fast.backend == "numba"
@@ -75,6 +80,8 @@ def test_limit_monitor_backends_report_the_same() -> None:
     ref.reset(start)
     fast.reset(start)
     reported = 0
+    block = np.zeros((5, N))  # the sample in rows 1..3, as a caller's workspace holds it
+    rows = block[1], block[2], block[3]
     for k in range(TICKS):
         if k % 500 == 0:  # a reset, as the tick does after a fault reset
             s_ref, s_fast = Recorder(), Recorder()
@@ -101,7 +108,12 @@ def test_limit_monitor_backends_report_the_same() -> None:
         tracking = bool(rng.random() < 0.8)
         gap = float(rng.choice([0.0, 0.0, rng.uniform(0.0, 0.05)]))  # a stall's allowance
         ref.check(s_ref, q, qd, tau, q_cmd, fresh, tracking, gap)
-        fast.check(s_fast, q.copy(), qd.copy(), tau.copy(), q_cmd.copy(), fresh, tracking, gap)
+        if packed:
+            block[1:4] = q, qd, tau
+            fast.check(s_fast, *rows, q_cmd.copy(), fresh, tracking, gap)
+            assert fast._block.base is block  # the scan read the caller's rows in place
+        else:
+            fast.check(s_fast, q.copy(), qd.copy(), tau.copy(), q_cmd.copy(), fresh, tracking, gap)
         assert _same(s_ref.calls, s_fast.calls), k
         assert s_ref.latched == s_fast.latched and s_ref.category == s_fast.category
         np.testing.assert_array_equal(ref.q_prev, fast.q_prev)

@@ -131,3 +131,50 @@ def test_compiled_read_and_commands_do_not_allocate(pair: tuple[DriveGroup, Driv
     tracemalloc.stop()
     assert after - before < 500  # nothing kept per call
     assert peak - before < 2000  # no arrays created per call
+
+
+def test_the_sample_is_one_block_the_limit_monitor_reads_in_place(
+    pair: tuple[DriveGroup, DriveGroup],
+) -> None:
+    """q, qd, tau stay views of one workspace across reads: safety's compiled limit scan
+    then takes them as one (3, n) argument instead of copying them."""
+    from safety.limits import _rows_of_one_block
+
+    for g in pair:
+        q, qd, tau = g.q, g.qd, g.tau
+        g.read()
+        assert g.q is q and g.qd is qd and g.tau is tau
+        block = _rows_of_one_block(q, qd, tau)
+        assert block is not None and np.shares_memory(block, g.sample)
+        np.testing.assert_array_equal(block, g.sample)
+
+
+def test_image_bytes_refuses_what_is_not_a_contiguous_process_image() -> None:
+    from drivers.cia402.kernels import image_bytes
+    from drivers.cia402.pdo import new_rx, new_tx
+
+    tx = new_tx(4)
+    assert image_bytes(tx).shape == (4 * tx.dtype.itemsize,)
+    assert np.shares_memory(image_bytes(tx), tx)
+    with pytest.raises(ValueError, match="not a contiguous process image"):
+        image_bytes(new_rx(6)[::2])
+    with pytest.raises(ValueError, match="not a contiguous process image"):
+        image_bytes(np.zeros(6))
+
+
+def test_the_kernels_literal_layout_is_the_pdo_modules(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled read/command bake the PDO byte offsets and the statusword table into
+    their cached machine code (numba does not see changes in other files): the literals in
+    drivers/cia402/kernels.py must be pdo.py's and state_machine.py's, and a group whose
+    layout differs runs the numpy path instead of decoding the wrong bytes."""
+    from drivers.cia402 import kernels
+
+    assert kernels.layout_matches()
+    monkeypatch.setattr(kernels, "_TX_VEL", 8)
+    assert not kernels.layout_matches()
+    monkeypatch.undo()
+    table = kernels._STATE_TABLE.copy()
+    table[5] ^= 1
+    monkeypatch.setattr(kernels, "_STATE_TABLE", table)
+    assert not kernels.layout_matches()
+    assert not kernels.ready("numba", lambda: None)

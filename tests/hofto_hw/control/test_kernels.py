@@ -7,9 +7,11 @@ CI (a missing numba is then a failure).
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from support.compiled import require_compiled_kernels
 
 from hofto_hw.control.joint_motion import MOVE, RAMP_DOWN, DemoPath, JointMotion
+from hofto_hw.control.kernels import _path_eval_numpy_trig, libm_trig_is_numpys, path_eval
 
 require_compiled_kernels()
 
@@ -51,6 +53,34 @@ def test_demo_path_is_bit_identical() -> None:
         fast.evaluate(float(t), q0, *out_fast)
         for a, b in zip(out_ref, out_fast, strict=True):
             assert _identical(a, b), t
+
+
+@pytest.mark.parametrize("trig", ["libm", "numpy"])
+def test_both_compiled_path_calls_give_the_reference(trig: str) -> None:
+    """The one-call path (libm's sines) and the four-call one (numpy's): the latter bit for
+    bit everywhere, the former bit for bit where libm_trig_is_numpys() says so (it is what
+    DemoPath picks then), else within 1e-12 (numpy's own SIMD sines, e.g. AVX-512)."""
+    rng = np.random.default_rng(4)
+    ref, fast = _motion("numpy").path, _motion("numba").path
+    assert ref is not None and fast is not None
+    fast._eval = path_eval if trig == "libm" else _path_eval_numpy_trig
+    exact = trig == "numpy" or libm_trig_is_numpys()
+    q0 = rng.normal(0.0, 1.0, N)
+    out_ref = [np.zeros(N) for _ in range(3)]
+    out_fast = [np.zeros(N) for _ in range(3)]
+    times = np.concatenate([np.linspace(-0.1, 1.0, 1101), rng.uniform(0.0, 1e5, 3000)])
+    for t in times:
+        ref.evaluate(float(t), q0, *out_ref)
+        fast.evaluate(float(t), q0, *out_fast)
+        for a, b in zip(out_ref, out_fast, strict=True):
+            if exact:
+                assert _identical(a, b), t
+            else:
+                np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12)
+    q0[2] = np.nan  # a non-finite start pose goes through both alike
+    ref.evaluate(2.0, q0, *out_ref)
+    fast.evaluate(2.0, q0, *out_fast)
+    assert _identical(out_ref[0], out_fast[0])
 
 
 def test_motion_update_is_bit_identical_through_mode_changes() -> None:
