@@ -231,6 +231,7 @@ class Tick:
         self._keep_sample(g.q, g.qd, g.tau)
         for obs in self.observers:
             obs.reset(g.q, g.qd)
+        self._check_bank()
         self.limits.reset(g.q)
         if self.collision is not None:
             self.collision.reset()
@@ -399,6 +400,13 @@ class Tick:
                 self._bank.update(h)
         self._keep_sample(q, qd, tau)
 
+    def _check_bank(self) -> None:
+        """After the observers' reset (start-up, a reset: never in a running tick): the bank
+        addresses its owners' arrays, so an owner that rebound one gets a new bank rather
+        than a bank that goes on integrating the arrays it dropped."""
+        if not self._bank.bound():
+            self._bank = ObserverBank(self.observers, self.snapshot, self.tau_ext)
+
     def _keep_sample(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
         g = self.group
         if q is g.q and qd is g.qd and tau is g.tau:
@@ -470,6 +478,7 @@ class Tick:
         self.snapshot.reset_memory()
         for obs in self.observers:
             obs.reset(g.q, g.qd)
+        self._check_bank()
         self._judge_from = self.tick + 1 + self.settle_ticks
         self.limits.reset(g.q)
         if self.collision is not None:

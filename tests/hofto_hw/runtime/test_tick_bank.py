@@ -43,3 +43,35 @@ def test_the_banked_tick_equals_the_per_observer_tick_over_stalls() -> None:
     finally:
         fused.close()
         alone.close()
+
+
+@pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
+def test_an_observer_that_rebinds_its_state_on_reset_gets_a_new_bank() -> None:
+    """The bank writes its owners' arrays by address: when a reset hands an observer new
+    arrays, the tick builds a new bank instead of integrating the dropped ones."""
+    cfg = load_config(CONFIG)
+    system = build(cfg, clock="sim", contact=False)
+    try:
+        tick = system.tick
+        momentum = tick.observers[tick.names.index("momentum")]
+        plain_reset = momentum.reset
+
+        def rebinding_reset(q: np.ndarray, qd: np.ndarray) -> None:
+            momentum.r = np.zeros_like(momentum.r)  # a new array, not the bank's
+            plain_reset(q, qd)
+
+        momentum.reset = rebinding_reset
+        period = 1.0 / system.rate_hz
+        tick.mode_request = MOVE
+        for k in range(1, 301):
+            tick.step(k * period, period, 0.0, 0, 0.0)
+        old_bank = tick._bank
+        tick.start()  # resets every observer: momentum rebinds r
+        assert tick._bank is not old_bank and tick._bank.bound()
+        assert tick._bank.fused == old_bank.fused
+        for k in range(301, 401):
+            tick.step(k * period, period, 0.0, 0, 0.0)
+        row = tick.tau_ext[tick.names.index("momentum")]
+        np.testing.assert_array_equal(row, momentum.r)  # the bank integrates the new array
+    finally:
+        system.close()
