@@ -94,15 +94,15 @@ def test_nan_in_measurement(cfg: SystemConfig) -> None:
 
 def test_nan_from_the_model(cfg: SystemConfig) -> None:
     system = _moving(cfg)
-    obs = system.tick.observers[1]
-    original = obs.update_snapshot  # the tick updates observers from its shared snapshot
-    bad = np.full(6, np.nan)
+    bank = system.tick._bank  # the tick's observers write their rows of tau_ext through it
+    original = bank.update
 
-    def update_snapshot(snap: Any, dt: float) -> Any:
-        obs.update_snapshot = original
-        return bad
+    def update(dt: float) -> None:
+        bank.update = original
+        original(dt)
+        system.tick.tau_ext[1].fill(np.nan)  # observer 1's estimate turns non-finite, once
 
-    obs.update_snapshot = update_snapshot
+    bank.update = update
     _check(system, Fault.NON_FINITE, cfg.safety.categories.non_finite)
 
 
