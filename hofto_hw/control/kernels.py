@@ -41,6 +41,29 @@ def path_arg(w: np.ndarray, phi: np.ndarray, t: float, arg: np.ndarray) -> None:
 
 
 @jit
+def _blend_joint(
+    a: float,
+    w: float,
+    offset: float,
+    s: float,
+    c: float,
+    b: float,
+    bd: float,
+    bdd: float,
+    bd2: float,
+    nb: float,
+    q0: float,
+) -> tuple[float, float, float]:
+    """One joint of the demo path: q, qd, qdd from amplitude, ω, offset, s = sin(arg),
+    c = cos(arg), the fade-in b, b', b'' (bd2 = 2·b', nb = -b) and the start q0, in the
+    operation order of the numpy reference."""
+    f = a * s - offset
+    aw = a * w
+    fd = aw * c
+    return f * b + q0, fd * b + f * bd, aw * w * s * nb + fd * bd2 + f * bdd
+
+
+@jit
 def path_blend(
     a: np.ndarray,
     w: np.ndarray,
@@ -60,12 +83,9 @@ def path_blend(
     bd2 = 2.0 * bd
     nb = -b
     for j in range(q.shape[0]):
-        f = a[j] * s[j] - offset[j]
-        aw = a[j] * w[j]
-        fd = aw * c[j]
-        qdd[j] = aw * w[j] * s[j] * nb + fd * bd2 + f * bdd
-        qd[j] = fd * b + f * bd
-        q[j] = f * b + q0[j]
+        q[j], qd[j], qdd[j] = _blend_joint(
+            a[j], w[j], offset[j], s[j], c[j], b, bd, bdd, bd2, nb, q0[j]
+        )
 
 
 @jit
@@ -88,14 +108,19 @@ def path_eval(
     for j in range(q.shape[0]):
         w = k[OMEGA, j]
         arg = w * t + k[PHASE, j]
-        s = math.sin(arg)
-        a = k[AMPLITUDE, j]
-        f = a * s - k[OFFSET, j]
-        aw = a * w
-        fd = aw * math.cos(arg)
-        qdd[j] = aw * w * s * nb + fd * bd2 + f * bdd
-        qd[j] = fd * b + f * bd
-        q[j] = f * b + q0[j]
+        q[j], qd[j], qdd[j] = _blend_joint(
+            k[AMPLITUDE, j],
+            w,
+            k[OFFSET, j],
+            math.sin(arg),
+            math.cos(arg),
+            b,
+            bd,
+            bdd,
+            bd2,
+            nb,
+            q0[j],
+        )
 
 
 def _path_eval_numpy_trig(

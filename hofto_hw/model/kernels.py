@@ -140,14 +140,9 @@ def friction(qd: np.ndarray, W: np.ndarray) -> None:
 
 
 @jit
-def snapshot_terms(
-    q: np.ndarray, qd: np.ndarray, tau: np.ndarray, C: np.ndarray, W: np.ndarray
-) -> bool:
-    """The snapshot's arithmetic around pinocchio: is the sample finite (the sum of q, qd and
-    tau, as the numpy path's check); if so, with ``W[FLAGS] & FRICTION_TERM`` the friction
-    ``W[F]`` = f(qd) and ``W[TOTAL]`` = tau - f, with ``& CORIOLIS_T_TERM`` ``W[CT]`` = Cᵀ·qd
-    (C (n, n) evaluated at this sample). Returns the finiteness; W is untouched (held-friction
-    memory included) for a non-finite sample."""
+def sample_finite(q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> bool:
+    """Whether q, qd and tau are all finite, by the finiteness of their sums (the numpy
+    path's check: one NaN or inf anywhere makes a sum non-finite)."""
     acc = 0.0
     for j in range(q.shape[0]):
         acc += q[j]
@@ -157,7 +152,19 @@ def snapshot_terms(
     acc3 = 0.0
     for j in range(tau.shape[0]):
         acc3 += tau[j]
-    if not math.isfinite(acc + acc2 + acc3):
+    return math.isfinite(acc + acc2 + acc3)
+
+
+@jit
+def snapshot_terms(
+    q: np.ndarray, qd: np.ndarray, tau: np.ndarray, C: np.ndarray, W: np.ndarray
+) -> bool:
+    """The snapshot's arithmetic around pinocchio: is the sample finite (the sum of q, qd and
+    tau, as the numpy path's check); if so, with ``W[FLAGS] & FRICTION_TERM`` the friction
+    ``W[F]`` = f(qd) and ``W[TOTAL]`` = tau - f, with ``& CORIOLIS_T_TERM`` ``W[CT]`` = Cᵀ·qd
+    (C (n, n) evaluated at this sample). Returns the finiteness; W is untouched (held-friction
+    memory included) for a non-finite sample."""
+    if not sample_finite(q, qd, tau):
         return False
     n = qd.shape[0]
     flags = int(W[FLAGS, 0])
@@ -194,16 +201,7 @@ def snapshot_native(
     ``W[FLAGS] >> NATIVE_SHIFT`` into O (n + 4, n): rows 0..n-1 M, n g, n+1 nle, n+2 the ABA
     acceleration for tau - f, n+3 Cᵀ·qd. Returns the finiteness; W and O are untouched for a
     non-finite sample."""
-    acc = 0.0
-    for j in range(q.shape[0]):
-        acc += q[j]
-    acc2 = 0.0
-    for j in range(qd.shape[0]):
-        acc2 += qd[j]
-    acc3 = 0.0
-    for j in range(tau.shape[0]):
-        acc3 += tau[j]
-    if not math.isfinite(acc + acc2 + acc3):
+    if not sample_finite(q, qd, tau):
         return False
     n = qd.shape[0]
     flags = int(W[FLAGS, 0])
