@@ -4,9 +4,10 @@ exchange -> joint state (SI) -> dynamics snapshot -> observers -> safety -> cont
 command -> record.
 
 The dynamics snapshot (:class:`~hofto_hw.model.snapshot.DynamicsSnapshot`, built by the
-composition root for the union of the observers' ``needs``) is computed once per tick; every
-observer reads it through ``update_snapshot`` (the same numbers as each observer's own
-``update``, which replay and the demo use).
+composition root for the union of the observers' ``needs``) is computed once per tick; the
+observers read it through one :class:`~hofto_hw.observers.bank.ObserverBank` (one compiled
+call for every observer it can fuse, each estimate written into its row of ``tau_ext``; the
+same numbers as each observer's own ``update``, which replay and the demo use).
 
 The :class:`Tick` owns every buffer it writes; the loop (hofto_hw/runtime/loop.py) calls
 :meth:`Tick.step` once per cycle with the real dt. Requests from other threads (stop, reset,
@@ -137,7 +138,7 @@ class Tick:
         self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
         self.tau_ff = np.zeros(n)
         #: the motion's version that tau_ff was evaluated for (-1: evaluate on the next tick),
-        #: and the model's friction and payload objects it was evaluated with
+        #: and the model's revision, friction and payload objects it was evaluated with
         self._ff_version = -1
         m = feedforward.model
         self._ff_model = (m.revision, m.friction, m.payload)
