@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import gc
 import json
+import math
 import os
 import select
 import socket
@@ -64,6 +65,11 @@ class EmulatedNetwork:
         ]
         self.drives = drives
         self.n = n
+        #: the true arm's (t, q, qd) at every plant step until ``_trace_until`` [s of plant
+        #: time] (requests ``trace`` / ``push`` with ``trace``; read by ``trace_read``): a
+        #: client sees every cycle however rarely it is scheduled to ask
+        self._trace: list[tuple[float, list[float], list[float]]] = []
+        self._trace_until = -math.inf
         self.frames = 0
         self.process_frames = 0
         self.dropped = 0
@@ -125,6 +131,9 @@ class EmulatedNetwork:
             if not s.pull_outputs(rx_u8[i]):
                 rx_u8[i] = 0
         self.drives.step(self.rx)
+        plant = self.drives.plant
+        if plant.t <= self._trace_until:
+            self._trace.append((plant.t, plant.q.tolist(), plant.qd.tolist()))
         self._push_inputs()
         codes = self.drives.tx["error_code"]
         np.not_equal(codes, self._last_error, out=self._changed)
@@ -163,7 +172,9 @@ class EmulatedNetwork:
         (slave); ``position_jump`` (slave, offset [rad]: the reported position jumps by it
         and stays off; 0 restores); ``push`` (force [N] (3,) world frame at the tool,
         duration [s], ramp [s]: a hand on the true arm from now; answers its start ``t`` [s]
-        of plant time); ``sdo_abort`` (slave,
+        of plant time; with ``trace`` [s] also a trace from then); ``trace`` (seconds: record
+        the true arm's t, q, qd at every plant step for that long from now); ``trace_read``
+        (the trace so far: t, q, qd lists, ``done`` once its time is over); ``sdo_abort`` (slave,
         index, sub (-1 = all), code; code 0 removes); ``refuse_state`` (slave, state, code;
         code 0 removes); ``al_error`` (slave, code: the slave drops to SAFE-OP, or stays
         lower, with the error flag and this code);
@@ -191,7 +202,20 @@ class EmulatedNetwork:
                 self.drives.push_tool(
                     request["force"], float(request["duration"]), float(request.get("ramp", 0.02))
                 )
+                if "trace" in request:
+                    self._start_trace(float(request["trace"]))
                 return {"ok": True, "t": float(self.drives.plant.t)}  # the push's start [s]
+            elif op == "trace":
+                if self.drives is None:
+                    raise ValueError("no drives on this network")
+                self._start_trace(float(request["seconds"]))
+                return {"ok": True, "t": float(self.drives.plant.t)}
+            elif op == "trace_read":
+                if self.drives is None:
+                    raise ValueError("no drives on this network")
+                t, q, qd = zip(*self._trace, strict=True) if self._trace else ((), (), ())
+                done = self.drives.plant.t > self._trace_until
+                return {"ok": True, "t": list(t), "q": list(q), "qd": list(qd), "done": done}
             elif op == "position_jump":
                 if self.drives is None:
                     raise ValueError("no drives on this network")
@@ -233,6 +257,12 @@ class EmulatedNetwork:
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             return {"ok": False, "error": f"{op}: {exc}"}
         return {"ok": True}
+
+    def _start_trace(self, seconds: float) -> None:
+        if not (math.isfinite(seconds) and 0.0 < seconds <= 60.0):
+            raise ValueError(f"trace seconds {seconds} not in (0, 60]")
+        self._trace = []
+        self._trace_until = self.drives.plant.t + seconds
 
     def _slave_index(self, value: Any) -> int:
         i = int(value)

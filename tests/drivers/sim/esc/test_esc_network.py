@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import struct
 
+import numpy as np
 from esc_helpers import make_desc
 
 from drivers.sim.esc import datagram as dg
@@ -63,3 +64,35 @@ def test_malformed_frames_are_counted_and_not_answered() -> None:
     frame = bytearray(_brd()[:20])
     assert not net.handle(frame, len(frame))
     assert net.malformed == 1
+
+
+def test_a_trace_records_the_true_arm_at_every_plant_step(er3a_config) -> None:
+    """``trace`` (and ``push`` with ``trace``) record t, q, qd at every plant step for the
+    asked time, whatever the client's polling; ``trace_read`` returns them."""
+    from hofto_hw.runtime.build import build_emulated_network
+
+    net = build_emulated_network(er3a_config)
+    dt = net.drives.dt
+    reply = net.control(
+        {"op": "push", "force": [5.0, 0, 0], "duration": 0.01, "ramp": 0.002, "trace": 0.02}
+    )
+    assert reply["ok"]
+    t0 = reply["t"]
+    for _ in range(10):
+        net.step()
+    partial = net.control({"op": "trace_read"})
+    assert partial["ok"] and not partial["done"] and len(partial["t"]) == 10
+    for _ in range(30):
+        net.step()
+    tr = net.control({"op": "trace_read"})
+    assert tr["done"]
+    t = np.array(tr["t"])
+    np.testing.assert_allclose(np.diff(t), dt, rtol=1e-9)  # every step, none twice
+    assert t[0] > t0 and t[-1] <= t0 + 0.02 + 1e-12 and t[-1] > t0 + 0.02 - dt
+    assert np.array(tr["q"]).shape == (len(t), net.n) == np.array(tr["qd"]).shape
+    assert net.drives.plant.t > t[-1] + 5 * dt  # the plant went on, the trace did not
+    for bad in (0.0, -1.0, float("nan"), 61.0):
+        assert "trace seconds" in net.control({"op": "trace", "seconds": bad})["error"]
+    assert (
+        "no drives" in EmulatedNetwork([make_desc()], None).control({"op": "trace_read"})["error"]
+    )
