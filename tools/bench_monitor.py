@@ -32,7 +32,7 @@ from hofto_hw.config import load_config  # noqa: E402
 from hofto_hw.model import RobotModel  # noqa: E402
 from hofto_hw.observers import kernels  # noqa: E402
 from hofto_hw.replay.thresholds import read_thresholds  # noqa: E402
-from safety.collision import CollisionLevels, CollisionMonitor  # noqa: E402
+from safety.collision import COLLIDED, CollisionLevels, CollisionMonitor  # noqa: E402
 from safety.stop import StopController  # noqa: E402
 
 DT = 1e-3
@@ -84,7 +84,7 @@ def _levels_case(cfg, model, backend: str, ticks: int, qd, tau, qdd, q) -> dict:
     def call(k: int) -> None:
         nonlocal trips
         stop.begin_tick(k + 1)
-        trips += mon.update(stop, tau[k], q, qd[k], qdd[k], DT)
+        trips += mon.update(stop, tau[k], q, qd[k], qdd[k], DT) & COLLIDED
 
     stats, grown = _time(call, ticks)
     return {"backend": mon.backend, **stats, "alloc_bytes": grown, "build_s": build_s}

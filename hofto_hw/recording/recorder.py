@@ -96,8 +96,9 @@ class FlightRecorder:
         Path(self.spec.path).parent.mkdir(parents=True, exist_ok=True)
         self._block = sh.SharedBlock(self.tick_dtype, self.caps, create=True)
         b = self._block
-        # bound methods of the rings: the loop's push is one attribute call
-        self._push_tick, self._push_event, self._push_diag = (
+        # the rings' own push as instance attributes (they shadow the methods below): the
+        # loop's sink.push_tick(rec) is then one Python frame, the ring's
+        self.push_tick, self.push_event, self.push_diag = (  # type: ignore[method-assign]
             b.ticks.push,
             b.events.push,
             b.diags.push,
@@ -143,7 +144,7 @@ class FlightRecorder:
             self._proc.kill()
             self._proc.wait()
         self._final = self.health()
-        self._push_tick = self._push_event = self._push_diag = _discard  # type: ignore[assignment]
+        self.push_tick = self.push_event = self.push_diag = _discard  # type: ignore[method-assign]
         self._block.close()
         return self._final
 
@@ -154,17 +155,19 @@ class FlightRecorder:
         self.close()
 
     # ---------------------------------------------------------------- RecordSink
+    # :meth:`start` replaces these three by the rings' own ``push`` (``Ring.push``: the copy
+    # into a slot, then the publish; False and counted when full), :meth:`close` by a discard
     def push_tick(self, rec: np.ndarray) -> None:
         """Copy one tick record (0-d, ``self.tick_dtype``) into the ring."""
-        self._push_tick(rec)
+        raise RuntimeError("flight recorder not started")
 
     def push_event(self, rec: np.ndarray) -> None:
         """Copy one event record (0-d, EVENT_DTYPE) into the ring."""
-        self._push_event(rec)
+        raise RuntimeError("flight recorder not started")
 
     def push_diag(self, rec: np.ndarray) -> None:
         """Copy one diagnostics record (0-d, DIAG_DTYPE) into the ring."""
-        self._push_diag(rec)
+        raise RuntimeError("flight recorder not started")
 
     @property
     def dropped(self) -> int:

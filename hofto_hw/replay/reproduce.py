@@ -193,6 +193,7 @@ def replay_levels(
     """First tick (index) CollisionLevels decides a collision on ``estimates`` (N, k, n),
     judged only on the ticks the run judged (``monitored``), and its joints; over the
     observers' interval where the log has it (``sample_dt``), as the loop did."""
+    from safety.collision import COLLIDED
     from safety.stop import StopController
 
     assert log.monitored is not None and log.qdd_cmd is not None
@@ -203,7 +204,7 @@ def replay_levels(
         if not log.monitored[k]:
             continue
         stop.begin_tick(int(log.ticks[k]))
-        if levels.update(stop, estimates[k], log.q[k], log.qd[k], log.qdd_cmd[k], h[k]):
+        if levels.update(stop, estimates[k], log.q[k], log.qd[k], log.qdd_cmd[k], h[k]) & COLLIDED:
             return k, [int(j) for j in np.flatnonzero(levels.collision_joints)]
     return None, []
 

@@ -44,7 +44,7 @@ from hofto_hw.recording.record import (
 from hofto_hw.runtime.teach import FINISHED, RECORDING
 from hofto_hw.runtime.tick_kernels import ESTIMATES_FINITE, POWER_ON, tick_flags, tick_flags_numpy
 from safety.bus_health import BusHealth
-from safety.collision import CollisionLevels
+from safety.collision import COLLIDED, CONTACT, CollisionLevels
 from safety.limits import LimitMonitor
 from safety.stop import NO_CATEGORY, EventKind, Fault, StopController
 
@@ -58,6 +58,7 @@ MAX_SUBSTEPS = 250  # observer steps over one stalled gap at most (cost: one ste
 FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
 _DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
 #: the power stage is on (a quick-stop ramp keeps it on until each axis rests)
+_COLLIDED_OR_CONTACT = COLLIDED | CONTACT  # the monitor's flags
 _POWERED = np.array([_OE, _QSA], dtype=np.uint8)
 
 
@@ -317,9 +318,9 @@ class Tick:
             mdt = obs_dt if obs_dt > 0.0 else dt
             c = self.collision
             est = self._monitored(True) if dragging else self.tau_ext
-            collided = c.update(stop, est, q, qd, motion.qdd, mdt)
+            flags = c.update(stop, est, q, qd, motion.qdd, mdt)
             if self._learn is not None and not dragging and stop.category == -1:
-                if not (collided or c.contact):  # contact-free motion: friction error
+                if not flags & _COLLIDED_OR_CONTACT:  # contact-free motion: friction error
                     self._learn(qd, self._drag_est, mdt)
         if missed or self.overrun_streak:
             self._overrun(missed)

@@ -52,8 +52,12 @@ allocates.
 from safety.collision.monitor import CollisionLevels
 from safety.collision.params import MonitorParams, from_levels_config, from_thresholds
 from safety.collision.single import CollisionMonitor
+from safety.collision.state import COLLIDED, CONTACT, NONFINITE
 
 __all__ = [
+    "COLLIDED",
+    "CONTACT",
+    "NONFINITE",
     "CollisionLevels",
     "CollisionMonitor",
     "MonitorParams",

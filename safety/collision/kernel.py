@@ -26,6 +26,7 @@ F_QD_PREV, F_ACCEL, F_MOVING, F_REVERSAL, F_STILL, F_QD_OK = 0, 1, 2, 3, 4, 5
 ST_STARTED, ST_PHASE_LEFT, ST_ACCEL_PHASE = 0, 1, 2
 L_THR, L_RATIO, L_ABOVE, L_BELOW = 0, 1, 2, 3
 LOGIC_ANY, LOGIC_ALL, LOGIC_MEAN = 0, 1, 2
+COLLIDED, CONTACT, NONFINITE = 1, 2, 4
 
 
 @_jit
@@ -38,9 +39,10 @@ def monitor_tick(
     qdd: np.ndarray,
     dt: float,
     tick: int,
-) -> None:
+) -> int:
     """One tick on the packed state (safety/collision/state.py MonitorState.fbuf/bbuf):
-    tau (k, n) [N·m], qd (n,) [rad/s], qdd (n,) [rad/s²], dt [s], tick (first crossings)."""
+    tau (k, n) [N·m], qd (n,) [rad/s], qdd (n,) [rad/s²], dt [s], tick (first crossings).
+    Returns the tick's flags (state.py ``flags_of``): COLLIDED | CONTACT | NONFINITE."""
     k = tau.shape[0]
     n = qd.shape[0]
     per_level = 6 * k * n + 4 * (k + 1) * n
@@ -71,6 +73,12 @@ def monitor_tick(
         par, scal, deciding, feat, sst, lev, joints, bad, row_hit, level_joints, hits,
         first_tick, tau, qd, qdd, dt, tick,
     )  # fmt: skip
+    flags = COLLIDED if hits[L - 1] else 0
+    if L > 1 and hits[0]:
+        flags |= CONTACT
+    if hits[L]:
+        flags |= NONFINITE
+    return flags
 
 
 @_jit

@@ -13,7 +13,17 @@ from safety.collision import params as P
 from safety.collision.kernel import monitor_tick as _kernel
 from safety.collision.params import MonitorParams
 from safety.collision.reference import NumpyStep
-from safety.collision.state import F_ACCEL, F_MOVING, F_REVERSAL, F_STILL, MonitorState
+from safety.collision.state import (
+    COLLIDED,
+    CONTACT,
+    F_ACCEL,
+    F_MOVING,
+    F_REVERSAL,
+    F_STILL,
+    NONFINITE,
+    MonitorState,
+    flags_of,
+)
 from safety.stop import EventKind, Fault, StopController
 
 Backend = Literal["numpy", "numba", "auto"]
@@ -171,34 +181,41 @@ class CollisionLevels:
         tau_ext: np.ndarray,
         q: np.ndarray,
         qd: np.ndarray,
-        qdd_ref: np.ndarray,
+        qdd_ref: np.ndarray | None,
         dt: float,
-    ) -> bool:
-        """One loop tick: estimates (k, n) [N·m], measured q, qd, reference acceleration (n,),
-        dt [s]. Reports COLLISION (latched by ``stop``), NON_FINITE and CONTACT (rising edge)
-        events; returns ``collision``."""
-        hits = self._hits
-        collision = self.step(tau_ext, qd, qdd_ref, dt, stop.tick)
-        contact = self._contact_level >= 0 and (hits[0] or self._was_contact)
-        if collision or hits[self.L] or contact:
-            self._report(stop, collision)
+    ) -> int:
+        """One loop tick: estimates (k, n) [N·m], measured q, qd, reference acceleration (n,)
+        (None: nominal phase), dt [s]. Reports COLLISION (latched by ``stop``), NON_FINITE and
+        CONTACT (rising edge) events; returns the tick's flags (safety.collision.state):
+        ``COLLIDED`` (the collision level decided), ``CONTACT`` (the contact level decided),
+        ``NONFINITE``; 0 on the common path. One compiled call when the kernel runs."""
+        if qdd_ref is None:
+            qdd_ref = self._zero_qdd
+        if self._use_kernel:
+            s = self.state
+            f = _kernel(s.fbuf, s.bbuf, s.first_tick, tau_ext, qd, qdd_ref, dt, stop.tick)
+        else:
+            self._numpy(tau_ext, qd, qdd_ref, dt, stop.tick)
+            f = flags_of(self._hits)
+        if f or self._was_contact:
+            self._report(stop, f)
         if self._tool is not None:
             self.tool_force_value = self._tool.check(tau_ext, q)
             if self.tool_force_value > self.tool_force:  # type: ignore[operator]
                 stop.report(Fault.COLLISION, -1, self.tool_force_value)
-        return collision
+        return f
 
-    def _report(self, stop: StopController, collision: bool) -> None:
-        """Something happened: tell the stop controller (Python, off the common path)."""
-        hits, L = self._hits, self.L
-        if hits[L]:
+    def _report(self, stop: StopController, flags: int) -> None:
+        """Something happened (``flags`` of :meth:`update`): tell the stop controller
+        (Python, off the common path)."""
+        if flags & NONFINITE:
             j = int(np.argmax(self.nonfinite))
             stop.report(Fault.NON_FINITE, j, float("nan"))
-        if collision:
+        if flags & COLLIDED:
             j = int(np.argmax(self.collision_joints))
-            stop.report(Fault.COLLISION, j, self._max_ratio(L - 1, j))
+            stop.report(Fault.COLLISION, j, self._max_ratio(self.L - 1, j))
         if self._contact_level >= 0:
-            contact = bool(hits[0])
+            contact = flags & CONTACT != 0
             if contact and not self._was_contact:
                 j = int(np.argmax(self.contact_joints))
                 stop.note(EventKind.CONTACT, j, self._max_ratio(0, j))

@@ -28,6 +28,20 @@ F_QD_PREV, F_ACCEL, F_MOVING, F_REVERSAL, F_STILL, F_QD_OK = range(6)
 ST_STARTED, ST_PHASE_LEFT, ST_ACCEL_PHASE = range(3)
 # lev planes
 L_THR, L_RATIO, L_ABOVE, L_BELOW = range(4)
+# a tick's flags (CollisionLevels.update's answer): the collision level decided, the contact
+# level decided (only with two levels), an estimate or the velocity was non-finite
+COLLIDED, CONTACT, NONFINITE = 1, 2, 4
+
+
+def flags_of(hits: np.ndarray) -> int:
+    """The flags of ``hits`` (L + 1,) bool (the compiled kernel computes the same)."""
+    L = hits.shape[0] - 1
+    flags = COLLIDED if hits[L - 1] else 0
+    if L > 1 and hits[0]:
+        flags |= CONTACT
+    if hits[L]:
+        flags |= NONFINITE
+    return flags
 
 
 class MonitorState:

@@ -175,3 +175,39 @@ def test_compiled_update_allocates_nothing() -> None:
     grown = tracemalloc.get_traced_memory()[1] - before
     tracemalloc.stop()
     assert grown < 2000  # bytes: no array per tick
+
+
+@pytest.mark.parametrize("logic", ["any", "mean"])
+def test_update_flags_agree_and_say_what_the_state_says(logic: str) -> None:
+    """update's one int (COLLIDED | CONTACT | NONFINITE) from either backend: the same, tick by
+    tick, as the state's own answers; the stop controllers see the same events."""
+    cfg, rows = _levels_cfg(logic), ["hofto", "momentum", "eso"]
+    tau, qd, qdd, dt = _inputs(len(rows), seed=11)
+    q = np.zeros(N)
+    seen: dict[str, list[int]] = {}
+    stops = {}
+    for be in ("numpy", "numba"):
+        mon = CollisionLevels(cfg, rows, backend=be)
+        stop = StopController.from_config(StopCategories())
+        flags = []
+        for i in range(STEPS):
+            stop.begin_tick(i)
+            f = mon.update(stop, tau[i], q, qd[i], qdd[i], dt[i])
+            assert bool(f & S.COLLIDED) == mon.collision
+            assert bool(f & S.CONTACT) == mon.contact
+            assert bool(f & S.NONFINITE) == mon.fault_nonfinite
+            flags.append(f)
+        seen[be], stops[be] = flags, stop
+    assert seen["numpy"] == seen["numba"]
+    f = np.array(seen["numpy"])
+    for bit in (S.COLLIDED, S.CONTACT, S.NONFINITE):
+        assert (f & bit).any() and not (f & bit).all(), bit  # the run exercised each flag
+    a, b = stops["numpy"].events, stops["numba"].events
+    assert a.count == b.count > 0
+    for name in ("tick", "kind", "joint", "category"):
+        np.testing.assert_array_equal(getattr(a, name)[: a.count], getattr(b, name)[: b.count])
+    np.testing.assert_allclose(b.value[: b.count], a.value[: a.count], rtol=TOL, atol=TOL)
+
+
+def test_flag_bits_match_the_state() -> None:
+    assert (K.COLLIDED, K.CONTACT, K.NONFINITE) == (S.COLLIDED, S.CONTACT, S.NONFINITE)

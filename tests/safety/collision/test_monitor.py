@@ -12,7 +12,7 @@ from pydantic import ValidationError
 from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.safety import CollisionLevelsConfig, StopCategories
 from hofto_hw.control.wrench import ToolJacobian
-from safety.collision import CollisionLevels, CollisionMonitor, from_thresholds
+from safety.collision import COLLIDED, CollisionLevels, CollisionMonitor, from_thresholds
 from safety.stop import Fault, StopController
 
 DT = 1e-3
@@ -32,7 +32,8 @@ def _levels(**kw) -> CollisionLevelsConfig:
 def _tick(mon: CollisionLevels, stop: StopController, est, n: int = 2, q=None) -> bool:
     stop.begin_tick(stop.tick + 1)
     z = np.zeros(n)
-    return mon.update(stop, np.asarray(est, float), z if q is None else q, z, z, DT)
+    flags = mon.update(stop, np.asarray(est, float), z if q is None else q, z, z, DT)
+    return bool(flags & COLLIDED)
 
 
 @pytest.mark.parametrize(
