@@ -119,6 +119,15 @@ def build_key(cxx_version: str, prefix: Path) -> str:
     return h.hexdigest()[:16]
 
 
+def _intact(lib: Path, digest: Path) -> bool:
+    """The library's bytes are the ones its build recorded (a cache file cut short or
+    overwritten is built again instead of loaded)."""
+    try:
+        return hashlib.sha256(lib.read_bytes()).hexdigest() == digest.read_text().strip()
+    except OSError:
+        return False
+
+
 def library(build: bool = True, say=None) -> Path:
     """The path of the built library, building it now if needed (and ``build``).
 
@@ -131,7 +140,8 @@ def library(build: bool = True, say=None) -> Path:
     folder = cache_dir()
     lib = folder / f"libhofto_dyn-{key}.so"
     failed = folder / f"{key}.failed"
-    if lib.is_file():
+    digest = folder / f"{key}.sha256"  # the library's hash, written before the library
+    if lib.is_file() and _intact(lib, digest):
         return lib
     if failed.is_file():
         raise BuildError(f"the build failed before (see {failed})")
@@ -145,7 +155,11 @@ def library(build: bool = True, say=None) -> Path:
     with lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # another process may be building it right now
         if lib.is_file():
-            return lib
+            if _intact(lib, digest):
+                return lib
+            # loading a truncated or damaged shared library crashes the process (SIGBUS)
+            if say is not None:
+                say(f"the cached {lib.name} does not match its build record; building it again")
         if failed.is_file():
             raise BuildError(f"the build failed before (see {failed})")
         if say is not None:
@@ -165,6 +179,7 @@ def library(build: bool = True, say=None) -> Path:
             detail = "timed out" if res is None else "\n".join(res.stderr.splitlines()[-40:])
             failed.write_text(" ".join(cmd) + "\n" + detail + "\n")
             raise BuildError(f"compiling {SOURCE.name} failed (see {failed})")
+        digest.write_text(hashlib.sha256(tmp.read_bytes()).hexdigest() + "\n")
         os.replace(tmp, lib)
         (folder / f"{key}.info").write_text(
             f"{' '.join(cmd)}\n{version}\nbuilt in {time.monotonic() - t0:.1f} s\n"

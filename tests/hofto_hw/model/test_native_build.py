@@ -93,3 +93,23 @@ def test_no_compiler_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     monkeypatch.setenv("CXX", str(tmp_path / "no-such-compiler"))
     with pytest.raises(build.BuildError, match=r"no C\+\+ compiler"):
         build.library()
+
+
+def test_a_damaged_cached_library_is_built_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A cached library cut short or overwritten is never loaded (a truncated shared library
+    crashes the process that maps it): its hash differs from the build's record, so it is
+    built again, with one line saying why."""
+    monkeypatch.setenv("CXX", str(_compiler(tmp_path)))
+    monkeypatch.setenv("HOFTO_HW_NATIVE_CACHE", str(tmp_path / "cache"))
+    lib = build.library()
+    assert _calls(tmp_path) == 1
+    assert build.library() == lib and _calls(tmp_path) == 1  # intact: the cache answers
+    lib.write_bytes(b"li")  # cut short
+    said: list[str] = []
+    assert build.library(say=said.append) == lib
+    assert _calls(tmp_path) == 2 and lib.read_text() == "lib"
+    assert any("does not match its build record" in line for line in said)
+    next((tmp_path / "cache").glob("*.sha256")).unlink()  # a library without its record
+    assert build.library() == lib and _calls(tmp_path) == 3
