@@ -15,6 +15,9 @@ import math
 import numpy as np
 
 from hofto_hw.observers.kernels import _jit  # one jit policy (cache, read-only fallback)
+from safety.collision.state import flags_of
+
+_flags_of = _jit(flags_of)  # the numpy path's own function, compiled: one definition
 
 # indices repeated from params.py / state.py as plain ints (numba reads module globals as
 # compile-time constants); tests/safety/collision/test_kernel.py checks they agree
@@ -73,12 +76,7 @@ def monitor_tick(
         par, scal, deciding, feat, sst, lev, joints, bad, row_hit, level_joints, hits,
         first_tick, tau, qd, qdd, dt, tick,
     )  # fmt: skip
-    flags = COLLIDED if hits[L - 1] else 0
-    if L > 1 and hits[0]:
-        flags |= CONTACT
-    if hits[L]:
-        flags |= NONFINITE
-    return flags
+    return _flags_of(hits)
 
 
 @_jit
