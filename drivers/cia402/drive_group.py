@@ -152,10 +152,8 @@ class DriveGroup(ImageFields):
     # ------------------------------------------------------------ hot path (tick)
 
     def read(self) -> None:
-        """Decode the TxPDO into q, qd, tau, current, states (no allocation)."""
-        if self._fast is not None:
-            self._fast.read_si(self._tx_bytes, self._si, self.states)
-            return
+        """Decode the TxPDO into q, qd, tau, current, states (no allocation): the numpy
+        reference; with the compiled backend the instance's ``read`` is the kernel itself."""
         sc = self.scaling
         sc.position_to_si(self._tx_pos, self.q)
         sc.velocity_to_si(self._tx_vel, self.qd)

@@ -98,12 +98,8 @@ class ModelData:
         (hofto_hw.model.native), when the native library is built here; else nothing."""
         from hofto_hw.model import native
 
-        if not native.ready():
-            return
-        try:
-            nm = native.NativeModel(self.model)
-        except ValueError as exc:  # a joint the native library does not know
-            native.say_once(f"native dynamics not used: {exc}")
+        nm = native.model_for(self.model)
+        if nm is None:
             return
         z, W, fn = np.zeros(self.n), self._W, mk.inverse_dynamics_native
         if kernels.warm(lambda: fn(z, z, z, W.copy(), np.zeros(self.n), nm.handle)):

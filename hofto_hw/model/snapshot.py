@@ -186,13 +186,9 @@ class DynamicsSnapshot:
         (hofto_hw.model.native), when the native library is built here; else nothing."""
         from hofto_hw.model import native
 
-        if not native.ready():
-            return
         n, needs = self.n, self.needs
-        try:
-            nm = native.NativeModel(self.model)
-        except ValueError as exc:  # a joint the native library does not know
-            native.say_once(f"native dynamics not used: {exc}")
+        nm = native.model_for(self.model)
+        if nm is None:
             return
         terms = (
             (native.MASS if needs & Needs.MASS else 0)

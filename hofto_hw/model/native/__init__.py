@@ -151,6 +151,18 @@ def model_numbers(model: RobotModel) -> dict[str, np.ndarray]:
     }
 
 
+def model_for(model: RobotModel) -> NativeModel | None:
+    """A :class:`NativeModel` of ``model`` when the library is ready here (building it if
+    needed) and knows every joint of ``model``; else None, with one line said once."""
+    if not ready():
+        return None
+    try:
+        return NativeModel(model)
+    except ValueError as exc:  # a joint the native library does not know
+        say_once(f"native dynamics not used: {exc}")
+        return None
+
+
 class NativeModel:
     """One C++ pinocchio Model + Data for ``model`` (its own workspace, like pinocchio's Data:
     one per consumer). ``handle`` is the address the kernels take; :meth:`sync` rebuilds it
@@ -191,10 +203,3 @@ class NativeModel:
     def stale(self) -> bool:
         """True when the model's parameters changed since the handle was made."""
         return self.model.revision != self.revision
-
-
-def ensure() -> None:
-    """Build (if needed) and load the library now; raise RuntimeError with the reason if it
-    cannot be had (for ``python -m hofto_hw.model.native`` and tests)."""
-    if not ready():
-        raise RuntimeError(unavailable_reason())

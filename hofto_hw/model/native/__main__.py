@@ -1,5 +1,5 @@
 """``python -m hofto_hw.model.native``: build the native dynamics library now (once per machine;
-CI runs it before the tests so that no test waits for the compiler)."""
+the test session's start does the same, tests/conftest.py)."""
 
 import sys
 
