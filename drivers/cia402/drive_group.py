@@ -165,10 +165,17 @@ class DriveGroup(ImageFields):
         """Exchange the process image, then :meth:`read`. Returns the transport status
         (0 = ok) and sets :attr:`fresh` (new TxPDO data this cycle) and :attr:`stale_cycles`.
         """
+        status = self.exchange()
+        self.read()
+        return status
+
+    def exchange(self) -> int:
+        """Exchange the process image without reading it (:meth:`cycle` without
+        :meth:`read`; the tick's fused call reads it). Returns the transport status and sets
+        :attr:`fresh` and :attr:`stale_cycles` as :meth:`cycle` does."""
         self.status = status = self.transport.exchange()
         self.fresh = fresh = status == STATUS_OK
         self.stale_cycles = 0 if fresh else self.stale_cycles + 1
-        self.read()
         return status
 
     @property

@@ -17,6 +17,7 @@ mode) are plain attributes the tick reads: one writer each, no locks.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 
 import numpy as np
@@ -41,6 +42,38 @@ from hofto_hw.recording.record import (
     new_record,
     tick_dtype,
 )
+from hofto_hw.runtime.fused import (
+    CONTROL,
+    DONE,
+    HOLD_STILL,
+    MONITOR,
+    MOVE_PATH,
+    OTHER,
+    R_COMP,
+    R_DT,
+    R_EXPECT,
+    R_FFSTALE,
+    R_FINITE,
+    R_JUDGE,
+    R_KIND,
+    R_MFLAGS,
+    R_MODE,
+    R_OBS_DT,
+    R_REC_MON,
+    R_SDT,
+    R_SINCE,
+    R_SIZE,
+    R_T,
+    R_T0,
+    R_TCMD,
+    R_TICK,
+    R_WAKE,
+    R_WAS_CONTACT,
+    READ,
+    FusedTick,
+    fused_tick,
+)
+from hofto_hw.runtime.fused import say_once as fused_say_once
 from hofto_hw.runtime.teach import FINISHED, RECORDING
 from hofto_hw.runtime.tick_kernels import ESTIMATES_FINITE, POWER_ON, tick_flags, tick_flags_numpy
 from safety.bus_health import BusHealth
@@ -101,6 +134,7 @@ class Tick:
         drag_row: int = 0,
         period: float = 0.0,
         backend: Backend = "numpy",
+        fuse: bool = True,
     ) -> None:
         n = group.n
         self.n = n
@@ -136,6 +170,9 @@ class Tick:
         self._prev = np.zeros((3, n))  # last tick's q, qd, tau (interpolation start)
         self._interp = np.zeros((3, n))  # one substep's q, qd, tau
         self.tau_ext = np.zeros((max(1, len(self.observers)), n))
+        #: the fused call's register (fused.py R_*): the tick's scalars it reads and writes;
+        #: R_REC_MON is the record's ``monitored`` (written when it changes) on both paths
+        self._reg = np.zeros(R_SIZE)
         self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
         self.tau_ff = np.zeros(n)
         #: the motion's version that tau_ff was evaluated for (-1: evaluate on the next tick),
@@ -211,7 +248,6 @@ class Tick:
         self._tau_mon = np.zeros_like(self.tau_ext)  # the collision monitor's input
         self._wrench = r["wrench"]
         self._wrench_set = False  # the record's wrench holds a drag estimate (else all NaN)
-        self._rec_monitored = False  # the record's ``monitored`` (written when it changes)
         self._qdd_rec = self._r["qdd_cmd"]
         #: the tick's flags call (tick_kernels.py): compiled with the record fill, else numpy
         self._flags = tick_flags if self._fill_kernel else tick_flags_numpy
@@ -220,6 +256,24 @@ class Tick:
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
+        # the common tick as one compiled call (fused.py): built on the arrays above, taken
+        # only on ticks where nothing unusual can happen (_fuse_refresh keeps _fuse_quiet)
+        self._fz: FusedTick | None = None
+        self._fuse_quiet = False
+        self._fz_kind = OTHER
+        self._fz_rev, self._fz_fr, self._fz_pl = -1, None, None
+        self._cmd_dt = 0.0
+        self.fused_ticks = 0  # ticks the fused call finished
+        self._fz_call = fused_tick
+        if fuse and os.environ.get("HOFTO_HW_NO_FUSE", "") not in ("", "0"):
+            fuse = False
+            fused_say_once("the tick runs without its fused call: HOFTO_HW_NO_FUSE is set")
+        if fuse and self.backend == "numba":
+            fz = FusedTick(self)
+            if fz.ok:
+                self._fz, self._fz_tab = fz, fz.tab
+            else:
+                fused_say_once("the tick runs without its fused call: " + fz.why)
 
     # --------------------------------------------------------------- start-up
 
@@ -239,22 +293,54 @@ class Tick:
             self.collision.reset()
         self.expect_enabled = g.all_in(State.OPERATION_ENABLED)
         self._judge_from = self.tick + 1 + self.settle_ticks
+        self._fuse_refresh()
 
     # ------------------------------------------------------------------ the tick
 
     def step(self, t: float, dt: float, wakeup_us: float, missed: int, compute_us: float) -> None:
         """One cycle at loop time ``t`` [s], ``dt`` [s] since the last tick (the real one after a
-        stall), ``missed`` deadlines before this tick, timings of the loop [µs]."""
-        g, stop, motion = self.group, self.stop, self.motion
+        stall), ``missed`` deadlines before this tick, timings of the loop [µs].
+
+        When nothing unusual can happen this tick, sections 2-7 run as one compiled call
+        (:mod:`hofto_hw.runtime.fused`, the same kernels in the same order); it answers the
+        stage where this reference code takes over for the rest of the tick."""
+        g, stop = self.group, self.stop
         self.tick += 1
         self.t = t
         stop.begin_tick(self.tick)
         if self.script is not None:
-            self.script.step(self)
+            self.script.step(self)  # may change anything: the fused call's checks again
+            self._fuse_refresh(rebuild=False)
 
-        # 1. exchange and 2. joint state in SI (views of the drive group's buffers)
-        status = g.cycle()
-        fresh = g.fresh
+        # 1. exchange
+        status = g.exchange()
+        stage = READ
+        if self._fuse_quiet and not (
+            status or missed or stop.active or self.stop_requested or self.log_failure
+            or self.reset_requested or self.mode_request >= 0 or self.script is not None
+        ):  # fmt: skip
+            stage = self._fused_step(dt, wakeup_us, compute_us)
+        if stage == READ:
+            self._front(dt)  # 2. joint state, 3. snapshot and observers, 3b. drag
+        if stage < MONITOR:
+            self._safety(status, dt)  # 4. safety: decides, latches, picks the stop category
+        elif stage == MONITOR:
+            self._monitor_flagged()  # the fused monitor flagged: its report, then on
+        if stage < CONTROL:
+            self._requests(missed)  # 4 (end): overruns, requests, reset, stop measurement
+        if stage < DONE:
+            self._control()  # 5. controller and 6. command (acting the stop category)
+            self._record(status, wakeup_us, compute_us)  # 7. the record into the sink
+            self._fuse_refresh()
+        else:
+            self._push()  # 7. the record (filled by the fused call) into the sink
+
+    # ------------------------------------------------------------ the tick's stages
+
+    def _front(self, dt: float) -> None:
+        """Sections 2-3b: the joint state in SI, the snapshot and the observers, the drag."""
+        g = self.group
+        g.read()  # the SI views of the drive group's buffers
         q, qd, tau = g.q, g.qd, g.tau
 
         # 3. the model terms of this sample, once for every estimator, and 3a. the observers
@@ -263,27 +349,30 @@ class Tick:
         # own clock, and an emulated arm moves one cycle per exchange however late the master
         # wakes; a lost frame brings no sample, the next one spans the gap), else the master's
         # dt. A repeated sample integrated as new reads as a contact to HOFTO
-        snap = self.snapshot
         sample_dt = self._transport.sample_dt
         obs_dt = 0.0  # held over a lost sample (logged: flight-log replay integrates the same)
         if sample_dt >= 0.0:
             obs_dt = sample_dt if sample_dt > 0.0 else dt
-            self._observe(snap, q, qd, tau, obs_dt)
+            self._observe(self.snapshot, q, qd, tau, obs_dt)
         self.sample_dt = obs_dt  # into the record with the rest (_record)
-        cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
+        self._cmd_dt = cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
         self.t_cmd += cmd_dt
 
         # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
         # safety's to latch below); the reference it integrates is used in step 5
-        dragging = motion.mode == DRAG
-        if dragging:
+        if self.motion.mode == DRAG:
             self._drag_observe(q, qd, cmd_dt)
         elif self._wrench_set:
             self._wrench.fill(np.nan)
             self._wrench_set = False
 
-        # 4. safety: decides, latches, picks the stop category
-        good = self.bus.check(stop, status, fresh, g.states, self.err_codes, self.expect_enabled)
+    def _safety(self, status: int, dt: float) -> None:
+        """Section 4 up to the collision monitor's decision (and the friction learning)."""
+        g, stop, motion, snap = self.group, self.stop, self.motion, self.snapshot
+        q, qd, tau = g.q, g.qd, g.tau
+        obs_dt = self.sample_dt
+        dragging = motion.mode == DRAG
+        good = self.bus.check(stop, status, g.fresh, g.states, self.err_codes, self.expect_enabled)
         lim = self.limits
         # a finite snapshot sample means q, qd, tau are all finite (their sum is): the per-array
         # checks, which name the joint, run only when something is not
@@ -307,8 +396,10 @@ class Tick:
         # only while the power stage is on (quick-stop ramps included)
         power_on = not self.enabling and flags & POWER_ON != 0
         monitored = self.collision is not None and ok and trusted and settled and power_on
-        if monitored != self._rec_monitored:
-            self._rec_monitored = monitored = bool(monitored)
+        reg = self._reg
+        if monitored != (reg[R_REC_MON] != 0.0):
+            monitored = bool(monitored)
+            reg[R_REC_MON] = 1.0 if monitored else 0.0
             self.tick_rec["monitored"] = monitored  # replay judges the same ticks
         if monitored:
             # only while the power stage is on (quick-stop ramps included): with it off the
@@ -319,9 +410,28 @@ class Tick:
             c = self.collision
             est = self._monitored(True) if dragging else self.tau_ext
             flags = c.update(stop, est, q, qd, motion.qdd, mdt)
-            if self._learn is not None and not dragging and stop.category == -1:
-                if not flags & _COLLIDED_OR_CONTACT:  # contact-free motion: friction error
-                    self._learn(qd, self._drag_est, mdt)
+            self._learn_step(flags, mdt)
+
+    def _monitor_flagged(self) -> None:
+        """The fused call's monitor flagged (or a contact was on): what CollisionLevels.update
+        does after its kernel, then the rest of :meth:`_safety`."""
+        reg, c = self._reg, self.collision
+        self.bus.streak = 0  # good data (what bus.check did on it)
+        self._since_fresh = 0.0
+        flags = int(reg[R_MFLAGS])
+        c._report(self.stop, flags)  # type: ignore[union-attr]
+        obs_dt = self.sample_dt
+        self._learn_step(flags, obs_dt if obs_dt > 0.0 else reg.item(R_DT))
+
+    def _learn_step(self, flags: int, mdt: float) -> None:
+        """The friction's error learned from contact-free motion (not dragging, no stop)."""
+        if self._learn is not None and self.motion.mode != DRAG and self.stop.category == -1:
+            if not flags & _COLLIDED_OR_CONTACT:  # contact-free motion: friction error
+                self._learn(self.group.qd, self._drag_est, mdt)
+
+    def _requests(self, missed: int) -> None:
+        """The end of section 4: overruns, requests from other threads, the stop's timing."""
+        stop = self.stop
         if missed or self.overrun_streak:
             self._overrun(missed)
         if self.stop_requested:
@@ -333,9 +443,13 @@ class Tick:
         if self.reset_requested:
             self._reset()
         if self._measuring or stop.first_tick == self.tick:
-            self._measure_stop(q, qd)
+            self._measure_stop(self.group.q, self.group.qd)
 
-        # 5. controller and 6. command (acting the stop category)
+    def _control(self) -> None:
+        """Sections 5 (controller) and 6 (command, acting the stop category)."""
+        g, stop, motion = self.group, self.stop, self.motion
+        q, qd = g.q, g.qd
+        cmd_dt = self._cmd_dt
         cat = stop.category
         if cat == 0 or cat == 1:
             self.expect_enabled = False
@@ -374,8 +488,108 @@ class Tick:
             self._ff_version = -1  # tau_ff holds the hand's torque: evaluate it again
         g.command_position(motion.q, self.tau_ff)
 
-        # 7. copy into the log sink (and motion.q into q_sent, with the record's q_cmd)
-        self._record(status, wakeup_us, compute_us)
+    # ----------------------------------------------------------- the fused call
+
+    def _fused_step(self, dt: float, wakeup_us: float, compute_us: float) -> int:
+        """The fused call (hofto_hw/runtime/fused.py) on this tick's scalars; its stage code.
+        The register's other entries are kept by :meth:`_fuse_refresh`."""
+        r = self._reg
+        r[R_T] = self.t
+        r[R_DT] = dt
+        r[R_SDT] = self._transport.sample_dt
+        r[R_TCMD] = self.t_cmd
+        r[R_SINCE] = self._since_fresh
+        r[R_TICK] = self.tick
+        r[R_WAKE] = wakeup_us
+        r[R_COMP] = compute_us
+        m = self.feedforward.model
+        if not (m.revision == self._fz_rev and m.friction is self._fz_fr):
+            return READ  # a model change: the reference takes it (and refreshes)
+        if m.payload is not self._fz_pl:
+            return READ
+        stage = self._fz_call(self._fz_tab, r, self._rec1)
+        if stage == READ:
+            return READ
+        self.sample_dt = r.item(R_OBS_DT)
+        self.t_cmd = r.item(R_TCMD)
+        if stage == DONE:
+            self.bus.streak = 0  # good data (what bus.check did on it)
+            self._since_fresh = 0.0
+            if self._fz_kind == MOVE_PATH:  # the path wrote the reference
+                motion = self.motion
+                motion.version += 1
+                self._ff_version = motion.version
+            self.fused_ticks += 1
+            return DONE
+        self.snapshot.finite = r.item(R_FINITE) != 0.0
+        self._cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
+        if stage == CONTROL:
+            self.bus.streak = 0
+            self._since_fresh = 0.0
+        return stage
+
+    def _fuse_refresh(self, rebuild: bool = True) -> None:
+        """After a tick the fused call did not finish, at start and after a script's step:
+        whether the next one may take it, and the register's slow scalars (off the common
+        path). ``rebuild``: check the table still addresses its owners' arrays (a reset may
+        have given the observers a new bank)."""
+        fz = self._fz
+        if fz is None:
+            return
+        if self._bank is not fz.bank or (rebuild and not fz.bound()):
+            self._fz = fz = FusedTick(self)  # a new bank (a reset), or an array rebound
+            if not fz.ok:
+                fused_say_once("the tick runs without its fused call: " + fz.why)
+                self._fz = None
+                self._fuse_quiet = False
+                return
+            self._fz_tab = fz.tab
+        stop, m, g, snap = self.stop, self.motion, self.group, self.snapshot
+        model = self.feedforward.model
+        ff = self.feedforward
+        synced = (
+            snap.model is model
+            and snap._fr_src is model.friction
+            and snap._native.revision == model.revision  # type: ignore[union-attr]
+            and ff._fr_src is model.friction
+            and ff._native.revision == model.revision  # type: ignore[union-attr]
+            and self._ff_model == (model.revision, model.friction, model.payload)
+        )
+        self._fz_rev, self._fz_fr, self._fz_pl = model.revision, model.friction, model.payload
+        self._fuse_quiet = bool(
+            synced
+            and stop.latched == 0
+            and stop.category == NO_CATEGORY
+            and not self.enabling
+            and not self._measuring
+            and not self.drag_reason
+            and not self._wrench_set
+            and self.recording is None
+            and self.playback is None
+            and self._fault_resetting == 0
+            and self.overrun_streak == 0
+            and m.mode != DRAG
+            and snap.q is g.q
+            and snap.qd is g.qd
+            and snap.tau is g.tau
+            and m.version == self._ff_version
+        )
+        if m.mode == HOLD and m._still:
+            kind = HOLD_STILL
+        elif m.mode == MOVE and fz.path_ok and m.path is fz.path:
+            kind = MOVE_PATH
+        else:
+            kind = OTHER
+        self._fz_kind = kind
+        r = self._reg
+        r[R_KIND] = kind
+        r[R_T0] = m.t0
+        r[R_MODE] = m.mode
+        r[R_EXPECT] = 1.0 if self.expect_enabled else 0.0
+        r[R_JUDGE] = self._judge_from
+        c = self.collision
+        r[R_WAS_CONTACT] = 1.0 if c is not None and c._was_contact else 0.0
+        r[R_FFSTALE] = 0.0
 
     # ------------------------------------------------------------- tick helpers
 
@@ -665,7 +879,12 @@ class Tick:
             )  # fmt: skip
         else:
             self._fill_numpy(status, wakeup_us, compute_us)
-        self.sink.push_tick(r)
+        self._push()
+
+    def _push(self) -> None:
+        """The filled tick record into the sink, with the new events (and every
+        ``diag_every`` ticks the diagnostics)."""
+        self.sink.push_tick(self.tick_rec)
         ev = self.stop.events
         while self._events_pushed < ev.count:
             i = self._events_pushed % ev.capacity

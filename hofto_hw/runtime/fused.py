@@ -1,0 +1,405 @@
+"""The tick's common path as one compiled call (numba), calling the parts' own kernels.
+
+:func:`fused_tick` does, for a tick where nothing unusual can happen, what
+:meth:`hofto_hw.runtime.tick.Tick.step` does after the exchange, in the same order and through
+the same kernels (not copies of them): the drive read (``read_si``), the dynamics snapshot
+(``snapshot_native``), the observers (``bank_update``), the tick's flags (``tick_flags``), the
+drive scan (``drive_scan``), the limit checks (``limits_quiet``), the collision monitor
+(``monitor_tick``), the friction learning (``friction_learn``), the demo path (``path_eval``),
+the feed-forward (``inverse_dynamics_native``), the command (``command_raw``) and the record
+fill (``fill_tick``). The flight recorder's push stays in Python (the tick's sink).
+
+When a part finds something that is not quiet, the kernel returns the stage where the Python
+reference takes over for the rest of the SAME tick (the :data:`STAGES` codes); it has not
+written anything the reference redoes from there (every earlier stage is done as the reference
+would have done it, every later one untouched).
+
+Arguments: one int64 table of addresses and sizes (``A_*``; :class:`FusedTick` builds it from
+the tick's own arrays, as the observer bank does, and :meth:`FusedTick.bound` checks they are
+still the arrays their owners hold), one float64 register of the tick's scalars (``R_*``) and
+the tick record (a one-element structured array).
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from drivers.cia402.kernels import command_raw, read_si
+from hofto_hw.control.kernels import friction_learn, path_eval
+from hofto_hw.model.kernels import inverse_dynamics_native, snapshot_native
+from hofto_hw.observers import kernels as K
+from hofto_hw.observers.kernels import bank_update
+from hofto_hw.recording.kernels import fill_tick
+from hofto_hw.runtime.tick_kernels import ESTIMATES_FINITE, POWER_ON, tick_flags
+from safety.collision.kernel import monitor_tick
+from safety.kernels import drive_scan, limits_quiet
+
+if TYPE_CHECKING:
+    from hofto_hw.runtime.tick import Tick
+
+#: stage codes (fused_tick's answer): where the Python reference goes on with this tick
+READ = 0  # only the drive read was done: the reference from the snapshot on (section 3)
+SAFETY = 1  # sections 1-3b done: the reference from the safety checks on (section 4)
+MONITOR = 2  # the monitor ran and flagged: its report, then the reference from there on
+CONTROL = 3  # section 4 done, nothing reported: the reference from the controller on (5)
+DONE = 4  # everything but the sink's push (and the diagnostics record)
+STAGES = ("read", "safety", "monitor", "control", "done")
+
+# the table (int64): addresses [A_*] and sizes
+(A_N, A_K, A_TX, A_TXLEN, A_SI, A_SIROWS, A_STATES, A_SW, A_SWROWS, A_SO, A_SH, A_BTAB,
+ A_BROWS, A_BCOLS, A_TAUEXT, A_POWERED, A_NPOW, A_QDD, A_QDDREC, A_FAULTMIN, A_OPEN, A_LIMW,
+ A_LIMROWS, A_LIMCOLS, A_QSENT, A_COLL, A_FBUF, A_FLEN, A_BBUF, A_BLEN, A_FIRST, A_LEARN,
+ A_DRAGEST, A_LS, A_LB, A_LST, A_LEVERY, A_PK, A_PKROWS, A_Q0, A_MQ, A_MQD, A_MQDD, A_IDW,
+ A_IDWROWS, A_TAUFF, A_IDH, A_RX, A_RXLEN, A_PREV) = range(50)  # fmt: skip
+A_SIZE = 50
+
+# the register (float64): inputs, the tick's kept scalars, constants, outputs
+(R_T, R_DT, R_SDT, R_TCMD, R_SINCE, R_TICK, R_JUDGE, R_EXPECT, R_KIND, R_FFSTALE, R_WAKE,
+ R_COMP, R_WAS_CONTACT, R_REC_MON, R_PERIOD, R_STALL, R_T0, R_RAMP, R_VS, R_LTAU, R_LMIN,
+ R_MODE, R_OBS_DT, R_FINITE, R_MFLAGS, R_FF, R_MON) = range(27)  # fmt: skip
+R_SIZE = 27
+
+#: R_KIND: the motion's update this tick (HOLD_STILL: nothing to write; MOVE_PATH: the
+#: compiled demo path; OTHER: the reference runs the controller)
+HOLD_STILL, MOVE_PATH, OTHER = 0, 1, 2
+
+if K.available():
+    import numba as _nb
+    from numba.core import types as _types
+    from numba.extending import intrinsic as _intrinsic
+
+    def _pointer(nbtype: Any) -> Any:
+        @_intrinsic
+        def at(typingctx, address):  # type: ignore[no-untyped-def]
+            if not isinstance(address, _types.Integer):
+                return None
+            sig = _types.CPointer(nbtype)(address)
+
+            def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+                return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
+
+            return sig, codegen
+
+        return at
+
+    _f64 = _pointer(_types.float64)
+    _u8 = _pointer(_types.uint8)
+    _i64 = _pointer(_types.int64)
+    _b1 = _pointer(_types.boolean)
+    _carray = _nb.carray
+else:  # never called without numba; keeps the module importable
+
+    def _f64(address: int) -> int:
+        return address
+
+    _u8 = _i64 = _b1 = _f64
+
+    def _carray(address: int, shape: Any) -> np.ndarray:
+        raise RuntimeError("numba is not available")
+
+
+@K.jit
+def fused_tick(a: np.ndarray, r: np.ndarray, rec: np.ndarray) -> int:
+    """One tick's common path (module docstring) on the table ``a``, register ``r`` and the
+    tick record ``rec`` (1,). Returns the stage code where the reference goes on."""
+    n = a[A_N]
+    # 1-2. the drive read (the exchange is the caller's)
+    si = _carray(_f64(a[A_SI]), (a[A_SIROWS], n))
+    states = _carray(_u8(a[A_STATES]), (n,))
+    read_si(_carray(_u8(a[A_TX]), (a[A_TXLEN],)), si, states)
+    sample = si[:3]
+    q, qd, tau = si[0], si[1], si[2]
+    dt = r[R_DT]
+    sdt = r[R_SDT]
+    if sdt < 0.0:
+        return READ  # a lost sample: the reference holds the observers
+    obs_dt = sdt if sdt > 0.0 else dt
+    if not obs_dt <= r[R_STALL]:
+        return READ  # a stall: the reference integrates the gap in sub-steps
+    # 3. snapshot and observers
+    finite = snapshot_native(
+        q,
+        qd,
+        tau,
+        _carray(_f64(a[A_SW]), (a[A_SWROWS], n)),
+        _carray(_f64(a[A_SO]), (n + 4, n)),
+        a[A_SH],
+    )
+    tau_ext = _carray(_f64(a[A_TAUEXT]), (a[A_K], n))
+    btab = _carray(_i64(a[A_BTAB]), (a[A_BROWS], a[A_BCOLS]))
+    bank_update(btab, q, qd, tau, finite, obs_dt)
+    prev = _carray(_f64(a[A_PREV]), (3, n))
+    for i in range(3):
+        for j in range(n):
+            prev[i, j] = sample[i, j]
+    period = r[R_PERIOD]
+    cmd_dt = dt if period <= 0.0 or dt <= period else period
+    t_cmd = r[R_TCMD] + cmd_dt
+    r[R_TCMD] = t_cmd
+    r[R_OBS_DT] = obs_dt
+    r[R_FINITE] = 1.0 if finite else 0.0
+    # 4. safety (good data: the caller checked the status; no fault latched or active)
+    expect = r[R_EXPECT] != 0.0
+    if drive_scan(states, a[A_FAULTMIN], a[A_OPEN] if expect else -1) >= 0:
+        return SAFETY
+    if not finite:
+        return SAFETY
+    mqdd = _carray(_f64(a[A_MQDD]), (n,))
+    flags = tick_flags(
+        tau_ext,
+        states,
+        _carray(_u8(a[A_POWERED]), (a[A_NPOW],)),
+        mqdd,
+        _carray(_f64(a[A_QDDREC]), (n,)),
+    )
+    if not flags & ESTIMATES_FINITE:
+        return SAFETY
+    q_sent = _carray(_f64(a[A_QSENT]), (n,))
+    gap = r[R_SINCE] + dt - period if period > 0.0 else 0.0
+    limw = _carray(_f64(a[A_LIMW]), (a[A_LIMROWS], a[A_LIMCOLS]))
+    if limits_quiet(sample, q_sent, limw, 1 + 2 * expect, gap if gap > 1e-9 else 0.0) == 0:
+        return SAFETY
+    settled = r[R_TICK] >= r[R_JUDGE]
+    monitored = a[A_COLL] != 0 and settled and flags & POWER_ON != 0
+    mon = 1.0 if monitored else 0.0
+    r[R_MON] = mon
+    if mon != r[R_REC_MON]:
+        r[R_REC_MON] = mon
+        rec[0].monitored = monitored
+    r[R_MFLAGS] = 0.0
+    if monitored:
+        mdt = obs_dt if obs_dt > 0.0 else dt
+        f = monitor_tick(
+            _carray(_f64(a[A_FBUF]), (a[A_FLEN],)),
+            _carray(_b1(a[A_BBUF]), (a[A_BLEN],)),
+            _carray(_i64(a[A_FIRST]), (a[A_K],)),
+            tau_ext,
+            qd,
+            mqdd,
+            mdt,
+            np.int64(r[R_TICK]),
+        )
+        r[R_MFLAGS] = f
+        if f != 0 or r[R_WAS_CONTACT] != 0.0:
+            return MONITOR
+        if a[A_LEARN] != 0:
+            friction_learn(
+                qd,
+                _carray(_f64(a[A_DRAGEST]), (n,)),
+                mdt,
+                r[R_VS],
+                r[R_LTAU],
+                r[R_LMIN],
+                a[A_LEVERY],
+                _carray(_f64(a[A_LS]), (n, 3, 3)),
+                _carray(_f64(a[A_LB]), (n, 3)),
+                _carray(_f64(a[A_LST]), (3,)),
+            )
+    # 5. controller (HOLD at rest: nothing; MOVE: the demo path once faded in)
+    kind = r[R_KIND]
+    if kind == OTHER:
+        return CONTROL
+    mq = _carray(_f64(a[A_MQ]), (n,))
+    mqd = _carray(_f64(a[A_MQD]), (n,))
+    moved = kind == MOVE_PATH
+    if moved:
+        t = t_cmd - r[R_T0]
+        if not t >= r[R_RAMP]:
+            return CONTROL  # the fade-in: the reference's Python arithmetic
+        pk = _carray(_f64(a[A_PK]), (a[A_PKROWS], n))
+        path_eval(pk, t, 1.0, 0.0, -0.0, _carray(_f64(a[A_Q0]), (n,)), mq, mqd, mqdd)
+    # the feed-forward: when the reference moved or the caller says it is stale
+    tau_ff = _carray(_f64(a[A_TAUFF]), (n,))
+    r[R_FF] = 0.0
+    if moved or r[R_FFSTALE] != 0.0:
+        inverse_dynamics_native(
+            mq, mqd, mqdd, _carray(_f64(a[A_IDW]), (a[A_IDWROWS], n)), tau_ff, a[A_IDH]
+        )
+        r[R_FF] = 1.0
+    # 6. command (CSP with the torque offset)
+    command_raw(mq, tau_ff, _carray(_u8(a[A_RX]), (a[A_RXLEN],)), si, 2)
+    # 7. the record (and q_sent = the command just sent)
+    fill_tick(
+        rec, sample, mq, tau_ext, q_sent, r[R_T], np.int64(r[R_TICK]), np.int64(r[R_MODE]),
+        np.int64(0), np.int64(0), r[R_WAKE], r[R_COMP], obs_dt,
+    )  # fmt: skip
+    return DONE
+
+
+_SAID: list[str] = []
+
+
+def say_once(line: str) -> None:
+    """Print ``line`` on stderr once per process (why the tick runs without the fused call)."""
+    if not _SAID:
+        _SAID.append(line)
+        print(f"hofto-hw: {line}", file=sys.stderr)
+
+
+def _fit(arr: Any, dtype: Any, shape: tuple[int, ...]) -> bool:
+    return (
+        isinstance(arr, np.ndarray)
+        and arr.dtype == dtype
+        and arr.shape == shape
+        and arr.flags.c_contiguous
+        and arr.flags.writeable
+    )
+
+
+class FusedTick:
+    """The fused call's table and register for one :class:`~hofto_hw.runtime.tick.Tick`
+    (built from its arrays; ``why`` says why not when ``ok`` is False)."""
+
+    def __init__(self, tick: Tick) -> None:
+        self.tick = tick
+        self.reg = tick._reg
+        self.tab = np.zeros(A_SIZE, dtype=np.int64)
+        self._keep: list[tuple[object, str, np.ndarray]] = []
+        self.why = self._build(tick)
+        self.ok = not self.why
+        if self.ok:
+            try:
+                self._warm()
+            except Exception as exc:  # numba's TypingError/LoweringError, a cache problem
+                self.ok = False
+                self.why = f"compiling the fused tick failed ({type(exc).__name__})"
+
+    # ---------------------------------------------------------------- building
+
+    def _put(self, slot: int, owner: object, attr: str, dtype: Any, shape: tuple[int, ...]) -> bool:
+        arr = getattr(owner, attr, None) if attr else owner
+        if not _fit(arr, dtype, shape):
+            return False
+        assert isinstance(arr, np.ndarray)
+        self._keep.append((owner if attr else None, attr, arr))
+        self.tab[slot] = arr.ctypes.data
+        return True
+
+    def bound(self) -> bool:
+        """The arrays the table addresses are still the ones their owners hold."""
+        return all(getattr(o, a) is arr for o, a, arr in self._keep if o is not None)
+
+    def _build(self, t: Tick) -> str:  # noqa: C901, PLR0911, PLR0912
+        """Fill the table; '' when every part can be fused, else why not."""
+        if not K.available():
+            return "the fused tick needs numba (" + K.unavailable_reason() + ")"
+        g, a, r, f64, u8 = t.group, self.tab, self.reg, np.float64, np.uint8
+        n, k = t.n, t.tau_ext.shape[0]
+        a[A_N], a[A_K] = n, k
+        if g._fast is None:
+            return "the drive group runs its numpy path"
+        si = g._si
+        if not (g.sample.base is si and g.sample.ctypes.data == si.ctypes.data):
+            return "the drive group's sample is not its workspace's first rows"
+        if not g.q.ctypes.data == si.ctypes.data:
+            return "the drive group's q is not its workspace's row"
+        a[A_SIROWS] = si.shape[0]
+        a[A_TXLEN], a[A_RXLEN] = g._tx_bytes.shape[0], g._rx_bytes.shape[0]
+        if not (
+            self._put(A_SI, g, "_si", f64, si.shape)
+            and self._put(A_STATES, g, "states", u8, (n,))
+            and self._put(A_TX, g, "_tx_bytes", u8, g._tx_bytes.shape)
+            and self._put(A_RX, g, "_rx_bytes", u8, g._rx_bytes.shape)
+        ):
+            return "the drive group's images are not plain arrays"
+        snap = t.snapshot
+        if snap.model is not t.feedforward.model:
+            return "the snapshot and the feed-forward use different models"
+        if snap._native is None:
+            return "the snapshot does not run the native dynamics"
+        a[A_SWROWS], a[A_SH] = snap._W.shape[0], snap._native.handle
+        if not (
+            self._put(A_SW, snap, "_W", f64, snap._W.shape)
+            and self._put(A_SO, snap, "_O", f64, (n + 4, n))
+        ):
+            return "the snapshot's workspace is not a plain array"
+        bank = self.bank = t._bank
+        if not (bank._any and bank._only) or bank._kernel is not bank_update:
+            return "an observer is not fused in the bank: " + ", ".join(bank.rest)
+        a[A_BROWS], a[A_BCOLS] = bank._tab.shape
+        if not (
+            self._put(A_BTAB, bank, "_tab", np.int64, bank._tab.shape)
+            and self._put(A_TAUEXT, t, "tau_ext", f64, (k, n))
+            and self._put(A_PREV, t, "_prev", f64, (3, n))
+            and self._put(A_QSENT, t, "q_sent", f64, (n,))
+        ):
+            return "the tick's arrays are not plain arrays"
+        if t._flags is not tick_flags or not t._fill_kernel:
+            return "the tick's flags and record run their numpy path"
+        from hofto_hw.runtime.tick import _POWERED
+
+        a[A_NPOW] = _POWERED.shape[0]
+        self._keep.append((None, "", _POWERED))
+        a[A_POWERED] = _POWERED.ctypes.data
+        a[A_QDDREC] = t._qdd_rec.ctypes.data  # the record's field (kept by the record)
+        bus, lim = t.bus, t.limits
+        if not bus._use_kernel or not lim._use_kernel:
+            return "the drive scan or the limit checks run their numpy path"
+        a[A_FAULTMIN], a[A_OPEN] = bus.fault_min, bus.op_enabled
+        a[A_LIMROWS], a[A_LIMCOLS] = lim._w.shape
+        if not self._put(A_LIMW, lim, "_w", f64, lim._w.shape):
+            return "the limit monitor's workspace is not a plain array"
+        c = t.collision
+        if c is not None:
+            if not c._use_kernel or c._tool is not None:
+                return "the collision monitor runs its numpy path or a tool-force check"
+            s = c.state
+            a[A_COLL], a[A_FLEN], a[A_BLEN] = 1, s.fbuf.shape[0], s.bbuf.shape[0]
+            if not (
+                self._put(A_FBUF, s, "fbuf", f64, s.fbuf.shape)
+                and self._put(A_BBUF, s, "bbuf", np.bool_, s.bbuf.shape)
+                and self._put(A_FIRST, s, "first_tick", np.int64, (k,))
+            ):
+                return "the collision monitor's state is not plain arrays"
+        if t._learn is not None and t.drag is not None and t.drag.friction is not None:
+            fr = t.drag.friction
+            if not fr._use_kernel:
+                return "the friction learning runs its numpy path"
+            a[A_LEARN], a[A_LEVERY] = 1, fr.every
+            r[R_VS], r[R_LTAU], r[R_LMIN] = fr.v_s, fr.tau, fr.min_speed
+            if not (
+                self._put(A_LS, fr, "S", f64, (n, 3, 3))
+                and self._put(A_LB, fr, "b", f64, (n, 3))
+                and self._put(A_LST, fr, "_st", f64, (3,))
+            ):
+                return "the friction learning's sums are not plain arrays"
+            a[A_DRAGEST] = t._drag_est.ctypes.data  # a row of tau_ext
+        m = t.motion
+        if not (
+            self._put(A_MQ, m, "q", f64, (n,))
+            and self._put(A_MQD, m, "qd", f64, (n,))
+            and self._put(A_MQDD, m, "qdd", f64, (n,))
+            and self._put(A_Q0, m, "q0", f64, (n,))
+        ):
+            return "the motion's reference is not plain arrays"
+        self.path_ok = False
+        p = m.path
+        if p is not None and p._use_kernel and p._eval is path_eval:
+            a[A_PKROWS] = p._k.shape[0]
+            self.path_ok = self._put(A_PK, p, "_k", f64, p._k.shape)
+            r[R_RAMP] = p.ramp
+        self.path = p
+        ff = t.feedforward
+        if ff._native is None or ff._id_native is not inverse_dynamics_native:
+            return "the feed-forward does not run the native RNEA"
+        a[A_IDWROWS], a[A_IDH] = ff._W.shape[0], ff._native.handle
+        if not (
+            self._put(A_IDW, ff, "_W", f64, ff._W.shape)
+            and self._put(A_TAUFF, t, "tau_ff", f64, (n,))
+        ):
+            return "the feed-forward's workspace is not a plain array"
+        r[R_PERIOD], r[R_STALL] = t.period, t._stall_dt
+        return ""
+
+    def _warm(self) -> None:
+        """Compile the kernel (all of it) with a lost sample, which returns after the drive
+        read, here into scratch rows: no state of the tick is touched."""
+        a, r = self.tab.copy(), self.reg.copy()
+        si = self.tick.group._si.copy()
+        states = self.tick.group.states.copy()
+        a[A_SI], a[A_STATES] = si.ctypes.data, states.ctypes.data  # scratch read
+        r[R_SDT] = -1.0  # a lost sample: the read into the scratch rows, then READ
+        fused_tick(a, r, self.tick._rec1)
