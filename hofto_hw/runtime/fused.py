@@ -282,7 +282,7 @@ class FusedTick:
         """The arrays the table addresses are still the ones their owners hold."""
         return all(getattr(o, a) is arr for o, a, arr in self._keep if o is not None)
 
-    def _build(self, t: Tick) -> str:  # noqa: C901, PLR0911, PLR0912
+    def _build(self, t: Tick) -> str:
         """Fill the table; '' when every part can be fused, else why not."""
         if not K.available():
             return "the fused tick needs numba (" + K.unavailable_reason() + ")"

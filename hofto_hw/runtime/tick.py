@@ -868,7 +868,6 @@ class Tick:
     def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
         """The tick record of this tick (and q_sent = motion.q, the command just sent), then
         into the sink with the new events (and every ``diag_every`` ticks the diagnostics)."""
-        r = self.tick_rec
         if self._fill_kernel:
             m = self.motion
             # the casts keep the kernel on its warmed signature whatever numbers callers pass
