@@ -198,7 +198,7 @@ def fused_tick(a: np.ndarray, r: np.ndarray, rec: np.ndarray) -> int:
                 _carray(_f64(a[A_LB]), (n, 3)),
                 _carray(_f64(a[A_LST]), (3,)),
             )
-    # 5. controller (HOLD at rest: nothing; MOVE: the demo path once faded in)
+    # 5. controller (HOLD at rest: nothing; MOVE: the demo path (FADED_IN) once faded in)
     kind = r[R_KIND]
     if kind == OTHER:
         return CONTROL
@@ -208,7 +208,9 @@ def fused_tick(a: np.ndarray, r: np.ndarray, rec: np.ndarray) -> int:
     if moved:
         t = t_cmd - r[R_T0]
         if not t >= r[R_RAMP]:
-            return CONTROL  # the fade-in: the reference's Python arithmetic
+            # the fade-in: the reference's Python arithmetic (its (1 - x)**2 is libm's pow,
+            # which a compiled x·x does not match to the bit)
+            return CONTROL
         pk = _carray(_f64(a[A_PK]), (a[A_PKROWS], n))
         path_eval(pk, t, 1.0, 0.0, -0.0, _carray(_f64(a[A_Q0]), (n,)), mq, mqd, mqdd)
     # the feed-forward: when the reference moved or the caller says it is stale

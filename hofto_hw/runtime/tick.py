@@ -317,7 +317,7 @@ class Tick:
         stage = READ
         if self._fuse_quiet and not (
             status or missed or stop.active or self.stop_requested or self.log_failure
-            or self.reset_requested or self.mode_request >= 0 or self.script is not None
+            or self.reset_requested or self.mode_request >= 0
         ):  # fmt: skip
             stage = self._fused_step(dt, wakeup_us, compute_us)
         if stage == READ:
@@ -527,6 +527,18 @@ class Tick:
             self.bus.streak = 0
             self._since_fresh = 0.0
         return stage
+
+    def use_fused(self, on: bool) -> None:
+        """Take the fused call on quiet ticks (``on``, when it was built) or always run the
+        reference (a test that injects through the parts' Python methods, a comparison)."""
+        if not on:
+            self._fz = None
+            self._fuse_quiet = False
+        elif self._fz is None:
+            fz = FusedTick(self)
+            if fz.ok:
+                self._fz, self._fz_tab = fz, fz.tab
+                self._fuse_refresh()
 
     def _fuse_refresh(self, rebuild: bool = True) -> None:
         """After a tick the fused call did not finish, at start and after a script's step:

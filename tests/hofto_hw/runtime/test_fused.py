@@ -1,0 +1,197 @@
+"""The fused tick (hofto_hw/runtime/fused.py) against the reference Tick.step, tick by tick:
+two identical systems, one taking the fused call on quiet ticks and one forced onto the
+reference, through moves, holds, a collision and its stop, a reset, drag, lost frames,
+stalls, a drive fault, a NaN measurement and mode changes. Every tick record, every estimate
+and the state every part keeps must be the same bit for bit, and the fused call must have
+run on most ticks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from drivers.cia402 import kernels as drive_kernels
+from hofto_hw.config.loader import load_config
+from hofto_hw.control.joint_motion import HOLD, MOVE
+from hofto_hw.observers import kernels
+from hofto_hw.runtime.compose import build
+from hofto_hw.runtime.fused import DONE, FusedTick
+
+CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
+
+pytestmark = pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
+
+
+def _arrays(obj: Any) -> list[bytes]:
+    """The bytes of every numpy array an object holds (its state, sorted by name)."""
+    return [v.tobytes() for _, v in sorted(vars(obj).items()) if isinstance(v, np.ndarray)]
+
+
+def _state(system: Any) -> list[Any]:
+    """Everything the tick's parts keep from one tick to the next, and what they sent."""
+    t, g = system.tick, system.group
+    out: list[Any] = [
+        t.tick_rec.tobytes(),
+        t.tau_ext.tobytes(),
+        t.tau_ff.tobytes(),
+        t.q_sent.tobytes(),
+        t._prev.tobytes(),
+        g._rx_bytes.tobytes(),
+        g._si.tobytes(),
+        t.limits._w.tobytes(),
+        t.snapshot._O.tobytes(),
+        t.snapshot._W.tobytes(),
+        t.feedforward._W.tobytes(),
+        *_arrays(t.motion),
+        (t.t_cmd, t.sample_dt, t._since_fresh, t.bus.streak, t.bus.lost_total),
+        (t.motion.version, t._ff_version, t.motion.mode, t.expect_enabled, t.enabling),
+        (t.stop.latched, t.stop.category, t.stop.events.count, t.snapshot.finite),
+        (t.n_stops, t.reset_result, t.mode_result),
+    ]
+    for obs in t.observers:
+        out += _arrays(obs)
+        core = getattr(obs, "core", None)
+        if core is not None:
+            out += _arrays(core)
+    if t.collision is not None:
+        s = t.collision.state
+        out += [s.fbuf.tobytes(), s.bbuf.tobytes(), s.first_tick.tobytes()]
+    if t.drag is not None and t.drag.friction is not None:
+        out += _arrays(t.drag.friction)
+    return out
+
+
+def _pair(contact: bool) -> tuple[Any, Any]:
+    cfg = load_config(CONFIG)
+    fused, reference = build(cfg, clock="sim", contact=contact), build(cfg, clock="sim", contact=contact)
+    reference.tick.use_fused(False)
+    assert fused.tick._fz is not None, "the fused call was not built"
+    return fused, reference
+
+
+def _compare(fused: Any, reference: Any, k: int) -> None:
+    a, b = _state(fused), _state(reference)
+    for i, (x, y) in enumerate(zip(a, b, strict=True)):
+        assert x == y, f"tick {k}: state item {i} differs"
+
+
+def _lockstep(fused: Any, reference: Any, ticks: int, event: Any) -> None:
+    period = 1.0 / fused.rate_hz
+    now = 0.0
+    for k in range(1, ticks + 1):
+        dt = event(k, period)
+        now += dt
+        for s in (fused, reference):
+            s.tick.step(now, dt, 1.5, 0, 2.5)
+        _compare(fused, reference, k)
+
+
+def test_the_run_scenario_is_the_reference_tick_by_tick() -> None:
+    """The main job's world (the path, the collision at 3 s and its stop, the reset, drag
+    with the hand's push, the taught path's release), with stalls and lost frames."""
+    fused, reference = _pair(contact=True)
+    try:
+
+        def event(k: int, period: float) -> float:
+            if k == 50:
+                for s in (fused, reference):
+                    s.tick.mode_request = MOVE
+            if k in (40, 2500, 6200):
+                for s in (fused, reference):
+                    s.bus.drop_cycles(1 + k % 2)  # lost frames: stale samples, then a gap
+            return period * 2 if k in (30, 2700, 6300) else period  # stalls
+
+        _lockstep(fused, reference, 6500, event)
+        t = fused.tick
+        assert t.n_stops >= 1, "the collision did not stop the arm"
+        assert t.drag is not None and t.drag.friction is not None
+        assert t.drag.friction.seconds > 0.0  # the friction learning ran (fused)
+        # the move's first second (the path's fade-in) and the stop and drag (3-6 s) run the
+        # reference; the rest of the move and the hold after the drag the fused call
+        assert t.fused_ticks > 1800, t.fused_ticks
+        assert reference.tick.fused_ticks == 0
+    finally:
+        fused.close()
+        reference.close()
+
+
+def test_faults_resets_and_mode_changes_are_the_reference_tick_by_tick() -> None:
+    """A drive fault and its reset, a NaN measurement and its reset, a stop request, holds
+    and moves, lost frames and stalls: the fused ticks hand each over to the reference."""
+    fused, reference = _pair(contact=False)
+    systems = (fused, reference)
+    rad_row = drive_kernels.RAD_PER_COUNT
+    saved = fused.group._si[rad_row, 3]
+
+    def event(k: int, period: float) -> float:
+        for s in systems:
+            t = s.tick
+            if k in (20, 1500, 2600):
+                t.mode_request = MOVE
+            elif k in (1200, 2300):
+                t.mode_request = HOLD
+            elif k == 1400:
+                s.bus.inject_fault(2, "over_temperature")
+            elif k in (1460, 2000, 2900):
+                t.reset_requested = True
+            elif k == 1900:
+                s.group._si[rad_row, 3] = np.nan  # the measurement turns NaN for a tick
+            elif k == 1901:
+                s.group._si[rad_row, 3] = saved
+            elif k == 2800:
+                t.stop_requested = True
+            elif k == 2801:
+                t.stop_requested = False
+            elif k in (700, 2450):
+                s.bus.drop_cycles(2)
+        return period * 3 if k in (900, 1700) else period
+
+    try:
+        _lockstep(fused, reference, 3200, event)
+        t = fused.tick
+        assert t.n_stops >= 3, t.n_stops  # the drive fault, the NaN, the stop request
+        assert t.stop.latched == 0, t.stop.latched_names()
+        # each move's first second (the path's fade-in) runs the reference controller
+        assert t.fused_ticks > 850, t.fused_ticks
+        assert reference.tick.fused_ticks == 0
+    finally:
+        fused.close()
+        reference.close()
+
+
+def test_a_quiet_tick_is_one_fused_call_and_the_switch_turns_it_off(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Holding and moving, every tick after the settling is finished by the fused call;
+    HOFTO_HW_NO_FUSE=1 builds a tick without it."""
+    cfg = load_config(CONFIG)
+    system = build(cfg, clock="sim", contact=False)
+    try:
+        t = system.tick
+        stages: list[int] = []
+        call = t._fz_call
+
+        def counted(*args: Any) -> int:
+            stages.append(call(*args))
+            return stages[-1]
+
+        t._fz_call = counted
+        t.mode_request = MOVE
+        system.loop.run(max_ticks=1500)
+        assert len(stages) > 1400 and stages[-300:] == [DONE] * 300
+        assert t.fused_ticks == stages.count(DONE)
+        assert isinstance(t._fz, FusedTick) and t._fz.bound()
+    finally:
+        system.close()
+    monkeypatch.setenv("HOFTO_HW_NO_FUSE", "1")
+    off = build(cfg, clock="sim", contact=False)
+    try:
+        assert off.tick._fz is None
+        off.tick.mode_request = MOVE
+        off.loop.run(max_ticks=200)
+        assert off.tick.fused_ticks == 0
+    finally:
+        off.close()
