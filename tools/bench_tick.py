@@ -22,7 +22,10 @@ Figures (µs; median / p99 / p99.9):
   ``--clock real``), SCHED_FIFO 50 when permitted, gc frozen and off (the Loop's own);
   and back to back with the arm holding (``hold_back_to_back``: the reference does not
   change, so the tick reuses its feed-forward);
-- per part (a second run with every part wrapped: each wrapper costs ~0.2 µs), "other" is
+- the tick as it runs: the fused call (hofto_hw/runtime/fused.py) on quiet ticks (``path``,
+  ``fused_ticks``), and the same loop forced onto the reference (``reference``);
+- per part (a third run, on the reference path: a fused call cannot be seen inside; every
+  part wrapped: each wrapper costs ~0.2 µs), "other" is
   the rest of Tick.step; safety's bus and limit checks, the motion update and the
   recording are parts of their own;
 - the numpy path (a subprocess with HOFTO_HW_NO_NUMBA=1, the official switch) and the
@@ -232,18 +235,35 @@ def run_loop(
     on one System (the same run continues)."""
     system = build_system(cfg, rate_hz, clock, hold)
     period = None if clock == "sim" else 1e6 / rate_hz
+    tick = system.tick
     try:
         system.loop.run(max_ticks=300)  # warm-up: caches, pages, the drive ramp
+        fused0 = tick.fused_ticks
         probe = Probe(system, ticks, False)
         system.loop.run(max_ticks=ticks)
         res = probe.result(floor, period)
         probe.detach()
+        # the tick as it runs (the fused call on quiet ticks when it was built)
+        res["path"] = "fused" if tick._fz is not None else "reference"
+        res["fused_ticks"] = int(tick.fused_ticks - fused0)
+        # the same loop forced onto the reference (every part its own call), unprobed
+        fused = tick._fz is not None
+        tick.use_fused(False)
+        probe = Probe(system, ticks, False)
+        system.loop.run(max_ticks=ticks)
+        ref = probe.result(floor, period)
+        probe.detach()
+        res["reference"] = {k: ref[k] for k in ("ticks", "tick", "median", "p99", "p999")}
+        res["reference"]["path"] = "reference"
+        # the parts: a fused call cannot be seen inside, so they are timed on the reference
         probe = Probe(system, part_ticks, True)
         system.loop.run(max_ticks=part_ticks)
         parts = probe.result(floor, period)
+        res["parts_path"] = "reference (per-part calls, probed)"
         res["parts"] = parts["parts"]
         res["hofto_plus_momentum"] = parts["hofto_plus_momentum"]
         res["tick_with_part_probes"] = parts["tick"]
+        tick.use_fused(fused)
         return res
     finally:
         system.close()
@@ -540,6 +560,12 @@ def print_report(res: dict) -> None:
                 f"   ratio tick/floor {r['ratio_to_floor']:.2f}"
                 f"   exchange (plant) median {r['exchange']['median']:.0f}"
             )
+            if "fused_ticks" in r:
+                ref = r["reference"]
+                line += (
+                    f"   [{r['path']}: {r['fused_ticks']}/{r['ticks']} ticks fused; reference"
+                    f" {ref['median']:.1f} / {ref['p99']:.1f}]"
+                )
             if "wakeup" in r:
                 w = r["wakeup"]
                 line += (
@@ -548,7 +574,7 @@ def print_report(res: dict) -> None:
                 )
             print(line)
             print(
-                "             parts (median): "
+                f"             parts ({r.get('parts_path', 'per part')}; median): "
                 + ", ".join(f"{c} {r['parts'][c]['median']:.1f}" for c in cols)
                 + f"; HOFTO+momentum {r['hofto_plus_momentum']['median']:.1f}"
                 + f" (tick with probes {r['tick_with_part_probes']['median']:.1f})"

@@ -54,8 +54,14 @@ def fade_in(t: float, ramp: float) -> tuple[float, float, float]:
     if t >= ramp:
         return FADED_IN
     x = min(max(t / ramp, 0.0), 1.0)
+    return fade_terms(x, (1.0 - x) ** 2, ramp)
+
+
+def fade_terms(x: float, u2: float, ramp: float) -> tuple[float, float, float]:
+    """:func:`fade_in`'s arithmetic at x = t/ramp in [0, 1] with u2 = (1 - x)**2 (libm's pow:
+    the tick's fused call computes it with the same pow and compiles this function)."""
     b = x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
-    bd = 30.0 * x * x * (1.0 - x) ** 2 / ramp
+    bd = 30.0 * x * x * u2 / ramp
     bdd = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / (ramp * ramp)
     return b, bd, bdd
 

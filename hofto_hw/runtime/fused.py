@@ -22,12 +22,14 @@ the tick record (a one-element structured array).
 
 from __future__ import annotations
 
+import math
 import sys
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from drivers.cia402.kernels import command_raw, read_si
+from hofto_hw.control.joint_motion import FADED_IN, fade_terms
 from hofto_hw.control.kernels import friction_learn, path_eval
 from hofto_hw.model.kernels import inverse_dynamics_native, snapshot_native
 from hofto_hw.observers import kernels as K
@@ -39,6 +41,8 @@ from safety.kernels import drive_scan, limits_quiet
 
 if TYPE_CHECKING:
     from hofto_hw.runtime.tick import Tick
+
+_fade_terms = K.jit(fade_terms)  # the demo path's fade-in arithmetic, compiled: one definition
 
 #: stage codes (fused_tick's answer): where the Python reference goes on with this tick
 READ = 0  # only the drive read was done: the reference from the snapshot on (section 3)
@@ -59,8 +63,8 @@ A_SIZE = 50
 # the register (float64): inputs, the tick's kept scalars, constants, outputs
 (R_T, R_DT, R_SDT, R_TCMD, R_SINCE, R_TICK, R_JUDGE, R_EXPECT, R_KIND, R_FFSTALE, R_WAKE,
  R_COMP, R_WAS_CONTACT, R_REC_MON, R_PERIOD, R_STALL, R_T0, R_RAMP, R_VS, R_LTAU, R_LMIN,
- R_MODE, R_OBS_DT, R_FINITE, R_MFLAGS, R_FF, R_MON) = range(27)  # fmt: skip
-R_SIZE = 27
+ R_MODE, R_OBS_DT, R_FINITE, R_MFLAGS, R_FF, R_MON, R_TWO) = range(28)  # fmt: skip
+R_SIZE = 28
 
 #: R_KIND: the motion's update this tick (HOLD_STILL: nothing to write; MOVE_PATH: the
 #: compiled demo path; OTHER: the reference runs the controller)
@@ -198,7 +202,7 @@ def fused_tick(a: np.ndarray, r: np.ndarray, rec: np.ndarray) -> int:
                 _carray(_f64(a[A_LB]), (n, 3)),
                 _carray(_f64(a[A_LST]), (3,)),
             )
-    # 5. controller (HOLD at rest: nothing; MOVE: the demo path (FADED_IN) once faded in)
+    # 5. controller (HOLD at rest: nothing; MOVE: the demo path)
     kind = r[R_KIND]
     if kind == OTHER:
         return CONTROL
@@ -207,12 +211,15 @@ def fused_tick(a: np.ndarray, r: np.ndarray, rec: np.ndarray) -> int:
     moved = kind == MOVE_PATH
     if moved:
         t = t_cmd - r[R_T0]
-        if not t >= r[R_RAMP]:
-            # the fade-in: the reference's Python arithmetic (its (1 - x)**2 is libm's pow,
-            # which a compiled x·x does not match to the bit)
-            return CONTROL
+        ramp = r[R_RAMP]
+        b, bd, bdd = 1.0, 0.0, -0.0  # joint_motion.FADED_IN
+        if not t >= ramp:
+            # joint_motion.fade_in: (1 - x)**2 is libm's pow in Python; the exponent comes
+            # from the register so that the compiler cannot turn pow into x·x (not the bits)
+            x = min(max(t / ramp, 0.0), 1.0)
+            b, bd, bdd = _fade_terms(x, math.pow(1.0 - x, r[R_TWO]), ramp)
         pk = _carray(_f64(a[A_PK]), (a[A_PKROWS], n))
-        path_eval(pk, t, 1.0, 0.0, -0.0, _carray(_f64(a[A_Q0]), (n,)), mq, mqd, mqdd)
+        path_eval(pk, t, b, bd, bdd, _carray(_f64(a[A_Q0]), (n,)), mq, mqd, mqdd)
     # the feed-forward: when the reference moved or the caller says it is stale
     tau_ff = _carray(_f64(a[A_TAUFF]), (n,))
     r[R_FF] = 0.0
@@ -393,7 +400,9 @@ class FusedTick:
             and self._put(A_TAUFF, t, "tau_ff", f64, (n,))
         ):
             return "the feed-forward's workspace is not a plain array"
-        r[R_PERIOD], r[R_STALL] = t.period, t._stall_dt
+        r[R_PERIOD], r[R_STALL], r[R_TWO] = t.period, t._stall_dt, 2.0
+        if FADED_IN != (1.0, 0.0, -0.0) or str(FADED_IN[2]) != "-0.0":
+            return "the demo path's faded-in constants are not the ones the fused call uses"
         return ""
 
     def _warm(self) -> None:
