@@ -9,6 +9,13 @@ observers read it through one :class:`~hofto_hw.observers.bank.ObserverBank` (on
 call for every observer it can fuse, each estimate written into its row of ``tau_ext``; the
 same numbers as each observer's own ``update``, which replay and the demo use).
 
+The common tick (nothing unusual can happen: no request, no fault, no drag, no teach, good
+data) runs sections 2-7 as ONE compiled call (:mod:`hofto_hw.runtime.fused`: the same kernels
+in the same order); when a part finds something that is not quiet the call answers a stage
+and this reference code finishes the same tick from there (the stage methods below serve
+both). ``HOFTO_HW_NO_FUSE=1`` or ``Tick(fuse=False)`` runs the reference on every tick;
+tests/hofto_hw/runtime/test_fused.py checks both tick by tick, bit for bit.
+
 The :class:`Tick` owns every buffer it writes; the loop (hofto_hw/runtime/loop.py) calls
 :meth:`Tick.step` once per cycle with the real dt. Requests from other threads (stop, reset,
 mode) are plain attributes the tick reads: one writer each, no locks.
@@ -581,6 +588,7 @@ class Tick:
             and self._fault_resetting == 0
             and self.overrun_streak == 0
             and m.mode != DRAG
+            and snap.finite
             and snap.q is g.q
             and snap.qd is g.qd
             and snap.tau is g.tau
