@@ -5,7 +5,7 @@ its Tick.step, its Loop and clocks. Nothing of the tick is copied here.
     python tools/bench_tick.py [--config configs/er3a.yaml] [--quick] [--json]
 
 The arm follows the config's ``run.path`` (mode MOVE) on the simulated bus. The simulated
-bus's exchange (the plant and the emulated drives) runs inside Tick.step (DriveGroup.cycle)
+bus's exchange (the plant and the emulated drives) runs inside Tick.step (DriveGroup.exchange)
 but is the bus's work, not the controller's: it is timed separately and taken off, so
 "tick" = Tick.step minus the exchange. Timing works by wrapping methods of the built
 objects (bus.exchange, tick.step; for the parts also group.read, snapshot.compute, each

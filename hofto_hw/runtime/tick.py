@@ -50,6 +50,8 @@ from hofto_hw.recording.record import (
     tick_dtype,
 )
 from hofto_hw.runtime.fused import (
+    A_IDH,
+    A_SH,
     CONTROL,
     DONE,
     HOLD_STILL,
@@ -575,6 +577,9 @@ class Tick:
             and self._ff_model == (model.revision, model.friction, model.payload)
         )
         self._fz_rev, self._fz_fr, self._fz_pl = model.revision, model.friction, model.payload
+        if synced:  # a parameter change made new C++ models (native.NativeModel.sync)
+            fz.tab[A_SH] = snap._native.handle  # type: ignore[union-attr]
+            fz.tab[A_IDH] = ff._native.handle  # type: ignore[union-attr]
         self._fuse_quiet = bool(
             synced
             and stop.latched == 0

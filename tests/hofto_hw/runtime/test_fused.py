@@ -16,6 +16,7 @@ import pytest
 from drivers.cia402 import kernels as drive_kernels
 from hofto_hw.config.loader import load_config
 from hofto_hw.control.joint_motion import HOLD, MOVE
+from hofto_hw.model.payload import Payload, apply_payload
 from hofto_hw.observers import kernels
 from hofto_hw.runtime.compose import build
 from hofto_hw.runtime.fused import DONE, FusedTick
@@ -122,7 +123,8 @@ def test_the_run_scenario_is_the_reference_tick_by_tick() -> None:
 
 def test_faults_resets_and_mode_changes_are_the_reference_tick_by_tick() -> None:
     """A drive fault and its reset, a NaN measurement and its reset, a stop request, holds
-    and moves, lost frames and stalls: the fused ticks hand each over to the reference."""
+    and moves, lost frames and stalls, a payload and a parameter change: the fused ticks hand
+    each over to the reference."""
     fused, reference = _pair(contact=False)
     systems = (fused, reference)
     rad_row = drive_kernels.RAD_PER_COUNT
@@ -131,9 +133,9 @@ def test_faults_resets_and_mode_changes_are_the_reference_tick_by_tick() -> None
     def event(k: int, period: float) -> float:
         for s in systems:
             t = s.tick
-            if k in (20, 1500, 2600):
+            if k in (20, 1500, 2600, 3300):
                 t.mode_request = MOVE
-            elif k in (1200, 2300):
+            elif k in (1200, 2300, 3000):
                 t.mode_request = HOLD
             elif k == 1400:
                 s.bus.inject_fault(2, "over_temperature")
@@ -149,14 +151,23 @@ def test_faults_resets_and_mode_changes_are_the_reference_tick_by_tick() -> None
                 t.stop_requested = False
             elif k in (700, 2450):
                 s.bus.drop_cycles(2)
+            elif k == 1300:  # a tool picked up at the hold (new C++ models: new handles)
+                load = Payload(1.0, (0.0, 0.0, 0.05), (0.0,) * 6)
+                apply_payload(s.bus.plant.true_model, load)
+                apply_payload(t.feedforward.model, load)
+            elif k == 2700:  # a parameter change while moving
+                for model in (s.bus.plant.true_model, t.feedforward.model):
+                    model.rotor_inertia = model.rotor_inertia * 1.05
         return period * 3 if k in (900, 1700) else period
 
     try:
-        _lockstep(fused, reference, 3200, event)
+        _lockstep(fused, reference, 4500, event)
         t = fused.tick
         assert t.n_stops >= 3, t.n_stops  # the drive fault, the NaN, the stop request
         assert t.stop.latched == 0, t.stop.latched_names()
-        assert t.fused_ticks > 1600, t.fused_ticks
+        # the stops, the resets' settling, the ramps to standstill and a move whose model
+        # changed run the reference; the rest the fused call
+        assert t.fused_ticks > 2800, t.fused_ticks
         assert reference.tick.fused_ticks == 0
     finally:
         fused.close()
