@@ -268,6 +268,7 @@ class Tick:
         # the common tick as one compiled call (fused.py): built on the arrays above, taken
         # only on ticks where nothing unusual can happen (_fuse_refresh keeps _fuse_quiet)
         self._fz: FusedTick | None = None
+        self._fz_rebind = False  # a reset may have rebound an owner's array: check the table
         self._fuse_quiet = False
         self._fz_kind = OTHER
         self._fz_rev, self._fz_fr, self._fz_pl = -1, None, None
@@ -552,12 +553,13 @@ class Tick:
     def _fuse_refresh(self, rebuild: bool = True) -> None:
         """After a tick the fused call did not finish, at start and after a script's step:
         whether the next one may take it, and the register's slow scalars (off the common
-        path). ``rebuild``: check the table still addresses its owners' arrays (a reset may
-        have given the observers a new bank)."""
+        path). After a reset or start (``_check_bank``), unless ``rebuild`` is False: check
+        the table still addresses its owners' arrays (a new bank: a new table)."""
         fz = self._fz
         if fz is None:
             return
-        if self._bank is not fz.bank or (rebuild and not fz.bound()):
+        rebind, self._fz_rebind = self._fz_rebind and rebuild, self._fz_rebind and not rebuild
+        if self._bank is not fz.bank or (rebind and not fz.bound()):
             self._fz = fz = FusedTick(self)  # a new bank (a reset), or an array rebound
             if not fz.ok:
                 fused_say_once("the tick runs without its fused call: " + fz.why)
@@ -647,6 +649,7 @@ class Tick:
         than a bank that goes on integrating the arrays it dropped."""
         if not self._bank.bound():
             self._bank = ObserverBank(self.observers, self.snapshot, self.tau_ext)
+        self._fz_rebind = True  # the fused call's table checked again (_fuse_refresh)
 
     def _keep_sample(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
         g = self.group
