@@ -48,6 +48,18 @@ def _jit(fn: Callable[..., Any]) -> Callable[..., Any]:
         return _numba.njit(cache=False, nogil=True, error_model="numpy")(fn)
 
 
+def _jit_inline(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """:func:`_jit` for small helpers inlined into their callers at numba's IR level: a call
+    between compiled functions passes each array as a dozen values and counts references on
+    it, which costs more than these helpers' arithmetic."""
+    if _numba is None:
+        return fn
+    try:
+        return _numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(fn)
+    except RuntimeError:
+        return _numba.njit(cache=False, nogil=True, error_model="numpy", inline="always")(fn)
+
+
 #: compile a function as these kernels are (cache=True, nogil, numpy's error model; the
 #: plain Python function without numba): for kernels elsewhere (drivers/cia402/kernels.py)
 jit = _jit
@@ -217,7 +229,7 @@ def hofto_step(
                 z[1, jj] = z[1, jj] + a[jj] * h
 
 
-@_jit
+@_jit_inline
 def _inject(
     z: np.ndarray,
     jj: int,
