@@ -198,8 +198,36 @@ def hofto_step(
     """
     s, joints = z.shape
     inj = col[0]
+    if taylor:
+        # substeps outside, joints inside: the prediction runs along rows of z (contiguous,
+        # all joints at once) and consecutive joints' injections do not depend on each other;
+        # each joint's arithmetic is the one joint-by-joint order does, in the same order
+        for k in range(substeps):
+            # prediction along the chain z = T·z (upper triangular), in place: row i reads
+            # rows >= i, not yet predicted; summed from T[i, i]·z_i up, as a dot product
+            for i in range(s):
+                t = T[i, i]
+                for jj in range(joints):
+                    z[i, jj] = 0.0 + t * z[i, jj]
+                for m in range(i + 1, s):
+                    t = T[i, m]
+                    for jj in range(joints):
+                        z[i, jj] = z[i, jj] + t * z[m, jj]
+            for jj in range(joints):
+                z[1, jj] = z[1, jj] + a[jj] * h
+                z[0, jj] = z[0, jj] + a[jj] * a_h2
+            for jj in range(joints):
+                if substeps == 1:
+                    yk = y[jj]
+                else:  # y_prev + step + ... + step, k + 1 times (first-order hold)
+                    step = (y[jj] - y_prev[jj]) / substeps
+                    yk = y_prev[jj]
+                    for _ in range(k + 1):
+                        yk = yk + step
+                _injection(z, jj, yk, neg_gains, powers, recursive, inj, h, True)
+        return
     zz = col[1]
-    for jj in range(joints):
+    for jj in range(joints):  # euler: inject with the state before the prediction
         step = (y[jj] - y_prev[jj]) / substeps
         yk = y_prev[jj]
         for _ in range(substeps):
@@ -207,26 +235,16 @@ def hofto_step(
                 yk = y[jj]
             else:
                 yk = yk + step
-            if not taylor:
-                _inject(z, jj, yk, neg_gains, powers, recursive, inj)
+            _inject(z, jj, yk, neg_gains, powers, recursive, inj)
             # prediction along the chain: zz = T·z (upper triangular)
             for i in range(s):
                 acc = 0.0
                 for m in range(i, s):
                     acc += T[i, m] * z[m, jj]
                 zz[i] = acc
-            if taylor:
-                zz[1] = zz[1] + a[jj] * h
-                zz[0] = zz[0] + a[jj] * a_h2
-                for i in range(s):
-                    z[i, jj] = zz[i]
-                _inject(z, jj, yk, neg_gains, powers, recursive, inj)
-                for i in range(s):
-                    z[i, jj] = z[i, jj] + inj[i] * h
-            else:
-                for i in range(s):
-                    z[i, jj] = zz[i] + inj[i] * h
-                z[1, jj] = z[1, jj] + a[jj] * h
+            for i in range(s):
+                z[i, jj] = zz[i] + inj[i] * h
+            z[1, jj] = z[1, jj] + a[jj] * h
 
 
 @_jit_inline
@@ -240,6 +258,23 @@ def _inject(
     inj: np.ndarray,
 ) -> None:
     """Output-injection terms of joint jj into inj (s,)."""
+    _injection(z, jj, y, neg_gains, powers, recursive, inj, 0.0, False)
+
+
+@_jit_inline
+def _injection(
+    z: np.ndarray,
+    jj: int,
+    y: float,
+    neg_gains: np.ndarray,
+    powers: np.ndarray,
+    recursive: bool,
+    inj: np.ndarray,
+    h: float,
+    apply: bool,
+) -> None:
+    """Output-injection terms of joint jj: into inj (s,), or with ``apply`` added to z at
+    once as z_i += inj_i·h (inj untouched; each stage reads only z_i, z_{i+1} of before)."""
     s = z.shape[0]
     if recursive:
         prev = y
@@ -248,9 +283,12 @@ def _inject(
             p = powers[i]
             a = abs(d)
             v = _sig_log(d, a, p, math.log2(a) if _needs_log(p) else 0.0) * neg_gains[i, jj]
-            inj[i] = v
             if i < s - 1:
                 prev = z[i + 1, jj] + v
+            if apply:
+                z[i, jj] = z[i, jj] + v * h
+            else:
+                inj[i] = v
     else:
         # every stage raises the same |e1|: one log2 for all of them
         e = y - z[0, jj]
@@ -262,7 +300,11 @@ def _inject(
             if not have and _needs_log(p):
                 log2a = math.log2(a)
                 have = True
-            inj[i] = -(_sig_log(e, a, p, log2a) * neg_gains[i, jj])
+            v = -(_sig_log(e, a, p, log2a) * neg_gains[i, jj])
+            if apply:
+                z[i, jj] = z[i, jj] + v * h
+            else:
+                inj[i] = v
 
 
 @_jit

@@ -1,8 +1,13 @@
-"""HOFTO's output injection sig^p(x) = |x|^p·sign(x) on the compiled path against numpy's
+"""The HOFTO kernel's own arithmetic.
+
+Output injection: sig^p(x) = |x|^p·sign(x) on the compiled path against numpy's
 np.power (the reference path's arithmetic) on the values where a formulation other than
 libm's pow could go wrong: zeros of both signs, subnormals, the extremes of the float range,
 infinities and NaN, for every kind of power the kernel treats apart (0, 1, the roots 1/4,
-1/2, 3/4, and the rest through one log2 shared by the stages of eq. (17))."""
+1/2, 3/4, and the rest through one log2 shared by the stages of eq. (17)).
+
+Joints: the step runs the joints side by side (substeps outside, joints inside); each joint's
+result must be the one it gets alone, bit for bit, for every form and discretisation."""
 
 from __future__ import annotations
 
@@ -83,3 +88,37 @@ def test_injection_powers_match_numpy_on_edge_values(recursive):
         np.testing.assert_allclose(g[ok], ref[ok], rtol=1e-13, atol=0.0, err_msg=f"p={p}")
         if p in (0.0, 1.0, 0.5):  # sign, identity and sqrt: exact
             np.testing.assert_array_equal(g[ok], ref[ok], err_msg=f"p={p}")
+
+
+@pytest.mark.parametrize("recursive", [False, True])
+@pytest.mark.parametrize("taylor", [False, True])
+@pytest.mark.parametrize("substeps", [1, 3])
+def test_each_joint_steps_as_it_does_alone(recursive, taylor, substeps):
+    rng = np.random.default_rng(8)
+    s, n = 4, 6
+    powers = np.array([0.95, 0.75, 0.5, 0.0] if recursive else [0.95, 0.9, 0.85, 0.8])
+    neg_gains = -rng.uniform(5.0, 50.0, (s, n))
+    h = 1e-3 / substeps
+    T = np.eye(s)
+    coef = 1.0
+    for j in range(1, s if taylor else 2):
+        coef *= h / j
+        T += coef * np.eye(s, k=j)
+    a_h2 = 0.5 * h * h if taylor else 0.0
+    z = rng.normal(0, 1e-2, (s, n))
+    alone = [np.ascontiguousarray(z[:, [j]]) for j in range(n)]
+    y_prev = rng.normal(0, 1e-2, n)
+    col = np.zeros((2, s))
+    for _ in range(200):
+        y = y_prev + rng.normal(0, 1e-3, n)
+        acc = rng.normal(0, 1, n)
+        args = (h, a_h2, recursive, taylor, substeps, col)
+        kernels.hofto_step(z, neg_gains, powers, T, y, y_prev, acc, *args)
+        for j in range(n):
+            c = slice(j, j + 1)
+            kernels.hofto_step(
+                alone[j], neg_gains[:, c].copy(), powers, T, y[c], y_prev[c], acc[c], *args
+            )
+        y_prev = y
+    assert np.all(np.isfinite(z)) and np.abs(z[2]).max() > 1e-3
+    np.testing.assert_array_equal(z, np.hstack(alone))
