@@ -16,6 +16,7 @@ import pytest
 from support.compiled import require_compiled_kernels
 
 from hofto_hw.observers import kernels
+from hofto_hw.observers.hofto import sigma_powers
 
 require_compiled_kernels()
 
@@ -65,14 +66,27 @@ def _compiled(e: np.ndarray, powers: list[float], recursive: bool) -> np.ndarray
     return out
 
 
-@pytest.mark.parametrize("recursive", [False, True])
-def test_injection_powers_match_numpy_on_edge_values(recursive):
+#: powers in arithmetic progression (eq. (17)'s 1 + i·sigma, rising, coarse): one exp2 for
+#: the first stage and one for the ratio, then products (kernels._progression)
+PROGRESSIONS = [
+    list(sigma_powers(2, -0.05)),
+    list(sigma_powers(3, -0.1)),
+    [0.05, 0.1, 0.15],
+    [0.9, 0.6, 0.3],
+]
+
+
+@pytest.mark.parametrize(
+    ("recursive", "powers"),
+    [(False, POWERS), (True, POWERS)] + [(False, p) for p in PROGRESSIONS],
+)
+def test_injection_powers_match_numpy_on_edge_values(recursive, powers):
     mags = np.array(FINITE + [np.inf])
     e = np.concatenate([mags, -mags, [np.nan, -0.0]])
     rng = np.random.default_rng(3)
     e = np.concatenate([e, rng.normal(0, 1, 200) * 10.0 ** rng.uniform(-300, 300, 200)])
-    got = _compiled(e, POWERS, recursive)
-    for i, p in enumerate(POWERS):
+    got = _compiled(e, powers, recursive)
+    for i, p in enumerate(powers):
         ref = _reference(e, p)
         g = got[i]
         # NaN, infinities, zeros and their signs exactly as numpy gives them
@@ -84,7 +98,8 @@ def test_injection_powers_match_numpy_on_edge_values(recursive):
         np.testing.assert_array_equal(np.signbit(g[signed]), np.signbit(ref[signed]), f"p={p}")
         np.testing.assert_array_equal(g == 0.0, ref == 0.0, err_msg=f"p={p}")
         ok = np.isfinite(ref) & (ref != 0.0)
-        # rounding only: 2^(p·log2|e|) carries ~|p·log2|e||·2^-53 (< 1e-13 over the range)
+        # rounding only: 2^(p·log2|e|) carries ~|p·log2|e||·2^-53 (< 1e-13 over the range),
+        # so do the products of a progression (plus one rounding per stage)
         np.testing.assert_allclose(g[ok], ref[ok], rtol=1e-13, atol=0.0, err_msg=f"p={p}")
         if p in (0.0, 1.0, 0.5):  # sign, identity and sqrt: exact
             np.testing.assert_array_equal(g[ok], ref[ok], err_msg=f"p={p}")
@@ -122,3 +137,13 @@ def test_each_joint_steps_as_it_does_alone(recursive, taylor, substeps):
         y_prev = y
     assert np.all(np.isfinite(z)) and np.abs(z[2]).max() > 1e-3
     np.testing.assert_array_equal(z, np.hstack(alone))
+
+
+def test_eq17_powers_take_the_progression():
+    """The main job's powers (configs/er3a.yaml: order 2, sigma = -0.05) and those of other
+    orders and sigmas are found to be a progression; powers with a root or sign are not."""
+    for order, sigma in [(2, -0.05), (1, -0.1), (3, -0.02), (4, -0.12)]:
+        p = sigma_powers(order, sigma)
+        assert kernels._progression(p) == pytest.approx(sigma, abs=1e-15)
+    for p in ([0.75, 2 / 3, 0.5, 0.0], [1.0, 1.0, 1.0], [0.9, 0.8, 0.75], [0.9, 0.8, 0.6], [0.9]):
+        assert np.isnan(kernels._progression(np.array(p)))
