@@ -407,7 +407,7 @@ def _taylor_progression(
             _injection_progression(z, jj, yk, neg_gains, powers, ratio, inj, h, True)
 
 
-@_jit
+@_jit_inline
 def hofto_update(
     z: np.ndarray,
     neg_gains: np.ndarray,
@@ -504,7 +504,7 @@ def sta_update(
 # ----------------------------------------------------------------- momentum, DOB
 
 
-@_jit
+@_jit_inline
 def momentum_update(
     M: np.ndarray,
     qd: np.ndarray,
