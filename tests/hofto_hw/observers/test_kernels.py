@@ -72,6 +72,11 @@ HOFTO_CASES = [
     (2, "eq17", "euler", 3, [0.9, 0.8, 0.7, 0.6]),
     (2, "eq17", "taylor", 1, [0.75, 2 / 3, 0.5, 0.0]),
     (2, "recursive", "euler", 1, [1.0, 1.0, 1.0, 1.0]),
+    # the main job's form (configs/er3a.yaml loop.observers): eq. (17)'s powers 1 + i·sigma
+    (2, "eq17", "taylor", 4, [0.95, 0.9, 0.85, 0.8]),
+    # roots the kernel takes without a logarithm, in both forms
+    (2, "recursive", "taylor", 1, [0.75, 0.5, 0.25, 0.0]),
+    (2, "eq17", "taylor", 2, [0.75, 0.5, 0.25, 0.0]),
 ]
 
 
