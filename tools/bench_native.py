@@ -69,7 +69,7 @@ def measure(config: Path, reps: int, count: int = 256) -> dict:
 
     res: dict = {"config": str(config), "n": n, "samples": count, "reps": reps, "us": {}}
     figures = res["us"]
-    for rep in range(3):  # interleaved, median of three
+    for _rep in range(3):  # interleaved, median of three
         row = {name: us(which) for name, which in ALGORITHMS.items()}
         row["terms, main job (M, g, Cᵀ·qd, accel): shared"] = us(6, main_job)
         row["terms, main job (M, g, Cᵀ·qd, accel): separate (ABA)"] = us(7, main_job)

@@ -74,15 +74,29 @@ namespace hofto_native
   typedef pinocchio::JointModelTpl<double, 0, ArmJointsTpl> JointModel;
   typedef Eigen::Map<const Eigen::VectorXd> In;
 
+  // pinocchio's Coriolis matrix sums link inertias as (mass, centre of mass, inertia) with the
+  // summed mass clamped at machine epsilon: masses of both signs that cancel (identified
+  // parameters need not be physical) make C wrong while RNEA's nle stays right. With every
+  // link mass >= 0 no sum cancels, and C·qd + g is nle.
+  bool masses_nonnegative(const Model & m)
+  {
+    for (std::size_t j = 1; j < m.inertias.size(); ++j)
+      if (!(m.inertias[j].mass() >= 0.0))
+        return false;
+    return true;
+  }
+
   struct Handle
   {
     Model model;
     Data data;
     Eigen::Index n;
+    bool nle_of_c; // C·qd + g may stand for nle (masses_nonnegative)
     explicit Handle(const Model & m)
     : model(m)
     , data(model)
     , n(model.nv)
+    , nle_of_c(masses_nonnegative(model))
     {
     }
   };
@@ -165,10 +179,10 @@ namespace hofto_native
     double * row = out + n * n;
     Eigen::Map<Eigen::VectorXd> g(row, n), nle(row + n, n), ddq(row + 2 * n, n);
     // SHARED: the acceleration from CRBA's M when M is asked for anyway; nle as C·qd + g when
-    // the Coriolis matrix and gravity are (pinocchio's C satisfies C·qd + g = nle)
+    // the Coriolis matrix and gravity are (C·qd + g = nle for pinocchio's C; see Handle)
     const bool by_mass = route == SHARED && (terms & ACCEL) && (terms & MASS);
-    const bool nle_of_c =
-      route == SHARED && (terms & CORIOLIS_T) && (terms & GRAVITY) && ((terms & NLE) || by_mass);
+    const bool nle_of_c = route == SHARED && h.nle_of_c && (terms & CORIOLIS_T)
+                          && (terms & GRAVITY) && ((terms & NLE) || by_mass);
     if ((terms & ACCEL) && !by_mass)
     {
       pinocchio::aba(h.model, h.data, Q, V, In(total, n));
@@ -280,7 +294,8 @@ std::int64_t hofto_dyn1_dof(void * handle)
 // n g(q), n+1 C(q,qd)·qd + g(q), n+2 the acceleration M(q)⁻¹·(total − C·qd − g) for the
 // torque `total`, n+3 C(q,qd)^T·qd [SI]; only the rows `terms` (Terms) asks for are written.
 // With MASS the acceleration is a Cholesky solve with CRBA's M (ABA when M is not positive
-// definite numerically, or without MASS); with CORIOLIS_T and GRAVITY, nle is C·qd + g.
+// definite numerically, or without MASS); with CORIOLIS_T and GRAVITY (and no negative link
+// mass), nle is C·qd + g, else pinocchio's nonLinearEffects.
 void hofto_dyn1_terms(
   void * handle,
   std::int64_t terms,
