@@ -1,7 +1,8 @@
-// The tick's rigid-body dynamics as plain C functions: pinocchio's own algorithms (CRBA, ABA,
-// Coriolis matrix, gravity, nonlinear effects, RNEA) on a copy of the robot's pinocchio model,
-// called from numba kernels (hofto_hw/model/kernels.py) so that a snapshot or a feed-forward is
-// one Python->compiled call. Built and loaded by hofto_hw/model/native/build.py.
+// The tick's rigid-body dynamics as plain C functions: pinocchio's own algorithms (CRBA,
+// Coriolis matrix, gravity, the sparse Cholesky of M, ABA, nonlinear effects, RNEA) on a copy
+// of the robot's pinocchio model, called from numba kernels (hofto_hw/model/kernels.py) so that
+// a snapshot or a feed-forward is one Python->compiled call. Built and loaded by
+// hofto_hw/model/native/build.py.
 //
 // Compile time is the reason for ArmJointsTpl (pinocchio's documented extension point: a Model
 // over one's own joint collection): pinocchio's default collection (~25 joint types in one
