@@ -32,12 +32,11 @@ back to back, whatever it computes, so the number of calls is what counts. With
 :meth:`~DynamicsSnapshot.compute` is ONE compiled call: the finiteness check, friction with its
 held memory and tau - f (:func:`hofto_hw.model.kernels.snapshot_native`), then pinocchio's own
 C++ algorithms the needs ask for on a copy of the model (CRBA, Coriolis matrix with Cᵀ·qd,
-gravity; the acceleration by pinocchio's Cholesky of CRBA's M and nle as C·qd + g where those
-are computed anyway, else ABA and nonlinear effects; see dynamics.cpp) — no Python call per
-algorithm. Without the native library: the
-pinocchio Python calls the needs ask for (the tick's HOFTO + momentum: ABA, CRBA, Coriolis
-matrix, gravity — the floor) and one compiled call for everything else. The numpy path (the
-reference) makes ~8 numpy calls more.
+gravity, nonlinear effects; the acceleration by pinocchio's Cholesky of CRBA's M when M is
+needed too, else ABA; see dynamics.cpp) — no Python call per algorithm. Without the native
+library: the pinocchio Python calls the needs ask for (the tick's HOFTO + momentum: ABA, CRBA,
+Coriolis matrix, gravity — the floor) and one compiled call for everything else. The numpy
+path (the reference) makes ~8 numpy calls more.
 """
 
 from __future__ import annotations

@@ -179,11 +179,12 @@ namespace hofto_native
     const In Q(q, n), V(qd, n);
     double * row = out + n * n;
     Eigen::Map<Eigen::VectorXd> g(row, n), nle(row + n, n), ddq(row + 2 * n, n);
-    // SHARED: the acceleration from CRBA's M when M is asked for anyway; nle as C·qd + g when
-    // the Coriolis matrix and gravity are (C·qd + g = nle for pinocchio's C; see Handle)
+    // SHARED: the acceleration from CRBA's M when M is asked for anyway, its right-hand side
+    // with C·qd + g for nle when the Coriolis matrix and gravity are computed (C·qd + g = nle
+    // for pinocchio's C, see Handle; to rounding: the NLE row itself stays nonLinearEffects')
     const bool by_mass = route == SHARED && (terms & ACCEL) && (terms & MASS);
-    const bool nle_of_c = route == SHARED && h.nle_of_c && (terms & CORIOLIS_T)
-                          && (terms & GRAVITY) && ((terms & NLE) || by_mass);
+    const bool nle_of_c = by_mass && !(terms & NLE) && h.nle_of_c && (terms & CORIOLIS_T)
+                          && (terms & GRAVITY);
     if ((terms & ACCEL) && !by_mass)
     {
       pinocchio::aba(h.model, h.data, Q, V, In(total, n));
@@ -295,8 +296,8 @@ std::int64_t hofto_dyn1_dof(void * handle)
 // n g(q), n+1 C(q,qd)·qd + g(q), n+2 the acceleration M(q)⁻¹·(total − C·qd − g) for the
 // torque `total`, n+3 C(q,qd)^T·qd [SI]; only the rows `terms` (Terms) asks for are written.
 // With MASS the acceleration is a Cholesky solve with CRBA's M (ABA when M is not positive
-// definite numerically, or without MASS); with CORIOLIS_T and GRAVITY (and no negative link
-// mass), nle is C·qd + g, else pinocchio's nonLinearEffects.
+// definite numerically, or without MASS); its nle is C·qd + g with CORIOLIS_T and GRAVITY
+// (and no negative link mass) unless NLE is asked for, else pinocchio's nonLinearEffects.
 void hofto_dyn1_terms(
   void * handle,
   std::int64_t terms,
