@@ -24,11 +24,13 @@ ROOT = Path(__file__).resolve().parents[3]
 ALL = Needs.MASS | Needs.GRAVITY | Needs.NLE | Needs.CORIOLIS_T | Needs.ACCEL
 TOL = 1e-12
 #: the snapshot's needs of the main job (HOFTO + momentum), of HOFTO alone (its own snapshot),
-#: of the DOB beside the momentum observer: each takes another route through dynamics.cpp
+#: of the DOB beside the momentum observer, the acceleration alone: each takes another route
+#: through dynamics.cpp
 NEEDS_SETS = {
     "main job": Needs.MASS | Needs.GRAVITY | Needs.CORIOLIS_T | Needs.ACCEL,
     "hofto": Needs.MASS | Needs.ACCEL,
     "dob + momentum": Needs.MASS | Needs.GRAVITY | Needs.CORIOLIS_T | Needs.NLE,
+    "acceleration alone (ABA)": Needs.ACCEL,
 }
 
 
