@@ -198,8 +198,8 @@ def snapshot_native(
 ) -> bool:
     """The whole snapshot in one call: :func:`snapshot_terms`'s finiteness check and friction
     (``W[F]``, ``W[TOTAL]`` = tau - f), then the native library (handle ``h``) for the terms
-    ``W[FLAGS] >> NATIVE_SHIFT`` into O (n + 4, n): rows 0..n-1 M, n g, n+1 nle, n+2 the ABA
-    acceleration for tau - f, n+3 Cᵀ·qd. Returns the finiteness; W and O are untouched for a
+    ``W[FLAGS] >> NATIVE_SHIFT`` into O (n + 4, n): rows 0..n-1 M, n g, n+1 nle, n+2 the model
+    acceleration M⁻¹·(tau - f - nle), n+3 Cᵀ·qd. Returns the finiteness; W and O are untouched for a
     non-finite sample."""
     if not sample_finite(q, qd, tau):
         return False

@@ -1,7 +1,8 @@
-// The tick's rigid-body dynamics as plain C functions: pinocchio's own algorithms (CRBA, ABA,
-// Coriolis matrix, gravity, nonlinear effects, RNEA) on a copy of the robot's pinocchio model,
-// called from numba kernels (hofto_hw/model/kernels.py) so that a snapshot or a feed-forward is
-// one Python->compiled call. Built and loaded by hofto_hw/model/native/build.py.
+// The tick's rigid-body dynamics as plain C functions: pinocchio's own algorithms (CRBA,
+// Coriolis matrix, gravity, the sparse Cholesky of M, ABA, nonlinear effects, RNEA) on a copy
+// of the robot's pinocchio model, called from numba kernels (hofto_hw/model/kernels.py) so that
+// a snapshot or a feed-forward is one Python->compiled call. Built and loaded by
+// hofto_hw/model/native/build.py.
 //
 // Compile time is the reason for ArmJointsTpl (pinocchio's documented extension point: a Model
 // over one's own joint collection): pinocchio's default collection (~25 joint types in one
@@ -19,15 +20,18 @@
 #endif
 #include <pinocchio/multibody.hpp>
 #include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/cholesky.hpp>
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 
 #include <cstdint>
 #include <algorithm>
+#include <chrono>
 #include <exception>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace hofto_native
 {
@@ -71,15 +75,29 @@ namespace hofto_native
   typedef pinocchio::JointModelTpl<double, 0, ArmJointsTpl> JointModel;
   typedef Eigen::Map<const Eigen::VectorXd> In;
 
+  // pinocchio's Coriolis matrix sums link inertias as (mass, centre of mass, inertia) with the
+  // summed mass clamped at machine epsilon: masses of both signs that cancel (identified
+  // parameters need not be physical) make C wrong while RNEA's nle stays right. With every
+  // link mass >= 0 no sum cancels, and C·qd + g is nle.
+  bool masses_nonnegative(const Model & m)
+  {
+    for (std::size_t j = 1; j < m.inertias.size(); ++j)
+      if (!(m.inertias[j].mass() >= 0.0))
+        return false;
+    return true;
+  }
+
   struct Handle
   {
     Model model;
     Data data;
     Eigen::Index n;
+    bool nle_of_c; // C·qd + g may stand for nle (masses_nonnegative)
     explicit Handle(const Model & m)
     : model(m)
     , data(model)
     , n(model.nv)
+    , nle_of_c(masses_nonnegative(model))
     {
     }
   };
@@ -120,21 +138,57 @@ namespace hofto_native
     CORIOLIS_T = 8,
     ACCEL = 16
   };
+
+  // How terms_of gets the acceleration and the nonlinear effects: SHARED (what the library
+  // runs) reuses what the other terms computed; SEPARATE runs one algorithm per term (ABA for
+  // the acceleration, nonLinearEffects for nle: the library before; kept to time and check
+  // SHARED against, and ABA is SHARED's fallback).
+  enum Route : std::int64_t
+  {
+    SHARED = 0,
+    SEPARATE = 1
+  };
+
+  // M⁻¹·(total − nle) into ddq by pinocchio's sparse Cholesky (U·D·Uᵀ) of data.M, which crba
+  // has just filled: the acceleration ABA gives, without ABA's three passes over the tree.
+  // False (ddq unspecified) when a pivot is not positive and finite: M is not numerically
+  // positive definite, and the caller runs ABA instead.
+  bool accel_by_mass(
+    Handle & h, const double * total, const Eigen::VectorXd & nle, Eigen::Map<Eigen::VectorXd> ddq)
+  {
+    pinocchio::cholesky::decompose(h.model, h.data);
+    const Eigen::VectorXd & D = h.data.D;
+    for (Eigen::Index j = 0; j < h.n; ++j)
+      if (!(D[j] > 0.0 && D[j] < std::numeric_limits<double>::infinity()))
+        return false;
+    ddq = In(total, h.n) - nle;
+    pinocchio::cholesky::solve(h.model, h.data, ddq);
+    return true;
+  }
+
   void terms_of(
     Handle & h,
     std::int64_t terms,
     const double * q,
     const double * qd,
     const double * total,
-    double * out)
+    double * out,
+    Route route = SHARED)
   {
     const Eigen::Index n = h.n;
     const In Q(q, n), V(qd, n);
     double * row = out + n * n;
-    if (terms & ACCEL)
+    Eigen::Map<Eigen::VectorXd> g(row, n), nle(row + n, n), ddq(row + 2 * n, n);
+    // SHARED: the acceleration from CRBA's M when M is asked for anyway, its right-hand side
+    // with C·qd + g for nle when the Coriolis matrix and gravity are computed (C·qd + g = nle
+    // for pinocchio's C, see Handle; to rounding: the NLE row itself stays nonLinearEffects')
+    const bool by_mass = route == SHARED && (terms & ACCEL) && (terms & MASS);
+    const bool nle_of_c = by_mass && !(terms & NLE) && h.nle_of_c && (terms & CORIOLIS_T)
+                          && (terms & GRAVITY);
+    if ((terms & ACCEL) && !by_mass)
     {
       pinocchio::aba(h.model, h.data, Q, V, In(total, n));
-      Eigen::Map<Eigen::VectorXd>(row + 2 * n, n) = h.data.ddq;
+      ddq = h.data.ddq;
     }
     if (terms & MASS)
     {
@@ -159,12 +213,23 @@ namespace hofto_native
     if (terms & GRAVITY)
     {
       pinocchio::computeGeneralizedGravity(h.model, h.data, Q);
-      Eigen::Map<Eigen::VectorXd>(row, n) = h.data.g;
+      g = h.data.g;
     }
-    if (terms & NLE)
+    // the nonlinear effects: into their row when asked for, else into scratch for the solve
+    Eigen::VectorXd & scratch = h.data.nle;
+    if (nle_of_c)
     {
+      scratch.noalias() = h.data.C * V;
+      scratch += h.data.g;
+    }
+    else if ((terms & NLE) || by_mass)
       pinocchio::nonLinearEffects(h.model, h.data, Q, V);
-      Eigen::Map<Eigen::VectorXd>(row + n, n) = h.data.nle;
+    if (terms & NLE)
+      nle = scratch;
+    if (by_mass && !accel_by_mass(h, total, scratch, ddq))
+    {
+      pinocchio::aba(h.model, h.data, Q, V, In(total, n));
+      ddq = h.data.ddq;
     }
   }
 } // namespace hofto_native
@@ -228,9 +293,11 @@ std::int64_t hofto_dyn1_dof(void * handle)
 }
 
 // The terms of one sample into out (n + 4, n), row-major: rows 0..n-1 M(q) (symmetric), row
-// n g(q), n+1 C(q,qd)·qd + g(q), n+2 the ABA acceleration for the torque `total`, n+3
-// C(q,qd)^T·qd [SI]; only the rows `terms` (Terms) asks for are written, in the order ABA,
-// CRBA, Coriolis matrix, gravity, nonlinear effects (that of the Python path).
+// n g(q), n+1 C(q,qd)·qd + g(q), n+2 the acceleration M(q)⁻¹·(total − C·qd − g) for the
+// torque `total`, n+3 C(q,qd)^T·qd [SI]; only the rows `terms` (Terms) asks for are written.
+// With MASS the acceleration is a Cholesky solve with CRBA's M (ABA when M is not positive
+// definite numerically, or without MASS); its nle is C·qd + g with CORIOLIS_T and GRAVITY
+// (and no negative link mass) unless NLE is asked for, else pinocchio's nonLinearEffects.
 void hofto_dyn1_terms(
   void * handle,
   std::int64_t terms,
@@ -248,6 +315,69 @@ void hofto_dyn1_terms(
   {
     std::fill(out, out + (h.n + 4) * h.n, std::numeric_limits<double>::quiet_NaN());
   }
+}
+
+// For tools/bench_native.py: the median over `reps` passes of the mean time of one call [ns]
+// over the `count` samples q, qd, total (count, n) row-major. `which`: 0 ABA, 1 CRBA, 2
+// Coriolis matrix, 3 gravity, 4 nonlinear effects, 5 the Cholesky decomposition and solve of
+// accel_by_mass (on each sample's M, computed before the clock starts), 6 terms_of(`terms`),
+// 7 terms_of(`terms`) by the SEPARATE route. out (n + 4, n) is terms_of's scratch.
+double hofto_dyn1_time(
+  void * handle,
+  std::int64_t which,
+  std::int64_t terms,
+  std::int64_t count,
+  std::int64_t reps,
+  const double * q,
+  const double * qd,
+  const double * total,
+  double * out)
+{
+  Handle & h = *static_cast<Handle *>(handle);
+  const Eigen::Index n = h.n;
+  std::vector<double> per_call;
+  std::vector<Eigen::MatrixXd> masses;
+  if (which == 5)
+    for (std::int64_t s = 0; s < count; ++s)
+      masses.push_back(pinocchio::crba(h.model, h.data, In(q + s * n, n)));
+  Eigen::Map<Eigen::VectorXd> ddq(out, n);
+  const Eigen::VectorXd nle = Eigen::VectorXd::Zero(n);
+  for (std::int64_t r = 0; r < reps; ++r)
+  {
+    const auto t0 = std::chrono::steady_clock::now();
+    for (std::int64_t s = 0; s < count; ++s)
+    {
+      const double *qs = q + s * n, *vs = qd + s * n, *ts = total + s * n;
+      switch (which)
+      {
+      case 0:
+        pinocchio::aba(h.model, h.data, In(qs, n), In(vs, n), In(ts, n));
+        break;
+      case 1:
+        pinocchio::crba(h.model, h.data, In(qs, n));
+        break;
+      case 2:
+        pinocchio::computeCoriolisMatrix(h.model, h.data, In(qs, n), In(vs, n));
+        break;
+      case 3:
+        pinocchio::computeGeneralizedGravity(h.model, h.data, In(qs, n));
+        break;
+      case 4:
+        pinocchio::nonLinearEffects(h.model, h.data, In(qs, n), In(vs, n));
+        break;
+      case 5:
+        h.data.M = masses[s];
+        accel_by_mass(h, ts, nle, ddq);
+        break;
+      default:
+        terms_of(h, terms, qs, vs, ts, out, which == 7 ? SEPARATE : SHARED);
+      }
+    }
+    const auto t1 = std::chrono::steady_clock::now();
+    per_call.push_back(std::chrono::duration<double, std::nano>(t1 - t0).count() / count);
+  }
+  std::sort(per_call.begin(), per_call.end());
+  return per_call.empty() ? 0.0 : per_call[per_call.size() / 2];
 }
 
 // RNEA: out (n) = M(q)·qdd + C(q,qd)·qd + g(q) [N m].

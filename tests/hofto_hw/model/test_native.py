@@ -23,6 +23,15 @@ from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 ROOT = Path(__file__).resolve().parents[3]
 ALL = Needs.MASS | Needs.GRAVITY | Needs.NLE | Needs.CORIOLIS_T | Needs.ACCEL
 TOL = 1e-12
+#: the snapshot's needs of the main job (HOFTO + momentum), of HOFTO alone (its own snapshot),
+#: of the DOB beside the momentum observer, the acceleration alone: each takes another route
+#: through dynamics.cpp
+NEEDS_SETS = {
+    "main job": Needs.MASS | Needs.GRAVITY | Needs.CORIOLIS_T | Needs.ACCEL,
+    "hofto": Needs.MASS | Needs.ACCEL,
+    "dob + momentum": Needs.MASS | Needs.GRAVITY | Needs.CORIOLIS_T | Needs.NLE,
+    "acceleration alone (ABA)": Needs.ACCEL,
+}
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -131,9 +140,10 @@ def test_parameter_changes_are_followed() -> None:
     check()
 
 
-def test_non_finite_sample_keeps_the_last_terms() -> None:
+@pytest.mark.parametrize("which", ["all", *NEEDS_SETS])
+def test_non_finite_sample_keeps_the_last_terms(which: str) -> None:
     model = _model("ur10e")
-    ref, fast = _pair(model)
+    ref, fast = _pair(model) if which == "all" else _pair_of(model, NEEDS_SETS[which])
     q, qd, tau = _samples(model, 1, 2)[0]
     assert fast.compute(q, qd, tau) and ref.compute(q, qd, tau)
     kept = {t: np.array(getattr(fast, t)) for t in ("M", "g", "nle", "ct_qd", "accel", "f")}
@@ -148,6 +158,112 @@ def test_non_finite_sample_keeps_the_last_terms() -> None:
                 np.testing.assert_array_equal(getattr(fast, t), v)
     assert fast.compute(q, qd, tau)
     _agree(fast, ref)
+
+
+def _pair_of(model: RobotModel, needs: Needs) -> tuple[DynamicsSnapshot, DynamicsSnapshot]:
+    ref = DynamicsSnapshot(model, needs | Needs.FRICTION, "numpy")
+    fast = DynamicsSnapshot(model, needs | Needs.FRICTION, "numba")
+    assert fast.native and not ref.native
+    return ref, fast
+
+
+def _terms_of(snap: DynamicsSnapshot) -> list[str]:
+    n = snap.needs
+    pairs = [(Needs.MASS, "M"), (Needs.GRAVITY, "g"), (Needs.NLE, "nle")]
+    pairs += [(Needs.CORIOLIS_T, "ct_qd"), (Needs.ACCEL, "accel"), (Needs.FRICTION, "f")]
+    return [t for flag, t in pairs if n & flag]
+
+
+@pytest.mark.parametrize("name", ["er3a", "ur10e"])
+@pytest.mark.parametrize("which", list(NEEDS_SETS))
+def test_each_route_of_the_terms_equals_the_pinocchio_python_path(name: str, which: str) -> None:
+    """The acceleration by a Cholesky solve with CRBA's M (with nle from the Coriolis matrix
+    and gravity, or from nonLinearEffects) and nle as C·qd + g: within 1e-12 of pinocchio's
+    ABA and nonLinearEffects; the rows not asked for are never written."""
+    model = _model(name)
+    ref, fast = _pair_of(model, NEEDS_SETS[which])
+    terms = _terms_of(fast)
+    others = [t for t in ("M", "g", "nle", "ct_qd", "accel") if t not in terms]
+    for q, qd, tau in _samples(model, 400, 8):
+        assert ref.compute(q, qd, tau) and fast.compute(q, qd, tau)
+        for t in terms:
+            x, y = getattr(fast, t), getattr(ref, t)
+            assert np.max(np.abs(x - y)) <= TOL * max(1.0, float(np.max(np.abs(y)))), t
+        for t in others:
+            assert not np.any(getattr(fast, t)), t
+
+
+def _with_last_link(model: RobotModel, link: np.ndarray, rotor: float) -> RobotModel:
+    pi = model.inertial_parameters()
+    pi[-10:] = link
+    model.set_inertial_parameters(pi)
+    r = model.rotor_inertia
+    r[-2:] = rotor
+    model.rotor_inertia = r
+    return model
+
+
+def test_badly_conditioned_mass_matrix() -> None:
+    """A wrist of 1e-7 its mass and no rotor inertia (cond M up to ~1e11): the acceleration by
+    the Cholesky solve stays within 1e-12 of ABA's and solves M·a = tau - f - nle to
+    rounding (backward error <= 1e-14)."""
+    model = _model("er3a")
+    _with_last_link(model, model.inertial_parameters()[-10:] * 1e-7, 0.0)
+    ref, fast = _pair_of(model, NEEDS_SETS["main job"])
+    worst = 0.0
+    for q, qd, tau in _samples(model, 100, 12):
+        assert ref.compute(q, qd, tau) and fast.compute(q, qd, tau)
+        worst = max(worst, float(np.linalg.cond(ref.M)))
+        a, b = fast.accel, ref.accel
+        assert np.max(np.abs(a - b)) <= TOL * max(1.0, float(np.max(np.abs(b))))
+        nle = pin.nonLinearEffects(model.pin_model, model.pin_model.createData(), q, qd)
+        rhs = tau - fast.f - nle
+        residual = np.linalg.norm(fast.M @ a - rhs)
+        assert residual <= 1e-14 * (
+            np.linalg.norm(fast.M, 2) * np.linalg.norm(a) + np.linalg.norm(rhs)
+        )
+    assert worst > 1e9  # the samples did reach a badly conditioned M
+
+
+def test_singular_mass_matrix_gives_what_aba_gives() -> None:
+    """A last link with its mass on the last axis and no rotational inertia nor rotor inertia:
+    M is singular (its last row zero), the Cholesky pivot is zero, and ABA runs as before (its
+    NaN, not another number)."""
+    model = _model("er3a")
+    link = np.zeros(10)
+    link[0] = 1e-3
+    _with_last_link(model, link, 0.0)
+    ref, fast = _pair_of(model, NEEDS_SETS["main job"])
+    for q, qd, tau in _samples(model, 20, 13):
+        assert ref.compute(q, qd, tau) and fast.compute(q, qd, tau)
+        assert not np.any(fast.M[-1])
+        np.testing.assert_array_equal(fast.accel, ref.accel)
+        for t in ("M", "g", "ct_qd", "f"):
+            x, y = getattr(fast, t), getattr(ref, t)
+            assert np.max(np.abs(x - y)) <= TOL * max(1.0, float(np.max(np.abs(y)))), t
+
+
+def test_a_negative_link_mass_keeps_the_nonlinear_effects_of_rnea() -> None:
+    """Identified parameters need not be physical: a link mass of -1 kg makes pinocchio's
+    Coriolis matrix wrong (its composite inertias' summed masses cancel), so nle and the
+    acceleration must not be built from it: both stay pinocchio's nonLinearEffects and ABA."""
+    model = _model("er3a")
+    link = model.inertial_parameters()[-10:]
+    link[0] = -1.0
+    _with_last_link(model, link, float(model.rotor_inertia[-1]))
+    ref, fast = _pair(model)
+    pm = model.pin_model
+    pd = pm.createData()
+    broken = 0
+    for q, qd, tau in _samples(model, 50, 14):
+        assert ref.compute(q, qd, tau) and fast.compute(q, qd, tau)
+        C = pin.computeCoriolisMatrix(pm, pd, q, qd)
+        off = C @ qd + pin.computeGeneralizedGravity(pm, pd, q) - ref.nle
+        broken += bool(np.max(np.abs(off)) > 1e-6 * max(1.0, float(np.max(np.abs(ref.nle)))))
+        for t in ("nle", "accel"):
+            x, y = getattr(fast, t), getattr(ref, t)
+            assert np.max(np.abs(x - y)) <= TOL * max(1.0, float(np.max(np.abs(y)))), t
+    assert broken  # C·qd + g is not nle for these parameters
 
 
 def _chain(joints: list, seed: int = 11) -> RobotModel:
