@@ -7,8 +7,8 @@ Samples: 256 random (q, qd, tau - f) of the config's arm (q uniform in ±3 rad, 
 torques in ±50 N·m), cycled; each figure is the median over ``reps`` passes of the mean time
 of one call [ns → µs], warm caches. "terms" is what one snapshot call computes for the
 terms the main job's observers ask for (HOFTO + momentum: M, g, Cᵀ·qd, the acceleration):
-"shared" is the library's route (the acceleration by a Cholesky solve with CRBA's M, its nle
-C·qd + g unless nle is asked for), "separate" one algorithm per term (ABA for the
+"shared" is the library's route (the acceleration by a Cholesky solve with CRBA's M and
+nonLinearEffects' nle), "separate" one algorithm per term (ABA for the
 acceleration: the library before).
 Timing goals live here, never in tests.
 """

@@ -11,8 +11,8 @@ declared (:class:`Needs`, the union of their ``needs``):
 - ``CORIOLIS_T``: C(q, qd)ᵀ·qd [N·m], (n,) (the momentum observer's beta term);
 - ``FRICTION``: f(qd) [N·m], (n,), eq. (12);
 - ``ACCEL``: M⁻¹·(tau - C·qd - g - f) [rad/s²], (n,), the model acceleration without
-  contact (ABA; on the native path a Cholesky solve with M when MASS is needed too; implies
-  FRICTION).
+  contact (ABA; on the native path a Cholesky solve with CRBA's M, ABA when M is not
+  numerically positive definite; implies FRICTION).
 
 No copies: on the native path (below) the arrays are rows of one buffer the compiled call
 writes, made once at construction; on the others they are views of pinocchio's Data storage
@@ -32,8 +32,8 @@ back to back, whatever it computes, so the number of calls is what counts. With
 :meth:`~DynamicsSnapshot.compute` is ONE compiled call: the finiteness check, friction with its
 held memory and tau - f (:func:`hofto_hw.model.kernels.snapshot_native`), then pinocchio's own
 C++ algorithms the needs ask for on a copy of the model (CRBA, Coriolis matrix with Cᵀ·qd,
-gravity, nonlinear effects; the acceleration by pinocchio's Cholesky of CRBA's M when M is
-needed too, else ABA; see dynamics.cpp) — no Python call per algorithm. Without the native
+gravity, nonlinear effects; the acceleration by pinocchio's Cholesky of CRBA's M, the same
+whatever else is asked for; see dynamics.cpp) — no Python call per algorithm. Without the native
 library: the pinocchio Python calls the needs ask for (the tick's HOFTO + momentum: ABA, CRBA,
 Coriolis matrix, gravity — the floor) and one compiled call for everything else. The numpy
 path (the reference) makes ~8 numpy calls more.

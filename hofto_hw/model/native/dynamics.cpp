@@ -75,29 +75,15 @@ namespace hofto_native
   typedef pinocchio::JointModelTpl<double, 0, ArmJointsTpl> JointModel;
   typedef Eigen::Map<const Eigen::VectorXd> In;
 
-  // pinocchio's Coriolis matrix sums link inertias as (mass, centre of mass, inertia) with the
-  // summed mass clamped at machine epsilon: masses of both signs that cancel (identified
-  // parameters need not be physical) make C wrong while RNEA's nle stays right. With every
-  // link mass >= 0 no sum cancels, and C·qd + g is nle.
-  bool masses_nonnegative(const Model & m)
-  {
-    for (std::size_t j = 1; j < m.inertias.size(); ++j)
-      if (!(m.inertias[j].mass() >= 0.0))
-        return false;
-    return true;
-  }
-
   struct Handle
   {
     Model model;
     Data data;
     Eigen::Index n;
-    bool nle_of_c; // C·qd + g may stand for nle (masses_nonnegative)
     explicit Handle(const Model & m)
     : model(m)
     , data(model)
     , n(model.nv)
-    , nle_of_c(masses_nonnegative(model))
     {
     }
   };
@@ -179,20 +165,22 @@ namespace hofto_native
     const In Q(q, n), V(qd, n);
     double * row = out + n * n;
     Eigen::Map<Eigen::VectorXd> g(row, n), nle(row + n, n), ddq(row + 2 * n, n);
-    // SHARED: the acceleration from CRBA's M when M is asked for anyway, its right-hand side
-    // with C·qd + g for nle when the Coriolis matrix and gravity are computed (C·qd + g = nle
-    // for pinocchio's C, see Handle; to rounding: the NLE row itself stays nonLinearEffects')
-    const bool by_mass = route == SHARED && (terms & ACCEL) && (terms & MASS);
-    const bool nle_of_c = by_mass && !(terms & NLE) && h.nle_of_c && (terms & CORIOLIS_T)
-                          && (terms & GRAVITY);
+    // SHARED: the acceleration from CRBA's M by its Cholesky, its right-hand side with
+    // nonLinearEffects' nle, whatever else is asked for: an observer's estimate must not
+    // depend on which other observers share the snapshot (HOFTO's gains, ~1e10, turn a
+    // rounding difference in the acceleration into 1e-10 N·m); C·qd + g from the Coriolis
+    // matrix would save 0.9 µs only when the momentum observer runs beside (and is not nle
+    // when identified link masses of both signs cancel: pinocchio clamps summed masses)
+    const bool by_mass = route == SHARED && (terms & ACCEL);
     if ((terms & ACCEL) && !by_mass)
     {
       pinocchio::aba(h.model, h.data, Q, V, In(total, n));
       ddq = h.data.ddq;
     }
+    if ((terms & MASS) || by_mass)
+      pinocchio::crba(h.model, h.data, Q);
     if (terms & MASS)
     {
-      pinocchio::crba(h.model, h.data, Q);
       const Eigen::MatrixXd & M = h.data.M; // the upper triangle is CRBA's
       for (Eigen::Index i = 0; i < n; ++i)
         for (Eigen::Index k = 0; k < n; ++k)
@@ -215,15 +203,10 @@ namespace hofto_native
       pinocchio::computeGeneralizedGravity(h.model, h.data, Q);
       g = h.data.g;
     }
-    // the nonlinear effects: into their row when asked for, else into scratch for the solve
-    Eigen::VectorXd & scratch = h.data.nle;
-    if (nle_of_c)
-    {
-      scratch.noalias() = h.data.C * V;
-      scratch += h.data.g;
-    }
-    else if ((terms & NLE) || by_mass)
+    // the nonlinear effects: into their row when asked for, and for the solve
+    if ((terms & NLE) || by_mass)
       pinocchio::nonLinearEffects(h.model, h.data, Q, V);
+    const Eigen::VectorXd & scratch = h.data.nle;
     if (terms & NLE)
       nle = scratch;
     if (by_mass && !accel_by_mass(h, total, scratch, ddq))
