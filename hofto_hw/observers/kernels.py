@@ -578,26 +578,36 @@ if _numba is not None:
     from numba.core import types as _types
     from numba.extending import intrinsic as _intrinsic
 
-    @_intrinsic
-    def _f64_at(typingctx, address):  # type: ignore[no-untyped-def]
-        """The float64 pointer at an integer address (for numba.carray)."""
-        if not isinstance(address, _types.Integer):
-            return None
-        sig = _types.CPointer(_types.float64)(address)
+    def pointer_at(dtype: str) -> Callable[..., Any]:
+        """A compiled function: the pointer to ``dtype`` (a numba type name: "float64",
+        "uint8", ...) at an integer address, for :data:`carray` (a table of addresses)."""
+        nbtype = getattr(_types, dtype)
 
-        def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-            return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
+        @_intrinsic
+        def at(typingctx, address):  # type: ignore[no-untyped-def]
+            if not isinstance(address, _types.Integer):
+                return None
+            sig = _types.CPointer(nbtype)(address)
 
-        return sig, codegen
+            def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+                return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
 
-    _carray = _numba.carray
+            return sig, codegen
+
+        return at
+
+    carray = _numba.carray
 else:  # never called without numba; keeps the module importable
 
-    def _f64_at(address: int) -> int:
-        return address
+    def pointer_at(dtype: str) -> Callable[..., Any]:
+        return lambda address: address
 
-    def _carray(address: int, shape: tuple[int, ...]) -> np.ndarray:
+    def carray(address: int, shape: tuple[int, ...]) -> np.ndarray:
         raise RuntimeError("numba is not available")
+
+
+_f64_at = pointer_at("float64")
+_carray = carray
 
 
 @_jit

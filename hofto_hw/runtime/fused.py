@@ -70,39 +70,12 @@ R_SIZE = 28
 #: compiled demo path; OTHER: the reference runs the controller)
 HOLD_STILL, MOVE_PATH, OTHER = 0, 1, 2
 
-if K.available():
-    import numba as _nb
-    from numba.core import types as _types
-    from numba.extending import intrinsic as _intrinsic
-
-    def _pointer(nbtype: Any) -> Any:
-        @_intrinsic
-        def at(typingctx, address):  # type: ignore[no-untyped-def]
-            if not isinstance(address, _types.Integer):
-                return None
-            sig = _types.CPointer(nbtype)(address)
-
-            def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-                return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
-
-            return sig, codegen
-
-        return at
-
-    _f64 = _pointer(_types.float64)
-    _u8 = _pointer(_types.uint8)
-    _i64 = _pointer(_types.int64)
-    _b1 = _pointer(_types.boolean)
-    _carray = _nb.carray
-else:  # never called without numba; keeps the module importable
-
-    def _f64(address: int) -> int:
-        return address
-
-    _u8 = _i64 = _b1 = _f64
-
-    def _carray(address: int, shape: Any) -> np.ndarray:
-        raise RuntimeError("numba is not available")
+# pointers at the table's addresses (the observer bank's helper, one per element type)
+_f64 = K.pointer_at("float64")
+_u8 = K.pointer_at("uint8")
+_i64 = K.pointer_at("int64")
+_b1 = K.pointer_at("boolean")
+_carray = K.carray
 
 
 @K.jit
@@ -140,7 +113,7 @@ def fused_tick(a: np.ndarray, r: np.ndarray, rec: np.ndarray) -> int:
         for j in range(n):
             prev[i, j] = sample[i, j]
     period = r[R_PERIOD]
-    cmd_dt = dt if period <= 0.0 or dt <= period else period
+    cmd_dt = dt if period <= 0.0 or dt <= period else period  # tick.command_dt
     t_cmd = r[R_TCMD] + cmd_dt
     r[R_TCMD] = t_cmd
     r[R_OBS_DT] = obs_dt

@@ -112,6 +112,13 @@ def gap_steps(dt: float, period: float) -> int:
     return 1
 
 
+def command_dt(dt: float, period: float) -> float:
+    """The setpoint (path) time step of a tick ``dt`` [s] after the last one: at most one
+    ``period`` [s] (0: unknown): an interpolator that missed cycles is late, it does not jump
+    (the fused call, hofto_hw/runtime/fused.py, computes the same in its kernel)."""
+    return dt if period <= 0.0 or dt <= period else period
+
+
 def lerp(prev: np.ndarray, now: np.ndarray, a: float, out: np.ndarray) -> None:
     """``out = prev + a·(now - prev)`` in place: a stall's sub-step sample (flight-log replay
     interpolates with the same operations, so its estimates are the loop's bit for bit)."""
@@ -271,7 +278,6 @@ class Tick:
         self._fz_rebind = False  # a reset may have rebound an owner's array: check the table
         self._fuse_quiet = False
         self._fz_kind = OTHER
-        self._fz_rev, self._fz_fr, self._fz_pl = -1, None, None
         self._cmd_dt = 0.0
         self.fused_ticks = 0  # ticks the fused call finished
         self._fz_call = fused_tick
@@ -365,7 +371,7 @@ class Tick:
             obs_dt = sample_dt if sample_dt > 0.0 else dt
             self._observe(self.snapshot, q, qd, tau, obs_dt)
         self.sample_dt = obs_dt  # into the record with the rest (_record)
-        self._cmd_dt = cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
+        self._cmd_dt = cmd_dt = command_dt(dt, self.period)
         self.t_cmd += cmd_dt
 
         # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
@@ -426,8 +432,6 @@ class Tick:
         """The fused call's monitor flagged (or a contact was on): what CollisionLevels.update
         does after its kernel, then the rest of :meth:`_safety`."""
         reg, c = self._reg, self.collision
-        self.bus.streak = 0  # good data (what bus.check did on it)
-        self._since_fresh = 0.0
         flags = int(reg[R_MFLAGS])
         c._report(self.stop, flags)  # type: ignore[union-attr]
         obs_dt = self.sample_dt
@@ -513,18 +517,18 @@ class Tick:
         r[R_WAKE] = wakeup_us
         r[R_COMP] = compute_us
         m = self.feedforward.model
-        if not (m.revision == self._fz_rev and m.friction is self._fz_fr):
+        rev, fr, pl = self._ff_model  # what _fuse_refresh found in sync
+        if m.revision != rev or m.friction is not fr or m.payload is not pl:
             return READ  # a model change: the reference takes it (and refreshes)
-        if m.payload is not self._fz_pl:
-            return READ
         stage = self._fz_call(self._fz_tab, r, self._rec1)
         if stage == READ:
             return READ
         self.sample_dt = r.item(R_OBS_DT)
         self.t_cmd = r.item(R_TCMD)
-        if stage == DONE:
-            self.bus.streak = 0  # good data (what bus.check did on it)
+        if stage >= MONITOR:  # good data, judged by the call (what bus.check does on it)
+            self.bus.streak = 0
             self._since_fresh = 0.0
+        if stage == DONE:
             if self._fz_kind == MOVE_PATH:  # the path wrote the reference
                 motion = self.motion
                 motion.version += 1
@@ -532,10 +536,7 @@ class Tick:
             self.fused_ticks += 1
             return DONE
         self.snapshot.finite = r.item(R_FINITE) != 0.0
-        self._cmd_dt = dt if self.period <= 0.0 or dt <= self.period else self.period
-        if stage == CONTROL:
-            self.bus.streak = 0
-            self._since_fresh = 0.0
+        self._cmd_dt = command_dt(dt, self.period)
         return stage
 
     def use_fused(self, on: bool) -> None:
@@ -578,7 +579,6 @@ class Tick:
             and ff._native.revision == model.revision  # type: ignore[union-attr]
             and self._ff_model == (model.revision, model.friction, model.payload)
         )
-        self._fz_rev, self._fz_fr, self._fz_pl = model.revision, model.friction, model.payload
         if synced:  # a parameter change made new C++ models (native.NativeModel.sync)
             fz.tab[A_SH] = snap._native.handle  # type: ignore[union-attr]
             fz.tab[A_IDH] = ff._native.handle  # type: ignore[union-attr]
