@@ -28,6 +28,14 @@ Figures (µs; median / p99 / p99.9):
   part wrapped: each wrapper costs ~0.2 µs), "other" is
   the rest of Tick.step; safety's bus and limit checks, the motion update and the
   recording are parts of their own;
+- the tick's own conditions: the tick always runs right after the simulated exchange (~0.2
+  ms of Python plant) and, in the 1/2 kHz loops, after a sleep, which leave the caches cold,
+  while ``floor`` runs warm. ``floor_in_loop`` times the floor's four calls in the same loop
+  right after the exchange (Tick.step replaced by the exchange, the read and the calls;
+  ``ratio_to_floor_in_loop`` = tick median / that), ``noop_call_in_loop`` a compiled call
+  that does nothing there; ``fused_call`` / ``fused_python`` split the tick that took the
+  fused call into the compiled call and the Python around it (a further run, the call
+  wrapped). Information next to the issue's targets, which stay judged against ``floor``;
 - the numpy path (a subprocess with HOFTO_HW_NO_NUMBA=1, the official switch) and the
   compiled path; ratio tick / floor;
 - tracemalloc over 10,000 ticks after warm-up (growth, the sites that grew) and the
@@ -264,9 +272,118 @@ def run_loop(
         res["hofto_plus_momentum"] = parts["hofto_plus_momentum"]
         res["tick_with_part_probes"] = parts["tick"]
         tick.use_fused(fused)
+        if fused:  # the compiled call and the Python around it, on the tick as it runs
+            res.update(fused_split(system, part_ticks))
+        # the floor and a no-op compiled call in the tick's own conditions (same loop)
+        res.update(in_loop_costs(system, part_ticks, res["median"]))
         return res
     finally:
         system.close()
+
+
+def fused_split(system, ticks: int) -> dict:
+    """``ticks`` more ticks with the fused call (``tick._fz_call``) wrapped: its own time
+    (``fused_call``) and the rest of the tick (``fused_python``: Tick.step minus the exchange
+    minus the call; the wrapper's own ~0.2 µs falls in it), over the ticks that took the call."""
+    tick = system.tick
+    clock = time.perf_counter_ns
+    call_ns = np.zeros(ticks)
+    probe = Probe(system, ticks, False)
+    orig = tick._fz_call
+    box = [0]
+
+    def timed(*args):
+        t0 = clock()
+        r = orig(*args)
+        box[0] += clock() - t0
+        return r
+
+    inner = tick.step  # the probe's wrapper (it records the tick and the exchange)
+
+    def step(*args):
+        k = probe.k
+        box[0] = 0
+        inner(*args)
+        if k < ticks:
+            call_ns[k] = box[0]
+
+    tick._fz_call, tick.step = timed, step
+    try:
+        system.loop.run(max_ticks=ticks)
+    finally:
+        tick._fz_call = orig
+        del tick.step  # the probe's wrapper again, then the class's own
+        probe.detach()
+    k = probe.k
+    took = call_ns[:k] > 0
+    tick_us = (probe.step[:k] - probe.exchange[:k]) / 1000.0
+    call_us = call_ns[:k] / 1000.0
+    if not took.any():
+        return {"fused_call": {"skipped": "no tick took the fused call"}}
+    return {
+        "fused_call": stats(call_us[took]),
+        "fused_python": stats(tick_us[took] - call_us[took]),
+    }
+
+
+def in_loop_costs(system, ticks: int, tick_median: float) -> dict:
+    """The tick's conditions without the tick: for ``ticks`` more cycles of the same loop,
+    Tick.step is replaced by the exchange and the drive read (the plant runs as for the tick;
+    the reference stands still), then a no-op compiled call (``noop_call_in_loop``) and the
+    floor's four pinocchio calls on the fresh sample (``floor_in_loop``), each timed alone.
+    ``ratio_to_floor_in_loop`` = the tick's median / ``floor_in_loop``'s median: the tick
+    against the floor when both start from the caches the exchange (and the sleep) left."""
+    import pinocchio as pin
+
+    from hofto_hw.observers import kernels
+
+    tick, g = system.tick, system.group
+    pm = system.model.pin_model
+    pd = pm.createData()
+    clock = time.perf_counter_ns
+    floor_ns, noop_ns = np.zeros(ticks), np.zeros(ticks)
+    noop = _noop_kernel() if kernels.available() else None
+    one = np.zeros(1)
+    if noop is not None:
+        noop(one)
+    box = [0]
+
+    def step(*args):
+        k = box[0]
+        g.exchange()
+        g.read()
+        q, qd, tau = g.q, g.qd, g.tau
+        t0 = clock()
+        if noop is not None:
+            noop(one)
+        t1 = clock()
+        pin.aba(pm, pd, q, qd, tau)
+        pin.crba(pm, pd, q)
+        pin.computeCoriolisMatrix(pm, pd, q, qd)
+        pin.computeGeneralizedGravity(pm, pd, q)
+        t2 = clock()
+        if k < ticks:
+            noop_ns[k], floor_ns[k] = t1 - t0, t2 - t1
+            box[0] = k + 1
+
+    tick.step = step
+    try:
+        system.loop.run(max_ticks=ticks)
+    finally:
+        del tick.step
+    k = box[0]
+    fl = stats(floor_ns[:k] / 1000.0)
+    out = {"floor_in_loop": fl, "ratio_to_floor_in_loop": tick_median / fl["median"]}
+    if noop is not None:
+        out["noop_call_in_loop"] = stats(noop_ns[:k] / 1000.0)
+    return out
+
+
+def _noop_kernel():
+    """A compiled function that does nothing with one array (the fixed cost of a call)."""
+    from hofto_hw.observers import kernels
+
+    return kernels._numba.njit(lambda a: a.shape[0])  # not cached: it compiles in ~0.1 s
 
 
 def floor_us(cfg, ticks: int) -> np.ndarray:
@@ -573,6 +690,22 @@ def print_report(res: dict) -> None:
                     f", {100 * r['share_of_period']:.1f} % of the period"
                 )
             print(line)
+            if "floor_in_loop" in r:
+                fl, noop = r["floor_in_loop"], r.get("noop_call_in_loop")
+                line = (
+                    f"             same conditions (after the exchange): floor"
+                    f" {fl['median']:.1f} / {fl['p99']:.1f}, tick/floor"
+                    f" {r['ratio_to_floor_in_loop']:.2f}"
+                )
+                if noop is not None:
+                    line += f"; a no-op compiled call {noop['median']:.2f}"
+                fc, fpy = r.get("fused_call"), r.get("fused_python")
+                if fpy is not None:
+                    line += (
+                        f"; the fused call {fc['median']:.1f} / {fc['p99']:.1f}"
+                        f" + Python {fpy['median']:.1f} / {fpy['p99']:.1f}"
+                    )
+                print(line)
             print(
                 f"             parts ({r.get('parts_path', 'per part')}; median): "
                 + ", ".join(f"{c} {r['parts'][c]['median']:.1f}" for c in cols)
