@@ -33,7 +33,9 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _start_emulator(iface: str, config: Path, workdir: Path) -> subprocess.Popen:
+def start_emulator(iface: str, config: Path, workdir: Path) -> subprocess.Popen:
+    """``hofto-hw sim-ethercat`` on ``iface`` for ``config`` (its own process, quiet arm),
+    returned once its ready file exists in ``workdir``; SystemExit when it fails to start."""
     ready = workdir / "ready"
     proc = subprocess.Popen(
         [
@@ -88,7 +90,7 @@ def run(seconds: float, rate: float, config: Path, fifo: int = 0) -> dict[str, f
     t = None
     try:
         with tempfile.TemporaryDirectory() as tmp:
-            proc = _start_emulator(slave_if, config, Path(tmp))
+            proc = start_emulator(slave_if, config, Path(tmp))
         if fifo:
             _set_fifo(proc.pid, fifo)
             _set_fifo(0, fifo)

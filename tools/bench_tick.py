@@ -239,57 +239,91 @@ class Probe:
 def run_loop(
     cfg, rate_hz: float, clock: str, ticks: int, part_ticks: int, floor: float, hold: bool = False
 ) -> dict:
-    """``ticks`` ticks timed as a whole, then ``part_ticks`` more with every part probed,
-    on one System (the same run continues)."""
+    """One System, one uninterrupted run of its loop in phases (:func:`loop_phases`): a
+    pause between phases would be a host stall to drives that run on their own clock (an
+    emulated EtherCAT arm moving along the path would see its target stop)."""
     system = build_system(cfg, rate_hz, clock, hold)
-    period = None if clock == "sim" else 1e6 / rate_hz
-    tick = system.tick
+    res: dict = {}
+    phases = loop_phases(system, ticks, part_ticks, floor, None if clock == "sim" else rate_hz, res)
+    left = [next(phases)]
+
+    def next_phase() -> bool:  # between two ticks: True ends the run
+        left[0] -= 1
+        if left[0] > 0:
+            return False
+        try:
+            left[0] = next(phases)
+        except StopIteration:
+            return True
+        return False
+
     try:
-        system.loop.run(max_ticks=300)  # warm-up: caches, pages, the drive ramp
-        fused0 = tick.fused_ticks
-        probe = Probe(system, ticks, False)
-        system.loop.run(max_ticks=ticks)
-        res = probe.result(floor, period)
-        probe.detach()
-        # the tick as it runs (the fused call on quiet ticks when it was built)
-        res["path"] = "fused" if tick._fz is not None else "reference"
-        res["fused_ticks"] = int(tick.fused_ticks - fused0)
-        # the same loop forced onto the reference (every part its own call), unprobed
-        fused = tick._fz is not None
-        tick.use_fused(False)
-        probe = Probe(system, ticks, False)
-        system.loop.run(max_ticks=ticks)
-        ref = probe.result(floor, period)
-        probe.detach()
-        res["reference"] = {k: ref[k] for k in ("ticks", "tick", "median", "p99", "p999")}
-        res["reference"]["path"] = "reference"
-        # the parts: a fused call cannot be seen inside, so they are timed on the reference
-        probe = Probe(system, part_ticks, True)
-        system.loop.run(max_ticks=part_ticks)
-        parts = probe.result(floor, period)
-        res["parts_path"] = "reference (per-part calls, probed)"
-        res["parts"] = parts["parts"]
-        res["hofto_plus_momentum"] = parts["hofto_plus_momentum"]
-        res["tick_with_part_probes"] = parts["tick"]
-        tick.use_fused(fused)
-        if fused:  # the compiled call and the Python around it, on the tick as it runs
-            res.update(fused_split(system, part_ticks))
-        # the floor and a no-op compiled call in the tick's own conditions (same loop)
-        res.update(in_loop_costs(system, part_ticks, res["median"]))
+        system.loop.run(should_stop=next_phase)
         return res
     finally:
         system.close()
 
 
-def fused_split(system, ticks: int) -> dict:
-    """``ticks`` more ticks with the fused call (``tick._fz_call``) wrapped: its own time
-    (``fused_call``) and the rest of the tick (``fused_python``: Tick.step minus the exchange
-    minus the call; the wrapper's own ~0.2 µs falls in it), over the ticks that took the call."""
+def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res: dict):
+    """The phases of :func:`run_loop`, as a generator that yields each phase's tick count and
+    sets it up before (and takes its probe off after) those ticks: warm-up, the tick as it
+    runs, the reference, the parts, the fused call's split, the floor in the same conditions.
+    The figures are computed after the last phase (computing them between phases takes
+    milliseconds: a host stall to the drives)."""
+    period = None if rate_hz is None else 1e6 / rate_hz
+    tick = system.tick
+    fused = tick._fz is not None
+    noop = _noop_kernel()  # compiled before the first tick
+    yield 300  # warm-up: caches, pages, the drive ramp
+    fused0 = tick.fused_ticks
+    main = Probe(system, ticks, False)
+    yield ticks
+    main.detach()
+    fused_ticks = tick.fused_ticks - fused0
+    # the same loop forced onto the reference (every part its own call), unprobed
+    tick.use_fused(False)
+    ref = Probe(system, ticks, False)
+    yield ticks
+    ref.detach()
+    # the parts: a fused call cannot be seen inside, so they are timed on the reference
+    parts = Probe(system, part_ticks, True)
+    yield part_ticks
+    parts.detach()
+    tick.use_fused(fused)
+    split: dict = {}
+    if fused:  # the compiled call and the Python around it, on the tick as it runs
+        yield from fused_split(system, part_ticks, split)
+    # the floor and a no-op compiled call in the tick's own conditions (same loop)
+    costs: dict = {}
+    yield from in_loop_costs(system, part_ticks, noop, costs)
+
+    res.update(main.result(floor, period))
+    # the tick as it runs (the fused call on quiet ticks when it was built)
+    res["path"] = "fused" if fused else "reference"
+    res["fused_ticks"] = int(fused_ticks)
+    r = ref.result(floor, period)
+    res["reference"] = {k: r[k] for k in ("ticks", "tick", "median", "p99", "p999")}
+    res["reference"]["path"] = "reference"
+    p = parts.result(floor, period)
+    res["parts_path"] = "reference (per-part calls, probed)"
+    res["parts"] = p["parts"]
+    res["hofto_plus_momentum"] = p["hofto_plus_momentum"]
+    res["tick_with_part_probes"] = p["tick"]
+    res.update(split)
+    res.update(costs)
+    res["ratio_to_floor_in_loop"] = res["median"] / costs["floor_in_loop"]["median"]
+
+
+def fused_split(system, ticks: int, res: dict):
+    """A phase of ``ticks`` ticks (a generator, see :func:`loop_phases`) with the fused call
+    (``tick._fz_call``) wrapped: its own time (``fused_call``) and the rest of the tick
+    (``fused_python``: Tick.step minus the exchange minus the call; the wrapper's own ~0.2 µs
+    falls in it), over the ticks that took the call."""
     tick = system.tick
     clock = time.perf_counter_ns
     call_ns = np.zeros(ticks)
     probe = Probe(system, ticks, False)
-    orig = tick._fz_call
+    orig, inner = tick._fz_call, tick.step  # inner: the probe's wrapper (tick and exchange)
     box = [0]
 
     def timed(*args):
@@ -297,8 +331,6 @@ def fused_split(system, ticks: int) -> dict:
         r = orig(*args)
         box[0] += clock() - t0
         return r
-
-    inner = tick.step  # the probe's wrapper (it records the tick and the exchange)
 
     def step(*args):
         k = probe.k
@@ -309,43 +341,37 @@ def fused_split(system, ticks: int) -> dict:
 
     tick._fz_call, tick.step = timed, step
     try:
-        system.loop.run(max_ticks=ticks)
+        yield ticks
     finally:
-        tick._fz_call = orig
-        del tick.step  # the probe's wrapper again, then the class's own
+        tick._fz_call, tick.step = orig, inner
         probe.detach()
     k = probe.k
     took = call_ns[:k] > 0
     tick_us = (probe.step[:k] - probe.exchange[:k]) / 1000.0
     call_us = call_ns[:k] / 1000.0
     if not took.any():
-        return {"fused_call": {"skipped": "no tick took the fused call"}}
-    return {
-        "fused_call": stats(call_us[took]),
-        "fused_python": stats(tick_us[took] - call_us[took]),
-    }
+        res["fused_call"] = {"skipped": "no tick took the fused call"}
+        return
+    res["fused_call"] = stats(call_us[took])
+    res["fused_python"] = stats(tick_us[took] - call_us[took])
 
 
-def in_loop_costs(system, ticks: int, tick_median: float) -> dict:
-    """The tick's conditions without the tick: for ``ticks`` more cycles of the same loop,
-    Tick.step is replaced by the exchange and the drive read (the plant runs as for the tick;
-    the reference stands still), then a no-op compiled call (``noop_call_in_loop``) and the
-    floor's four pinocchio calls on the fresh sample (``floor_in_loop``), each timed alone.
-    ``ratio_to_floor_in_loop`` = the tick's median / ``floor_in_loop``'s median: the tick
-    against the floor when both start from the caches the exchange (and the sleep) left."""
+def in_loop_costs(system, ticks: int, noop, res: dict):
+    """A phase of ``ticks`` cycles (a generator, see :func:`loop_phases`) in the tick's
+    conditions without the tick: Tick.step replaced by the exchange and the drive read (the
+    plant runs as for the tick; the reference stands still), then a no-op compiled call
+    (``noop_call_in_loop``) and the floor's four pinocchio calls on the fresh sample
+    (``floor_in_loop``), each timed alone. ``ratio_to_floor_in_loop`` = the tick's median /
+    ``floor_in_loop``'s median (:func:`loop_phases`): the tick against the floor when both
+    start from the caches the exchange (and the sleep) left. ``noop``: :func:`_noop_kernel`'s."""
     import pinocchio as pin
-
-    from hofto_hw.observers import kernels
 
     tick, g = system.tick, system.group
     pm = system.model.pin_model
     pd = pm.createData()
     clock = time.perf_counter_ns
     floor_ns, noop_ns = np.zeros(ticks), np.zeros(ticks)
-    noop = _noop_kernel() if kernels.available() else None
     one = np.zeros(1)
-    if noop is not None:
-        noop(one)
     box = [0]
 
     def step(*args):
@@ -368,22 +394,26 @@ def in_loop_costs(system, ticks: int, tick_median: float) -> dict:
 
     tick.step = step
     try:
-        system.loop.run(max_ticks=ticks)
+        yield ticks
     finally:
         del tick.step
     k = box[0]
     fl = stats(floor_ns[:k] / 1000.0)
-    out = {"floor_in_loop": fl, "ratio_to_floor_in_loop": tick_median / fl["median"]}
+    res["floor_in_loop"] = fl
     if noop is not None:
-        out["noop_call_in_loop"] = stats(noop_ns[:k] / 1000.0)
-    return out
+        res["noop_call_in_loop"] = stats(noop_ns[:k] / 1000.0)
 
 
 def _noop_kernel():
-    """A compiled function that does nothing with one array (the fixed cost of a call)."""
+    """A compiled function that does nothing with one array (the fixed cost of a call),
+    compiled and called once; None without numba."""
     from hofto_hw.observers import kernels
 
-    return kernels._numba.njit(lambda a: a.shape[0])  # not cached: it compiles in ~0.1 s
+    if not kernels.available():
+        return None
+    noop = kernels._numba.njit(lambda a: a.shape[0])  # not cached: it compiles in ~0.1 s
+    noop(np.zeros(1))
+    return noop
 
 
 def floor_us(cfg, ticks: int) -> np.ndarray:
@@ -564,6 +594,50 @@ def bench_path(cfg, quick: bool, floor: float) -> dict:
     return res
 
 
+def ethercat_loop(config: Path, quick: bool, floor: float) -> dict:
+    """The tick in a 1 kHz loop over the real SOEM master (pysoem) on a veth pair, the six
+    drives and the arm emulated by ``hofto-hw sim-ethercat`` in its own process
+    (tools/bench_ethercat.py's ``start_emulator``): the exchange is the master's frame round
+    trip and the plant runs in the other process, as on a controller PC. Needs root.
+    Late frames on a loaded machine are counted, not acted on (``safety.bus.lost_cycles``)."""
+    if os.geteuid() != 0:
+        return {"skipped": "needs root (a veth pair and raw sockets)"}
+    import yaml
+
+    from drivers.sim.esc import veth
+    from hofto_hw.config import load_config
+
+    sys.path.insert(0, str(ROOT / "tools"))
+    from bench_ethercat import start_emulator
+
+    ticks, part_ticks = (1500, 500) if quick else (20000, 5000)
+    tag = f"{os.getpid() % 100000}"
+    master, slave = f"tm{tag}", f"ts{tag}"
+    data = yaml.safe_load(config.read_text())
+    data["robot"]["urdf"] = str((config.parent / data["robot"]["urdf"]).resolve())
+    data["bus"].update(transport="ethercat", interface=master)
+    # the emulated slaves' SM watchdog at 2 s: a host stall must not take a drive out of OP
+    data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), "pdo_watchdog": 2.0}
+    data["safety"]["bus"]["lost_cycles"] = 1000
+    veth.create_pair(master, slave)
+    proc = None
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "ethercat.yaml"
+            path.write_text(yaml.safe_dump(data))
+            proc = start_emulator(slave, path, Path(tmp))
+            res = run_loop(load_config(path), 1000.0, "real", ticks, part_ticks, floor)
+    finally:
+        if proc is not None and proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        veth.delete_pair(master)
+    return {"bus": "ethercat: pysoem over a veth pair, hofto-hw sim-ethercat", "loop_1khz": res}
+
+
 def realtime() -> str:
     """SCHED_FIFO 50 if permitted; returns the policy in use."""
     try:
@@ -585,7 +659,7 @@ def numpy_path(config: Path, quick: bool, floor: float) -> dict:
     return json.loads(r.stdout)
 
 
-def bench(config: Path, quick: bool) -> dict:
+def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
     from hofto_hw.config import load_config
     from hofto_hw.model.snapshot import pinocchio_traits
     from hofto_hw.observers import kernels
@@ -620,6 +694,8 @@ def bench(config: Path, quick: bool) -> dict:
     res["path"] = best
     for key in (*LOOPS, HOLD_LOOP):
         res[key] = res["paths"][best][key]
+    if ethercat:
+        res["ethercat"] = ethercat_loop(config, quick, f)
     res["startup"] = {"skipped": "--quick"} if quick else startup(config)
     res["load_average_end"] = list(os.getloadavg())
     return res
@@ -650,6 +726,52 @@ def targets(res: dict) -> list[tuple[str, str, bool]]:
     ]
 
 
+def print_loop(key: str, r: dict) -> None:
+    """One loop's lines of the report."""
+    cols = (*PARTS, "other")
+    t = r["tick"]
+    line = (
+        f"{key:12s} tick {t['median']:6.1f} / {t['p99']:6.1f} / {t['p999']:6.1f}"
+        f"   ratio tick/floor {r['ratio_to_floor']:.2f}"
+        f"   exchange median {r['exchange']['median']:.0f}"
+    )
+    if "fused_ticks" in r:
+        ref = r["reference"]
+        line += (
+            f"   [{r['path']}: {r['fused_ticks']}/{r['ticks']} ticks fused; reference"
+            f" {ref['median']:.1f} / {ref['p99']:.1f}]"
+        )
+    if "wakeup" in r:
+        w = r["wakeup"]
+        line += (
+            f"   wake-up {w['median']:.0f}/{w['p99']:.0f}, overruns {r['overruns']}"
+            f", {100 * r['share_of_period']:.1f} % of the period"
+        )
+    print(line)
+    if "floor_in_loop" in r:
+        fl, noop = r["floor_in_loop"], r.get("noop_call_in_loop")
+        line = (
+            f"             same conditions (after the exchange): floor"
+            f" {fl['median']:.1f} / {fl['p99']:.1f}, tick/floor"
+            f" {r['ratio_to_floor_in_loop']:.2f}"
+        )
+        if noop is not None:
+            line += f"; a no-op compiled call {noop['median']:.2f}"
+        fc, fpy = r.get("fused_call"), r.get("fused_python")
+        if fpy is not None:
+            line += (
+                f"; the fused call {fc['median']:.1f} / {fc['p99']:.1f}"
+                f" + Python {fpy['median']:.1f} / {fpy['p99']:.1f}"
+            )
+        print(line)
+    print(
+        f"             parts ({r.get('parts_path', 'per part')}; median): "
+        + ", ".join(f"{c} {r['parts'][c]['median']:.1f}" for c in cols)
+        + f"; HOFTO+momentum {r['hofto_plus_momentum']['median']:.1f}"
+        + f" (tick with probes {r['tick_with_part_probes']['median']:.1f})"
+    )
+
+
 def print_report(res: dict) -> None:
     print(
         f"{res['machine']}, python {res['python']}, numpy {res['numpy']}, "
@@ -661,7 +783,6 @@ def print_report(res: dict) -> None:
         f"floor (aba+crba+coriolis+gravity): median {fl['median']:.1f}  p99 {fl['p99']:.1f}  "
         f"p99.9 {fl['p999']:.1f} µs"
     )
-    cols = (*PARTS, "other")
     for backend, path in res["paths"].items():
         if "skipped" in path:
             print(f"\n[{backend}] skipped: {path['skipped']}")
@@ -669,49 +790,8 @@ def print_report(res: dict) -> None:
         print(f"\n[{backend} path] tick = Tick.step minus the bus exchange; µs median/p99/p99.9")
         for key in (*LOOPS, HOLD_LOOP):
             r = path.get(key)
-            if r is None:
-                continue
-            t = r["tick"]
-            line = (
-                f"{key:12s} tick {t['median']:6.1f} / {t['p99']:6.1f} / {t['p999']:6.1f}"
-                f"   ratio tick/floor {r['ratio_to_floor']:.2f}"
-                f"   exchange (plant) median {r['exchange']['median']:.0f}"
-            )
-            if "fused_ticks" in r:
-                ref = r["reference"]
-                line += (
-                    f"   [{r['path']}: {r['fused_ticks']}/{r['ticks']} ticks fused; reference"
-                    f" {ref['median']:.1f} / {ref['p99']:.1f}]"
-                )
-            if "wakeup" in r:
-                w = r["wakeup"]
-                line += (
-                    f"   wake-up {w['median']:.0f}/{w['p99']:.0f}, overruns {r['overruns']}"
-                    f", {100 * r['share_of_period']:.1f} % of the period"
-                )
-            print(line)
-            if "floor_in_loop" in r:
-                fl, noop = r["floor_in_loop"], r.get("noop_call_in_loop")
-                line = (
-                    f"             same conditions (after the exchange): floor"
-                    f" {fl['median']:.1f} / {fl['p99']:.1f}, tick/floor"
-                    f" {r['ratio_to_floor_in_loop']:.2f}"
-                )
-                if noop is not None:
-                    line += f"; a no-op compiled call {noop['median']:.2f}"
-                fc, fpy = r.get("fused_call"), r.get("fused_python")
-                if fpy is not None:
-                    line += (
-                        f"; the fused call {fc['median']:.1f} / {fc['p99']:.1f}"
-                        f" + Python {fpy['median']:.1f} / {fpy['p99']:.1f}"
-                    )
-                print(line)
-            print(
-                f"             parts ({r.get('parts_path', 'per part')}; median): "
-                + ", ".join(f"{c} {r['parts'][c]['median']:.1f}" for c in cols)
-                + f"; HOFTO+momentum {r['hofto_plus_momentum']['median']:.1f}"
-                + f" (tick with probes {r['tick_with_part_probes']['median']:.1f})"
-            )
+            if r is not None:
+                print_loop(key, r)
         sp = path.get("snapshot_parts")
         if sp is not None:
             print(
@@ -729,6 +809,13 @@ def print_report(res: dict) -> None:
         )
         for site in a["growth_sites"]:
             print(f"    {site}")
+    ec = res.get("ethercat")
+    if ec is not None:
+        if "skipped" in ec:
+            print(f"\n[ethercat] skipped: {ec['skipped']}")
+        else:
+            print(f"\n[{ec['bus']}] tick = Tick.step minus the master's exchange")
+            print_loop("loop_1khz", ec["loop_1khz"])
     s = res["startup"]
     if "cold" in s:
         print(
@@ -753,6 +840,12 @@ def main(argv: list[str] | None = None) -> int:
         help="a short run (< 30 s on an idle machine): 1,500 ticks per loop (+500 with part "
         "probes), tracemalloc over 1,000 ticks, no start-up (compilation) measurement",
     )
+    parser.add_argument(
+        "--ethercat",
+        action="store_true",
+        help="also the 1 kHz loop over the real SOEM master and the EtherCAT emulator on a "
+        "veth pair (needs root; ~10 s more)",
+    )
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--path-only", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--floor", type=float, default=0.0, help=argparse.SUPPRESS)
@@ -763,7 +856,7 @@ def main(argv: list[str] | None = None) -> int:
         realtime()
         print(json.dumps(bench_path(load_config(args.config), args.quick, args.floor)))
         return 0
-    res = bench(args.config, args.quick)
+    res = bench(args.config, args.quick, args.ethercat)
     res["targets"] = [{"target": n, "value": v, "met": ok} for n, v, ok in targets(res)]
     if args.json:
         print(json.dumps(res, indent=2))
