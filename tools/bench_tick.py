@@ -244,7 +244,19 @@ def run_loop(
     emulated EtherCAT arm moving along the path would see its target stop)."""
     system = build_system(cfg, rate_hz, clock, hold)
     res: dict = {}
-    phases = loop_phases(system, ticks, part_ticks, floor, None if clock == "sim" else rate_hz, res)
+    try:
+        run_phases(
+            system,
+            loop_phases(system, ticks, part_ticks, floor, None if clock == "sim" else rate_hz, res),
+        )
+        return res
+    finally:
+        system.close()
+
+
+def run_phases(system, phases) -> None:
+    """Run ``system``'s loop once through ``phases`` (a generator yielding tick counts; the
+    code between two yields runs between two ticks)."""
     left = [next(phases)]
 
     def next_phase() -> bool:  # between two ticks: True ends the run
@@ -257,11 +269,7 @@ def run_loop(
             return True
         return False
 
-    try:
-        system.loop.run(should_stop=next_phase)
-        return res
-    finally:
-        system.close()
+    system.loop.run(should_stop=next_phase)
 
 
 def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res: dict):

@@ -1,0 +1,61 @@
+"""tools/bench_tick.py's loop phases: every phase runs on one uninterrupted loop, each probe
+comes off again, and the figures it reports are there and finite (never their values: a
+benchmark's timings are not a test's business)."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("bench_tick", ROOT / "tools" / "bench_tick.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["bench_tick"] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _finite_stats(d: dict) -> None:
+    for key in ("median", "p99", "p999"):
+        assert math.isfinite(d[key]) and d[key] > 0.0, (key, d)
+
+
+def test_the_phases_run_on_one_loop_and_leave_the_tick_as_it_was(bench) -> None:
+    from hofto_hw.config import load_config
+    from hofto_hw.runtime.fused import fused_tick
+
+    cfg = load_config(ROOT / "configs" / "er3a.yaml")
+    system = bench.build_system(cfg, float(cfg.loop.rate_hz), "sim")
+    tick = system.tick
+    res: dict = {}
+    try:
+        bench.run_phases(system, bench.loop_phases(system, 60, 30, 7.0, None, res))
+        # warm-up 300, the tick 60, the reference 60, the parts 30, the split 30, the floor 30
+        assert system.loop.ticks == 300 + 60 + 60 + 30 + 30 + 30
+        # every wrapper off: the class's own step and the compiled call itself again
+        assert getattr(tick.step, "__func__", None) is type(tick).step
+        assert tick._fz_call is fused_tick
+        assert tick._fz is not None  # the fused call back on after the reference phases
+    finally:
+        system.close()
+    assert res["path"] == "fused" and res["fused_ticks"] == 60
+    assert res["reference"]["ticks"] == 60
+    for key in ("tick", "fused_call", "fused_python", "floor_in_loop", "noop_call_in_loop"):
+        _finite_stats(res[key])
+    assert res["fused_call"]["median"] < res["tick"]["p999"] * 10
+    assert math.isfinite(res["ratio_to_floor_in_loop"]) and res["ratio_to_floor_in_loop"] > 0
+    assert set(bench.PARTS) <= set(res["parts"])
+
+
+def test_the_ethercat_loop_says_why_it_does_not_run_unprivileged(bench, monkeypatch) -> None:
+    monkeypatch.setattr(bench.os, "geteuid", lambda: 1000)
+    res = bench.ethercat_loop(ROOT / "configs" / "er3a.yaml", True, 7.0)
+    assert res == {"skipped": "needs root (a veth pair and raw sockets)"}
