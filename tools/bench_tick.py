@@ -319,6 +319,14 @@ def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res:
     res["tick_with_part_probes"] = p["tick"]
     res.update(split)
     res.update(costs)
+    # a stop during the run (e.g. a host stall read as a contact while moving on a bus whose
+    # drives keep their own clock): the phases after it ran on a stopped arm
+    ev = tick.stop.events
+    res["stops"] = [
+        {"tick": int(ev.tick[i % ev.capacity]), "fault": int(ev.kind[i % ev.capacity])}
+        for i in range(max(0, ev.count - ev.capacity), ev.count)
+        if ev.category[i % ev.capacity] >= 0
+    ]
     res["ratio_to_floor_in_loop"] = res["median"] / costs["floor_in_loop"]["median"]
 
 
@@ -756,6 +764,8 @@ def print_loop(key: str, r: dict) -> None:
             f", {100 * r['share_of_period']:.1f} % of the period"
         )
     print(line)
+    if r.get("stops"):
+        print(f"             STOPPED during the run (later phases on a stopped arm): {r['stops']}")
     if "floor_in_loop" in r:
         fl, noop = r["floor_in_loop"], r.get("noop_call_in_loop")
         line = (

@@ -46,6 +46,7 @@ def test_the_phases_run_on_one_loop_and_leave_the_tick_as_it_was(bench) -> None:
         assert tick._fz is not None  # the fused call back on after the reference phases
     finally:
         system.close()
+    assert res["stops"] == []  # the simulated arm holds its path: nothing stops it
     assert res["path"] == "fused" and res["fused_ticks"] == 60
     assert res["reference"]["ticks"] == 60
     for key in ("tick", "fused_call", "fused_python", "floor_in_loop", "noop_call_in_loop"):
