@@ -2,7 +2,7 @@
 runtime's own tick: the System that ``hofto-hw run`` builds (hofto_hw.runtime.compose.build),
 its Tick.step, its Loop and clocks. Nothing of the tick is copied here.
 
-    python tools/bench_tick.py [--config configs/er3a.yaml] [--quick] [--json]
+    python tools/bench_tick.py [--config configs/er3a.yaml] [--quick] [--ethercat] [--json]
 
 The arm follows the config's ``run.path`` (mode MOVE) on the simulated bus. The simulated
 bus's exchange (the plant and the emulated drives) runs inside Tick.step (DriveGroup.exchange)
@@ -31,11 +31,17 @@ Figures (µs; median / p99 / p99.9):
 - the tick's own conditions: the tick always runs right after the simulated exchange (~0.2
   ms of Python plant) and, in the 1/2 kHz loops, after a sleep, which leave the caches cold,
   while ``floor`` runs warm. ``floor_in_loop`` times the floor's four calls in the same loop
-  right after the exchange (Tick.step replaced by the exchange, the read and the calls;
-  ``ratio_to_floor_in_loop`` = tick median / that), ``noop_call_in_loop`` a compiled call
-  that does nothing there; ``fused_call`` / ``fused_python`` split the tick that took the
-  fused call into the compiled call and the Python around it (a further run, the call
-  wrapped). Information next to the issue's targets, which stay judged against ``floor``;
+  right after the exchange (on the compiled path's run; Tick.step replaced by the exchange,
+  the read and the calls; ``ratio_to_floor_in_loop`` = tick median / that),
+  ``noop_call_in_loop`` a compiled call that does nothing there; ``fused_call`` /
+  ``fused_python`` split the tick that took the fused call into the compiled call and the
+  Python around it (a further run, the call wrapped). Information next to the issue's
+  targets, which stay judged against ``floor``;
+- ``--ethercat`` (root): the 1 kHz loop again over the real SOEM master on a veth pair and
+  ``hofto-hw sim-ethercat`` in its own process (``ethercat.loop_1khz``): the exchange is the
+  frame's round trip and the plant runs in another process;
+- each loop runs once, uninterrupted, through its phases (:func:`loop_phases`), and lists
+  the ``stops`` latched during it (any later phase ran on a stopped arm);
 - the numpy path (a subprocess with HOFTO_HW_NO_NUMBA=1, the official switch) and the
   compiled path; ratio tick / floor;
 - tracemalloc over 10,000 ticks after warm-up (growth, the sites that grew) and the
@@ -301,9 +307,11 @@ def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res:
     split: dict = {}
     if fused:  # the compiled call and the Python around it, on the tick as it runs
         yield from fused_split(system, part_ticks, split)
-    # the floor and a no-op compiled call in the tick's own conditions (same loop)
+    # the floor and a no-op compiled call in the tick's own conditions (same loop); once, on
+    # the compiled path's run (the numpy-path subprocess has no compiled call to time)
     costs: dict = {}
-    yield from in_loop_costs(system, part_ticks, noop, costs)
+    if noop is not None:
+        yield from in_loop_costs(system, part_ticks, noop, costs)
 
     res.update(main.result(floor, period))
     # the tick as it runs (the fused call on quiet ticks when it was built)
@@ -318,7 +326,9 @@ def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res:
     res["hofto_plus_momentum"] = p["hofto_plus_momentum"]
     res["tick_with_part_probes"] = p["tick"]
     res.update(split)
-    res.update(costs)
+    if costs:
+        res.update(costs)
+        res["ratio_to_floor_in_loop"] = res["median"] / costs["floor_in_loop"]["median"]
     # a stop during the run (e.g. a host stall read as a contact while moving on a bus whose
     # drives keep their own clock): the phases after it ran on a stopped arm
     ev = tick.stop.events
@@ -327,7 +337,6 @@ def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res:
         for i in range(max(0, ev.count - ev.capacity), ev.count)
         if ev.category[i % ev.capacity] >= 0
     ]
-    res["ratio_to_floor_in_loop"] = res["median"] / costs["floor_in_loop"]["median"]
 
 
 def fused_split(system, ticks: int, res: dict):
