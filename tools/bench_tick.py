@@ -625,9 +625,12 @@ def ethercat_loop(config: Path, quick: bool, floor: float) -> dict:
     (tools/bench_ethercat.py's ``start_emulator``): the exchange is the master's frame round
     trip and the plant runs in the other process, as on a controller PC. Needs root.
     Late frames on a loaded machine are counted, not acted on (``safety.bus.lost_cycles``).
-    A late master cycle while the arm moves can read as a contact and stop it: a run stopped
-    before its measured phase ends is run again on a fresh emulator, up to
-    :data:`ETHERCAT_ATTEMPTS` runs; the stops of those given up on are listed
+    A late master cycle while the arm moves can stop it: the emulated drives' DC time
+    follows the wall clock while their plant moves one cycle per exchange
+    (drivers/sim/pacing.py), so HOFTO integrates a longer gap than the arm moved in and
+    reads it as a contact (measured: a 1-ms-late cycle, sample_dt 2 ms, HOFTO 188 N·m,
+    momentum 1 N·m). A run stopped before its measured phase ends is run again on a fresh
+    emulator, up to :data:`ETHERCAT_ATTEMPTS` runs; the stops of those given up on are listed
     (``runs_stopped_before``)."""
     if os.geteuid() != 0:
         return {"skipped": "needs root (a veth pair and raw sockets)"}
