@@ -625,12 +625,13 @@ def ethercat_loop(config: Path, quick: bool, floor: float) -> dict:
     (tools/bench_ethercat.py's ``start_emulator``): the exchange is the master's frame round
     trip and the plant runs in the other process, as on a controller PC. Needs root.
     Late frames on a loaded machine are counted, not acted on (``safety.bus.lost_cycles``).
-    A late master cycle while the arm moves can stop it: the emulated drives' DC time
-    follows the wall clock while their plant moves one cycle per exchange
-    (drivers/sim/pacing.py), so HOFTO integrates a longer gap than the arm moved in and
-    reads it as a contact (measured: a 1-ms-late cycle, sample_dt 2 ms, HOFTO 188 N·m,
-    momentum 1 N·m). A run stopped before its measured phase ends is run again on a fresh
-    emulator, up to :data:`ETHERCAT_ATTEMPTS` runs; the stops of those given up on are listed
+    With DC sync (on here): without it the tick takes the master's wall-clock dt as the
+    sample interval, while the emulated arm moves one cycle per exchange
+    (drivers/sim/pacing.py), so one late cycle while moving made HOFTO integrate a 2-ms gap
+    over 1 ms of motion (measured: 188 N·m, the momentum observer 1 N·m) and stopped the arm
+    in 4 of 12 runs; the drives' DC time moves with the emulated plant. A run stopped anyway
+    before its measured phase ends is run again on a fresh emulator, up to
+    :data:`ETHERCAT_ATTEMPTS` runs; the stops of those given up on are listed
     (``runs_stopped_before``)."""
     if os.geteuid() != 0:
         return {"skipped": "needs root (a veth pair and raw sockets)"}
@@ -648,8 +649,10 @@ def ethercat_loop(config: Path, quick: bool, floor: float) -> dict:
     data = yaml.safe_load(config.read_text())
     data["robot"]["urdf"] = str((config.parent / data["robot"]["urdf"]).resolve())
     data["bus"].update(transport="ethercat", interface=master)
-    # the emulated slaves' SM watchdog at 2 s: a host stall must not take a drive out of OP
-    data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), "pdo_watchdog": 2.0}
+    # the emulated slaves' SM watchdog at 2 s: a host stall must not take a drive out of OP;
+    # DC sync, as a CSP deployment runs: the sample interval is then the drives' (see below)
+    ethercat = {"pdo_watchdog": 2.0, "dc_sync": True}
+    data["bus"]["ethercat"] = {**(data["bus"].get("ethercat") or {}), **ethercat}
     data["safety"]["bus"]["lost_cycles"] = 1000
     veth.create_pair(master, slave)
     stopped: list = []  # the stops of the runs given up on
