@@ -246,8 +246,8 @@ def run_loop(
     cfg, rate_hz: float, clock: str, ticks: int, part_ticks: int, floor: float, hold: bool = False
 ) -> dict:
     """One System, one uninterrupted run of its loop in phases (:func:`loop_phases`): a
-    pause between phases would be a host stall to drives that run on their own clock (an
-    emulated EtherCAT arm moving along the path would see its target stop)."""
+    pause between phases is a host stall to the drives (over EtherCAT without DC sync, one
+    read as a contact while moving: see :func:`ethercat_loop`)."""
     system = build_system(cfg, rate_hz, clock, hold)
     res: dict = {}
     try:
@@ -329,8 +329,8 @@ def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res:
     if costs:
         res.update(costs)
         res["ratio_to_floor_in_loop"] = res["median"] / costs["floor_in_loop"]["median"]
-    # a stop during the run (e.g. a host stall read as a contact while moving on a bus whose
-    # drives keep their own clock): the phases after it ran on a stopped arm
+    # a stop during the run (e.g. a host stall read as a contact while moving: see
+    # ethercat_loop): the phases after it ran on a stopped arm
     ev = tick.stop.events
     res["stops"] = [
         {"tick": int(ev.tick[i % ev.capacity]), "fault": int(ev.kind[i % ev.capacity])}
