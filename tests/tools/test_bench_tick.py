@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -60,3 +61,22 @@ def test_the_ethercat_loop_says_why_it_does_not_run_unprivileged(bench, monkeypa
     monkeypatch.setattr(bench.os, "geteuid", lambda: 1000)
     res = bench.ethercat_loop(ROOT / "configs" / "er3a.yaml", True, 7.0)
     assert res == {"skipped": "needs root (a veth pair and raw sockets)"}
+
+
+def test_the_ethercat_loop_says_why_its_emulator_did_not_start(bench, monkeypatch) -> None:
+    """As root (CI): the veth pair is made, the emulator fails to start; one line says so and
+    the pair is gone again."""
+    from support.rootnet import require_root
+
+    require_root("a veth pair")
+    sys.path.insert(0, str(ROOT / "tools"))
+    import bench_ethercat
+
+    def refuse(iface, config, workdir):
+        raise SystemExit(f"emulator exited: nothing listens on {iface}")
+
+    monkeypatch.setattr(bench_ethercat, "start_emulator", refuse)
+    res = bench.ethercat_loop(ROOT / "configs" / "er3a.yaml", True, 7.0)
+    tag = f"tm{os.getpid() % 100000}"  # ethercat_loop's master end
+    assert res["skipped"].startswith("the EtherCAT emulator did not start: emulator exited")
+    assert not Path(f"/sys/class/net/{tag}").exists()  # the pair deleted
