@@ -35,8 +35,10 @@ Figures (µs; median / p99 / p99.9):
   the read and the calls; ``ratio_to_floor_in_loop`` = tick median / that),
   ``noop_call_in_loop`` a compiled call that does nothing there; ``fused_call`` /
   ``fused_python`` split the tick that took the fused call into the compiled call and the
-  Python around it (a further run, the call wrapped). Information next to the issue's
-  targets, which stay judged against ``floor``;
+  Python around it (a further run, the call wrapped), ``fused_call_warm`` the same call
+  repeated on the same state after the tick's last phase (its code and data in the caches: on
+  the holding arm; a moving arm's repeated sample reads as a contact, so there it says
+  why not). Information next to the issue's targets, which stay judged against ``floor``;
 - ``--ethercat`` (root): the 1 kHz loop again over the real SOEM master on a veth pair and
   ``hofto-hw sim-ethercat`` in its own process (``ethercat.loop_1khz``): the exchange is the
   frame's round trip and the plant runs in another process;
@@ -309,8 +311,10 @@ def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res:
         yield from fused_split(system, part_ticks, split)
     # the floor and a no-op compiled call in the tick's own conditions (same loop); once, on
     # the compiled path's run (the numpy-path subprocess has no compiled call to time)
+    if fused:  # after the tick's last phase: the repeated calls move its state on
+        warm_call(system, part_ticks, split)
     costs: dict = {}
-    if noop is not None:
+    if noop is not None:  # (the tick does not run here)
         yield from in_loop_costs(system, part_ticks, noop, costs)
 
     res.update(main.result(floor, period))
@@ -427,6 +431,36 @@ def in_loop_costs(system, ticks: int, noop, res: dict):
     res["floor_in_loop"] = fl
     if noop is not None:
         res["noop_call_in_loop"] = stats(noop_ns[:k] / 1000.0)
+
+
+def warm_call(system, calls: int, res: dict) -> None:
+    """The fused call alone, ``calls`` times in a row on the tick's own table, register and
+    record (``fused_call_warm``): the compiled work of a quiet tick with its code and data in
+    the caches, no exchange or Python between. Runs after the tick's last phase (each call
+    moves the tick's state on; between two cycles: a stall of ``calls`` calls). Only the
+    calls that ran to the end count: while moving, the same sample integrated again soon
+    reads as a contact and the call stops at the monitor or the safety checks."""
+    from hofto_hw.runtime.fused import DONE, STAGES
+
+    tick = system.tick
+    call, tab, reg, rec = tick._fz_call, tick._fz_tab, tick._reg, tick._rec1
+    clock = time.perf_counter_ns
+    ns = np.zeros(calls)
+    stage = np.zeros(calls, dtype=np.int64)
+    for k in range(calls):
+        t0 = clock()
+        stage[k] = call(tab, reg, rec)
+        ns[k] = clock() - t0
+    done = stage == DONE
+    if done.sum() < calls // 2:
+        last = STAGES[int(stage[-1])]
+        res["fused_call_warm"] = {
+            "skipped": f"{int(done.sum())} of {calls} repeated calls ran to the end "
+            f"(the last stopped at '{last}')"
+        }
+        return
+    res["fused_call_warm"] = stats(ns[done] / 1000.0)
+    res["fused_call_warm"]["calls"] = int(done.sum())
 
 
 def _noop_kernel():
@@ -828,6 +862,9 @@ def print_loop(key: str, r: dict) -> None:
                 f"; the fused call {fc['median']:.1f} / {fc['p99']:.1f}"
                 f" + Python {fpy['median']:.1f} / {fpy['p99']:.1f}"
             )
+        warm = r.get("fused_call_warm", {})
+        if "median" in warm:
+            line += f"; the call repeated warm {warm['median']:.1f}"
         print(line)
     print(
         f"             parts ({r.get('parts_path', 'per part')}; median): "

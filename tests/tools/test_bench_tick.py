@@ -55,6 +55,25 @@ def test_the_phases_run_on_one_loop_and_leave_the_tick_as_it_was(bench) -> None:
     assert res["fused_call"]["median"] < res["tick"]["p999"] * 10
     assert math.isfinite(res["ratio_to_floor_in_loop"]) and res["ratio_to_floor_in_loop"] > 0
     assert set(bench.PARTS) <= set(res["parts"])
+    # the repeated call: timed, or one line saying why not (the arm moves: a contact)
+    warm = res["fused_call_warm"]
+    assert "skipped" in warm or (warm["calls"] >= 15 and math.isfinite(warm["median"]))
+
+
+def test_the_fused_call_repeats_warm_to_the_end_on_a_holding_arm(bench) -> None:
+    from hofto_hw.config import load_config
+
+    cfg = load_config(ROOT / "configs" / "er3a.yaml")
+    system = bench.build_system(cfg, float(cfg.loop.rate_hz), "sim", hold=True)
+    res: dict = {}
+    try:
+        bench.run_phases(system, bench.loop_phases(system, 40, 30, 7.0, None, res))
+    finally:
+        system.close()
+    assert res["stops"] == []
+    warm = res["fused_call_warm"]
+    assert warm.get("calls") == 30, warm  # every repeated call ran to the end
+    _finite_stats(warm)
 
 
 def test_the_ethercat_loop_says_why_it_does_not_run_unprivileged(bench, monkeypatch) -> None:
