@@ -309,12 +309,13 @@ def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res:
     split: dict = {}
     if fused:  # the compiled call and the Python around it, on the tick as it runs
         yield from fused_split(system, part_ticks, split)
-    # the floor and a no-op compiled call in the tick's own conditions (same loop); once, on
-    # the compiled path's run (the numpy-path subprocess has no compiled call to time)
     if fused:  # after the tick's last phase: the repeated calls move its state on
         warm_call(system, part_ticks, split)
+    # the floor and a no-op compiled call in the tick's own conditions (same loop, the tick
+    # itself not run); once, on the compiled path's run (the numpy-path subprocess has no
+    # compiled call to time)
     costs: dict = {}
-    if noop is not None:  # (the tick does not run here)
+    if noop is not None:
         yield from in_loop_costs(system, part_ticks, noop, costs)
 
     res.update(main.result(floor, period))
