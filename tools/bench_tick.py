@@ -307,9 +307,10 @@ def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res:
     parts.detach()
     tick.use_fused(fused)
     split: dict = {}
-    if fused:  # the compiled call and the Python around it, on the tick as it runs
+    if fused:
+        # the compiled call and the Python around it, on the tick as it runs; then, after the
+        # tick's last phase (the repeated calls move its state on), the call repeated warm
         yield from fused_split(system, part_ticks, split)
-    if fused:  # after the tick's last phase: the repeated calls move its state on
         warm_call(system, part_ticks, split)
     # the floor and a no-op compiled call in the tick's own conditions (same loop, the tick
     # itself not run); once, on the compiled path's run (the numpy-path subprocess has no
@@ -866,6 +867,8 @@ def print_loop(key: str, r: dict) -> None:
         warm = r.get("fused_call_warm", {})
         if "median" in warm:
             line += f"; the call repeated warm {warm['median']:.1f}"
+        elif "skipped" in warm:
+            line += f"; the call repeated warm: {warm['skipped']}"
         print(line)
     print(
         f"             parts ({r.get('parts_path', 'per part')}; median): "
