@@ -454,15 +454,15 @@ def warm_call(system, calls: int, res: dict) -> None:
         stage[k] = call(tab, reg, rec)
         ns[k] = clock() - t0
     done = stage == DONE
-    if done.sum() < calls // 2:
+    n_done = int(done.sum())
+    if n_done < calls // 2:
         last = STAGES[int(stage[-1])]
         res["fused_call_warm"] = {
-            "skipped": f"{int(done.sum())} of {calls} repeated calls ran to the end "
+            "skipped": f"{n_done} of {calls} repeated calls ran to the end "
             f"(the last stopped at '{last}')"
         }
         return
-    res["fused_call_warm"] = stats(ns[done] / 1000.0)
-    res["fused_call_warm"]["calls"] = int(done.sum())
+    res["fused_call_warm"] = {**stats(ns[done] / 1000.0), "calls": n_done}
 
 
 def _noop_kernel():
