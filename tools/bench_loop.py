@@ -78,7 +78,9 @@ def _case(conn, config: str, rate: float, seconds: float, fifo: bool, log: bool)
     bus = cfg.bus.model_copy(update={"cycle_time": 1.0 / rate})
     loop_cfg = cfg.loop.model_copy(update={"rate_hz": rate})
     cfg = cfg.model_copy(update={"bus": bus, "loop": loop_cfg})
-    rt = realtime.setup("preferred" if fifo else "off", cfg.loop.priority, cfg.loop.cpus)
+    rt = realtime.setup(
+        "preferred" if fifo else "off", cfg.loop.priority, cfg.loop.cpus, cfg.loop.cpu_latency_us
+    )
     tmp = tempfile.TemporaryDirectory(prefix="bench-loop-")
     rec = _recorder(cfg, tmp.name) if log else None
     system = build(cfg, clock="real", sink=rec, contact=False)

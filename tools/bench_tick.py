@@ -737,13 +737,22 @@ def _stop_process(proc: subprocess.Popen) -> None:
             proc.wait()
 
 
-def realtime() -> str:
-    """SCHED_FIFO 50 if permitted; returns the policy in use."""
+def realtime(cpu_latency_us: int | None) -> str:
+    """SCHED_FIFO 50 if permitted, and the CPU wake-up latency limit ``hofto-hw run`` holds
+    (``loop.cpu_latency_us``); returns what is in use."""
+    from hofto_hw.runtime.realtime import hold_cpu_latency
+
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
-        return "SCHED_FIFO 50"
+        policy = "SCHED_FIFO 50"
     except (PermissionError, OSError, AttributeError):
-        return "SCHED_OTHER (SCHED_FIFO not permitted)"
+        policy = "SCHED_OTHER (SCHED_FIFO not permitted)"
+    if cpu_latency_us is None:
+        return policy + ", no CPU wake-up latency limit (loop.cpu_latency_us: null)"
+    problem = hold_cpu_latency(cpu_latency_us)
+    if problem is not None:
+        return policy + f", no CPU wake-up latency limit (missing {problem})"
+    return policy + f", CPU wake-up latency <= {cpu_latency_us} µs"
 
 
 def numpy_path(config: Path, quick: bool, floor: float) -> dict:
@@ -764,7 +773,7 @@ def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
     from hofto_hw.observers import kernels
 
     cfg = load_config(config)
-    policy = realtime()
+    policy = realtime(cfg.loop.cpu_latency_us)
     floor = floor_us(cfg, 1000 if quick else 20000)
     f = float(np.median(floor))
     res: dict = {
@@ -961,8 +970,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.path_only:  # the numpy-path subprocess
         from hofto_hw.config import load_config
 
-        realtime()
-        print(json.dumps(bench_path(load_config(args.config), args.quick, args.floor)))
+        cfg = load_config(args.config)
+        realtime(cfg.loop.cpu_latency_us)
+        print(json.dumps(bench_path(cfg, args.quick, args.floor)))
         return 0
     res = bench(args.config, args.quick, args.ethercat)
     res["targets"] = [{"target": n, "value": v, "met": ok} for n, v, ok in targets(res)]

@@ -73,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
     duration = args.duration if args.duration is not None else cfg.run.duration
     clock = args.clock or cfg.run.clock
     lc = cfg.loop
-    rt = realtime.setup(lc.realtime, lc.priority, lc.cpus)
+    latency = lc.cpu_latency_us if clock != "sim" else None  # the sim clock never sleeps
+    rt = realtime.setup(lc.realtime, lc.priority, lc.cpus, latency)
     rt_text = rt.describe() if lc.realtime != "off" else "real-time off"
     if clock == "sim":
         realtime.drop_realtime()  # back-to-back ticks must not starve the machine

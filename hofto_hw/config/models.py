@@ -340,6 +340,15 @@ class LoopConfig(FileModel):
     cpus: list[Annotated[int, Field(ge=0)]] | None = Field(
         None, description="CPU affinity of the loop; None = leave as is"
     )
+    cpu_latency_us: int | None = Field(
+        0,
+        ge=0,
+        le=1_000_000,
+        description="CPU wake-up latency limit [µs] held while the loop runs with the real "
+        "clock (PM QoS, /dev/cpu_dma_latency; applies to every CPU): 0 keeps idle CPUs "
+        "polling instead of sleeping, for a prompt and warm wake-up at each deadline at the "
+        "cost of idle power; None = the kernel's default",
+    )
     observers: dict[str, ObserverConfig] | None = Field(
         None,
         description="observers the loop runs (hofto, momentum), when they differ from the "

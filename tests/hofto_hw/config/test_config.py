@@ -149,3 +149,18 @@ def test_read_yaml_accepts_a_bom_and_names_a_folder(tmp_path):
     assert read_yaml(path, "column map") == {"name": "caf\u00e9"}
     with pytest.raises(ConfigError, match=rf"^{tmp_path}: is a folder, not a column map$"):
         read_yaml(tmp_path, "column map")
+
+
+@pytest.mark.parametrize("value", [-1, 1.5, "fast", float("nan"), 2_000_000])
+def test_cpu_latency_out_of_range_or_not_an_integer_names_field(tmp_path, base, value):
+    base["loop"]["cpu_latency_us"] = value
+    with pytest.raises(ConfigError) as err:
+        load_config(_write(tmp_path, base))
+    text = str(err.value)
+    assert "loop.cpu_latency_us" in text and "cfg.yaml" in text and len(text.splitlines()) == 1
+
+
+def test_cpu_latency_null_requests_none(tmp_path, base):
+    assert load_config(ROOT / "configs" / "er3a.yaml").loop.cpu_latency_us == 0
+    base["loop"]["cpu_latency_us"] = None
+    assert load_config(_write(tmp_path, base)).loop.cpu_latency_us is None

@@ -93,6 +93,17 @@ def test_realtime_required_refuses_unprivileged_naming_the_capability(public_dir
     assert "Traceback" not in r.stderr
 
 
+def test_realtime_required_on_the_real_clock_names_the_cpu_latency_device(
+    public_dir: Path,
+) -> None:
+    cfg = _config_file(public_dir, "required")
+    args = ["run", "--config", str(cfg), "--clock", "real", "--duration", "0.1", "--no-log"]
+    r = _as_nobody(args)
+    assert r.returncode == 2, r.stderr
+    assert "write access to /dev/cpu_dma_latency" in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
 def test_realtime_preferred_runs_unprivileged_with_one_warning(public_dir: Path) -> None:
     cfg = _config_file(public_dir, "preferred")
     r = _as_nobody(["run", "--config", str(cfg), "--clock", "sim", "--duration", "0.2", "--no-log"])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import configparser
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -66,3 +67,16 @@ def test_unit_is_notify_with_watchdog_capabilities_and_hardening():
         "AF_INET6",
     }
     assert s["ReadWritePaths"] == "/var/log/hofto-hw"
+
+
+def test_udev_rule_gives_the_service_group_the_cpu_latency_device():
+    rule = UNIT.parents[1] / "udev" / "60-hofto-hw-cpu-latency.rules"
+    lines = [ln for ln in rule.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+    assert len(lines) == 1
+    pairs = re.findall(r'(\w+)(==|=)"([^"]*)"', lines[0])
+    assert len(pairs) == len(lines[0].split(","))  # every comma-separated part is key="value"
+    keys = {key + op: value for key, op, value in pairs}
+    assert keys["KERNEL=="] == "cpu_dma_latency" and keys["SUBSYSTEM=="] == "misc"
+    assert keys["GROUP="] == service_section()["Group"] and keys["MODE="] == "0660"
+    # the unit must not hide /dev from the service (the device would then not be there)
+    assert service_section().get("PrivateDevices", "no") == "no"
