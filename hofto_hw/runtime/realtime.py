@@ -109,7 +109,7 @@ def _try_mlockall() -> str | None:
 
 
 def hold_cpu_latency(us: int) -> str | None:
-    """Hold a PM QoS request that no CPU take longer than ``us`` [µs] to wake up, until
+    """Hold a PM QoS request that no CPU takes longer than ``us`` [µs] to wake up, until
     :func:`release_cpu_latency` or the process ends; returns what is missing, or None."""
     global _latency_fd
     release_cpu_latency()
