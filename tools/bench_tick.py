@@ -19,7 +19,9 @@ Figures (µs; median / p99 / p99.9):
   gravity) back to back on the tick's own samples;
 - the tick back to back (SimClock, as ``--clock sim``) and inside a 1 kHz and a 2 kHz loop
   (RealClock: absolute CLOCK_MONOTONIC deadlines with clock_nanosleep TIMER_ABSTIME, as
-  ``--clock real``), SCHED_FIFO 50 when permitted, gc frozen and off (the Loop's own);
+  ``--clock real``), SCHED_FIFO 50 when permitted, the config's CPU wake-up latency limit
+  held as ``hofto-hw run`` holds it (``loop.cpu_latency_us``), gc frozen and off (the
+  Loop's own);
   and back to back with the arm holding (``hold_back_to_back``: the reference does not
   change, so the tick reuses its feed-forward);
 - the tick as it runs: the fused call (hofto_hw/runtime/fused.py) on quiet ticks (``path``,
