@@ -13,7 +13,7 @@ import pytest
 
 from hofto_hw.errors import ConfigError
 from hofto_hw.runtime import realtime
-from tests.support.rootnet import require_root
+from tests.support.pm_qos import kernel_cpu_latency, require_latency_device
 
 
 def _open_to(path: Path) -> int:
@@ -92,27 +92,15 @@ def test_a_refusal_gives_the_held_limit_back(device: Path, monkeypatch: pytest.M
     assert not _open_to(device)  # ... and given back with the refusal
 
 
-def _kernel_limit() -> int:
-    fd = os.open(realtime.CPU_LATENCY_DEVICE, os.O_RDONLY)
-    try:
-        return struct.unpack("=i", os.read(fd, 4))[0]
-    finally:
-        os.close(fd)
-
-
 def test_the_kernel_applies_the_request_while_held() -> None:
-    require_root(f"the PM QoS device {realtime.CPU_LATENCY_DEVICE}")
-    if not os.path.exists(realtime.CPU_LATENCY_DEVICE):
-        if os.environ.get("CI"):
-            pytest.fail(f"CI is set but {realtime.CPU_LATENCY_DEVICE} does not exist")
-        pytest.skip(f"{realtime.CPU_LATENCY_DEVICE} does not exist (kernel without PM QoS)")
-    before = _kernel_limit()
+    require_latency_device()
+    before = kernel_cpu_latency()
     assert realtime.hold_cpu_latency(123) is None
     try:
-        assert _kernel_limit() == min(before, 123)
+        assert kernel_cpu_latency() == min(before, 123)
     finally:
         realtime.release_cpu_latency()
-    assert _kernel_limit() == before
+    assert kernel_cpu_latency() == before
 
 
 def test_sleep_until_a_passed_deadline_makes_no_system_call(monkeypatch) -> None:

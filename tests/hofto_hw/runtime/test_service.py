@@ -6,7 +6,6 @@ import os
 import signal
 import socket
 import stat
-import struct
 import subprocess
 import sys
 import time
@@ -19,7 +18,7 @@ from drivers.sim.control_socket import claim_control_path
 from hofto_hw.errors import UserError
 from hofto_hw.runtime.control_client import request
 from tests.hofto_hw.runtime.conftest import CONFIG
-from tests.support.rootnet import require_root
+from tests.support.pm_qos import kernel_cpu_latency, require_latency_device
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -68,18 +67,10 @@ def test_control_socket_status_stop_reset_mode(tmp_path: Path) -> None:
     assert not sock.exists()  # removed on exit
 
 
-def _kernel_cpu_latency() -> int:
-    fd = os.open("/dev/cpu_dma_latency", os.O_RDONLY)
-    try:
-        return struct.unpack("=i", os.read(fd, 4))[0]
-    finally:
-        os.close(fd)
-
-
 def test_run_holds_the_cpu_latency_limit_while_it_runs(tmp_path: Path) -> None:
     """loop.cpu_latency_us is the kernel's limit from set-up until the process exits."""
-    require_root("the PM QoS device /dev/cpu_dma_latency")
-    before = _kernel_cpu_latency()
+    require_latency_device()
+    before = kernel_cpu_latency()
     if before <= 17:  # e.g. tuned's realtime profile: the request would change nothing
         why = f"another process already holds a CPU latency limit of {before} µs"
         if os.environ.get("CI"):
@@ -92,11 +83,11 @@ def test_run_holds_the_cpu_latency_limit_while_it_runs(tmp_path: Path) -> None:
     cfg.write_text(yaml.safe_dump(data))
     proc = _start(tmp_path, None, "--config", str(cfg), "--hold")
     try:
-        assert _kernel_cpu_latency() == 17  # held before the loop's first tick
+        assert kernel_cpu_latency() == 17  # held before the loop's first tick
     finally:
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=120) == 0
-    assert _kernel_cpu_latency() == before
+    assert kernel_cpu_latency() == before
 
 
 def test_mode_move_without_a_demo_path_is_refused(tmp_path: Path) -> None:
