@@ -34,6 +34,7 @@ ALGORITHMS = {
     "gravity": 3,
     "nonlinear effects": 4,
     "cholesky decompose + solve": 5,
+    "Cᵀ·qd by the momentum recursion (with its kinematics)": 8,
 }
 
 
@@ -73,9 +74,11 @@ def measure(config: Path, reps: int, count: int = 256) -> dict:
     for _rep in range(3):  # interleaved, median of three
         row = {name: us(which) for name, which in ALGORITHMS.items()}
         row["terms, main job (M, g, Cᵀ·qd, accel): shared"] = us(6, main_job)
-        row["terms, main job (M, g, Cᵀ·qd, accel): separate (ABA)"] = us(7, main_job)
+        row["terms, main job (M, g, Cᵀ·qd, accel): separate (ABA, Coriolis matrix)"] = us(
+            7, main_job
+        )
         row["terms, all five: shared"] = us(6, every)
-        row["terms, all five: separate (ABA, nonLinearEffects)"] = us(7, every)
+        row["terms, all five: separate (ABA, nonLinearEffects, Coriolis matrix)"] = us(7, every)
         for k, v in row.items():
             figures.setdefault(k, []).append(v)
     for k, v in figures.items():

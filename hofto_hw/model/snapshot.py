@@ -31,9 +31,10 @@ back to back, whatever it computes, so the number of calls is what counts. With
 ``backend="numba"`` and the native library built on this machine (:mod:`hofto_hw.model.native`)
 :meth:`~DynamicsSnapshot.compute` is ONE compiled call: the finiteness check, friction with its
 held memory and tau - f (:func:`hofto_hw.model.kernels.snapshot_native`), then pinocchio's own
-C++ algorithms the needs ask for on a copy of the model (CRBA, Coriolis matrix with Cᵀ·qd,
-gravity, nonlinear effects; the acceleration by pinocchio's Cholesky of CRBA's M, the same
-whatever else is asked for; see dynamics.cpp) — no Python call per algorithm. Without the native
+C++ algorithms the needs ask for on a copy of the model (CRBA, gravity, nonlinear effects; the
+acceleration by pinocchio's Cholesky of CRBA's M, the same whatever else is asked for; Cᵀ·qd as
+the kinetic energy's gradient by one recursion, without the Coriolis matrix; see dynamics.cpp)
+— no Python call per algorithm. Without the native
 library: the pinocchio Python calls the needs ask for (the tick's HOFTO + momentum: ABA, CRBA,
 Coriolis matrix, gravity — the floor) and one compiled call for everything else. The numpy
 path (the reference) makes ~8 numpy calls more.

@@ -4,9 +4,10 @@ Why: inside a 1 kHz loop every Python→compiled call costs ~2.5-4 µs more than
 (cold caches), whatever it computes; the snapshot made five such calls (ABA, CRBA, Coriolis
 matrix, gravity through pinocchio's Python binding, and one numba kernel) and the feed-forward
 two (RNEA, one kernel). ``dynamics.cpp`` runs the same pinocchio algorithms (pinocchio's own
-templates, compiled here against the installed pinocchio's headers, not hand-written
-dynamics) behind plain C functions, and the numba kernels of :mod:`hofto_hw.model.kernels`
-call them directly, so that :meth:`DynamicsSnapshot.compute
+templates, compiled here against the installed pinocchio's headers; for Cᵀ·qd one recursion
+of ours on pinocchio's spatial types, the kinetic energy's gradient, where pinocchio offers
+only the whole Coriolis matrix) behind plain C functions, and the numba kernels of
+:mod:`hofto_hw.model.kernels` call them directly, so that :meth:`DynamicsSnapshot.compute
 <hofto_hw.model.snapshot.DynamicsSnapshot.compute>` and :meth:`ModelData.inverse_dynamics
 <hofto_hw.model.data.ModelData.inverse_dynamics>` are one call each.
 

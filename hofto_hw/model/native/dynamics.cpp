@@ -22,6 +22,8 @@
 #include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/cholesky.hpp>
 #include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 
 #include <cstdint>
@@ -80,11 +82,20 @@ namespace hofto_native
     Model model;
     Data data;
     Eigen::Index n;
+    // per joint (index 1..n): the rotation axis in the joint's frame, constant for the
+    // revolute joints of ArmJointsTpl, and the subtree momentum (scratch of ct_qd_of)
+    std::vector<Eigen::Vector3d> axis;
+    PINOCCHIO_ALIGNED_STD_VECTOR(pinocchio::Force) momentum;
     explicit Handle(const Model & m)
     : model(m)
     , data(model)
     , n(model.nv)
+    , axis(model.joints.size(), Eigen::Vector3d::Zero())
+    , momentum(model.joints.size(), pinocchio::Force::Zero())
     {
+      pinocchio::forwardKinematics(model, data, pinocchio::neutral(model));
+      for (std::size_t i = 1; i < model.joints.size(); ++i)
+        axis[i] = data.joints[i].S().matrix().template bottomRows<3>().col(0);
     }
   };
 
@@ -152,6 +163,36 @@ namespace hofto_native
     return true;
   }
 
+  // C(q,qd)ᵀ·qd into out (n) without the Coriolis matrix: with Ṁ = C + Cᵀ (pinocchio's C),
+  // Cᵀ·qd = Ṁ·qd − C·qd = ∂T/∂q for the kinetic energy T = ½·qdᵀ·M(q)·qd, and for a tree of
+  // revolute joints ∂T/∂q_k = −S_kᵀ·(v_k ×* H_k): S_k joint k's axis, v_k body k's spatial
+  // velocity, H_k the momentum of the bodies joint k carries (its subtree), all in body k's
+  // frame. One backward pass over data.v and data.liMi, which `kinematics` says are those of
+  // (q, qd) already (nonLinearEffects leaves them so); otherwise forwardKinematics first.
+  // ~0.4 µs where computeCoriolisMatrix takes ~1.8 µs (tools/bench_native.py), and it sums
+  // momenta, never inertias (no clamped composite mass).
+  void ct_qd_of(Handle & h, const In & Q, const In & V, bool kinematics, double * out)
+  {
+    const Model & model = h.model;
+    Data & data = h.data;
+    if (!kinematics)
+      pinocchio::forwardKinematics(model, data, Q, V);
+    const std::size_t nj = model.joints.size();
+    for (std::size_t i = 1; i < nj; ++i)
+      h.momentum[i] = model.inertias[i] * data.v[i];
+    for (std::size_t i = nj - 1; i > 0; --i)
+    {
+      const pinocchio::Motion & v = data.v[i];
+      const pinocchio::Force & H = h.momentum[i];
+      // the angular part of v ×* H
+      const Eigen::Vector3d t = v.angular().cross(H.angular()) + v.linear().cross(H.linear());
+      out[model.joints[i].idx_v()] = -h.axis[i].dot(t);
+      const std::size_t parent = model.parents[i];
+      if (parent > 0)
+        h.momentum[parent] += data.liMi[i].act(H);
+    }
+  }
+
   void terms_of(
     Handle & h,
     std::int64_t terms,
@@ -186,7 +227,7 @@ namespace hofto_native
         for (Eigen::Index k = 0; k < n; ++k)
           out[i * n + k] = k >= i ? M(i, k) : M(k, i);
     }
-    if (terms & CORIOLIS_T)
+    if ((terms & CORIOLIS_T) && route == SEPARATE)
     {
       pinocchio::computeCoriolisMatrix(h.model, h.data, Q, V);
       const Eigen::MatrixXd & C = h.data.C;
@@ -204,11 +245,14 @@ namespace hofto_native
       g = h.data.g;
     }
     // the nonlinear effects: into their row when asked for, and for the solve
-    if ((terms & NLE) || by_mass)
+    const bool nle_ran = (terms & NLE) || by_mass;
+    if (nle_ran)
       pinocchio::nonLinearEffects(h.model, h.data, Q, V);
     const Eigen::VectorXd & scratch = h.data.nle;
     if (terms & NLE)
       nle = scratch;
+    if ((terms & CORIOLIS_T) && route == SHARED)
+      ct_qd_of(h, Q, V, nle_ran, row + 3 * n);
     if (by_mass && !accel_by_mass(h, total, scratch, ddq))
     {
       pinocchio::aba(h.model, h.data, Q, V, In(total, n));
@@ -278,9 +322,8 @@ std::int64_t hofto_dyn1_dof(void * handle)
 // The terms of one sample into out (n + 4, n), row-major: rows 0..n-1 M(q) (symmetric), row
 // n g(q), n+1 C(q,qd)·qd + g(q), n+2 the acceleration M(q)⁻¹·(total − C·qd − g) for the
 // torque `total`, n+3 C(q,qd)^T·qd [SI]; only the rows `terms` (Terms) asks for are written.
-// With MASS the acceleration is a Cholesky solve with CRBA's M (ABA when M is not positive
-// definite numerically, or without MASS); its nle is C·qd + g with CORIOLIS_T and GRAVITY
-// (and no negative link mass) unless NLE is asked for, else pinocchio's nonLinearEffects.
+// With MASS the acceleration is a Cholesky solve with CRBA's M and nonLinearEffects' nle (ABA
+// when M is not positive definite numerically, or without MASS); Cᵀ·qd is ct_qd_of's.
 void hofto_dyn1_terms(
   void * handle,
   std::int64_t terms,
@@ -304,7 +347,7 @@ void hofto_dyn1_terms(
 // over the `count` samples q, qd, total (count, n) row-major. `which`: 0 ABA, 1 CRBA, 2
 // Coriolis matrix, 3 gravity, 4 nonlinear effects, 5 the Cholesky decomposition and solve of
 // accel_by_mass (on each sample's M, computed before the clock starts), 6 terms_of(`terms`),
-// 7 terms_of(`terms`) by the SEPARATE route. out (n + 4, n) is terms_of's scratch.
+// 7 terms_of(`terms`) by the SEPARATE route, 8 ct_qd_of (with its forward kinematics). out (n + 4, n) is terms_of's scratch.
 double hofto_dyn1_time(
   void * handle,
   std::int64_t which,
@@ -351,6 +394,9 @@ double hofto_dyn1_time(
       case 5:
         h.data.M = masses[s];
         accel_by_mass(h, ts, nle, ddq);
+        break;
+      case 8:
+        ct_qd_of(h, In(qs, n), In(vs, n), false, out);
         break;
       default:
         terms_of(h, terms, qs, vs, ts, out, which == 7 ? SEPARATE : SHARED);

@@ -282,6 +282,53 @@ def test_a_negative_link_mass_keeps_the_nonlinear_effects_of_rnea() -> None:
     assert broken  # C·qd + g is not nle for these parameters
 
 
+def _kinetic_energy_gradient(model: RobotModel, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """∂T/∂q by central differences of pinocchio's kinetic energy (a sum over the bodies, no
+    composite inertia): the independent reference of Cᵀ·qd (Ṁ = C + Cᵀ, so Cᵀ·qd = ∂T/∂q)."""
+    pm = model.pin_model
+    pd = pm.createData()
+    step = 1e-6
+    grad = np.zeros(model.n)
+    for k in range(model.n):
+        e = np.zeros(model.n)
+        e[k] = step
+        up = pin.computeKineticEnergy(pm, pd, q + e, qd)
+        down = pin.computeKineticEnergy(pm, pd, q - e, qd)
+        grad[k] = (up - down) / (2.0 * step)
+    return grad
+
+
+@pytest.mark.parametrize("negative_mass", [False, True])
+def test_coriolis_transpose_term_is_the_kinetic_energy_gradient(negative_mass: bool) -> None:
+    """Cᵀ·qd by the momentum recursion (ct_qd_of, not the Coriolis matrix) equals ∂T/∂q by
+    finite differences, for physical parameters and for a link mass of -1 kg (identified
+    parameters need not be physical), where pinocchio's Coriolis matrix is off (its composite
+    inertias' summed masses are clamped) and the recursion, which sums momenta, is not."""
+    model = _model("er3a")
+    if negative_mass:
+        link = model.inertial_parameters()[-10:]
+        link[0] = -1.0
+        _with_last_link(model, link, float(model.rotor_inertia[-1]))
+    fast = DynamicsSnapshot(model, NEEDS_SETS["main job"], "numba")
+    alone = DynamicsSnapshot(model, Needs.CORIOLIS_T, "numba")  # its own forward kinematics
+    assert fast.native and alone.native
+    pm = model.pin_model
+    pd = pm.createData()
+    off_by_matrix = 0.0
+    for q, qd, tau in _samples(model, 60, 15):
+        assert fast.compute(q, qd, tau) and alone.compute(q, qd, tau)
+        np.testing.assert_array_equal(alone.ct_qd, fast.ct_qd)
+        grad = _kinetic_energy_gradient(model, q, qd)
+        scale = max(1.0, float(np.max(np.abs(grad))))
+        assert np.max(np.abs(fast.ct_qd - grad)) <= 1e-7 * scale
+        by_matrix = pin.computeCoriolisMatrix(pm, pd, q, qd).T @ qd
+        off_by_matrix = max(off_by_matrix, float(np.max(np.abs(by_matrix - grad))) / scale)
+    if negative_mass:
+        assert off_by_matrix > 1e-4  # the Coriolis matrix's route would be wrong here
+    else:
+        assert off_by_matrix <= 1e-7  # both routes are the gradient
+
+
 def _chain(joints: list, seed: int = 11) -> RobotModel:
     """A serial chain of ``joints`` with random placements, inertias, armature, gravity."""
     pm = pin.Model()
