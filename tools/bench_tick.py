@@ -444,16 +444,19 @@ def warm_call(system, calls: int, res: dict) -> None:
     moves the tick's state on; between two cycles: a stall of ``calls`` calls). Only the
     calls that ran to the end count: while moving, the same sample integrated again soon
     reads as a contact and the call stops at the monitor or the safety checks."""
-    from hofto_hw.runtime.fused import DONE, STAGES
+    from hofto_hw.runtime.fused import DONE, R_COMP, R_DT, R_SDT, R_T, R_TICK, R_WAKE, STAGES
 
     tick = system.tick
     call, tab, reg, rec = tick._fz_call, tick._fz_tab, tick._reg, tick._rec1
+    # the last tick's scalars, as Tick._fused_step passes them
+    t, dt, sdt, comp, wake = (reg.item(i) for i in (R_T, R_DT, R_SDT, R_COMP, R_WAKE))
+    n = int(reg[R_TICK])
     clock = time.perf_counter_ns
     ns = np.zeros(calls)
     stage = np.zeros(calls, dtype=np.int64)
     for k in range(calls):
         t0 = clock()
-        stage[k] = call(tab, reg, rec)
+        stage[k] = call(tab, rec, t, dt, sdt, n, wake, comp)
         ns[k] = clock() - t0
     done = stage == DONE
     n_done = int(done.sum())

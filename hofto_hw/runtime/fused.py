@@ -16,8 +16,10 @@ would have done it, every later one untouched).
 
 Arguments: one int64 table of addresses and sizes (``A_*``; :class:`FusedTick` builds it from
 the tick's own arrays, as the observer bank does, and :meth:`FusedTick.bound` checks they are
-still the arrays their owners hold), one float64 register of the tick's scalars (``R_*``) and
-the tick record (a one-element structured array).
+still the arrays their owners hold; among them the tick's float64 register of scalars,
+``R_*``), the tick record (a one-element structured array) and this tick's scalars (loop
+time, dt, the bus's sample interval, tick number, the loop's timings) as plain arguments:
+numba passes a float argument for ~20 ns where a register write from Python costs ~50.
 """
 
 from __future__ import annotations
@@ -57,8 +59,8 @@ STAGES = ("read", "safety", "monitor", "control", "done")
  A_BROWS, A_BCOLS, A_TAUEXT, A_POWERED, A_NPOW, A_QDD, A_QDDREC, A_FAULTMIN, A_OPEN, A_LIMW,
  A_LIMROWS, A_LIMCOLS, A_QSENT, A_COLL, A_FBUF, A_FLEN, A_BBUF, A_BLEN, A_FIRST, A_LEARN,
  A_DRAGEST, A_LS, A_LB, A_LST, A_LEVERY, A_PK, A_PKROWS, A_Q0, A_MQ, A_MQD, A_MQDD, A_IDW,
- A_IDWROWS, A_TAUFF, A_IDH, A_RX, A_RXLEN, A_PREV) = range(50)  # fmt: skip
-A_SIZE = 50
+ A_IDWROWS, A_TAUFF, A_IDH, A_RX, A_RXLEN, A_PREV, A_REG) = range(51)  # fmt: skip
+A_SIZE = 51
 
 # the register (float64): inputs, the tick's kept scalars, constants, outputs
 (R_T, R_DT, R_SDT, R_TCMD, R_SINCE, R_TICK, R_JUDGE, R_EXPECT, R_KIND, R_FFSTALE, R_WAKE,
@@ -79,18 +81,30 @@ _carray = K.carray
 
 
 @K.jit
-def fused_tick(a: np.ndarray, r: np.ndarray, rec: np.ndarray) -> int:
-    """One tick's common path (module docstring) on the table ``a``, register ``r`` and the
-    tick record ``rec`` (1,). Returns the stage code where the reference goes on."""
+def fused_tick(
+    a: np.ndarray,
+    rec: np.ndarray,
+    t_loop: float,
+    dt: float,
+    sdt: float,
+    tick: int,
+    wake: float,
+    comp: float,
+) -> int:
+    """One tick's common path (module docstring) on the table ``a`` (the register at
+    ``a[A_REG]``) and the tick record ``rec`` (1,), for loop time ``t_loop`` [s], ``dt`` [s]
+    since the last tick, the bus's sample interval ``sdt`` [s] (0: unknown, -1: no sample),
+    tick number ``tick`` and the loop's wake-up and compute times [µs]. Returns the stage code
+    where the reference goes on (the scalars are in the register for it)."""
     n = a[A_N]
+    r = _carray(_f64(a[A_REG]), (R_SIZE,))
+    r[R_T], r[R_DT], r[R_SDT], r[R_TICK], r[R_WAKE], r[R_COMP] = t_loop, dt, sdt, tick, wake, comp
     # 1-2. the drive read (the exchange is the caller's)
     si = _carray(_f64(a[A_SI]), (a[A_SIROWS], n))
     states = _carray(_u8(a[A_STATES]), (n,))
     read_si(_carray(_u8(a[A_TX]), (a[A_TXLEN],)), si, states)
     sample = si[:3]
     q, qd, tau = si[0], si[1], si[2]
-    dt = r[R_DT]
-    sdt = r[R_SDT]
     if sdt < 0.0:
         return READ  # a lost sample: the reference holds the observers
     obs_dt = sdt if sdt > 0.0 else dt
@@ -139,6 +153,7 @@ def fused_tick(a: np.ndarray, r: np.ndarray, rec: np.ndarray) -> int:
     limw = _carray(_f64(a[A_LIMW]), (a[A_LIMROWS], a[A_LIMCOLS]))
     if limits_quiet(sample, q_sent, limw, 1 + 2 * expect, gap if gap > 1e-9 else 0.0) == 0:
         return SAFETY
+    r[R_SINCE] = 0.0  # good data (what bus.check and Tick._safety do on it)
     settled = r[R_TICK] >= r[R_JUDGE]
     monitored = a[A_COLL] != 0 and settled and flags & POWER_ON != 0
     mon = 1.0 if monitored else 0.0
@@ -157,7 +172,7 @@ def fused_tick(a: np.ndarray, r: np.ndarray, rec: np.ndarray) -> int:
             qd,
             mqdd,
             mdt,
-            np.int64(r[R_TICK]),
+            tick,
         )
         r[R_MFLAGS] = f
         if f != 0 or r[R_WAS_CONTACT] != 0.0:
@@ -205,10 +220,25 @@ def fused_tick(a: np.ndarray, r: np.ndarray, rec: np.ndarray) -> int:
     command_raw(mq, tau_ff, _carray(_u8(a[A_RX]), (a[A_RXLEN],)), si, 2)
     # 7. the record (and q_sent = the command just sent)
     fill_tick(
-        rec, sample, mq, tau_ext, q_sent, r[R_T], np.int64(r[R_TICK]), np.int64(r[R_MODE]),
-        np.int64(0), np.int64(0), r[R_WAKE], r[R_COMP], obs_dt,
+        rec, sample, mq, tau_ext, q_sent, t_loop, tick, np.int64(r[R_MODE]), np.int64(0),
+        np.int64(0), wake, comp, obs_dt,
     )  # fmt: skip
     return DONE
+
+
+def _entry_point(tab: np.ndarray, rec: np.ndarray) -> Any:
+    """:func:`fused_tick`'s compiled overload for a tick's table and record (and the scalar
+    types :meth:`Tick._fused_step` passes), called without numba's dispatch on argument types:
+    ~0.3 µs less a call (tools/bench_tick.py), and the types cannot change (the table and
+    the record are the tick's own, built once; an int where a float is expected converts
+    instead of compiling again). The dispatcher itself when numba does not offer it."""
+    try:
+        typeof = K._numba.typeof
+        key = (typeof(tab), typeof(rec)) + tuple(typeof(x) for x in (0.0, 0.0, 0.0, 0, 0.0, 0.0))
+        entry = fused_tick.overloads[key].entry_point
+    except (AttributeError, KeyError, TypeError):
+        return fused_tick
+    return entry if callable(entry) else fused_tick
 
 
 _SAID: list[str] = []
@@ -242,12 +272,16 @@ class FusedTick:
         self._keep: list[tuple[object, str, np.ndarray]] = []
         self.why = self._build(tick)
         self.ok = not self.why
+        #: what the tick calls: the compiled overload for its table and record
+        self.call: Any = fused_tick
         if self.ok:
             try:
                 self._warm()
             except Exception as exc:  # numba's TypingError/LoweringError, a cache problem
                 self.ok = False
                 self.why = f"compiling the fused tick failed ({type(exc).__name__})"
+            else:
+                self.call = _entry_point(self.tab, tick._rec1)
 
     # ---------------------------------------------------------------- building
 
@@ -271,6 +305,8 @@ class FusedTick:
         g, a, r, f64, u8 = t.group, self.tab, self.reg, np.float64, np.uint8
         n, k = t.n, t.tau_ext.shape[0]
         a[A_N], a[A_K] = n, k
+        if not self._put(A_REG, t, "_reg", f64, (R_SIZE,)):
+            return "the tick's register is not a plain array"
         if g._fast is None:
             return "the drive group runs its numpy path"
         si = g._si
@@ -385,5 +421,7 @@ class FusedTick:
         si = self.tick.group._si.copy()
         states = self.tick.group.states.copy()
         a[A_SI], a[A_STATES] = si.ctypes.data, states.ctypes.data  # scratch read
-        r[R_SDT] = -1.0  # a lost sample: the read into the scratch rows, then READ
-        fused_tick(a, r, self.tick._rec1)
+        a[A_REG] = r.ctypes.data
+        # a lost sample (sdt -1): the read into the scratch rows, then READ; the argument
+        # types the tick passes (Tick._fused_step)
+        fused_tick(a, self.tick._rec1, 0.0, 0.0, -1.0, 0, 0.0, 0.0)

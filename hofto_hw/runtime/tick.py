@@ -58,7 +58,6 @@ from hofto_hw.runtime.fused import (
     MONITOR,
     MOVE_PATH,
     OTHER,
-    R_COMP,
     R_DT,
     R_EXPECT,
     R_FFSTALE,
@@ -69,14 +68,10 @@ from hofto_hw.runtime.fused import (
     R_MODE,
     R_OBS_DT,
     R_REC_MON,
-    R_SDT,
     R_SINCE,
     R_SIZE,
-    R_T,
     R_T0,
     R_TCMD,
-    R_TICK,
-    R_WAKE,
     R_WAS_CONTACT,
     READ,
     FusedTick,
@@ -181,14 +176,15 @@ class Tick:
         #: does not jump), and the jump check allows for the gap
         self.period = float(period)
         self._stall_dt = 1.5 * self.period if self.period > 0.0 else math.inf  # see gap_steps
+        #: the fused call's register (fused.py R_*): the tick's scalars it reads and writes
+        #: (t_cmd, sample_dt and _since_fresh live there: one owner for both paths);
+        #: R_REC_MON is the record's ``monitored`` (written when it changes) on both paths
+        self._reg = np.zeros(R_SIZE)
         self.t_cmd = 0.0  # setpoint (path) time [s]
         self._since_fresh = 0.0  # [s] since the last fresh sample
         self._prev = np.zeros((3, n))  # last tick's q, qd, tau (interpolation start)
         self._interp = np.zeros((3, n))  # one substep's q, qd, tau
         self.tau_ext = np.zeros((max(1, len(self.observers)), n))
-        #: the fused call's register (fused.py R_*): the tick's scalars it reads and writes;
-        #: R_REC_MON is the record's ``monitored`` (written when it changes) on both paths
-        self._reg = np.zeros(R_SIZE)
         self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
         self.tau_ff = np.zeros(n)
         #: the motion's version that tau_ff was evaluated for (-1: evaluate on the next tick),
@@ -196,7 +192,6 @@ class Tick:
         self._ff_version = -1
         m = feedforward.model
         self._ff_model = (m.revision, m.friction, m.payload)
-        #: the interval the observers integrated this tick [s] (the record's sample_dt)
         self.sample_dt = 0.0
         self.q_sent = np.zeros(n)  # position target of the last command [rad]
         self.err_codes = group.transport.tx["error_code"]
@@ -287,7 +282,7 @@ class Tick:
         if fuse and self.backend == "numba":
             fz = FusedTick(self)
             if fz.ok:
-                self._fz, self._fz_tab = fz, fz.tab
+                self._fz, self._fz_tab, self._fz_call = fz, fz.tab, fz.call
             else:
                 fused_say_once("the tick runs without its fused call: " + fz.why)
 
@@ -310,6 +305,35 @@ class Tick:
         self.expect_enabled = g.all_in(State.OPERATION_ENABLED)
         self._judge_from = self.tick + 1 + self.settle_ticks
         self._fuse_refresh()
+
+    # ------------------------------------------- the scalars kept in the register
+
+    @property
+    def t_cmd(self) -> float:
+        """Setpoint (path) time [s]."""
+        return self._reg.item(R_TCMD)
+
+    @t_cmd.setter
+    def t_cmd(self, value: float) -> None:
+        self._reg[R_TCMD] = value
+
+    @property
+    def sample_dt(self) -> float:
+        """The interval the observers integrated this tick [s] (the record's sample_dt)."""
+        return self._reg.item(R_OBS_DT)
+
+    @sample_dt.setter
+    def sample_dt(self, value: float) -> None:
+        self._reg[R_OBS_DT] = value
+
+    @property
+    def _since_fresh(self) -> float:
+        """Time since the last fresh sample [s]."""
+        return self._reg.item(R_SINCE)
+
+    @_since_fresh.setter
+    def _since_fresh(self, value: float) -> None:
+        self._reg[R_SINCE] = value
 
     # ------------------------------------------------------------------ the tick
 
@@ -336,6 +360,9 @@ class Tick:
             or self.reset_requested or self.mode_request >= 0
         ):  # fmt: skip
             stage = self._fused_step(dt, wakeup_us, compute_us)
+            if stage == DONE:
+                self._push()  # 7. the record (filled by the fused call) into the sink
+                return
         if stage == READ:
             self._front(dt)  # 2. joint state, 3. snapshot and observers, 3b. drag
         if stage < MONITOR:
@@ -344,12 +371,9 @@ class Tick:
             self._monitor_flagged()  # the fused monitor flagged: its report, then on
         if stage < CONTROL:
             self._requests(missed)  # 4 (end): overruns, requests, reset, stop measurement
-        if stage < DONE:
-            self._control()  # 5. controller and 6. command (acting the stop category)
-            self._record(status, wakeup_us, compute_us)  # 7. the record into the sink
-            self._fuse_refresh()
-        else:
-            self._push()  # 7. the record (filled by the fused call) into the sink
+        self._control()  # 5. controller and 6. command (acting the stop category)
+        self._record(status, wakeup_us, compute_us)  # 7. the record into the sink
+        self._fuse_refresh()
 
     # ------------------------------------------------------------ the tick's stages
 
@@ -506,28 +530,20 @@ class Tick:
 
     def _fused_step(self, dt: float, wakeup_us: float, compute_us: float) -> int:
         """The fused call (hofto_hw/runtime/fused.py) on this tick's scalars; its stage code.
-        The register's other entries are kept by :meth:`_fuse_refresh`."""
-        r = self._reg
-        r[R_T] = self.t
-        r[R_DT] = dt
-        r[R_SDT] = self._transport.sample_dt
-        r[R_TCMD] = self.t_cmd
-        r[R_SINCE] = self._since_fresh
-        r[R_TICK] = self.tick
-        r[R_WAKE] = wakeup_us
-        r[R_COMP] = compute_us
+        It keeps t_cmd, sample_dt and _since_fresh in the register; the register's other
+        entries are kept by :meth:`_fuse_refresh`."""
         m = self.feedforward.model
         rev, fr, pl = self._ff_model  # what _fuse_refresh found in sync
         if m.revision != rev or m.friction is not fr or m.payload is not pl:
             return READ  # a model change: the reference takes it (and refreshes)
-        stage = self._fz_call(self._fz_tab, r, self._rec1)
+        stage = self._fz_call(
+            self._fz_tab, self._rec1, self.t, dt, self._transport.sample_dt, self.tick,
+            wakeup_us, compute_us,
+        )  # fmt: skip
         if stage == READ:
             return READ
-        self.sample_dt = r.item(R_OBS_DT)
-        self.t_cmd = r.item(R_TCMD)
         if stage >= MONITOR:  # good data, judged by the call (what bus.check does on it)
             self.bus.streak = 0
-            self._since_fresh = 0.0
         if stage == DONE:
             if self._fz_kind == MOVE_PATH:  # the path wrote the reference
                 motion = self.motion
@@ -535,7 +551,7 @@ class Tick:
                 self._ff_version = motion.version
             self.fused_ticks += 1
             return DONE
-        self.snapshot.finite = r.item(R_FINITE) != 0.0
+        self.snapshot.finite = self._reg.item(R_FINITE) != 0.0
         self._cmd_dt = command_dt(dt, self.period)
         return stage
 
@@ -548,7 +564,7 @@ class Tick:
         elif self._fz is None:
             fz = FusedTick(self)
             if fz.ok:
-                self._fz, self._fz_tab = fz, fz.tab
+                self._fz, self._fz_tab, self._fz_call = fz, fz.tab, fz.call
                 self._fuse_refresh()
 
     def _fuse_refresh(self, rebuild: bool = True) -> None:
@@ -567,7 +583,7 @@ class Tick:
                 self._fz = None
                 self._fuse_quiet = False
                 return
-            self._fz_tab = fz.tab
+            self._fz_tab, self._fz_call = fz.tab, fz.call
         stop, m, g, snap = self.stop, self.motion, self.group, self.snapshot
         model = self.feedforward.model
         ff = self.feedforward

@@ -19,7 +19,7 @@ from hofto_hw.control.joint_motion import HOLD, MOVE
 from hofto_hw.model.payload import Payload, apply_payload
 from hofto_hw.observers import kernels
 from hofto_hw.runtime.compose import build
-from hofto_hw.runtime.fused import DONE, FusedTick
+from hofto_hw.runtime.fused import DONE, FusedTick, fused_tick
 
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
@@ -183,6 +183,11 @@ def test_a_quiet_tick_is_one_fused_call_and_the_switch_turns_it_off(
     system = build(cfg, clock="sim", contact=False)
     try:
         t = system.tick
+        # the compiled overload for the tick's table and record, without numba's dispatch
+        # on argument types (fused._entry_point); the arguments it takes are the tick's own
+        assert t._fz is not None and t._fz_call is t._fz.call and t._fz_call is not fused_tick
+        assert t._fz_call in [o.entry_point for o in fused_tick.overloads.values()]
+        compiled = len(fused_tick.overloads)
         stages: list[int] = []
         call = t._fz_call
 
@@ -196,6 +201,7 @@ def test_a_quiet_tick_is_one_fused_call_and_the_switch_turns_it_off(
         assert len(stages) > 1400 and stages[-300:] == [DONE] * 300
         assert t.fused_ticks == stages.count(DONE)
         assert isinstance(t._fz, FusedTick) and t._fz.bound()
+        assert len(fused_tick.overloads) == compiled  # nothing compiled while running
     finally:
         system.close()
     monkeypatch.setenv("HOFTO_HW_NO_FUSE", "1")
