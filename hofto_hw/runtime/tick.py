@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -120,6 +121,21 @@ def lerp(prev: np.ndarray, now: np.ndarray, a: float, out: np.ndarray) -> None:
     np.subtract(now, prev, out=out)
     out *= a
     out += prev
+
+
+class InRegister:
+    """A float attribute of :class:`Tick` kept in its register (``Tick._reg``, fused.py
+    ``R_*``) at ``index``: the fused call and the reference read and write the same copy."""
+
+    def __init__(self, index: int, doc: str) -> None:
+        self.index = index
+        self.__doc__ = doc
+
+    def __get__(self, tick: Tick | None, owner: type) -> Any:
+        return self if tick is None else tick._reg.item(self.index)
+
+    def __set__(self, tick: Tick, value: float) -> None:
+        tick._reg[self.index] = value
 
 
 class Tick:
@@ -306,34 +322,12 @@ class Tick:
         self._judge_from = self.tick + 1 + self.settle_ticks
         self._fuse_refresh()
 
-    # ------------------------------------------- the scalars kept in the register
-
-    @property
-    def t_cmd(self) -> float:
-        """Setpoint (path) time [s]."""
-        return self._reg.item(R_TCMD)
-
-    @t_cmd.setter
-    def t_cmd(self, value: float) -> None:
-        self._reg[R_TCMD] = value
-
-    @property
-    def sample_dt(self) -> float:
-        """The interval the observers integrated this tick [s] (the record's sample_dt)."""
-        return self._reg.item(R_OBS_DT)
-
-    @sample_dt.setter
-    def sample_dt(self, value: float) -> None:
-        self._reg[R_OBS_DT] = value
-
-    @property
-    def _since_fresh(self) -> float:
-        """Time since the last fresh sample [s]."""
-        return self._reg.item(R_SINCE)
-
-    @_since_fresh.setter
-    def _since_fresh(self, value: float) -> None:
-        self._reg[R_SINCE] = value
+    # the scalars the fused call reads and writes: kept in the register only (one owner)
+    t_cmd = InRegister(R_TCMD, "Setpoint (path) time [s].")
+    sample_dt = InRegister(
+        R_OBS_DT, "The interval the observers integrated this tick [s] (the record's sample_dt)."
+    )
+    _since_fresh = InRegister(R_SINCE, "Time since the last fresh sample [s].")
 
     # ------------------------------------------------------------------ the tick
 
