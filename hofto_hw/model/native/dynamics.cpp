@@ -1,8 +1,9 @@
 // The tick's rigid-body dynamics as plain C functions: pinocchio's own algorithms (CRBA,
-// Coriolis matrix, gravity, the sparse Cholesky of M, ABA, nonlinear effects, RNEA) on a copy
-// of the robot's pinocchio model, called from numba kernels (hofto_hw/model/kernels.py) so that
-// a snapshot or a feed-forward is one Python->compiled call. Built and loaded by
-// hofto_hw/model/native/build.py.
+// Coriolis matrix, gravity, the sparse Cholesky of M, ABA, nonlinear effects, RNEA), and one
+// recursion of ours for Cᵀ·qd (ct_qd_of: pinocchio has it only as the whole Coriolis matrix),
+// on a copy of the robot's pinocchio model, called from numba kernels
+// (hofto_hw/model/kernels.py) so that a snapshot or a feed-forward is one Python->compiled
+// call. Built and loaded by hofto_hw/model/native/build.py.
 //
 // Compile time is the reason for ArmJointsTpl (pinocchio's documented extension point: a Model
 // over one's own joint collection): pinocchio's default collection (~25 joint types in one
@@ -347,7 +348,8 @@ void hofto_dyn1_terms(
 // over the `count` samples q, qd, total (count, n) row-major. `which`: 0 ABA, 1 CRBA, 2
 // Coriolis matrix, 3 gravity, 4 nonlinear effects, 5 the Cholesky decomposition and solve of
 // accel_by_mass (on each sample's M, computed before the clock starts), 6 terms_of(`terms`),
-// 7 terms_of(`terms`) by the SEPARATE route, 8 ct_qd_of (with its forward kinematics). out (n + 4, n) is terms_of's scratch.
+// 7 terms_of(`terms`) by the SEPARATE route (the Coriolis matrix for Cᵀ·qd), 8 ct_qd_of (with
+// its forward kinematics). out (n + 4, n) is terms_of's scratch.
 double hofto_dyn1_time(
   void * handle,
   std::int64_t which,
