@@ -444,19 +444,19 @@ def warm_call(system, calls: int, res: dict) -> None:
     moves the tick's state on; between two cycles: a stall of ``calls`` calls). Only the
     calls that ran to the end count: while moving, the same sample integrated again soon
     reads as a contact and the call stops at the monitor or the safety checks."""
-    from hofto_hw.runtime.fused import DONE, R_COMP, R_DT, R_SDT, R_T, R_TICK, R_WAKE, STAGES
+    from hofto_hw.runtime.fused import DONE, STAGES
 
     tick = system.tick
-    call, tab, reg, rec = tick._fz_call, tick._fz_tab, tick._reg, tick._rec1
-    # the last tick's scalars, as Tick._fused_step passes them
-    t, dt, sdt, comp, wake = (reg.item(i) for i in (R_T, R_DT, R_SDT, R_COMP, R_WAKE))
-    n = int(reg[R_TICK])
+    call, tab, rec = tick._fz_call, tick._fz_tab, tick._rec1
+    # the last tick's time and number, one period, the bus's sample interval, as
+    # Tick._fused_step passes them; no loop timings (they only go into the record)
+    t, n, dt, sdt = tick.t, tick.tick, system.loop.period, tick._transport.sample_dt
     clock = time.perf_counter_ns
     ns = np.zeros(calls)
     stage = np.zeros(calls, dtype=np.int64)
     for k in range(calls):
         t0 = clock()
-        stage[k] = call(tab, rec, t, dt, sdt, n, wake, comp)
+        stage[k] = call(tab, rec, t, dt, sdt, n, 0.0, 0.0)
         ns[k] = clock() - t0
     done = stage == DONE
     n_done = int(done.sum())

@@ -62,11 +62,12 @@ STAGES = ("read", "safety", "monitor", "control", "done")
  A_IDWROWS, A_TAUFF, A_IDH, A_RX, A_RXLEN, A_PREV, A_REG) = range(51)  # fmt: skip
 A_SIZE = 51
 
-# the register (float64): inputs, the tick's kept scalars, constants, outputs
-(R_T, R_DT, R_SDT, R_TCMD, R_SINCE, R_TICK, R_JUDGE, R_EXPECT, R_KIND, R_FFSTALE, R_WAKE,
- R_COMP, R_WAS_CONTACT, R_REC_MON, R_PERIOD, R_STALL, R_T0, R_RAMP, R_VS, R_LTAU, R_LMIN,
- R_MODE, R_OBS_DT, R_FINITE, R_MFLAGS, R_FF, R_MON, R_TWO) = range(28)  # fmt: skip
-R_SIZE = 28
+# the register (float64): the tick's kept scalars, constants, outputs (this tick's own
+# scalars are the call's arguments)
+(R_TCMD, R_SINCE, R_JUDGE, R_EXPECT, R_KIND, R_FFSTALE, R_WAS_CONTACT, R_REC_MON, R_PERIOD,
+ R_STALL, R_T0, R_RAMP, R_VS, R_LTAU, R_LMIN, R_MODE, R_OBS_DT, R_FINITE, R_MFLAGS, R_FF,
+ R_MON, R_TWO) = range(22)  # fmt: skip
+R_SIZE = 22
 
 #: R_KIND: the motion's update this tick (HOLD_STILL: nothing to write; MOVE_PATH: the
 #: compiled demo path; OTHER: the reference runs the controller)
@@ -95,10 +96,9 @@ def fused_tick(
     ``a[A_REG]``) and the tick record ``rec`` (1,), for loop time ``t_loop`` [s], ``dt`` [s]
     since the last tick, the bus's sample interval ``sdt`` [s] (0: unknown, -1: no sample),
     tick number ``tick`` and the loop's wake-up and compute times [µs]. Returns the stage code
-    where the reference goes on (the scalars are in the register for it)."""
+    where the reference goes on."""
     n = a[A_N]
     r = _carray(_f64(a[A_REG]), (R_SIZE,))
-    r[R_T], r[R_DT], r[R_SDT], r[R_TICK], r[R_WAKE], r[R_COMP] = t_loop, dt, sdt, tick, wake, comp
     # 1-2. the drive read (the exchange is the caller's)
     si = _carray(_f64(a[A_SI]), (a[A_SIROWS], n))
     states = _carray(_u8(a[A_STATES]), (n,))
@@ -154,7 +154,7 @@ def fused_tick(
     if limits_quiet(sample, q_sent, limw, 1 + 2 * expect, gap if gap > 1e-9 else 0.0) == 0:
         return SAFETY
     r[R_SINCE] = 0.0  # good data (what bus.check and Tick._safety do on it)
-    settled = r[R_TICK] >= r[R_JUDGE]
+    settled = tick >= r[R_JUDGE]
     monitored = a[A_COLL] != 0 and settled and flags & POWER_ON != 0
     mon = 1.0 if monitored else 0.0
     r[R_MON] = mon

@@ -59,7 +59,6 @@ from hofto_hw.runtime.fused import (
     MONITOR,
     MOVE_PATH,
     OTHER,
-    R_DT,
     R_EXPECT,
     R_FFSTALE,
     R_FINITE,
@@ -362,7 +361,7 @@ class Tick:
         if stage < MONITOR:
             self._safety(status, dt)  # 4. safety: decides, latches, picks the stop category
         elif stage == MONITOR:
-            self._monitor_flagged()  # the fused monitor flagged: its report, then on
+            self._monitor_flagged(dt)  # the fused monitor flagged: its report, then on
         if stage < CONTROL:
             self._requests(missed)  # 4 (end): overruns, requests, reset, stop measurement
         self._control()  # 5. controller and 6. command (acting the stop category)
@@ -446,14 +445,14 @@ class Tick:
             flags = c.update(stop, est, q, qd, motion.qdd, mdt)
             self._learn_step(flags, mdt)
 
-    def _monitor_flagged(self) -> None:
+    def _monitor_flagged(self, dt: float) -> None:
         """The fused call's monitor flagged (or a contact was on): what CollisionLevels.update
         does after its kernel, then the rest of :meth:`_safety`."""
         reg, c = self._reg, self.collision
         flags = int(reg[R_MFLAGS])
         c._report(self.stop, flags)  # type: ignore[union-attr]
         obs_dt = self.sample_dt
-        self._learn_step(flags, obs_dt if obs_dt > 0.0 else reg.item(R_DT))
+        self._learn_step(flags, obs_dt if obs_dt > 0.0 else dt)
 
     def _learn_step(self, flags: int, mdt: float) -> None:
         """The friction's error learned from contact-free motion (not dragging, no stop)."""
