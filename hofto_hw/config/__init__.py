@@ -6,6 +6,8 @@ from hofto_hw.config.loader import (
     json_schema,
     load_config,
     parse_config,
+    parse_yaml_bytes,
+    read_bounded,
     read_model,
     read_yaml,
 )
@@ -46,6 +48,8 @@ __all__ = [
     "json_schema",
     "load_config",
     "parse_config",
+    "parse_yaml_bytes",
+    "read_bounded",
     "read_model",
     "read_yaml",
 ]

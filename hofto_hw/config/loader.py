@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+import reprlib
+import stat
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -33,9 +36,7 @@ def format_validation_error(source: str, err: ValidationError) -> str:
         loc = _format_loc(tuple(e.get("loc", ())))
         msg = e.get("msg", "invalid")
         got = e.get("input")
-        shown = repr(got)
-        if len(shown) > 80:
-            shown = shown[:77] + "..."
+        shown = _excerpt(got, 80)
         lines.append(f"{source}: {loc}: {msg} (got {shown})")
     return "\n".join(lines)
 
@@ -64,8 +65,8 @@ def _refuse_removed_fields(data: dict, source: str) -> None:
         rate = loop.get("rate_hz", 1000.0) if isinstance(loop, dict) else 1000.0
         raise ConfigError(
             f"{source}: bus.cycle_time: removed; the bus cycles at loop.rate_hz "
-            f"(here {rate!r} Hz, a {_period(rate)} cycle): delete the line "
-            f"(got {bus['cycle_time']!r})"
+            f"(here {_excerpt(rate, 40)} Hz, a {_period(rate)} cycle): delete the line "
+            f"(got {_excerpt(bus['cycle_time'], 40)})"
         )
 
 
@@ -84,59 +85,206 @@ def _resolve_paths(cfg: SystemConfig, base_dir: Path) -> None:
         robot.parameters = (base_dir / robot.parameters).resolve()
 
 
-def read_yaml(path: str | Path, what: str, error: type[UserError] = ConfigError) -> dict:
-    """Parse the YAML file ``path`` whose top level must be a mapping; ``what`` names the kind
-    of file in messages ("config file", "column map", ...).
+#: largest YAML file any reader accepts [bytes]: the biggest shipped file (a parameters file)
+#: is ~20 kB; 4 MiB leaves room for long hand-written files and bounds the parser's memory.
+MAX_YAML_BYTES = 4 << 20
 
-    Raises ``error`` with one line naming the file: not found, a folder, unreadable, empty,
-    binary, not UTF-8 at byte N, not valid YAML at line L column C (a truncated file says it
-    ends early), or not a mapping.
+
+def read_bounded(
+    path: str | Path, what: str, max_bytes: int, error: type[UserError] = ConfigError
+) -> bytes:
+    """The bytes of the regular file ``path``, at most ``max_bytes`` of them.
+
+    The file is opened non-blocking and checked with fstat before anything is read: a FIFO,
+    a device (``/dev/zero``), a socket or a folder is refused without waiting on it, and a
+    file larger than ``max_bytes`` is refused before it is read (the read itself is bounded
+    too, for a file that grows meanwhile). Raises ``error``, one line naming the file.
     """
     path = Path(path)
+    flags = os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0)
     try:
-        raw = path.read_bytes()
+        fd = os.open(path, flags)
     except FileNotFoundError:
         raise error(f"{path}: {what} not found") from None
     except IsADirectoryError:
         raise error(f"{path}: is a folder, not a {what}") from None
     except OSError as exc:
         raise error(f"{path}: cannot read {what}: {exc.strerror}") from None
-    text = _decode(raw, path, what, error)
     try:
-        data = yaml.safe_load(text)
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise error(f"{path}: is a folder, not a {what}")
+        if not stat.S_ISREG(st.st_mode):
+            raise error(f"{path}: is {_file_kind(st.st_mode)}, not a {what} (a regular file)")
+        if st.st_size > max_bytes:
+            raise error(
+                f"{path}: {st.st_size} bytes; a {what} is at most {max_bytes} bytes "
+                f"({max_bytes / 1e6:g} MB)"
+            )
+        chunks, left = [], max_bytes + 1
+        while left > 0:
+            chunk = os.read(fd, min(left, 1 << 20))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            left -= len(chunk)
+        if left <= 0:
+            raise error(f"{path}: grew past {max_bytes} bytes while read; not a {what}")
+        return b"".join(chunks)
+    except OSError as exc:
+        raise error(f"{path}: cannot read {what}: {exc.strerror}") from None
+    finally:
+        os.close(fd)
+
+
+def _file_kind(mode: int) -> str:
+    for test, name in (
+        (stat.S_ISFIFO, "a FIFO (named pipe)"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    ):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+class _Refused(Exception):
+    """A YAML construct the safe loader refuses: ``line`` (1-based) and a message."""
+
+    def __init__(self, line: int, message: str) -> None:
+        super().__init__(message)
+        self.line = line
+        self.message = message
+
+
+class _SafeLoader(yaml.SafeLoader):
+    """yaml.SafeLoader that refuses aliases (``*name``: a few hundred bytes of nested aliases
+    expand to billions of nodes in whatever walks the result) and duplicate keys (YAML says
+    a key is unique; PyYAML lets the last one win silently)."""
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise _Refused(
+                event.start_mark.line + 1,
+                f"alias *{_clip(str(event.anchor), 40)} refused: aliases are not accepted "
+                "in hofto-hw files (write the value out)",
+            )
+        return super().compose_node(parent, index)
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        if isinstance(node, yaml.MappingNode):
+            seen: dict[Any, int] = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                line = key_node.start_mark.line + 1
+                try:
+                    first = seen.get(key)
+                except TypeError:  # an unhashable key: the constructor refuses it below
+                    continue
+                if first is not None:
+                    raise _Refused(
+                        line,
+                        f"duplicate key {_excerpt(key, 60)} (first at line {first}): "
+                        "remove one (YAML keeps only the last, silently)",
+                    )
+                seen[key] = line
+        return super().construct_mapping(node, deep=deep)
+
+
+def _clip(text: str, limit: int) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _excerpt(value: Any, limit: int = 80) -> str:
+    """A bounded repr of ``value`` (at most ``limit`` characters): never the repr of a whole
+    input, which for a big or deeply shared structure costs as much as the input."""
+    r = reprlib.Repr()
+    r.maxstring = r.maxother = limit
+    r.maxlist = r.maxtuple = r.maxdict = r.maxset = 6
+    r.maxlevel = 3
+    shown = r.repr(value)
+    return shown if len(shown) <= limit else shown[: limit - 3] + "..."
+
+
+def read_yaml(
+    path: str | Path,
+    what: str,
+    error: type[UserError] = ConfigError,
+    *,
+    max_bytes: int = MAX_YAML_BYTES,
+) -> dict:
+    """Parse the YAML file ``path`` whose top level must be a mapping; ``what`` names the kind
+    of file in messages ("config file", "column map", ...).
+
+    The one YAML reader of the stack (config, parameters, thresholds, column maps, drive
+    profiles): a regular file of at most ``max_bytes`` (checked before reading: a FIFO, a
+    device or a huge file never blocks or fills memory), no aliases, no duplicate keys.
+
+    Raises ``error`` with one line naming the file: not found, a folder, not a regular file,
+    too large, unreadable, empty, binary, not UTF-8 at byte N, not valid YAML at line L
+    column C (a truncated file says it ends early), an alias or a duplicate key at line L,
+    or not a mapping.
+    """
+    raw = read_bounded(path, what, max_bytes, error)
+    return parse_yaml_bytes(raw, str(path), what, error, max_bytes=max_bytes)
+
+
+def parse_yaml_bytes(
+    raw: bytes,
+    source: str,
+    what: str,
+    error: type[UserError] = ConfigError,
+    *,
+    max_bytes: int = MAX_YAML_BYTES,
+) -> dict:
+    """Decode and parse YAML ``raw`` with the rules of :func:`read_yaml`; ``source`` names
+    it in messages. For YAML that is not a file of its own (a config attached to a log)."""
+    if len(raw) > max_bytes:
+        raise error(f"{source}: {len(raw)} bytes; a {what} is at most {max_bytes} bytes")
+    text = _decode(raw, source, what, error)
+    try:
+        data = yaml.load(text, Loader=_SafeLoader)  # a SafeLoader subclass
+    except _Refused as exc:
+        raise error(f"{source}: line {exc.line}: {exc.message}") from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
-        problem = " ".join(str(exc.problem or exc.context or "invalid").split())
+        problem = _clip(" ".join(str(exc.problem or exc.context or "invalid").split()), 160)
         if mark is None:
-            raise error(f"{path}: not valid YAML: {problem}") from None
+            raise error(f"{source}: not valid YAML: {problem}") from None
         at_end = mark.index >= len(text.rstrip())
         ends_early = at_end or "<stream end>" in problem or "end of stream" in problem
         hint = " (the file ends early: truncated?)" if ends_early else ""
         raise error(
-            f"{path}: line {mark.line + 1} column {mark.column + 1}: not valid YAML{hint}: "
+            f"{source}: line {mark.line + 1} column {mark.column + 1}: not valid YAML{hint}: "
             f"{problem}"
         ) from None
     except yaml.reader.ReaderError as exc:
         at = exc.position
         line, column = text.count("\n", 0, at) + 1, at - text.rfind("\n", 0, at)
         raise error(
-            f"{path}: line {line} column {column}: not valid YAML: control character "
+            f"{source}: line {line} column {column}: not valid YAML: control character "
             f"U+{_code_point(exc.character):04X} is not allowed in a {what}"
         ) from None
-    except (yaml.YAMLError, RecursionError) as exc:
+    except (yaml.YAMLError, RecursionError, ValueError) as exc:
+        # ValueError: an integer literal longer than Python's int() accepts (4300 digits)
         reason = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
-        raise error(f"{path}: not valid YAML: {reason.splitlines()[0]}") from None
+        first = reason.splitlines()[0] if reason else type(exc).__name__
+        raise error(f"{source}: not valid YAML: {_clip(first, 160)}") from None
     if data is None:
-        raise error(f"{path}: {what} is empty")
+        raise error(f"{source}: {what} is empty")
     if not isinstance(data, dict):
         raise error(
-            f"{path}: expected a mapping (key: value lines) at the top level of a {what}, "
+            f"{source}: expected a mapping (key: value lines) at the top level of a {what}, "
             f"got {_kind(data)}"
         )
     return data
 
 
-def _decode(raw: bytes, path: Path, what: str, error: type[UserError]) -> str:
+def _decode(raw: bytes, path: str | Path, what: str, error: type[UserError]) -> str:
     """UTF-8 text of ``raw`` (a BOM is dropped), or ``error`` for a binary/non-UTF-8 file."""
     if not raw.strip():
         raise error(f"{path}: {what} is empty")
@@ -166,7 +314,7 @@ def _code_point(character: str | int) -> int:
 def _kind(data: Any) -> str:
     if isinstance(data, list):
         return "a list"
-    return f"a single value {data!r:.40}"
+    return f"a single value {_excerpt(data, 40)}"
 
 
 def read_model(path: str | Path, what: str, model: type[M]) -> M:

@@ -25,10 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
+from hofto_hw.config.loader import read_bounded
 from hofto_hw.errors import UserError
 from hofto_hw.model.robot import RobotModel
 
 MAGIC = "# hofto-hw taught path v1"
+#: largest taught-path file read [bytes]: ~90 bytes a row, so 256 MiB is ~50 min at 1 kHz
+#: (motion.record_seconds allows an hour at most)
+MAX_BYTES = 256 << 20
 
 
 @dataclass
@@ -89,9 +93,7 @@ def save_taught_path(path: TaughtPath, file: Path | str) -> Path:
 def load_taught_path(file: Path | str, model: RobotModel) -> TaughtPath:
     """Read and check a taught-path file for ``model`` (raises UserError, one line)."""
     file = Path(file)
-    if not file.is_file():
-        raise UserError(f"{file}: taught-path file not found")
-    raw = file.read_bytes()
+    raw = read_bounded(file, "taught-path file", MAX_BYTES, UserError)
     if not raw:
         raise UserError(f"{file}: empty file, not a taught path")
     if b"\x00" in raw[:4096]:

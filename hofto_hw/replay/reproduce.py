@@ -22,9 +22,8 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-import yaml
 
-from hofto_hw.config.loader import parse_config
+from hofto_hw.config.loader import parse_config, parse_yaml_bytes
 from hofto_hw.config.models import ObserverConfig, SystemConfig
 from hofto_hw.errors import ConfigError, UserError
 from hofto_hw.identify.data import Recording
@@ -115,11 +114,8 @@ def run_setup(log: FlightLog) -> RunSetup:
             f"{log.path}: no {att.CONFIG}/{att.URDF} attachments: cannot rebuild the robot"
         )
     src = f"{log.path}:{att.CONFIG}"
-    try:
-        data = yaml.safe_load(files[att.CONFIG])
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{src}: not valid YAML: {exc}") from None
-    if not isinstance(data, dict) or not isinstance(data.get("robot"), dict):
+    data = parse_yaml_bytes(files[att.CONFIG], src, "config file")
+    if not isinstance(data.get("robot"), dict):
         raise ConfigError(f"{src}: no robot section")
     with tempfile.TemporaryDirectory(prefix="hofto-replay-") as tmp:
         folder = Path(tmp)

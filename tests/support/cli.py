@@ -13,3 +13,40 @@ def one_line_error(code: int, err: str, *needles: str) -> str:
     for needle in needles:
         assert needle in lines[0], (needle, err)
     return lines[0]
+
+
+def run_limited(
+    argv: list[str],
+    *,
+    timeout: float = 20.0,
+    memory: int = 2 << 30,
+    cwd: str | None = None,
+) -> tuple[int | None, str, str, float]:
+    """Run ``hofto-hw ARGV`` in a subprocess under an address-space limit of ``memory``
+    bytes (RLIMIT_AS) and a wall-clock ``timeout`` [s]: for inputs that used to hang or
+    exhaust memory. Returns (exit code, or None when it was killed at the timeout, stdout,
+    stderr, seconds taken)."""
+    import resource
+    import subprocess
+    import sys
+    import time
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
+
+    code = f"import sys; from hofto_hw.cli import main; sys.exit(main({argv!r}))"
+    t0 = time.monotonic()
+    try:
+        p = subprocess.run(
+            [sys.executable, "-c", code],
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            preexec_fn=limit,
+            cwd=cwd,
+        )
+    except subprocess.TimeoutExpired as exc:
+        out = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+        err = exc.stderr.decode() if isinstance(exc.stderr, bytes) else (exc.stderr or "")
+        return None, out, err, time.monotonic() - t0
+    return p.returncode, p.stdout, p.stderr, time.monotonic() - t0

@@ -1,13 +1,15 @@
 """Every command that reads a YAML file answers a damaged one with one line naming the file.
 
 Kinds of damage: binary, not UTF-8, empty, truncated (YAML cut inside a flow list; a file cut
-inside a UTF-8 character), and valid YAML that is not a mapping. Each is tried as a config
+inside a UTF-8 character), valid YAML that is not a mapping, a duplicate key and an alias
+(the one safe reader refuses both, see hofto_hw/config/loader.py). Each is tried as a config
 (``config check``), a parameters file (``replay``), a thresholds file (``thresholds check``)
 and a column map (``identify --columns``).
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -27,6 +29,13 @@ def _truncated(good: Path) -> bytes:
     return text[: text.rindex(": [") + 6].encode()
 
 
+def _duplicate_key(good: Path) -> bytes:
+    """``good`` with its first top-level key given again at the end (YAML's last would win)."""
+    key = re.search(r"^([A-Za-z_]\w*):", good.read_text(), re.MULTILINE)
+    assert key is not None
+    return good.read_bytes() + f"\n{key.group(1)}: 0\n".encode()
+
+
 #: kind -> (bytes of the damaged file from the good file of its role, words the error says)
 DAMAGE: dict[str, tuple[Callable[[Path], bytes], str]] = {
     "binary": (lambda good: bytes(range(256)) * 4, "is a binary file"),
@@ -42,6 +51,11 @@ DAMAGE: dict[str, tuple[Callable[[Path], bytes], str]] = {
         "ends inside a UTF-8 character",
     ),
     "a list": (lambda good: b"- 1\n- 2\n", "expected a mapping"),
+    "duplicate key": (_duplicate_key, "duplicate key"),
+    "alias": (
+        lambda good: good.read_bytes() + b"\nanchored: &here 1\naliased: *here\n",
+        "alias *here refused",
+    ),
 }
 
 #: role -> (good file of that role, argv with the damaged file at BAD)
