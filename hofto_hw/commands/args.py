@@ -18,6 +18,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from hofto_hw.errors import UserError
+from hofto_hw.outputs import output_problem
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -100,21 +101,13 @@ def parse_rows(text: str | None, what: str = "--rows") -> tuple[int, int] | None
 
 
 def output_file(text: str) -> Path:
-    """A file to write: not a folder, in an existing, writable folder."""
-    path = Path(text)
-    if not text or path.is_dir() or text.endswith(("/", os.sep)):
-        raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name")
-    if path.exists() and not path.is_file():
-        raise argparse.ArgumentTypeError(f"{text!r} exists and is not a regular file")
-    folder = path.parent
-    if not folder.is_dir():
-        what = "is not a folder" if folder.exists() else "does not exist"
-        raise argparse.ArgumentTypeError(
-            f"{text!r}: folder {str(folder)!r} {what} (create it first)"
-        )
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"{text!r}: folder {str(folder)!r} is not writable")
-    return path
+    """A file to write: not a folder, in an existing folder that takes a new file
+    (:func:`hofto_hw.outputs.output_problem`, checked when the arguments are parsed)."""
+    problem = output_problem(text)
+    if problem is not None:
+        sep = " " if problem.startswith("is a folder") else ": "
+        raise argparse.ArgumentTypeError(f"{text!r}{sep}{problem}")
+    return Path(text)
 
 
 def ensure_default_folder(path: Path) -> None:

@@ -23,6 +23,7 @@ from hofto_hw.commands.args import (
     output_file,
     write_failed,
 )
+from hofto_hw.outputs import atomic_path
 
 DEFAULT_CONFIG = "er3a"  # the simulated ER3A-class arm of the paper (configs/er3a.yaml)
 DEFAULT_PLOT = Path("out/demo_fig4.png")  # ours: its folder is created
@@ -203,6 +204,7 @@ def _plot(samples, comp, path: Path) -> None:
     fig.suptitle("External torque estimates, paper's gains (cf. Fig. 4 of Han et al. 2022)")
     fig.tight_layout()
     try:
-        fig.savefig(path, dpi=110, format="png")  # exactly at path, whatever its suffix
+        with atomic_path(path, "figure") as tmp:  # exactly at path, whatever its suffix
+            fig.savefig(tmp, dpi=110, format="png")
     finally:
         plt.close(fig)

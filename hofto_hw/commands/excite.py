@@ -21,6 +21,7 @@ from hofto_hw.commands.args import (
     refuse_overwrite,
     write_failed,
 )
+from hofto_hw.outputs import atomic_path
 
 DEFAULT_ACCELERATION = 5.0  # rad/s², when neither the config nor --max-acceleration gives one
 
@@ -114,14 +115,15 @@ def run(args: argparse.Namespace) -> int:
         flush=True,
     )
     try:
-        np.savetxt(
-            args.output,
-            np.column_stack([t, q, qd, qdd]),
-            delimiter=",",
-            header=header,
-            comments="",
-            fmt="%.9g",
-        )
+        with atomic_path(args.output, "trajectory") as tmp:
+            np.savetxt(
+                tmp,
+                np.column_stack([t, q, qd, qdd]),
+                delimiter=",",
+                header=header,
+                comments="",
+                fmt="%.9g",
+            )
     except OSError as exc:
         raise write_failed(args.output, "trajectory", exc) from None
     try:
@@ -159,6 +161,7 @@ def _plot(
     fig.suptitle(f"excitation trajectory, condition number {cond:.4g}")
     fig.tight_layout()
     try:
-        fig.savefig(path, dpi=100, format="png")  # exactly at path, whatever its suffix
+        with atomic_path(path, "figure") as tmp:  # exactly at path, whatever its suffix
+            fig.savefig(tmp, dpi=100, format="png")
     finally:
         plt.close(fig)

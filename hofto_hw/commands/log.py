@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 from hofto_hw.errors import UserError
@@ -54,12 +55,20 @@ def _info(args: argparse.Namespace) -> int:
 
 
 def _recover(args: argparse.Namespace) -> int:
-    from hofto_hw.recording.recover import default_output, recover
+    from hofto_hw.outputs import output_problem
+    from hofto_hw.recording.recover import check_magic, default_output, recover
 
     src: Path = args.file
     dst: Path = args.output if args.output is not None else default_output(src)
     if args.output is None and dst.exists():
         raise UserError(f"{dst}: exists; name the output with -o (it will be replaced)")
+    check_magic(src)  # the input first: a wrong file is the likelier mistake
+    problem = output_problem(dst)
+    if problem is None and dst.exists() and os.path.samefile(src, dst):
+        problem = "is the input; name another output"
+    if problem is not None:
+        option = "-o " if args.output is not None else "output (FILE's stem + .recovered.mcap) "
+        raise UserError(f"{option}{dst}: {problem}")
     out = recover(src, dst)
     state = "was complete" if out.complete else f"truncated ({out.stopped or 'end of file'})"
     print(

@@ -13,7 +13,12 @@ from pathlib import Path
 
 import yaml
 
-from hofto_hw.commands.args import HelpFormatter, finite_positive_float
+from hofto_hw.commands.args import (
+    HelpFormatter,
+    finite_positive_float,
+    output_file,
+    refuse_overwrite,
+)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -25,7 +30,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     idp.add_argument("params", type=Path, help="identified-parameters file of the arm")
     idp.add_argument("files", nargs="+", metavar="FILE[@FIRST:LAST]")
-    idp.add_argument("-o", "--output", type=Path, help="write the payload: block (YAML)")
+    idp.add_argument("-o", "--output", type=output_file, help="write the payload: block (YAML)")
     idp.add_argument("--config", type=Path, help="robot config (default: <robot>.yaml)")
     idp.add_argument("--columns", type=Path, help="CSV column map (default: by column count)")
     idp.add_argument(
@@ -41,8 +46,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.identify.inputs import Conditioning, load_samples
     from hofto_hw.identify.payload import identify_payload
+    from hofto_hw.outputs import write_atomic
     from hofto_hw.replay.setup import load_setup
 
+    inputs = [args.params, args.config, args.columns, *args.files]
+    refuse_overwrite(args.output, inputs, "--output")
     setup = load_setup(args.params, args.config)
     opts = Conditioning(args.cutoff, False, 1, args.drop_bad_rows, trim=False)
     search = [setup.robot_dir, setup.config.robot.urdf.parent]
@@ -55,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
         text = "# written by hofto-hw payload identify from " + ", ".join(
             Path(s.source).name for s, _ in loaded
         )
-        args.output.write_text(text + "\n" + yaml.safe_dump(block, sort_keys=False))
+        body = text + "\n" + yaml.safe_dump(block, sort_keys=False)
+        write_atomic(args.output, body, "the payload block")
     if args.json:
         out = {
             "mass": est.mass,

@@ -42,35 +42,59 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _check_duration(value: float | None) -> None:
+    from hofto_hw.config.runtime import MAX_RUN_SECONDS
     from hofto_hw.errors import UserError
 
     if value is not None and (not math.isfinite(value) or value <= 0.0):
         raise UserError(f"--duration: must be a finite number of seconds > 0, got {value}")
+    if value is not None and value > MAX_RUN_SECONDS:
+        raise UserError(f"--duration: at most {MAX_RUN_SECONDS:g} s (a week), got {value:g}")
 
 
-def _check_output(path: Path | None, what: str) -> None:
+def _check_ticks(duration: float, rate_hz: float, given: bool) -> None:
+    """A run shorter than one tick does nothing and would still say it ran."""
     from hofto_hw.errors import UserError
 
-    if path is not None and path.is_dir():
-        raise UserError(f"{what}: {path} is a directory, expected a file name")
+    if round(duration * rate_hz) < 1:
+        where = "--duration" if given else "run.duration"
+        raise UserError(
+            f"{where}: {duration:g} s is less than one tick at loop.rate_hz = {rate_hz:g} Hz "
+            f"(at least {0.5 / rate_hz:g} s)"
+        )
+
+
+def _check_interface(cfg: object, interface: str | None) -> None:
+    """--interface names the NIC or CAN channel of a real bus: refused where it cannot apply."""
+    from hofto_hw.errors import UserError
+
+    if interface is None:
+        return
+    bus = cfg.bus  # type: ignore[attr-defined]
+    if bus is None or bus.transport == "sim":
+        what = "no bus: section" if bus is None else "bus.transport sim (the simulated bus)"
+        raise UserError(f"--interface {interface}: does not apply to {what}; it has no interface")
 
 
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.config import load_config
     from hofto_hw.control.joint_motion import MOVE
+    from hofto_hw.outputs import check_output, write_atomic
     from hofto_hw.runtime import realtime
     from hofto_hw.runtime.compose import build
     from hofto_hw.runtime.drag_script import run_loop
     from hofto_hw.runtime.summary import build_summary, format_summary
 
     _check_duration(args.duration)
-    _check_output(args.summary_json, "--summary-json")
+    if args.summary_json is not None:
+        check_output(args.summary_json, "--summary-json", inputs=[args.config])
     cfg = load_config(args.config)
+    _check_interface(cfg, args.interface)
     if args.interface is not None and cfg.bus is not None:
         cfg = cfg.model_copy(
             update={"bus": cfg.bus.model_copy(update={"interface": args.interface})}
         )
     duration = args.duration if args.duration is not None else cfg.run.duration
+    _check_ticks(duration, cfg.loop.rate_hz, args.duration is not None)
     clock = args.clock or cfg.run.clock
     lc = cfg.loop
     latency = lc.cpu_latency_us if clock != "sim" else None  # the sim clock never sleeps
@@ -143,10 +167,9 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
     summary = build_summary(system, log, rt_text)
-    if args.summary_json is not None:
-        args.summary_json.parent.mkdir(parents=True, exist_ok=True)
-        args.summary_json.write_text(json.dumps(summary, indent=2) + "\n")
     print(format_summary(summary))
+    if args.summary_json is not None:  # after the summary is shown: a failure loses no figure
+        write_atomic(args.summary_json, json.dumps(summary, indent=2) + "\n", "the summary")
     sys.stdout.flush()
     return 0
 

@@ -9,6 +9,7 @@ Loading and checking only; nothing here runs in the tick.
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
@@ -16,6 +17,8 @@ from pydantic import Field, model_validator
 from hofto_hw.config.base import FileModel, PositiveFloat
 
 U32 = Annotated[int, Field(ge=0, le=0xFFFFFFFF)]
+#: a wait at start-up or on a request [s]: bounded, so a typo cannot hang the start for hours
+Timeout = Annotated[float, Field(gt=0.0, le=60.0)]
 
 
 class DriveIdentity(FileModel):
@@ -52,6 +55,24 @@ class DriveConfig(FileModel):
         0.01, description="time outside the window before the fault, 0x6066 [s]"
     )
 
+    @model_validator(mode="after")
+    def _raw_ranges(self) -> DriveConfig:
+        """The limits must fit the objects they are written to (the drive would get a
+        clipped value): 0x6072 is u16 per mille of rated torque, 0x6085 u32 counts/s²."""
+        most = 65535 * self.rated_torque * 1e-6 * self.gear_ratio
+        if self.torque_limit > most:
+            raise ValueError(
+                f"torque_limit = {self.torque_limit:g} N·m is above what 0x6072 (u16 per "
+                f"mille of rated_torque x gear_ratio) can hold: at most {most:.6g} N·m"
+            )
+        per_rad = self.counts_per_rev * self.gear_ratio / (2.0 * math.pi)
+        if self.quick_stop_deceleration * per_rad > 0xFFFFFFFF:
+            raise ValueError(
+                f"quick_stop_deceleration = {self.quick_stop_deceleration:g} rad/s² is above "
+                f"what 0x6085 (u32 counts/s²) can hold: at most {0xFFFFFFFF / per_rad:.6g} rad/s²"
+            )
+        return self
+
 
 class EtherCATOptions(FileModel):
     """EtherCAT master options (``bus.ethercat``; used when ``transport: ethercat``)."""
@@ -62,10 +83,10 @@ class EtherCATOptions(FileModel):
     recover_lost_slaves: bool = Field(
         False, description="bring lost slaves back when they answer again (else stop the bus)"
     )
-    receive_timeout: PositiveFloat | None = Field(
+    receive_timeout: Annotated[float, Field(gt=0.0, le=1.0)] | None = Field(
         None, description="wait for the process-data frame [s]; None = one bus cycle"
     )
-    state_timeout: PositiveFloat = Field(3.0, description="max time per AL state change [s]")
+    state_timeout: Timeout = Field(3.0, description="max time per AL state change [s]")
     pdo_watchdog: Annotated[float, Field(gt=0.0, le=6.5)] | None = Field(
         None,
         description="SM process-data watchdog written to every slave [s] (a gap in process "
@@ -99,20 +120,20 @@ class CANopenOptions(FileModel):
     heartbeat_time: Annotated[float, Field(ge=0.001, le=65.535)] = Field(
         0.05, description="heartbeat producer time written to each node's 0x1017 [s]"
     )
-    heartbeat_timeout: PositiveFloat | None = Field(
+    heartbeat_timeout: Annotated[float, Field(gt=0.0, le=65.535)] | None = Field(
         None, description="heartbeat consumer time [s]; None = 3 x heartbeat_time"
     )
-    tpdo_deadline: PositiveFloat | None = Field(
+    tpdo_deadline: Annotated[float, Field(gt=0.0, le=1.0)] | None = Field(
         None, description="wait for a cycle's TPDOs [s] after the SYNC; None = 0.8 cycle"
     )
-    tpdo_resync: PositiveFloat | None = Field(
+    tpdo_resync: Annotated[float, Field(gt=0.0, le=65.535)] | None = Field(
         None,
         description="a node's TPDOs lagging the SYNC this long [s] (or one lost on the way) are "
         "written off and read as on time again; longer than safety.bus.lost_cycles cycles, or "
         "a lag ends unreported; None = heartbeat_timeout",
     )
-    sdo_timeout: PositiveFloat = Field(0.5, description="SDO response timeout [s]")
-    boot_timeout: PositiveFloat = Field(
+    sdo_timeout: Timeout = Field(0.5, description="SDO response timeout [s]")
+    boot_timeout: Timeout = Field(
         3.0, description="wait for boot-up / operational heartbeats at start-up [s]"
     )
 
@@ -138,7 +159,7 @@ class BusConfig(FileModel):
     interface: str | None = Field(
         None, description="network interface (ethercat, e.g. 'eth1') or CAN channel (canopen)"
     )
-    transition_timeout: PositiveFloat = Field(
+    transition_timeout: Timeout = Field(
         0.5, description="max time for one CiA-402 state transition or mode change [s]"
     )
     drives: list[DriveConfig] = Field(min_length=1, description="one drive per joint, in order")

@@ -323,13 +323,22 @@ class SimulationConfig(FileModel):
     external: list[ExternalTorqueConfig] = Field(default_factory=list)
 
 
+#: highest loop.rate_hz [Hz] (by design: the tick takes tens of µs; EtherCAT and CAN cycles
+#: faster than 100 µs are out of reach of a Python loop)
+MAX_RATE_HZ = 10_000.0
+#: most samples one `mode drag --record` request allocates: an hour at 1 kHz
+MAX_RECORD_SAMPLES = 3_600_000
+
+
 class LoopConfig(FileModel):
     """The real-time loop; the drive bus cycles at the same rate."""
 
     rate_hz: float = Field(
         1000.0,
         ge=10.0,
-        description="loop and bus cycle rate [Hz]; the cycle time is 1 / rate_hz",
+        le=MAX_RATE_HZ,
+        description="loop and bus cycle rate [Hz]; the cycle time is 1 / rate_hz (at most "
+        "10 kHz: a 100 µs cycle is the shortest the Python tick can meet)",
     )
     realtime: Literal["required", "preferred", "off"] = Field(
         "preferred",
@@ -396,6 +405,13 @@ class SystemConfig(FileModel):
         _check_canopen_resync(self)
         if self.motion.jerk is not None:
             _check_lengths([("motion.jerk", self.motion.jerk)], n)
+        samples = self.motion.record_seconds * self.loop.rate_hz
+        if samples > MAX_RECORD_SAMPLES:
+            raise ValueError(
+                f"motion.record_seconds = {self.motion.record_seconds:g} s at loop.rate_hz = "
+                f"{self.loop.rate_hz:g} Hz is {samples:.3g} samples per taught path; at most "
+                f"{MAX_RECORD_SAMPLES} ({MAX_RECORD_SAMPLES / self.loop.rate_hz:g} s here)"
+            )
         if self.drag is not None:
             try:
                 self.drag.check_rate(self.loop.rate_hz, n)

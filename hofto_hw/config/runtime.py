@@ -19,6 +19,8 @@ from hofto_hw.config.payload import PayloadConfig
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+#: longest finite run [s] (a week): a longer one is a typo, not a plan
+MAX_RUN_SECONDS = 7 * 86400.0
 
 
 class DemoPathConfig(FileModel):
@@ -86,7 +88,7 @@ class ScriptedDragConfig(FileModel):
 class RunConfig(FileModel):
     """The ``run:`` section: what ``hofto-hw run`` does on the simulated arm."""
 
-    duration: Positive = Field(5.0, description="default run time [s]")
+    duration: Positive = Field(5.0, le=MAX_RUN_SECONDS, description="default run time [s]")
     clock: Literal["sim", "real"] = "real"
     path: DemoPathConfig | None = None
     collision: ScriptedCollisionConfig | None = Field(default_factory=ScriptedCollisionConfig)
@@ -110,4 +112,6 @@ class ServiceConfig(FileModel):
     watchdog_fraction: Annotated[float, Field(gt=0.0, lt=1.0)] = Field(
         0.5, description="pet the systemd watchdog every fraction·WatchdogSec"
     )
-    status_interval: Positive = Field(1.0, description="sd_notify STATUS update period [s]")
+    status_interval: Positive = Field(
+        1.0, le=3600.0, description="sd_notify STATUS update period [s]"
+    )

@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hofto_hw.outputs import atomic_path
+
 if TYPE_CHECKING:
     from hofto_hw.model.robot import RobotModel
 
@@ -87,6 +89,7 @@ def plot_fit(
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     try:
-        fig.savefig(path, dpi=110, format="png")  # exactly at path, whatever its suffix
+        with atomic_path(path, "figure") as tmp:  # exactly at path, whatever its suffix
+            fig.savefig(tmp, dpi=110, format="png")
     finally:
         plt.close(fig)

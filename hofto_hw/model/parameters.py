@@ -68,6 +68,7 @@ import yaml
 from hofto_hw.config.loader import read_yaml
 from hofto_hw.errors import ModelError
 from hofto_hw.model.friction import FrictionParams
+from hofto_hw.outputs import write_atomic
 
 if TYPE_CHECKING:
     from hofto_hw.model.robot import RobotModel
@@ -218,10 +219,10 @@ def _plain(obj: Any) -> Any:
 
 
 def write_parameters(path: str | Path, pf: ParametersFile) -> None:
-    """Write ``pf`` as YAML to ``path``."""
+    """Write ``pf`` as YAML to ``path`` (atomically; UserError naming the file on failure)."""
     text = "# Identified dynamic parameters; format: hofto_hw/model/parameters.py\n"
     text += yaml.safe_dump(to_dict(pf), sort_keys=False, default_flow_style=None, width=100)
-    Path(path).write_text(text)
+    write_atomic(path, text, "parameters file")
 
 
 class _Reader:

@@ -17,6 +17,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from hofto_hw.errors import UserError
+from hofto_hw.outputs import atomic_path
 
 MAGIC = b"\x89MCAP0\r\n"
 
@@ -61,12 +62,13 @@ def default_output(path: Path) -> Path:
 def recover(src: Path, dst: Path) -> Salvage:
     """Copy every complete record of ``src`` into a new complete MCAP file ``dst``.
 
-    ``dst`` is written to a temporary name and renamed at the end, so a failure leaves no
-    half file and ``src`` is never touched (unless it is ``dst`` itself, named by the user).
+    ``dst`` is written to a temporary name beside it and renamed at the end
+    (:func:`hofto_hw.outputs.atomic_path`), so a failure leaves no half file and ``src`` is
+    never touched (unless it is ``dst`` itself, named by the user). A read error of ``src``
+    is a UserError naming ``src``; a write error one naming ``dst``.
     """
     check_magic(src)
-    tmp = dst.with_name(f".{dst.name}.partial")
-    try:
+    with atomic_path(dst, "the recovered log") as tmp:
         with src.open("rb") as f, tmp.open("wb") as g:
             w = Writer(g, compression=CompressionType.ZSTD)
             w.start(profile="ros2", library="hofto-hw log recover")
@@ -78,12 +80,7 @@ def recover(src: Path, dst: Path) -> Salvage:
                 copier.out.stopped = type(exc).__name__ + (f": {exc}" if str(exc) else "")
             w.finish()
         if copier.out.total == 0 and not copier.out.complete:
-            tmp.unlink()
             raise UserError(f"{src}: no complete message to recover ({copier.out.stopped})")
-        tmp.replace(dst)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise UserError(f"{dst}: cannot write: {exc.strerror}") from None
     return copier.out
 
 

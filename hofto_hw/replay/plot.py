@@ -6,7 +6,7 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
-from hofto_hw.errors import UserError
+from hofto_hw.outputs import atomic_path
 from hofto_hw.replay.episodes import Episode
 from hofto_hw.replay.runner import ReplayResult
 
@@ -35,8 +35,6 @@ def plot_replay(result: ReplayResult, episodes: list[Episode], path: str | Path)
     axes[-1, 0].set_xlabel("time since start [s]")
     fig.tight_layout()
     path = Path(path)
-    try:
-        fig.savefig(path, dpi=90, format="png")  # exactly at path, whatever its suffix
-    except OSError as exc:
-        raise UserError(f"{path}: cannot write plot: {exc.strerror}") from None
+    with atomic_path(path, "plot") as tmp:  # exactly at path, whatever its suffix
+        fig.savefig(tmp, dpi=90, format="png")
     return path

@@ -37,6 +37,7 @@ from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.loader import read_model
 from hofto_hw.config.models import ObserverConfig
 from hofto_hw.errors import ConfigError
+from hofto_hw.outputs import write_atomic
 
 FORMAT = "hofto-hw/collision-thresholds"
 
@@ -110,7 +111,9 @@ def write_thresholds(path: str | Path, content: ThresholdsFile) -> None:
 
     _Dumper.add_representer(list, _list)
     data = content.model_dump(mode="json", exclude_none=True)
-    Path(path).write_text(  # OSError: the caller names the option
+    write_atomic(  # UserError naming the file on failure
+        path,
         "# Collision thresholds: written by `hofto-hw thresholds calibrate` or `hofto-hw tune`"
-        " (see provenance).\n" + yaml.dump(data, Dumper=_Dumper, sort_keys=False, width=100)
+        " (see provenance).\n" + yaml.dump(data, Dumper=_Dumper, sort_keys=False, width=100),
+        "thresholds file",
     )

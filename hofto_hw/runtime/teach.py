@@ -38,6 +38,7 @@ from hofto_hw.control.taught_path import (
 )
 from hofto_hw.errors import UserError
 from hofto_hw.model.robot import RobotModel
+from hofto_hw.outputs import output_problem
 
 ARMED, RECORDING, FINISHED, SAVED, FAILED = range(5)
 STATE_NAMES = {
@@ -51,7 +52,9 @@ STATE_NAMES = {
 
 def check_output(file: Path | str, force: bool) -> Path:
     """Refuse (UserError, one line) an output file the taught path must not go to: a folder,
-    an existing file without ``force``, a missing or unwritable folder. Returns the path."""
+    an existing file without ``force``, a missing folder or one that takes no new file (a
+    read-only mount, /proc: probed, :func:`hofto_hw.outputs.output_problem`). Called where
+    the request is accepted (the control server's ``mode drag --record``). Returns the path."""
     file = Path(file)
     if file.is_dir():
         raise UserError(f"{file}: is a folder; --record needs a file name")
@@ -65,8 +68,9 @@ def check_output(file: Path | str, force: bool) -> Path:
     parent = file.parent
     if not parent.is_dir():
         raise UserError(f"{file}: folder {parent} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise UserError(f"{file}: folder {parent} is not writable")
+    problem = output_problem(file)  # probes the folder: os.access says yes to root anywhere
+    if problem is not None:
+        raise UserError(f"{file}: {problem}")
     return file
 
 
