@@ -35,6 +35,25 @@ from safety.kernels import (
 from safety.stop import Fault, StopController
 
 
+def monitored_limits(
+    cfg: object, limits: object
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(lower, upper, velocity, torque) limits the monitor trips at, each (n,) [rad, rad/s,
+    N·m], from ``safety.limits`` (LimitsSafetyConfig) and the model's JointLimits: the
+    position range shrunk by ``position_margin``, the velocity and torque limits scaled (or
+    overridden per joint). Also what a planned motion is checked against before it runs."""
+    margin = cfg.position_margin  # type: ignore[attr-defined]
+    vel = np.asarray(limits.velocity, dtype=float) * cfg.velocity_scale  # type: ignore[attr-defined]
+    tau = np.asarray(limits.torque, dtype=float) * cfg.torque_scale  # type: ignore[attr-defined]
+    if cfg.velocity is not None:  # type: ignore[attr-defined]
+        vel = np.asarray(cfg.velocity, dtype=float)  # type: ignore[attr-defined]
+    if cfg.torque is not None:  # type: ignore[attr-defined]
+        tau = np.asarray(cfg.torque, dtype=float)  # type: ignore[attr-defined]
+    lower = np.asarray(limits.position_lower, dtype=float) + margin  # type: ignore[attr-defined]
+    upper = np.asarray(limits.position_upper, dtype=float) - margin  # type: ignore[attr-defined]
+    return lower, upper, vel, tau
+
+
 class LimitMonitor:
     """Limits per joint, arrays of shape (n,): ``lower``/``upper`` [rad] (soft limits),
     ``velocity`` [rad/s], ``torque`` [N·m]; ``following_error`` and ``position_jump`` [rad]."""
@@ -116,18 +135,8 @@ class LimitMonitor:
     @classmethod
     def from_config(cls, cfg: object, limits: object, backend: Backend = "numpy") -> LimitMonitor:
         """From ``safety.limits`` (LimitsSafetyConfig) and the model's JointLimits."""
-        margin = cfg.position_margin  # type: ignore[attr-defined]
-        vel = np.asarray(limits.velocity, dtype=float) * cfg.velocity_scale  # type: ignore[attr-defined]
-        tau = np.asarray(limits.torque, dtype=float) * cfg.torque_scale  # type: ignore[attr-defined]
-        if cfg.velocity is not None:  # type: ignore[attr-defined]
-            vel = np.asarray(cfg.velocity, dtype=float)  # type: ignore[attr-defined]
-        if cfg.torque is not None:  # type: ignore[attr-defined]
-            tau = np.asarray(cfg.torque, dtype=float)  # type: ignore[attr-defined]
         return cls(
-            np.asarray(limits.position_lower, dtype=float) + margin,  # type: ignore[attr-defined]
-            np.asarray(limits.position_upper, dtype=float) - margin,  # type: ignore[attr-defined]
-            vel,
-            tau,
+            *monitored_limits(cfg, limits),
             cfg.following_error,  # type: ignore[attr-defined]
             cfg.position_jump,  # type: ignore[attr-defined]
             backend,

@@ -44,11 +44,17 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.model import RobotModel
     from hofto_hw.observers import make_observer
     from hofto_hw.observers.stability import check_observer
+    from hofto_hw.runtime.compose import build_model
+    from hofto_hw.runtime.motion_check import check_motion
 
     for path in args.files:
         cfg = load_config(path)
         check_transport(cfg, str(path))
         model = RobotModel.from_config(cfg.robot)  # URDF, joints and tool frame exist
+        try:
+            check_motion(cfg, build_model(cfg))
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from None
         for name, obs in cfg.observers.items():
             try:
                 check_observer(name, obs, model, cfg.loop.rate_hz)

@@ -63,6 +63,19 @@ def _check_ticks(duration: float, rate_hz: float, given: bool) -> None:
         )
 
 
+def _observer_choice(cfg: object) -> str:
+    """Which observers the loop runs and where their gains come from (loop.observers, or the
+    top-level observers section when loop.observers leaves one out): said, never silent."""
+    from hofto_hw.runtime.compose import loop_observer_names
+
+    own = cfg.loop.observers or {}  # type: ignore[attr-defined]
+    parts = [
+        f"{name} ({'loop.observers' if name in own else 'observers: the offline gains'})"
+        for name in loop_observer_names(cfg)  # type: ignore[arg-type]
+    ]
+    return "loop observers " + ", ".join(parts)
+
+
 def _check_interface(cfg: object, interface: str | None) -> None:
     """--interface names the NIC or CAN channel of a real bus: refused where it cannot apply."""
     from hofto_hw.errors import UserError
@@ -95,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         )
     duration = args.duration if args.duration is not None else cfg.run.duration
     _check_ticks(duration, cfg.loop.rate_hz, args.duration is not None)
+    print(f"hofto-hw run: {_observer_choice(cfg)}", file=sys.stderr, flush=True)
     clock = args.clock or cfg.run.clock
     lc = cfg.loop
     latency = lc.cpu_latency_us if clock != "sim" else None  # the sim clock never sleeps

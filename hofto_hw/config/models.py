@@ -361,8 +361,19 @@ class LoopConfig(FileModel):
     observers: dict[str, ObserverConfig] | None = Field(
         None,
         description="observers the loop runs (hofto, momentum), when they differ from the "
-        "top-level observers section (e.g. gains for a faster detection); None = those",
+        "top-level observers section (e.g. gains for a faster detection); None = those "
+        "(`hofto-hw run` prints which it runs); empty is refused",
     )
+
+    @field_validator("observers")
+    @classmethod
+    def _not_empty(cls, v: dict[str, ObserverConfig] | None) -> dict | None:
+        if v is not None and not v:
+            raise ValueError(
+                "empty: name the observers the loop runs (hofto, momentum), or delete the key "
+                "to run the top-level observers section (its offline gains)"
+            )
+        return v
 
 
 class SystemConfig(FileModel):

@@ -39,6 +39,7 @@ from hofto_hw.runtime.build import (
     build_transport,
 )
 from hofto_hw.runtime.loop import Loop, RealClock, SimClock
+from hofto_hw.runtime.motion_check import check_motion
 from hofto_hw.runtime.realtime import collect_before_loop
 from hofto_hw.runtime.tick import Tick
 from safety.bus_health import BusHealth
@@ -157,6 +158,7 @@ def build(
     loop's first tick would latch a disabled drive."""
     rate = float(cfg.loop.rate_hz)
     model = build_model(cfg)
+    check_motion(cfg, model)  # home and demo path inside the monitored limits
     table = loop_observer_table(cfg)
     names = loop_observer_names(cfg)
     for name in names:
