@@ -70,6 +70,10 @@ def _recover(args: argparse.Namespace) -> int:
         option = "-o " if args.output is not None else "output (FILE's stem + .recovered.mcap) "
         raise UserError(f"{option}{dst}: {problem}")
     out = recover(src, dst)
+    from hofto_hw.recording.shared import remove_stale
+
+    for name, size, pid in remove_stale():  # what a killed run left besides its log
+        print(f"removed stale shared memory /dev/shm/{name} ({size / 1e6:.1f} MB, pid {pid} gone)")
     state = "was complete" if out.complete else f"truncated ({out.stopped or 'end of file'})"
     print(
         f"{src}: {state}; wrote {dst}: {out.total} messages up to {out.end_ns * 1e-9:.3f} s, "

@@ -108,7 +108,6 @@ def run(args: argparse.Namespace) -> int:
         )
     duration = args.duration if args.duration is not None else cfg.run.duration
     _check_ticks(duration, cfg.loop.rate_hz, args.duration is not None)
-    print(f"hofto-hw run: {_observer_choice(cfg)}", file=sys.stderr, flush=True)
     clock = args.clock or cfg.run.clock
     lc = cfg.loop
     latency = lc.cpu_latency_us if clock != "sim" else None  # the sim clock never sleeps
@@ -151,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.hold:
         tick.mode_request = MOVE
     n_ticks = round(duration * system.rate_hz)
+    print(f"hofto-hw run: {_observer_choice(cfg)}", file=sys.stderr)
     print(f"hofto-hw run: running (pid {os.getpid()})", file=sys.stderr, flush=True)
     try:
         run_loop(system, n_ticks, lambda: tick.exit_requested and tick.stopped_and_off())
@@ -216,7 +216,14 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
         },
         event_kinds=dict(EVENT_NAMES),
     )
-    return FlightRecorder(spec).start()
+    recorder = FlightRecorder(spec).start()
+    for name, size, pid in recorder.removed_stale:
+        print(
+            f"hofto-hw run: removed stale shared memory /dev/shm/{name} ({size / 1e6:.1f} MB, "
+            f"its run, pid {pid}, is gone)",
+            file=sys.stderr,
+        )
+    return recorder
 
 
 def _log_dir(cfg: object, config_path: Path) -> Path:

@@ -83,17 +83,21 @@ class FlightRecorder:
         self._block: sh.SharedBlock | None = None
         self._proc: subprocess.Popen[bytes] | None = None
         self._final: RecorderHealth | None = None
+        #: (name, bytes, owner pid) of the stale segments :meth:`start` removed
+        self.removed_stale: list[tuple[str, int, int]] = []
 
     # ---------------------------------------------------------------- lifecycle
     def start(self, timeout: float = 60.0) -> FlightRecorder:
-        """Create the rings, start the writer process and wait until it has opened the first
-        file (or failed, or died), at most ``timeout`` [s]. Returns self; check
-        :meth:`health` for failures."""
+        """Remove stale segments of dead runs (:attr:`removed_stale`), create the rings
+        (UserError when /dev/shm has not the room), start the writer process and wait until
+        it has opened the first file (or failed, or died), at most ``timeout`` [s]. Returns
+        self; check :meth:`health` for failures."""
         if self._block is not None:
             raise RuntimeError("flight recorder already started")
         if Path(self.spec.path).exists():
             raise UserError(f"{self.spec.path}: exists; a flight log is never overwritten")
         Path(self.spec.path).parent.mkdir(parents=True, exist_ok=True)
+        self.removed_stale = sh.remove_stale()  # segments of killed runs: room for ours
         self._block = sh.SharedBlock(self.tick_dtype, self.caps, create=True)
         b = self._block
         # the rings' own push as instance attributes (they shadow the methods below): the

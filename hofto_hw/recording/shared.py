@@ -3,17 +3,33 @@ three rings (tick, event, diagnostics records of :mod:`hofto_hw.recording.record
 
 Control block: u64 words, each written by one side only (``stop`` by the owner, the rest by
 the writer), so neither side needs a lock.
+
+The segment (``/dev/shm/hofto-hw-<owner pid>-<random>``) is created by the owner with its
+pages reserved up front (``posix_fallocate``): a full /dev/shm is one line at creation
+(free space is checked first, naming /dev/shm and the size needed), never a SIGBUS when
+the loop first touches a page. The owner's pid in the name makes a segment left by a killed
+run provably stale (:func:`remove_stale`: the pid is gone, or now belongs to a process
+started after the segment was made).
 """
 
 from __future__ import annotations
 
+import os
+import secrets
 from dataclasses import dataclass
 from multiprocessing import shared_memory
+from pathlib import Path
 
 import numpy as np
 
+from hofto_hw.errors import UserError
 from hofto_hw.recording.record import DIAG_DTYPE, EVENT_DTYPE
 from hofto_hw.recording.ring import Ring, ring_nbytes
+
+#: where POSIX shared memory lives on Linux (shm_open names are files here)
+SHM_DIR = Path("/dev/shm")
+#: segment names: PREFIX + "<owner pid>-<8 hex digits>"
+PREFIX = "hofto-hw-"
 
 CONTROL_BYTES = 256
 
@@ -56,7 +72,7 @@ class SharedBlock:
         ]
         total = CONTROL_BYTES + sum(sizes)
         if create:
-            self.shm = shared_memory.SharedMemory(create=True, size=total)
+            self.shm = _create(total)
         else:
             self.shm = _attach(name or "")
         self.owner = create
@@ -89,6 +105,116 @@ class SharedBlock:
                 self.shm.unlink()
             except FileNotFoundError:
                 pass
+
+
+def _create(size: int) -> shared_memory.SharedMemory:
+    """A new segment of ``size`` bytes named after this process, its pages reserved now.
+
+    Raises UserError (one line naming /dev/shm and the size) when /dev/shm has not the room:
+    checked with statvfs first, then ``posix_fallocate`` (ENOSPC here, not a SIGBUS later
+    when a page is first touched)."""
+    need = f"{size / 1e6:.2f} MB ({size} bytes)"
+    hint = "free space there, or run with --no-log"
+    try:
+        st = os.statvfs(SHM_DIR)
+    except OSError as exc:
+        raise UserError(f"{SHM_DIR}: cannot use POSIX shared memory: {exc.strerror}") from None
+    free = st.f_bavail * st.f_frsize
+    if free < size:
+        raise UserError(
+            f"{SHM_DIR}: {free / 1e6:.2f} MB free, the flight recorder's shared memory needs "
+            f"{need}; {hint}"
+        )
+    name = f"{PREFIX}{os.getpid()}-{secrets.token_hex(4)}"
+    path = SHM_DIR / name
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600)
+    except OSError as exc:
+        raise UserError(f"{path}: cannot create shared memory: {exc.strerror}") from None
+    try:
+        os.posix_fallocate(fd, 0, size)
+    except OSError as exc:
+        os.close(fd)
+        _unlink(path)
+        raise UserError(
+            f"{SHM_DIR}: cannot reserve {need} for the flight recorder's shared memory: "
+            f"{exc.strerror}; {hint}"
+        ) from None
+    os.close(fd)
+    try:
+        return shared_memory.SharedMemory(name=name)  # the owner's tracked handle
+    except BaseException:
+        _unlink(path)
+        raise
+
+
+def _unlink(path: Path) -> None:
+    try:
+        path.unlink()
+    except OSError:
+        pass
+
+
+def remove_stale() -> list[tuple[str, int, int]]:
+    """Remove the segments of runs that are gone; returns (name, bytes, owner pid) of each.
+
+    A segment is stale when its owner's pid (in its name) is not running, or runs a process
+    started after the segment was made (the pid was reused). A segment of a live owner, or
+    one whose name does not say its owner, is left alone."""
+    removed = []
+    try:
+        entries = list(SHM_DIR.glob(f"{PREFIX}*"))
+    except OSError:
+        return removed
+    for path in entries:
+        pid_text = path.name[len(PREFIX) :].split("-", 1)[0]
+        if not pid_text.isdigit():
+            continue
+        pid = int(pid_text)
+        try:
+            st = path.stat()
+        except OSError:
+            continue
+        if pid == os.getpid() or _owner_alive(pid, min(st.st_ctime, st.st_mtime)):
+            continue
+        try:
+            path.unlink()
+        except OSError:
+            continue
+        removed.append((path.name, st.st_size, pid))
+    return removed
+
+
+def _owner_alive(pid: int, made: float) -> bool:
+    """Whether process ``pid`` exists and was started before ``made`` (epoch seconds) + 1 s
+    (the boot time's resolution): else the pid now belongs to another process."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process
+        pass
+    started = _start_time(pid)
+    return started is None or started <= made + 1.0
+
+
+def _start_time(pid: int) -> float | None:
+    """Start time of ``pid`` [epoch s] from /proc, or None when it cannot be read."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        boot = next(
+            float(line.split()[1])
+            for line in Path("/proc/stat").read_text().splitlines()
+            if line.startswith("btime ")
+        )
+    except (OSError, StopIteration, ValueError, IndexError):
+        return None
+    fields = stat[stat.rfind(")") + 2 :].split()  # after "pid (comm) "
+    try:
+        ticks = int(fields[19])  # field 22 of proc(5): starttime, in clock ticks since boot
+    except (IndexError, ValueError):
+        return None
+    return boot + ticks / os.sysconf("SC_CLK_TCK")
 
 
 def _attach(name: str) -> shared_memory.SharedMemory:
