@@ -137,6 +137,20 @@ def read_bounded(
         os.close(fd)
 
 
+def require_regular(path: str | Path, what: str, error: type[UserError] = ConfigError) -> None:
+    """Refuse (``error``, one line) a ``path`` that is not a regular file, before a reader
+    that streams a large file (CSV recordings, MCAP logs) opens it: a FIFO would block the
+    open, a device (/dev/zero) never end. A missing path is left to the reader's message."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return
+    if stat.S_ISDIR(st.st_mode):
+        raise error(f"{path}: is a folder, not a {what}")
+    if not stat.S_ISREG(st.st_mode):
+        raise error(f"{path}: is {_file_kind(st.st_mode)}, not a {what} (a regular file)")
+
+
 def _file_kind(mode: int) -> str:
     for test, name in (
         (stat.S_ISFIFO, "a FIFO (named pipe)"),

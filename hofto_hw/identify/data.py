@@ -32,7 +32,7 @@ from pydantic import Field, model_validator
 from scipy import signal
 
 from hofto_hw.config.base import FileModel
-from hofto_hw.config.loader import read_model
+from hofto_hw.config.loader import read_model, require_regular
 from hofto_hw.errors import ConfigError, UserError
 
 log = logging.getLogger(__name__)
@@ -333,6 +333,7 @@ def _decode(block: bytes, src: str, offset: int) -> list[str]:
 
 def _line_blocks(path: Path, src: str) -> Iterator[list[str]]:
     """The lines of a text file, a block of about CHUNK_BYTES at a time (no line endings)."""
+    require_regular(path, "CSV recording", UserError)  # a FIFO would block the open
     try:
         fh = path.open("rb")
     except FileNotFoundError:
@@ -442,6 +443,7 @@ def load_csv(
     src = str(path)
     used = _layout(cmap)
     col = {c: i for i, c in enumerate(used)}
+    require_regular(path, "CSV recording", UserError)
     total = _count_lines(path)
     lo, hi = row_range if row_range is not None else (1, total)
     first_row = max(cmap.header_rows + 1, lo)

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hofto_hw.config.loader import read_bounded
 from hofto_hw.errors import UserError
 from hofto_hw.model.parameters import ParametersFile, urdf_sha256
 
@@ -28,7 +29,11 @@ _TO_PIN = [9, 6, 7, 8, 0, 1, 3, 2, 4, 5]
 
 def read_authors_file(path: str | Path) -> dict[str, np.ndarray]:
     """The vectors ``drvGains``, ``pi_drvs``, ``pi_frcn``, ``pi_rgd`` of their text file."""
-    text = Path(path).read_text()
+    raw = read_bounded(path, "parameter file", 16 << 20, UserError)
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise UserError(f"{path}: not UTF-8 text, not the authors' parameter file") from None
     out = {}
     for key in ("drvGains", "pi_drvs", "pi_frcn", "pi_rgd"):
         m = re.search(rf"{key}\s*=\s*\[([^\]]*)\]", text)

@@ -16,6 +16,7 @@ from mcap.records import Attachment, Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
+from hofto_hw.config.loader import require_regular
 from hofto_hw.errors import UserError
 from hofto_hw.outputs import atomic_path
 
@@ -41,7 +42,9 @@ class Salvage:
 
 
 def check_magic(path: Path) -> None:
-    """Raise UserError unless ``path`` exists and starts with the MCAP magic."""
+    """Raise UserError unless ``path`` is a regular file that starts with the MCAP magic
+    (a FIFO or a device is refused before it is opened)."""
+    require_regular(path, "flight log (MCAP)", UserError)
     try:
         with path.open("rb") as f:
             head = f.read(len(MAGIC))

@@ -110,3 +110,21 @@ def test_the_good_files_still_load() -> None:
     # aliases and duplicates are refused; everything shipped has neither
     for path in sorted((ROOT / "configs").rglob("*.yaml")):
         read_yaml(path, "file")
+
+
+@pytest.mark.parametrize(
+    ("argv", "what"),
+    [
+        (["log", "info", "FIFO"], "not a flight log (MCAP)"),
+        (["log", "recover", "FIFO"], "not a flight log (MCAP)"),
+        (["replay", str(ROOT / "configs" / "ur10e" / "parameters.yaml"), "FIFO"], "CSV recording"),
+    ],
+    ids=["log info", "log recover", "replay csv"],
+)
+def test_streamed_inputs_refuse_a_fifo_before_opening_it(argv, what, tmp_path: Path) -> None:
+    fifo = tmp_path / ("run.mcap" if argv[0] == "log" else "rec.csv")
+    os.mkfifo(fifo)
+    argv = [str(fifo) if a == "FIFO" else a for a in argv]
+    code, out, err, _ = run_limited(argv, timeout=60, memory=1 << 30)
+    assert code is not None, f"{argv[:2]} blocked on a FIFO"
+    one_line_error(code, err, f"{fifo}: is a FIFO (named pipe)", what)
