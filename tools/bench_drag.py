@@ -77,7 +77,9 @@ def _scratch_config(config: Path, lipschitz: float, folder: Path) -> Path:
     constant) is ``lipschitz``; relative paths keep working through links."""
     import yaml
 
-    data = yaml.safe_load(config.read_text())
+    from hofto_hw.config import read_yaml
+
+    data = read_yaml(config, "config file")
     hofto = (data.get("loop") or {}).get("observers", {}).get("hofto")
     if hofto is None:
         raise SystemExit(f"{config}: loop.observers.hofto: missing (--hofto-lipschitz)")

@@ -679,7 +679,7 @@ def ethercat_loop(config: Path, quick: bool, floor: float) -> dict:
     import yaml
 
     from drivers.sim.esc import veth
-    from hofto_hw.config import load_config
+    from hofto_hw.config import load_config, read_yaml
     from hofto_hw.errors import UserError
 
     sys.path.insert(0, str(ROOT / "tools"))
@@ -688,7 +688,7 @@ def ethercat_loop(config: Path, quick: bool, floor: float) -> dict:
     ticks, part_ticks = (1500, 500) if quick else (20000, 5000)
     tag = f"{os.getpid() % 100000}"
     master, slave = f"tm{tag}", f"ts{tag}"
-    data = yaml.safe_load(config.read_text())
+    data = read_yaml(config, "config file")
     data["robot"]["urdf"] = str((config.parent / data["robot"]["urdf"]).resolve())
     data["bus"].update(transport="ethercat", interface=master)
     # the emulated slaves' SM watchdog at 2 s: a host stall must not take a drive out of OP;
