@@ -14,8 +14,9 @@ from __future__ import annotations
 import argparse
 import math
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any
 
 from hofto_hw.errors import UserError
 from hofto_hw.outputs import output_problem
@@ -83,6 +84,22 @@ def positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
     return value
+
+
+def at_most(
+    high: float, kind: Callable[[str], Any] = finite_positive_float, unit: str = ""
+) -> Callable[[str], Any]:
+    """``kind`` (a type above) with an upper bound ``high``: for numbers whose bound exists by
+    design (a fraction of a limit, a sample rate, the size of what gets allocated)."""
+
+    def parse(text: str) -> Any:
+        value = kind(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"at most {high:g}{unit}, got {text!r}")
+        return value
+
+    parse.__name__ = kind.__name__  # argparse names the type in "invalid ... value"
+    return parse
 
 
 def parse_rows(text: str | None, what: str = "--rows") -> tuple[int, int] | None:

@@ -18,8 +18,8 @@ import numpy as np
 
 from hofto_hw.commands.args import (
     add_config,
+    at_most,
     ensure_default_folder,
-    finite_positive_float,
     output_file,
     write_failed,
 )
@@ -33,7 +33,7 @@ TABLE_OBSERVERS = ("hofto", "eso", "dob")
 def configure(parser: argparse.ArgumentParser) -> None:
     add_config(parser, default=DEFAULT_CONFIG)
     parser.add_argument(
-        "--duration", type=finite_positive_float, default=20.0, help="simulated seconds (>= 5)"
+        "--duration", type=at_most(3600, unit=" s"), default=20.0, help="simulated seconds (>= 5)"
     )
     parser.add_argument("--json", action="store_true", help="print the figures as JSON only")
     parser.add_argument("--plot", type=output_file, default=DEFAULT_PLOT, help="Fig. 4-style PNG")

@@ -15,6 +15,7 @@ import numpy as np
 
 from hofto_hw.commands.args import (
     add_config,
+    at_most,
     finite_positive_float,
     output_file,
     positive_int,
@@ -23,6 +24,7 @@ from hofto_hw.commands.args import (
 )
 from hofto_hw.outputs import atomic_path
 
+MAX_SAMPLES = 10e6  # rows of the trajectory file (~1 GB of CSV)
 DEFAULT_ACCELERATION = 5.0  # rad/s², when neither the config nor --max-acceleration gives one
 
 
@@ -30,11 +32,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_config(parser, default=None, required=True)
     parser.add_argument("-o", "--output", type=output_file, required=True, help="trajectory CSV")
     parser.add_argument("--plot", type=output_file, help="PNG (default: OUTPUT with .png)")
-    parser.add_argument("--harmonics", type=positive_int, default=5, help="Fourier harmonics L")
-    parser.add_argument("--period", type=finite_positive_float, default=10.0, help="period [s]")
-    parser.add_argument("--cycles", type=positive_int, default=1, help="periods in the file")
     parser.add_argument(
-        "--rate", type=finite_positive_float, default=100.0, help="sample rate of the CSV [Hz]"
+        "--harmonics", type=at_most(50, positive_int), default=5, help="Fourier harmonics L"
+    )
+    parser.add_argument("--period", type=at_most(600, unit=" s"), default=10.0, help="period [s]")
+    parser.add_argument(
+        "--cycles", type=at_most(100, positive_int), default=1, help="periods in the file"
+    )
+    parser.add_argument(
+        "--rate",
+        type=at_most(10_000, unit=" Hz"),
+        default=100.0,
+        help="sample rate of the CSV [Hz]",
     )
     parser.add_argument(
         "--range",
@@ -44,14 +53,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--velocity-scale",
-        type=finite_positive_float,
+        type=at_most(1.0),
         default=0.8,
         help="fraction of the velocity limits",
     )
     parser.add_argument(
         "--max-acceleration", type=finite_positive_float, help="[rad/s²] for every joint"
     )
-    parser.add_argument("--iterations", type=positive_int, default=100, help="SLSQP iterations")
+    parser.add_argument(
+        "--iterations", type=at_most(10_000, positive_int), default=100, help="SLSQP iterations"
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-torque-limits", action="store_true", help="ignore torque limits")
 
@@ -66,6 +77,12 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.identify.regressor import Regressor
     from hofto_hw.model import RobotModel
 
+    samples = args.cycles * args.period * args.rate
+    if samples > MAX_SAMPLES:
+        raise UserError(
+            f"--cycles x --period x --rate = {samples:.3g} samples; at most {MAX_SAMPLES:g} "
+            "(an excitation file a person can load)"
+        )
     config_path = find_config(args.config)
     png = args.plot or args.output.with_suffix(".png")
     if png == args.output:

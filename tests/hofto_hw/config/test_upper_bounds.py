@@ -110,3 +110,26 @@ def test_run_duration_option_is_bounded() -> None:
     code, out, err, _ = run_limited(argv, timeout=120)
     assert code is not None, "a 1e12 s run was accepted and ran"
     one_line_error(code, err, "--duration", "at most 604800 s")
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["demo", "--duration", "1e9"], "argument --duration: at most 3600 s"),
+        (["excite", "--config", "er3a", "-o", "OUT", "--velocity-scale", "3"], "at most 1"),
+        (["excite", "--config", "er3a", "-o", "OUT", "--harmonics", "100000"], "at most 50"),
+        (
+            ["excite", "--config", "er3a", "-o", "OUT", "--period", "600", "--cycles", "100"]
+            + ["--rate", "1000"],
+            "6e+07 samples; at most 1e+07",
+        ),
+    ],
+    ids=["demo duration", "velocity scale", "harmonics", "excitation size"],
+)
+def test_command_numbers_with_a_bound_by_design(argv, words, tmp_path: Path) -> None:
+    out = tmp_path / "x.csv"
+    argv = [str(out) if a == "OUT" else a for a in argv]
+    code, stdout, err, _ = run_limited(argv, timeout=120)
+    assert code is not None, f"{argv[:3]} ran on"
+    one_line_error(code, err, words)
+    assert not out.exists()
