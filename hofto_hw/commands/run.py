@@ -51,11 +51,11 @@ def _check_duration(value: float | None) -> None:
         raise UserError(f"--duration: at most {MAX_RUN_SECONDS:g} s (a week), got {value:g}")
 
 
-def _check_ticks(duration: float, rate_hz: float, given: bool) -> None:
-    """A run shorter than one tick does nothing and would still say it ran."""
+def _check_ticks(duration: float | None, rate_hz: float, given: bool) -> None:
+    """A run shorter than one tick does nothing and would still say it ran (None: no end)."""
     from hofto_hw.errors import UserError
 
-    if round(duration * rate_hz) < 1:
+    if duration is not None and round(duration * rate_hz) < 1:
         where = "--duration" if given else "run.duration"
         raise UserError(
             f"{where}: {duration:g} s is less than one tick at loop.rate_hz = {rate_hz:g} Hz "

@@ -58,7 +58,11 @@ class DriveConfig(FileModel):
     @model_validator(mode="after")
     def _raw_ranges(self) -> DriveConfig:
         """The limits must fit the objects they are written to (the drive would get a
-        clipped value): 0x6072 is u16 per mille of rated torque, 0x6085 u32 counts/s²."""
+        clipped value): 0x6072 is u16 per mille of rated torque, 0x6085 u32 counts/s².
+        Skipped while a value is not given here (taken from elsewhere)."""
+        values = (self.rated_torque, self.gear_ratio, self.torque_limit, self.counts_per_rev)
+        if any(v is None for v in (*values, self.quick_stop_deceleration)):
+            return self
         most = 65535 * self.rated_torque * 1e-6 * self.gear_ratio
         if self.torque_limit > most:
             raise ValueError(
