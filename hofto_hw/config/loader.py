@@ -36,7 +36,7 @@ def format_validation_error(source: str, err: ValidationError) -> str:
         loc = _format_loc(tuple(e.get("loc", ())))
         msg = e.get("msg", "invalid")
         got = e.get("input")
-        shown = _excerpt(got, 80)
+        shown = excerpt(got, 80)
         lines.append(f"{source}: {loc}: {msg} (got {shown})")
     return "\n".join(lines)
 
@@ -65,8 +65,8 @@ def _refuse_removed_fields(data: dict, source: str) -> None:
         rate = loop.get("rate_hz", 1000.0) if isinstance(loop, dict) else 1000.0
         raise ConfigError(
             f"{source}: bus.cycle_time: removed; the bus cycles at loop.rate_hz "
-            f"(here {_excerpt(rate, 40)} Hz, a {_period(rate)} cycle): delete the line "
-            f"(got {_excerpt(bus['cycle_time'], 40)})"
+            f"(here {excerpt(rate, 40)} Hz, a {_period(rate)} cycle): delete the line "
+            f"(got {excerpt(bus['cycle_time'], 40)})"
         )
 
 
@@ -202,7 +202,7 @@ class _SafeLoader(yaml.SafeLoader):
                 if first is not None:
                     raise _Refused(
                         line,
-                        f"duplicate key {_excerpt(key, 60)} (first at line {first}): "
+                        f"duplicate key {excerpt(key, 60)} (first at line {first}): "
                         "remove one (YAML keeps only the last, silently)",
                     )
                 seen[key] = line
@@ -213,7 +213,7 @@ def _clip(text: str, limit: int) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def _excerpt(value: Any, limit: int = 80) -> str:
+def excerpt(value: Any, limit: int = 80) -> str:
     """A bounded repr of ``value`` (at most ``limit`` characters): never the repr of a whole
     input, which for a big or deeply shared structure costs as much as the input."""
     r = reprlib.Repr()
@@ -328,7 +328,7 @@ def _code_point(character: str | int) -> int:
 def _kind(data: Any) -> str:
     if isinstance(data, list):
         return "a list"
-    return f"a single value {_excerpt(data, 40)}"
+    return f"a single value {excerpt(data, 40)}"
 
 
 def read_model(path: str | Path, what: str, model: type[M]) -> M:

@@ -65,7 +65,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-from hofto_hw.config.loader import read_yaml
+from hofto_hw.config.loader import excerpt, read_yaml
 from hofto_hw.errors import ModelError
 from hofto_hw.model.friction import FrictionParams
 from hofto_hw.outputs import write_atomic
@@ -268,7 +268,9 @@ def read_parameters(path: str | Path) -> ParametersFile:
         raise ModelError(f"{src}: not a hofto-hw parameters file (format: {FORMAT} missing)")
     version = data.get("version")
     if version != VERSION:
-        raise ModelError(f"{src}: version: {version!r} is not supported (expected {VERSION})")
+        raise ModelError(
+            f"{src}: version: {excerpt(version, 40)} is not supported (expected {VERSION})"
+        )
     joints = r.get(data, "joints", "")
     if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
         raise r.fail("joints", "expected a list of joint names")
@@ -417,7 +419,8 @@ def check_compatible(pf: ParametersFile, model: RobotModel, source: str) -> None
     """Raise ModelError if ``pf`` was identified for another robot, joint set or URDF."""
     if pf.robot != model.name:
         raise ModelError(
-            f"{source}: parameters are for robot {pf.robot!r}, but the model is {model.name!r}"
+            f"{source}: parameters are for robot {excerpt(pf.robot, 60)}, but the model is "
+            f"{model.name!r}"
         )
     if list(pf.joints) != list(model.joint_names):
         raise ModelError(
