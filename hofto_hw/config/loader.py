@@ -95,12 +95,14 @@ def read_bounded(
 ) -> bytes:
     """The bytes of the regular file ``path``, at most ``max_bytes`` of them.
 
-    The file is opened non-blocking and checked with fstat before anything is read: a FIFO,
-    a device (``/dev/zero``), a socket or a folder is refused without waiting on it, and a
-    file larger than ``max_bytes`` is refused before it is read (the read itself is bounded
-    too, for a file that grows meanwhile). Raises ``error``, one line naming the file.
+    A FIFO, a device (``/dev/zero``), a socket or a folder is refused by stat before it is
+    opened (opening a device can have effects of its own), and again by fstat on the file
+    opened non-blocking (a swap between the two never blocks); a file larger than
+    ``max_bytes`` is refused before it is read (the read itself is bounded too, for a file
+    that grows meanwhile). Raises ``error``, one line naming the file.
     """
     path = Path(path)
+    require_regular(path, what, error)
     flags = os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0)
     try:
         fd = os.open(path, flags)
