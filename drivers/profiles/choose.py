@@ -157,7 +157,18 @@ def choose(desc: DeviceDescription, loop: str | None = None, name: str | None = 
                 f"supports {', '.join(modes) or 'none'}"
                 + (f"; absent too: {', '.join(absent)}" if absent else "")
             )
-        loop = cyclic[0]
+        mappable = [
+            m
+            for m in cyclic
+            if "rx"
+            in getattr(desc.objects.get((FIELD_OBJECTS[CYCLIC_TARGETS[m]], 0)), "mappable", "")
+        ]
+        loop = (mappable or cyclic)[0]
+        if loop != cyclic[0]:
+            reasons.append(
+                f"loop: {loop}, the first cyclic mode whose target the drive can map "
+                f"({', '.join(m for m in cyclic if m not in mappable)}: target not mappable)"
+            )
     elif loop not in modes:
         raise ProfileImportError(
             f"{where}: --loop {loop}: the drive supports {', '.join(modes) or 'none'}"
