@@ -37,9 +37,9 @@ from hofto_hw.config.drive_profile import (
     LOOP_OBJECTS,
     MODE_NUMBERS,
     DriveProfile,
+    format_profile_error,
     modes_from_bits,
 )
-from hofto_hw.config.loader import format_validation_error
 
 #: what each object is worth to the loop (essential ones dominate everything else)
 WEIGHTS: dict[str, int] = {
@@ -228,7 +228,7 @@ def choose(desc: DeviceDescription, loop: str | None = None, name: str | None = 
     try:
         profile = DriveProfile.model_validate(data)
     except ValidationError as err:
-        first = format_validation_error(str(desc.path), err).splitlines()[0]
+        first = format_profile_error(str(desc.path), err).splitlines()[0]
         raise ProfileImportError(f"{first} (device {desc.device})") from None
     return Choice(profile, reasons)
 

@@ -23,11 +23,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from hofto_hw.config.base import FileModel
 from hofto_hw.config.drives import BusConfig
-from hofto_hw.config.loader import read_model
+from hofto_hw.config.loader import read_yaml
 from hofto_hw.errors import ConfigError
 
 FORMAT_VERSION = 1
@@ -603,6 +603,22 @@ class DriveProfile(FileModel):
                     )
 
     # ------------------------------------------------------------------ helpers
+    def image_bits(self, side: Literal["rx", "tx"]) -> int:
+        """Length of one axis-device's ``side`` process data [bit] (its PDOs back to back)."""
+        return sum(p.bits for p in (self.rx_pdos if side == "rx" else self.tx_pdos))
+
+    def field_offsets(self, side: Literal["rx", "tx"], axis: int = 0) -> dict[str, tuple[int, int]]:
+        """field name -> (bit offset, bits) of axis ``axis``'s CiA-402 objects in the ``side``
+        process data of the device (PDOs in assignment order, entries in wire order)."""
+        out: dict[str, tuple[int, int]] = {}
+        at = 0
+        for pdo in self.rx_pdos if side == "rx" else self.tx_pdos:
+            for e in pdo.entries:
+                if e.field is not None and e.axis == axis:
+                    out[e.field] = (at, e.bits)
+                at += e.bits
+        return out
+
     def startup_value(self, index: int, subindex: int = 0) -> int | str | None:
         """The last start-up value written to ``index:subindex``, or None."""
         for s in reversed(self.startup):
@@ -684,13 +700,37 @@ def find_profile(spec: str | Path, base_dir: Path | None = None) -> Path:
     )
 
 
+def format_profile_error(source: str, err: ValidationError) -> str:
+    """``format_validation_error`` for profiles: a cross-field check (a ``ValueError`` of a
+    model validator) reads ``FILE: field: message`` without the whole section as "got"."""
+    lines = []
+    for e in err.errors(include_url=False):
+        loc = ".".join(f"[{p}]" if isinstance(p, int) else str(p) for p in e.get("loc", ()))
+        loc = loc.replace(".[", "[")
+        msg = e.get("msg", "invalid")
+        got = e.get("input")
+        if e.get("type") == "value_error":
+            msg = msg.removeprefix("Value error, ")
+        shown = "" if isinstance(got, dict | list) else f" (got {got!r:.80})"
+        lines.append(f"{source}: {loc + ': ' if loc else ''}{msg}{shown}")
+    return "\n".join(lines)
+
+
+def parse_profile(data: object, source: str) -> DriveProfile:
+    """Validate an already-parsed profile mapping; errors as :func:`format_profile_error`."""
+    try:
+        return DriveProfile.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(format_profile_error(source, err)) from None
+
+
 def load_profile(path: str | Path) -> DriveProfile:
     """Read and validate the drive profile file ``path`` (YAML).
 
     Raises:
         ConfigError: one line per problem, ``FILE: field.path: message (got VALUE)``.
     """
-    return read_model(path, "drive profile", DriveProfile)
+    return parse_profile(read_yaml(path, "drive profile"), str(path))
 
 
 def resolve_profiles(
@@ -711,7 +751,7 @@ def resolve_profiles(
         if drive.profile is None:
             out.append(None)
             continue
-        where = f"{source}: bus.drives[{i}].profile"
+        where = f"{source}: bus.drives[{i}].profile {drive.profile!r}"
         try:
             path = find_profile(drive.profile, base_dir)
         except ConfigError as exc:

@@ -233,7 +233,7 @@ def test_config_names_a_profile(tmp_path, er3a_config):
     )
     got = resolve_profiles(bus, 0.001, "cfg.yaml", tmp_path)
     assert got[0] is not None and got[0].name == "test_fixed" and got[1] is None
-    with pytest.raises(ConfigError, match=r"cfg.yaml: bus.drives\[0\].profile: .*0x60C2"):
+    with pytest.raises(ConfigError, match=r"cfg.yaml: bus.drives\[0\].profile '[a-z.]*': .*0x60C2"):
         resolve_profiles(bus, 0.002, "cfg.yaml", tmp_path)
     canbus = bus.model_copy(update={"transport": "canopen"})
     with pytest.raises(ConfigError, match="is an ethercat drive, the bus is canopen"):
@@ -241,7 +241,9 @@ def test_config_names_a_profile(tmp_path, er3a_config):
     missing = bus.model_copy(
         update={"drives": [d.model_copy(update={"profile": "nosuch"}) for d in bus.drives]}
     )
-    with pytest.raises(ConfigError, match=r"bus.drives\[0\].profile: drive profile 'nosuch'"):
+    with pytest.raises(
+        ConfigError, match=r"bus.drives\[0\].profile '[a-z.]*': drive profile 'nosuch'"
+    ):
         resolve_profiles(missing, 0.001, "cfg.yaml", tmp_path)
 
 
@@ -255,3 +257,33 @@ def test_interpolation_period_follows_the_loop(tmp_path):
         check_profile_against_loop(p, 0.00025, "x")
     data["startup"][0]["value"] = "loop_period"
     assert "only for 0x60C2:01" in _refused(tmp_path, data)
+
+
+def test_written_profile_reads_back_equal(tmp_path):
+    from hofto_hw.config.drive_profile import profile_yaml, write_profile
+
+    p = load_profile(_write(tmp_path, PROFILE))
+    text = profile_yaml(p, header="test header\nsecond line")
+    assert text.startswith("# test header\n# second line\n")
+    assert "index: 0x6040" in text and "vendor_id: 0x0000009A" in text
+    out = tmp_path / "out.yaml"
+    write_profile(p, out, header="x")
+    assert load_profile(out) == p
+    assert [f.name for f in tmp_path.iterdir() if f.name.startswith(".")] == []
+    with pytest.raises(ConfigError, match="cannot write drive profile"):
+        write_profile(p, tmp_path / "nosuch" / "p.yaml")
+
+
+def test_field_offsets(tmp_path):
+    p = load_profile(_write(tmp_path, PROFILE))
+    rx = p.field_offsets("rx")
+    assert rx == {"target_position": (0, 32), "target_torque": (32, 16), "controlword": (48, 16)}
+    tx = p.field_offsets("tx")
+    assert tx["mode_display"] == (96, 8) and p.image_bits("tx") == 112
+
+
+def test_profile_errors_are_short(tmp_path):
+    data = _profile()
+    data["rx_pdos"][1]["entries"] = [{"index": 0x607A, "bits": 32}]
+    msg = _refused(tmp_path, data)
+    assert "Value error" not in msg and "{" not in msg and "\n" not in msg
