@@ -452,6 +452,10 @@ def _startup(desc: DeviceDescription, loop: str, set_by: str, reasons: list[str]
             value = "loop_period"
             comment += f" (file: {cmd.value}; the master writes the loop period)"
         bits = cmd.bits
+        info = desc.objects.get((cmd.index, cmd.subindex))
+        if info is not None and info.bits in (8, 16, 32, 64) and info.bits != bits:
+            if isinstance(value, str) or 0 <= value < 1 << info.bits:
+                bits = info.bits  # the object's size, not the length the file wrote the data in
         if isinstance(value, int) and value >= 1 << (bits - 1) and _signed(cmd.index):
             value -= 1 << bits
         for transition in cmd.transitions or ["PS"]:
@@ -554,8 +558,12 @@ def _canopen(
     caps = [p.max_entries or 8 for p in rx + tx]
     rates = sorted(desc.bitrates) or [1_000_000]
     reasons.append(f"canopen: bitrates {', '.join(f'{r // 1000} kbit/s' for r in rates)}")
+    ids = (1, 127)
+    if desc.node_id is not None and 1 <= desc.node_id <= 127:
+        ids = (desc.node_id, desc.node_id)
+        reasons.append(f"canopen: node id {desc.node_id} (the DCF's [DeviceComissioning])")
     return {
-        "node_ids": (1, 127),
+        "node_ids": ids,
         "bitrates": rates,
         "max_entries": min(caps),
         "rpdo": [comm(p) for p in rx],

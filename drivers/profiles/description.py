@@ -50,6 +50,8 @@ class ObjectInfo:
     mappable: str = ""  # "" not mappable, "rx", "tx" or "rxtx"
     default: int | None = None
     name: str = ""
+    low: int | None = None  # EDS LowLimit / HighLimit (signed objects read as signed)
+    high: int | None = None
 
 
 @dataclass
@@ -109,6 +111,7 @@ class DeviceDescription:
     bitrates: list[int] = field(default_factory=list)
     comm: dict[int, CanComm] = field(default_factory=dict)  # mapping index -> communication
     heartbeat: bool = False
+    node_id: int | None = None  # a DCF's [DeviceComissioning] NodeID
     notes: list[str] = field(default_factory=list)
 
     def has(self, index: int, subindex: int = 0) -> bool:

@@ -242,3 +242,19 @@ def test_bad_eds(tmp_path, text, expect):
     with pytest.raises(ProfileImportError) as err:
         read_vendor_description(path)
     assert expect in str(err.value) and "\n" not in str(err.value)
+
+
+def test_dcf_node_id_and_bom(tmp_path):
+    text = "\ufeff" + EDS + "[DeviceComissioning]\nNodeID=0x05\nBaudrate=1000\n"
+    desc = read_vendor_description(_write(tmp_path, text, "d.dcf"))[0]
+    assert desc.node_id == 5
+    p = choose(desc).profile
+    assert p.canopen is not None and p.canopen.node_ids == (5, 5)
+
+
+def test_initcmd_data_longer_than_the_object(tmp_path):
+    text = esi().replace("<Data>01</Data>", "<Data>0100</Data>")  # 0x60C2:1 written as 2 bytes
+    desc = read_vendor_description(_write(tmp_path, text))[0]
+    desc.objects[(0x60C2, 1)] = type(desc.objects[(0x6040, 0)])(0x60C2, 1, 8)
+    p = choose(desc).profile
+    assert [(s.index, s.subindex, s.bits) for s in p.startup][0] == (0x60C2, 1, 8)

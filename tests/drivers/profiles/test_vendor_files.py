@@ -165,3 +165,10 @@ def test_shipped_profile_is_what_import_gives(path):
     again = choose(desc, name=shipped.name).profile
     assert again == shipped
     check_profile_against_loop(shipped, 0.001, str(path))
+
+
+def test_zeroerr_signed_limits_written_in_hex():
+    d = read_vendor_description(DATA / "zeroerr_eRob-eDriver.eds")[0]
+    home = d.objects[(0x607C, 0)]  # INTEGER32, LowLimit=0x80000000 HighLimit=0x7FFFFFFF
+    assert (home.low, home.high) == (-(2**31), 2**31 - 1)
+    assert d.objects[(0x6040, 0)].high == 0xFFFF  # unsigned stays unsigned
