@@ -257,4 +257,5 @@ def test_initcmd_data_longer_than_the_object(tmp_path):
     desc = read_vendor_description(_write(tmp_path, text))[0]
     desc.objects[(0x60C2, 1)] = type(desc.objects[(0x6040, 0)])(0x60C2, 1, 8)
     p = choose(desc).profile
-    assert [(s.index, s.subindex, s.bits) for s in p.startup][0] == (0x60C2, 1, 8)
+    s = p.startup[0]
+    assert (s.index, s.subindex, s.bits) == (0x60C2, 1, 8)
