@@ -765,6 +765,18 @@ def resolve_profiles(
                 f"{where}: profile {profile.name} is an {profile.bus} drive, the bus is "
                 f"{bus.transport} (got {drive.profile!r})"
             )
+        ident = drive.identity
+        if "identity" in drive.model_fields_set and (
+            ident.vendor_id != profile.identity.vendor_id
+            or ident.product_code != profile.identity.product_code
+        ):
+            raise ConfigError(
+                f"{where}: bus.drives[{i}].identity (vendor 0x{ident.vendor_id:08X}, product "
+                f"0x{ident.product_code:08X}) is not the profile's drive (vendor "
+                f"0x{profile.identity.vendor_id:08X}, product "
+                f"0x{profile.identity.product_code:08X}): fix the identity or drop it (the "
+                "profile's is used)"
+            )
         check_profile_against_loop(profile, cycle_time, where)
         out.append(profile)
     return out

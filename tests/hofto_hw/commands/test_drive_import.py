@@ -150,7 +150,7 @@ def _config(tmp_path: Path, profile: str, rate: str = "1000.0") -> Path:
     text = ER3A.read_text().replace("urdf: er3a/er3a.urdf", f"urdf: {ER3A.parent}/er3a/er3a.urdf")
     text = text.replace("rate_hz: 1000.0", f"rate_hz: {rate}")
     old = "identity: {vendor_id: 0x00000DEC, product_code: 0x00402001}}"
-    text = text.replace(old, old[:-1] + f", profile: {profile}}}", 1)
+    text = text.replace(old, f"profile: {profile}}}", 1)  # the profile's identity
     path = tmp_path / "cfg.yaml"
     path.write_text(text)
     return path

@@ -219,6 +219,7 @@ def test_find_profile(tmp_path, monkeypatch):
 
 def test_config_names_a_profile(tmp_path, er3a_config):
     from hofto_hw.config.drive_profile import resolve_profiles
+    from hofto_hw.config.drives import DriveConfig
 
     _write(tmp_path, PROFILE)
     bus = er3a_config.bus.model_copy(
@@ -226,7 +227,11 @@ def test_config_names_a_profile(tmp_path, er3a_config):
             "transport": "ethercat",
             "interface": "eth0",
             "drives": [
-                d.model_copy(update={"profile": "p.yaml" if i == 0 else None})
+                DriveConfig.model_validate(
+                    d.model_dump(exclude={"identity"}) | {"profile": "p.yaml"}
+                )
+                if i == 0
+                else d
                 for i, d in enumerate(er3a_config.bus.drives)
             ],
         }
@@ -245,6 +250,11 @@ def test_config_names_a_profile(tmp_path, er3a_config):
         ConfigError, match=r"bus.drives\[0\].profile '[a-z.]*': drive profile 'nosuch'"
     ):
         resolve_profiles(missing, 0.001, "cfg.yaml", tmp_path)
+    other = bus.drives[0].model_copy(update={"identity": bus.drives[1].identity})
+    other.model_fields_set.add("identity")
+    wrong = bus.model_copy(update={"drives": [other, *bus.drives[1:]]})
+    with pytest.raises(ConfigError, match=r"identity \(vendor 0x00000DEC.*is not the profile's"):
+        resolve_profiles(wrong, 0.001, "cfg.yaml", tmp_path)
 
 
 def test_interpolation_period_follows_the_loop(tmp_path):
@@ -287,3 +297,17 @@ def test_profile_errors_are_short(tmp_path):
     data["rx_pdos"][1]["entries"] = [{"index": 0x607A, "bits": 32}]
     msg = _refused(tmp_path, data)
     assert "Value error" not in msg and "{" not in msg and "\n" not in msg
+
+
+SHIPPED = sorted((Path(__file__).resolve().parents[3] / "configs" / "drives").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_shipped_profiles_load(path):
+    p = load_profile(path)
+    assert p.name == path.stem and find_profile(path.stem).resolve() == path.resolve()
+    check_profile_against_loop(p, 0.001, str(path))  # every shipped drive runs a 1 kHz loop
+
+
+def test_six_profiles_are_shipped():
+    assert len(SHIPPED) == 6
