@@ -78,9 +78,9 @@ def _num(text: str | None, path: Path, what: str) -> int | None:
 def _hexdata(text: str, path: Path, what: str) -> int:
     """Little-endian hex bytes (ESI ``Data``/``DefaultData``) -> int."""
     t = text.strip()
-    if t.startswith(("#x", "0x")):
-        return int(t[2:], 16)
     try:
+        if t.startswith(("#x", "0x")):
+            return int(t[2:], 16)
         return int.from_bytes(bytes.fromhex(t), "little")
     except ValueError:
         raise ProfileImportError(f"{path}: {what}: not hex data (got {text!r})") from None

@@ -259,3 +259,9 @@ def test_initcmd_data_longer_than_the_object(tmp_path):
     p = choose(desc).profile
     s = p.startup[0]
     assert (s.index, s.subindex, s.bits) == (0x60C2, 1, 8)
+
+
+@pytest.mark.parametrize("data", ["#x", "0xZZ", "ABC"])
+def test_bad_initcmd_data(tmp_path, data):
+    msg = _refused(_write(tmp_path, esi().replace("<Data>01</Data>", f"<Data>{data}</Data>")))
+    assert "not hex data" in msg
