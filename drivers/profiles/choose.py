@@ -470,14 +470,33 @@ def _startup(desc: DeviceDescription, loop: str, set_by: str, reasons: list[str]
                 }
             )
     has = {(s["index"], s["subindex"]) for s in out}
-    if (0x60C2, 1) in has and (0x60C2, 2) not in has and desc.has(0x60C2, 2):
+    period = desc.objects.get((0x60C2, 1))
+    if (0x60C2, 1) not in has and period is not None and period.writable:
+        out.append(
+            {
+                "index": 0x60C2,
+                "subindex": 1,
+                "value": "loop_period",
+                "bits": period.bits if period.bits in (8, 16, 32) else 8,
+                "transition": "PO" if can else "PS",
+                "comment": "interpolation period = the loop period (CiA 402; the master writes it)",
+            }
+        )
+        has.add((0x60C2, 1))
+    unit = desc.objects.get((0x60C2, 2))
+    if (
+        (0x60C2, 1) in has
+        and (0x60C2, 2) not in has
+        and unit is not None
+        and (unit.writable or not unit.access)
+    ):
         out.append(
             {
                 "index": 0x60C2,
                 "subindex": 2,
                 "value": -3,
                 "bits": 8,
-                "transition": "PS",
+                "transition": "PO" if can else "PS",
                 "comment": "interpolation period unit 1e-3 s (the master's loop_period unit)",
             }
         )

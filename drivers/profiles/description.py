@@ -52,6 +52,12 @@ class ObjectInfo:
     name: str = ""
     low: int | None = None  # EDS LowLimit / HighLimit (signed objects read as signed)
     high: int | None = None
+    access: str = ""  # ro, rw, wo, rww, rwr, const ("" = not given)
+
+    @property
+    def writable(self) -> bool:
+        """Whether an SDO may write it (access rw, wo, rww or rwr)."""
+        return self.access in ("rw", "wo", "rww", "rwr")
 
 
 @dataclass

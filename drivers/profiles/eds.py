@@ -133,7 +133,15 @@ def read_eds(path: Path) -> list[DeviceDescription]:
             _value(s.get(key), dtype, bits) for key in ("DefaultValue", "LowLimit", "HighLimit")
         )
         desc.objects[(index, sub)] = ObjectInfo(
-            index, sub, bits, mappable, default, (s.get("ParameterName") or "").strip(), low, high
+            index,
+            sub,
+            bits,
+            mappable,
+            default,
+            (s.get("ParameterName") or "").strip(),
+            low,
+            high,
+            (s.get("AccessType") or "").strip().lower(),
         )
     ident = {k: desc.default_of(0x1018, k) for k in (1, 2, 3)}
     desc.vendor_id = number(info.get("VendorNumber"), "[DeviceInfo] VendorNumber") or ident[1] or 0

@@ -270,17 +270,18 @@ def _mapping_flag(flags: Element | None) -> str:
 def _dictionary(d: Element, desc: DeviceDescription, path: Path) -> None:
     types: dict[str, Element] = {_text(t, "Name"): t for t in d.findall("DataTypes/DataType")}
 
-    def subitems(type_name: str) -> list[tuple[int, int | None, str, str]]:
-        """(subindex, bits, name, mapping flag) of a record/array type."""
+    def subitems(type_name: str) -> list[tuple[int, int | None, str, str, str]]:
+        """(subindex, bits, name, mapping flag, access) of a record/array type."""
         t = types.get(type_name)
-        out: list[tuple[int, int | None, str, str]] = []
+        out: list[tuple[int, int | None, str, str, str]] = []
         if t is None:
             return out
         for s in t.findall("SubItem"):
             sub = _num(_text(s, "SubIdx"), path, f"DataType {type_name} SubIdx")
             bits = _num(_text(s, "BitSize"), path, f"DataType {type_name} BitSize")
+            access = _text(s, "Flags/Access").lower()
             if sub is not None:
-                out.append((sub, bits, _text(s, "Name"), _mapping_flag(s.find("Flags"))))
+                out.append((sub, bits, _text(s, "Name"), _mapping_flag(s.find("Flags")), access))
                 continue
             arr = types.get(_text(s, "Type"))  # array of elements, sub-indices LBound..
             info = arr.find("ArrayInfo") if arr is not None else None
@@ -291,7 +292,7 @@ def _dictionary(d: Element, desc: DeviceDescription, path: Path) -> None:
             base = types.get(_text(arr, "BaseType"))
             ebits = _num(_text(base, "BitSize"), path, "BitSize") if base is not None else None
             flag = _mapping_flag(s.find("Flags"))
-            out += [(lo + k, ebits, _text(s, "Name"), flag) for k in range(n)]
+            out += [(lo + k, ebits, _text(s, "Name"), flag, access) for k in range(n)]
         return out
 
     for obj in d.findall("Objects/Object"):
@@ -301,6 +302,7 @@ def _dictionary(d: Element, desc: DeviceDescription, path: Path) -> None:
         type_name = _text(obj, "Type")
         bits = _num(_text(obj, "BitSize"), path, f"Object 0x{index:04X} BitSize")
         flag = _mapping_flag(obj.find("Flags"))
+        access = _text(obj, "Flags/Access").lower()
         subs = subitems(type_name)
         info_subs = obj.findall("Info/SubItem")
         if not subs:
@@ -312,9 +314,10 @@ def _dictionary(d: Element, desc: DeviceDescription, path: Path) -> None:
                 flag,
                 _hexdata(default, path, f"0x{index:04X} DefaultData") if default else None,
                 _text(obj, "Name"),
+                access=access,
             )
             continue
-        for k, (sub, sbits, sname, sflag) in enumerate(subs):
+        for k, (sub, sbits, sname, sflag, saccess) in enumerate(subs):
             default = None
             for s in info_subs:  # the object's Info/SubItem of that sub-index, by name
                 if _text(s, "Name") == sname or _text(s, "Name").endswith(f"{sub:03d}"):
@@ -330,4 +333,5 @@ def _dictionary(d: Element, desc: DeviceDescription, path: Path) -> None:
                 sflag or flag,
                 _hexdata(default, path, f"0x{index:04X}:{sub} DefaultData") if default else None,
                 sname,
+                access=saccess or access,
             )
