@@ -257,7 +257,10 @@ def _ethercat_side(
     options = [p for p in desc.pdos if p.direction == side]
     limit = desc.sm_rx_bytes if side == "rx" else desc.sm_tx_bytes
     fixed = _greedy_fixed([p for p in options if p.fixed and p.entries], wanted, limit)
-    conf = _configurable(desc, [p for p in options if not p.fixed], side, wanted, limit)
+    mandatory = [p for p in options if p.fixed and p.mandatory]
+    conf = _configurable(desc, [p for p in options if not p.fixed], side, wanted, limit, mandatory)
+    if all(p.fixed for p in conf):
+        conf = []  # nothing configurable: the fixed branch holds the mandatory PDOs too
     got_fixed = set().union(*(_fields(p) for p in fixed)) & set(wanted)
     got_conf = set().union(*(_fields(p) for p in conf)) & set(wanted)
     names = lambda ps: " + ".join(f"0x{p.index:04X}" for p in ps) or "none"  # noqa: E731
@@ -293,10 +296,10 @@ def _ethercat_side(
 def _greedy_fixed(
     options: list[PdoOption], wanted: tuple[str, ...], limit: int | None
 ) -> list[PdoOption]:
-    chosen: list[PdoOption] = []
-    covered: set[str] = set()
-    keys: set[tuple[int, int]] = set()
-    total = 0
+    chosen = [p for p in options if p.mandatory]  # ESI Mandatory="1": always assigned
+    covered = set().union(*(_fields(p) for p in chosen))
+    keys = {(i, s) for p in chosen for i, s, _ in p.entries if i}
+    total = sum(p.bits // 8 for p in chosen)
     while True:
         best: tuple[tuple[int, int, int], PdoOption] | None = None
         for p in options:
@@ -326,18 +329,23 @@ def _configurable(
     side: str,
     wanted: tuple[str, ...],
     limit: int | None,
+    mandatory: list[PdoOption] = (),  # type: ignore[assignment]
 ) -> list[PdoOption]:
     """Wanted objects mappable in ``side``, written into the configurable PDOs in order
-    (default-assigned ones first), each up to its mapping entries, within the sync manager."""
+    (default-assigned ones first), each up to its mapping entries, within the sync manager;
+    after the ``mandatory`` fixed PDOs, whose objects are not mapped again."""
     objs = []
     for name in wanted:
         info = desc.objects.get((FIELD_OBJECTS[name], 0))
         if info is not None and side in info.mappable:
             objs.append((FIELD_OBJECTS[name], 0, CIA402_OBJECTS[FIELD_OBJECTS[name]][1]))
+    out = [p for p in mandatory if p.direction == side]  # assigned whatever is written
+    carried = {(i, s) for p in out for i, s, _ in p.entries}
+    objs = [o for o in objs if o[:2] not in carried]
+    fixed_bits = sum(p.bits for p in out)
     if limit is not None:
-        while objs and sum(b for _, _, b in objs) // 8 > limit:
+        while objs and (fixed_bits + sum(b for _, _, b in objs)) // 8 > limit:
             objs.pop()
-    out: list[PdoOption] = []
     for p in sorted(options, key=lambda p: (not p.default, p.index)):
         if not objs:
             break
@@ -345,7 +353,12 @@ def _configurable(
             continue
         n = _max_entries(desc, p)
         take, objs = objs[:n], objs[n:]
-        out.append(PdoOption(p.index, p.direction, False, take, p.excludes, True, n, p.name))
+        out.append(
+            PdoOption(
+                p.index, p.direction, fixed=False, entries=take, excludes=p.excludes,
+                default=True, max_entries=n, name=p.name,
+            )
+        )  # fmt: skip
     return out
 
 
@@ -380,7 +393,15 @@ def _can_side(
             else:
                 skipped.append(_field(obj[0], 0) or f"0x{obj[0]:04X}")
     pdos = [
-        PdoOption(p.index, side, False, frame, set(), True, caps[k], p.name)  # type: ignore[arg-type]
+        PdoOption(
+            p.index,
+            side,
+            fixed=False,
+            entries=frame,
+            default=True,  # type: ignore[arg-type]
+            max_entries=caps[k],
+            name=p.name,
+        )
         for k, (p, frame) in enumerate(zip(options[: len(frames)], frames, strict=True))
     ]
     why = (

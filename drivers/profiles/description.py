@@ -31,6 +31,7 @@ class PdoOption:
     entries: list[tuple[int, int, int]]  # (index, subindex, bits) in wire order; 0 = gap
     excludes: set[int] = field(default_factory=set)  # PDOs that cannot be assigned with it
     default: bool = False  # assigned by default (ESI Sm attribute; EDS: valid at power-on)
+    mandatory: bool = False  # must always be assigned (ESI Mandatory="1")
     max_entries: int | None = None  # mapping sub-indices (configurable PDOs)
     name: str = ""
 

@@ -192,6 +192,8 @@ def read_eds(path: Path) -> list[DeviceDescription]:
             )
             cob_text = (section(comm_base + k, 1) or {}).get("DefaultValue")
             cob = number(cob_text, f"[{comm_base + k:04X}sub1] DefaultValue", node_id=0)
+            if cob is not None and desc.node_id and not _NODEID.search(cob_text or ""):
+                cob -= desc.node_id  # a DCF's COB-ID written with its node id included
             tt = desc.default_of(comm_base + k, 2)
             if cob is not None:
                 desc.comm[map_base + k] = CanComm(

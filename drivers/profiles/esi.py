@@ -238,6 +238,7 @@ def _pdo(pdo: Element, direction: str, where: str, path: Path) -> PdoOption:
             x for x in (_num(_text(x), path, "Exclude") for x in pdo.findall("Exclude")) if x
         },
         default=pdo.get("Sm") is not None,
+        mandatory=pdo.get("Mandatory", "0") in ("1", "true"),
         name=_text(pdo, "Name"),
     )
 

@@ -265,3 +265,27 @@ def test_initcmd_data_longer_than_the_object(tmp_path):
 def test_bad_initcmd_data(tmp_path, data):
     msg = _refused(_write(tmp_path, esi().replace("<Data>01</Data>", f"<Data>{data}</Data>")))
     assert "not hex data" in msg
+
+
+def test_mandatory_pdo_always_assigned(tmp_path):
+    """A Mandatory fixed PDO stays assigned beside what is chosen; its objects are not mapped
+    again."""
+    text = esi().replace('<TxPdo Fixed="1" Sm="3">', '<TxPdo Fixed="1" Sm="3" Mandatory="1">')
+    extra = (
+        '<TxPdo Fixed="1"><Index>#x1A01</Index><Name>more</Name>'
+        + "".join(f"<Entry><Index>#x{i:04X}</Index><SubIndex>0</SubIndex><BitLen>{b}</BitLen>"
+                  "<Name>x</Name></Entry>" for i, b in ((0x6041, 16), (0x6064, 32), (0x606C, 32),
+                                                        (0x6077, 16), (0x603F, 16)))
+        + "</TxPdo>"
+    )  # fmt: skip
+    text = text.replace("<Mailbox>", extra + "<Mailbox>")
+    p = choose(read_vendor_description(_write(tmp_path, text))[0]).profile
+    assert [pdo.index for pdo in p.tx_pdos] == [0x1A00]  # 0x1A01 would map 0x6041 twice
+
+
+def test_dcf_cob_id_with_node_id_included(tmp_path):
+    text = EDS.replace("DefaultValue=$NODEID+0x180", "DefaultValue=0x185") + (
+        "[DeviceComissioning]\nNodeID=5\n"
+    )
+    p = choose(read_vendor_description(_write(tmp_path, text, "d.dcf"))[0]).profile
+    assert p.canopen is not None and p.canopen.tpdo[0].cob_id_base == 0x180
