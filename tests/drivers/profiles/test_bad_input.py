@@ -10,7 +10,7 @@ import pytest
 
 from drivers.profiles import ProfileImportError, read_vendor_description
 from drivers.profiles.choose import choose
-from tests.drivers.profiles.esi_factory import entry, esi
+from tests.support.esi_factory import entry, esi
 
 
 def _write(tmp_path: Path, text: str | bytes, name: str = "drive.xml") -> Path:

@@ -10,7 +10,7 @@ import pytest
 
 from hofto_hw.cli import main
 from hofto_hw.config.drive_profile import load_profile
-from tests.drivers.profiles.esi_factory import esi
+from tests.support.esi_factory import esi
 
 ROOT = Path(__file__).resolve().parents[3]
 DATA = ROOT.parent / "shared" / "data" / "drives"
