@@ -25,7 +25,7 @@ the mode, when 0x6060 cannot be mapped, becomes a start-up write.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from pydantic import ValidationError
 
@@ -255,6 +255,13 @@ def _ethercat_side(
     desc: DeviceDescription, side: str, wanted: tuple[str, ...]
 ) -> tuple[list[PdoOption], str]:
     options = [p for p in desc.pdos if p.direction == side]
+    notes = []
+    if not desc.pdo_config:  # mappings cannot be written: every PDO is as the file gives it
+        options = [replace(p, fixed=True) for p in options if p.entries]
+        notes.append("PdoConfig=0: no mapping is written")
+    if not desc.pdo_assign:  # the default assignment is the only one
+        options = [replace(p, mandatory=p.fixed) for p in options if p.default]
+        notes.append("PdoAssign=0: the default assignment is kept")
     limit = desc.sm_rx_bytes if side == "rx" else desc.sm_tx_bytes
     fixed = _greedy_fixed([p for p in options if p.fixed and p.entries], wanted, limit)
     mandatory = [p for p in options if p.fixed and p.mandatory]
@@ -276,9 +283,15 @@ def _ethercat_side(
                 else "; the file has no configurable PDO"
             )
         )
-        return fixed, why
+        return fixed, why + "".join(f"; {n}" for n in notes)
     if not conf:
         return [], f"{side}: no PDO maps what the loop needs"
+    unused = [p for p in options if not p.fixed and p.default and p not in conf and p.entries]
+    if not desc.pdo_assign and any(p.index not in {c.index for c in conf} for p in unused):
+        raise ProfileImportError(
+            f"{desc.path}: {desc.device}: PdoAssign=0 keeps configurable PDO "
+            f"0x{unused[0].index:04X} assigned, but the layout does not need it: not supported"
+        )
     why = (
         f"{side}: configurable {names(conf)} written with {len(got_conf)} of {len(wanted)} "
         "wanted objects"
@@ -290,7 +303,7 @@ def _ethercat_side(
             else "; the file has no fixed PDO"
         )
     )
-    return conf, why
+    return conf, why + "".join(f"; {n}" for n in notes)
 
 
 def _greedy_fixed(

@@ -114,6 +114,8 @@ class DeviceDescription:
     dc: list[DcMode] = field(default_factory=list)
     sm_rx_bytes: int | None = None
     sm_tx_bytes: int | None = None
+    pdo_assign: bool = True  # ESI CoE@PdoAssign: the PDO assignment may be changed
+    pdo_config: bool = True  # ESI CoE@PdoConfig: configurable PDOs may be written
     # CANopen
     bitrates: list[int] = field(default_factory=list)
     comm: dict[int, CanComm] = field(default_factory=dict)  # mapping index -> communication

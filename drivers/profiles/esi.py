@@ -186,6 +186,12 @@ def _device(
             info = desc.objects.setdefault((index, sub), ObjectInfo(index, sub, bits))
             if pdo.direction not in info.mappable:
                 info.mappable += pdo.direction
+    coe = dev.find("Mailbox/CoE")
+    if coe is not None:  # ETG.2000: both default to false; a file without CoE: the dump's
+        desc.pdo_assign = coe.get("PdoAssign", "0").lower() in ("1", "true")
+        desc.pdo_config = coe.get("PdoConfig", "0").lower() in ("1", "true")
+    elif dump:
+        desc.pdo_assign = desc.pdo_config = False  # what the live drives ran, as it was
     for cmd in dev.findall("Mailbox/CoE/InitCmd"):
         data = _text(cmd, "Data")
         if not data:

@@ -289,3 +289,20 @@ def test_dcf_cob_id_with_node_id_included(tmp_path):
     )
     p = choose(read_vendor_description(_write(tmp_path, text, "d.dcf"))[0]).profile
     assert p.canopen is not None and p.canopen.tpdo[0].cob_id_base == 0x180
+
+
+def test_pdo_assign_false_keeps_the_default_assignment(tmp_path):
+    """ETG.2000: without PdoAssign the assignment cannot change: a better non-default PDO is
+    not used; without PdoConfig nothing is written."""
+    extra = (
+        '<TxPdo Fixed="1"><Index>#x1A01</Index><Name>more</Name>'
+        + "".join(f"<Entry><Index>#x{i:04X}</Index><SubIndex>0</SubIndex><BitLen>{b}</BitLen>"
+                  "<Name>x</Name></Entry>" for i, b in ((0x6041, 16), (0x6064, 32), (0x606C, 32),
+                                                        (0x6077, 16), (0x603F, 16)))
+        + "</TxPdo>"
+    )  # fmt: skip
+    for coe, expect in (('PdoAssign="1" PdoConfig="1"', [0x1A01]), ("", [0x1A00])):
+        text = esi(coe=coe).replace("<Mailbox>", extra + "<Mailbox>")
+        c = choose(read_vendor_description(_write(tmp_path, text))[0])
+        assert [pdo.index for pdo in c.profile.tx_pdos] == expect, coe
+    assert any("PdoAssign=0" in r for r in c.reasons)
