@@ -178,6 +178,7 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
             "observer_backend": kernels.resolve(observer_backend()),
         },
         event_kinds=dict(EVENT_NAMES),
+        tool_frame=cfg.robot.tool_frame,  # type: ignore[attr-defined]
     )
     return FlightRecorder(spec).start()
 
