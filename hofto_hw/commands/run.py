@@ -17,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 
+from hofto_hw.commands.args import output_file
+
 DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "er3a.yaml"
 
 
@@ -31,6 +33,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--log-dir", type=Path, default=None, help="folder for the MCAP flight log (run.log_dir)"
     )
     parser.add_argument("--no-log", action="store_true", help="record no flight log")
+    parser.add_argument(
+        "--plot", type=output_file, metavar="PNG", help="draw the run from its log into PNG"
+    )
     parser.add_argument("--no-collision", action="store_true", help="no scripted collision")
     parser.add_argument(
         "--socket", type=Path, default=None, help="serve the control socket at this path"
@@ -65,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
 
     _check_duration(args.duration)
     _check_output(args.summary_json, "--summary-json")
+    _check_plot(args)
     cfg = load_config(args.config)
     if args.interface is not None and cfg.bus is not None:
         cfg = cfg.model_copy(
@@ -148,7 +154,22 @@ def run(args: argparse.Namespace) -> int:
         args.summary_json.write_text(json.dumps(summary, indent=2) + "\n")
     print(format_summary(summary))
     sys.stdout.flush()
+    if args.plot is not None and health is not None:
+        from hofto_hw.replay.run_plot import plot_run
+
+        plot_run(Path(log), args.plot)  # type: ignore[arg-type]
+        print(f"plot: {args.plot}")
     return 0
+
+
+def _check_plot(args: argparse.Namespace) -> None:
+    """--plot draws the run from its flight log: refused without one, or onto an input."""
+    from hofto_hw.commands.args import refuse_overwrite
+    from hofto_hw.errors import UserError
+
+    if args.plot is not None and args.no_log:
+        raise UserError("--plot: draws the run from its flight log; drop --no-log")
+    refuse_overwrite(args.plot, [args.config, args.summary_json], "--plot")
 
 
 def _start_recorder(cfg: object, args: argparse.Namespace) -> object:

@@ -66,6 +66,11 @@ class FlightLog:
     #: (N,) [s] the interval the loop's observers integrated in each tick (the bus's sample
     #: interval with EtherCAT DC; 0 where they held over a lost sample); None in older logs
     sample_dt: FloatArray | None = None
+    #: (N,) from /loop/status (None in older logs): controller mode code
+    #: (hofto_hw.control.joint_motion), wake-up and compute time of the tick [µs]
+    mode: NDArray[np.uint8] | None = None
+    wakeup_us: FloatArray | None = None
+    compute_us: FloatArray | None = None
 
     @property
     def n_ticks(self) -> int:
@@ -195,6 +200,9 @@ def _tick_status(log: FlightLog, raws: list[bytes]) -> None:
     st = np.frombuffer(b"".join(raws), dtype=dtype)
     log.monitored = np.array(st["monitored"], dtype=np.uint8)
     log.qdd_cmd = np.array(st["qdd_cmd"], dtype=float).reshape(log.n_ticks, -1)
+    log.mode = np.array(st["mode"], dtype=np.uint8)
+    log.wakeup_us = np.array(st["wakeup_us"], dtype=float)
+    log.compute_us = np.array(st["compute_us"], dtype=float)
     if with_dt:
         log.sample_dt = np.array(st["sample_dt"], dtype=float)
 
