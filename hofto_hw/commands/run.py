@@ -85,6 +85,9 @@ def run(args: argparse.Namespace) -> int:
     if clock == "sim":
         realtime.drop_realtime()  # back-to-back ticks must not starve the machine
         rt_text += "; checked, then normal priority for the sim clock"
+    if args.no_log and cfg.run.live_view is not None:
+        print("hofto-hw run: run.live_view is off with --no-log (the log's writer serves it)",
+              file=sys.stderr)  # fmt: skip
     recorder = None if args.no_log else _start_recorder(cfg, args)
     try:
         system = build(cfg, clock=clock, sink=recorder, contact=not args.no_collision)
@@ -200,8 +203,18 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
         },
         event_kinds=dict(EVENT_NAMES),
         tool_frame=cfg.robot.tool_frame,  # type: ignore[attr-defined]
+        live_view=_live_spec(cfg.run.live_view),  # type: ignore[attr-defined]
     )
     return FlightRecorder(spec).start()
+
+
+def _live_spec(live: object) -> object:
+    """run.live_view as the writer's LiveSpec (None: off)."""
+    if live is None:
+        return None
+    from hofto_hw.recording.live import LiveSpec
+
+    return LiveSpec(live.host, live.port, live.rate_hz)  # type: ignore[attr-defined]
 
 
 def _log_dir(cfg: object, config_path: Path) -> Path:

@@ -196,6 +196,8 @@ class FlightFile:
             sid = self.w.register_schema(type_name, "ros2msg", msgdef.encode())
             cid = self.w.register_channel(topic, "cdr", sid)
             self.topics[cid] = topic
+            if self.live is not None:
+                self.live.declare(topic, type_name, msgdef)
             return cid
 
         js = (s.JOINT_STATE_TYPE, s.JOINT_STATE_MSGDEF)

@@ -64,7 +64,10 @@ class _Writer:
         if spec.live_view is not None:
             from hofto_hw.recording.live import LiveView
 
-            self.live = LiveView(spec, self.frames, urdf)
+            try:
+                self.live = LiveView(spec.live_view)
+            except ImportError as exc:  # the log goes on without the view
+                print(f"hofto-hw flight recorder: no live view: {exc}", file=sys.stderr)
 
     def counters(self) -> dict[str, int]:
         c = self.ctl
