@@ -177,3 +177,11 @@ def string_message(text: str) -> bytes:
     """std_msgs/msg/String as CDR."""
     data = text.encode() + b"\x00"
     return ENCAPSULATION + struct.pack("<I", len(data)) + data
+
+
+def thresholds_layout(observer: str, n_joints: int, contact: bool) -> tuple[np.dtype, np.ndarray]:
+    """hofto_hw_msgs/msg/CollisionThresholds: fields ``contact`` (n,) (absent when not
+    ``contact``) and ``collision`` (n,) [N·m]."""
+    lay = header(CdrLayout(), "").const_string(observer)
+    lay.doubles("contact", n_joints if contact else 0).doubles("collision", n_joints)
+    return lay.build()

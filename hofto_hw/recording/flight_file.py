@@ -15,7 +15,10 @@ Topics (log time = publish time = the record's ``t`` in ns, sequence = tick mod 
 - when the log carries the URDF (attachment ``robot.urdf``): ``/robot_description``
   std_msgs/String (the URDF, once per file), ``/tf_static`` (fixed joints, once per file) and
   ``/tf`` tf2_msgs/TFMessage (each movable joint's link transform and the tool's aligned frame,
-  from the logged q at ``tf_rate_hz``), computed here with pinocchio (:mod:`frames`).
+  from the logged q at ``tf_rate_hz``), computed here with pinocchio (:mod:`frames`);
+- with the run's config attached and its two-level monitor: ``/safety/thresholds``
+  hofto_hw_msgs/CollisionThresholds, the contact/collision thresholds [N·m] the monitor
+  applied, re-computed from the records (hofto_hw.replay.levels_track), on judged ticks.
 
 Times: log time = stamp = ``origin_ns`` + the record's t [ns]; the writer process sets
 ``origin_ns`` to the wall clock of the loop's t = 0 (metadata record ``hofto_hw.clock``), so a
@@ -146,12 +149,15 @@ class FlightFile:
         origin_ns: int = 0,
         frames: Any = _AUTO,
         live: Any = None,
+        thresholds: Any = None,
     ) -> None:
         self.path = path
         self.spec = spec
         self.messages = 0
         self.origin_ns = origin_ns
         self.live = live
+        #: hofto_hw.replay.levels_track.ThresholdTrack of the run (state carried across files)
+        self.track = thresholds
         self._begun = False
         self.urdf = urdf_text(spec)
         if frames is _AUTO:
@@ -216,6 +222,12 @@ class FlightFile:
             self.ch_tf_static = channel(s.TF_STATIC_TOPIC, *tf)
             self.ch_tf = channel(s.TF_TOPIC, *tf)
             self.lay_tf = cdr.tf_message_layout(self.frames.moving_pairs)
+        if self.track is not None:
+            self.ch_thr = channel(
+                s.THRESHOLDS_TOPIC, s.COLLISION_THRESHOLDS_TYPE, s.COLLISION_THRESHOLDS_MSGDEF
+            )
+            two = len(self.track.levels) == 2
+            self.lay_thr = cdr.thresholds_layout(self.track.observer, len(names), two)
         self.lay_state = cdr.joint_state_layout(names, position=True, velocity=True, effort=True)
         self.lay_cmd = cdr.joint_state_layout(names, position=True, velocity=False, effort=False)
         self.lay_obs = cdr.joint_state_layout(names, position=False, velocity=False, effort=True)
@@ -309,6 +321,22 @@ class FlightFile:
             self._emit(self.ch_wrench, b, ns[have], seq[have])
         if self.frames is not None and self.spec.tf_rate_hz > 0:
             self._write_tf(ticks, ns, seq)
+        if self.track is not None:
+            self._write_thresholds(ticks, ns, seq)
+
+    def _write_thresholds(self, ticks: np.ndarray, ns: np.ndarray, seq: np.ndarray) -> None:
+        """/safety/thresholds on the ticks the monitor judged."""
+        assert self.track is not None
+        thr = self.track.update(ticks)
+        judged = ticks["monitored"] != 0
+        if not judged.any():
+            return
+        b = cdr.fill_batch(*self.lay_thr, int(judged.sum()))
+        cdr.set_stamps(b, ticks["t"][judged], self.origin_ns)
+        b["collision"] = thr[judged, -1]
+        if len(self.track.levels) == 2:
+            b["contact"] = thr[judged, 0]
+        self._emit(self.ch_thr, b, ns[judged], seq[judged])
 
     def _write_tf(self, ticks: np.ndarray, ns: np.ndarray, seq: np.ndarray) -> None:
         """/tf for the first tick of each 1/tf_rate_hz period of the loop's t."""

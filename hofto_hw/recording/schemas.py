@@ -170,3 +170,15 @@ TF_STATIC_TOPIC = "/tf_static"
 #: loop's t = 0. Log times and stamps are origin_ns + round(t·1e9); logs without it have
 #: origin 0 (stamps from the loop's t alone).
 CLOCK_METADATA = "hofto_hw.clock"
+
+#: The contact and collision thresholds [N·m] per joint the loop's monitor applied to the
+#: detector observer's estimate, re-computed by the writer process from the logged records
+#: (hofto_hw.replay.levels_track), on the ticks the monitor judged. ``contact`` is empty when
+#: the monitor has one level.
+COLLISION_THRESHOLDS_TYPE = "hofto_hw_msgs/msg/CollisionThresholds"
+COLLISION_THRESHOLDS_MSGDEF = _msgdef(
+    ["std_msgs/Header header", "string observer", "float64[] contact", "float64[] collision"],
+    _HEADER,
+    _TIME,
+)
+THRESHOLDS_TOPIC = "/safety/thresholds"

@@ -60,6 +60,7 @@ class _Writer:
         self.frames = _frames(urdf, spec) if urdf else None
         #: the loop's timing over every tick drained, for /diagnostics (systemd or not)
         self.wakeup, self.compute = Histogram(), Histogram()
+        self.track = _thresholds(spec)
         self.live = None
         if spec.live_view is not None:
             from hofto_hw.recording.live import LiveView
@@ -95,7 +96,12 @@ class _Writer:
             self.index += 1
             try:
                 self.file = FlightFile(
-                    self.spec, path, self.index - 1, frames=self.frames, live=self.live
+                    self.spec,
+                    path,
+                    self.index - 1,
+                    frames=self.frames,
+                    live=self.live,
+                    thresholds=self.track,
                 )
                 break
             except FileExistsError:
@@ -202,6 +208,33 @@ def _frames(urdf: str, spec: LogSpec) -> ArmFrames | None:
         return ArmFrames(urdf, spec.joint_names, spec.tool_frame)
     except (ValueError, RuntimeError) as exc:
         print(f"hofto-hw flight recorder: no /tf in the log: {exc}", file=sys.stderr)
+        return None
+
+
+def _thresholds(spec: LogSpec) -> object | None:
+    """The monitor's thresholds re-computed from the records (/safety/thresholds) when the
+    log carries the run's config; None otherwise (said on stderr when it should have)."""
+    from hofto_hw.recording.attachments import CONFIG
+
+    attached = {name: data for name, _media, data in spec.attachments}
+    if CONFIG not in attached or not spec.observers:
+        return None
+    try:
+        from hofto_hw.replay.levels_track import ThresholdTrack
+
+        track = ThresholdTrack(attached, spec.metadata, spec.joint_names, spec.observers)
+        if track.mon.backend != "numba":  # numpy: ~250 µs per tick, a quarter of a 1 kHz tick
+            print(
+                "hofto-hw flight recorder: no /safety/thresholds (the run's monitor is not on "
+                "the compiled kernels; `hofto-hw log plot` draws them from the log)",
+                file=sys.stderr,
+            )
+            return None
+        return track
+    except LookupError:  # a thresholds-file monitor (older runs, tests): nothing to track
+        return None
+    except Exception as exc:  # the log must not depend on it
+        print(f"hofto-hw flight recorder: no /safety/thresholds: {exc}", file=sys.stderr)
         return None
 
 

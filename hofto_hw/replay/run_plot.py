@@ -48,29 +48,24 @@ def titles(fig: Figure) -> list[str]:
     return [ax.get_title() for ax in fig.axes if ax.get_title()]
 
 
-def _thresholds(log: FlightLog) -> tuple[str, np.ndarray | None, list[str]]:
+def _thresholds(log: FlightLog) -> tuple[str, np.ndarray | None, tuple[str, ...]]:
     """(detector observer, thresholds (N, L, n) [N·m] of its row (NaN on ticks the monitor
     did not judge) or None, level names) by re-running the run's monitor on the log."""
-    from hofto_hw.replay.reproduce import loop_dt, make_detector, run_setup
-    from safety.collision import CollisionLevels
+    from hofto_hw.replay.levels_track import detector_levels, level_names, track_thresholds
+    from hofto_hw.replay.reproduce import loop_dt, run_setup
 
-    setup = run_setup(log)
-    det = make_detector(log, setup)
-    mon = det.monitor
-    if not isinstance(mon, CollisionLevels) or det.observer not in log.observers:
-        return det.observer, None, []
+    found = detector_levels(log)
+    if found is None:
+        return log.metadata.get("detector", ""), None, ()
+    observer, row, mon = found
     assert log.monitored is not None and log.qdd_cmd is not None
-    row = log.observers.index(det.observer)
     est = np.stack([log.tau_ext[o] for o in log.observers], axis=1)
-    dt = loop_dt(log, float(setup.config.loop.rate_hz))
+    rate = log.metadata.get("rate_hz") or run_setup(log).config.loop.rate_hz
+    dt = loop_dt(log, float(rate))
     h = dt if log.sample_dt is None else np.where(log.sample_dt > 0.0, log.sample_dt, dt)
-    out = np.full((log.n_ticks, mon.L, len(log.joint_names)), np.nan)
     mon.reset()
-    for k in np.flatnonzero(log.monitored):
-        mon.step(est[k], log.qd[k], log.qdd_cmd[k], float(h[k]), int(log.ticks[k]))
-        out[k] = mon.threshold[:, row, :]
-    names = ["contact", "collision"] if mon.L == 2 else ["collision"]
-    return det.observer, out, names
+    thr = track_thresholds(mon, row, est, log.qd, log.qdd_cmd, h, log.ticks, log.monitored)
+    return observer, thr, level_names(mon)
 
 
 def _mark_events(ax: Axes, events: list[RecordedEvent], t0: float, label: bool = False) -> None:

@@ -176,3 +176,30 @@ def test_run_plot_without_a_log_is_refused_before_the_run(tmp_path, capsys) -> N
     assert main(["run", "--no-log", "--plot", str(tmp_path / "x.png")]) == 2
     assert "drop --no-log" in capsys.readouterr().err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_the_log_carries_the_monitor_s_thresholds_as_replay_computes_them(run_log) -> None:
+    """/safety/thresholds (computed by the writer process batch by batch while the run went)
+    equals the thresholds re-computed from the whole log, on every judged tick."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from hofto_hw.recording import schemas as s
+    from hofto_hw.replay.run_plot import _thresholds
+
+    log = read_flight_log(run_log[0])
+    observer, thr, levels = _thresholds(log)
+    assert observer == "hofto" and levels == ("contact", "collision") and thr is not None
+    with run_log[0].open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        msgs = [
+            (m.sequence, msg)
+            for _s, _c, m, msg in reader.iter_decoded_messages(topics=[s.THRESHOLDS_TOPIC])
+        ]
+    assert log.monitored is not None
+    judged = np.flatnonzero(log.monitored)
+    assert [k for k, _ in msgs] == list(log.ticks[judged])
+    assert all(msg.observer == "hofto" for _, msg in msgs)
+    logged = np.array([[msg.contact, msg.collision] for _, msg in msgs])
+    assert np.array_equal(logged, thr[judged])
+    assert (logged[:, 1] > logged[:, 0]).all()  # collision above contact everywhere
