@@ -1,5 +1,6 @@
 """Live view: the writer process serves the topics it logs over Foxglove's WebSocket protocol
-(``foxglove.websocket.v1``), so Foxglove (or any client of the protocol) shows a running arm.
+(subprotocol ``foxglove.sdk.v1`` with foxglove-sdk 0.30, the successor of
+``foxglove.websocket.v1``), so Foxglove (or any client of the protocol) shows a running arm.
 
 Why here and why foxglove-sdk: the writer already has every record as encoded ROS 2 messages,
 and it is the process that may be slow (never the loop's process: that one only copies records
@@ -119,7 +120,7 @@ class LiveView:
         ch.log(bytes(data), log_time=ns)
         self.published += 1
 
-    def poll(self, now_ns: int) -> None:
+    def poll(self) -> None:
         """Re-publish latched topics to clients that subscribed since the last call."""
         while self._resend:
             topic = self._resend.pop()

@@ -135,7 +135,7 @@ class _Writer:
             self.wakeup.add_many(ticks["wakeup_us"])
             self.compute.add_many(ticks["compute_us"])
         if self.live is not None:
-            self.live.poll(self.origin_ns or 0)
+            self.live.poll()
         if self.file is None and now >= self.retry_at:
             try:
                 self._open(now)
