@@ -149,6 +149,29 @@ def bench_writer(folder: Path, n_ticks: int) -> dict[str, float]:
     }
 
 
+def bench_file_cost(folder: Path, n_ticks: int) -> dict[str, float]:
+    """The writer's work per tick [µs] in this process (no ring, no process scheduling): the
+    log's messages without and with the arm's topics (/tf at 50 Hz by pinocchio, the URDF)."""
+    urdf = Path(__file__).resolve().parents[1] / "configs" / "er3a" / "er3a.urdf"
+    rng = np.random.default_rng(2)
+    ticks = np.zeros(n_ticks, dtype=tick_dtype(len(JOINTS), len(OBSERVERS)))
+    for k in range(n_ticks):
+        fill(ticks[k : k + 1].reshape(()), k, rng)
+    runs: dict[str, list[float]] = {"without_arm_topics": [], "with_arm_topics": []}
+    arm = [("robot.urdf", "application/xml", urdf.read_bytes())]
+    for rep in range(5):  # alternated, medians: the machine is shared
+        for label, attachments in (("without_arm_topics", []), ("with_arm_topics", arm)):
+            s = LogSpec(folder / f"{label}{rep}.mcap", JOINTS, OBSERVERS,
+                        attachments=attachments, tool_frame="tool0")  # fmt: skip
+            f = FlightFile(s, s.path, 0)
+            t0 = time.perf_counter()
+            for start in range(0, n_ticks, 100):  # 0.1 s batches at 1 kHz, as the writer drains
+                f.write_ticks(ticks[start : start + 100])
+            f.finish()
+            runs[label].append((time.perf_counter() - t0) / n_ticks * 1e6)
+    return {label: float(np.median(v)) for label, v in runs.items()}
+
+
 class _ThreadWriter:
     """The rejected design, for comparison: the same file writer in a thread of the loop."""
 
@@ -256,6 +279,7 @@ def main() -> int:
         out["push_us"] = bench_push(folder, 5000 if args.quick else 20000)
         out["encode_us_per_message"] = bench_encode(2000 if args.quick else 10000)
         out["writer"] = bench_writer(folder, 10000 if args.quick else 30000)
+        out["writer_us_per_tick"] = bench_file_cost(folder, 5000 if args.quick else 20000)
         out["loop_wakeup_us"] = {
             mode: bench_loop(folder, mode, seconds, args.fifo, args.pin)
             for mode in ("off", "process", "thread")
@@ -274,6 +298,11 @@ def main() -> int:
     print(
         f"writer process: {w['ticks_per_s']:.0f} ticks/s = {w['messages_per_s']:.0f} "  # type: ignore[index]
         f"messages/s, {w['bytes_per_tick']:.0f} B/tick on disk"  # type: ignore[index]
+    )
+    c = out["writer_us_per_tick"]
+    print(
+        f"writer work per tick: {c['without_arm_topics']:.1f} µs, with /tf and the URDF "  # type: ignore[index]
+        f"{c['with_arm_topics']:.1f} µs"  # type: ignore[index]
     )
     fifo = ("SCHED_FIFO 50" if args.fifo else "SCHED_OTHER") + (", pinned" if args.pin else "")
     print(f"1 kHz loop wake-up latency [µs], {seconds:.0f} s each, {fifo}:")

@@ -4,7 +4,8 @@ Dimensions: Efort's public ER3A data sheet gives 6 revolute axes, 3 kg payload, 
 reach and a spherical wrist; the link lengths below are chosen to give that envelope (they
 are ours, not Efort's drawings). Masses, centres of mass and inertias are ESTIMATES: each link
 is modelled as a solid aluminium-like cylinder of the given mass (inertia about its centre of
-mass from the cylinder formulas). Run `python tools/make_er3a_urdf.py` to regenerate.
+mass from the cylinder formulas); each link's visual is that cylinder, so viewers draw the arm.
+Run `python tools/make_er3a_urdf.py` to regenerate.
 """
 
 from __future__ import annotations
@@ -39,8 +40,24 @@ def cylinder_inertia(m: float, r: float, length: float, axis: str) -> tuple[floa
     return tuple(along if a == axis else across for a in "xyz")  # type: ignore[return-value]
 
 
+#: rpy turning a URDF cylinder (along z) onto each axis
+_CYLINDER_RPY = {"x": "0 1.5708 0", "y": "1.5708 0 0", "z": "0 0 0"}
+
+
+def visual(xyz: tuple[float, float, float], r: float, length: float, axis: str) -> list[str]:
+    """A grey cylinder: what viewers (Foxglove's 3D panel) draw; dynamics ignore it."""
+    return [
+        "    <visual>",
+        f'      <origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}" rpy="{_CYLINDER_RPY[axis]}"/>',
+        f'      <geometry><cylinder radius="{r}" length="{length}"/></geometry>',
+        '      <material name="grey"><color rgba="0.62 0.64 0.68 1"/></material>',
+        "    </visual>",
+    ]
+
+
 def urdf() -> str:
-    out = ['<?xml version="1.0"?>', '<robot name="er3a">', '  <link name="base_link"/>']
+    out = ['<?xml version="1.0"?>', '<robot name="er3a">', '  <link name="base_link">']
+    out += [*visual((0.0, 0.0, 0.08), 0.08, 0.16, "z"), "  </link>"]
     parent = "base_link"
     for i, (name, xyz, axis, m, (r, length, cax), com) in enumerate(LINKS):
         ixx, iyy, izz = cylinder_inertia(m, r, length, cax)
@@ -61,6 +78,7 @@ def urdf() -> str:
             f'      <inertia ixx="{ixx:.6g}" ixy="0" ixz="0" iyy="{iyy:.6g}" iyz="0" '
             f'izz="{izz:.6g}"/>',
             "    </inertial>",
+            *visual(com, r, length, cax),
             "  </link>",
         ]
         parent = name

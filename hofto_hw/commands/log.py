@@ -5,6 +5,7 @@ Examples::
 
     hofto-hw log info /var/log/hofto-hw/run.mcap
     hofto-hw log recover /var/log/hofto-hw/run.mcap        # -> run.recovered.mcap
+    hofto-hw log plot /var/log/hofto-hw/run.mcap           # -> run.png
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import json
 import os
 from pathlib import Path
 
+from hofto_hw.commands.args import output_file, refuse_overwrite
 from hofto_hw.errors import UserError
 
 
@@ -27,12 +29,42 @@ def configure(parser: argparse.ArgumentParser) -> None:
     p.add_argument(
         "-o", "--output", type=Path, help="output file (default: FILE's stem + .recovered.mcap)"
     )
+    p = sub.add_parser(
+        "plot", help="a picture of a run: joints, torques vs thresholds, stop, drag, timing"
+    )
+    p.add_argument("file", type=Path, metavar="FILE")
+    p.add_argument(
+        "-o", "--output", type=output_file, metavar="PNG", help="default: FILE's stem + .png"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     if args.log_command == "info":
         return _info(args)
+    if args.log_command == "plot":
+        return _plot(args)
     return _recover(args)
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from hofto_hw.recording.recover import check_magic
+    from hofto_hw.replay.flight_log import read_flight_log
+    from hofto_hw.replay.run_plot import run_figure, save_figure
+
+    src: Path = args.file
+    check_magic(src)  # a missing or non-MCAP input is said before anything else
+    dst: Path = args.output if args.output is not None else src.with_suffix(".png")
+    if args.output is None:
+        if dst.exists():
+            raise UserError(f"{dst}: exists; name the output with -o (it will be replaced)")
+        try:
+            output_file(str(dst))
+        except argparse.ArgumentTypeError as exc:
+            raise UserError(f"-o: {exc}") from None
+    refuse_overwrite(dst, [src], "-o")
+    save_figure(run_figure(read_flight_log(src)), dst)
+    print(f"{src}: wrote {dst}")
+    return 0
 
 
 def _info(args: argparse.Namespace) -> int:

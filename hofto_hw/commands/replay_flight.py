@@ -2,18 +2,29 @@
 
 Prints the recorded and the replayed first collision (tick, joints) and each observer's
 largest difference from its recorded estimate; exit code 0 when they match, 1 when not.
+``--plot PNG``: the detector observer's recorded and replayed estimate per joint.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from hofto_hw.replay.flight_log import FlightLog
+    from hofto_hw.replay.reproduce import Reproduction
 
 
 def run_flight(args: argparse.Namespace) -> int:
+    from hofto_hw.commands.args import refuse_overwrite
     from hofto_hw.replay.flight_log import read_flight_log
     from hofto_hw.replay.reproduce import reproduce
 
+    plot = getattr(args, "plot", None)
+    refuse_overwrite(plot, [args.file], "--plot")
     log = read_flight_log(args.file)
     result = reproduce(log)
     d = {
@@ -23,8 +34,11 @@ def run_flight(args: argparse.Namespace) -> int:
         "robot": log.metadata.get("robot", ""),
         **result.as_dict(),
     }
+    if plot is not None:
+        d["plot"] = str(plot)
     if args.json:
-        print(json.dumps(d, indent=2))
+        print(json.dumps(d, indent=2), flush=True)
+        _plot(plot, log, result)
         return 0 if result.match else 1
     print(
         f"{d['file']}: flight log, robot {d['robot']}, {d['ticks']} ticks, "
@@ -43,4 +57,18 @@ def run_flight(args: argparse.Namespace) -> int:
     print(f"  recorded collision: {recorded}")
     print(f"  replayed collision: {replayed}")
     print("  MATCH" if result.match else "  MISMATCH: the replay decides differently")
+    sys.stdout.flush()
+    if _plot(plot, log, result):
+        print(f"  plot: {plot}")
     return 0 if result.match else 1
+
+
+def _plot(path: Path | None, log: FlightLog, result: Reproduction) -> bool:
+    """Write the figure after the results (a figure that cannot be written must not cost
+    the user the numbers); False when no --plot."""
+    if path is None:
+        return False
+    from hofto_hw.replay.run_plot import replay_figure, save_figure
+
+    save_figure(replay_figure(log, result.replayed, result.detector, result.replayed_tick), path)
+    return True

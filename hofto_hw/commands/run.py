@@ -17,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 
+from hofto_hw.commands.args import output_file
+
 DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "er3a.yaml"
 
 
@@ -31,6 +33,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--log-dir", type=Path, default=None, help="folder for the MCAP flight log (run.log_dir)"
     )
     parser.add_argument("--no-log", action="store_true", help="record no flight log")
+    parser.add_argument(
+        "--plot", type=output_file, metavar="PNG", help="draw the run from its log into PNG"
+    )
     parser.add_argument("--no-collision", action="store_true", help="no scripted collision")
     parser.add_argument(
         "--socket", type=Path, default=None, help="serve the control socket at this path"
@@ -100,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
     _check_duration(args.duration)
     if args.summary_json is not None:
         check_output(args.summary_json, "--summary-json", inputs=[args.config])
+    _check_plot(args)
     cfg = load_config(args.config)
     _check_interface(cfg, args.interface)
     if args.interface is not None and cfg.bus is not None:
@@ -116,6 +122,9 @@ def run(args: argparse.Namespace) -> int:
     if clock == "sim":
         realtime.drop_realtime()  # back-to-back ticks must not starve the machine
         rt_text += "; checked, then normal priority for the sim clock"
+    if args.no_log and cfg.run.live_view is not None:
+        print("hofto-hw run: run.live_view is off with --no-log (the log's writer serves it)",
+              file=sys.stderr)  # fmt: skip
     recorder = None if args.no_log else _start_recorder(cfg, args)
     try:
         system = build(cfg, clock=clock, sink=recorder, contact=not args.no_collision)
@@ -185,7 +194,22 @@ def run(args: argparse.Namespace) -> int:
     if args.summary_json is not None:  # after the summary is shown: a failure loses no figure
         write_atomic(args.summary_json, json.dumps(summary, indent=2) + "\n", "the summary")
     sys.stdout.flush()
+    if args.plot is not None and health is not None:
+        from hofto_hw.replay.run_plot import plot_run
+
+        plot_run(Path(log), args.plot)  # type: ignore[arg-type]
+        print(f"plot: {args.plot}")
     return 0
+
+
+def _check_plot(args: argparse.Namespace) -> None:
+    """--plot draws the run from its flight log: refused without one, or onto an input."""
+    from hofto_hw.commands.args import refuse_overwrite
+    from hofto_hw.errors import UserError
+
+    if args.plot is not None and args.no_log:
+        raise UserError("--plot: draws the run from its flight log; drop --no-log")
+    refuse_overwrite(args.plot, [args.config, args.summary_json], "--plot")
 
 
 def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
@@ -215,6 +239,8 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
             "observer_backend": kernels.resolve(observer_backend()),
         },
         event_kinds=dict(EVENT_NAMES),
+        tool_frame=cfg.robot.tool_frame,  # type: ignore[attr-defined]
+        live_view=_live_spec(cfg.run.live_view),  # type: ignore[attr-defined]
     )
     recorder = FlightRecorder(spec).start()
     for name, size, pid in recorder.removed_stale:
@@ -224,6 +250,15 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
             file=sys.stderr,
         )
     return recorder
+
+
+def _live_spec(live: object) -> object:
+    """run.live_view as the writer's LiveSpec (None: off)."""
+    if live is None:
+        return None
+    from hofto_hw.recording.live import LiveSpec
+
+    return LiveSpec(live.host, live.port, live.rate_hz)  # type: ignore[attr-defined]
 
 
 def _log_dir(cfg: object, config_path: Path) -> Path:

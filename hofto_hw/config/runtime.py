@@ -85,6 +85,19 @@ class ScriptedDragConfig(FileModel):
         return self
 
 
+class LiveViewConfig(FileModel):
+    """``run.live_view``: serve the logged topics live over Foxglove's WebSocket protocol
+    (from the flight recorder's writer process; docs/recording.md)."""
+
+    host: str = Field(
+        "127.0.0.1", min_length=1, description="bind address (the protocol has no login)"
+    )
+    port: Annotated[int, Field(ge=0, le=65535)] = Field(8765, description="TCP port; 0: any")
+    rate_hz: Annotated[float, Field(gt=0.0, le=1000.0)] = Field(
+        30.0, description="most messages per topic per second sent live (the log keeps all)"
+    )
+
+
 class RunConfig(FileModel):
     """The ``run:`` section: what ``hofto-hw run`` does on the simulated arm."""
 
@@ -101,6 +114,9 @@ class RunConfig(FileModel):
     log_dir: Path = Field(Path("out/logs"), description="folder of the flight-recorder logs")
     drag: ScriptedDragConfig | None = Field(
         None, description="scripted drag after the collision stop (needs a drag: section)"
+    )
+    live_view: LiveViewConfig | None = Field(
+        None, description="Foxglove live view of the logged topics (off when absent)"
     )
 
 

@@ -130,9 +130,10 @@ def fill_batch(dtype: np.dtype, template: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-def set_stamps(batch: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Write header stamps from ``t`` (n,) [s]; returns the stamps in integer ns (n,)."""
-    ns = np.round(np.asarray(t) * 1e9).astype(np.int64)
+def set_stamps(batch: np.ndarray, t: np.ndarray, origin_ns: int = 0) -> np.ndarray:
+    """Write header stamps ``origin_ns`` + ``t`` (n,) [s]; returns them in integer ns (n,).
+    The origin is added in integers: t round-trips exactly (replay needs its dt bit-exact)."""
+    ns = np.round(np.asarray(t) * 1e9).astype(np.int64) + origin_ns
     batch["sec"] = ns // 1_000_000_000
     batch["nanosec"] = ns % 1_000_000_000
     return ns
@@ -148,4 +149,39 @@ def tick_status_layout(n_joints: int = 0, sample_dt: bool = True) -> tuple[np.dt
     lay.doubles("qdd_cmd", n_joints)
     if sample_dt:
         lay.scalar("sample_dt", "f8")
+    return lay.build()
+
+
+def tf_message_layout(pairs: list[tuple[str, str]]) -> tuple[np.dtype, np.ndarray]:
+    """tf2_msgs/msg/TFMessage of ``len(pairs)`` transforms (parent frame, child frame), fixed
+    names: fields ``sec<i>``/``nanosec<i>``, ``translation<i>`` (3,) [m], ``rotation<i>`` (4,)
+    (x, y, z, w) per transform i."""
+    lay = CdrLayout().const_u32(len(pairs))
+    for i, (parent, child) in enumerate(pairs):
+        lay.scalar(f"sec{i}", "i4").scalar(f"nanosec{i}", "u4").const_string(parent)
+        lay.const_string(child)
+        lay.doubles(f"translation{i}", 3, sequence=False)
+        lay.doubles(f"rotation{i}", 4, sequence=False)
+    return lay.build()
+
+
+def set_tf_stamps(batch: np.ndarray, n_transforms: int, ns: np.ndarray) -> None:
+    """Every transform's header stamp of a TFMessage batch from ``ns`` (N,) [ns]."""
+    sec, nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+    for i in range(n_transforms):
+        batch[f"sec{i}"] = sec
+        batch[f"nanosec{i}"] = nanosec
+
+
+def string_message(text: str) -> bytes:
+    """std_msgs/msg/String as CDR."""
+    data = text.encode() + b"\x00"
+    return ENCAPSULATION + struct.pack("<I", len(data)) + data
+
+
+def thresholds_layout(observer: str, n_joints: int, contact: bool) -> tuple[np.dtype, np.ndarray]:
+    """hofto_hw_msgs/msg/CollisionThresholds: fields ``contact`` (n,) (absent when not
+    ``contact``) and ``collision`` (n,) [N·m]."""
+    lay = header(CdrLayout(), "").const_string(observer)
+    lay.doubles("contact", n_joints if contact else 0).doubles("collision", n_joints)
     return lay.build()

@@ -11,7 +11,18 @@ Topics (log time = publish time = the record's ``t`` in ns, sequence = tick mod 
 - ``/loop/status`` hofto_hw_msgs/TickStatus: mode, latched fault bits, bus status, wake-up
   and compute time [µs], one per tick;
 - ``/diagnostics`` diagnostic_msgs/DiagnosticArray (loop, bus, recorder health, 10 Hz);
-- ``/safety/events`` hofto_hw_msgs/SafetyEvent (see schemas.py for why a custom message).
+- ``/safety/events`` hofto_hw_msgs/SafetyEvent (see schemas.py for why a custom message);
+- when the log carries the URDF (attachment ``robot.urdf``): ``/robot_description``
+  std_msgs/String (the URDF, once per file), ``/tf_static`` (fixed joints, once per file) and
+  ``/tf`` tf2_msgs/TFMessage (each movable joint's link transform and the tool's aligned frame,
+  from the logged q at ``tf_rate_hz``), computed here with pinocchio (:mod:`frames`);
+- with the run's config attached and its two-level monitor: ``/safety/thresholds``
+  hofto_hw_msgs/CollisionThresholds, the contact/collision thresholds [N·m] the monitor
+  applied, re-computed from the records (hofto_hw.replay.levels_track), on judged ticks.
+
+Times: log time = stamp = ``origin_ns`` + the record's t [ns]; the writer process sets
+``origin_ns`` to the wall clock of the loop's t = 0 (metadata record ``hofto_hw.clock``), so a
+sim-clock run is stamped from its real start time.
 """
 
 from __future__ import annotations
@@ -29,8 +40,10 @@ from mcap_ros2._dynamic import serialize_dynamic
 
 from hofto_hw.recording import cdr
 from hofto_hw.recording import schemas as s
+from hofto_hw.recording.frames import ArmFrames, aligned_frame
 
 CHUNK_BYTES = 64 * 1024
+_AUTO = object()  # FlightFile(frames=...) not given: built from the URDF attachment
 #: tick-record fields copied into /loop/status
 _STATUS_FIELDS = (
     "tick",
@@ -55,6 +68,9 @@ class LogSpec:
     Rotation starts a new file after ``rotate_bytes`` or ``rotate_seconds`` (0 = never).
     ``flush_seconds`` bounds what a SIGKILL can lose (a chunk is closed at least that often).
     ``fail_after_bytes`` is a fault hook for tests: writes raise ENOSPC past that total.
+    ``tool_frame`` (URDF frame of the tool): the wrench's frame is its aligned frame (tool
+    origin, root axes) unless ``wrench_frame`` names one; ``tf_rate_hz`` bounds ``/tf``.
+    ``live_view``: serve the topics live over Foxglove's WebSocket protocol (None: off).
     """
 
     path: Path
@@ -64,6 +80,9 @@ class LogSpec:
     metadata: dict[str, str] = field(default_factory=dict)
     event_kinds: dict[int, str] = field(default_factory=dict)
     wrench_frame: str = ""
+    tool_frame: str = ""
+    tf_rate_hz: float = 50.0
+    live_view: Any = None  # hofto_hw.recording.live.LiveSpec
     compression: str = "zstd"
     chunk_bytes: int = CHUNK_BYTES
     rotate_bytes: int = 0
@@ -114,12 +133,39 @@ def rotated_path(path: Path, index: int) -> Path:
 
 class FlightFile:
     """An open MCAP file of a flight-recorder log. Every write may raise OSError (disk
-    full): the caller then abandons this file (:meth:`abandon`)."""
+    full): the caller then abandons this file (:meth:`abandon`).
 
-    def __init__(self, spec: LogSpec, path: Path, index: int) -> None:
+    ``origin_ns``: wall-clock ns of the loop's t = 0 (settable until the first write; 0 keeps
+    the loop's t). ``frames``: the arm's frames for /tf (built from the URDF attachment when
+    not given; None: no /tf). ``live``: a sink also offered the last message of each batch per topic
+    (:class:`hofto_hw.recording.live.LiveView`), or None."""
+
+    def __init__(
+        self,
+        spec: LogSpec,
+        path: Path,
+        index: int,
+        *,
+        origin_ns: int = 0,
+        frames: Any = _AUTO,
+        live: Any = None,
+        thresholds: Any = None,
+    ) -> None:
         self.path = path
         self.spec = spec
         self.messages = 0
+        self.origin_ns = origin_ns
+        self.live = live
+        #: hofto_hw.replay.levels_track.ThresholdTrack of the run (state carried across files)
+        self.track = thresholds
+        self._begun = False
+        self.urdf = urdf_text(spec)
+        if frames is _AUTO:
+            frames = None
+            if self.urdf is not None:
+                frames = ArmFrames(self.urdf, spec.joint_names, spec.tool_frame)
+        self.frames: ArmFrames | None = frames
+        self._tf_bucket = -1  # /tf decimation: the last tf_rate_hz period written
         self.file = CountingFile(path, spec.fail_after_bytes)
         comp = CompressionType.LZ4 if spec.compression == "lz4" else CompressionType.ZSTD
         self.w = Writer(self.file, chunk_size=spec.chunk_bytes, compression=comp)
@@ -133,17 +179,32 @@ class FlightFile:
             "event_kinds": json.dumps({str(k): v for k, v in spec.event_kinds.items()}),
             "file_index": str(index),
         }
+        if spec.tool_frame:
+            meta["tool_frame"] = spec.tool_frame
+        meta["wrench_frame"] = self.wrench_frame
         meta.update(spec.metadata)
         self.w.add_metadata(s.FLIGHT_METADATA, meta)
         for name, media_type, data in spec.attachments:
             self.w.add_attachment(0, 0, name, media_type, data)
 
+    @property
+    def wrench_frame(self) -> str:
+        spec = self.spec
+        if spec.wrench_frame or not spec.tool_frame:
+            return spec.wrench_frame
+        return aligned_frame(spec.tool_frame)
+
     def _channels(self, spec: LogSpec) -> None:
         names = spec.joint_names
+        self.topics: dict[int, str] = {}
 
         def channel(topic: str, type_name: str, msgdef: str) -> int:
             sid = self.w.register_schema(type_name, "ros2msg", msgdef.encode())
-            return self.w.register_channel(topic, "cdr", sid)
+            cid = self.w.register_channel(topic, "cdr", sid)
+            self.topics[cid] = topic
+            if self.live is not None:
+                self.live.declare(topic, type_name, msgdef)
+            return cid
 
         js = (s.JOINT_STATE_TYPE, s.JOINT_STATE_MSGDEF)
         self.ch_state = channel(s.JOINT_STATE_TOPIC, *js)
@@ -155,10 +216,22 @@ class FlightFile:
         )
         self.ch_event = channel(s.SAFETY_TOPIC, s.SAFETY_EVENT_TYPE, s.SAFETY_EVENT_MSGDEF)
         self.ch_status = channel(s.TICK_STATUS_TOPIC, s.TICK_STATUS_TYPE, s.TICK_STATUS_MSGDEF)
+        if self.frames is not None:
+            self.ch_urdf = channel(s.ROBOT_DESCRIPTION_TOPIC, s.STRING_TYPE, s.STRING_MSGDEF)
+            tf = (s.TF_MESSAGE_TYPE, s.TF_MESSAGE_MSGDEF)
+            self.ch_tf_static = channel(s.TF_STATIC_TOPIC, *tf)
+            self.ch_tf = channel(s.TF_TOPIC, *tf)
+            self.lay_tf = cdr.tf_message_layout(self.frames.moving_pairs)
+        if self.track is not None:
+            self.ch_thr = channel(
+                s.THRESHOLDS_TOPIC, s.COLLISION_THRESHOLDS_TYPE, s.COLLISION_THRESHOLDS_MSGDEF
+            )
+            two = len(self.track.levels) == 2
+            self.lay_thr = cdr.thresholds_layout(self.track.observer, len(names), two)
         self.lay_state = cdr.joint_state_layout(names, position=True, velocity=True, effort=True)
         self.lay_cmd = cdr.joint_state_layout(names, position=True, velocity=False, effort=False)
         self.lay_obs = cdr.joint_state_layout(names, position=False, velocity=False, effort=True)
-        self.lay_wrench = cdr.wrench_stamped_layout(spec.wrench_frame)
+        self.lay_wrench = cdr.wrench_stamped_layout(self.wrench_frame)
         self.lay_status = cdr.tick_status_layout(len(names))
         self.enc_diag = serialize_dynamic(s.DIAGNOSTIC_ARRAY_TYPE, s.DIAGNOSTIC_ARRAY_MSGDEF)[
             s.DIAGNOSTIC_ARRAY_TYPE
@@ -166,12 +239,42 @@ class FlightFile:
         self.enc_event = serialize_dynamic(s.SAFETY_EVENT_TYPE, s.SAFETY_EVENT_MSGDEF)[
             s.SAFETY_EVENT_TYPE
         ]
+        self.enc_tf = serialize_dynamic(s.TF_MESSAGE_TYPE, s.TF_MESSAGE_MSGDEF)[s.TF_MESSAGE_TYPE]
 
     @property
     def bytes(self) -> int:
         return self.file.written
 
     # ------------------------------------------------------------------ records
+    def _begin(self, ns: int) -> None:
+        """Once per file, at the first record's time ``ns``: the clock origin, and the
+        latched topics (the URDF, the fixed joints' transforms)."""
+        self._begun = True
+        self.w.add_metadata(s.CLOCK_METADATA, {"origin_ns": str(int(self.origin_ns))})
+        if self.frames is None or self.urdf is None:
+            return
+        self._add(self.ch_urdf, ns, cdr.string_message(self.urdf), 0)
+        msg = {
+            "transforms": [
+                {
+                    "header": _header(ns, parent),
+                    "child_frame_id": child,
+                    "transform": {
+                        "translation": dict(zip("xyz", xyz.tolist(), strict=True)),
+                        "rotation": dict(zip("xyzw", quat.tolist(), strict=True)),
+                    },
+                }
+                for parent, child, xyz, quat in self.frames.static()
+            ]
+        }
+        self._add(self.ch_tf_static, ns, self.enc_tf(msg), 0)
+
+    def _add(self, channel: int, ns: int, data: bytes, seq: int) -> None:
+        self.w.add_message(channel, ns, data, ns, seq)
+        self.messages += 1
+        if self.live is not None:
+            self.live.offer(self.topics[channel], data, ns)
+
     def _emit(self, channel: int, batch: np.ndarray, ns: np.ndarray, seq: np.ndarray) -> None:
         raw = batch.tobytes()
         size = batch.dtype.itemsize
@@ -179,26 +282,33 @@ class FlightFile:
         for i, (t_ns, k) in enumerate(zip(ns.tolist(), seq.tolist(), strict=True)):
             add(channel, t_ns, raw[i * size : (i + 1) * size], t_ns, k)
         self.messages += len(batch)
+        if self.live is not None and len(batch):
+            self.live.offer(self.topics[channel], raw[-size:], int(ns[-1]))
 
     def write_ticks(self, ticks: np.ndarray) -> None:
-        """Ticks (N,) of the tick dtype -> joint states, commands, observers, wrench."""
+        """Ticks (N,) of the tick dtype -> joint states, commands, observers, wrench, /tf."""
         n = len(ticks)
+        if n == 0:
+            return
+        origin = self.origin_ns
+        if not self._begun:
+            self._begin(origin + round(float(ticks["t"][0]) * 1e9))
         seq = ticks["tick"] & 0xFFFFFFFF
         b = cdr.fill_batch(*self.lay_state, n)
-        ns = cdr.set_stamps(b, ticks["t"])
+        ns = cdr.set_stamps(b, ticks["t"], origin)
         b["position"], b["velocity"], b["effort"] = ticks["q"], ticks["qd"], ticks["tau"]
         self._emit(self.ch_state, b, ns, seq)
         b = cdr.fill_batch(*self.lay_cmd, n)
-        cdr.set_stamps(b, ticks["t"])
+        cdr.set_stamps(b, ticks["t"], origin)
         b["position"] = ticks["q_cmd"]
         self._emit(self.ch_cmd, b, ns, seq)
         b = cdr.fill_batch(*self.lay_obs, n)
-        cdr.set_stamps(b, ticks["t"])
+        cdr.set_stamps(b, ticks["t"], origin)
         for i, ch in enumerate(self.ch_obs):
             b["effort"] = ticks["tau_ext"][:, i]
             self._emit(ch, b, ns, seq)
         b = cdr.fill_batch(*self.lay_status, n)
-        cdr.set_stamps(b, ticks["t"])
+        cdr.set_stamps(b, ticks["t"], origin)
         for name in _STATUS_FIELDS:
             b[name] = ticks[name]
         self._emit(self.ch_status, b, ns, seq)
@@ -206,14 +316,51 @@ class FlightFile:
         if have.any():
             w = ticks[have]
             b = cdr.fill_batch(*self.lay_wrench, len(w))
-            cdr.set_stamps(b, w["t"])
+            cdr.set_stamps(b, w["t"], origin)
             b["force"], b["torque"] = w["wrench"][:, :3], w["wrench"][:, 3:]
             self._emit(self.ch_wrench, b, ns[have], seq[have])
+        if self.frames is not None and self.spec.tf_rate_hz > 0:
+            self._write_tf(ticks, ns, seq)
+        if self.track is not None:
+            self._write_thresholds(ticks, ns, seq)
+
+    def _write_thresholds(self, ticks: np.ndarray, ns: np.ndarray, seq: np.ndarray) -> None:
+        """/safety/thresholds on the ticks the monitor judged."""
+        assert self.track is not None
+        thr = self.track.update(ticks)
+        judged = ticks["monitored"] != 0
+        if not judged.any():
+            return
+        b = cdr.fill_batch(*self.lay_thr, int(judged.sum()))
+        cdr.set_stamps(b, ticks["t"][judged], self.origin_ns)
+        b["collision"] = thr[judged, -1]
+        if len(self.track.levels) == 2:
+            b["contact"] = thr[judged, 0]
+        self._emit(self.ch_thr, b, ns[judged], seq[judged])
+
+    def _write_tf(self, ticks: np.ndarray, ns: np.ndarray, seq: np.ndarray) -> None:
+        """/tf for the first tick of each 1/tf_rate_hz period of the loop's t."""
+        assert self.frames is not None
+        bucket = np.floor(ticks["t"] * self.spec.tf_rate_hz).astype(np.int64)
+        prev = np.concatenate([[self._tf_bucket], bucket[:-1]])
+        keep = bucket != prev
+        self._tf_bucket = int(bucket[-1])
+        if not keep.any():
+            return
+        trans, quat = self.frames.moving(ticks["q"][keep])
+        b = cdr.fill_batch(*self.lay_tf, len(trans))
+        cdr.set_tf_stamps(b, len(self.frames.moving_pairs), ns[keep])
+        for i in range(len(self.frames.moving_pairs)):
+            b[f"translation{i}"] = trans[:, i]
+            b[f"rotation{i}"] = quat[:, i]
+        self._emit(self.ch_tf, b, ns[keep], seq[keep])
 
     def write_events(self, events: np.ndarray) -> None:
         """Safety events (N,) of EVENT_DTYPE."""
         for ev in events:
-            ns = round(float(ev["t"]) * 1e9)
+            ns = self.origin_ns + round(float(ev["t"]) * 1e9)
+            if not self._begun:
+                self._begin(ns)
             kind = int(ev["kind"])
             msg = {
                 "header": _header(ns, ""),
@@ -224,17 +371,18 @@ class FlightFile:
                 "category": int(ev["category"]),
                 "value": float(ev["value"]),
             }
-            self.w.add_message(
-                self.ch_event, ns, self.enc_event(msg), ns, int(ev["tick"]) & 0xFFFFFFFF
-            )
-            self.messages += 1
+            self._add(self.ch_event, ns, self.enc_event(msg), int(ev["tick"]) & 0xFFFFFFFF)
 
-    def write_diags(self, diags: np.ndarray, recorder: dict[str, int]) -> None:
-        """Diagnostics (N,) of DIAG_DTYPE plus the writer's own counters ``recorder``."""
+    def write_diags(
+        self, diags: np.ndarray, recorder: dict[str, int], timing: dict[str, float] | None = None
+    ) -> None:
+        """Diagnostics (N,) of DIAG_DTYPE plus the writer's own counters ``recorder`` and the
+        loop's timing the writer measured from the ticks (``timing``, see diag_message)."""
         for d in diags:
-            ns = round(float(d["t"]) * 1e9)
-            self.w.add_message(self.ch_diag, ns, self.enc_diag(diag_message(d, recorder)), ns, 0)
-            self.messages += 1
+            ns = self.origin_ns + round(float(d["t"]) * 1e9)
+            if not self._begun:
+                self._begin(ns)
+            self._add(self.ch_diag, ns, self.enc_diag(diag_message(d, recorder, timing, ns)), 0)
 
     def flush(self) -> None:
         """Close the chunk in progress (bounds what a SIGKILL loses)."""
@@ -253,6 +401,16 @@ class FlightFile:
             pass
 
 
+def urdf_text(spec: LogSpec) -> str | None:
+    """The URDF attachment of ``spec`` as text, or None."""
+    from hofto_hw.recording.attachments import URDF
+
+    for name, _media, data in spec.attachments:
+        if name == URDF:
+            return data.decode()
+    return None
+
+
 def _header(ns: int, frame_id: str) -> dict[str, Any]:
     return {
         "stamp": {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000},
@@ -264,10 +422,20 @@ def _kv(values: dict[str, Any]) -> list[dict[str, str]]:
     return [{"key": k, "value": str(v)} for k, v in values.items()]
 
 
-def diag_message(d: np.ndarray, recorder: dict[str, int]) -> dict[str, Any]:
-    """A DiagnosticArray dict: loop, bus and recorder status from one diag record."""
-    ns = round(float(d["t"]) * 1e9)
+def diag_message(
+    d: np.ndarray,
+    recorder: dict[str, int],
+    timing: dict[str, float] | None = None,
+    ns: int | None = None,
+) -> dict[str, Any]:
+    """A DiagnosticArray dict: loop, bus and recorder status from one diag record, stamped
+    ``ns`` (default: the record's t). ``timing`` (``wakeup_p99_us``, ``compute_p99_us``):
+    the loop's timing over the ticks logged so far, which the writer measures from the tick
+    records whether or not systemd supervises the run; the record's own values otherwise."""
+    ns = round(float(d["t"]) * 1e9) if ns is None else ns
     loop = {k: d[k].item() for k in ("ticks", "overruns", "wakeup_p99_us", "compute_p99_us")}
+    if timing:
+        loop.update(timing)
     bus_errors = int(d["bus_errors"])
     rec = dict(recorder, dropped_records=int(d["dropped_records"]))
     rec_level = 2 if recorder.get("failing") else (1 if rec["dropped_records"] else 0)

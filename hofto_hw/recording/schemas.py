@@ -136,3 +136,49 @@ def observer_topic(name: str) -> str:
 #: metadata record name and format tag of flight-recorder files
 FLIGHT_METADATA = "hofto_hw.flight"
 FLIGHT_FORMAT = "hofto-hw/flight-recorder"
+
+# ------------------------------------------------------------- what draws the arm in 3D
+
+STRING_TYPE = "std_msgs/msg/String"
+STRING_MSGDEF = "string data"
+
+TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
+TF_MESSAGE_MSGDEF = _msgdef(
+    ["geometry_msgs/TransformStamped[] transforms"],
+    [
+        "MSG: geometry_msgs/TransformStamped",
+        "std_msgs/Header header",
+        "string child_frame_id",
+        "Transform transform",
+    ],
+    _HEADER,
+    _TIME,
+    ["MSG: geometry_msgs/Transform", "Vector3 translation", "Quaternion rotation"],
+    ["MSG: geometry_msgs/Vector3", "float64 x", "float64 y", "float64 z"],
+    ["MSG: geometry_msgs/Quaternion", "float64 x", "float64 y", "float64 z", "float64 w"],
+)
+
+#: the URDF as std_msgs/String, once at the start of each file (latched, as robot_state_publisher)
+ROBOT_DESCRIPTION_TOPIC = "/robot_description"
+#: each movable joint's transform parent link -> child link (and the tool's aligned frame),
+#: from the logged joint positions at LogSpec.tf_rate_hz
+TF_TOPIC = "/tf"
+#: the fixed joints' transforms, once at the start of each file
+TF_STATIC_TOPIC = "/tf_static"
+
+#: metadata record with ``origin_ns``: the wall-clock time [ns since the Unix epoch] of the
+#: loop's t = 0. Log times and stamps are origin_ns + round(t·1e9); logs without it have
+#: origin 0 (stamps from the loop's t alone).
+CLOCK_METADATA = "hofto_hw.clock"
+
+#: The contact and collision thresholds [N·m] per joint the loop's monitor applied to the
+#: detector observer's estimate, re-computed by the writer process from the logged records
+#: (hofto_hw.replay.levels_track), on the ticks the monitor judged. ``contact`` is empty when
+#: the monitor has one level.
+COLLISION_THRESHOLDS_TYPE = "hofto_hw_msgs/msg/CollisionThresholds"
+COLLISION_THRESHOLDS_MSGDEF = _msgdef(
+    ["std_msgs/Header header", "string observer", "float64[] contact", "float64[] collision"],
+    _HEADER,
+    _TIME,
+)
+THRESHOLDS_TOPIC = "/safety/thresholds"

@@ -14,13 +14,16 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import time
 
 import numpy as np
 
 from hofto_hw.recording import shared as sh
-from hofto_hw.recording.flight_file import FlightFile, LogSpec, rotated_path
+from hofto_hw.recording.flight_file import FlightFile, LogSpec, rotated_path, urdf_text
+from hofto_hw.recording.frames import ArmFrames
 from hofto_hw.recording.record import tick_dtype
+from hofto_hw.runtime.timing import Histogram
 
 IDLE_SLEEP = 0.005  # [s] between polls of empty rings (5 ms: 5 records at 1 kHz)
 TERM_GRACE = 10.0  # [s] after a SIGTERM to this process before it finishes by itself
@@ -50,6 +53,22 @@ class _Writer:
         self.flushed_at = 0.0
         self.retry_at = 0.0
         self.bytes_closed = 0
+        #: wall-clock ns of the loop's t = 0: the wall clock when the first records are
+        #: drained minus their t (within a drain period, ~5 ms); None until then
+        self.origin_ns: int | None = None
+        urdf = urdf_text(spec)
+        self.frames = _frames(urdf, spec) if urdf else None
+        #: the loop's timing over every tick drained, for /diagnostics (systemd or not)
+        self.wakeup, self.compute = Histogram(), Histogram()
+        self.track = _thresholds(spec)
+        self.live = None
+        if spec.live_view is not None:
+            from hofto_hw.recording.live import LiveView
+
+            try:
+                self.live = LiveView(spec.live_view)
+            except ImportError as exc:  # the log goes on without the view
+                print(f"hofto-hw flight recorder: no live view: {exc}", file=sys.stderr)
 
     def counters(self) -> dict[str, int]:
         c = self.ctl
@@ -61,13 +80,29 @@ class _Writer:
             "failing": int(c[sh.FAILING]),
         }
 
+    def timing(self) -> dict[str, float]:
+        """p99 wake-up and compute time [µs] over the ticks drained (empty before any)."""
+        if self.compute.n == 0:
+            return {}
+        return {
+            "wakeup_p99_us": self.wakeup.percentile(99.0),
+            "compute_p99_us": self.compute.percentile(99.0),
+        }
+
     def _open(self, now: float) -> None:
         """Open the next free file name (existing files are never overwritten)."""
         while True:
             path = rotated_path(self.spec.path, self.index)
             self.index += 1
             try:
-                self.file = FlightFile(self.spec, path, self.index - 1)
+                self.file = FlightFile(
+                    self.spec,
+                    path,
+                    self.index - 1,
+                    frames=self.frames,
+                    live=self.live,
+                    thresholds=self.track,
+                )
                 break
             except FileExistsError:
                 continue
@@ -93,6 +128,14 @@ class _Writer:
         b = self.block
         ticks, events, diags = b.ticks.drain(), b.events.drain(), b.diags.drain()
         n = len(ticks) + len(events) + len(diags)
+        if self.origin_ns is None and n:
+            t0 = min(float(r["t"][0]) for r in (ticks, events, diags) if len(r))
+            self.origin_ns = time.time_ns() - round(t0 * 1e9)
+        if len(ticks):
+            self.wakeup.add_many(ticks["wakeup_us"])
+            self.compute.add_many(ticks["compute_us"])
+        if self.live is not None:
+            self.live.poll()
         if self.file is None and now >= self.retry_at:
             try:
                 self._open(now)
@@ -104,13 +147,15 @@ class _Writer:
             self.ctl[sh.LOST] += n
             return n
         counted = False
+        if not self.file.messages:
+            self.file.origin_ns = self.origin_ns or 0
         try:
             if len(ticks):
                 self.file.write_ticks(ticks)
             if len(events):
                 self.file.write_events(events)
             if len(diags):
-                self.file.write_diags(diags, self.counters())
+                self.file.write_diags(diags, self.counters(), self.timing())
             self.ctl[sh.RECORDS] += n
             counted = True
             if now - self.flushed_at >= self.spec.flush_seconds:
@@ -156,6 +201,43 @@ class _Writer:
         self.file = None
 
 
+def _frames(urdf: str, spec: LogSpec) -> ArmFrames | None:
+    """The arm's frames for /tf; None (a log without /tf, said on stderr) if the URDF does
+    not give them: the log itself must not depend on it."""
+    try:
+        return ArmFrames(urdf, spec.joint_names, spec.tool_frame)
+    except (ValueError, RuntimeError) as exc:
+        print(f"hofto-hw flight recorder: no /tf in the log: {exc}", file=sys.stderr)
+        return None
+
+
+def _thresholds(spec: LogSpec) -> object | None:
+    """The monitor's thresholds re-computed from the records (/safety/thresholds) when the
+    log carries the run's config; None otherwise (said on stderr when it should have)."""
+    from hofto_hw.recording.attachments import CONFIG
+
+    attached = {name: data for name, _media, data in spec.attachments}
+    if CONFIG not in attached or not spec.observers:
+        return None
+    try:
+        from hofto_hw.replay.levels_track import ThresholdTrack
+
+        track = ThresholdTrack(attached, spec.metadata, spec.joint_names, spec.observers)
+        if track.mon.backend != "numba":  # numpy: ~250 µs per tick, a quarter of a 1 kHz tick
+            print(
+                "hofto-hw flight recorder: no /safety/thresholds (the run's monitor is not on "
+                "the compiled kernels; `hofto-hw log plot` draws them from the log)",
+                file=sys.stderr,
+            )
+            return None
+        return track
+    except LookupError:  # a thresholds-file monitor (older runs, tests): nothing to track
+        return None
+    except Exception as exc:  # the log must not depend on it
+        print(f"hofto-hw flight recorder: no /safety/thresholds: {exc}", file=sys.stderr)
+        return None
+
+
 def writer_main(
     shm_name: str,
     n_joints: int,
@@ -192,6 +274,8 @@ def writer_main(
         raise
     if ctl[sh.STATE] != sh.FAILED:
         ctl[sh.STATE] = sh.FINISHED
+    if w.live is not None:
+        w.live.close()
     del ctl, w
     block.close()
 

@@ -3,7 +3,8 @@
 JointState topics are decoded through the fixed CDR layout the writer used (one numpy view
 over all messages; a message of another size falls back to mcap_ros2's decoder), the safety
 events with mcap_ros2's decoder. Ticks come from the messages' sequence numbers (tick mod
-2³², unwrapped here).
+2³², unwrapped here). Times are the loop's t [s]: the stamps less the log's clock origin
+(``hofto_hw.clock`` metadata; logs without it were stamped with t alone).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from numpy.typing import NDArray
 from hofto_hw.errors import UserError
 from hofto_hw.recording import cdr
 from hofto_hw.recording import schemas as s
+from hofto_hw.recording.reader import clock_origin_ns
 from hofto_hw.recording.recover import check_magic
 
 FloatArray = NDArray[np.float64]
@@ -64,6 +66,11 @@ class FlightLog:
     #: (N,) [s] the interval the loop's observers integrated in each tick (the bus's sample
     #: interval with EtherCAT DC; 0 where they held over a lost sample); None in older logs
     sample_dt: FloatArray | None = None
+    #: (N,) from /loop/status (None in older logs): controller mode code
+    #: (hofto_hw.control.joint_motion), wake-up and compute time of the tick [µs]
+    mode: NDArray[np.uint8] | None = None
+    wakeup_us: FloatArray | None = None
+    compute_us: FloatArray | None = None
 
     @property
     def n_ticks(self) -> int:
@@ -130,6 +137,7 @@ def read_flight_log(path: Path) -> FlightLog:
     with path.open("rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         attachments = {a.name: a.data for a in reader.iter_attachments()}
+        origin = clock_origin_ns(reader)
         for _schema, channel, message in reader.iter_messages(topics=topics, log_time_order=True):
             raw[channel.topic].append(message.data)
             seq[channel.topic].append(message.sequence)
@@ -142,7 +150,7 @@ def read_flight_log(path: Path) -> FlightLog:
     ticks = _unwrap(np.asarray(seq[s.JOINT_STATE_TOPIC], dtype=np.int64))
     log = FlightLog(
         path=path,
-        t=np.asarray(stamps, dtype=np.int64) * 1e-9,
+        t=(np.asarray(stamps, dtype=np.int64) - origin) * 1e-9,  # the loop's t, exactly
         ticks=ticks,
         q=np.array(js["position"]),
         qd=np.array(js["velocity"]),
@@ -167,7 +175,7 @@ def read_flight_log(path: Path) -> FlightLog:
         log.events.append(
             RecordedEvent(
                 tick=int(ev.tick),
-                t=ev.header.stamp.sec + 1e-9 * ev.header.stamp.nanosec,
+                t=(ev.header.stamp.sec * 1_000_000_000 + ev.header.stamp.nanosec - origin) * 1e-9,
                 kind=int(ev.kind),
                 kind_name=ev.kind_name or kinds.get(str(ev.kind), ""),
                 joint=int(ev.joint),
@@ -192,6 +200,9 @@ def _tick_status(log: FlightLog, raws: list[bytes]) -> None:
     st = np.frombuffer(b"".join(raws), dtype=dtype)
     log.monitored = np.array(st["monitored"], dtype=np.uint8)
     log.qdd_cmd = np.array(st["qdd_cmd"], dtype=float).reshape(log.n_ticks, -1)
+    log.mode = np.array(st["mode"], dtype=np.uint8)
+    log.wakeup_us = np.array(st["wakeup_us"], dtype=float)
+    log.compute_us = np.array(st["compute_us"], dtype=float)
     if with_dt:
         log.sample_dt = np.array(st["sample_dt"], dtype=float)
 

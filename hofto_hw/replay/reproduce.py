@@ -79,6 +79,8 @@ class Reproduction:
     replayed_tick: int | None
     replayed_joints: list[int]
     max_abs_diff: dict[str, float] = field(default_factory=dict)
+    #: observer name -> replayed estimate (N, n) [N·m] (for the figure of `replay --plot`)
+    replayed: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
     def match(self) -> bool:
@@ -275,6 +277,7 @@ def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
         replayed_tick=None if k is None else int(log.ticks[k]),
         replayed_joints=joints,
         max_abs_diff=diffs,
+        replayed=replayed,
     )
 
 

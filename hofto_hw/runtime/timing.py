@@ -25,6 +25,15 @@ class Histogram:
             self.max = us
         self.n += 1
 
+    def add_many(self, us: np.ndarray) -> None:
+        """:meth:`add` for a batch of durations (the flight recorder's writer; allocates)."""
+        if len(us) == 0:
+            return
+        i = np.clip(np.asarray(us, dtype=np.float64), 0.0, float(self.last)).astype(np.int64)
+        self.counts += np.bincount(i, minlength=self.last + 1)
+        self.max = max(self.max, float(np.max(us)))
+        self.n += len(us)
+
     def reset(self) -> None:
         self.counts.fill(0)
         self.max = 0.0

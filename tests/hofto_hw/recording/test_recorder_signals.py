@@ -13,6 +13,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from hofto_hw.cli import main as cli_main
+from hofto_hw.recording.reader import clock_origin_ns
 from hofto_hw.recording.schemas import (
     JOINT_STATE_TOPIC,
     SAFETY_TOPIC,
@@ -34,8 +35,17 @@ def decode_all(path, topic):
     return np.array(seqs), msgs
 
 
-def check_joint_states(seqs, msgs, n):
-    """Ticks 0..n-1 once each, with the values flight_child.py pushed."""
+def origin_of(path) -> int:
+    """The log's wall-clock origin [ns]: the loop's t = 0 happened while this test ran."""
+    with open(path, "rb") as f:
+        origin = clock_origin_ns(make_reader(f))
+    assert abs(origin - time.time_ns()) < 600 * 10**9
+    return origin
+
+
+def check_joint_states(seqs, msgs, n, origin):
+    """Ticks 0..n-1 once each, with the values flight_child.py pushed, stamped from the
+    wall clock of the run's start plus the loop's t."""
     order = np.argsort(seqs)
     assert np.array_equal(seqs[order], np.arange(n))
     for k in (0, n // 2, n - 1):
@@ -43,7 +53,7 @@ def check_joint_states(seqs, msgs, n):
         assert msg.name == [f"joint_{j + 1}" for j in range(6)]
         assert np.allclose(msg.position, k * 1e-3 + np.arange(6))
         assert np.allclose(msg.velocity, 0.5) and np.allclose(msg.effort, -1.0)
-        assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == round(k * 1e6)
+        assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == origin + round(k * 1e6)
 
 
 def test_sigterm_gives_a_complete_file_with_every_tick(tmp_path, child_factory):
@@ -58,7 +68,7 @@ def test_sigterm_gives_a_complete_file_with_every_tick(tmp_path, child_factory):
     assert health["state"] == "finished"
     seqs, msgs = decode_all(out, JOINT_STATE_TOPIC)
     assert len(msgs) == N_TICKS
-    check_joint_states(seqs, msgs, N_TICKS)
+    check_joint_states(seqs, msgs, N_TICKS, origin_of(out))
     for name in ("hofto", "momentum", "eso"):
         seqs, msgs = decode_all(out, observer_topic(name))
         assert len(msgs) == N_TICKS and np.allclose(msgs[-1].effort, 0.25)
@@ -94,7 +104,7 @@ def test_sigkill_then_recover_keeps_every_flushed_tick(tmp_path, child_factory, 
     seqs, msgs = decode_all(fixed, JOINT_STATE_TOPIC)
     # Records count ticks + events + diags; this child pushes one event and no diags.
     assert len(msgs) >= flushed - 1
-    check_joint_states(seqs, msgs, len(msgs))
+    check_joint_states(seqs, msgs, len(msgs), origin_of(fixed))
     with open(fixed, "rb") as f:
         assert {a.name for a in make_reader(f).iter_attachments()} == {
             "config.yaml",
@@ -118,7 +128,7 @@ def test_sigkill_of_the_loop_alone_lets_the_writer_finish_the_file(tmp_path, chi
         time.sleep(0.05)
     seqs, msgs = decode_all(out, JOINT_STATE_TOPIC)  # the indexed reader: file is complete
     assert len(msgs) >= flushed - 1
-    check_joint_states(seqs, msgs, len(msgs))
+    check_joint_states(seqs, msgs, len(msgs), origin_of(out))
 
 
 def pid_alive(pid: int) -> bool:

@@ -29,10 +29,11 @@ def run_log(tmp_path_factory) -> tuple[Path, dict]:
     summary = folder / "summary.json"
     cmd = [sys.executable, "-m", "hofto_hw.cli", "run", "--config", str(CONFIG)]
     cmd += ["--clock", "sim", "--duration", "3.8", "--log-dir", str(folder)]
-    cmd += ["--summary-json", str(summary)]
+    cmd += ["--summary-json", str(summary), "--plot", str(folder / "run.png")]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
+    assert f"plot: {folder / 'run.png'}" in proc.stdout
     (log,) = folder.glob("*.mcap")
     return log, json.loads(summary.read_text())
 
@@ -87,3 +88,118 @@ def test_replayed_estimates_follow_the_runs_reset(run_log) -> None:
         diff = np.abs(rep._run_with_dt(obs, log, dt) - log.tau_ext[name]).max(axis=1)
         assert diff[200:].max() < 1e-9, (name, float(diff[200:].max()))
         assert diff[after:].max() < 1e-9
+
+
+# ------------------------------------------------------------------ the pictures of a run
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def test_run_plot_draws_every_panel(run_log) -> None:
+    """`run --plot` wrote the figure; its panels: joints, per-joint torque against both
+    thresholds with the collision marked, the stop, drag (none in 3.8 s), loop timing."""
+    from hofto_hw.replay.run_plot import run_figure, titles
+
+    path, summary = run_log
+    assert (path.parent / "run.png").read_bytes()[:8] == PNG
+    fig = run_figure(read_flight_log(path))
+    names = titles(fig)
+    assert names[0] == "joint positions"
+    torque = [t for t in names if t.endswith("estimated external torque vs thresholds")]
+    assert len(torque) == 6
+    stop = next(t for t in names if t.startswith("stop: "))
+    col = next(e for e in summary["events"] if e["kind"] == "collision")
+    assert stop.startswith("stop: collision (category 1)")
+    assert f"at rest after {col['stopping_time_ms']:.0f} ms" in stop  # the summary's figure
+    assert "drag: none in this run" in names
+    assert any(t.startswith("loop timing: compute median") for t in names)
+    ax = next(a for a in fig.axes if a.get_title() == torque[1])
+    labels = {line.get_label() for line in ax.get_lines()}
+    assert {"hofto estimate", "contact threshold", "collision threshold"} <= labels
+    thr = next(line for line in ax.get_lines() if line.get_label() == "collision threshold")
+    assert np.nanmin(thr.get_ydata()) > 0.0  # a threshold was computed on judged ticks
+
+
+def test_log_plot_writes_next_to_the_log_and_never_overwrites(run_log, tmp_path, capsys):
+    path = run_log[0]
+    out = tmp_path / "fig.png"
+    assert main(["log", "plot", str(path), "-o", str(out)]) == 0
+    assert out.read_bytes()[:8] == PNG
+    copy = tmp_path / "copy.mcap"
+    copy.write_bytes(path.read_bytes())
+    assert main(["log", "plot", str(copy)]) == 0
+    assert (tmp_path / "copy.png").read_bytes()[:8] == PNG
+    assert main(["log", "plot", str(copy)]) == 2  # the default exists: name it with -o
+    assert "exists" in capsys.readouterr().err
+    assert main(["log", "plot", str(copy), "-o", str(copy)]) == 2
+    assert copy.read_bytes() == path.read_bytes()
+
+
+def test_drag_panel_shows_the_tool_speed_in_drag_mode(run_log) -> None:
+    from hofto_hw.control.joint_motion import DRAG
+    from hofto_hw.replay.run_plot import run_figure, titles
+
+    log = read_flight_log(run_log[0])
+    assert log.mode is not None
+    mode = log.mode.copy()
+    mode[1000:1500] = DRAG  # the demo path, moving: a nonzero tool speed
+    names = titles(run_figure(dataclasses.replace(log, mode=mode)))
+    drag = next(t for t in names if t.startswith("drag: "))
+    assert drag.startswith("drag: tool speed, max") and "over 0.50 s in drag mode" in drag
+    assert float(drag.split("max ")[1].split(" mm/s")[0]) > 10.0
+
+
+def test_replay_plot_writes_recorded_vs_replayed_per_joint(run_log, tmp_path, capsys):
+    from hofto_hw.replay.run_plot import replay_figure, titles
+
+    out = tmp_path / "replay.png"
+    assert main(["replay", str(run_log[0]), "--plot", str(out)]) == 0
+    assert f"plot: {out}" in capsys.readouterr().out
+    assert out.read_bytes()[:8] == PNG
+    log = read_flight_log(run_log[0])
+    r = reproduce(log)
+    names = titles(replay_figure(log, r.replayed, r.detector, r.replayed_tick))
+    assert len(names) == 6
+    assert all("hofto estimate, recorded vs replayed" in t for t in names)
+
+
+def test_replay_plot_refuses_to_overwrite_the_log(run_log, tmp_path, capsys) -> None:
+    copy = tmp_path / "copy.mcap"
+    copy.write_bytes(run_log[0].read_bytes())
+    assert main(["replay", str(copy), "--plot", str(copy)]) == 2
+    err = capsys.readouterr().err
+    assert "refusing to overwrite" in err and len(err.strip().splitlines()) == 1
+    assert copy.read_bytes() == run_log[0].read_bytes()
+
+
+def test_run_plot_without_a_log_is_refused_before_the_run(tmp_path, capsys) -> None:
+    assert main(["run", "--no-log", "--plot", str(tmp_path / "x.png")]) == 2
+    assert "drop --no-log" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_the_log_carries_the_monitor_s_thresholds_as_replay_computes_them(run_log) -> None:
+    """/safety/thresholds (computed by the writer process batch by batch while the run went)
+    equals the thresholds re-computed from the whole log, on every judged tick."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from hofto_hw.recording import schemas as s
+    from hofto_hw.replay.run_plot import _thresholds
+
+    log = read_flight_log(run_log[0])
+    observer, thr, levels = _thresholds(log)
+    assert observer == "hofto" and levels == ("contact", "collision") and thr is not None
+    with run_log[0].open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        msgs = [
+            (m.sequence, msg)
+            for _s, _c, m, msg in reader.iter_decoded_messages(topics=[s.THRESHOLDS_TOPIC])
+        ]
+    assert log.monitored is not None
+    judged = np.flatnonzero(log.monitored)
+    assert [k for k, _ in msgs] == list(log.ticks[judged])
+    assert all(msg.observer == "hofto" for _, msg in msgs)
+    logged = np.array([[msg.contact, msg.collision] for _, msg in msgs])
+    assert np.array_equal(logged, thr[judged])
+    assert (logged[:, 1] > logged[:, 0]).all()  # collision above contact everywhere
