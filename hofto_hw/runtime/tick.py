@@ -51,8 +51,6 @@ from hofto_hw.recording.record import (
     tick_dtype,
 )
 from hofto_hw.runtime.fused import (
-    A_IDH,
-    A_SH,
     CONTROL,
     DONE,
     HOLD_STILL,
@@ -67,11 +65,14 @@ from hofto_hw.runtime.fused import (
     R_MFLAGS,
     R_MODE,
     R_OBS_DT,
+    R_PERIOD,
     R_REC_MON,
     R_SINCE,
     R_SIZE,
+    R_STALL,
     R_T0,
     R_TCMD,
+    R_TWO,
     R_WAS_CONTACT,
     READ,
     FusedTick,
@@ -79,7 +80,13 @@ from hofto_hw.runtime.fused import (
 )
 from hofto_hw.runtime.fused import say_once as fused_say_once
 from hofto_hw.runtime.teach import FINISHED, RECORDING
-from hofto_hw.runtime.tick_kernels import ESTIMATES_FINITE, POWER_ON, tick_flags, tick_flags_numpy
+from hofto_hw.runtime.tick_kernels import (
+    ESTIMATES_FINITE,
+    POWER_ON,
+    POWERED,
+    tick_flags,
+    tick_flags_numpy,
+)
 from safety.bus_health import BusHealth
 from safety.collision import COLLIDED, CONTACT, CollisionLevels
 from safety.limits import LimitMonitor
@@ -94,9 +101,7 @@ MAX_STOPS = 256  # stop episodes kept for the summary
 MAX_SUBSTEPS = 250  # observer steps over one stalled gap at most (cost: one step each)
 FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
 _DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
-#: the power stage is on (a quick-stop ramp keeps it on until each axis rests)
 _COLLIDED_OR_CONTACT = COLLIDED | CONTACT  # the monitor's flags
-_POWERED = np.array([_OE, _QSA], dtype=np.uint8)
 
 
 def gap_steps(dt: float, period: float) -> int:
@@ -285,7 +290,7 @@ class Tick:
         # the common tick as one compiled call (fused.py): built on the arrays above, taken
         # only on ticks where nothing unusual can happen (_fuse_refresh keeps _fuse_quiet)
         self._fz: FusedTick | None = None
-        self._fz_rebind = False  # a reset may have rebound an owner's array: check the table
+        self._fz_args: tuple[Any, ...] = ()
         self._fuse_quiet = False
         self._fz_kind = OTHER
         self._cmd_dt = 0.0
@@ -297,7 +302,7 @@ class Tick:
         if fuse and self.backend == "numba":
             fz = FusedTick(self)
             if fz.ok:
-                self._fz, self._fz_tab, self._fz_call = fz, fz.tab, fz.call
+                self._fz = fz
             else:
                 fused_say_once("the tick runs without its fused call: " + fz.why)
 
@@ -411,7 +416,7 @@ class Tick:
         # checks, which name the joint, run only when something is not
         ok = snap.finite or (lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau))
         # one call: the estimates' finiteness, the power stage, motion.qdd into the record
-        flags = self._flags(self.tau_ext, g.states, _POWERED, motion.qdd, self._qdd_rec)
+        flags = self._flags(self.tau_ext, g.states, POWERED, motion.qdd, self._qdd_rec)
         if not flags & ESTIMATES_FINITE:
             for i in range(len(self.observers)):
                 ok &= lim.finite(stop, self.tau_ext[i])
@@ -530,9 +535,8 @@ class Tick:
         if m.revision != rev or m.friction is not fr or m.payload is not pl:
             return READ  # a model change: the reference takes it (and refreshes)
         stage = self._fz_call(
-            self._fz_tab, self._rec1, self.t, dt, self._transport.sample_dt, self.tick,
-            wakeup_us, compute_us,
-        )  # fmt: skip
+            *self._fz_args, self.t, dt, self._transport.sample_dt, self.tick, wakeup_us, compute_us
+        )
         if stage == READ:
             return READ
         if stage >= MONITOR:  # good data, judged by the call (what bus.check does on it)
@@ -557,26 +561,19 @@ class Tick:
         elif self._fz is None:
             fz = FusedTick(self)
             if fz.ok:
-                self._fz, self._fz_tab, self._fz_call = fz, fz.tab, fz.call
+                self._fz = fz
                 self._fuse_refresh()
 
     def _fuse_refresh(self, rebuild: bool = True) -> None:
         """After a tick the fused call did not finish, at start and after a script's step:
-        whether the next one may take it, and the register's slow scalars (off the common
-        path). After a reset or start (``_check_bank``), unless ``rebuild`` is False: check
-        the table still addresses its owners' arrays (a new bank: a new table)."""
+        whether the next one may take it, its arguments (the parts' arrays as they hold them
+        now; not after a script's step, ``rebuild`` False) and the register's slow scalars
+        (off the common path)."""
         fz = self._fz
         if fz is None:
             return
-        rebind, self._fz_rebind = self._fz_rebind and rebuild, self._fz_rebind and not rebuild
-        if self._bank is not fz.bank or (rebind and not fz.bound()):
-            self._fz = fz = FusedTick(self)  # a new bank (a reset), or an array rebound
-            if not fz.ok:
-                fused_say_once("the tick runs without its fused call: " + fz.why)
-                self._fz = None
-                self._fuse_quiet = False
-                return
-            self._fz_tab, self._fz_call = fz.tab, fz.call
+        if rebuild or not self._fz_args:
+            self._fz_args = fz.args()
         stop, m, g, snap = self.stop, self.motion, self.group, self.snapshot
         model = self.feedforward.model
         ff = self.feedforward
@@ -588,9 +585,6 @@ class Tick:
             and ff._native.revision == model.revision  # type: ignore[union-attr]
             and self._ff_model == (model.revision, model.friction, model.payload)
         )
-        if synced:  # a parameter change made new C++ models (native.NativeModel.sync)
-            fz.tab[A_SH] = snap._native.handle  # type: ignore[union-attr]
-            fz.tab[A_IDH] = ff._native.handle  # type: ignore[union-attr]
         self._fuse_quiet = bool(
             synced
             and stop.latched == 0
@@ -626,6 +620,7 @@ class Tick:
         c = self.collision
         r[R_WAS_CONTACT] = 1.0 if c is not None and c._was_contact else 0.0
         r[R_FFSTALE] = 0.0
+        r[R_PERIOD], r[R_STALL], r[R_TWO] = self.period, self._stall_dt, 2.0
 
     # ------------------------------------------------------------- tick helpers
 
@@ -658,7 +653,6 @@ class Tick:
         than a bank that goes on integrating the arrays it dropped."""
         if not self._bank.bound():
             self._bank = ObserverBank(self.observers, self.snapshot, self.tau_ext)
-        self._fz_rebind = True  # the fused call's table checked again (_fuse_refresh)
 
     def _keep_sample(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
         g = self.group
@@ -893,7 +887,7 @@ class Tick:
     def _warm_flags(self) -> None:
         # on the tick's own arrays (the record's field is an unaligned view: its own signature);
         # it copies motion.qdd into the record, as every tick does
-        tick_flags(self.tau_ext, self.group.states, _POWERED, self.motion.qdd, self._qdd_rec)
+        tick_flags(self.tau_ext, self.group.states, POWERED, self.motion.qdd, self._qdd_rec)
 
     def _warm_record(self) -> None:
         g, scratch = self.group, np.zeros(1, dtype=self.tick_rec.dtype)

@@ -13,12 +13,15 @@ import math
 
 import numpy as np
 
+from drivers.cia402.state_machine import State
 from hofto_hw.observers.kernels import jit
 
 #: bit of :func:`tick_flags`'s answer: every estimate in ``tau_ext`` is finite
 ESTIMATES_FINITE = 1
 #: bit of :func:`tick_flags`'s answer: some axis is in one of the ``powered`` states
 POWER_ON = 2
+#: the power stage is on (a quick-stop ramp keeps it on until each axis rests)
+POWERED = np.array([int(State.OPERATION_ENABLED), int(State.QUICK_STOP_ACTIVE)], dtype=np.uint8)
 
 _sum = np.add.reduce
 

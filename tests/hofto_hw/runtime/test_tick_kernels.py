@@ -8,13 +8,13 @@ import numpy as np
 from support.compiled import require_compiled_kernels
 
 from drivers.cia402.state_machine import State
-from hofto_hw.runtime.tick import _POWERED
 from hofto_hw.runtime.tick_kernels import (
     ESTIMATES_FINITE,
     POWER_ON,
     tick_flags,
     tick_flags_numpy,
 )
+from hofto_hw.runtime.tick_kernels import POWERED as _POWERED
 
 require_compiled_kernels()
 
