@@ -16,10 +16,12 @@ would have done it, every later one untouched).
 
 Arguments: the parts' own arrays, one tuple per part (:meth:`FusedTick.args`, rebuilt from
 the parts whenever the tick leaves the fused path, so it always holds the arrays their owners
-hold; None for a part the tick does not have), the tick's float64 register of scalars
-(``R_*``), the tick record (a one-element structured array) and this tick's scalars (loop
-time, dt, the bus's sample interval, tick number, the loop's timings). Numba types each array
-by its dtype, dimensions and layout and keeps it alive during the call.
+hold; None for a part the tick does not have), the tick's state (:func:`tick_state_dtype`:
+its scalars and arrays as one record), the tick record (a one-element structured array) and
+this tick's scalars (loop time, dt, the bus's sample interval, tick number, the loop's
+timings). Numba types each array by its dtype, dimensions and layout and keeps it alive
+during the call; with numba's JIT switched off (NUMBA_DISABLE_JIT=1) the same source runs
+as Python.
 """
 
 from __future__ import annotations
@@ -55,14 +57,42 @@ CONTROL = 3  # section 4 done, nothing reported: the reference from the controll
 DONE = 4  # everything but the sink's push (and the diagnostics record)
 STAGES = ("read", "safety", "monitor", "control", "done")
 
-# the register (float64): the tick's kept scalars, constants, outputs (this tick's own
-# scalars are the call's arguments)
-(R_TCMD, R_SINCE, R_JUDGE, R_EXPECT, R_KIND, R_FFSTALE, R_WAS_CONTACT, R_REC_MON, R_PERIOD,
- R_STALL, R_T0, R_RAMP, R_VS, R_LTAU, R_LMIN, R_MODE, R_OBS_DT, R_FINITE, R_MFLAGS, R_FF,
- R_MON, R_TWO) = range(22)  # fmt: skip
-R_SIZE = 22
 
-#: R_KIND: the motion's update this tick (HOLD_STILL: nothing to write; MOVE_PATH: the
+def tick_state_dtype(n: int, k: int) -> np.dtype:
+    """The tick's state that the fused call reads and writes (``Tick.state``, one aligned
+    record): the scalars it keeps from tick to tick, its constants, what the fused call found
+    and the tick's own arrays (k observer rows, n joints)."""
+    f8, i8, b1 = np.float64, np.int64, np.bool_
+    return np.dtype(
+        [
+            ("t_cmd", f8),  # setpoint (path) time [s]
+            ("since_fresh", f8),  # [s] since the last fresh sample
+            ("sample_dt", f8),  # the interval the observers integrated this tick [s]
+            ("monitored", b1),  # the tick record's ``monitored`` (written when it changes)
+            # kept by Tick._fuse_refresh: the motion, the enable state, the monitor's settling
+            ("kind", i8),  # the motion's update (HOLD_STILL, MOVE_PATH, OTHER)
+            ("mode", i8),
+            ("t0", f8),  # the path's start [s]
+            ("expect", b1),  # the drives are expected enabled
+            ("judge_from", i8),  # the first tick the collision monitor judges
+            ("was_contact", b1),  # the monitor's contact was on
+            # constants: the cycle [s], the stall limit [s], the fade-in's exponent (2.0)
+            ("period", f8),
+            ("stall", f8),
+            ("two", f8),
+            # what the fused call found on a tick it did not finish
+            ("finite", b1),  # the sample was finite
+            ("mflags", i8),  # the monitor's flags
+            ("tau_ext", f8, (k, n)),  # the observers' estimates [N·m]
+            ("prev", f8, (3, n)),  # last tick's q, qd, tau (a stall's interpolation start)
+            ("q_sent", f8, (n,)),  # position target of the last command [rad]
+            ("tau_ff", f8, (n,)),  # the feed-forward torque [N·m]
+        ],
+        align=True,
+    )
+
+
+#: ``kind``: the motion's update this tick (HOLD_STILL: nothing to write; MOVE_PATH: the
 #: compiled demo path; OTHER: the reference runs the controller)
 HOLD_STILL, MOVE_PATH, OTHER = 0, 1, 2
 
@@ -93,7 +123,8 @@ def fused_tick(
     ``tick`` and the loop's wake-up and compute times [µs]. Returns the stage code where the
     reference goes on."""
     tx, rx, si, states, fault_min, op_enabled = io
-    r, tau_ext, prev, q_sent, tau_ff = tk
+    ts = tk[0]
+    tau_ext, prev, q_sent, tau_ff = ts["tau_ext"], ts["prev"], ts["q_sent"], ts["tau_ff"]
     # 1-2. the drive read (the exchange is the caller's)
     read_si(tx, si, states)
     sample = si[:3]
@@ -101,7 +132,7 @@ def fused_tick(
     if sdt < 0.0:
         return READ  # a lost sample: the reference holds the observers
     obs_dt = sdt if sdt > 0.0 else dt
-    if not obs_dt <= r[R_STALL]:
+    if not obs_dt <= ts["stall"]:
         return READ  # a stall: the reference integrates the gap in sub-steps
     # 3. snapshot and observers
     sw, so, sh = snap
@@ -112,70 +143,66 @@ def fused_tick(
     for i in range(3):
         for j in range(n):
             prev[i, j] = sample[i, j]
-    period = r[R_PERIOD]
+    period = ts["period"]
     cmd_dt = dt if period <= 0.0 or dt <= period else period  # tick.command_dt
-    t_cmd = r[R_TCMD] + cmd_dt
-    r[R_TCMD] = t_cmd
-    r[R_OBS_DT] = obs_dt
-    r[R_FINITE] = 1.0 if finite else 0.0
+    t_cmd = ts["t_cmd"] + cmd_dt
+    ts["t_cmd"] = t_cmd
+    ts["sample_dt"] = obs_dt
+    ts["finite"] = finite
     # 4. safety (good data: the caller checked the status; no fault latched or active)
-    expect = r[R_EXPECT] != 0.0
+    expect = ts["expect"]
     if drive_scan(states, fault_min, op_enabled if expect else -1) >= 0:
         return SAFETY
     if not finite:
         return SAFETY
     mq, mqd, mqdd, q0 = motion
-    flags = tick_flags(tau_ext, states, POWERED, mqdd, rec[0].qdd_cmd)
+    flags = tick_flags(tau_ext, states, POWERED, mqdd, rec[0]["qdd_cmd"])
     if not flags & ESTIMATES_FINITE:
         return SAFETY
-    gap = r[R_SINCE] + dt - period if period > 0.0 else 0.0
+    gap = ts["since_fresh"] + dt - period if period > 0.0 else 0.0
     if limits_quiet(sample, q_sent, lim, 1 + 2 * expect, gap if gap > 1e-9 else 0.0) == 0:
         return SAFETY
-    r[R_SINCE] = 0.0  # good data (what bus.check and Tick._safety do on it)
-    settled = tick >= r[R_JUDGE]
+    ts["since_fresh"] = 0.0  # good data (what bus.check and Tick._safety do on it)
+    settled = tick >= ts["judge_from"]
     monitored = coll is not None and settled and flags & POWER_ON != 0
-    mon = 1.0 if monitored else 0.0
-    r[R_MON] = mon
-    if mon != r[R_REC_MON]:
-        r[R_REC_MON] = mon
-        rec[0].monitored = monitored
-    r[R_MFLAGS] = 0.0
+    if monitored != ts["monitored"]:
+        ts["monitored"] = monitored
+        rec[0]["monitored"] = monitored
+    ts["mflags"] = 0
     if coll is not None and monitored:
         mdt = obs_dt if obs_dt > 0.0 else dt
         fbuf, bbuf, first = coll
         f = monitor_tick(fbuf, bbuf, first, tau_ext, qd, mqdd, mdt, tick)
-        r[R_MFLAGS] = f
-        if f != 0 or r[R_WAS_CONTACT] != 0.0:
+        ts["mflags"] = f
+        if f != 0 or ts["was_contact"]:
             return MONITOR
         if learn is not None:
             ls, lb, lst, row, v_s, l_tau, l_min, every = learn
             friction_learn(qd, tau_ext[row], mdt, v_s, l_tau, l_min, every, ls, lb, lst)
     # 5. controller (HOLD at rest: nothing; MOVE: the demo path)
-    kind = r[R_KIND]
+    kind = ts["kind"]
     if kind == OTHER:
         return CONTROL
     moved = kind == MOVE_PATH
     if path is not None and moved:
         pk, ramp = path
-        t = t_cmd - r[R_T0]
+        t = t_cmd - ts["t0"]
         b, bd, bdd = 1.0, 0.0, -0.0  # joint_motion.FADED_IN
         if not t >= ramp:
             # joint_motion.fade_in: (1 - x)**2 is libm's pow in Python; the exponent comes
-            # from the register so that the compiler cannot turn pow into x·x (not the bits)
+            # from the state so that the compiler cannot turn pow into x·x (not the bits)
             x = min(max(t / ramp, 0.0), 1.0)
-            b, bd, bdd = _fade_terms(x, math.pow(1.0 - x, r[R_TWO]), ramp)
+            b, bd, bdd = _fade_terms(x, math.pow(1.0 - x, ts["two"]), ramp)
         path_eval(pk, t, b, bd, bdd, q0, mq, mqd, mqdd)
-    # the feed-forward: when the reference moved or the caller says it is stale
-    r[R_FF] = 0.0
-    if moved or r[R_FFSTALE] != 0.0:
+    # the feed-forward: when the reference moved
+    if moved:
         fw, fh = ff
         inverse_dynamics_native(mq, mqd, mqdd, fw, tau_ff, fh)
-        r[R_FF] = 1.0
     # 6. command (CSP with the torque offset)
     command_raw(mq, tau_ff, rx, si, 2)
     # 7. the record (and q_sent = the command just sent)
     fill_tick(
-        rec, sample, mq, tau_ext, q_sent, t_loop, tick, np.int64(r[R_MODE]), np.int64(0),
+        rec, sample, mq, tau_ext, q_sent, t_loop, tick, ts["mode"], np.int64(0),
         np.int64(0), wake, comp, obs_dt,
     )  # fmt: skip
     return DONE
@@ -219,7 +246,7 @@ class FusedTick:
             return "the snapshot and the feed-forward use different models"
         if snap._native is None:
             return "the snapshot does not run the native dynamics"
-        bank = t._bank
+        bank = self.bank = t._bank
         if not (bank._any and bank._only) or bank._kernel is not bank_update:
             return "an observer is not fused in the bank: " + ", ".join(bank.rest)
         if t._flags is not tick_flags or not t._fill_kernel:
@@ -255,7 +282,7 @@ class FusedTick:
             (g._tx_bytes, g._rx_bytes, g._si, g.states, t.bus.fault_min, t.bus.op_enabled),
             (snap._W, snap._O, snap._native.handle),  # type: ignore[union-attr]
             t._bank.args,
-            (t._reg, t.tau_ext, t._prev, t.q_sent, t.tau_ff),
+            t.state,
             t.limits._w,
             coll,
             learn,

@@ -57,26 +57,10 @@ from hofto_hw.runtime.fused import (
     MONITOR,
     MOVE_PATH,
     OTHER,
-    R_EXPECT,
-    R_FFSTALE,
-    R_FINITE,
-    R_JUDGE,
-    R_KIND,
-    R_MFLAGS,
-    R_MODE,
-    R_OBS_DT,
-    R_PERIOD,
-    R_REC_MON,
-    R_SINCE,
-    R_SIZE,
-    R_STALL,
-    R_T0,
-    R_TCMD,
-    R_TWO,
-    R_WAS_CONTACT,
     READ,
     FusedTick,
     fused_tick,
+    tick_state_dtype,
 )
 from hofto_hw.runtime.fused import say_once as fused_say_once
 from hofto_hw.runtime.teach import FINISHED, RECORDING
@@ -125,21 +109,6 @@ def lerp(prev: np.ndarray, now: np.ndarray, a: float, out: np.ndarray) -> None:
     np.subtract(now, prev, out=out)
     out *= a
     out += prev
-
-
-class InRegister:
-    """A float attribute of :class:`Tick` kept in its register (``Tick._reg``, fused.py
-    ``R_*``) at ``index``: the fused call and the reference read and write the same copy."""
-
-    def __init__(self, index: int, doc: str) -> None:
-        self.index = index
-        self.__doc__ = doc
-
-    def __get__(self, tick: Tick | None, owner: type) -> Any:
-        return self if tick is None else tick._reg.item(self.index)
-
-    def __set__(self, tick: Tick, value: float) -> None:
-        tick._reg[self.index] = value
 
 
 class Tick:
@@ -196,24 +165,23 @@ class Tick:
         #: does not jump), and the jump check allows for the gap
         self.period = float(period)
         self._stall_dt = 1.5 * self.period if self.period > 0.0 else math.inf  # see gap_steps
-        #: the fused call's register (fused.py R_*): the tick's scalars it reads and writes
-        #: (t_cmd, sample_dt and _since_fresh live there: one owner for both paths);
-        #: R_REC_MON is the record's ``monitored`` (written when it changes) on both paths
-        self._reg = np.zeros(R_SIZE)
-        self.t_cmd = 0.0  # setpoint (path) time [s]
-        self._since_fresh = 0.0  # [s] since the last fresh sample
-        self._prev = np.zeros((3, n))  # last tick's q, qd, tau (interpolation start)
+        #: the tick's state (fused.tick_state_dtype): the scalars both paths read and write
+        #: (``st["t_cmd"]``, ``st["sample_dt"]``, ...) and the arrays below, as one record
+        self.state = np.zeros(1, tick_state_dtype(n, max(1, len(self.observers))))
+        self.st = self.state[0]  # its fields by name (a view)
+        self.st["stall"], self.st["two"] = self._stall_dt, 2.0
+        self.st["period"] = self.period
+        self._prev = self.state["prev"][0]  # last tick's q, qd, tau (interpolation start)
         self._interp = np.zeros((3, n))  # one substep's q, qd, tau
-        self.tau_ext = np.zeros((max(1, len(self.observers)), n))
+        self.tau_ext = self.state["tau_ext"][0]
         self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
-        self.tau_ff = np.zeros(n)
+        self.tau_ff = self.state["tau_ff"][0]
         #: the motion's version that tau_ff was evaluated for (-1: evaluate on the next tick),
         #: and the model's revision, friction and payload objects it was evaluated with
         self._ff_version = -1
         m = feedforward.model
         self._ff_model = (m.revision, m.friction, m.payload)
-        self.sample_dt = 0.0
-        self.q_sent = np.zeros(n)  # position target of the last command [rad]
+        self.q_sent = self.state["q_sent"][0]  # position target of the last command [rad]
         self.err_codes = group.transport.tx["error_code"]
         self._transport = group.transport  # its sample_dt (DriveGroup.sample_dt forwards it)
         self.controlword = group.transport.rx["controlword"]
@@ -326,13 +294,6 @@ class Tick:
         self._judge_from = self.tick + 1 + self.settle_ticks
         self._fuse_refresh()
 
-    # the scalars the fused call reads and writes: kept in the register only (one owner)
-    t_cmd = InRegister(R_TCMD, "Setpoint (path) time [s].")
-    sample_dt = InRegister(
-        R_OBS_DT, "The interval the observers integrated this tick [s] (the record's sample_dt)."
-    )
-    _since_fresh = InRegister(R_SINCE, "Time since the last fresh sample [s].")
-
     # ------------------------------------------------------------------ the tick
 
     def step(self, t: float, dt: float, wakeup_us: float, missed: int, compute_us: float) -> None:
@@ -392,9 +353,10 @@ class Tick:
         if sample_dt >= 0.0:
             obs_dt = sample_dt if sample_dt > 0.0 else dt
             self._observe(self.snapshot, q, qd, tau, obs_dt)
-        self.sample_dt = obs_dt  # into the record with the rest (_record)
+        st = self.st
+        st["sample_dt"] = obs_dt  # into the record with the rest (_record)
         self._cmd_dt = cmd_dt = command_dt(dt, self.period)
-        self.t_cmd += cmd_dt
+        st["t_cmd"] += cmd_dt
 
         # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
         # safety's to latch below); the reference it integrates is used in step 5
@@ -408,7 +370,8 @@ class Tick:
         """Section 4 up to the collision monitor's decision (and the friction learning)."""
         g, stop, motion, snap = self.group, self.stop, self.motion, self.snapshot
         q, qd, tau = g.q, g.qd, g.tau
-        obs_dt = self.sample_dt
+        st = self.st
+        obs_dt = float(st["sample_dt"])
         dragging = motion.mode == DRAG
         good = self.bus.check(stop, status, g.fresh, g.states, self.err_codes, self.expect_enabled)
         lim = self.limits
@@ -421,11 +384,11 @@ class Tick:
             for i in range(len(self.observers)):
                 ok &= lim.finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
-        self._since_fresh += dt
-        gap = self._since_fresh - self.period if self.period > 0.0 else 0.0
+        st["since_fresh"] += dt
+        gap = float(st["since_fresh"]) - self.period if self.period > 0.0 else 0.0
         lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap if gap > 1e-9 else 0.0)
         if good:
-            self._since_fresh = 0.0
+            st["since_fresh"] = 0.0
         # judged on trustworthy data only: fresh (a lost frame repeats the last sample) and
         # from drives that report no fault (a failed encoder freezes its position); an
         # observer with poles at a few hundred rad/s reads either as a contact
@@ -434,10 +397,9 @@ class Tick:
         # only while the power stage is on (quick-stop ramps included)
         power_on = not self.enabling and flags & POWER_ON != 0
         monitored = self.collision is not None and ok and trusted and settled and power_on
-        reg = self._reg
-        if monitored != (reg[R_REC_MON] != 0.0):
+        if monitored != st["monitored"]:
             monitored = bool(monitored)
-            reg[R_REC_MON] = 1.0 if monitored else 0.0
+            st["monitored"] = monitored
             self.tick_rec["monitored"] = monitored  # replay judges the same ticks
         if monitored:
             # only while the power stage is on (quick-stop ramps included): with it off the
@@ -453,10 +415,9 @@ class Tick:
     def _monitor_flagged(self, dt: float) -> None:
         """The fused call's monitor flagged (or a contact was on): what CollisionLevels.update
         does after its kernel, then the rest of :meth:`_safety`."""
-        reg, c = self._reg, self.collision
-        flags = int(reg[R_MFLAGS])
-        c._report(self.stop, flags)  # type: ignore[union-attr]
-        obs_dt = self.sample_dt
+        flags = int(self.st["mflags"])
+        self.collision._report(self.stop, flags)  # type: ignore[union-attr]
+        obs_dt = float(self.st["sample_dt"])
         self._learn_step(flags, obs_dt if obs_dt > 0.0 else dt)
 
     def _learn_step(self, flags: int, mdt: float) -> None:
@@ -512,7 +473,7 @@ class Tick:
                 d = self.drag
                 motion.follow(d.q_cmd, d.qd_cmd, d.qdd_cmd)
             else:
-                motion.update(self.t_cmd, cmd_dt)
+                motion.update(float(self.st["t_cmd"]), cmd_dt)
         if self.recording is not None or self.playback is not None:
             self._teach_record(q)
         # the feed-forward is a function of the reference (and the model): a hold reuses it
@@ -528,8 +489,8 @@ class Tick:
 
     def _fused_step(self, dt: float, wakeup_us: float, compute_us: float) -> int:
         """The fused call (hofto_hw/runtime/fused.py) on this tick's scalars; its stage code.
-        It keeps t_cmd, sample_dt and _since_fresh in the register; the register's other
-        entries are kept by :meth:`_fuse_refresh`."""
+        It keeps t_cmd, sample_dt and since_fresh in the tick's state; the state's other
+        scalars are kept by :meth:`_fuse_refresh`."""
         m = self.feedforward.model
         rev, fr, pl = self._ff_model  # what _fuse_refresh found in sync
         if m.revision != rev or m.friction is not fr or m.payload is not pl:
@@ -548,7 +509,7 @@ class Tick:
                 self._ff_version = motion.version
             self.fused_ticks += 1
             return DONE
-        self.snapshot.finite = self._reg.item(R_FINITE) != 0.0
+        self.snapshot.finite = bool(self.st["finite"])
         self._cmd_dt = command_dt(dt, self.period)
         return stage
 
@@ -567,12 +528,18 @@ class Tick:
     def _fuse_refresh(self, rebuild: bool = True) -> None:
         """After a tick the fused call did not finish, at start and after a script's step:
         whether the next one may take it, its arguments (the parts' arrays as they hold them
-        now; not after a script's step, ``rebuild`` False) and the register's slow scalars
-        (off the common path)."""
+        now; not after a script's step, ``rebuild`` False) and the state's slow scalars (off
+        the common path)."""
         fz = self._fz
         if fz is None:
             return
-        if rebuild or not self._fz_args:
+        if self._bank is not fz.bank:  # a new bank (a reset): checked again
+            self._fz = fz = FusedTick(self)
+            if not fz.ok:
+                fused_say_once("the tick runs without its fused call: " + fz.why)
+                self._fz, self._fuse_quiet = None, False
+                return
+        if rebuild or not self._fz_args or self._fz_args[2] is not self._bank.args:
             self._fz_args = fz.args()
         stop, m, g, snap = self.stop, self.motion, self.group, self.snapshot
         model = self.feedforward.model
@@ -611,16 +578,10 @@ class Tick:
         else:
             kind = OTHER
         self._fz_kind = kind
-        r = self._reg
-        r[R_KIND] = kind
-        r[R_T0] = m.t0
-        r[R_MODE] = m.mode
-        r[R_EXPECT] = 1.0 if self.expect_enabled else 0.0
-        r[R_JUDGE] = self._judge_from
-        c = self.collision
-        r[R_WAS_CONTACT] = 1.0 if c is not None and c._was_contact else 0.0
-        r[R_FFSTALE] = 0.0
-        r[R_PERIOD], r[R_STALL], r[R_TWO] = self.period, self._stall_dt, 2.0
+        st, c = self.st, self.collision
+        st["kind"], st["t0"], st["mode"] = kind, m.t0, m.mode
+        st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
+        st["was_contact"] = c is not None and c._was_contact
 
     # ------------------------------------------------------------- tick helpers
 
@@ -781,7 +742,7 @@ class Tick:
             self.play_request = None
         elif want == MOVE and motion.mode != DRAG:
             if self.expect_enabled and not self.enabling:
-                motion.move(self.t_cmd)
+                motion.move(float(self.st["t_cmd"]))
         else:  # hold, or move while dragging: ramp the drag's velocity down first
             motion.ramp_down()
 
@@ -905,7 +866,7 @@ class Tick:
             fill_tick(
                 self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t),
                 self.tick, m.mode, self.stop.latched, int(status), float(wakeup_us),
-                float(compute_us), float(self.sample_dt),
+                float(compute_us), float(self.st["sample_dt"]),
             )  # fmt: skip
         else:
             self._fill_numpy(status, wakeup_us, compute_us)
@@ -945,7 +906,7 @@ class Tick:
         r["bus_status"] = status
         r["wakeup_us"] = wakeup_us
         r["compute_us"] = compute_us
-        r["sample_dt"] = self.sample_dt
+        r["sample_dt"] = self.st["sample_dt"]
         np.copyto(self.q_sent, self.motion.q)
 
     def _diag(self) -> None:
