@@ -26,28 +26,38 @@ as Python.
 
 from __future__ import annotations
 
-import math
 import sys
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from drivers.cia402.kernels import command_raw, read_si
-from hofto_hw.control.joint_motion import FADED_IN, fade_terms
+from hofto_hw.control.joint_motion import fade_in
 from hofto_hw.control.kernels import friction_learn, path_eval
 from hofto_hw.model import kernels as MK
 from hofto_hw.model.kernels import inverse_dynamics_native, snapshot_native
 from hofto_hw.observers import kernels as K
 from hofto_hw.observers.kernels import bank_update
 from hofto_hw.recording.kernels import fill_tick
-from hofto_hw.runtime.tick_kernels import ESTIMATES_FINITE, POWER_ON, POWERED, tick_flags
+from hofto_hw.runtime.tick_kernels import (
+    ESTIMATES_FINITE,
+    POWERED,
+    command_dt,
+    judged,
+    jump_gap,
+    tick_flags,
+)
 from safety.collision.kernel import monitor_tick
 from safety.kernels import drive_scan, limits_quiet
 
 if TYPE_CHECKING:
     from hofto_hw.runtime.tick import Tick
 
-_fade_terms = K.jit(fade_terms)  # the demo path's fade-in arithmetic, compiled: one definition
+# the glue the reference computes in Python, compiled from the same functions: one definition
+_fade_in = K.jit(fade_in)
+_command_dt = K.jit(command_dt)
+_jump_gap = K.jit(jump_gap)
+_judged = K.jit(judged)
 
 #: stage codes (fused_tick's answer): where the Python reference goes on with this tick
 READ = 0  # only the drive read was done: the reference from the snapshot on (section 3)
@@ -144,7 +154,7 @@ def fused_tick(
         for j in range(n):
             prev[i, j] = sample[i, j]
     period = ts["period"]
-    cmd_dt = dt if period <= 0.0 or dt <= period else period  # tick.command_dt
+    cmd_dt = _command_dt(dt, period)
     t_cmd = ts["t_cmd"] + cmd_dt
     ts["t_cmd"] = t_cmd
     ts["sample_dt"] = obs_dt
@@ -159,12 +169,11 @@ def fused_tick(
     flags = tick_flags(tau_ext, states, POWERED, mqdd, rec[0]["qdd_cmd"])
     if not flags & ESTIMATES_FINITE:
         return SAFETY
-    gap = ts["since_fresh"] + dt - period if period > 0.0 else 0.0
-    if limits_quiet(sample, q_sent, lim, 1 + 2 * expect, gap if gap > 1e-9 else 0.0) == 0:
+    gap = _jump_gap(ts["since_fresh"] + dt, period)
+    if limits_quiet(sample, q_sent, lim, 1 + 2 * expect, gap) == 0:
         return SAFETY
     ts["since_fresh"] = 0.0  # good data (what bus.check and Tick._safety do on it)
-    settled = tick >= ts["judge_from"]
-    monitored = coll is not None and settled and flags & POWER_ON != 0
+    monitored = coll is not None and _judged(tick, ts["judge_from"], flags)
     if monitored != ts["monitored"]:
         ts["monitored"] = monitored
         rec[0]["monitored"] = monitored
@@ -187,12 +196,8 @@ def fused_tick(
     if path is not None and moved:
         pk, ramp = path
         t = t_cmd - ts["t0"]
-        b, bd, bdd = 1.0, 0.0, -0.0  # joint_motion.FADED_IN
-        if not t >= ramp:
-            # joint_motion.fade_in: (1 - x)**2 is libm's pow in Python; the exponent comes
-            # from the state so that the compiler cannot turn pow into x·x (not the bits)
-            x = min(max(t / ramp, 0.0), 1.0)
-            b, bd, bdd = _fade_terms(x, math.pow(1.0 - x, ts["two"]), ramp)
+        # the exponent 2 from the state: the compiler cannot turn libm's pow into x·x
+        b, bd, bdd = _fade_in(t, ramp, ts["two"])
         path_eval(pk, t, b, bd, bdd, q0, mq, mqd, mqdd)
     # the feed-forward: when the reference moved
     if moved:
@@ -262,8 +267,6 @@ class FusedTick:
         ff = t.feedforward
         if ff._native is None or ff._id_native is not inverse_dynamics_native:
             return "the feed-forward does not run the native RNEA"
-        if FADED_IN != (1.0, 0.0, -0.0) or str(FADED_IN[2]) != "-0.0":
-            return "the demo path's faded-in constants are not the ones the fused call uses"
         return ""
 
     def args(self) -> tuple[Any, ...]:

@@ -66,8 +66,10 @@ from hofto_hw.runtime.fused import say_once as fused_say_once
 from hofto_hw.runtime.teach import FINISHED, RECORDING
 from hofto_hw.runtime.tick_kernels import (
     ESTIMATES_FINITE,
-    POWER_ON,
     POWERED,
+    command_dt,
+    judged,
+    jump_gap,
     tick_flags,
     tick_flags_numpy,
 )
@@ -94,13 +96,6 @@ def gap_steps(dt: float, period: float) -> int:
     if period > 0.0 and dt > 1.5 * period:
         return min(MAX_SUBSTEPS, round(dt / period))
     return 1
-
-
-def command_dt(dt: float, period: float) -> float:
-    """The setpoint (path) time step of a tick ``dt`` [s] after the last one: at most one
-    ``period`` [s] (0: unknown): an interpolator that missed cycles is late, it does not jump
-    (the fused call, hofto_hw/runtime/fused.py, computes the same in its kernel)."""
-    return dt if period <= 0.0 or dt <= period else period
 
 
 def lerp(prev: np.ndarray, now: np.ndarray, a: float, out: np.ndarray) -> None:
@@ -385,18 +380,17 @@ class Tick:
                 ok &= lim.finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
         st["since_fresh"] += dt
-        gap = float(st["since_fresh"]) - self.period if self.period > 0.0 else 0.0
-        lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap if gap > 1e-9 else 0.0)
+        gap = jump_gap(float(st["since_fresh"]), self.period)
+        lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap)
         if good:
             st["since_fresh"] = 0.0
         # judged on trustworthy data only: fresh (a lost frame repeats the last sample) and
         # from drives that report no fault (a failed encoder freezes its position); an
         # observer with poles at a few hundred rad/s reads either as a contact
-        trusted = good and not stop.active & _DRIVE_CAUSES
-        settled = self.tick >= self._judge_from
-        # only while the power stage is on (quick-stop ramps included)
-        power_on = not self.enabling and flags & POWER_ON != 0
-        monitored = self.collision is not None and ok and trusted and settled and power_on
+        trusted = ok and good and not stop.active & _DRIVE_CAUSES and not self.enabling
+        monitored = (
+            self.collision is not None and trusted and judged(self.tick, self._judge_from, flags)
+        )
         if monitored != st["monitored"]:
             monitored = bool(monitored)
             st["monitored"] = monitored

@@ -26,6 +26,32 @@ POWERED = np.array([int(State.OPERATION_ENABLED), int(State.QUICK_STOP_ACTIVE)],
 _sum = np.add.reduce
 
 
+# The tick's glue arithmetic, one definition each: Tick's reference stages call these, the
+# fused call (hofto_hw/runtime/fused.py) their compiled form (``jit`` of the same function).
+
+
+def command_dt(dt: float, period: float) -> float:
+    """The setpoint (path) time step of a tick ``dt`` [s] after the last one: at most one
+    ``period`` [s] (0: unknown): an interpolator that missed cycles is late, it does not jump."""
+    return dt if period <= 0.0 or dt <= period else period
+
+
+def jump_gap(since_fresh: float, period: float) -> float:
+    """The time [s] beyond one ``period`` since the last fresh sample (``since_fresh`` [s],
+    this tick's dt included): the position-jump check's allowance for lost cycles (0 within
+    one period, or when the period is unknown)."""
+    gap = since_fresh - period if period > 0.0 else 0.0
+    return gap if gap > 1e-9 else 0.0
+
+
+def judged(tick: int, judge_from: int, flags: int) -> bool:
+    """The collision monitor judges this ``tick`` (its data otherwise trusted): it has settled
+    since the last (re)start (``judge_from``) and the power stage is on (``flags`` of
+    :func:`tick_flags`: with it off the brakes act and the motor torque no longer explains
+    the motion)."""
+    return tick >= judge_from and flags & POWER_ON != 0
+
+
 @jit
 def tick_flags(
     tau_ext: np.ndarray, states: np.ndarray, powered: np.ndarray, qdd: np.ndarray, out: np.ndarray
