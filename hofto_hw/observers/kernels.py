@@ -110,6 +110,12 @@ def warm(call: Callable[[], object]) -> bool:
     return True
 
 
+def compiled_or_python(fn: Callable[..., Any], backend: str) -> Callable[..., Any]:
+    """The compiled kernel ``fn`` for the ``numba`` backend, else the same function as Python
+    (numba's ``py_func``): one source for both."""
+    return fn if backend == "numba" else getattr(fn, "py_func", fn)
+
+
 def ready(backend: Backend, warm_call: Callable[[], object]) -> Literal["numpy", "numba"]:
     """The backend a kernel user runs: :func:`resolve`, and for numba :func:`warm` with
     ``warm_call`` now (compiled before the loop); numpy when that compilation fails."""

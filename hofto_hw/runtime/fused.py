@@ -254,8 +254,8 @@ class FusedTick:
         bank = self.bank = t._bank
         if not (bank._any and bank._only) or bank._kernel is not bank_update:
             return "an observer is not fused in the bank: " + ", ".join(bank.rest)
-        if t._flags is not tick_flags or not t._fill_kernel:
-            return "the tick's flags and record run their numpy path"
+        if t._flags is not tick_flags or t._fill is not fill_tick:
+            return "the tick's flags and record fill run as Python"
         if not t.bus._use_kernel or not t.limits._use_kernel:
             return "the drive scan or the limit checks run their numpy path"
         c = t.collision

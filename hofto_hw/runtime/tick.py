@@ -71,7 +71,6 @@ from hofto_hw.runtime.tick_kernels import (
     judged,
     jump_gap,
     tick_flags,
-    tick_flags_numpy,
 )
 from safety.bus_health import BusHealth
 from safety.collision import COLLIDED, CONTACT, CollisionLevels
@@ -214,14 +213,10 @@ class Tick:
         self.wakeup_p99_us = 0.0
         self.compute_p99_us = 0.0
         r = self.tick_rec
-        self._r = {k: r[k] for k in ("q", "qd", "tau", "q_cmd", "tau_ext", "qdd_cmd")}
         r["wrench"][...] = np.nan
         self._events_pushed = 0
-        #: the record fill: numpy (the reference) or one compiled call (recording/kernels.py)
         self._rec1 = r.reshape(1)  # the same memory as a one-element array, for the kernel
         self._sample = group.sample  # q, qd, tau as rows of one (3, n) view
-        self.backend = kernels.ready(backend, self._warm_record)
-        self._fill_kernel = self.backend == "numba"
         # drag (hand guiding): controller, enabling input, the observer row that drives it
         self.drag = drag
         self.enable_input = enable_input if enable_input is not None else EnableInput()
@@ -242,11 +237,12 @@ class Tick:
         self._tau_mon = np.zeros_like(self.tau_ext)  # the collision monitor's input
         self._wrench = r["wrench"]
         self._wrench_set = False  # the record's wrench holds a drag estimate (else all NaN)
-        self._qdd_rec = self._r["qdd_cmd"]
-        #: the tick's flags call (tick_kernels.py): compiled with the record fill, else numpy
-        self._flags = tick_flags if self._fill_kernel else tick_flags_numpy
-        if self._fill_kernel and not kernels.warm(self._warm_flags):
-            self._flags = tick_flags_numpy
+        self._qdd_rec = r["qdd_cmd"]
+        #: the record fill and the tick's flags: one compiled call each (recording/kernels.py,
+        #: tick_kernels.py); without the compiled path the same functions run as Python
+        self.backend = kernels.ready(backend, self._warm)
+        self._fill = kernels.compiled_or_python(fill_tick, self.backend)
+        self._flags = kernels.compiled_or_python(tick_flags, self.backend)
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
@@ -839,31 +835,26 @@ class Tick:
             # joint = link index (the link after joint j is link j + 1, 1-based)
             stop.report(Fault.COLLISION, d.contact_link - 1, d.mismatch)
 
-    def _warm_flags(self) -> None:
-        # on the tick's own arrays (the record's field is an unaligned view: its own signature);
-        # it copies motion.qdd into the record, as every tick does
-        tick_flags(self.tau_ext, self.group.states, POWERED, self.motion.qdd, self._qdd_rec)
-
-    def _warm_record(self) -> None:
+    def _warm(self) -> None:
+        """Compile the record fill (into a scratch record) and the flags call (on the tick's
+        own arrays: it copies motion.qdd into the record, as every tick does)."""
         g, scratch = self.group, np.zeros(1, dtype=self.tick_rec.dtype)
         q_sent = self.q_sent.copy()
         fill_tick(
             scratch, g.sample, self.motion.q, self.tau_ext, q_sent, 0.0, 0, 0, 0, 0, 0.0, 0.0, 0.0
         )
+        tick_flags(self.tau_ext, g.states, POWERED, self.motion.qdd, self._qdd_rec)
 
     def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
         """The tick record of this tick (and q_sent = motion.q, the command just sent), then
         into the sink with the new events (and every ``diag_every`` ticks the diagnostics)."""
-        if self._fill_kernel:
-            m = self.motion
-            # the casts keep the kernel on its warmed signature whatever numbers callers pass
-            fill_tick(
-                self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t),
-                self.tick, m.mode, self.stop.latched, int(status), float(wakeup_us),
-                float(compute_us), float(self.st["sample_dt"]),
-            )  # fmt: skip
-        else:
-            self._fill_numpy(status, wakeup_us, compute_us)
+        m = self.motion
+        # the casts keep the kernel on its warmed signature whatever numbers callers pass
+        self._fill(
+            self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t), self.tick,
+            m.mode, self.stop.latched, int(status), float(wakeup_us), float(compute_us),
+            float(self.st["sample_dt"]),
+        )  # fmt: skip
         self._push()
 
     def _push(self) -> None:
@@ -884,24 +875,6 @@ class Tick:
             self._events_pushed += 1
         if self.tick % self.diag_every == 0:
             self._diag()
-
-    def _fill_numpy(self, status: int, wakeup_us: float, compute_us: float) -> None:
-        """The reference fill of the tick record (field by field)."""
-        r, v = self.tick_rec, self._r
-        r["t"] = self.t
-        r["tick"] = self.tick
-        np.copyto(v["q"], self.group.q)
-        np.copyto(v["qd"], self.group.qd)
-        np.copyto(v["tau"], self.group.tau)
-        np.copyto(v["q_cmd"], self.motion.q)
-        np.copyto(v["tau_ext"], self.tau_ext)
-        r["mode"] = self.motion.mode
-        r["faults"] = self.stop.latched
-        r["bus_status"] = status
-        r["wakeup_us"] = wakeup_us
-        r["compute_us"] = compute_us
-        r["sample_dt"] = self.st["sample_dt"]
-        np.copyto(self.q_sent, self.motion.q)
 
     def _diag(self) -> None:
         d = self.diag_rec
