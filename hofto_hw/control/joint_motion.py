@@ -147,10 +147,12 @@ class JointMotion:
         self.n = n
         self.accel = np.asarray(accel_limit, dtype=float).copy()
         self.path = path
-        self.q = np.zeros(n)
-        self.qd = np.zeros(n)
-        self.qdd = np.zeros(n)
-        self.q0 = np.zeros(n)
+        #: the reference q, qd, qdd and the path's start pose q0 (n,) as one record (the
+        #: tick's compiled call takes it as one argument); the attributes are its fields
+        self.state = np.zeros(
+            1, np.dtype([(f, np.float64, (n,)) for f in ("q", "qd", "qdd", "q0")])
+        )
+        self.q, self.qd, self.qdd, self.q0 = (self.state[f][0] for f in ("q", "qd", "qdd", "q0"))
         self.mode = HOLD
         self.t0 = 0.0
         self.player: TrajectoryPlayer | None = None

@@ -165,7 +165,8 @@ def fused_tick(
         return SAFETY
     if not finite:
         return SAFETY
-    mq, mqd, mqdd, q0 = motion
+    ms = motion[0]
+    mq, mqd, mqdd, q0 = ms["q"], ms["qd"], ms["qdd"], ms["q0"]
     flags = tick_flags(tau_ext, states, POWERED, mqdd, rec[0]["qdd_cmd"])
     if not flags & ESTIMATES_FINITE:
         return SAFETY
@@ -180,14 +181,18 @@ def fused_tick(
     ts["mflags"] = 0
     if coll is not None and monitored:
         mdt = obs_dt if obs_dt > 0.0 else dt
-        fbuf, bbuf, first = coll
-        f = monitor_tick(fbuf, bbuf, first, tau_ext, qd, mqdd, mdt, tick)
+        cr, bbuf = coll
+        c = cr[0]
+        f = monitor_tick(c["fbuf"], bbuf, c["first_tick"], tau_ext, qd, mqdd, mdt, tick)
         ts["mflags"] = f
         if f != 0 or ts["was_contact"]:
             return MONITOR
         if learn is not None:
-            ls, lb, lst, row, v_s, l_tau, l_min, every = learn
-            friction_learn(qd, tau_ext[row], mdt, v_s, l_tau, l_min, every, ls, lb, lst)
+            lr, row, v_s, l_tau, l_min, every = learn
+            lrn = lr[0]
+            friction_learn(
+                qd, tau_ext[row], mdt, v_s, l_tau, l_min, every, lrn["S"], lrn["b"], lrn["st"]
+            )
     # 5. controller (HOLD at rest: nothing; MOVE: the demo path)
     kind = ts["kind"]
     if kind == OTHER:
@@ -274,11 +279,11 @@ class FusedTick:
         them now (:attr:`path_ok`: the motion's path is the compiled one)."""
         t = self.tick
         g, snap, m, c, ff = t.group, t.snapshot, t.motion, t.collision, t.feedforward
-        coll = None if c is None else (c.state.fbuf, c.state.bbuf, c.state.first_tick)
+        coll = None if c is None else (c.state.record, c.state.bbuf)
         learn = None
         if t._learn is not None and t.drag is not None and t.drag.friction is not None:
             fr = t.drag.friction
-            learn = (fr.S, fr.b, fr._st, t.drag_row, fr.v_s, fr.tau, fr.min_speed, fr.every)
+            learn = (fr.record, t.drag_row, fr.v_s, fr.tau, fr.min_speed, fr.every)
         p = self.path = m.path
         self.path_ok = p is not None and p._use_kernel and p._eval is path_eval
         return (
@@ -289,7 +294,7 @@ class FusedTick:
             t.limits._w,
             coll,
             learn,
-            (m.q, m.qd, m.qdd, m.q0),
+            m.state,
             (p._k, float(p.ramp)) if self.path_ok else None,  # type: ignore[union-attr]
             (ff._W, ff._native.handle),  # type: ignore[union-attr]
             t._rec1,
