@@ -65,6 +65,12 @@ def _fit(arr: np.ndarray, shape: tuple[int, ...], symmetric: bool = False) -> bo
     )
 
 
+def _fields_of(arrays: list[np.ndarray], record: np.ndarray) -> bool:
+    """The observer's arrays are still fields of its record (what the compiled call reads):
+    an owner that rebound one runs through its own update."""
+    return all(np.shares_memory(a, record) for a in arrays)
+
+
 class ObserverBank:
     """``observers`` updated from ``snapshot`` into the rows of ``out`` (k, n) float64, row i
     for observer i (``out`` is the caller's; at least one row per observer).
@@ -166,26 +172,16 @@ class ObserverBank:
         if kind is HoftoObserver:
             core = obs.core  # type: ignore[attr-defined]
             s = core.stages
-            arrs = self._arrays(
-                [
-                    (core, "z", (s, n)),
-                    (core, "_neg_gains", (s, n)),
-                    (core, "powers", (s,)),
-                    (core._hold, "prev", (n,)),
-                ]
-            )
-            if arrs is None:
+            pairs = [(core, "z", (s, n)), (core, "_neg_gains", (s, n)), (core, "powers", (s,))]
+            arrs = self._arrays([*pairs, (core._hold, "prev", (n,))])
+            if arrs is None or not _fields_of(arrs, core.record):
                 return None
-            work = np.zeros((s + 3, s))  # T (s, s), [h, a_h2] (h < 0: none yet), col (2, s)
-            work[:s] = np.eye(s)
-            work[s, 0] = -1.0
-            flags = (K.BANK_RECURSIVE if core.form == "recursive" else 0) | (
-                K.BANK_TAYLOR if core.discretisation == "taylor" else 0
-            )
-            return K.BANK_HOFTO, (i, *arrs, work, int(core.substeps), flags)
+            return K.BANK_HOFTO, (i, core.record)
         if kind is MomentumObserver:
             arrs = self._arrays([(obs, a, (n,)) for a in ("gain", "p0", "integral", "r")])
-            return None if arrs is None else (K.BANK_MOMENTUM, (i, *arrs))
+            if arrs is None or not _fields_of(arrs, obs.record):  # type: ignore[attr-defined]
+                return None
+            return K.BANK_MOMENTUM, (i, obs.record)  # type: ignore[attr-defined]
         if kind is EsoObserver or kind is StaObserver:
             if kind is EsoObserver:
                 core = obs.core  # type: ignore[attr-defined]

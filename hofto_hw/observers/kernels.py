@@ -33,6 +33,14 @@ except Exception as exc:  # ImportError, or a numba that does not match the inst
 else:
     _IMPORT_ERROR = ""
 
+
+def _literal_unroll(group: Any) -> Any:  # without numba: the tuple itself
+    return group
+
+
+if _numba is not None:
+    _literal_unroll = _numba.literal_unroll
+
 _DISABLED = os.environ.get("HOFTO_HW_NO_NUMBA", "") not in ("", "0")
 _FAILED: str = ""  # first compilation failure, if any
 
@@ -564,8 +572,9 @@ def dob_update(
 # C·qd + g (n,). Numba types every array by its own dtype, shape and layout and keeps it
 # alive while it runs: nothing is addressed by hand.
 
-#: per-observer tuples: (row, z (s, n), -L (s, n), powers (s,), y_prev (n,), work (s + 3, s):
-#: T, [h, a_h2], col (2, s), substeps, flags); (row, gain, p0, integral, r (n,));
+#: per-observer tuples: (row, HoftoCore.record: z (s, n), neg_gains (s, n), powers (s,), prev
+#: (n,), work (s + 3, s): T, [h, a_h2], col (2, s), substeps, flags); (row,
+#: MomentumObserver.record: gain, p0, integral, r (n,));
 #: (row, z (3, n), gains (3, n), y_prev (n,), substeps) for ESO and STA;
 #: (row, g·Jn, cutoff, w (n,), work (2, n): [dt of alpha], alpha)
 BANK_HOFTO, BANK_MOMENTUM, BANK_ESO, BANK_STA, BANK_DOB = range(5)
@@ -593,7 +602,7 @@ def _hofto_transition(T: np.ndarray, hs: np.ndarray, h: float, taylor: bool) -> 
 @_jit
 def _nan_rows(group: Any, out: np.ndarray) -> None:
     if group is not None:
-        for o in group:
+        for o in _literal_unroll(group):
             r = out[o[0]]
             for i in range(r.shape[0]):
                 r[i] = np.nan
@@ -604,7 +613,10 @@ def _bank_hofto(
     group: Any, M: np.ndarray, a: np.ndarray, y: np.ndarray, dt: float, out: np.ndarray
 ) -> None:
     if group is not None:
-        for row, z, neg_gains, powers, y_prev, work, sub, flags in group:
+        for entry in _literal_unroll(group):  # HOFTOs of different orders: records' types
+            row, rec = entry
+            c = rec[0]
+            z, work, sub, flags = c["z"], c["work"], c["substeps"], c["flags"]
             s = z.shape[0]
             T, hs = work[:s], work[s]
             taylor = (flags & BANK_TAYLOR) != 0
@@ -613,8 +625,8 @@ def _bank_hofto(
                 _hofto_transition(T, hs, h, taylor)
             recursive = (flags & BANK_RECURSIVE) != 0
             hofto_update(
-                z, neg_gains, powers, T, y, y_prev, a, h, hs[1], recursive, taylor, sub,
-                work[s + 1 :], M, out[row],
+                z, c["neg_gains"], c["powers"], T, y, c["prev"], a, h, hs[1], recursive, taylor,
+                sub, work[s + 1 :], M, out[row],
             )  # fmt: skip
 
 
@@ -630,8 +642,10 @@ def _bank_momentum(
 ) -> None:
     if group is not None:
         _, _, f, g, ct_qd, _ = terms
-        for row, gain, p0, integral, r in group:
-            momentum_update(M, qd, tau, f, g, ct_qd, gain, p0, integral, r, dt)
+        for row, rec in group:
+            c = rec[0]
+            r = c["r"]
+            momentum_update(M, qd, tau, f, g, ct_qd, c["gain"], c["p0"], c["integral"], r, dt)
             o = out[row]
             for i in range(o.shape[0]):
                 o[i] = r[i]
