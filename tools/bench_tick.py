@@ -438,7 +438,7 @@ def in_loop_costs(system, ticks: int, noop, res: dict):
 
 
 def warm_call(system, calls: int, res: dict) -> None:
-    """The fused call alone, ``calls`` times in a row on the tick's own table, register and
+    """The fused call alone, ``calls`` times in a row on the tick's own arrays, register and
     record (``fused_call_warm``): the compiled work of a quiet tick with its code and data in
     the caches, no exchange or Python between. Runs after the tick's last phase (each call
     moves the tick's state on; between two cycles: a stall of ``calls`` calls). Only the
@@ -447,7 +447,7 @@ def warm_call(system, calls: int, res: dict) -> None:
     from hofto_hw.runtime.fused import DONE, STAGES
 
     tick = system.tick
-    call, tab, rec = tick._fz_call, tick._fz_tab, tick._rec1
+    call, args = tick._fz_call, tick._fz_args
     # the last tick's time and number, one period, the bus's sample interval, as
     # Tick._fused_step passes them; no loop timings (they only go into the record)
     t, n, dt, sdt = tick.t, tick.tick, system.loop.period, tick._transport.sample_dt
@@ -456,7 +456,7 @@ def warm_call(system, calls: int, res: dict) -> None:
     stage = np.zeros(calls, dtype=np.int64)
     for k in range(calls):
         t0 = clock()
-        stage[k] = call(tab, rec, t, dt, sdt, n, 0.0, 0.0)
+        stage[k] = call(*args, t, dt, sdt, n, 0.0, 0.0)
         ns[k] = clock() - t0
     done = stage == DONE
     n_done = int(done.sum())

@@ -57,8 +57,14 @@ class FrictionResidual:
         self.ridge = float(ridge)
         self.limit = float(limit)
         self.n = n
-        self.S = np.zeros((n, 3, 3))  # weighted mean of x·xᵀ per joint
-        self.b = np.zeros((n, 3))  # weighted mean of x·r per joint
+        #: the learned sums as one record (the tick's compiled call takes it as one argument):
+        #: S, b and _st are its fields
+        self.record = np.zeros(
+            1, np.dtype([("S", np.float64, (n, 3, 3)), ("b", np.float64, (n, 3)),
+                         ("st", np.float64, (3,))])
+        )  # fmt: skip
+        self.S = self.record["S"][0]  # weighted mean of x·xᵀ per joint
+        self.b = self.record["b"][0]  # weighted mean of x·r per joint
         self.coef = np.zeros((n, 3))
         self.every = max(1, int(every))
         self._count = 0
@@ -75,7 +81,7 @@ class FrictionResidual:
         self._f = np.zeros(n)
         self._scratch = np.zeros((3, n))
         self._abs = np.zeros(n)
-        self._st = np.zeros(3)  # count, pending time (compiled path), seconds learned
+        self._st = self.record["st"][0]  # count, pending time (compiled path), seconds learned
         self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
 

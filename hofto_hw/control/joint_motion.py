@@ -47,21 +47,16 @@ PLAYING = (REPLAY, MOVE_TO)
 FADED_IN = (1.0, 0.0, -0.0)
 
 
-def fade_in(t: float, ramp: float) -> tuple[float, float, float]:
+def fade_in(t: float, ramp: float, two: float = 2.0) -> tuple[float, float, float]:
     """The quintic fade-in s(t/ramp) and its time derivatives s', s'' [1/s, 1/s²] at ``t`` [s]
     (``ramp`` > 0). At and after the ramp the constants its formula gives there (1, +0, -0:
-    every tick of a long run, without the arithmetic)."""
+    every tick of a long run, without the arithmetic). ``two``: the exponent of (1 - x)²,
+    libm's pow (the tick's fused call compiles this function and passes it from memory)."""
     if t >= ramp:
         return FADED_IN
     x = min(max(t / ramp, 0.0), 1.0)
-    return fade_terms(x, (1.0 - x) ** 2, ramp)
-
-
-def fade_terms(x: float, u2: float, ramp: float) -> tuple[float, float, float]:
-    """:func:`fade_in`'s arithmetic at x = t/ramp in [0, 1] with u2 = (1 - x)**2 (libm's pow:
-    the tick's fused call computes it with the same pow and compiles this function)."""
     b = x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
-    bd = 30.0 * x * x * u2 / ramp
+    bd = 30.0 * x * x * math.pow(1.0 - x, two) / ramp
     bdd = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / (ramp * ramp)
     return b, bd, bdd
 
@@ -103,7 +98,7 @@ class DemoPath:
     ) -> None:
         """Reference at time ``t`` [s] since the start into q, qd, qdd (n,)."""
         ramp = self.ramp  # after the ramp its constants without the call (every tick of a run)
-        b, bd, bdd = FADED_IN if t >= ramp else fade_in(t, ramp)
+        b, bd, bdd = fade_in(t, ramp)
         s, c, arg = self._s, self._c, self._arg
         if self._use_kernel:
             self._eval(self._k, t, b, bd, bdd, q0, q, qd, qdd)
@@ -152,10 +147,12 @@ class JointMotion:
         self.n = n
         self.accel = np.asarray(accel_limit, dtype=float).copy()
         self.path = path
-        self.q = np.zeros(n)
-        self.qd = np.zeros(n)
-        self.qdd = np.zeros(n)
-        self.q0 = np.zeros(n)
+        #: the reference q, qd, qdd and the path's start pose q0 (n,) as one record (the
+        #: tick's compiled call takes it as one argument); the attributes are its fields
+        self.state = np.zeros(
+            1, np.dtype([(f, np.float64, (n,)) for f in ("q", "qd", "qdd", "q0")])
+        )
+        self.q, self.qd, self.qdd, self.q0 = (self.state[f][0] for f in ("q", "qd", "qdd", "q0"))
         self.mode = HOLD
         self.t0 = 0.0
         self.player: TrajectoryPlayer | None = None

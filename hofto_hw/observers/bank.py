@@ -16,14 +16,14 @@ its own ``update_snapshot`` and copied into its row; without numba (``HOFTO_HW_N
 that is every observer, exactly as before.
 
 Ownership: the observers keep their state arrays (``reset``, replay and standalone
-``update`` keep working on them); the bank reads and writes those arrays in place through
-their addresses, taken at construction, and keeps a reference to each, so none is freed
-while the bank lives. Its own are constant: the per-observer step-size terms (HOFTO's
-transition matrix for the current step, DOB's discrete pole), recomputed when dt changes.
-Contract: the observers' state and parameter arrays and the snapshot's term arrays (``M``,
-``accel``, ``f``, ``g``, ``ct_qd``, ``nle``) are allocated once and updated in place; an
-owner that rebinds one to a new array must build a new bank (:meth:`ObserverBank.bound`
-says whether the bank still points at the arrays its owners hold).
+``update`` keep working on them); the bank passes those arrays themselves (``args``: a tuple
+per kind of each observer's arrays, taken at construction) to the compiled call, which
+updates them in place. Its own are the per-observer step-size terms (HOFTO's transition
+matrix for the current step, DOB's discrete pole), recomputed when dt changes. Contract: the
+observers' state and parameter arrays and the snapshot's term arrays (``M``, ``accel``,
+``f``, ``g``, ``ct_qd``, ``nle``) are allocated once and updated in place; an owner that
+rebinds one to a new array must build a new bank (:meth:`ObserverBank.bound` says whether
+the bank still holds the arrays its owners hold).
 """
 
 from __future__ import annotations
@@ -65,6 +65,12 @@ def _fit(arr: np.ndarray, shape: tuple[int, ...], symmetric: bool = False) -> bo
     )
 
 
+def _fields_of(arrays: list[np.ndarray], record: np.ndarray) -> bool:
+    """The observer's arrays are still fields of its record (what the compiled call reads):
+    an owner that rebound one runs through its own update."""
+    return all(np.shares_memory(a, record) for a in arrays)
+
+
 class ObserverBank:
     """``observers`` updated from ``snapshot`` into the rows of ``out`` (k, n) float64, row i
     for observer i (``out`` is the caller's; at least one row per observer).
@@ -89,32 +95,34 @@ class ObserverBank:
         self.snapshot = snapshot
         self.out = out
         self._keep: list[tuple[object, str, np.ndarray]] = []  # (owner, attribute, array)
-        rows: list[list[int]] = []
         self._rest: list[tuple[Observer, np.ndarray]] = []
+        groups: list[list[tuple]] = [[] for _ in range(5)]  # per kind (kernels.BANK_*)
         fused: list[str] = []
-        common = [n, out.shape[0], self._address(None, "", out)]
+        terms: list[np.ndarray] = []
+        self._has: set[str] = set()
         for attr in _TERMS:
             shape = (n, n) if attr == "M" else (n,)
             arr = getattr(snapshot, attr, None)
-            ok = _fit(arr, shape, symmetric=attr == "M")  # M(q) is symmetric (the snapshot's)
-            common.append(self._address(snapshot, attr, arr) if ok else 0)
-        self._terms = dict(zip(_TERMS, common[3:], strict=True))
+            if _fit(arr, shape, symmetric=attr == "M"):  # M(q) is symmetric (the snapshot's)
+                self._keep.append((snapshot, attr, arr))
+                self._has.add(attr)
+            else:
+                arr = np.zeros(shape)  # not computed: no fused observer reads it
+            terms.append(arr)
+        self.terms = tuple(terms)
         for i, obs in enumerate(self.observers):
-            row = self._row(obs, i, n) if fuse and K.available() else None
-            if row is None:
+            entry = self._entry(obs, i, n) if fuse and K.available() else None
+            if entry is None:
                 self._rest.append((obs, out[i]))
             else:
-                rows.append(row)
+                groups[entry[0]].append(entry[1])
                 fused.append(obs.name)
-        tab = np.zeros((1 + len(rows), K.BANK_COLS), dtype=np.int64)
-        tab[0, : len(common)] = common
-        for r, row in enumerate(rows, start=1):
-            tab[r, : len(row)] = row
-        self._tab = tab
+        #: the compiled call's observers: one tuple per kind, None for a kind with none
+        self.args = tuple(tuple(g) if g else None for g in groups)
         self.fused = tuple(fused)
         self.rest = tuple(o.name for o, _ in self._rest)
-        if rows and not K.warm(self._warm):
-            self._tab = tab[:1]
+        if fused and not K.warm(self._warm):
+            self.args = (None,) * 5
             self._rest = [(o, out[i]) for i, o in enumerate(self.observers)]
             self.fused, self.rest = (), tuple(o.name for o in self.observers)
         self._kernel = K.bank_update
@@ -129,7 +137,9 @@ class ObserverBank:
         (NaN rows for a non-finite sample or dt, the observers' states untouched)."""
         snap = self.snapshot
         if self._any:
-            self._kernel(self._tab, snap.q, snap.qd, snap.tau, snap.finite, dt)
+            self._kernel(
+                self.args, self.terms, self.out, snap.q, snap.qd, snap.tau, snap.finite, dt
+            )
             if self._only:
                 return
         for obs, row in self._rest:
@@ -138,53 +148,40 @@ class ObserverBank:
     # ------------------------------------------------------------------ building
 
     def bound(self) -> bool:
-        """The arrays the bank addresses are still the ones their owners hold."""
-        return all(getattr(o, a) is arr for o, a, arr in self._keep if o is not None)
+        """The arrays the bank passes are still the ones their owners hold."""
+        return all(getattr(o, a) is arr for o, a, arr in self._keep)
 
-    def _address(self, owner: object, attr: str, arr: np.ndarray) -> int:
-        self._keep.append((owner, attr, arr))
-        return int(arr.ctypes.data)
-
-    def _own(self, arr: np.ndarray) -> int:
-        return self._address(None, "", arr)
-
-    def _addresses(self, pairs: Sequence[tuple[object, str, tuple[int, ...]]]) -> list[int] | None:
-        """Addresses of ``owner.attr`` arrays of the given shapes, or None if one does not fit
-        (that observer then runs through its own update)."""
+    def _arrays(
+        self, pairs: Sequence[tuple[object, str, tuple[int, ...]]]
+    ) -> list[np.ndarray] | None:
+        """The ``owner.attr`` arrays of the given shapes, or None if one does not fit (that
+        observer then runs through its own update)."""
         arrays = [(o, a, getattr(o, a), shape) for o, a, shape in pairs]
         if not all(_fit(arr, shape) for _, _, arr, shape in arrays):
             return None
-        return [self._address(o, a, arr) for o, a, arr, _ in arrays]
+        self._keep += [(o, a, arr) for o, a, arr, _ in arrays]
+        return [arr for _, _, arr, _ in arrays]
 
-    def _row(self, obs: Observer, i: int, n: int) -> list[int] | None:
-        """The table row of a fusable observer (its kind, its output row, ...), else None."""
+    def _entry(self, obs: Observer, i: int, n: int) -> tuple[int, tuple] | None:
+        """(kind, the observer's tuple) of a fusable observer (kernels.BANK_*), else None."""
         kind = type(obs)
         if kind not in _READS or getattr(obs, "backend", "numpy") != "numba" or obs.n != n:
             return None
-        if obs.needs & ~self.snapshot.needs or not all(self._terms[t] for t in _READS[kind]):
+        if obs.needs & ~self.snapshot.needs or not all(t in self._has for t in _READS[kind]):
             return None  # the snapshot does not compute (or hold) what this observer reads
         if kind is HoftoObserver:
             core = obs.core  # type: ignore[attr-defined]
             s = core.stages
-            addr = self._addresses(
-                [
-                    (core, "z", (s, n)),
-                    (core._hold, "prev", (n,)),
-                    (core, "_neg_gains", (s, n)),
-                    (core, "powers", (s,)),
-                ]
-            )
-            if addr is None:
+            pairs = [(core, "z", (s, n)), (core, "_neg_gains", (s, n)), (core, "powers", (s,))]
+            arrs = self._arrays([*pairs, (core._hold, "prev", (n,))])
+            if arrs is None or not _fields_of(arrs, core.record):
                 return None
-            hs = np.array([-1.0, 0.0])  # [h, a_h2] of T (h < 0: none yet)
-            own = [self._own(hs), self._own(np.eye(s)), self._own(np.zeros((2, s)))]
-            flags = (K.BANK_RECURSIVE if core.form == "recursive" else 0) | (
-                K.BANK_TAYLOR if core.discretisation == "taylor" else 0
-            )
-            return [K.BANK_HOFTO, i, s, core.substeps, flags, *addr, *own]
+            return K.BANK_HOFTO, (i, core.record)
         if kind is MomentumObserver:
-            addr = self._addresses([(obs, a, (n,)) for a in ("gain", "p0", "integral", "r")])
-            return None if addr is None else [K.BANK_MOMENTUM, i, 0, 1, 0, *addr]
+            arrs = self._arrays([(obs, a, (n,)) for a in ("gain", "p0", "integral", "r")])
+            if arrs is None or not _fields_of(arrs, obs.record):  # type: ignore[attr-defined]
+                return None
+            return K.BANK_MOMENTUM, (i, obs.record)  # type: ignore[attr-defined]
         if kind is EsoObserver or kind is StaObserver:
             if kind is EsoObserver:
                 core = obs.core  # type: ignore[attr-defined]
@@ -194,21 +191,19 @@ class ObserverBank:
                 core = obs
                 pairs = [(obs, "z", (3, n)), (obs, "gains", (3, n)), (obs._hold, "prev", (n,))]  # type: ignore[attr-defined]
                 code = K.BANK_STA
-            addr = self._addresses(pairs)
-            return None if addr is None else [code, i, 3, core.substeps, 0, *addr]  # type: ignore[attr-defined]
+            arrs = self._arrays(pairs)
+            return None if arrs is None else (code, (i, *arrs, int(core.substeps)))  # type: ignore[attr-defined]
         if kind is DobObserver:
-            addr = self._addresses([(obs, a, (n,)) for a in ("_gj", "cutoff", "w")])
-            if addr is None:
+            arrs = self._arrays([(obs, a, (n,)) for a in ("_gj", "cutoff", "w")])
+            if arrs is None:
                 return None
-            own = [self._own(np.array([-1.0])), self._own(np.zeros(n))]
-            return [K.BANK_DOB, i, 0, 1, 0, *addr, *own]
+            work = np.zeros((2, n))  # [dt of alpha] (< 0: none yet), alpha (n,)
+            work[0, 0] = -1.0
+            return K.BANK_DOB, (i, *arrs, work)
         return None
 
     def _warm(self) -> None:
-        """Compile the kernel with a table of no observers (every state untouched)."""
-        scratch = np.zeros_like(self.out)
-        tab = self._tab[:1].copy()
-        tab[0, K.BANK_OUT] = scratch.ctypes.data
+        """Compile the kernel for these observers with a non-finite sample: NaN into a scratch
+        output, every state untouched."""
         z = np.zeros(self.snapshot.n)
-        K.bank_update(tab, z, z, z, True, 1e-3)
-        K.bank_update(tab, z, z, z, False, 1e-3)
+        K.bank_update(self.args, self.terms, np.zeros_like(self.out), z, z, z, False, 1e-3)

@@ -139,8 +139,9 @@ class LinearHold:
     Allocation-free; shape (joints,).
     """
 
-    def __init__(self, joints: int) -> None:
-        self.prev = np.zeros(joints)
+    def __init__(self, joints: int, prev: np.ndarray | None = None) -> None:
+        #: the previous sample (``prev``: the owner's array to keep it in, else its own)
+        self.prev = np.zeros(joints) if prev is None else prev
         self._cur = np.zeros(joints)
         self._step = np.zeros(joints)
 

@@ -95,12 +95,35 @@ class HoftoCore:
         self.stages, self.joints = gains.shape
         self.order = self.stages - 2
         self.gains = gains.copy()
-        self.powers = powers.copy()
         self.form = form
         self.discretisation = discretisation
         self.substeps = int(substeps)
         s, j = self.stages, self.joints
-        self.z = np.zeros((s, j))
+        #: the state and parameters the compiled update reads and writes, as one record
+        #: (observers.bank passes it as one argument): z, -L, powers, the previous sample,
+        #: the step terms of the compiled update (T, [h, a_h2], scratch: ``work``), substeps
+        #: and flags (kernels.BANK_RECURSIVE | BANK_TAYLOR); the attributes are its fields
+        f8 = np.float64
+        self.record = np.zeros(
+            1,
+            np.dtype(
+                [("z", f8, (s, j)), ("neg_gains", f8, (s, j)), ("powers", f8, (s,)),
+                 ("prev", f8, (j,)), ("work", f8, (s + 3, s)), ("substeps", np.int64),
+                 ("flags", np.int64)],
+                align=True,
+            ),
+        )  # fmt: skip
+        rec = self.record[0]
+        self.z = rec["z"]
+        self.powers = rec["powers"]
+        self.powers[:] = powers
+        work = rec["work"]
+        work[:s] = np.eye(s)
+        work[s, 0] = -1.0  # h < 0: no step yet
+        rec["substeps"] = self.substeps
+        rec["flags"] = (kernels.BANK_RECURSIVE if form == "recursive" else 0) | (
+            kernels.BANK_TAYLOR if discretisation == "taylor" else 0
+        )
         self._inj = np.zeros((s, j))
         self._tz = np.zeros((s, j))
         self._pow_col = self.powers.reshape(s, 1).copy()
@@ -109,9 +132,10 @@ class HoftoCore:
         self._d = np.zeros(j)
         self._t = np.zeros(j)
         self._prev = np.zeros(j)
-        self._hold = LinearHold(j)
+        self._hold = LinearHold(j, rec["prev"])
         self._T = np.eye(s)
-        self._neg_gains = -self.gains
+        self._neg_gains = rec["neg_gains"]
+        np.negative(self.gains, out=self._neg_gains)
         # row views made once: (z_i, z_{i+1} or None, inj_i, -L_i, p_i) per stage
         self._stages = [
             (

@@ -33,6 +33,14 @@ except Exception as exc:  # ImportError, or a numba that does not match the inst
 else:
     _IMPORT_ERROR = ""
 
+
+def _literal_unroll(group: Any) -> Any:  # without numba: the tuple itself
+    return group
+
+
+if _numba is not None:
+    _literal_unroll = _numba.literal_unroll
+
 _DISABLED = os.environ.get("HOFTO_HW_NO_NUMBA", "") not in ("", "0")
 _FAILED: str = ""  # first compilation failure, if any
 
@@ -108,6 +116,12 @@ def warm(call: Callable[[], object]) -> bool:
         _FAILED = _FAILED.splitlines()[0]
         return False
     return True
+
+
+def compiled_or_python(fn: Callable[..., Any], backend: str) -> Callable[..., Any]:
+    """The compiled kernel ``fn`` for the ``numba`` backend, else the same function as Python
+    (numba's ``py_func``): one source for both."""
+    return fn if backend == "numba" else getattr(fn, "py_func", fn)
 
 
 def ready(backend: Backend, warm_call: Callable[[], object]) -> Literal["numpy", "numba"]:
@@ -551,73 +565,21 @@ def dob_update(
 
 # ----------------------------------------------------------------- the observer bank
 #
-# One call updates every observer of a tick (hofto_hw.observers.bank). A compiled call
-# costs ~0.2 µs per array argument (more with cold caches), so the arrays the bank reads
-# and writes do not travel as arguments: their addresses sit in one int64 table, made once
-# from arrays that stay allocated and in place for the bank's life (the bank keeps a
-# reference to each). Row 0 holds what every observer reads; each further row one observer.
+# One call updates every observer of a tick (hofto_hw.observers.bank) on the observers' own
+# arrays: ``obs`` holds one tuple per kind (None when the bank has none of that kind), each a
+# tuple per observer of its output row, its arrays and its integers (the BANK_* layouts
+# below); ``terms`` the snapshot's M (n, n), model acceleration, friction, gravity, Cᵀ·qd and
+# C·qd + g (n,). Numba types every array by its own dtype, shape and layout and keeps it
+# alive while it runs: nothing is addressed by hand.
 
-# row 0: joints, rows of the output, then addresses: output (rows, n), M (n, n), model
-# acceleration, friction, gravity, Cᵀ·qd, C·qd + g (n,)
-BANK_N, BANK_ROWS, BANK_OUT, BANK_M, BANK_ACCEL, BANK_F, BANK_G, BANK_CT, BANK_NLE = range(9)
-# observer rows: kind, output row, stages, substeps, flags, then BANK_ADDRESSES addresses
-BANK_KIND, BANK_ROW, BANK_STAGES, BANK_SUBSTEPS, BANK_FLAGS, BANK_A0 = range(6)
-BANK_ADDRESSES = 7
-BANK_COLS = BANK_A0 + BANK_ADDRESSES
-# kinds and their addresses (in order from BANK_A0):
-BANK_HOFTO = 1  # z (s, n), y_prev (n,), -L (s, n), powers (s,), [h, a_h2], T (s, s), col (2, s)
-BANK_MOMENTUM = 2  # gain, p0, integral, r (n,)
-BANK_ESO = 3  # z (3, n), k (3, n), y_prev (n,)
-BANK_STA = 4  # z (3, n), l (3, n), y_prev (n,)
-BANK_DOB = 5  # g·Jn, cutoff, w (n,), [dt of alpha] (1,), alpha (n,)
-BANK_RECURSIVE = 1  # flags of a HOFTO row
+#: per-observer tuples: (row, HoftoCore.record: z (s, n), neg_gains (s, n), powers (s,), prev
+#: (n,), work (s + 3, s): T, [h, a_h2], col (2, s), substeps, flags); (row,
+#: MomentumObserver.record: gain, p0, integral, r (n,));
+#: (row, z (3, n), gains (3, n), y_prev (n,), substeps) for ESO and STA;
+#: (row, g·Jn, cutoff, w (n,), work (2, n): [dt of alpha], alpha)
+BANK_HOFTO, BANK_MOMENTUM, BANK_ESO, BANK_STA, BANK_DOB = range(5)
+BANK_RECURSIVE = 1  # flags of a HOFTO tuple
 BANK_TAYLOR = 2
-
-
-if _numba is not None:
-    from numba.core import types as _types
-    from numba.extending import intrinsic as _intrinsic
-
-    def pointer_at(dtype: str) -> Callable[..., Any]:
-        """A compiled function: the pointer to ``dtype`` (a numba type name: "float64",
-        "uint8", ...) at an integer address, for :data:`carray` (a table of addresses)."""
-        nbtype = getattr(_types, dtype)
-
-        @_intrinsic
-        def at(typingctx, address):  # type: ignore[no-untyped-def]
-            if not isinstance(address, _types.Integer):
-                return None
-            sig = _types.CPointer(nbtype)(address)
-
-            def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-                return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
-
-            return sig, codegen
-
-        return at
-
-    carray = _numba.carray
-else:  # never called without numba; keeps the module importable
-
-    def pointer_at(dtype: str) -> Callable[..., Any]:
-        return lambda address: address
-
-    def carray(address: int, shape: tuple[int, ...]) -> np.ndarray:
-        raise RuntimeError("numba is not available")
-
-
-_f64_at = pointer_at("float64")
-_carray = carray
-
-
-@_jit
-def _vec(tab: np.ndarray, r: int, c: int, n: int) -> np.ndarray:
-    return _carray(_f64_at(tab[r, c]), (n,))
-
-
-@_jit
-def _mat(tab: np.ndarray, r: int, c: int, rows: int, cols: int) -> np.ndarray:
-    return _carray(_f64_at(tab[r, c]), (rows, cols))
 
 
 @_jit
@@ -638,93 +600,110 @@ def _hofto_transition(T: np.ndarray, hs: np.ndarray, h: float, taylor: bool) -> 
 
 
 @_jit
-def bank_update(
-    tab: np.ndarray, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, finite: bool, dt: float
+def _nan_rows(group: Any, out: np.ndarray) -> None:
+    if group is not None:
+        for o in _literal_unroll(group):
+            r = out[o[0]]
+            for i in range(r.shape[0]):
+                r[i] = np.nan
+
+
+@_jit
+def _bank_hofto(
+    group: Any, M: np.ndarray, a: np.ndarray, y: np.ndarray, dt: float, out: np.ndarray
 ) -> None:
-    """Every observer of the table ``tab`` (see above) advanced by dt [s] with the sample
-    q, qd, tau (n,) and the model terms at the table's addresses, each estimate written into
-    its row of the output, with the arithmetic of each observer's own kernel. A sample that is
-    not ``finite`` or a non-finite dt: NaN in every row, no state touched."""
-    n = tab[0, BANK_N]
-    out = _mat(tab, 0, BANK_OUT, tab[0, BANK_ROWS], n)
-    usable = finite and math.isfinite(dt)
-    M = _mat(tab, 0, BANK_M, n, n)
-    a = _vec(tab, 0, BANK_ACCEL, n)
-    for r in range(1, tab.shape[0]):
-        o = out[tab[r, BANK_ROW]]
-        if not usable:
-            for i in range(n):
-                o[i] = np.nan
-            continue
-        kind = tab[r, BANK_KIND]
-        sub = tab[r, BANK_SUBSTEPS]
-        c = BANK_A0
-        if kind == BANK_HOFTO:
-            s = tab[r, BANK_STAGES]
-            z = _mat(tab, r, c, s, n)
-            hs = _vec(tab, r, c + 4, 2)
-            T = _mat(tab, r, c + 5, s, s)
-            taylor = (tab[r, BANK_FLAGS] & BANK_TAYLOR) != 0
+    if group is not None:
+        for entry in _literal_unroll(group):  # HOFTOs of different orders: records' types
+            row, rec = entry
+            c = rec[0]
+            z, work, sub, flags = c["z"], c["work"], c["substeps"], c["flags"]
+            s = z.shape[0]
+            T, hs = work[:s], work[s]
+            taylor = (flags & BANK_TAYLOR) != 0
             h = dt / sub
             if h != hs[0]:
                 _hofto_transition(T, hs, h, taylor)
+            recursive = (flags & BANK_RECURSIVE) != 0
             hofto_update(
-                z,
-                _mat(tab, r, c + 2, s, n),
-                _vec(tab, r, c + 3, s),
-                T,
-                q,
-                _vec(tab, r, c + 1, n),
-                a,
-                h,
-                hs[1],
-                (tab[r, BANK_FLAGS] & BANK_RECURSIVE) != 0,
-                taylor,
-                sub,
-                _mat(tab, r, c + 6, 2, s),
-                M,
-                o,
-            )
-        elif kind == BANK_MOMENTUM:
-            res = _vec(tab, r, c + 3, n)
-            momentum_update(
-                M,
-                qd,
-                tau,
-                _vec(tab, 0, BANK_F, n),
-                _vec(tab, 0, BANK_G, n),
-                _vec(tab, 0, BANK_CT, n),
-                _vec(tab, r, c, n),
-                _vec(tab, r, c + 1, n),
-                _vec(tab, r, c + 2, n),
-                res,
-                dt,
-            )
-            for i in range(n):
-                o[i] = res[i]
-        elif kind == BANK_ESO or kind == BANK_STA:
-            z = _mat(tab, r, c, 3, n)
-            gains = _mat(tab, r, c + 1, 3, n)
-            y_prev = _vec(tab, r, c + 2, n)
-            if kind == BANK_ESO:
-                eso_update(z, gains, q, y_prev, a, dt / sub, sub, M, o)
+                z, c["neg_gains"], c["powers"], T, y, c["prev"], a, h, hs[1], recursive, taylor,
+                sub, work[s + 1 :], M, out[row],
+            )  # fmt: skip
+
+
+@_jit
+def _bank_momentum(
+    group: Any,
+    M: np.ndarray,
+    terms: Any,
+    qd: np.ndarray,
+    tau: np.ndarray,
+    dt: float,
+    out: np.ndarray,
+) -> None:
+    if group is not None:
+        _, _, f, g, ct_qd, _ = terms
+        for row, rec in group:
+            c = rec[0]
+            r = c["r"]
+            momentum_update(M, qd, tau, f, g, ct_qd, c["gain"], c["p0"], c["integral"], r, dt)
+            o = out[row]
+            for i in range(o.shape[0]):
+                o[i] = r[i]
+
+
+@_jit
+def _bank_euler(
+    group: Any, sta: bool, M: np.ndarray, a: np.ndarray, y: np.ndarray, dt: float, out: np.ndarray
+) -> None:
+    if group is not None:
+        for row, z, gains, y_prev, sub in group:
+            if sta:
+                sta_update(z, gains, y, y_prev, a, dt / sub, sub, M, out[row])
             else:
-                sta_update(z, gains, q, y_prev, a, dt / sub, sub, M, o)
-        elif kind == BANK_DOB:
-            cutoff = _vec(tab, r, c + 1, n)
-            ds = _vec(tab, r, c + 3, 1)
-            alpha = _vec(tab, r, c + 4, n)
-            if dt != ds[0]:  # the discrete pole, only when the period changes
-                for i in range(n):
+                eso_update(z, gains, y, y_prev, a, dt / sub, sub, M, out[row])
+
+
+@_jit
+def _bank_dob(
+    group: Any, terms: Any, qd: np.ndarray, tau: np.ndarray, dt: float, out: np.ndarray
+) -> None:
+    if group is not None:
+        _, _, f, _, _, nle = terms
+        for row, gj, cutoff, w, work in group:
+            alpha = work[1]
+            if dt != work[0, 0]:  # the discrete pole, only when the period changes
+                for i in range(alpha.shape[0]):
                     alpha[i] = -math.expm1(cutoff[i] * -dt)
-                ds[0] = dt
-            dob_update(
-                _vec(tab, r, c, n),
-                alpha,
-                qd,
-                tau,
-                _vec(tab, 0, BANK_NLE, n),
-                _vec(tab, 0, BANK_F, n),
-                _vec(tab, r, c + 2, n),
-                o,
-            )
+                work[0, 0] = dt
+            dob_update(gj, alpha, qd, tau, nle, f, w, out[row])
+
+
+@_jit
+def bank_update(
+    obs: Any,
+    terms: Any,
+    out: np.ndarray,
+    q: np.ndarray,
+    qd: np.ndarray,
+    tau: np.ndarray,
+    finite: bool,
+    dt: float,
+) -> None:
+    """Every observer of ``obs`` (see above) advanced by dt [s] with the sample q, qd, tau (n,)
+    and the model ``terms``, each estimate written into its row of ``out``, with the
+    arithmetic of each observer's own kernel. A sample that is not ``finite`` or a non-finite
+    dt: NaN in every row, no state touched."""
+    hoftos, momenta, esos, stas, dobs = obs
+    if not (finite and math.isfinite(dt)):
+        _nan_rows(hoftos, out)
+        _nan_rows(momenta, out)
+        _nan_rows(esos, out)
+        _nan_rows(stas, out)
+        _nan_rows(dobs, out)
+        return
+    M, a = terms[0], terms[1]
+    _bank_hofto(hoftos, M, a, q, dt, out)
+    _bank_momentum(momenta, M, terms, qd, tau, dt, out)
+    _bank_euler(esos, False, M, a, q, dt, out)
+    _bank_euler(stas, True, M, a, q, dt, out)
+    _bank_dob(dobs, terms, qd, tau, dt, out)

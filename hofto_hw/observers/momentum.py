@@ -19,6 +19,8 @@ from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import kernels
 from hofto_hw.observers.base import SampleGuard, SnapshotUpdate, per_joint
 
+_FIELDS = ("gain", "p0", "integral", "r")
+
 
 class MomentumObserver(SnapshotUpdate):
     name = "momentum"
@@ -30,10 +32,11 @@ class MomentumObserver(SnapshotUpdate):
         n = model.n
         self.model = model
         self.n = n
-        self.gain = per_joint(gain, n, "momentum.gain")
-        self.integral = np.zeros(n)
-        self.p0 = np.zeros(n)
-        self.r = np.zeros(n)
+        #: gain, p0, integral and the residual r (n,) as one record (observers.bank passes it
+        #: as one argument); the attributes are its fields
+        self.record = np.zeros(1, np.dtype([(f, np.float64, (n,)) for f in _FIELDS]))
+        self.gain, self.p0, self.integral, self.r = (self.record[0][f] for f in _FIELDS)
+        self.gain[:] = per_joint(gain, n, "momentum.gain")
         self._p = np.zeros(n)
         self._tmp = np.zeros(n)
         self._guard = SampleGuard(self.n)

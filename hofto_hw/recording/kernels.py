@@ -1,5 +1,4 @@
-"""Compiled fill of the tick record (numba), beside the numpy reference in
-:meth:`hofto_hw.runtime.tick.Tick._record`.
+"""Compiled fill of the tick record (numba); the same source runs as Python without numba.
 
 Filling the record field by field costs a numpy call (~0.1-0.5 µs) per field; this kernel
 writes every per-tick field of a record in one call (the sample as one (3, n) array, the
@@ -7,8 +6,8 @@ tick's copy of the command riding along; scalars packed into small arrays measur
 each element written from Python costs more than an argument). ``rec`` is the tick record
 seen as a one-element array (``new_record(...).reshape(1)``: a view, the same memory). Backend
 conventions are the observers' (:mod:`hofto_hw.observers.kernels`); the tick warms the
-kernel when built. tests/hofto_hw/runtime/test_record_kernel.py checks both fills give the
-same bytes.
+kernel when built. tests/hofto_hw/runtime/test_record_kernel.py checks it against a
+field-by-field numpy reference kept there.
 """
 
 from __future__ import annotations
@@ -39,20 +38,20 @@ def fill_tick(
     observers' sample_dt [s] into ``rec[0]``; and ``q_sent[:] = q_cmd`` (n,) (the tick's
     copy of the command just sent, in the same pass)."""
     r = rec[0]
-    r.t = t
-    r.tick = tick
+    r["t"] = t
+    r["tick"] = tick
     for j in range(q_cmd.shape[0]):
-        r.q[j] = sample[0, j]
-        r.qd[j] = sample[1, j]
-        r.tau[j] = sample[2, j]
-        r.q_cmd[j] = q_cmd[j]
+        r["q"][j] = sample[0, j]
+        r["qd"][j] = sample[1, j]
+        r["tau"][j] = sample[2, j]
+        r["q_cmd"][j] = q_cmd[j]
         q_sent[j] = q_cmd[j]
     for i in range(tau_ext.shape[0]):
         for j in range(tau_ext.shape[1]):
-            r.tau_ext[i, j] = tau_ext[i, j]
-    r.mode = mode
-    r.faults = faults
-    r.bus_status = bus_status
-    r.wakeup_us = wakeup_us
-    r.compute_us = compute_us
-    r.sample_dt = sample_dt
+            r["tau_ext"][i, j] = tau_ext[i, j]
+    r["mode"] = mode
+    r["faults"] = faults
+    r["bus_status"] = bus_status
+    r["wakeup_us"] = wakeup_us
+    r["compute_us"] = compute_us
+    r["sample_dt"] = sample_dt

@@ -51,35 +51,27 @@ from hofto_hw.recording.record import (
     tick_dtype,
 )
 from hofto_hw.runtime.fused import (
-    A_IDH,
-    A_SH,
     CONTROL,
     DONE,
     HOLD_STILL,
     MONITOR,
     MOVE_PATH,
     OTHER,
-    R_EXPECT,
-    R_FFSTALE,
-    R_FINITE,
-    R_JUDGE,
-    R_KIND,
-    R_MFLAGS,
-    R_MODE,
-    R_OBS_DT,
-    R_REC_MON,
-    R_SINCE,
-    R_SIZE,
-    R_T0,
-    R_TCMD,
-    R_WAS_CONTACT,
     READ,
     FusedTick,
     fused_tick,
+    tick_state_dtype,
 )
 from hofto_hw.runtime.fused import say_once as fused_say_once
 from hofto_hw.runtime.teach import FINISHED, RECORDING
-from hofto_hw.runtime.tick_kernels import ESTIMATES_FINITE, POWER_ON, tick_flags, tick_flags_numpy
+from hofto_hw.runtime.tick_kernels import (
+    ESTIMATES_FINITE,
+    POWERED,
+    command_dt,
+    judged,
+    jump_gap,
+    tick_flags,
+)
 from safety.bus_health import BusHealth
 from safety.collision import COLLIDED, CONTACT, CollisionLevels
 from safety.limits import LimitMonitor
@@ -94,9 +86,7 @@ MAX_STOPS = 256  # stop episodes kept for the summary
 MAX_SUBSTEPS = 250  # observer steps over one stalled gap at most (cost: one step each)
 FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
 _DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
-#: the power stage is on (a quick-stop ramp keeps it on until each axis rests)
 _COLLIDED_OR_CONTACT = COLLIDED | CONTACT  # the monitor's flags
-_POWERED = np.array([_OE, _QSA], dtype=np.uint8)
 
 
 def gap_steps(dt: float, period: float) -> int:
@@ -107,34 +97,12 @@ def gap_steps(dt: float, period: float) -> int:
     return 1
 
 
-def command_dt(dt: float, period: float) -> float:
-    """The setpoint (path) time step of a tick ``dt`` [s] after the last one: at most one
-    ``period`` [s] (0: unknown): an interpolator that missed cycles is late, it does not jump
-    (the fused call, hofto_hw/runtime/fused.py, computes the same in its kernel)."""
-    return dt if period <= 0.0 or dt <= period else period
-
-
 def lerp(prev: np.ndarray, now: np.ndarray, a: float, out: np.ndarray) -> None:
     """``out = prev + a·(now - prev)`` in place: a stall's sub-step sample (flight-log replay
     interpolates with the same operations, so its estimates are the loop's bit for bit)."""
     np.subtract(now, prev, out=out)
     out *= a
     out += prev
-
-
-class InRegister:
-    """A float attribute of :class:`Tick` kept in its register (``Tick._reg``, fused.py
-    ``R_*``) at ``index``: the fused call and the reference read and write the same copy."""
-
-    def __init__(self, index: int, doc: str) -> None:
-        self.index = index
-        self.__doc__ = doc
-
-    def __get__(self, tick: Tick | None, owner: type) -> Any:
-        return self if tick is None else tick._reg.item(self.index)
-
-    def __set__(self, tick: Tick, value: float) -> None:
-        tick._reg[self.index] = value
 
 
 class Tick:
@@ -191,24 +159,23 @@ class Tick:
         #: does not jump), and the jump check allows for the gap
         self.period = float(period)
         self._stall_dt = 1.5 * self.period if self.period > 0.0 else math.inf  # see gap_steps
-        #: the fused call's register (fused.py R_*): the tick's scalars it reads and writes
-        #: (t_cmd, sample_dt and _since_fresh live there: one owner for both paths);
-        #: R_REC_MON is the record's ``monitored`` (written when it changes) on both paths
-        self._reg = np.zeros(R_SIZE)
-        self.t_cmd = 0.0  # setpoint (path) time [s]
-        self._since_fresh = 0.0  # [s] since the last fresh sample
-        self._prev = np.zeros((3, n))  # last tick's q, qd, tau (interpolation start)
+        #: the tick's state (fused.tick_state_dtype): the scalars both paths read and write
+        #: (``st["t_cmd"]``, ``st["sample_dt"]``, ...) and the arrays below, as one record
+        self.state = np.zeros(1, tick_state_dtype(n, max(1, len(self.observers))))
+        self.st = self.state[0]  # its fields by name (a view)
+        self.st["stall"], self.st["two"] = self._stall_dt, 2.0
+        self.st["period"] = self.period
+        self._prev = self.state["prev"][0]  # last tick's q, qd, tau (interpolation start)
         self._interp = np.zeros((3, n))  # one substep's q, qd, tau
-        self.tau_ext = np.zeros((max(1, len(self.observers)), n))
+        self.tau_ext = self.state["tau_ext"][0]
         self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
-        self.tau_ff = np.zeros(n)
+        self.tau_ff = self.state["tau_ff"][0]
         #: the motion's version that tau_ff was evaluated for (-1: evaluate on the next tick),
         #: and the model's revision, friction and payload objects it was evaluated with
         self._ff_version = -1
         m = feedforward.model
         self._ff_model = (m.revision, m.friction, m.payload)
-        self.sample_dt = 0.0
-        self.q_sent = np.zeros(n)  # position target of the last command [rad]
+        self.q_sent = self.state["q_sent"][0]  # position target of the last command [rad]
         self.err_codes = group.transport.tx["error_code"]
         self._transport = group.transport  # its sample_dt (DriveGroup.sample_dt forwards it)
         self.controlword = group.transport.rx["controlword"]
@@ -246,14 +213,10 @@ class Tick:
         self.wakeup_p99_us = 0.0
         self.compute_p99_us = 0.0
         r = self.tick_rec
-        self._r = {k: r[k] for k in ("q", "qd", "tau", "q_cmd", "tau_ext", "qdd_cmd")}
         r["wrench"][...] = np.nan
         self._events_pushed = 0
-        #: the record fill: numpy (the reference) or one compiled call (recording/kernels.py)
         self._rec1 = r.reshape(1)  # the same memory as a one-element array, for the kernel
         self._sample = group.sample  # q, qd, tau as rows of one (3, n) view
-        self.backend = kernels.ready(backend, self._warm_record)
-        self._fill_kernel = self.backend == "numba"
         # drag (hand guiding): controller, enabling input, the observer row that drives it
         self.drag = drag
         self.enable_input = enable_input if enable_input is not None else EnableInput()
@@ -274,18 +237,19 @@ class Tick:
         self._tau_mon = np.zeros_like(self.tau_ext)  # the collision monitor's input
         self._wrench = r["wrench"]
         self._wrench_set = False  # the record's wrench holds a drag estimate (else all NaN)
-        self._qdd_rec = self._r["qdd_cmd"]
-        #: the tick's flags call (tick_kernels.py): compiled with the record fill, else numpy
-        self._flags = tick_flags if self._fill_kernel else tick_flags_numpy
-        if self._fill_kernel and not kernels.warm(self._warm_flags):
-            self._flags = tick_flags_numpy
+        self._qdd_rec = r["qdd_cmd"]
+        #: the record fill and the tick's flags: one compiled call each (recording/kernels.py,
+        #: tick_kernels.py); without the compiled path the same functions run as Python
+        self.backend = kernels.ready(backend, self._warm)
+        self._fill = kernels.compiled_or_python(fill_tick, self.backend)
+        self._flags = kernels.compiled_or_python(tick_flags, self.backend)
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
         # the common tick as one compiled call (fused.py): built on the arrays above, taken
         # only on ticks where nothing unusual can happen (_fuse_refresh keeps _fuse_quiet)
         self._fz: FusedTick | None = None
-        self._fz_rebind = False  # a reset may have rebound an owner's array: check the table
+        self._fz_args: tuple[Any, ...] = ()
         self._fuse_quiet = False
         self._fz_kind = OTHER
         self._cmd_dt = 0.0
@@ -297,7 +261,7 @@ class Tick:
         if fuse and self.backend == "numba":
             fz = FusedTick(self)
             if fz.ok:
-                self._fz, self._fz_tab, self._fz_call = fz, fz.tab, fz.call
+                self._fz = fz
             else:
                 fused_say_once("the tick runs without its fused call: " + fz.why)
 
@@ -320,13 +284,6 @@ class Tick:
         self.expect_enabled = g.all_in(State.OPERATION_ENABLED)
         self._judge_from = self.tick + 1 + self.settle_ticks
         self._fuse_refresh()
-
-    # the scalars the fused call reads and writes: kept in the register only (one owner)
-    t_cmd = InRegister(R_TCMD, "Setpoint (path) time [s].")
-    sample_dt = InRegister(
-        R_OBS_DT, "The interval the observers integrated this tick [s] (the record's sample_dt)."
-    )
-    _since_fresh = InRegister(R_SINCE, "Time since the last fresh sample [s].")
 
     # ------------------------------------------------------------------ the tick
 
@@ -387,9 +344,10 @@ class Tick:
         if sample_dt >= 0.0:
             obs_dt = sample_dt if sample_dt > 0.0 else dt
             self._observe(self.snapshot, q, qd, tau, obs_dt)
-        self.sample_dt = obs_dt  # into the record with the rest (_record)
+        st = self.st
+        st["sample_dt"] = obs_dt  # into the record with the rest (_record)
         self._cmd_dt = cmd_dt = command_dt(dt, self.period)
-        self.t_cmd += cmd_dt
+        st["t_cmd"] += cmd_dt
 
         # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
         # safety's to latch below); the reference it integrates is used in step 5
@@ -403,7 +361,8 @@ class Tick:
         """Section 4 up to the collision monitor's decision (and the friction learning)."""
         g, stop, motion, snap = self.group, self.stop, self.motion, self.snapshot
         q, qd, tau = g.q, g.qd, g.tau
-        obs_dt = self.sample_dt
+        st = self.st
+        obs_dt = float(st["sample_dt"])
         dragging = motion.mode == DRAG
         good = self.bus.check(stop, status, g.fresh, g.states, self.err_codes, self.expect_enabled)
         lim = self.limits
@@ -411,28 +370,26 @@ class Tick:
         # checks, which name the joint, run only when something is not
         ok = snap.finite or (lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau))
         # one call: the estimates' finiteness, the power stage, motion.qdd into the record
-        flags = self._flags(self.tau_ext, g.states, _POWERED, motion.qdd, self._qdd_rec)
+        flags = self._flags(self.tau_ext, g.states, POWERED, motion.qdd, self._qdd_rec)
         if not flags & ESTIMATES_FINITE:
             for i in range(len(self.observers)):
                 ok &= lim.finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
-        self._since_fresh += dt
-        gap = self._since_fresh - self.period if self.period > 0.0 else 0.0
-        lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap if gap > 1e-9 else 0.0)
+        st["since_fresh"] += dt
+        gap = jump_gap(float(st["since_fresh"]), self.period)
+        lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap)
         if good:
-            self._since_fresh = 0.0
+            st["since_fresh"] = 0.0
         # judged on trustworthy data only: fresh (a lost frame repeats the last sample) and
         # from drives that report no fault (a failed encoder freezes its position); an
         # observer with poles at a few hundred rad/s reads either as a contact
-        trusted = good and not stop.active & _DRIVE_CAUSES
-        settled = self.tick >= self._judge_from
-        # only while the power stage is on (quick-stop ramps included)
-        power_on = not self.enabling and flags & POWER_ON != 0
-        monitored = self.collision is not None and ok and trusted and settled and power_on
-        reg = self._reg
-        if monitored != (reg[R_REC_MON] != 0.0):
+        trusted = ok and good and not stop.active & _DRIVE_CAUSES and not self.enabling
+        monitored = (
+            self.collision is not None and trusted and judged(self.tick, self._judge_from, flags)
+        )
+        if monitored != st["monitored"]:
             monitored = bool(monitored)
-            reg[R_REC_MON] = 1.0 if monitored else 0.0
+            st["monitored"] = monitored
             self.tick_rec["monitored"] = monitored  # replay judges the same ticks
         if monitored:
             # only while the power stage is on (quick-stop ramps included): with it off the
@@ -448,10 +405,9 @@ class Tick:
     def _monitor_flagged(self, dt: float) -> None:
         """The fused call's monitor flagged (or a contact was on): what CollisionLevels.update
         does after its kernel, then the rest of :meth:`_safety`."""
-        reg, c = self._reg, self.collision
-        flags = int(reg[R_MFLAGS])
-        c._report(self.stop, flags)  # type: ignore[union-attr]
-        obs_dt = self.sample_dt
+        flags = int(self.st["mflags"])
+        self.collision._report(self.stop, flags)  # type: ignore[union-attr]
+        obs_dt = float(self.st["sample_dt"])
         self._learn_step(flags, obs_dt if obs_dt > 0.0 else dt)
 
     def _learn_step(self, flags: int, mdt: float) -> None:
@@ -507,7 +463,7 @@ class Tick:
                 d = self.drag
                 motion.follow(d.q_cmd, d.qd_cmd, d.qdd_cmd)
             else:
-                motion.update(self.t_cmd, cmd_dt)
+                motion.update(float(self.st["t_cmd"]), cmd_dt)
         if self.recording is not None or self.playback is not None:
             self._teach_record(q)
         # the feed-forward is a function of the reference (and the model): a hold reuses it
@@ -523,16 +479,15 @@ class Tick:
 
     def _fused_step(self, dt: float, wakeup_us: float, compute_us: float) -> int:
         """The fused call (hofto_hw/runtime/fused.py) on this tick's scalars; its stage code.
-        It keeps t_cmd, sample_dt and _since_fresh in the register; the register's other
-        entries are kept by :meth:`_fuse_refresh`."""
+        It keeps t_cmd, sample_dt and since_fresh in the tick's state; the state's other
+        scalars are kept by :meth:`_fuse_refresh`."""
         m = self.feedforward.model
         rev, fr, pl = self._ff_model  # what _fuse_refresh found in sync
         if m.revision != rev or m.friction is not fr or m.payload is not pl:
             return READ  # a model change: the reference takes it (and refreshes)
         stage = self._fz_call(
-            self._fz_tab, self._rec1, self.t, dt, self._transport.sample_dt, self.tick,
-            wakeup_us, compute_us,
-        )  # fmt: skip
+            *self._fz_args, self.t, dt, self._transport.sample_dt, self.tick, wakeup_us, compute_us
+        )
         if stage == READ:
             return READ
         if stage >= MONITOR:  # good data, judged by the call (what bus.check does on it)
@@ -544,7 +499,7 @@ class Tick:
                 self._ff_version = motion.version
             self.fused_ticks += 1
             return DONE
-        self.snapshot.finite = self._reg.item(R_FINITE) != 0.0
+        self.snapshot.finite = bool(self.st["finite"])
         self._cmd_dt = command_dt(dt, self.period)
         return stage
 
@@ -557,26 +512,25 @@ class Tick:
         elif self._fz is None:
             fz = FusedTick(self)
             if fz.ok:
-                self._fz, self._fz_tab, self._fz_call = fz, fz.tab, fz.call
+                self._fz = fz
                 self._fuse_refresh()
 
     def _fuse_refresh(self, rebuild: bool = True) -> None:
         """After a tick the fused call did not finish, at start and after a script's step:
-        whether the next one may take it, and the register's slow scalars (off the common
-        path). After a reset or start (``_check_bank``), unless ``rebuild`` is False: check
-        the table still addresses its owners' arrays (a new bank: a new table)."""
+        whether the next one may take it, its arguments (the parts' arrays as they hold them
+        now; not after a script's step, ``rebuild`` False) and the state's slow scalars (off
+        the common path)."""
         fz = self._fz
         if fz is None:
             return
-        rebind, self._fz_rebind = self._fz_rebind and rebuild, self._fz_rebind and not rebuild
-        if self._bank is not fz.bank or (rebind and not fz.bound()):
-            self._fz = fz = FusedTick(self)  # a new bank (a reset), or an array rebound
+        if self._bank is not fz.bank:  # a new bank (a reset): checked again
+            self._fz = fz = FusedTick(self)
             if not fz.ok:
                 fused_say_once("the tick runs without its fused call: " + fz.why)
-                self._fz = None
-                self._fuse_quiet = False
+                self._fz, self._fuse_quiet = None, False
                 return
-            self._fz_tab, self._fz_call = fz.tab, fz.call
+        if rebuild or not self._fz_args or self._fz_args[2] is not self._bank.args:
+            self._fz_args = fz.args()
         stop, m, g, snap = self.stop, self.motion, self.group, self.snapshot
         model = self.feedforward.model
         ff = self.feedforward
@@ -588,9 +542,6 @@ class Tick:
             and ff._native.revision == model.revision  # type: ignore[union-attr]
             and self._ff_model == (model.revision, model.friction, model.payload)
         )
-        if synced:  # a parameter change made new C++ models (native.NativeModel.sync)
-            fz.tab[A_SH] = snap._native.handle  # type: ignore[union-attr]
-            fz.tab[A_IDH] = ff._native.handle  # type: ignore[union-attr]
         self._fuse_quiet = bool(
             synced
             and stop.latched == 0
@@ -617,15 +568,10 @@ class Tick:
         else:
             kind = OTHER
         self._fz_kind = kind
-        r = self._reg
-        r[R_KIND] = kind
-        r[R_T0] = m.t0
-        r[R_MODE] = m.mode
-        r[R_EXPECT] = 1.0 if self.expect_enabled else 0.0
-        r[R_JUDGE] = self._judge_from
-        c = self.collision
-        r[R_WAS_CONTACT] = 1.0 if c is not None and c._was_contact else 0.0
-        r[R_FFSTALE] = 0.0
+        st, c = self.st, self.collision
+        st["kind"], st["t0"], st["mode"] = kind, m.t0, m.mode
+        st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
+        st["was_contact"] = c is not None and c._was_contact
 
     # ------------------------------------------------------------- tick helpers
 
@@ -658,7 +604,6 @@ class Tick:
         than a bank that goes on integrating the arrays it dropped."""
         if not self._bank.bound():
             self._bank = ObserverBank(self.observers, self.snapshot, self.tau_ext)
-        self._fz_rebind = True  # the fused call's table checked again (_fuse_refresh)
 
     def _keep_sample(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
         g = self.group
@@ -787,7 +732,7 @@ class Tick:
             self.play_request = None
         elif want == MOVE and motion.mode != DRAG:
             if self.expect_enabled and not self.enabling:
-                motion.move(self.t_cmd)
+                motion.move(float(self.st["t_cmd"]))
         else:  # hold, or move while dragging: ramp the drag's velocity down first
             motion.ramp_down()
 
@@ -890,31 +835,26 @@ class Tick:
             # joint = link index (the link after joint j is link j + 1, 1-based)
             stop.report(Fault.COLLISION, d.contact_link - 1, d.mismatch)
 
-    def _warm_flags(self) -> None:
-        # on the tick's own arrays (the record's field is an unaligned view: its own signature);
-        # it copies motion.qdd into the record, as every tick does
-        tick_flags(self.tau_ext, self.group.states, _POWERED, self.motion.qdd, self._qdd_rec)
-
-    def _warm_record(self) -> None:
+    def _warm(self) -> None:
+        """Compile the record fill (into a scratch record) and the flags call (on the tick's
+        own arrays: it copies motion.qdd into the record, as every tick does)."""
         g, scratch = self.group, np.zeros(1, dtype=self.tick_rec.dtype)
         q_sent = self.q_sent.copy()
         fill_tick(
             scratch, g.sample, self.motion.q, self.tau_ext, q_sent, 0.0, 0, 0, 0, 0, 0.0, 0.0, 0.0
         )
+        tick_flags(self.tau_ext, g.states, POWERED, self.motion.qdd, self._qdd_rec)
 
     def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
         """The tick record of this tick (and q_sent = motion.q, the command just sent), then
         into the sink with the new events (and every ``diag_every`` ticks the diagnostics)."""
-        if self._fill_kernel:
-            m = self.motion
-            # the casts keep the kernel on its warmed signature whatever numbers callers pass
-            fill_tick(
-                self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t),
-                self.tick, m.mode, self.stop.latched, int(status), float(wakeup_us),
-                float(compute_us), float(self.sample_dt),
-            )  # fmt: skip
-        else:
-            self._fill_numpy(status, wakeup_us, compute_us)
+        m = self.motion
+        # the casts keep the kernel on its warmed signature whatever numbers callers pass
+        self._fill(
+            self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t), self.tick,
+            m.mode, self.stop.latched, int(status), float(wakeup_us), float(compute_us),
+            float(self.st["sample_dt"]),
+        )  # fmt: skip
         self._push()
 
     def _push(self) -> None:
@@ -935,24 +875,6 @@ class Tick:
             self._events_pushed += 1
         if self.tick % self.diag_every == 0:
             self._diag()
-
-    def _fill_numpy(self, status: int, wakeup_us: float, compute_us: float) -> None:
-        """The reference fill of the tick record (field by field)."""
-        r, v = self.tick_rec, self._r
-        r["t"] = self.t
-        r["tick"] = self.tick
-        np.copyto(v["q"], self.group.q)
-        np.copyto(v["qd"], self.group.qd)
-        np.copyto(v["tau"], self.group.tau)
-        np.copyto(v["q_cmd"], self.motion.q)
-        np.copyto(v["tau_ext"], self.tau_ext)
-        r["mode"] = self.motion.mode
-        r["faults"] = self.stop.latched
-        r["bus_status"] = status
-        r["wakeup_us"] = wakeup_us
-        r["compute_us"] = compute_us
-        r["sample_dt"] = self.sample_dt
-        np.copyto(self.q_sent, self.motion.q)
 
     def _diag(self) -> None:
         d = self.diag_rec

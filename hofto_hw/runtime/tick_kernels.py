@@ -1,10 +1,11 @@
-"""The tick's own bookkeeping between the safety checks, as one call (numba), beside the numpy
-reference :func:`tick_flags_numpy`.
+"""The tick's own bookkeeping between the safety checks, as one call (numba), and the tick's
+glue arithmetic (one definition each, for the reference stages and the fused call).
 
 Each of these is a numpy call or a Python loop over six elements (~1-4 µs each with the
 caches cold after the exchange); together they are one compiled call. Backend conventions are
-the observers' (:mod:`hofto_hw.observers.kernels`); the tick warms the kernel when built.
-tests/hofto_hw/runtime/test_tick_kernels.py checks both give the same flags and copies.
+the observers' (:mod:`hofto_hw.observers.kernels`); the tick warms the kernel when built and
+runs the same source as Python without the compiled path.
+tests/hofto_hw/runtime/test_tick_kernels.py checks it against a numpy reference kept there.
 """
 
 from __future__ import annotations
@@ -13,14 +14,40 @@ import math
 
 import numpy as np
 
+from drivers.cia402.state_machine import State
 from hofto_hw.observers.kernels import jit
 
 #: bit of :func:`tick_flags`'s answer: every estimate in ``tau_ext`` is finite
 ESTIMATES_FINITE = 1
 #: bit of :func:`tick_flags`'s answer: some axis is in one of the ``powered`` states
 POWER_ON = 2
+#: the power stage is on (a quick-stop ramp keeps it on until each axis rests)
+POWERED = np.array([int(State.OPERATION_ENABLED), int(State.QUICK_STOP_ACTIVE)], dtype=np.uint8)
 
-_sum = np.add.reduce
+# The tick's glue arithmetic, one definition each: Tick's reference stages call these, the
+# fused call (hofto_hw/runtime/fused.py) their compiled form (``jit`` of the same function).
+
+
+def command_dt(dt: float, period: float) -> float:
+    """The setpoint (path) time step of a tick ``dt`` [s] after the last one: at most one
+    ``period`` [s] (0: unknown): an interpolator that missed cycles is late, it does not jump."""
+    return dt if period <= 0.0 or dt <= period else period
+
+
+def jump_gap(since_fresh: float, period: float) -> float:
+    """The time [s] beyond one ``period`` since the last fresh sample (``since_fresh`` [s],
+    this tick's dt included): the position-jump check's allowance for lost cycles (0 within
+    one period, or when the period is unknown)."""
+    gap = since_fresh - period if period > 0.0 else 0.0
+    return gap if gap > 1e-9 else 0.0
+
+
+def judged(tick: int, judge_from: int, flags: int) -> bool:
+    """The collision monitor judges this ``tick`` (its data otherwise trusted): it has settled
+    since the last (re)start (``judge_from``) and the power stage is on (``flags`` of
+    :func:`tick_flags`: with it off the brakes act and the motor torque no longer explains
+    the motion)."""
+    return tick >= judge_from and flags & POWER_ON != 0
 
 
 @jit
@@ -41,19 +68,4 @@ def tick_flags(
                 flags |= POWER_ON
     for j in range(qdd.shape[0]):
         out[j] = qdd[j]
-    return flags
-
-
-def tick_flags_numpy(
-    tau_ext: np.ndarray, states: np.ndarray, powered: np.ndarray, qdd: np.ndarray, out: np.ndarray
-) -> int:
-    """The reference of :func:`tick_flags` (the tick's code before the kernel). The finiteness
-    is one sum: a sum that overflows to inf says 'not finite' where the kernel does not, and
-    the tick then only runs its per-row checks, which report nothing (the same outcome)."""
-    flags = ESTIMATES_FINITE if math.isfinite(_sum(tau_ext, axis=None)) else 0
-    for s in states:
-        if s in powered:
-            flags |= POWER_ON
-            break
-    np.copyto(out, qdd)
     return flags

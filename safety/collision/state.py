@@ -67,15 +67,23 @@ class MonitorState:
             "level_joints": (L, n),
             "hits": (L + 1,),
         }
-        self.fbuf = np.zeros(sum(int(np.prod(v)) for v in fshapes.values()))
-        self.bbuf = np.zeros(sum(int(np.prod(v)) for v in bshapes.values()), dtype=bool)
+        nf = sum(int(np.prod(v)) for v in fshapes.values())
+        nb = sum(int(np.prod(v)) for v in bshapes.values())
+        #: the packed numbers as one record (the tick's compiled call takes it and bbuf as its
+        #: arguments: numba has no boolean fields); fbuf and first_tick are its fields
+        self.record = np.zeros(
+            1, np.dtype([("fbuf", np.float64, (nf,)), ("first_tick", np.int64, (k,))])
+        )
+        self.fbuf = self.record["fbuf"][0]
+        self.bbuf = np.zeros(nb, dtype=bool)
         for buf, shapes in ((self.fbuf, fshapes), (self.bbuf, bshapes)):
             at = 0
             for name, shape in shapes.items():
                 size = int(np.prod(shape))
                 setattr(self, name, buf[at : at + size].reshape(shape))
                 at += size
-        self.first_tick = np.full(k, -1, dtype=np.int64)
+        self.first_tick = self.record["first_tick"][0]
+        self.first_tick.fill(-1)
 
     def reset(self, par: np.ndarray, qd: np.ndarray | None, v_rev: float) -> None:
         """Forget everything; thresholds back to the nominal bases; a finite ``qd`` (n,)

@@ -31,6 +31,7 @@ def _finite_stats(d: dict) -> None:
 
 def test_the_phases_run_on_one_loop_and_leave_the_tick_as_it_was(bench) -> None:
     from hofto_hw.config import load_config
+    from hofto_hw.runtime.fused import fused_tick
 
     cfg = load_config(ROOT / "configs" / "er3a.yaml")
     system = bench.build_system(cfg, float(cfg.loop.rate_hz), "sim")
@@ -42,7 +43,7 @@ def test_the_phases_run_on_one_loop_and_leave_the_tick_as_it_was(bench) -> None:
         assert system.loop.ticks == 300 + 60 + 60 + 30 + 30 + 30
         # every wrapper off: the class's own step and the compiled call itself again
         assert getattr(tick.step, "__func__", None) is type(tick).step
-        assert tick._fz is not None and tick._fz_call is tick._fz.call
+        assert tick._fz is not None and tick._fz_call is fused_tick
         assert tick._fz is not None  # the fused call back on after the reference phases
     finally:
         system.close()
