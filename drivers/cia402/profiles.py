@@ -1,0 +1,115 @@
+"""Drive profiles as the drivers use them: the built-in profile and profile -> wire layout.
+
+A :class:`hofto_hw.config.drive_profile.DriveProfile` says how a drive model runs (PDOs,
+start-up SDOs, DC, CANopen communication). An axis whose ``bus.drives[i].profile`` is not
+set runs the stack's own layout (:func:`builtin_profile`: RxPDO 0x1600 / TxPDO 0x1A00 of
+:mod:`drivers.cia402.pdo` on EtherCAT, the two RPDOs / two TPDOs of
+:mod:`drivers.canopen.layout` on CANopen), so every master has exactly one code path: the
+profile's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from drivers.cia402.pdo import RXPDO_INDEX, RXPDO_MAPPING, TXPDO_INDEX, TXPDO_MAPPING, PdoEntry
+from drivers.cia402.wire import AxisLayout, WireEntry
+from hofto_hw.config.drive_profile import DriveProfile, find_profile, load_profile
+
+
+def _pdo(index: int, entries: Sequence[PdoEntry], fixed: bool = False) -> dict[str, Any]:
+    return {
+        "index": index,
+        "fixed": fixed,
+        "entries": [{"index": e.index, "subindex": e.subindex, "bits": e.bit_length}
+                    for e in entries],  # fmt: skip
+    }
+
+
+_FALLBACKS_EC: dict[str, str] = {}
+_FALLBACKS_CAN = {"error_code": "emcy", "digital_inputs": "none"}
+
+
+def builtin_profile(bus: str = "ethercat", vendor_id: int = 0, product_code: int = 0) -> DriveProfile:
+    """The stack's own layout as a profile (an axis without ``profile``): on EtherCAT
+    RxPDO 0x1600 and TxPDO 0x1A00 written by the master; on CANopen RPDO1/2 and TPDO1/2 of
+    :mod:`drivers.canopen.layout`, synchronous, no start-up SDOs, no DC."""
+    common: dict[str, Any] = {
+        "profile": 1,
+        "name": f"builtin-{bus}",
+        "description": "the hofto-hw layout every emulated drive accepts",
+        "identity": {"vendor_id": vendor_id, "product_code": product_code},
+        "bus": bus,
+        "modes": {"supported": ["csp", "csv", "cst"], "loop": "csp", "set_by": "pdo"},
+    }
+    if bus == "ethercat":
+        return DriveProfile.model_validate(
+            common
+            | {
+                "rx_pdos": [_pdo(RXPDO_INDEX, RXPDO_MAPPING)],
+                "tx_pdos": [_pdo(TXPDO_INDEX, TXPDO_MAPPING)],
+                "fallbacks": _FALLBACKS_EC,
+            }
+        )
+    from drivers.canopen import layout
+
+    return DriveProfile.model_validate(
+        common
+        | {
+            "rx_pdos": [_pdo(p.map_index, p.entries) for p in layout.RPDOS],
+            "tx_pdos": [_pdo(p.map_index, p.entries) for p in layout.TPDOS],
+            "fallbacks": _FALLBACKS_CAN,
+            "canopen": {
+                "bitrates": [125_000, 250_000, 500_000, 1_000_000],
+                "max_entries": 8,
+                "rpdo": [{"cob_id_base": p.cob_base, "transmission_type": 1,
+                          "enabled_by_default": True} for p in layout.RPDOS],  # fmt: skip
+                "tpdo": [{"cob_id_base": p.cob_base, "transmission_type": 1,
+                          "enabled_by_default": True} for p in layout.TPDOS],  # fmt: skip
+            },
+        }
+    )
+
+
+def profile_for(drive: Any, bus: str, base_dir: Path | None = None) -> DriveProfile:
+    """The profile of one ``bus.drives[i]``: its ``profile`` (a loaded DriveProfile, a file
+    or a profile name in configs/drives/) or, when unset, :func:`builtin_profile` with the
+    drive's configured identity."""
+    spec = getattr(drive, "profile", None)
+    if spec is None:
+        ident = getattr(drive, "identity", None)
+        return builtin_profile(
+            bus,
+            getattr(ident, "vendor_id", 0) if ident is not None else 0,
+            getattr(ident, "product_code", 0) if ident is not None else 0,
+        )
+    if isinstance(spec, DriveProfile):
+        return spec
+    loaded = getattr(spec, "loaded", None)  # a reference object that carries its profile
+    if isinstance(loaded, DriveProfile):
+        return loaded
+    return load_profile(find_profile(str(spec), base_dir))
+
+
+def profiles_for(drives: Sequence[Any], bus: str, base_dir: Path | None = None) -> list[DriveProfile]:
+    """:func:`profile_for` of every drive."""
+    return [profile_for(d, bus, base_dir) for d in drives]
+
+
+def layout_of(profile: DriveProfile) -> AxisLayout:
+    """The wire layout the profile says the drive will run (its PDOs in assignment order)."""
+    return AxisLayout(
+        rx=tuple(WireEntry(e.index, e.subindex, e.bits) for p in profile.rx_pdos for e in p.entries),
+        tx=tuple(WireEntry(e.index, e.subindex, e.bits) for p in profile.tx_pdos for e in p.entries),
+        rx_pdos=tuple(p.index for p in profile.rx_pdos),
+        tx_pdos=tuple(p.index for p in profile.tx_pdos),
+    )
+
+
+def mode_number(profile: DriveProfile) -> int:
+    """0x6060 value of the profile's loop mode."""
+    from hofto_hw.config.drive_profile import MODE_NUMBERS
+
+    return MODE_NUMBERS[profile.modes.loop]
