@@ -14,17 +14,19 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from hofto_hw.config.drive_profile import DriveProfile, find_profile, load_profile
+
 from drivers.cia402.pdo import RXPDO_INDEX, RXPDO_MAPPING, TXPDO_INDEX, TXPDO_MAPPING, PdoEntry
 from drivers.cia402.wire import AxisLayout, WireEntry
-from hofto_hw.config.drive_profile import DriveProfile, find_profile, load_profile
 
 
 def _pdo(index: int, entries: Sequence[PdoEntry], fixed: bool = False) -> dict[str, Any]:
     return {
         "index": index,
         "fixed": fixed,
-        "entries": [{"index": e.index, "subindex": e.subindex, "bits": e.bit_length}
-                    for e in entries],  # fmt: skip
+        "entries": [
+            {"index": e.index, "subindex": e.subindex, "bits": e.bit_length} for e in entries
+        ],
     }
 
 
@@ -32,7 +34,9 @@ _FALLBACKS_EC: dict[str, str] = {}
 _FALLBACKS_CAN = {"error_code": "emcy", "digital_inputs": "none"}
 
 
-def builtin_profile(bus: str = "ethercat", vendor_id: int = 0, product_code: int = 0) -> DriveProfile:
+def builtin_profile(
+    bus: str = "ethercat", vendor_id: int = 0, product_code: int = 0
+) -> DriveProfile:
     """The stack's own layout as a profile (an axis without ``profile``): on EtherCAT
     RxPDO 0x1600 and TxPDO 0x1A00 written by the master; on CANopen RPDO1/2 and TPDO1/2 of
     :mod:`drivers.canopen.layout`, synchronous, no start-up SDOs, no DC."""
@@ -64,10 +68,14 @@ def builtin_profile(bus: str = "ethercat", vendor_id: int = 0, product_code: int
             "canopen": {
                 "bitrates": [125_000, 250_000, 500_000, 1_000_000],
                 "max_entries": 8,
-                "rpdo": [{"cob_id_base": p.cob_base, "transmission_type": 1,
-                          "enabled_by_default": True} for p in layout.RPDOS],  # fmt: skip
-                "tpdo": [{"cob_id_base": p.cob_base, "transmission_type": 1,
-                          "enabled_by_default": True} for p in layout.TPDOS],  # fmt: skip
+                "rpdo": [
+                    {"cob_id_base": p.cob_base, "transmission_type": 1, "enabled_by_default": True}
+                    for p in layout.RPDOS
+                ],
+                "tpdo": [
+                    {"cob_id_base": p.cob_base, "transmission_type": 1, "enabled_by_default": True}
+                    for p in layout.TPDOS
+                ],
             },
         }
     )
@@ -93,7 +101,9 @@ def profile_for(drive: Any, bus: str, base_dir: Path | None = None) -> DriveProf
     return load_profile(find_profile(str(spec), base_dir))
 
 
-def profiles_for(drives: Sequence[Any], bus: str, base_dir: Path | None = None) -> list[DriveProfile]:
+def profiles_for(
+    drives: Sequence[Any], bus: str, base_dir: Path | None = None
+) -> list[DriveProfile]:
     """:func:`profile_for` of every drive."""
     return [profile_for(d, bus, base_dir) for d in drives]
 
@@ -101,8 +111,12 @@ def profiles_for(drives: Sequence[Any], bus: str, base_dir: Path | None = None) 
 def layout_of(profile: DriveProfile) -> AxisLayout:
     """The wire layout the profile says the drive will run (its PDOs in assignment order)."""
     return AxisLayout(
-        rx=tuple(WireEntry(e.index, e.subindex, e.bits) for p in profile.rx_pdos for e in p.entries),
-        tx=tuple(WireEntry(e.index, e.subindex, e.bits) for p in profile.tx_pdos for e in p.entries),
+        rx=tuple(
+            WireEntry(e.index, e.subindex, e.bits) for p in profile.rx_pdos for e in p.entries
+        ),
+        tx=tuple(
+            WireEntry(e.index, e.subindex, e.bits) for p in profile.tx_pdos for e in p.entries
+        ),
         rx_pdos=tuple(p.index for p in profile.rx_pdos),
         tx_pdos=tuple(p.index for p in profile.tx_pdos),
     )

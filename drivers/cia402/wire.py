@@ -125,8 +125,7 @@ class AxisLayout:
                         )
                     if OBJECT_FIELDS[key] not in (dtype.names or ()):
                         raise LayoutError(
-                            f"{who}: {direction} entry {_fmt(e)} belongs to the other "
-                            "direction"
+                            f"{who}: {direction} entry {_fmt(e)} belongs to the other direction"
                         )
             have = self.fields(direction)
             for f in required:
@@ -175,9 +174,7 @@ class WireImage:
         n = len(layouts)
         names = list(names) if names else [f"axis{i}" for i in range(n)]
         self.n = n
-        self.layouts = tuple(
-            lay.check(f"axis {i} ({names[i]})") for i, lay in enumerate(layouts)
-        )
+        self.layouts = tuple(lay.check(f"axis {i} ({names[i]})") for i, lay in enumerate(layouts))
         rx_sizes = [lay.rx_size for lay in layouts]
         tx_sizes = [lay.tx_size for lay in layouts]
         self.rx_offsets = np.concatenate(([0], np.cumsum(rx_sizes))).astype(np.intp)
@@ -222,8 +219,9 @@ class WireImage:
         self._rx_src = np.zeros(n * RXPDO_SIZE + 1, dtype=np.uint8)
         self._drive_tx_src = np.zeros(n * TXPDO_SIZE + 1, dtype=np.uint8)
         #: True when every axis runs the built-in layout (the wire IS the canonical image)
-        self.builtin = all(lay.rx == BUILTIN_LAYOUT.rx and lay.tx == BUILTIN_LAYOUT.tx
-                           for lay in layouts)
+        self.builtin = all(
+            lay.rx == BUILTIN_LAYOUT.rx and lay.tx == BUILTIN_LAYOUT.tx for lay in layouts
+        )
 
     # ----------------------------------------------------------- sizes and info
 
