@@ -55,6 +55,10 @@ def run(args: argparse.Namespace) -> int:
             except ConfigError as exc:
                 raise ConfigError(f"{path}: {exc} (rate: loop.rate_hz)") from None
             make_observer(obs, model)
+        if cfg.bus is not None:
+            from hofto_hw.config.drive_profile import resolve_profiles
+
+            resolve_profiles(cfg.bus, cfg.cycle_time, str(path), Path(path).parent)
         if cfg.bus is not None and cfg.bus.transport == "canopen":
             from drivers.canopen.busload import check_bus_load, configured_load
 

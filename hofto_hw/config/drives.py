@@ -51,6 +51,14 @@ class DriveConfig(FileModel):
     following_error_timeout: Annotated[float, Field(ge=0.0, le=65.535)] = Field(
         0.01, description="time outside the window before the fault, 0x6066 [s]"
     )
+    profile: str | None = Field(
+        None,
+        min_length=1,
+        description="drive profile: a name in configs/drives/ (e.g. 'elmo_gold') or a YAML "
+        "path relative to this config; None = the stack's built-in PDO layout "
+        "(drivers/cia402/pdo.py). `hofto-hw config check` loads it and checks it against "
+        "loop.rate_hz",
+    )
 
 
 class EtherCATOptions(FileModel):

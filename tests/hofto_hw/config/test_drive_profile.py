@@ -1,0 +1,245 @@
+"""Drive profile schema (hofto_hw/config/drive_profile.py): a hand-written profile loads, and
+each kind of mistake is refused in one line naming the field."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+import yaml
+
+from hofto_hw.config.drive_profile import (
+    CIA402_OBJECTS,
+    DriveProfile,
+    check_profile_against_loop,
+    cia402_object,
+    find_profile,
+    load_profile,
+    modes_from_bits,
+)
+from hofto_hw.errors import ConfigError
+
+#: an Elmo-like drive: fixed single-object PDOs, controlword last, mode by start-up SDO
+PROFILE: dict = {
+    "profile": 1,
+    "name": "test_fixed",
+    "description": "hand-written test profile",
+    "identity": {"vendor_id": 0x9A, "product_code": 0x30924, "revision_min": 0x10420},
+    "bus": "ethercat",
+    "modes": {"supported": ["pp", "csp", "csv", "cst", "hm"], "loop": "csp", "set_by": "startup"},
+    "rx_pdos": [
+        {"index": 0x160A, "fixed": True, "entries": [{"index": 0x607A, "bits": 32}]},
+        {"index": 0x160C, "fixed": True, "entries": [{"index": 0x6071, "bits": 16}]},
+        {"index": 0x1600, "fixed": True, "entries": [{"index": 0x6040, "bits": 16}]},
+    ],
+    "tx_pdos": [
+        {
+            "index": 0x1A00,
+            "fixed": False,
+            "entries": [
+                {"index": 0x6041, "bits": 16},
+                {"index": 0x6064, "bits": 32},
+                {"index": 0x606C, "bits": 32},
+                {"index": 0x6077, "bits": 16},
+                {"index": 0x6061, "bits": 8},
+                {"index": 0, "bits": 8},
+            ],
+        }
+    ],
+    "fallbacks": {
+        "mode": "startup",
+        "target_velocity": "unavailable",
+        "torque_offset": "target_torque_in_cst",
+        "current": "unavailable",
+        "error_code": "sdo",
+        "digital_inputs": "none",
+    },
+    "startup": [
+        {"index": 0x6060, "value": 8, "bits": 8, "transition": "PS", "comment": "CSP"},
+        {"index": 0x60C2, "subindex": 1, "value": 1, "bits": 8, "transition": "PS"},
+        {"index": 0x60C2, "subindex": 2, "value": -3, "bits": 8, "transition": "PS"},
+    ],
+    "dc": {"assign_activate": 0x300, "sync0_shift_ns": 0},
+}
+
+
+def _profile(**changes) -> dict:
+    data = copy.deepcopy(PROFILE)
+    data.update(changes)
+    return data
+
+
+def _write(tmp_path: Path, data: dict) -> Path:
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def test_handwritten_profile_loads(tmp_path):
+    p = load_profile(_write(tmp_path, PROFILE))
+    assert p.rx_pdos[-1].entries[0].field == "controlword"
+    assert [e.field for e in p.tx_pdos[0].entries][:2] == ["statusword", "position"]
+    assert p.tx_pdos[0].entries[-1].field is None  # padding
+    assert p.tx_pdos[0].bits == 112
+    assert p.mapped_fields() >= {"controlword", "target_position", "statusword", "position"}
+    assert p.startup_value(0x6060) == 8
+    assert p.identity.matches(0x9A, 0x30924, 0x10420)
+    assert not p.identity.matches(0x9A, 0x30924, 0x10000)
+    # what is written is read back unchanged
+    again = DriveProfile.model_validate(yaml.safe_load(yaml.safe_dump(p.model_dump())))
+    assert again == p
+
+
+def test_field_names_agree_with_pdo_layout():
+    from drivers.cia402.pdo import OBJECT_FIELDS
+
+    for (index, sub), name in OBJECT_FIELDS.items():
+        assert sub == 0
+        assert CIA402_OBJECTS[index][0] == name
+
+
+def test_helpers():
+    assert cia402_object(0x6840) == (0x6040, 1)
+    assert cia402_object(0x6064) == (0x6064, 0)
+    assert cia402_object(0x2000) is None
+    assert modes_from_bits(0x3A5) == ["pp", "pv", "hm", "csp", "csv", "cst"]
+
+
+def _refused(tmp_path: Path, data: dict) -> str:
+    path = _write(tmp_path, data)
+    with pytest.raises(ConfigError) as err:
+        load_profile(path)
+    msg = str(err.value)
+    assert msg.startswith(str(path))
+    return msg
+
+
+def test_duplicate_entry_refused(tmp_path):
+    data = _profile()
+    data["rx_pdos"][1]["entries"] = [{"index": 0x607A, "bits": 32}]
+    msg = _refused(tmp_path, data)
+    assert "0x607A:00 mapped twice" in msg and "0x160A" in msg
+
+
+def test_odd_bit_layout_refused(tmp_path):
+    data = _profile()
+    data["tx_pdos"][0]["entries"].pop()  # drop the 8-bit padding: 104 bits is fine...
+    data["tx_pdos"][0]["entries"].append({"index": 0, "bits": 4})  # ...108 is not
+    assert "108 bits, not a whole number of bytes" in _refused(tmp_path, data)
+
+
+def test_wrong_object_size_refused(tmp_path):
+    data = _profile()
+    data["rx_pdos"][2]["entries"] = [{"index": 0x6040, "bits": 32}]
+    assert "(controlword) is 16 bits, not 32" in _refused(tmp_path, data)
+
+
+def test_loop_mode_not_supported(tmp_path):
+    data = _profile(modes={"supported": ["pp", "csv"], "loop": "csp", "set_by": "startup"})
+    assert "modes.loop: csp is not among" in _refused(tmp_path, data)
+
+
+def test_needed_object_without_fallback(tmp_path):
+    data = _profile()
+    del data["fallbacks"]["error_code"]
+    msg = _refused(tmp_path, data)
+    assert "error_code (0x603F)" in msg and "fallbacks.error_code is not set" in msg
+
+
+def test_target_of_loop_mode_must_be_mapped(tmp_path):
+    data = _profile()
+    data["rx_pdos"].pop(0)
+    data["fallbacks"]["target_position"] = "unavailable"
+    assert "target_position (0x607A) of axis 0 is not mapped" in _refused(tmp_path, data)
+
+
+def test_bad_fallback_refused(tmp_path):
+    data = _profile()
+    data["fallbacks"]["error_code"] = "guess"
+    assert "fallbacks.error_code: 'guess'" in _refused(tmp_path, data)
+
+
+def test_mode_by_startup_needs_the_write(tmp_path):
+    data = _profile()
+    data["startup"].pop(0)
+    assert "0x6060 = 8 (csp)" in _refused(tmp_path, data)
+
+
+def test_sync_manager_size(tmp_path):
+    data = _profile(process_data={"rx_bytes": 6})
+    assert "8 bytes exceed the sync manager's 6" in _refused(tmp_path, data)
+
+
+def test_canopen_max_entries(tmp_path):
+    data = _profile(
+        bus="canopen",
+        dc=None,
+        canopen={
+            "bitrates": [1_000_000],
+            "max_entries": 4,
+            "rpdo": [{"cob_id_base": 0x200 + 0x100 * i} for i in range(3)],
+            "tpdo": [{"cob_id_base": 0x180}],
+        },
+    )
+    for s in data["startup"]:
+        s["transition"] = "PO"
+    msg = _refused(tmp_path, data)
+    assert "6 entries, the drive takes at most 4" in msg
+
+
+def test_dc_cycle_against_loop(tmp_path):
+    data = _profile()
+    data["dc"]["sync0_cycle_ns"] = 1_000_000
+    p = load_profile(_write(tmp_path, data))
+    check_profile_against_loop(p, 0.001, "cfg.yaml: bus.drives[0].profile")
+    with pytest.raises(ConfigError) as err:
+        check_profile_against_loop(p, 0.0005, "cfg.yaml: bus.drives[0].profile")
+    msg = str(err.value)
+    assert "\n" not in msg and "dc.sync0_cycle_ns" in msg and "500000 ns" in msg
+
+
+def test_interpolation_period_against_loop(tmp_path):
+    p = load_profile(_write(tmp_path, PROFILE))  # 0x60C2 = 1e-3 s
+    with pytest.raises(ConfigError, match="0x60C2 interpolation period"):
+        check_profile_against_loop(p, 0.002, "x")
+
+
+def test_find_profile(tmp_path, monkeypatch):
+    path = _write(tmp_path, PROFILE)
+    assert find_profile(path) == path
+    assert find_profile("p.yaml", base_dir=tmp_path) == tmp_path / "p.yaml"
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "configs" / "drives").mkdir(parents=True)
+    (tmp_path / "configs" / "drives" / "mine.yaml").write_text("x: 1\n")
+    assert find_profile("mine").name == "mine.yaml"
+    with pytest.raises(ConfigError, match="neither a file nor a profile"):
+        find_profile("nosuch")
+
+
+def test_config_names_a_profile(tmp_path, er3a_config):
+    from hofto_hw.config.drive_profile import resolve_profiles
+
+    _write(tmp_path, PROFILE)
+    bus = er3a_config.bus.model_copy(
+        update={
+            "transport": "ethercat",
+            "interface": "eth0",
+            "drives": [
+                d.model_copy(update={"profile": "p.yaml" if i == 0 else None})
+                for i, d in enumerate(er3a_config.bus.drives)
+            ],
+        }
+    )
+    got = resolve_profiles(bus, 0.001, "cfg.yaml", tmp_path)
+    assert got[0] is not None and got[0].name == "test_fixed" and got[1] is None
+    with pytest.raises(ConfigError, match=r"cfg.yaml: bus.drives\[0\].profile: .*0x60C2"):
+        resolve_profiles(bus, 0.002, "cfg.yaml", tmp_path)
+    canbus = bus.model_copy(update={"transport": "canopen"})
+    with pytest.raises(ConfigError, match="is an ethercat drive, the bus is canopen"):
+        resolve_profiles(canbus, 0.001, "cfg.yaml", tmp_path)
+    missing = bus.model_copy(
+        update={"drives": [d.model_copy(update={"profile": "nosuch"}) for d in bus.drives]}
+    )
+    with pytest.raises(ConfigError, match=r"bus.drives\[0\].profile: drive profile 'nosuch'"):
+        resolve_profiles(missing, 0.001, "cfg.yaml", tmp_path)
