@@ -286,7 +286,11 @@ class StartupSdo(FileModel):
 
     index: U16 = Field(description="object index")
     subindex: U8 = Field(0, description="sub-index")
-    value: int = Field(description="value written (signed or unsigned, fits `bits`)")
+    value: int | Literal["loop_period"] = Field(
+        description="value written (signed or unsigned, fits `bits`); 'loop_period' (only "
+        "0x60C2:01, the interpolation period): the loop period in units of 10^(0x60C2:02) s, "
+        "computed by the master from loop.rate_hz"
+    )
     bits: Literal[8, 16, 32, 64] = Field(description="object size [bit]")
     transition: Transition = Field(
         "PS", description="EtherCAT state transition (PS = PREOP->SAFEOP); CANopen: PO"
@@ -295,6 +299,12 @@ class StartupSdo(FileModel):
 
     @model_validator(mode="after")
     def _fits(self) -> StartupSdo:
+        if self.value == "loop_period":
+            if (self.index, self.subindex) != (0x60C2, 1):
+                raise ValueError(
+                    f"{_hex(self.index, self.subindex)}: 'loop_period' is only for 0x60C2:01"
+                )
+            return self
         lo, hi = -(1 << (self.bits - 1)), (1 << self.bits) - 1
         if not lo <= self.value <= hi:
             raise ValueError(
@@ -593,7 +603,7 @@ class DriveProfile(FileModel):
                     )
 
     # ------------------------------------------------------------------ helpers
-    def startup_value(self, index: int, subindex: int = 0) -> int | None:
+    def startup_value(self, index: int, subindex: int = 0) -> int | str | None:
         """The last start-up value written to ``index:subindex``, or None."""
         for s in reversed(self.startup):
             if s.index == index and s.subindex == subindex:
@@ -621,10 +631,18 @@ def check_profile_against_loop(profile: DriveProfile, cycle_time: float, source:
     units = profile.startup_value(0x60C2, 1)
     if units is not None:
         exponent = profile.startup_value(0x60C2, 2)
-        exponent = -3 if exponent is None else exponent
+        exponent = -3 if not isinstance(exponent, int) else exponent
         if exponent > 127:
             exponent -= 256  # INTEGER8 written as unsigned
-        got_ns = round(units * 10.0**exponent * 1e9)
+        if units == "loop_period":
+            units = round(cycle_time / 10.0**exponent)
+            if not 1 <= units <= 255:
+                raise ConfigError(
+                    f"{source}: profile {profile.name}: startup 0x60C2:01 (interpolation "
+                    f"period, UNSIGNED8 in units of 1e{exponent} s) cannot hold the loop's "
+                    f"period ({rate})"
+                )
+        got_ns = round(int(units) * 10.0**exponent * 1e9)
         if got_ns != period_ns:
             raise ConfigError(
                 f"{source}: profile {profile.name}: startup 0x60C2 interpolation period "

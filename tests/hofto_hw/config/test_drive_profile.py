@@ -243,3 +243,15 @@ def test_config_names_a_profile(tmp_path, er3a_config):
     )
     with pytest.raises(ConfigError, match=r"bus.drives\[0\].profile: drive profile 'nosuch'"):
         resolve_profiles(missing, 0.001, "cfg.yaml", tmp_path)
+
+
+def test_interpolation_period_follows_the_loop(tmp_path):
+    data = _profile()
+    data["startup"][1]["value"] = "loop_period"
+    p = load_profile(_write(tmp_path, data))
+    for cycle in (0.001, 0.002, 0.004):
+        check_profile_against_loop(p, cycle, "x")
+    with pytest.raises(ConfigError, match="cannot hold the loop's period"):
+        check_profile_against_loop(p, 0.00025, "x")
+    data["startup"][0]["value"] = "loop_period"
+    assert "only for 0x60C2:01" in _refused(tmp_path, data)
