@@ -14,10 +14,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from hofto_hw.config.drive_profile import DriveProfile, find_profile, load_profile
-
 from drivers.cia402.pdo import RXPDO_INDEX, RXPDO_MAPPING, TXPDO_INDEX, TXPDO_MAPPING, PdoEntry
 from drivers.cia402.wire import AxisLayout, WireEntry
+from hofto_hw.config.drive_profile import DriveProfile, find_profile, load_profile
 
 
 def _pdo(index: int, entries: Sequence[PdoEntry], fixed: bool = False) -> dict[str, Any]:
@@ -127,3 +126,26 @@ def mode_number(profile: DriveProfile) -> int:
     from hofto_hw.config.drive_profile import MODE_NUMBERS
 
     return MODE_NUMBERS[profile.modes.loop]
+
+
+def startup_int(
+    profile: DriveProfile, index: int, sub: int, value: int | str, cycle_time: float
+) -> int:
+    """The integer a start-up write sends: ``value`` itself, or for ``'loop_period'``
+    (0x60C2:01, the interpolation period) the loop period in units of 10^0x60C2:02 s
+    (default 10^-3 s)."""
+    if isinstance(value, int):
+        return value
+    exponent = profile.startup_value(0x60C2, 2)
+    exponent = -3 if not isinstance(exponent, int) else exponent
+    if exponent > 127:
+        exponent -= 256
+    return round(cycle_time / 10.0**exponent)
+
+
+def profiles_of_bus(bus: Any) -> list[DriveProfile | None]:
+    """Per ``bus.drives[i]``: its loaded profile, or None when it names none (built-in)."""
+    return [
+        profile_for(d, str(bus.transport)) if getattr(d, "profile", None) else None
+        for d in bus.drives
+    ]

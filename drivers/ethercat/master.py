@@ -345,11 +345,14 @@ class EtherCATTransport(Transport):
 
     def _startup(self, axis: int, transitions: tuple[str, ...]) -> None:
         """Write the profile's start-up SDOs of ``transitions``, in the profile's order."""
+        from drivers.cia402.profiles import startup_int
+
         for w in self.profiles[axis].startup:
             if w.transition not in transitions:
                 continue
             size = w.bits // 8
-            value = w.value & ((1 << w.bits) - 1)  # signed values as their two's complement
+            value = startup_int(self.profiles[axis], w.index, w.subindex, w.value, self.cycle_time)
+            value &= (1 << w.bits) - 1  # signed values as their two's complement
             self._write(axis, w.index, w.subindex, value.to_bytes(size, "little"))
             self.startup_written += 1
 

@@ -505,6 +505,13 @@ def impersonate(od: ObjectDictionary, profile: Any, serial: int) -> None:
         if not obj.present:
             od.remove(index)
     od.entry(0x6502, 0).value = sum(1 << MODE_BITS[m] for m in profile.modes.supported)
+    kinds = {8: "u8", 16: "u16", 32: "u32"}
+    for w in profile.startup:  # the objects its start-up writes go to exist in the drive
+        if (w.index, w.subindex) in od or w.bits not in kinds:
+            continue
+        if w.subindex and (w.index, 0) not in od:
+            od.add(OdEntry(w.index, 0, "highest sub-index", "u8", "ro", w.subindex))
+        od.add(OdEntry(w.index, w.subindex, w.comment or "start-up object", kinds[w.bits]))
     od.remove(RXPDO_INDEX)
     od.remove(TXPDO_INDEX)
     max_entries = profile.canopen.max_entries if profile.canopen is not None else 8

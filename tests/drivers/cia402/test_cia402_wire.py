@@ -16,10 +16,23 @@ PAD8 = E(0, 0, 8)
 
 #: Elmo-like: controlword last, the 8-bit mode padded to 16 bits, no torque offset
 ELMO = AxisLayout(
-    rx=(E(0x607A, 0, 32), E(0x60FF, 0, 32), E(0x6071, 0, 16), E(0x6060, 0, 8), PAD8,
-        E(0x6040, 0, 16)),
-    tx=(E(0x6064, 0, 32), E(0x60FD, 0, 32), E(0x606C, 0, 32), E(0x6077, 0, 16),
-        E(0x6041, 0, 16), E(0x6061, 0, 8), PAD8),
+    rx=(
+        E(0x607A, 0, 32),
+        E(0x60FF, 0, 32),
+        E(0x6071, 0, 16),
+        E(0x6060, 0, 8),
+        PAD8,
+        E(0x6040, 0, 16),
+    ),
+    tx=(
+        E(0x6064, 0, 32),
+        E(0x60FD, 0, 32),
+        E(0x606C, 0, 32),
+        E(0x6077, 0, 16),
+        E(0x6041, 0, 16),
+        E(0x6061, 0, 8),
+        PAD8,
+    ),
 )
 #: Faulhaber-like: no 0x6071/0x6077/0x603F/0x60B2, mode by SDO, a vendor object mapped
 SPARSE = AxisLayout(
@@ -58,8 +71,12 @@ def test_mixed_layouts_encode_each_axis_in_its_own_order():
     a0 = bytes(img.rx_slice(0))
     pos, vel, tau, mode, pad, cw = struct.unpack("<iihbbH", a0)
     assert (pos, vel, tau, mode, pad, cw) == (
-        rx["target_position"][0], rx["target_velocity"][0], rx["target_torque"][0],
-        rx["mode"][0], 0, rx["controlword"][0],
+        rx["target_position"][0],
+        rx["target_velocity"][0],
+        rx["target_torque"][0],
+        rx["mode"][0],
+        0,
+        rx["controlword"][0],
     )
     assert bytes(img.rx_slice(1)) == rx[1:2].tobytes()
     cw, pos, probe = struct.unpack("<HiH", bytes(img.rx_slice(2)))
@@ -113,13 +130,19 @@ def test_drive_side_round_trip_keeps_what_the_drive_does_not_map():
 @pytest.mark.parametrize(
     ("layout", "message"),
     [
-        (AxisLayout(rx=(E(0x6040, 0, 16), E(0x607A, 0, 32), E(0, 0, 4)), tx=SPARSE.tx),
-         "not a whole number of bytes"),
+        (
+            AxisLayout(rx=(E(0x6040, 0, 16), E(0x607A, 0, 32), E(0, 0, 4)), tx=SPARSE.tx),
+            "not a whole number of bytes",
+        ),
         (AxisLayout(rx=(E(0x6040, 0, 16), E(0x607A, 0, 16)), tx=SPARSE.tx), "is 32 bits"),
-        (AxisLayout(rx=(E(0x6040, 0, 16), E(0x607A, 0, 32), E(0x6040, 0, 16)), tx=SPARSE.tx),
-         "mapped twice"),
-        (AxisLayout(rx=(E(0x6040, 0, 16), E(0x607A, 0, 32), E(0x6041, 0, 16)), tx=SPARSE.tx),
-         "other direction"),
+        (
+            AxisLayout(rx=(E(0x6040, 0, 16), E(0x607A, 0, 32), E(0x6040, 0, 16)), tx=SPARSE.tx),
+            "mapped twice",
+        ),
+        (
+            AxisLayout(rx=(E(0x6040, 0, 16), E(0x607A, 0, 32), E(0x6041, 0, 16)), tx=SPARSE.tx),
+            "other direction",
+        ),
         (AxisLayout(rx=(E(0x607A, 0, 32),), tx=SPARSE.tx), "do not map controlword"),
         (AxisLayout(rx=SPARSE.rx, tx=(E(0x6041, 0, 16),)), "do not map position"),
     ],
