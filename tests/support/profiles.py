@@ -295,3 +295,123 @@ def write_mixed_config(
     out = folder / "mixed.yaml"
     out.write_text(yaml.safe_dump(data, sort_keys=False))
     return out
+
+
+def _can(name: str, vendor: int, product: int, rx, tx, rcomm, tcomm, **kw: Any) -> dict:
+    return {
+        "profile": 1,
+        "name": name,
+        "bus": "canopen",
+        "identity": {"vendor_id": vendor, "product_code": product},
+        "modes": kw.pop("modes", CSP),
+        "rx_pdos": rx,
+        "tx_pdos": tx,
+        "canopen": {
+            "bitrates": [1_000_000],
+            "max_entries": kw.pop("max_entries", 8),
+            "rpdo": rcomm,
+            "tpdo": tcomm,
+        },
+    } | kw
+
+
+def _comm(base: int, ttype: int = 1, enabled: bool = False) -> dict[str, Any]:
+    return {"cob_id_base": base, "transmission_type": ttype, "enabled_by_default": enabled}
+
+
+#: ZeroErr-like: PDOs disabled by default, two RPDOs / two TPDOs, 1 Mbit/s only
+CAN_ZEROERR = _can(
+    "test_can_zeroerr",
+    0x5A65726F,
+    0x00029252,
+    [
+        {"index": 0x1600, "fixed": False, "entries": [_e(0x6040, 16), _e(0x607A, 32)]},
+        {
+            "index": 0x1601,
+            "fixed": False,
+            "entries": [_e(0x60FF, 32), _e(0x6071, 16), _e(0x6060, 8)],
+        },
+    ],
+    [
+        {
+            "index": 0x1A00,
+            "fixed": False,
+            "entries": [_e(0x6041, 16), _e(0x6064, 32), _e(0x6077, 16)],
+        },
+        {
+            "index": 0x1A01,
+            "fixed": False,
+            "entries": [_e(0x606C, 32), _e(0x6061, 8), _e(0x603F, 16)],
+        },
+    ],
+    [_comm(0x200), _comm(0x300)],
+    [_comm(0x180), _comm(0x280)],
+    fallbacks={
+        "torque_offset": "target_torque_in_cst",
+        "current": "unavailable",
+        "digital_inputs": "none",
+    },
+)
+#: Faulhaber-like: at most four entries per PDO, no torque objects, no error code object
+#: (EMCY), mode by start-up SDO
+CAN_FAULHABER = _can(
+    "test_can_faulhaber",
+    0x00000147,
+    0x00003150,
+    [
+        {"index": 0x1600, "fixed": False, "entries": [_e(0x6040, 16), _e(0x607A, 32)]},
+        {"index": 0x1601, "fixed": False, "entries": [_e(0x60FF, 32)]},
+    ],
+    [
+        {"index": 0x1A00, "fixed": False, "entries": [_e(0x6041, 16), _e(0x6064, 32)]},
+        {
+            "index": 0x1A01,
+            "fixed": False,
+            "entries": [_e(0x606C, 32), _e(0x6078, 16), _e(0x6061, 8)],
+        },
+    ],
+    [_comm(0x200, 1, True), _comm(0x300)],
+    [_comm(0x180, 1, True), _comm(0x280)],
+    modes={"supported": ["pp", "pv", "csp", "csv"], "loop": "csp", "set_by": "startup"},
+    max_entries=4,
+    startup=[{"index": 0x6060, "value": 8, "bits": 8, "transition": "PO"}],
+    fallbacks={
+        "mode": "startup",
+        "target_torque": "unavailable",
+        "torque_offset": "unavailable",
+        "torque": "current",
+        "error_code": "emcy",
+        "digital_inputs": "none",
+    },
+    objects={
+        "absent": ["target_torque", "torque_offset", "torque", "error_code", "digital_inputs"]
+    },
+)
+#: Technosoft-like: fixed TPDO1, every-SYNC TPDOs, no 0x60B2/0x603F
+CAN_TECHNOSOFT = _can(
+    "test_can_technosoft",
+    0x000001A3,
+    0x00000290,
+    [
+        {
+            "index": 0x1600,
+            "fixed": False,
+            "entries": [_e(0x6040, 16), _e(0x6060, 8), PAD8, _e(0x607A, 32)],
+        },
+        {"index": 0x1601, "fixed": False, "entries": [_e(0x60FF, 32), _e(0x6071, 16)]},
+    ],
+    [
+        {"index": 0x1A00, "fixed": True, "entries": [_e(0x6041, 16), _e(0x6061, 8)]},
+        {"index": 0x1A01, "fixed": False, "entries": [_e(0x6064, 32), _e(0x606C, 32)]},
+        {"index": 0x1A02, "fixed": False, "entries": [_e(0x6077, 16), _e(0x6078, 16)]},
+    ],
+    [_comm(0x200, 1, True), _comm(0x300, 1, True)],
+    [_comm(0x180, 1, True), _comm(0x280, 1, True), _comm(0x380, 1, True)],
+    fallbacks={
+        "torque_offset": "target_torque_in_cst",
+        "error_code": "emcy",
+        "digital_inputs": "none",
+    },
+    objects={"absent": ["torque_offset", "error_code"]},
+)
+CAN_MIXED = [CAN_ZEROERR, CAN_FAULHABER, CAN_TECHNOSOFT] * 2
