@@ -48,6 +48,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "serve emulated EtherCAT CiA-402 drives on a network interface",
     ),
     "sim-canopen": ("hofto_hw.commands.sim_canopen", "serve emulated CANopen CiA-402 drives"),
+    "drive": ("hofto_hw.commands.drive", "drive profiles: import a vendor ESI/EDS file"),
 }
 
 

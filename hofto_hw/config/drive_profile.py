@@ -728,3 +728,66 @@ def resolve_profiles(
         check_profile_against_loop(profile, cycle_time, where)
         out.append(profile)
     return out
+
+
+#: keys whose integer values are written in hex (object indices, identity, DC word, COB-IDs)
+_HEX_KEYS = {"index": 4, "vendor_id": 8, "product_code": 8, "revision_min": 8,
+             "revision_max": 8, "assign_activate": 4, "cob_id_base": 3}  # fmt: skip
+
+
+def profile_yaml(profile: DriveProfile, header: str = "") -> str:
+    """The YAML text of ``profile``: indices and identities in hex (``0x6040``), fields in
+    schema order, ``header`` as leading comment lines. :func:`load_profile` reads it back equal."""
+    import yaml
+
+    class _Hex(int):
+        width = 4
+
+    class _Dumper(yaml.SafeDumper):
+        pass
+
+    def _hex(dumper: yaml.SafeDumper, value: _Hex) -> yaml.ScalarNode:
+        return dumper.represent_scalar("tag:yaml.org,2002:int", f"0x{int(value):0{value.width}X}")
+
+    _Dumper.add_representer(_Hex, _hex)
+
+    def walk(node: object, key: str = "") -> object:
+        if isinstance(node, dict):  # an entry's axis 0 is the default: not written
+            return {k: walk(v, k) for k, v in node.items() if not (k == "axis" and v == 0)}
+        if isinstance(node, list | tuple):
+            return [walk(v, key) for v in node]
+        if key in _HEX_KEYS and isinstance(node, int) and not isinstance(node, bool) and node >= 0:
+            h = _Hex(node)
+            h.width = _HEX_KEYS[key]
+            return h
+        return node
+
+    data = walk(profile.model_dump(mode="python"))
+    text = yaml.dump(data, Dumper=_Dumper, sort_keys=False, allow_unicode=True, width=100)
+    lines = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
+    return lines + text
+
+
+def write_profile(profile: DriveProfile, path: str | Path, header: str = "") -> None:
+    """Write ``profile`` to ``path`` atomically (a temporary file in the same folder, then a
+    rename): a reader never sees half a profile, a failed write leaves the old file.
+
+    Raises:
+        ConfigError: the folder is missing or not writable (one line).
+    """
+    import os
+    import tempfile
+
+    path = Path(path)
+    text = profile_yaml(profile, header)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except OSError as exc:
+        try:
+            os.unlink(tmp)
+        except (OSError, UnboundLocalError):
+            pass
+        raise ConfigError(f"{path}: cannot write drive profile: {exc.strerror or exc}") from None

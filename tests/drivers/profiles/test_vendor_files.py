@@ -1,0 +1,167 @@
+"""Every real vendor file of ../shared/data/drives imports with the expected layout facts (or
+is refused in one line: the I/O module, and the two CANopen drives without a cyclic
+synchronous mode)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from drivers.profiles import ProfileImportError, read_vendor_description
+from drivers.profiles.choose import choose, is_drive
+from hofto_hw.config.drive_profile import check_profile_against_loop, load_profile
+from hofto_hw.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[3]
+DATA = ROOT.parent / "shared" / "data" / "drives"
+SHIPPED = ROOT / "configs" / "drives"
+
+pytestmark = [
+    pytest.mark.data,
+    pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/drives (vendor files) absent"),
+]
+
+
+def _import(name: str, device: int = 0, loop: str | None = None):
+    descs = [d for d in read_vendor_description(DATA / name) if is_drive(d)]
+    return choose(descs[device], loop=loop)
+
+
+def _layout(pdos) -> list[list[str | None]]:
+    return [[e.field for e in p.entries] for p in pdos]
+
+
+def test_elmo_fixed_pdos_controlword_after_targets_padding():
+    descs = read_vendor_description(DATA / "elmo_GoldDrive.xml")
+    assert len(descs) == 4  # two products, two revisions
+    new = next(d for d in descs if d.product_code == 0x30924 and d.revision == 0x10420)
+    p = choose(new).profile
+    assert all(pdo.fixed for pdo in p.rx_pdos + p.tx_pdos)  # only assigned, never written
+    assert [pdo.index for pdo in p.rx_pdos] == [0x1605, 0x1618]
+    rx = _layout(p.rx_pdos)[0]
+    assert rx.index("controlword") > rx.index("target_torque")  # Elmo maps it after targets
+    assert p.rx_pdos[0].entries[-1].index == 0 and p.rx_pdos[0].entries[-1].bits == 8  # pad
+    assert {0x1A13, 0x1A1F, 0x1A26} <= {pdo.index for pdo in p.tx_pdos}  # single-object PDOs
+    assert p.mapped_fields() >= {"statusword", "position", "velocity", "torque", "error_code"}
+    assert p.dc is not None and p.dc.assign_activate == 0x300 and p.dc.sync0_cycle_ns is None
+    assert p.startup_value(0x60C2, 1) == "loop_period"  # the file's 0x60C2:1 = 2 follows the loop
+    assert p.identity.revision_min == 0x10420
+    old = next(d for d in descs if d.product_code == 0x30924 and d.revision == 1)
+    p_old = choose(old).profile  # one fixed layout, mode set at start-up
+    assert [pdo.index for pdo in p_old.rx_pdos] == [0x1600]
+    assert _layout(p_old.rx_pdos)[0][-1] == "controlword"  # controlword last
+    assert p_old.modes.set_by == "startup" and p_old.startup_value(0x6060) == 8
+
+
+def test_inovance_configurable_layout_over_fixed_defaults():
+    c = _import("inovance_SV660N.xml")
+    p = c.profile
+    # the fixed 0x1701/0x1B01 defaults miss objects the loop wants; 0x1600/0x1A00 (writable
+    # in PREOP, excluding them) map them all: chosen, and the reason says so
+    assert [pdo.index for pdo in p.rx_pdos] == [0x1600] and not p.rx_pdos[0].fixed
+    assert [pdo.index for pdo in p.tx_pdos] == [0x1A00]
+    assert any("best fixed set" in r for r in c.reasons)
+    assert p.mapped_fields() >= {"controlword", "mode", "target_position", "torque_offset"}
+    assert p.fallbacks == {"current": "unavailable"}  # 0x6078 is not in the dictionary
+    assert p.dc is not None and p.dc.assign_activate == 0x300
+
+
+def test_nanotec_dc_fixed_sync0_and_shift():
+    p = _import("nanotec_C5-E-2-21.xml").profile
+    assert p.dc is not None
+    assert (p.dc.assign_activate, p.dc.sync0_cycle_ns, p.dc.sync0_shift_ns) == (
+        0x330,
+        1_000_000,
+        250_000,
+    )
+    assert "csp" in p.modes.supported and "cst" in p.modes.supported
+    check_profile_against_loop(p, 0.001, "x")
+    with pytest.raises(ConfigError, match="SYNC0 every 1000000 ns"):
+        check_profile_against_loop(p, 0.0005, "x")
+
+
+def test_somanet_dictionary_in_module_and_bom():
+    raw = (DATA / "synapticon_SOMANET-Node-fw5.6.6.xml").read_bytes()
+    assert raw.startswith(b"\xef\xbb\xbf")
+    descs = read_vendor_description(DATA / "synapticon_SOMANET-Node-fw5.6.6.xml")
+    assert [d.device for d in descs] == [
+        "SOMANET Node",
+        "SOMANET Circulo",
+        "SOMANET Circulo SMM",
+        "SOMANET Integro",
+    ]
+    d = descs[0]
+    assert d.has(0x6502) and d.default_of(0x6502) == 0x303AD  # from the CiA402 module
+    p = choose(d).profile
+    assert p.modes.loop == "csp" and p.modes.set_by == "pdo"
+    assert p.process_data.rx_bytes == 300
+    assert p.dc is not None and p.dc.sync0_cycle_ns is None  # Factor=1: the loop period
+
+
+def test_maxon_sii_dump_recognised():
+    descs = read_vendor_description(DATA / "maxon_EPOS4-Micro-24-5_IgH-SII-dump_NOT-VENDOR-ESI.xml")
+    assert len(descs) == 1  # three identical live drives, listed once
+    assert descs[0].kind == "igh-sii-dump" and descs[0].vendor_id == 251  # decimal id
+    c = choose(descs[0])
+    assert [pdo.index for pdo in c.profile.rx_pdos] == [0x1600]
+    assert "SII dump" in c.profile.description
+    assert c.profile.dc is None and any("SII dump" in r for r in c.reasons)
+
+
+def test_zeroerr_one_megabit_and_disabled_pdos():
+    descs = read_vendor_description(DATA / "zeroerr_eRob-eDriver.eds")
+    assert descs[0].bitrates == [1_000_000]
+    p = choose(descs[0]).profile
+    assert p.bus == "canopen" and p.canopen is not None
+    assert p.canopen.bitrates == [1_000_000]
+    assert [c.cob_id_base for c in p.canopen.rpdo] == [0x200, 0x300]
+    assert [c.enabled_by_default for c in p.canopen.rpdo] == [True, False]  # bit 31 in file
+    assert all(c.transmission_type == 1 for c in p.canopen.rpdo + p.canopen.tpdo)
+    assert all(pdo.bits <= 64 for pdo in p.rx_pdos + p.tx_pdos)
+    assert p.fallbacks == {"error_code": "emcy", "digital_inputs": "none"}
+
+
+@pytest.mark.parametrize(
+    ("name", "absent"),
+    [
+        ("faulhaber_MCBL300x-CO.eds", ("0x60B2", "0x603F", "0x6071", "0x6077")),
+        ("technosoft_iPOS.eds", ("0x60B2", "0x603F")),
+    ],
+)
+def test_can_drives_without_cyclic_mode_refused(name, absent):
+    d = read_vendor_description(DATA / name)[0]
+    assert not d.has(0x60B2) and not d.has(0x603F)
+    with pytest.raises(ProfileImportError) as err:
+        choose(d)
+    msg = str(err.value)
+    assert "\n" not in msg and "no cyclic synchronous mode" in msg
+    for index in absent:
+        assert index in msg
+
+
+def test_faulhaber_four_entries_per_pdo():
+    d = read_vendor_description(DATA / "faulhaber_MCBL300x-CO.eds")[0]
+    assert {p.max_entries for p in d.pdos} == {4}
+    assert d.vendor_id == 327 and d.product_code == 3150  # decimal in [DeviceInfo]
+
+
+def test_io_module_has_no_drive():
+    descs = read_vendor_description(DATA / "itegva_E7x-IO_NEGATIVE.xml")
+    assert descs and not any(is_drive(d) for d in descs)
+
+
+@pytest.mark.parametrize("path", sorted(SHIPPED.glob("*.yaml")), ids=lambda p: p.stem)
+def test_shipped_profile_is_what_import_gives(path):
+    """configs/drives/*.yaml are exactly what `drive import` makes of the vendor file today."""
+    shipped = load_profile(path)
+    descs = read_vendor_description(DATA / shipped.source.file)
+    desc = next(
+        d
+        for d in descs
+        if d.product_code == shipped.identity.product_code
+        and d.revision == shipped.identity.revision_min
+    )
+    again = choose(desc, name=shipped.name).profile
+    assert again == shipped
+    check_profile_against_loop(shipped, 0.001, str(path))
