@@ -149,3 +149,111 @@ def profiles_of_bus(bus: Any) -> list[DriveProfile | None]:
         profile_for(d, str(bus.transport)) if getattr(d, "profile", None) else None
         for d in bus.drives
     ]
+
+
+# ------------------------------------------------------------ configuring a drive by SDO
+
+
+def write_startup(t: Any, axis: int, profile: DriveProfile, transitions: tuple[str, ...]) -> int:
+    """Write ``profile``'s start-up SDOs of ``transitions`` to drive ``axis`` of transport
+    ``t``, in the profile's order; returns how many were written."""
+    count = 0
+    for w in profile.startup:
+        if w.transition not in transitions:
+            continue
+        value = startup_int(profile, w.index, w.subindex, w.value, t.cycle_time)
+        value &= (1 << w.bits) - 1  # signed values as their two's complement
+        t.sdo_write(axis, w.index, w.subindex, value.to_bytes(w.bits // 8, "little"))
+        count += 1
+    return count
+
+
+def _read_u(t: Any, axis: int, index: int, sub: int, size: int) -> int:
+    data = t.sdo_read(axis, index, sub)
+    return int.from_bytes(bytes(data[:size]).ljust(size, b"\0"), "little")
+
+
+def assignment(t: Any, axis: int, assign: int) -> list[int]:
+    """The PDO indices assigned in ``assign`` (0x1C12/0x1C13) as drive ``axis`` reports."""
+    count = _read_u(t, axis, assign, 0, 1)
+    return [_read_u(t, axis, assign, k, 2) for k in range(1, count + 1)]
+
+
+def read_mapping(t: Any, axis: int, index: int) -> list[WireEntry]:
+    """The entries of PDO mapping object ``index`` as drive ``axis`` reports them."""
+    count = _read_u(t, axis, index, 0, 1)
+    out = []
+    for k in range(1, count + 1):
+        raw = _read_u(t, axis, index, k, 4)
+        out.append(WireEntry(raw >> 16, (raw >> 8) & 0xFF, raw & 0xFF))
+    return out
+
+
+def fmt_entries(entries: Sequence[Any]) -> str:
+    """``[0x6040:00/16, ...]``."""
+    return "[" + ", ".join(f"0x{e[0]:04X}:{e[1]:02X}/{e[2]}" for e in entries) + "]"
+
+
+def fmt_indices(indices: Sequence[int]) -> str:
+    """``[0x1600, ...]``."""
+    return "[" + ", ".join(f"0x{i:04X}" for i in indices) + "]"
+
+
+def configure_pdos(t: Any, axis: int, profile: DriveProfile, error: type[Exception]) -> AxisLayout:
+    """Configure drive ``axis`` as ``profile`` says over CoE-style objects (EtherCAT, and the
+    in-process simulated bus): the configurable PDOs written (count 0, entries, count), the
+    assignment 0x1C12/0x1C13 written where it differs (fixed PDOs only assigned); then the
+    assignment and every assigned mapping READ BACK. Returns the layout the drive reports;
+    a difference from the profile raises ``error`` in one line naming ``t``'s name of the
+    axis, the object, the expected and the found value."""
+    from drivers.cia402.pdo import RXPDO_ASSIGN_INDEX, TXPDO_ASSIGN_INDEX
+
+    for assign, pdos in (
+        (RXPDO_ASSIGN_INDEX, profile.rx_pdos),
+        (TXPDO_ASSIGN_INDEX, profile.tx_pdos),
+    ):
+        want = [p.index for p in pdos]
+        if assignment(t, axis, assign) != want:
+            t.write_value(axis, assign, 0, "u8", 0)
+            for k, index in enumerate(want):
+                t.write_value(axis, assign, k + 1, "u16", index)
+            t.write_value(axis, assign, 0, "u8", len(want))
+        for p in pdos:
+            if p.fixed:
+                continue
+            t.write_value(axis, p.index, 0, "u8", 0)
+            for k, e in enumerate(p.entries):
+                t.write_value(
+                    axis, p.index, k + 1, "u32", (e.index << 16) | (e.subindex << 8) | e.bits
+                )
+            t.write_value(axis, p.index, 0, "u8", len(p.entries))
+    found: dict[str, tuple[list[int], list[WireEntry]]] = {}
+    who = t._who(axis)
+    for side, assign, pdos in (
+        ("rx", RXPDO_ASSIGN_INDEX, profile.rx_pdos),
+        ("tx", TXPDO_ASSIGN_INDEX, profile.tx_pdos),
+    ):
+        got = assignment(t, axis, assign)
+        want = [p.index for p in pdos]
+        if got != want:
+            raise error(
+                f"{who}: 0x{assign:04X} reads back {fmt_indices(got)}, profile {profile.name} "
+                f"expects {fmt_indices(want)}"
+            )
+        entries: list[WireEntry] = []
+        for p in pdos:
+            read = read_mapping(t, axis, p.index)
+            expect = [WireEntry(e.index, e.subindex, e.bits) for e in p.entries]
+            if read != expect:
+                raise error(
+                    f"{who}: 0x{p.index:04X} reads back {fmt_entries(read)}, profile "
+                    f"{profile.name} expects {fmt_entries(expect)}"
+                )
+            entries.extend(read)
+        found[side] = (got, entries)
+    return AxisLayout(
+        rx=tuple(found["rx"][1]),
+        tx=tuple(found["tx"][1]),
+        rx_pdos=tuple(found["rx"][0]),
+        tx_pdos=tuple(found["tx"][0]),
+    )

@@ -43,7 +43,6 @@ them back when they answer again, :meth:`drive_faults` reads 0x603F of faulted d
 from __future__ import annotations
 
 import os
-import struct
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -334,93 +333,18 @@ class EtherCATTransport(Transport):
                         got,
                     )
 
-    def _write(self, axis: int, index: int, sub: int, data: bytes) -> None:
-        """SDO write during start-up, mailbox retries; an abort raises SdoAbortError."""
-        self.sdo_write(axis, index, sub, data)
-
-    def _read_u(self, axis: int, index: int, sub: int, size: int) -> int:
-        """Unsigned SDO read of ``size`` bytes (longer answers are cut, as SOEM users do)."""
-        data = self.sdo_read(axis, index, sub)
-        return int.from_bytes(bytes(data[:size]).ljust(size, b"\0"), "little")
-
     def _startup(self, axis: int, transitions: tuple[str, ...]) -> None:
         """Write the profile's start-up SDOs of ``transitions``, in the profile's order."""
-        from drivers.cia402.profiles import startup_int
+        from drivers.cia402.profiles import write_startup
 
-        for w in self.profiles[axis].startup:
-            if w.transition not in transitions:
-                continue
-            size = w.bits // 8
-            value = startup_int(self.profiles[axis], w.index, w.subindex, w.value, self.cycle_time)
-            value &= (1 << w.bits) - 1  # signed values as their two's complement
-            self._write(axis, w.index, w.subindex, value.to_bytes(size, "little"))
-            self.startup_written += 1
+        self.startup_written += write_startup(self, axis, self.profiles[axis], transitions)
 
     def _configure_pdos(self, axis: int) -> Any:
-        """Write the profile's configurable PDOs and the assignment (CiA 301 order: the
-        assignment cleared first when it must change), read everything back, and return the
-        :class:`~drivers.cia402.wire.AxisLayout` the drive reports."""
-        from drivers.cia402.wire import AxisLayout, WireEntry
+        """The profile's PDOs written, assigned and read back: the layout the drive reports
+        (:func:`drivers.cia402.profiles.configure_pdos`; a difference: EtherCATError)."""
+        from drivers.cia402.profiles import configure_pdos
 
-        prof = self.profiles[axis]
-        u8, u16, u32 = (struct.Struct(f).pack for f in ("<B", "<H", "<I"))
-        for assign, pdos in (
-            (pdo.RXPDO_ASSIGN_INDEX, prof.rx_pdos),
-            (pdo.TXPDO_ASSIGN_INDEX, prof.tx_pdos),
-        ):
-            want = [p.index for p in pdos]
-            if self._assignment(axis, assign) != want:
-                self._write(axis, assign, 0, u8(0))
-                for k, index in enumerate(want):
-                    self._write(axis, assign, k + 1, u16(index))
-                self._write(axis, assign, 0, u8(len(want)))
-            for p in pdos:
-                if p.fixed:
-                    continue
-                self._write(axis, p.index, 0, u8(0))
-                for k, e in enumerate(p.entries):
-                    value = (e.index << 16) | (e.subindex << 8) | e.bits
-                    self._write(axis, p.index, k + 1, u32(value))
-                self._write(axis, p.index, 0, u8(len(p.entries)))
-        found: dict[str, tuple[list[int], list[WireEntry]]] = {}
-        for side, assign, pdos in (
-            ("rx", pdo.RXPDO_ASSIGN_INDEX, prof.rx_pdos),
-            ("tx", pdo.TXPDO_ASSIGN_INDEX, prof.tx_pdos),
-        ):
-            got = self._assignment(axis, assign)
-            want = [p.index for p in pdos]
-            if got != want:
-                self._refuse(axis, prof, f"0x{assign:04X}", _fmt_list(want), _fmt_list(got))
-            entries: list[WireEntry] = []
-            for p in pdos:
-                count = self._read_u(axis, p.index, 0, 1)
-                read = []
-                for k in range(1, count + 1):
-                    raw = self._read_u(axis, p.index, k, 4)
-                    read.append(WireEntry(raw >> 16, (raw >> 8) & 0xFF, raw & 0xFF))
-                expect = [WireEntry(e.index, e.subindex, e.bits) for e in p.entries]
-                if read != expect:
-                    self._refuse(
-                        axis, prof, f"0x{p.index:04X}", _fmt_entries(expect), _fmt_entries(read)
-                    )
-                entries.extend(read)
-            found[side] = (got, entries)
-        return AxisLayout(
-            rx=tuple(found["rx"][1]),
-            tx=tuple(found["tx"][1]),
-            rx_pdos=tuple(found["rx"][0]),
-            tx_pdos=tuple(found["tx"][0]),
-        )
-
-    def _assignment(self, axis: int, assign: int) -> list[int]:
-        """The PDO indices assigned in 0x1C12/0x1C13 as the drive reports them."""
-        count = self._read_u(axis, assign, 0, 1)
-        return [self._read_u(axis, assign, k, 2) for k in range(1, count + 1)]
-
-    def _refuse(self, axis: int, prof: Any, obj: str, want: str, got: str) -> None:
-        raise EtherCATError(
-            f"{self._who(axis)}: {obj} reads back {got}, profile {prof.name} expects {want}"
-        )
+        return configure_pdos(self, axis, self.profiles[axis], EtherCATError)
 
     def _program_dc(self, axis: int, slave: Any) -> None:
         """SYNC0 (and SYNC1) of one slave as its profile says; without a ``dc`` section the
@@ -750,11 +674,3 @@ class EtherCATTransport(Transport):
         """Request INIT and close the interface. Safe to call twice."""
         self.is_open = False
         self._shutdown()
-
-
-def _fmt_list(indices: list[int]) -> str:
-    return "[" + ", ".join(f"0x{i:04X}" for i in indices) + "]"
-
-
-def _fmt_entries(entries: list[Any]) -> str:
-    return "[" + ", ".join(f"0x{e[0]:04X}:{e[1]:02X}/{e[2]}" for e in entries) + "]"
