@@ -66,6 +66,9 @@ class SlaveDescription:
     dc_required: bool = False
     #: SYNC0 cycle the drive insists on [ns] (None: any)
     sync0_cycle_ns: int | None = None
+    #: SYNC0 shift [ns] and AssignActivate of its DC op mode (the SII's DC category)
+    sync0_shift_ns: int = 0
+    assign_activate: int = 0
 
     def __post_init__(self) -> None:
         for name in ("vendor_id", "product_code", "revision", "serial"):
@@ -130,6 +133,8 @@ def slave_descriptions(
                     name=prof.name[:60],
                     dc_required=dc is not None,
                     sync0_cycle_ns=dc.sync0_cycle_ns if dc is not None else None,
+                    sync0_shift_ns=dc.sync0_shift_ns if dc is not None else 0,
+                    assign_activate=dc.assign_activate if dc is not None else 0,
                 )
             )
             continue
