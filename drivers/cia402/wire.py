@@ -267,6 +267,15 @@ class WireImage:
         No allocation."""
         np.take(self._tx_ext, self._dec, out=self._tx_flat)
 
+    def mapped_bytes(self) -> tuple[np.ndarray, np.ndarray]:
+        """bool masks over the n canonical RxPDO / TxPDO records' bytes: True where the
+        axis's drive maps the field (an in-process bus copies just those, in place)."""
+        rx = np.zeros(self.n * RXPDO_SIZE, dtype=bool)
+        tx = np.zeros(self.n * TXPDO_SIZE, dtype=bool)
+        rx[self._drx_rec] = True
+        tx[self._dtx[self._dtx < self.n * TXPDO_SIZE]] = True
+        return rx, tx
+
     # ------------------------------------------------------------ drive side (sim)
 
     def drive_rx(self, rx: np.ndarray) -> None:

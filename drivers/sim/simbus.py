@@ -108,6 +108,14 @@ class SimBus(Transport):
             self.wire.bind_master(self.rx, self.tx)
             self._wired = not self.wire.builtin
             if self._wired:
+                # in one process the bytes need no wire order: what each drive maps is
+                # copied in place (two masked copies a cycle); what it does not map keeps
+                # its value on either side (the master's: its defined default)
+                self._rx_mask, self._tx_mask = self.wire.mapped_bytes()
+                self._rx_flat = self.rx.view(np.uint8).reshape(-1)
+                self._tx_flat = self.tx.view(np.uint8).reshape(-1)
+                self._drv_rx_flat = self.drives.rx.view(np.uint8).reshape(-1)
+                self._drv_tx_flat = self.drives.tx.view(np.uint8).reshape(-1)
                 self.wire.drive_tx(self.drives.tx)
                 self.wire.decode_tx()
         self.is_open = True
@@ -130,12 +138,9 @@ class SimBus(Transport):
             self.drives.step(None)
             return STATUS_NO_RESPONSE
         if self._wired:
-            w = self.wire
-            w.encode_rx()
-            w.drive_rx(self.drives.rx)
+            np.copyto(self._drv_rx_flat, self._rx_flat, where=self._rx_mask)
             self.drives.step(self.drives.rx)
-            w.drive_tx(self.drives.tx)
-            w.decode_tx()
+            np.copyto(self._tx_flat, self._drv_tx_flat, where=self._tx_mask)
             return STATUS_OK
         self.drives.step(self.rx)
         np.copyto(self.tx, self.drives.tx)
