@@ -6,7 +6,9 @@ The drive group and the tick read and write one canonical record per axis
 order, padding, objects it does not have) is an :class:`AxisLayout`. A :class:`WireImage`
 precomputes, once, byte-index tables between the n canonical records and the n drives'
 wire bytes laid end to end, so a whole bus of different layouts is encoded with ONE
-``np.take(..., out=)`` per direction and nothing is allocated per cycle:
+``ndarray.take(..., out=, mode="clip")`` per direction and nothing is allocated per cycle
+(the method, not ``np.take``: numpy 2.4's function wrapper costs ~3.7 µs a call against
+~1 µs; ``mode="clip"`` because ``out`` is buffered under the default ``raise``):
 
 - master side (:meth:`WireImage.encode_rx`, :meth:`WireImage.decode_tx`): canonical RxPDO
   -> wire outputs, wire inputs -> canonical TxPDO. Wire bytes no canonical field feeds
@@ -260,12 +262,12 @@ class WireImage:
     def encode_rx(self) -> None:
         """Canonical RxPDO -> :attr:`rx_out` (every axis, its own layout). No allocation."""
         np.copyto(self._rx_head, self._rx_flat)
-        np.take(self._rx_src, self._enc, out=self.rx_out)
+        self._rx_src.take(self._enc, out=self.rx_out, mode="clip")
 
     def decode_tx(self) -> None:
         """:attr:`tx_in` -> canonical TxPDO; fields a drive does not map read its default.
         No allocation."""
-        np.take(self._tx_ext, self._dec, out=self._tx_flat)
+        self._tx_ext.take(self._dec, out=self._tx_flat, mode="clip")
 
     def mapped_bytes(self) -> tuple[np.ndarray, np.ndarray]:
         """bool masks over the n canonical RxPDO / TxPDO records' bytes: True where the
@@ -282,11 +284,11 @@ class WireImage:
         """:attr:`rx_out` -> a drive-side canonical RxPDO ``rx`` (n,): only the bytes each
         drive maps; the rest keep their values."""
         flat = rx.view(np.uint8).reshape(-1)
-        np.take(self.rx_out, self._drx_wire, out=self._drx_tmp)
+        self.rx_out.take(self._drx_wire, out=self._drx_tmp, mode="clip")
         flat[self._drx_rec] = self._drx_tmp
 
     def drive_tx(self, tx: np.ndarray) -> None:
         """A drive-side canonical TxPDO ``tx`` (n,) -> :attr:`tx_in` (padding zero)."""
         head = self._drive_tx_src[: tx.nbytes]
         np.copyto(head, tx.view(np.uint8).reshape(-1))
-        np.take(self._drive_tx_src, self._dtx, out=self.tx_in)
+        self._drive_tx_src.take(self._dtx, out=self.tx_in, mode="clip")
