@@ -25,7 +25,7 @@ the mode, when 0x6060 cannot be mapped, becomes a start-up write.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from pydantic import ValidationError
 
@@ -37,9 +37,9 @@ from hofto_hw.config.drive_profile import (
     LOOP_OBJECTS,
     MODE_NUMBERS,
     DriveProfile,
+    format_profile_error,
     modes_from_bits,
 )
-from hofto_hw.config.loader import format_validation_error
 
 #: what each object is worth to the loop (essential ones dominate everything else)
 WEIGHTS: dict[str, int] = {
@@ -228,7 +228,7 @@ def choose(desc: DeviceDescription, loop: str | None = None, name: str | None = 
     try:
         profile = DriveProfile.model_validate(data)
     except ValidationError as err:
-        first = format_validation_error(str(desc.path), err).splitlines()[0]
+        first = format_profile_error(str(desc.path), err).splitlines()[0]
         raise ProfileImportError(f"{first} (device {desc.device})") from None
     return Choice(profile, reasons)
 
@@ -255,9 +255,19 @@ def _ethercat_side(
     desc: DeviceDescription, side: str, wanted: tuple[str, ...]
 ) -> tuple[list[PdoOption], str]:
     options = [p for p in desc.pdos if p.direction == side]
+    notes = []
+    if not desc.pdo_config:  # mappings cannot be written: every PDO is as the file gives it
+        options = [replace(p, fixed=True) for p in options if p.entries]
+        notes.append("PdoConfig=0: no mapping is written")
+    if not desc.pdo_assign:  # the default assignment is the only one
+        options = [replace(p, mandatory=p.fixed) for p in options if p.default]
+        notes.append("PdoAssign=0: the default assignment is kept")
     limit = desc.sm_rx_bytes if side == "rx" else desc.sm_tx_bytes
     fixed = _greedy_fixed([p for p in options if p.fixed and p.entries], wanted, limit)
-    conf = _configurable(desc, [p for p in options if not p.fixed], side, wanted, limit)
+    mandatory = [p for p in options if p.fixed and p.mandatory]
+    conf = _configurable(desc, [p for p in options if not p.fixed], side, wanted, limit, mandatory)
+    if all(p.fixed for p in conf):
+        conf = []  # nothing configurable: the fixed branch holds the mandatory PDOs too
     got_fixed = set().union(*(_fields(p) for p in fixed)) & set(wanted)
     got_conf = set().union(*(_fields(p) for p in conf)) & set(wanted)
     names = lambda ps: " + ".join(f"0x{p.index:04X}" for p in ps) or "none"  # noqa: E731
@@ -273,9 +283,15 @@ def _ethercat_side(
                 else "; the file has no configurable PDO"
             )
         )
-        return fixed, why
+        return fixed, why + "".join(f"; {n}" for n in notes)
     if not conf:
         return [], f"{side}: no PDO maps what the loop needs"
+    unused = [p for p in options if not p.fixed and p.default and p not in conf and p.entries]
+    if not desc.pdo_assign and any(p.index not in {c.index for c in conf} for p in unused):
+        raise ProfileImportError(
+            f"{desc.path}: {desc.device}: PdoAssign=0 keeps configurable PDO "
+            f"0x{unused[0].index:04X} assigned, but the layout does not need it: not supported"
+        )
     why = (
         f"{side}: configurable {names(conf)} written with {len(got_conf)} of {len(wanted)} "
         "wanted objects"
@@ -287,16 +303,16 @@ def _ethercat_side(
             else "; the file has no fixed PDO"
         )
     )
-    return conf, why
+    return conf, why + "".join(f"; {n}" for n in notes)
 
 
 def _greedy_fixed(
     options: list[PdoOption], wanted: tuple[str, ...], limit: int | None
 ) -> list[PdoOption]:
-    chosen: list[PdoOption] = []
-    covered: set[str] = set()
-    keys: set[tuple[int, int]] = set()
-    total = 0
+    chosen = [p for p in options if p.mandatory]  # ESI Mandatory="1": always assigned
+    covered = set().union(*(_fields(p) for p in chosen))
+    keys = {(i, s) for p in chosen for i, s, _ in p.entries if i}
+    total = sum(p.bits // 8 for p in chosen)
     while True:
         best: tuple[tuple[int, int, int], PdoOption] | None = None
         for p in options:
@@ -326,18 +342,23 @@ def _configurable(
     side: str,
     wanted: tuple[str, ...],
     limit: int | None,
+    mandatory: list[PdoOption] = (),  # type: ignore[assignment]
 ) -> list[PdoOption]:
     """Wanted objects mappable in ``side``, written into the configurable PDOs in order
-    (default-assigned ones first), each up to its mapping entries, within the sync manager."""
+    (default-assigned ones first), each up to its mapping entries, within the sync manager;
+    after the ``mandatory`` fixed PDOs, whose objects are not mapped again."""
     objs = []
     for name in wanted:
         info = desc.objects.get((FIELD_OBJECTS[name], 0))
         if info is not None and side in info.mappable:
             objs.append((FIELD_OBJECTS[name], 0, CIA402_OBJECTS[FIELD_OBJECTS[name]][1]))
+    out = [p for p in mandatory if p.direction == side]  # assigned whatever is written
+    carried = {(i, s) for p in out for i, s, _ in p.entries}
+    objs = [o for o in objs if o[:2] not in carried]
+    fixed_bits = sum(p.bits for p in out)
     if limit is not None:
-        while objs and sum(b for _, _, b in objs) // 8 > limit:
+        while objs and (fixed_bits + sum(b for _, _, b in objs)) // 8 > limit:
             objs.pop()
-    out: list[PdoOption] = []
     for p in sorted(options, key=lambda p: (not p.default, p.index)):
         if not objs:
             break
@@ -345,7 +366,12 @@ def _configurable(
             continue
         n = _max_entries(desc, p)
         take, objs = objs[:n], objs[n:]
-        out.append(PdoOption(p.index, p.direction, False, take, p.excludes, True, n, p.name))
+        out.append(
+            PdoOption(
+                p.index, p.direction, fixed=False, entries=take, excludes=p.excludes,
+                default=True, max_entries=n, name=p.name,
+            )
+        )  # fmt: skip
     return out
 
 
@@ -380,7 +406,15 @@ def _can_side(
             else:
                 skipped.append(_field(obj[0], 0) or f"0x{obj[0]:04X}")
     pdos = [
-        PdoOption(p.index, side, False, frame, set(), True, caps[k], p.name)  # type: ignore[arg-type]
+        PdoOption(
+            p.index,
+            side,
+            fixed=False,
+            entries=frame,
+            default=True,  # type: ignore[arg-type]
+            max_entries=caps[k],
+            name=p.name,
+        )
         for k, (p, frame) in enumerate(zip(options[: len(frames)], frames, strict=True))
     ]
     why = (
@@ -452,6 +486,10 @@ def _startup(desc: DeviceDescription, loop: str, set_by: str, reasons: list[str]
             value = "loop_period"
             comment += f" (file: {cmd.value}; the master writes the loop period)"
         bits = cmd.bits
+        info = desc.objects.get((cmd.index, cmd.subindex))
+        if info is not None and info.bits in (8, 16, 32, 64) and info.bits != bits:
+            if isinstance(value, str) or 0 <= value < 1 << info.bits:
+                bits = info.bits  # the object's size, not the length the file wrote the data in
         if isinstance(value, int) and value >= 1 << (bits - 1) and _signed(cmd.index):
             value -= 1 << bits
         for transition in cmd.transitions or ["PS"]:
@@ -466,14 +504,33 @@ def _startup(desc: DeviceDescription, loop: str, set_by: str, reasons: list[str]
                 }
             )
     has = {(s["index"], s["subindex"]) for s in out}
-    if (0x60C2, 1) in has and (0x60C2, 2) not in has and desc.has(0x60C2, 2):
+    period = desc.objects.get((0x60C2, 1))
+    if (0x60C2, 1) not in has and period is not None and period.writable:
+        out.append(
+            {
+                "index": 0x60C2,
+                "subindex": 1,
+                "value": "loop_period",
+                "bits": period.bits if period.bits in (8, 16, 32) else 8,
+                "transition": "PO" if can else "PS",
+                "comment": "interpolation period = the loop period (CiA 402; the master writes it)",
+            }
+        )
+        has.add((0x60C2, 1))
+    unit = desc.objects.get((0x60C2, 2))
+    if (
+        (0x60C2, 1) in has
+        and (0x60C2, 2) not in has
+        and unit is not None
+        and (unit.writable or not unit.access)
+    ):
         out.append(
             {
                 "index": 0x60C2,
                 "subindex": 2,
                 "value": -3,
                 "bits": 8,
-                "transition": "PS",
+                "transition": "PO" if can else "PS",
                 "comment": "interpolation period unit 1e-3 s (the master's loop_period unit)",
             }
         )
@@ -554,8 +611,12 @@ def _canopen(
     caps = [p.max_entries or 8 for p in rx + tx]
     rates = sorted(desc.bitrates) or [1_000_000]
     reasons.append(f"canopen: bitrates {', '.join(f'{r // 1000} kbit/s' for r in rates)}")
+    ids = (1, 127)
+    if desc.node_id is not None and 1 <= desc.node_id <= 127:
+        ids = (desc.node_id, desc.node_id)
+        reasons.append(f"canopen: node id {desc.node_id} (the DCF's [DeviceComissioning])")
     return {
-        "node_ids": (1, 127),
+        "node_ids": ids,
         "bitrates": rates,
         "max_entries": min(caps),
         "rpdo": [comm(p) for p in rx],

@@ -31,6 +31,7 @@ class PdoOption:
     entries: list[tuple[int, int, int]]  # (index, subindex, bits) in wire order; 0 = gap
     excludes: set[int] = field(default_factory=set)  # PDOs that cannot be assigned with it
     default: bool = False  # assigned by default (ESI Sm attribute; EDS: valid at power-on)
+    mandatory: bool = False  # must always be assigned (ESI Mandatory="1")
     max_entries: int | None = None  # mapping sub-indices (configurable PDOs)
     name: str = ""
 
@@ -50,6 +51,14 @@ class ObjectInfo:
     mappable: str = ""  # "" not mappable, "rx", "tx" or "rxtx"
     default: int | None = None
     name: str = ""
+    low: int | None = None  # EDS LowLimit / HighLimit (signed objects read as signed)
+    high: int | None = None
+    access: str = ""  # ro, rw, wo, rww, rwr, const ("" = not given)
+
+    @property
+    def writable(self) -> bool:
+        """Whether an SDO may write it (access rw, wo, rww or rwr)."""
+        return self.access in ("rw", "wo", "rww", "rwr")
 
 
 @dataclass
@@ -105,10 +114,13 @@ class DeviceDescription:
     dc: list[DcMode] = field(default_factory=list)
     sm_rx_bytes: int | None = None
     sm_tx_bytes: int | None = None
+    pdo_assign: bool = True  # ESI CoE@PdoAssign: the PDO assignment may be changed
+    pdo_config: bool = True  # ESI CoE@PdoConfig: configurable PDOs may be written
     # CANopen
     bitrates: list[int] = field(default_factory=list)
     comm: dict[int, CanComm] = field(default_factory=dict)  # mapping index -> communication
     heartbeat: bool = False
+    node_id: int | None = None  # a DCF's [DeviceComissioning] NodeID
     notes: list[str] = field(default_factory=list)
 
     def has(self, index: int, subindex: int = 0) -> bool:

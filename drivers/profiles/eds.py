@@ -54,6 +54,18 @@ def eds_int(text: str | None, node_id: int = 0) -> int | None:
     return total
 
 
+def _value(text: str | None, dtype: int, bits: int | None) -> int | None:
+    """A DefaultValue/LowLimit/HighLimit; a signed object's hex value (0x80000000) read as
+    signed; None for strings or expressions that are not numbers."""
+    try:
+        value = eds_int(text)
+    except ValueError:
+        return None
+    if value is not None and dtype in SIGNED and bits and value >= 1 << (bits - 1):
+        value -= 1 << bits
+    return value
+
+
 def read_eds(path: Path) -> list[DeviceDescription]:
     """The one device of the EDS/DCF file ``path``.
 
@@ -117,15 +129,19 @@ def read_eds(path: Path) -> list[DeviceDescription]:
             mappable = ("rx" if access in ("rw", "rww", "wo") else "") + (
                 "tx" if access in ("ro", "rw", "rwr", "const") else ""
             )
-        default_text = s.get("DefaultValue")
-        try:
-            default = eds_int(default_text)
-        except ValueError:
-            default = None  # strings, $NODEID-less expressions we do not need
-        if default is not None and dtype in SIGNED and bits and default >= 1 << (bits - 1):
-            default -= 1 << bits  # signed values written in hex (0xFFFF8000)
+        default, low, high = (
+            _value(s.get(key), dtype, bits) for key in ("DefaultValue", "LowLimit", "HighLimit")
+        )
         desc.objects[(index, sub)] = ObjectInfo(
-            index, sub, bits, mappable, default, (s.get("ParameterName") or "").strip()
+            index,
+            sub,
+            bits,
+            mappable,
+            default,
+            (s.get("ParameterName") or "").strip(),
+            low,
+            high,
+            (s.get("AccessType") or "").strip().lower(),
         )
     ident = {k: desc.default_of(0x1018, k) for k in (1, 2, 3)}
     desc.vendor_id = number(info.get("VendorNumber"), "[DeviceInfo] VendorNumber") or ident[1] or 0
@@ -140,6 +156,9 @@ def read_eds(path: Path) -> list[DeviceDescription]:
             desc.bitrates.append(int(m.group(1)) * 1000)
     desc.bitrates.sort()
     desc.heartbeat = desc.has(0x1017)
+    commissioning = sections.get("DEVICECOMISSIONING")  # sic, CiA 306
+    if commissioning is not None:
+        desc.node_id = number(cp[commissioning].get("NodeID"), "[DeviceComissioning] NodeID")
     # PDOs: mapping 0x1600+k / 0x1A00+k with communication 0x1400+k / 0x1800+k
     for direction, comm_base, map_base in (("rx", 0x1400, 0x1600), ("tx", 0x1800, 0x1A00)):
         for k in range(512):
@@ -173,6 +192,8 @@ def read_eds(path: Path) -> list[DeviceDescription]:
             )
             cob_text = (section(comm_base + k, 1) or {}).get("DefaultValue")
             cob = number(cob_text, f"[{comm_base + k:04X}sub1] DefaultValue", node_id=0)
+            if cob is not None and desc.node_id and not _NODEID.search(cob_text or ""):
+                cob -= desc.node_id  # a DCF's COB-ID written with its node id included
             tt = desc.default_of(comm_base + k, 2)
             if cob is not None:
                 desc.comm[map_base + k] = CanComm(

@@ -78,9 +78,9 @@ def _num(text: str | None, path: Path, what: str) -> int | None:
 def _hexdata(text: str, path: Path, what: str) -> int:
     """Little-endian hex bytes (ESI ``Data``/``DefaultData``) -> int."""
     t = text.strip()
-    if t.startswith(("#x", "0x")):
-        return int(t[2:], 16)
     try:
+        if t.startswith(("#x", "0x")):
+            return int(t[2:], 16)
         return int.from_bytes(bytes.fromhex(t), "little")
     except ValueError:
         raise ProfileImportError(f"{path}: {what}: not hex data (got {text!r})") from None
@@ -186,6 +186,12 @@ def _device(
             info = desc.objects.setdefault((index, sub), ObjectInfo(index, sub, bits))
             if pdo.direction not in info.mappable:
                 info.mappable += pdo.direction
+    coe = dev.find("Mailbox/CoE")
+    if coe is not None:  # ETG.2000: both default to false; a file without CoE: the dump's
+        desc.pdo_assign = coe.get("PdoAssign", "0").lower() in ("1", "true")
+        desc.pdo_config = coe.get("PdoConfig", "0").lower() in ("1", "true")
+    elif dump:
+        desc.pdo_assign = desc.pdo_config = False  # what the live drives ran, as it was
     for cmd in dev.findall("Mailbox/CoE/InitCmd"):
         data = _text(cmd, "Data")
         if not data:
@@ -238,6 +244,7 @@ def _pdo(pdo: Element, direction: str, where: str, path: Path) -> PdoOption:
             x for x in (_num(_text(x), path, "Exclude") for x in pdo.findall("Exclude")) if x
         },
         default=pdo.get("Sm") is not None,
+        mandatory=pdo.get("Mandatory", "0") in ("1", "true"),
         name=_text(pdo, "Name"),
     )
 
@@ -270,17 +277,18 @@ def _mapping_flag(flags: Element | None) -> str:
 def _dictionary(d: Element, desc: DeviceDescription, path: Path) -> None:
     types: dict[str, Element] = {_text(t, "Name"): t for t in d.findall("DataTypes/DataType")}
 
-    def subitems(type_name: str) -> list[tuple[int, int | None, str, str]]:
-        """(subindex, bits, name, mapping flag) of a record/array type."""
+    def subitems(type_name: str) -> list[tuple[int, int | None, str, str, str]]:
+        """(subindex, bits, name, mapping flag, access) of a record/array type."""
         t = types.get(type_name)
-        out: list[tuple[int, int | None, str, str]] = []
+        out: list[tuple[int, int | None, str, str, str]] = []
         if t is None:
             return out
         for s in t.findall("SubItem"):
             sub = _num(_text(s, "SubIdx"), path, f"DataType {type_name} SubIdx")
             bits = _num(_text(s, "BitSize"), path, f"DataType {type_name} BitSize")
+            access = _text(s, "Flags/Access").lower()
             if sub is not None:
-                out.append((sub, bits, _text(s, "Name"), _mapping_flag(s.find("Flags"))))
+                out.append((sub, bits, _text(s, "Name"), _mapping_flag(s.find("Flags")), access))
                 continue
             arr = types.get(_text(s, "Type"))  # array of elements, sub-indices LBound..
             info = arr.find("ArrayInfo") if arr is not None else None
@@ -291,7 +299,7 @@ def _dictionary(d: Element, desc: DeviceDescription, path: Path) -> None:
             base = types.get(_text(arr, "BaseType"))
             ebits = _num(_text(base, "BitSize"), path, "BitSize") if base is not None else None
             flag = _mapping_flag(s.find("Flags"))
-            out += [(lo + k, ebits, _text(s, "Name"), flag) for k in range(n)]
+            out += [(lo + k, ebits, _text(s, "Name"), flag, access) for k in range(n)]
         return out
 
     for obj in d.findall("Objects/Object"):
@@ -301,6 +309,7 @@ def _dictionary(d: Element, desc: DeviceDescription, path: Path) -> None:
         type_name = _text(obj, "Type")
         bits = _num(_text(obj, "BitSize"), path, f"Object 0x{index:04X} BitSize")
         flag = _mapping_flag(obj.find("Flags"))
+        access = _text(obj, "Flags/Access").lower()
         subs = subitems(type_name)
         info_subs = obj.findall("Info/SubItem")
         if not subs:
@@ -312,9 +321,10 @@ def _dictionary(d: Element, desc: DeviceDescription, path: Path) -> None:
                 flag,
                 _hexdata(default, path, f"0x{index:04X} DefaultData") if default else None,
                 _text(obj, "Name"),
+                access=access,
             )
             continue
-        for k, (sub, sbits, sname, sflag) in enumerate(subs):
+        for k, (sub, sbits, sname, sflag, saccess) in enumerate(subs):
             default = None
             for s in info_subs:  # the object's Info/SubItem of that sub-index, by name
                 if _text(s, "Name") == sname or _text(s, "Name").endswith(f"{sub:03d}"):
@@ -330,4 +340,5 @@ def _dictionary(d: Element, desc: DeviceDescription, path: Path) -> None:
                 sflag or flag,
                 _hexdata(default, path, f"0x{index:04X}:{sub} DefaultData") if default else None,
                 sname,
+                access=saccess or access,
             )

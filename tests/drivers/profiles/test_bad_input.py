@@ -10,7 +10,7 @@ import pytest
 
 from drivers.profiles import ProfileImportError, read_vendor_description
 from drivers.profiles.choose import choose
-from tests.drivers.profiles.esi_factory import entry, esi
+from tests.support.esi_factory import entry, esi
 
 
 def _write(tmp_path: Path, text: str | bytes, name: str = "drive.xml") -> Path:
@@ -242,3 +242,67 @@ def test_bad_eds(tmp_path, text, expect):
     with pytest.raises(ProfileImportError) as err:
         read_vendor_description(path)
     assert expect in str(err.value) and "\n" not in str(err.value)
+
+
+def test_dcf_node_id_and_bom(tmp_path):
+    text = "\ufeff" + EDS + "[DeviceComissioning]\nNodeID=0x05\nBaudrate=1000\n"
+    desc = read_vendor_description(_write(tmp_path, text, "d.dcf"))[0]
+    assert desc.node_id == 5
+    p = choose(desc).profile
+    assert p.canopen is not None and p.canopen.node_ids == (5, 5)
+
+
+def test_initcmd_data_longer_than_the_object(tmp_path):
+    text = esi().replace("<Data>01</Data>", "<Data>0100</Data>")  # 0x60C2:1 written as 2 bytes
+    desc = read_vendor_description(_write(tmp_path, text))[0]
+    desc.objects[(0x60C2, 1)] = type(desc.objects[(0x6040, 0)])(0x60C2, 1, 8)
+    p = choose(desc).profile
+    s = p.startup[0]
+    assert (s.index, s.subindex, s.bits) == (0x60C2, 1, 8)
+
+
+@pytest.mark.parametrize("data", ["#x", "0xZZ", "ABC"])
+def test_bad_initcmd_data(tmp_path, data):
+    msg = _refused(_write(tmp_path, esi().replace("<Data>01</Data>", f"<Data>{data}</Data>")))
+    assert "not hex data" in msg
+
+
+def test_mandatory_pdo_always_assigned(tmp_path):
+    """A Mandatory fixed PDO stays assigned beside what is chosen; its objects are not mapped
+    again."""
+    text = esi().replace('<TxPdo Fixed="1" Sm="3">', '<TxPdo Fixed="1" Sm="3" Mandatory="1">')
+    extra = (
+        '<TxPdo Fixed="1"><Index>#x1A01</Index><Name>more</Name>'
+        + "".join(f"<Entry><Index>#x{i:04X}</Index><SubIndex>0</SubIndex><BitLen>{b}</BitLen>"
+                  "<Name>x</Name></Entry>" for i, b in ((0x6041, 16), (0x6064, 32), (0x606C, 32),
+                                                        (0x6077, 16), (0x603F, 16)))
+        + "</TxPdo>"
+    )  # fmt: skip
+    text = text.replace("<Mailbox>", extra + "<Mailbox>")
+    p = choose(read_vendor_description(_write(tmp_path, text))[0]).profile
+    assert [pdo.index for pdo in p.tx_pdos] == [0x1A00]  # 0x1A01 would map 0x6041 twice
+
+
+def test_dcf_cob_id_with_node_id_included(tmp_path):
+    text = EDS.replace("DefaultValue=$NODEID+0x180", "DefaultValue=0x185") + (
+        "[DeviceComissioning]\nNodeID=5\n"
+    )
+    p = choose(read_vendor_description(_write(tmp_path, text, "d.dcf"))[0]).profile
+    assert p.canopen is not None and p.canopen.tpdo[0].cob_id_base == 0x180
+
+
+def test_pdo_assign_false_keeps_the_default_assignment(tmp_path):
+    """ETG.2000: without PdoAssign the assignment cannot change: a better non-default PDO is
+    not used; without PdoConfig nothing is written."""
+    extra = (
+        '<TxPdo Fixed="1"><Index>#x1A01</Index><Name>more</Name>'
+        + "".join(f"<Entry><Index>#x{i:04X}</Index><SubIndex>0</SubIndex><BitLen>{b}</BitLen>"
+                  "<Name>x</Name></Entry>" for i, b in ((0x6041, 16), (0x6064, 32), (0x606C, 32),
+                                                        (0x6077, 16), (0x603F, 16)))
+        + "</TxPdo>"
+    )  # fmt: skip
+    for coe, expect in (('PdoAssign="1" PdoConfig="1"', [0x1A01]), ("", [0x1A00])):
+        text = esi(coe=coe).replace("<Mailbox>", extra + "<Mailbox>")
+        c = choose(read_vendor_description(_write(tmp_path, text))[0])
+        assert [pdo.index for pdo in c.profile.tx_pdos] == expect, coe
+    assert any("PdoAssign=0" in r for r in c.reasons)

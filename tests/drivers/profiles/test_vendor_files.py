@@ -165,3 +165,20 @@ def test_shipped_profile_is_what_import_gives(path):
     again = choose(desc, name=shipped.name).profile
     assert again == shipped
     check_profile_against_loop(shipped, 0.001, str(path))
+
+
+def test_zeroerr_signed_limits_written_in_hex():
+    d = read_vendor_description(DATA / "zeroerr_eRob-eDriver.eds")[0]
+    home = d.objects[(0x607C, 0)]  # INTEGER32, LowLimit=0x80000000 HighLimit=0x7FFFFFFF
+    assert (home.low, home.high) == (-(2**31), 2**31 - 1)
+    assert d.objects[(0x6040, 0)].high == 0xFFFF  # unsigned stays unsigned
+
+
+def test_interpolation_period_written_where_writable():
+    nanotec = _import("nanotec_C5-E-2-21.xml").profile  # 0x60C2 ro, its sub-indices rw
+    assert nanotec.startup_value(0x60C2, 1) == "loop_period"
+    assert nanotec.startup_value(0x60C2, 2) == -3
+    zeroerr = _import("zeroerr_eRob-eDriver.eds").profile
+    assert [s.transition for s in zeroerr.startup] == ["PO", "PO"]
+    inovance = _import("inovance_SV660N.xml").profile  # no writable 0x60C2
+    assert inovance.startup == []

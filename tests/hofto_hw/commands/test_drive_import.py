@@ -10,7 +10,7 @@ import pytest
 
 from hofto_hw.cli import main
 from hofto_hw.config.drive_profile import load_profile
-from tests.drivers.profiles.esi_factory import esi
+from tests.support.esi_factory import esi
 
 ROOT = Path(__file__).resolve().parents[3]
 DATA = ROOT.parent / "shared" / "data" / "drives"
@@ -150,7 +150,7 @@ def _config(tmp_path: Path, profile: str, rate: str = "1000.0") -> Path:
     text = ER3A.read_text().replace("urdf: er3a/er3a.urdf", f"urdf: {ER3A.parent}/er3a/er3a.urdf")
     text = text.replace("rate_hz: 1000.0", f"rate_hz: {rate}")
     old = "identity: {vendor_id: 0x00000DEC, product_code: 0x00402001}}"
-    text = text.replace(old, old[:-1] + f", profile: {profile}}}", 1)
+    text = text.replace(old, f"profile: {profile}}}", 1)  # the profile's identity
     path = tmp_path / "cfg.yaml"
     path.write_text(text)
     return path
@@ -162,6 +162,30 @@ def test_config_check_loads_the_named_profile(tmp_path, capsys):
     capsys.readouterr()
     assert main(["config", "check", str(_config(tmp_path, "nanotec_c5_e_2_21", "500.0"))]) == 2
     err = capsys.readouterr().err.strip()
-    assert "bus.drives[0].profile: profile nanotec_c5_e_2_21: dc.sync0_cycle_ns" in err
+    assert (
+        "bus.drives[0].profile 'nanotec_c5_e_2_21': profile nanotec_c5_e_2_21: dc.sync0_cycle_ns"
+        in err
+    )
     assert main(["config", "check", str(_config(tmp_path, "no_such_drive"))]) == 2
     assert "drive profile 'no_such_drive' is neither a file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("change", "expect"),
+    [
+        (lambda d: d["rx_pdos"][0]["entries"].append(dict(d["rx_pdos"][0]["entries"][0])),
+         "mapped twice"),
+        (lambda d: d["rx_pdos"][0]["entries"].append({"index": 0, "bits": 4}),
+         "not a whole number of bytes"),
+        (lambda d: d["dc"].update(sync0_cycle_ns=2_000_000), "not the loop's period"),
+    ],
+)  # fmt: skip
+def test_config_check_refuses_a_bad_profile(tmp_path, capsys, change, expect):
+    import yaml
+
+    data = yaml.safe_load((ROOT / "configs" / "drives" / "nanotec_c5_e_2_21.yaml").read_text())
+    change(data)
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump(data))
+    assert main(["config", "check", str(_config(tmp_path, "bad.yaml"))]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and expect in err and "bad.yaml" in err, err

@@ -219,6 +219,7 @@ def test_find_profile(tmp_path, monkeypatch):
 
 def test_config_names_a_profile(tmp_path, er3a_config):
     from hofto_hw.config.drive_profile import resolve_profiles
+    from hofto_hw.config.drives import DriveConfig
 
     _write(tmp_path, PROFILE)
     bus = er3a_config.bus.model_copy(
@@ -226,14 +227,18 @@ def test_config_names_a_profile(tmp_path, er3a_config):
             "transport": "ethercat",
             "interface": "eth0",
             "drives": [
-                d.model_copy(update={"profile": "p.yaml" if i == 0 else None})
+                DriveConfig.model_validate(
+                    d.model_dump(exclude={"identity"}) | {"profile": "p.yaml"}
+                )
+                if i == 0
+                else d
                 for i, d in enumerate(er3a_config.bus.drives)
             ],
         }
     )
     got = resolve_profiles(bus, 0.001, "cfg.yaml", tmp_path)
     assert got[0] is not None and got[0].name == "test_fixed" and got[1] is None
-    with pytest.raises(ConfigError, match=r"cfg.yaml: bus.drives\[0\].profile: .*0x60C2"):
+    with pytest.raises(ConfigError, match=r"cfg.yaml: bus.drives\[0\].profile '[a-z.]*': .*0x60C2"):
         resolve_profiles(bus, 0.002, "cfg.yaml", tmp_path)
     canbus = bus.model_copy(update={"transport": "canopen"})
     with pytest.raises(ConfigError, match="is an ethercat drive, the bus is canopen"):
@@ -241,8 +246,15 @@ def test_config_names_a_profile(tmp_path, er3a_config):
     missing = bus.model_copy(
         update={"drives": [d.model_copy(update={"profile": "nosuch"}) for d in bus.drives]}
     )
-    with pytest.raises(ConfigError, match=r"bus.drives\[0\].profile: drive profile 'nosuch'"):
+    with pytest.raises(
+        ConfigError, match=r"bus.drives\[0\].profile '[a-z.]*': drive profile 'nosuch'"
+    ):
         resolve_profiles(missing, 0.001, "cfg.yaml", tmp_path)
+    other = bus.drives[0].model_copy(update={"identity": bus.drives[1].identity})
+    other.model_fields_set.add("identity")
+    wrong = bus.model_copy(update={"drives": [other, *bus.drives[1:]]})
+    with pytest.raises(ConfigError, match=r"identity \(vendor 0x00000DEC.*is not the profile's"):
+        resolve_profiles(wrong, 0.001, "cfg.yaml", tmp_path)
 
 
 def test_interpolation_period_follows_the_loop(tmp_path):
@@ -255,3 +267,47 @@ def test_interpolation_period_follows_the_loop(tmp_path):
         check_profile_against_loop(p, 0.00025, "x")
     data["startup"][0]["value"] = "loop_period"
     assert "only for 0x60C2:01" in _refused(tmp_path, data)
+
+
+def test_written_profile_reads_back_equal(tmp_path):
+    from hofto_hw.config.drive_profile import profile_yaml, write_profile
+
+    p = load_profile(_write(tmp_path, PROFILE))
+    text = profile_yaml(p, header="test header\nsecond line")
+    assert text.startswith("# test header\n# second line\n")
+    assert "index: 0x6040" in text and "vendor_id: 0x0000009A" in text
+    out = tmp_path / "out.yaml"
+    write_profile(p, out, header="x")
+    assert load_profile(out) == p
+    assert [f.name for f in tmp_path.iterdir() if f.name.startswith(".")] == []
+    with pytest.raises(ConfigError, match="cannot write drive profile"):
+        write_profile(p, tmp_path / "nosuch" / "p.yaml")
+
+
+def test_field_offsets(tmp_path):
+    p = load_profile(_write(tmp_path, PROFILE))
+    rx = p.field_offsets("rx")
+    assert rx == {"target_position": (0, 32), "target_torque": (32, 16), "controlword": (48, 16)}
+    tx = p.field_offsets("tx")
+    assert tx["mode_display"] == (96, 8) and p.image_bits("tx") == 112
+
+
+def test_profile_errors_are_short(tmp_path):
+    data = _profile()
+    data["rx_pdos"][1]["entries"] = [{"index": 0x607A, "bits": 32}]
+    msg = _refused(tmp_path, data)
+    assert "Value error" not in msg and "{" not in msg and "\n" not in msg
+
+
+SHIPPED = sorted((Path(__file__).resolve().parents[3] / "configs" / "drives").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_shipped_profiles_load(path):
+    p = load_profile(path)
+    assert p.name == path.stem and find_profile(path.stem).resolve() == path.resolve()
+    check_profile_against_loop(p, 0.001, str(path))  # every shipped drive runs a 1 kHz loop
+
+
+def test_six_profiles_are_shipped():
+    assert len(SHIPPED) == 6

@@ -31,6 +31,7 @@ def esi(
     number: str = "hex",
     extra_device: bool = False,
     prolog: str = '<?xml version="1.0" encoding="utf-8"?>\n',
+    coe: str = 'PdoAssign="1" PdoConfig="1"',
 ) -> str:
     h = (lambda v, w=4: f"#x{v:0{w}X}") if number == "hex" else (lambda v, w=4: str(v))
     rx = rx_entries if rx_entries is not None else (
@@ -60,7 +61,7 @@ def esi(
         f'<Sm MaxSize="{sm_max}" StartAddress="#x1180" ControlByte="#x20" Enable="1">Inputs</Sm>'
         f'<RxPdo Fixed="1" Sm="2"><Index>{h(0x1600)}</Index><Name>Rx</Name>{rx}</RxPdo>'
         f'<TxPdo Fixed="1" Sm="3"><Index>{h(0x1A00)}</Index><Name>Tx</Name>{tx}</TxPdo>'
-        "<Mailbox><CoE><InitCmd><Transition>PS</Transition><Index>#x60C2</Index>"
+        f"<Mailbox><CoE {coe}><InitCmd><Transition>PS</Transition><Index>#x60C2</Index>"
         "<SubIndex>1</SubIndex><Data>01</Data><Comment>period</Comment></InitCmd></CoE></Mailbox>"
         "<Dc><OpMode><Name>DC</Name><AssignActivate>#x300</AssignActivate>"
         "<CycleTimeSync0>0</CycleTimeSync0><ShiftTimeSync0>0</ShiftTimeSync0></OpMode></Dc>"

@@ -1,4 +1,4 @@
-"""Drive profiles: everything the stack needs to run one drive model (``configs/drives/*.yaml``).
+"""The drive-profile schema: everything the stack needs to run one drive model.
 
 A profile says how a real servo drive is run: its identity (0x1018), its bus, the process-data
 layout as the drive will run it (which PDOs in which order, each entry index:sub:bits, padding,
@@ -20,14 +20,11 @@ CiA-402 objects of axis k of a multi-axis device sit at ``0x6000 + 0x800·k`` (C
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
 
 from hofto_hw.config.base import FileModel
-from hofto_hw.config.drives import BusConfig
-from hofto_hw.config.loader import read_model
 from hofto_hw.errors import ConfigError
 
 FORMAT_VERSION = 1
@@ -603,6 +600,22 @@ class DriveProfile(FileModel):
                     )
 
     # ------------------------------------------------------------------ helpers
+    def image_bits(self, side: Literal["rx", "tx"]) -> int:
+        """Length of one axis-device's ``side`` process data [bit] (its PDOs back to back)."""
+        return sum(p.bits for p in (self.rx_pdos if side == "rx" else self.tx_pdos))
+
+    def field_offsets(self, side: Literal["rx", "tx"], axis: int = 0) -> dict[str, tuple[int, int]]:
+        """field name -> (bit offset, bits) of axis ``axis``'s CiA-402 objects in the ``side``
+        process data of the device (PDOs in assignment order, entries in wire order)."""
+        out: dict[str, tuple[int, int]] = {}
+        at = 0
+        for pdo in self.rx_pdos if side == "rx" else self.tx_pdos:
+            for e in pdo.entries:
+                if e.field is not None and e.axis == axis:
+                    out[e.field] = (at, e.bits)
+                at += e.bits
+        return out
+
     def startup_value(self, index: int, subindex: int = 0) -> int | str | None:
         """The last start-up value written to ``index:subindex``, or None."""
         for s in reversed(self.startup):
@@ -648,146 +661,3 @@ def check_profile_against_loop(profile: DriveProfile, cycle_time: float, source:
                 f"{source}: profile {profile.name}: startup 0x60C2 interpolation period "
                 f"{units}e{exponent} s is not the loop's period ({rate})"
             )
-
-
-def profile_dirs() -> list[Path]:
-    """Folders searched for ``<name>.yaml`` by profile name: ./configs/drives, then the
-    project's configs/drives."""
-    from hofto_hw.config.locate import config_dirs
-
-    return [d / "drives" for d in config_dirs()]
-
-
-def find_profile(spec: str | Path, base_dir: Path | None = None) -> Path:
-    """The profile file named by ``spec``: a path (relative to ``base_dir`` when given) or a
-    profile name in configs/drives/.
-
-    Raises:
-        ConfigError: naming what was looked for and the profiles that exist.
-    """
-    path = Path(spec)
-    candidates = [path] if path.is_absolute() or base_dir is None else [base_dir / path, path]
-    for c in candidates:
-        if c.is_file():
-            return c
-    name = str(spec)
-    if "/" in name or path.suffix in (".yaml", ".yml"):
-        raise ConfigError(f"{candidates[0]}: drive profile not found")
-    for folder in profile_dirs():
-        candidate = folder / f"{name}.yaml"
-        if candidate.is_file():
-            return candidate
-    known = sorted({p.stem for d in profile_dirs() for p in d.glob("*.yaml")})
-    raise ConfigError(
-        f"drive profile {name!r} is neither a file nor a profile in configs/drives/ (have: "
-        f"{', '.join(known) or 'none'})"
-    )
-
-
-def load_profile(path: str | Path) -> DriveProfile:
-    """Read and validate the drive profile file ``path`` (YAML).
-
-    Raises:
-        ConfigError: one line per problem, ``FILE: field.path: message (got VALUE)``.
-    """
-    return read_model(path, "drive profile", DriveProfile)
-
-
-def resolve_profiles(
-    bus: BusConfig, cycle_time: float, source: str, base_dir: Path | None = None
-) -> list[DriveProfile | None]:
-    """Load the profile each of ``bus.drives`` names (None where it names none), check each
-    against the bus kind and the loop period ``cycle_time`` [s].
-
-    ``source`` is the config file's name, ``base_dir`` its folder (relative profile paths).
-
-    Raises:
-        ConfigError: one line naming ``bus.drives[i].profile`` and what is wrong.
-    """
-    kind = {"ethercat": "ethercat", "canopen": "canopen"}.get(bus.transport)
-    loaded: dict[Path, DriveProfile] = {}
-    out: list[DriveProfile | None] = []
-    for i, drive in enumerate(bus.drives):
-        if drive.profile is None:
-            out.append(None)
-            continue
-        where = f"{source}: bus.drives[{i}].profile"
-        try:
-            path = find_profile(drive.profile, base_dir)
-        except ConfigError as exc:
-            raise ConfigError(f"{where}: {exc}") from None
-        key = path.resolve()
-        if key not in loaded:
-            loaded[key] = load_profile(path)
-        profile = loaded[key]
-        if kind is not None and profile.bus != kind:
-            raise ConfigError(
-                f"{where}: profile {profile.name} is an {profile.bus} drive, the bus is "
-                f"{bus.transport} (got {drive.profile!r})"
-            )
-        check_profile_against_loop(profile, cycle_time, where)
-        out.append(profile)
-    return out
-
-
-#: keys whose integer values are written in hex (object indices, identity, DC word, COB-IDs)
-_HEX_KEYS = {"index": 4, "vendor_id": 8, "product_code": 8, "revision_min": 8,
-             "revision_max": 8, "assign_activate": 4, "cob_id_base": 3}  # fmt: skip
-
-
-def profile_yaml(profile: DriveProfile, header: str = "") -> str:
-    """The YAML text of ``profile``: indices and identities in hex (``0x6040``), fields in
-    schema order, ``header`` as leading comment lines. :func:`load_profile` reads it back equal."""
-    import yaml
-
-    class _Hex(int):
-        width = 4
-
-    class _Dumper(yaml.SafeDumper):
-        pass
-
-    def _hex(dumper: yaml.SafeDumper, value: _Hex) -> yaml.ScalarNode:
-        return dumper.represent_scalar("tag:yaml.org,2002:int", f"0x{int(value):0{value.width}X}")
-
-    _Dumper.add_representer(_Hex, _hex)
-
-    def walk(node: object, key: str = "") -> object:
-        if isinstance(node, dict):  # an entry's axis 0 is the default: not written
-            return {k: walk(v, k) for k, v in node.items() if not (k == "axis" and v == 0)}
-        if isinstance(node, list | tuple):
-            return [walk(v, key) for v in node]
-        if key in _HEX_KEYS and isinstance(node, int) and not isinstance(node, bool) and node >= 0:
-            h = _Hex(node)
-            h.width = _HEX_KEYS[key]
-            return h
-        return node
-
-    data = walk(profile.model_dump(mode="python"))
-    text = yaml.dump(data, Dumper=_Dumper, sort_keys=False, allow_unicode=True, width=100)
-    lines = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
-    return lines + text
-
-
-def write_profile(profile: DriveProfile, path: str | Path, header: str = "") -> None:
-    """Write ``profile`` to ``path`` atomically (a temporary file in the same folder, then a
-    rename): a reader never sees half a profile, a failed write leaves the old file.
-
-    Raises:
-        ConfigError: the folder is missing or not writable (one line).
-    """
-    import os
-    import tempfile
-
-    path = Path(path)
-    text = profile_yaml(profile, header)
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except OSError as exc:
-        try:
-            os.unlink(tmp)
-        except (OSError, UnboundLocalError):
-            pass
-        raise ConfigError(f"{path}: cannot write drive profile: {exc.strerror or exc}") from None
