@@ -58,3 +58,17 @@ def test_a_drive_whose_mapping_cannot_be_written_is_refused(tmp_path: Path) -> N
     with pytest.raises(TransportError) as err:
         bus.open()
     assert "0x1600" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_profile_path_relative_to_the_config_is_found_from_any_folder(
+    tmp_path: Path, monkeypatch
+) -> None:
+    config = write_mixed_config(tmp_path)
+    text = config.read_text().replace(str(tmp_path) + "/", "")
+    assert "profile: test_elmo.yaml" in text
+    config.write_text(text)
+    monkeypatch.chdir("/")
+    cfg = load_config(config)
+    bus = build_sim_bus(cfg, external=False)
+    bus.open()
+    assert bus.wire.layouts[0].rx_pdos == (0x1605,)
