@@ -80,7 +80,17 @@ class Transport(ABC):
         self.rx: np.ndarray = new_rx(n_axes)
         #: TxPDO image, drives -> master, shape (n_axes,)
         self.tx: np.ndarray = new_tx(n_axes)
+        #: the drives' own wire layouts (:class:`drivers.cia402.wire.WireImage`) when the
+        #: backend runs per-axis profiles; None: every drive has every canonical field
+        self.wire: Any = None
         self._deadline = 0.0
+
+    def present(self, field: str) -> np.ndarray:
+        """bool (n_axes,): which drives map canonical process-image ``field`` (e.g.
+        ``torque_offset``, ``error_code``); all True without per-axis layouts."""
+        if self.wire is None:
+            return np.ones(self.n_axes, dtype=bool)
+        return self.wire.present[field]
 
     # ------------------------------------------------------------------ lifecycle
 

@@ -49,6 +49,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "sim-canopen": ("hofto_hw.commands.sim_canopen", "serve emulated CANopen CiA-402 drives"),
     "drive": ("hofto_hw.commands.drive", "drive profiles: import a vendor ESI/EDS file"),
+    "bus": ("hofto_hw.commands.bus", "the live bus: scan it into draft drive profiles"),
 }
 
 

@@ -95,8 +95,15 @@ def run(seconds: float, rate: float, config: Path, fifo: int = 0) -> dict[str, f
             _set_fifo(proc.pid, fifo)
             _set_fifo(0, fifo)
         period = 1.0 / rate
+        from drivers.cia402.profiles import profiles_for
+
         t = EtherCATTransport(
-            master_if, cfg.bus.drives, period, list(cfg.robot.joints), receive_timeout=0.01
+            master_if,
+            cfg.bus.drives,
+            period,
+            list(cfg.robot.joints),
+            receive_timeout=0.01,
+            profiles=profiles_for(cfg.bus.drives, "ethercat"),  # the config's drive models
         )
         t.open()
         g = DriveGroup.from_config(t, cfg.bus)

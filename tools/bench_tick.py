@@ -953,6 +953,46 @@ def print_report(res: dict) -> None:
         print(f"  {'met ' if ok else 'MISS'}  {name}: {value}")
 
 
+def mixed(config: Path, mixed_config: Path, rounds: int, ticks: int) -> dict:
+    """The single-layout tick (``config``) against the mixed-profile tick (``mixed_config``:
+    six drive profiles, each axis in its own PDO layout; the simulated bus moves the data
+    through the per-axis wire image) back to back on the simulated clock, interleaved
+    ``rounds`` times (this machine is shared: one config never gets a quiet spell the other
+    does not), ``ticks`` per run. Figures: per round the tick medians and their ratio, and
+    the median of the ratios; the exchange (the bus's work, not the tick's) the same way."""
+    from hofto_hw.config import load_config
+
+    cfgs = {"single": load_config(config), "mixed": load_config(mixed_config)}
+    floor = float(np.median(floor_us(cfgs["single"], 1000)))
+    per: dict[str, list[dict]] = {"single": [], "mixed": []}
+    for k in range(rounds):
+        order = ("single", "mixed") if k % 2 == 0 else ("mixed", "single")
+        for name in order:
+            cfg = cfgs[name]
+            r = run_loop(cfg, float(cfg.loop.rate_hz), "sim", ticks, min(500, ticks), floor)
+            per[name].append(r["back_to_back"] if "back_to_back" in r else r)
+
+    def medians(name: str, key: str) -> list[float]:
+        return [float(r[key]["median"]) for r in per[name]]
+
+    out: dict = {
+        "rounds": rounds,
+        "ticks": ticks,
+        "configs": {k: str(v) for k, v in (("single", config), ("mixed", mixed_config))},
+    }
+    for key in ("tick", "exchange"):
+        single, mix = medians("single", key), medians("mixed", key)
+        ratios = [m / s for m, s in zip(mix, single, strict=True)]
+        out[key] = {
+            "single_median_us": single,
+            "mixed_median_us": mix,
+            "ratio_per_round": ratios,
+            "ratio_median": float(np.median(ratios)),
+        }
+    out["load_average"] = list(os.getloadavg())
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", type=Path, default=ROOT / "configs" / "er3a.yaml")
@@ -968,6 +1008,17 @@ def main(argv: list[str] | None = None) -> int:
         help="also the 1 kHz loop over the real SOEM master and the EtherCAT emulator on a "
         "veth pair (needs root; ~10 s more)",
     )
+    parser.add_argument(
+        "--mixed",
+        type=Path,
+        nargs="?",
+        const=ROOT / "configs" / "er3a_mixed.yaml",
+        default=None,
+        metavar="CONFIG",
+        help="only: the tick of --config against that of a mixed-profile config (default "
+        "configs/er3a_mixed.yaml), interleaved, median ratios",
+    )
+    parser.add_argument("--rounds", type=int, default=7, help="--mixed: interleaved rounds")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--path-only", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--floor", type=float, default=0.0, help=argparse.SUPPRESS)
@@ -978,6 +1029,20 @@ def main(argv: list[str] | None = None) -> int:
         cfg = load_config(args.config)
         realtime(cfg.loop.cpu_latency_us)
         print(json.dumps(bench_path(cfg, args.quick, args.floor)))
+        return 0
+    if args.mixed is not None:
+        res = mixed(args.config, args.mixed, args.rounds, 1500 if args.quick else 5000)
+        if args.json:
+            print(json.dumps(res, indent=2))
+        else:
+            for key in ("tick", "exchange"):
+                r = res[key]
+                print(
+                    f"{key}: single {np.median(r['single_median_us']):.2f} us, mixed "
+                    f"{np.median(r['mixed_median_us']):.2f} us (medians of {res['rounds']} "
+                    f"rounds); mixed/single ratio median {r['ratio_median']:.3f}, per round "
+                    + " ".join(f"{x:.3f}" for x in r["ratio_per_round"])
+                )
         return 0
     res = bench(args.config, args.quick, args.ethercat)
     res["targets"] = [{"target": n, "value": v, "met": ok} for n, v, ok in targets(res)]

@@ -54,7 +54,7 @@ from drivers.canopen.busload import bus_load, check_bus_load
 from drivers.canopen.errors import CANopenError, IdentityMismatchError, NodeMissingError
 from drivers.canopen.socket_buffer import widen_receive_buffer
 from drivers.cia402.codes import describe_error_code
-from drivers.cia402.pdo import RXPDO_SIZE, TXPDO_SIZE, mapping_value, parse_mapping_value
+from drivers.cia402.pdo import parse_mapping_value
 from drivers.transport import (
     STATUS_BUS_ERROR,
     STATUS_NOT_OPEN,
@@ -76,12 +76,20 @@ STATUS_TEXT.setdefault(
 _ABORT_TIMEOUT = 0x05040000
 
 
-def _gather(plan: layout.CopyPlan, axis: int, record_size: int) -> np.ndarray:
-    """Flat record-byte indices of one PDO payload, in payload order."""
-    idx = []
-    for _po, ro, size in plan:
-        idx.extend(range(axis * record_size + ro, axis * record_size + ro + size))
-    return np.array(idx, dtype=np.intp)
+class _Pdo:
+    """One PDO of one node as its profile runs it: communication and mapping objects,
+    COB-ID, transmission type, where its payload sits in the axis's wire bytes."""
+
+    def __init__(self, name: str, comm: int, spec: Any, cob: int, ttype: int, offset: int):
+        self.name = name
+        self.comm_index = comm
+        self.map_index = spec.index
+        self.fixed = spec.fixed
+        self.entries = [(e.index, e.subindex, e.bits) for e in spec.entries]
+        self.cob = cob
+        self.transmission = ttype
+        self.offset = offset
+        self.size = spec.bits // 8
 
 
 class CANopenTransport(Transport):
@@ -116,6 +124,7 @@ class CANopenTransport(Transport):
         sdo_timeout: float = 0.5,
         boot_timeout: float = 3.0,
         bus_kwargs: dict[str, Any] | None = None,
+        profiles: Sequence[Any] | None = None,
     ) -> None:
         super().__init__(len(drives), cycle_time, axis_names)
         n = self.n_axes
@@ -155,8 +164,50 @@ class CANopenTransport(Transport):
         self._hb_state = np.full(n, -1, dtype=np.int16)
         self._booted = np.zeros(n, dtype=bool)
         self._emcy_code = np.zeros(n, dtype=np.uint16)
+        from drivers.cia402.profiles import builtin_profile, layout_of
+        from drivers.cia402.wire import WireImage
+
+        #: one DriveProfile per node (None in the list: the built-in two RPDOs / TPDOs)
+        self.profiles = [
+            p if p is not None else builtin_profile("canopen")
+            for p in (profiles if profiles is not None else [None] * n)
+        ]
+        self.startup_written = 0
+        # the wire image of every node: its PDO payloads end to end (RPDOs / TPDOs), one
+        # encode and one decode per cycle; the frames are slices of it
+        self.wire = WireImage([layout_of(p) for p in self.profiles], self.axis_names)
+        self.wire.bind_master(self.rx, self.tx)
+        self._rpdos: list[list[_Pdo]] = []
+        self._tpdos: list[list[_Pdo]] = []
+        for prof, nid in zip(self.profiles, self.node_ids, strict=True):
+            comm = prof.canopen
+            for out, pdos, comms, base, kind in (
+                (self._rpdos, prof.rx_pdos, comm.rpdo, 0x1400, "RPDO"),
+                (self._tpdos, prof.tx_pdos, comm.tpdo, 0x1800, "TPDO"),
+            ):
+                off, row = 0, []
+                for spec, c in zip(pdos, comms, strict=True):
+                    number = (spec.index & 0x1FF) + 1
+                    row.append(
+                        _Pdo(
+                            f"{kind}{number}",
+                            base + (spec.index & 0x1FF),
+                            spec,
+                            c.cob_id_base + nid,
+                            c.transmission_type,
+                            off,
+                        )
+                    )
+                    off += row[-1].size
+                out.append(row)
         # Cyclic-path buffers.
-        n_t = len(layout.TPDOS)
+        n_t = max(len(row) for row in self._tpdos)
+        #: TPDO slots a node does not have: always "got", never owed
+        self._unused = np.array(
+            [[k >= len(row) for k in range(n_t)] for row in self._tpdos], dtype=bool
+        )
+        self._used = (~self._unused).astype(np.int64)
+        self._n_used = int(self._used.sum())
         self._got = np.zeros((n, n_t), dtype=bool)
         self._got_any = np.zeros(n, dtype=bool)
         #: SYNCs each node's TPDO has not answered yet (1 while the cycle's answer is due)
@@ -169,17 +220,19 @@ class CANopenTransport(Transport):
         self._age = np.zeros(n)
         self._lost = np.zeros(n, dtype=bool)
         self._missing = np.zeros(n, dtype=bool)
-        self._rx_flat = self.rx.view(np.uint8).reshape(-1)
-        self._tx_flat = self.tx.view(np.uint8).reshape(-1)
         self._tx_err = self.tx["error_code"]
+        #: axes whose drive does not map 0x603F: the error code of their last EMCY
+        self._err_by_emcy = ~self.wire.present["error_code"]
         self._rpdo_msgs: list[Any] = []
         self._rpdo_views: list[np.ndarray] = []
-        self._rpdo_idx: list[np.ndarray] = []
-        #: TPDO COB-ID -> (axis, slot, scatter indices, payload size)
+        self._rpdo_src: list[np.ndarray] = []
+        #: TPDO COB-ID -> (slot, axis, the payload's bytes in the wire image, payload size)
         self._tpdo_slots: dict[int, tuple[int, int, np.ndarray, int]] = {}
-        for i, nid in enumerate(self.node_ids):
-            for k, (p, plan) in enumerate(zip(layout.TPDOS, layout.TPDO_PLANS, strict=True)):
-                self._tpdo_slots[p.cob_base + nid] = (k, i, _gather(plan, i, TXPDO_SIZE), p.size)
+        for i in range(n):
+            base = self.wire.tx_offsets[i]
+            for k, p in enumerate(self._tpdos[i]):
+                view = self.wire.tx_in[base + p.offset : base + p.offset + p.size]
+                self._tpdo_slots[p.cob] = (k, i, view, p.size)
         self._sync_msg: Any = None
 
     @classmethod
@@ -188,6 +241,7 @@ class CANopenTransport(Transport):
     ) -> CANopenTransport:
         """From a :class:`hofto_hw.config.drives.BusConfig` with ``transport: canopen``;
         ``cycle_time`` [s] is the system config's 1 / loop.rate_hz (as EtherCAT's)."""
+        from drivers.cia402.profiles import profiles_for
         from hofto_hw.config.drives import CANopenOptions
 
         o = bus.canopen or CANopenOptions()
@@ -207,6 +261,7 @@ class CANopenTransport(Transport):
             tpdo_resync=o.tpdo_resync,
             sdo_timeout=o.sdo_timeout,
             boot_timeout=o.boot_timeout,
+            profiles=profiles_for(bus.drives, "canopen"),
         )
 
     # ------------------------------------------------------------------ naming
@@ -216,8 +271,9 @@ class CANopenTransport(Transport):
 
     def load(self) -> Any:
         """Worst-case bus load of this configuration (:class:`BusLoad`)."""
+        sizes = [p.size for row in self._rpdos + self._tpdos for p in row]
         return bus_load(
-            layout.frame_payloads(self.n_axes),
+            [0] + sizes,
             1.0 / self.cycle_time,
             self.bitrate,
             self.data_bitrate,
@@ -317,16 +373,15 @@ class CANopenTransport(Transport):
 
     def _prepare_messages(self, can: Any) -> None:
         fd = self.data_bitrate is not None
-        self._rpdo_msgs, self._rpdo_views, self._rpdo_idx = [], [], []
-        for i, nid in enumerate(self.node_ids):
-            for p, plan in zip(layout.RPDOS, layout.RPDO_PLANS, strict=True):
+        self._rpdo_msgs, self._rpdo_views, self._rpdo_src = [], [], []
+        for i in range(self.n_axes):
+            base = self.wire.rx_offsets[i]
+            for p in self._rpdos[i]:
                 data = bytearray(p.size)
-                msg = can.Message(
-                    arbitration_id=p.cob_base + nid, data=data, is_extended_id=False, is_fd=fd
-                )
+                msg = can.Message(arbitration_id=p.cob, data=data, is_extended_id=False, is_fd=fd)
                 self._rpdo_msgs.append(msg)
                 self._rpdo_views.append(np.frombuffer(msg.data, dtype=np.uint8))
-                self._rpdo_idx.append(_gather(plan, i, RXPDO_SIZE))
+                self._rpdo_src.append(self.wire.rx_out[base + p.offset : base + p.offset + p.size])
         self._sync_msg = can.Message(
             arbitration_id=layout.SYNC_COB_ID, data=b"", is_extended_id=False
         )
@@ -348,13 +403,23 @@ class CANopenTransport(Transport):
                 f"CAN channel {self.channel}: no boot-up message from {', '.join(missing)} "
                 f"within {self.boot_timeout:g} s after NMT reset communication"
             )
+        from drivers.cia402.profiles import startup_int
+
+        self.startup_written = 0
         for i in range(self.n_axes):
             self._check_identity(i)
-            for p in layout.RPDOS:
-                self._map_pdo(i, p, transmission=layout.SYNC_EVERY)
-            for p in layout.TPDOS:
-                self._map_pdo(i, p, transmission=layout.SYNC_EVERY)
-            self.write_value(i, 0x1017, 0, "u16", max(1, round(self.heartbeat_time * 1000)))
+            prof = self.profiles[i]
+            for w in prof.startup:
+                value = startup_int(prof, w.index, w.subindex, w.value, self.cycle_time)
+                data = (value & ((1 << w.bits) - 1)).to_bytes(w.bits // 8, "little")
+                self.sdo_write(i, w.index, w.subindex, data)
+                self.startup_written += 1
+            for p in self._rpdos[i] + self._tpdos[i]:
+                self._map_pdo(i, p)
+            ms = prof.canopen.heartbeat_ms
+            if ms is None:
+                ms = max(1, round(self.heartbeat_time * 1000))
+            self.write_value(i, 0x1017, 0, "u16", ms)
         self.rx.fill(0)
         self._hb_state.fill(-1)
         net.nmt.send_command(layout.NMT_START)
@@ -394,25 +459,35 @@ class CANopenTransport(Transport):
                     got,
                 )
 
-    def _map_pdo(self, i: int, p: layout.CanPdo, transmission: int) -> None:
-        cob = p.cob_base + self.node_ids[i]
-        self.write_value(i, p.comm_index, 1, "u32", cob | layout.COB_ID_INVALID)
-        self.write_value(i, p.comm_index, 2, "u8", transmission)
-        self.write_value(i, p.map_index, 0, "u8", 0)
-        for sub, e in enumerate(p.entries, start=1):
-            self.write_value(i, p.map_index, sub, "u32", mapping_value(e))
-        self.write_value(i, p.map_index, 0, "u8", len(p.entries))
-        self.write_value(i, p.comm_index, 1, "u32", cob)
+    def _map_pdo(self, i: int, p: _Pdo) -> None:
+        """Communication parameters and (when configurable) the mapping of one PDO in the
+        CiA 301 order (PDO invalid, transmission type, count 0, entries, count, valid), the
+        mapping read back and compared with the profile."""
+        self.write_value(i, p.comm_index, 1, "u32", p.cob | layout.COB_ID_INVALID)
+        self.write_value(i, p.comm_index, 2, "u8", p.transmission)
+        if not p.fixed:
+            self.write_value(i, p.map_index, 0, "u8", 0)
+            for sub, (index, subindex, bits) in enumerate(p.entries, start=1):
+                value = (index << 16) | (subindex << 8) | bits
+                self.write_value(i, p.map_index, sub, "u32", value)
+            self.write_value(i, p.map_index, 0, "u8", len(p.entries))
+        self.write_value(i, p.comm_index, 1, "u32", p.cob)
         count = self.read_value(i, p.map_index, 0, "u8")
         found = [
             parse_mapping_value(self.read_value(i, p.map_index, s, "u32"))[:3]
             for s in range(1, count + 1)
         ]
-        want = [e[:3] for e in p.entries]
-        if found != want:
+        if found != p.entries:
             raise CANopenError(
                 f"{self._who(i)}: {p.name} mapping 0x{p.map_index:04X} reads back as "
-                f"{_fmt_map(found)}, written {_fmt_map(want)}"
+                f"{_fmt_map(found)}, profile {self.profiles[i].name} expects "
+                f"{_fmt_map(p.entries)}"
+            )
+        cob = self.read_value(i, p.comm_index, 1, "u32")
+        if cob != p.cob:
+            raise CANopenError(
+                f"{self._who(i)}: {p.name} COB-ID 0x{p.comm_index:04X}:01 reads back as "
+                f"0x{cob:08X}, expected 0x{p.cob:08X}"
             )
 
     # ------------------------------------------------------------------- cycle
@@ -435,17 +510,17 @@ class CANopenTransport(Transport):
                     self.late_frames += 1
                     if owed[slot] > 0:
                         owed[slot] -= 1
-            rx_flat = self._rx_flat
-            for msg, view, idx in zip(
-                self._rpdo_msgs, self._rpdo_views, self._rpdo_idx, strict=False
+            self.wire.encode_rx()
+            for msg, view, src in zip(
+                self._rpdo_msgs, self._rpdo_views, self._rpdo_src, strict=False
             ):
-                np.take(rx_flat, idx, out=view)
+                np.copyto(view, src)
                 bus.send(msg)
             bus.send(self._sync_msg)
-            np.add(owed, 1, out=owed)
-            got.fill(False)
+            np.add(owed, self._used, out=owed)
+            np.copyto(got, self._unused)
             self._old.fill(False)
-            pending = got.size
+            pending = self._n_used
             deadline = time.monotonic() + self.tpdo_deadline
             while pending:
                 remaining = deadline - time.monotonic()
@@ -474,7 +549,8 @@ class CANopenTransport(Transport):
             self.send_errors += 1
             return STATUS_BUS_ERROR
         self._write_off_backlog()
-        np.copyto(self._tx_err, self._emcy_code)
+        self.wire.decode_tx()
+        np.copyto(self._tx_err, self._emcy_code, where=self._err_by_emcy)
         now = time.monotonic()
         np.subtract(now, self._hb_time, out=self._age)
         np.greater(self._age, self.heartbeat_timeout, out=self._lost)
@@ -510,16 +586,17 @@ class CANopenTransport(Transport):
         hit = self._tpdo_slots.get(m.arbitration_id)
         if hit is None or m.is_error_frame or m.is_remote_frame:
             return None
-        k, i, _idx, size = hit
+        k, i, _view, size = hit
         if len(m.data) != size:
             self.bad_frames += 1
             return None
         return i, k
 
     def _store(self, m: Any) -> None:
-        """Scatter a TPDO frame's payload into ``tx``."""
-        idx = self._tpdo_slots[m.arbitration_id][2]
-        np.put(self._tx_flat, idx, np.frombuffer(m.data, dtype=np.uint8))
+        """Copy a TPDO frame's payload into its place in the wire image (decoded into ``tx``
+        once per cycle)."""
+        view = self._tpdo_slots[m.arbitration_id][2]
+        view[:] = np.frombuffer(m.data, dtype=np.uint8)
 
     # ---------------------------------------------------------------------- NMT
 

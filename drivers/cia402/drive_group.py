@@ -286,12 +286,50 @@ class DriveGroup(ImageFields):
         self.transport.wait_next_cycle()
         self.cycle()
 
+    def present(self, field: str) -> np.ndarray:
+        """bool (n,): which axes' drives map canonical process-image ``field`` (their
+        profile's layout as read back from the drive); e.g. ``torque_offset`` False: the
+        feed-forward of :meth:`command_position` does not reach that drive."""
+        return self.transport.present(field)
+
+    def unavailable(self) -> list[str]:
+        """One line per axis and signal its drive does not map, saying how the stack does
+        without it (setup and diagnostics, not the tick)."""
+        how = {
+            "torque_offset": "no torque feed-forward in CSP/CSV (only through the target "
+            "torque in CST)",
+            "error_code": "the error code is read by SDO (or EMCY) on a fault",
+            "digital_inputs": "no enabling or STO input from this drive",
+            "mode": "the mode is written by SDO",
+            "mode_display": "the mode display is read by SDO",
+            "torque": "no measured torque",
+            "current": "no measured current",
+            "velocity": "no measured velocity",
+            "target_velocity": "no CSV",
+            "target_torque": "no CST",
+        }
+        out = []
+        for field, what in how.items():
+            for i in np.flatnonzero(~self.present(field)):
+                out.append(f"axis {i} ({self.names[i]}): {field} not mapped: {what}")
+        return out
+
     def set_mode(self, mode: Mode | int) -> None:
-        """Select the mode of operation on every axis and wait for 0x6061 to show it."""
+        """Select the mode of operation on every axis and wait for 0x6061 to show it.
+
+        Axes whose drive does not map 0x6060 get it by SDO; those that do not map 0x6061
+        have it read by SDO (and kept as the canonical mode display of that axis)."""
         mode = Mode(int(mode))
         self._rx_mode.fill(mode)
+        t = self.transport
+        for i in np.flatnonzero(~self.present("mode")):
+            t.write_value(int(i), 0x6060, 0, "i8", int(mode))
+        by_sdo = [int(i) for i in np.flatnonzero(~self.present("mode_display"))]
         for _ in range(self.timeout_cycles):
             self._step()
+            for i in by_sdo:
+                t.wire.set_default(i, "mode_display", t.read_value(i, 0x6061, 0, "i8"))
+                self._tx_mode[i] = t.wire.defaults["mode_display"][i]
             np.equal(self._tx_mode, mode, out=self._flags)
             if self._flags.all():
                 return

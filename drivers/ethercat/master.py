@@ -6,12 +6,21 @@ the slave and the values involved):
 1. open the interface (must exist; raw sockets need root or CAP_NET_RAW);
 2. scan (``config_init``): the slave count must equal the configured drive count, and each
    slave's SII identity (vendor id, product code, revision) must match ``bus.drives[i]``;
-3. INIT -> PRE-OP; in the PRE-OP -> SAFE-OP hook map the PDOs by CoE SDO: 0x1C12/0x1C13
-   cleared, 0x1600/0x1A00 written entry by entry from :mod:`drivers.cia402.pdo`, then
-   assigned (the CiA 301 order); ``config_map`` builds the process image;
-4. optional DC: ``config_dc`` and SYNC0 at the bus cycle time on every slave;
-5. SAFE-OP, then OP while exchanging process data, checking states on the way; a slave that
-   refuses is reported with its AL status code in words.
+3. INIT -> PRE-OP; each drive configured as its profile says (``bus.drives[i].profile``,
+   :mod:`drivers.cia402.profiles`; no profile: the built-in 0x1600/0x1A00 layout): start-up
+   SDOs of INIT -> PRE-OP and PRE-OP -> SAFE-OP in their order, the configurable PDOs
+   written (count 0, entries, count), the assignment 0x1C12/0x1C13 written when it differs
+   (fixed PDOs are only assigned, never written); then the assignment and every assigned
+   mapping are READ BACK and the wire layout is built from what the drive reports
+   (:class:`drivers.cia402.wire.WireImage`): a difference from the profile is a one-line
+   refusal naming the slave, the object, the expected and the found value;
+   ``config_map`` builds the process image and its sizes are checked against the layout;
+4. DC: ``config_dc`` and, per slave, SYNC0 (and SYNC1) as its profile's ``dc`` says (cycle:
+   the profile's, else the loop period; shift), or at the loop period for every slave with
+   ``bus.ethercat.dc_sync``;
+5. SAFE-OP (then the SAFE-OP -> OP start-up SDOs), then OP while exchanging process data,
+   checking states on the way; a slave that refuses is reported with its AL status code in
+   words.
 
 Start-up waits for states, never for a fixed time: every state change is polled until
 ``state_timeout``; mailbox traffic (SDOs, the watchdog register) that fails for lack of an
@@ -34,7 +43,6 @@ them back when they answer again, :meth:`drive_faults` reads 0x603F of faulted d
 from __future__ import annotations
 
 import os
-import struct
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -112,6 +120,7 @@ class EtherCATTransport(Transport):
         axis_names: list[str] | None = None,
         *,
         dc_sync: bool = False,
+        profiles: Sequence[Any] | None = None,
         recover: bool = False,
         receive_timeout: float | None = None,
         state_timeout: float = 3.0,
@@ -121,7 +130,20 @@ class EtherCATTransport(Transport):
         super().__init__(len(drives), cycle_time, axis_names)
         self.interface = interface
         self.drives = list(drives)
-        self.dc_sync = dc_sync
+        from drivers.cia402.profiles import builtin_profile
+
+        #: one DriveProfile per slave (None in the list: the built-in layout)
+        self.profiles = [
+            p if p is not None else builtin_profile("ethercat")
+            for p in (profiles if profiles is not None else [None] * len(self.drives))
+        ]
+        if len(self.profiles) != len(self.drives):
+            raise ValueError(f"{len(self.profiles)} profiles for {len(self.drives)} drives")
+        self.dc_opt = dc_sync
+        #: DC runs when asked for or when any drive's profile programs it
+        self.dc_sync = dc_sync or any(p.dc is not None for p in self.profiles)
+        #: start-up SDOs written at the last open (for commissioning reports)
+        self.startup_written = 0
         self._cycle_ns = max(1, round(cycle_time * 1e9))
         self._dc_prev = -1  # DC system time of the last good exchange [ns]; -1: none
         self.recover = recover
@@ -141,14 +163,11 @@ class EtherCATTransport(Transport):
         self.cycles = 0
         self.lost_frames = 0
         self.wkc_errors = 0
-        size = pdo.TXPDO_SIZE
-        tx_bytes = memoryview(self.tx.view(np.uint8))
-        #: one writable byte view per slave into ``tx`` (filled from pysoem's input bytes)
-        self._tx_rows = [tx_bytes[i * size : (i + 1) * size] for i in range(self.n_axes)]
+        self._tx_rows: list[memoryview] = []
+        self._rx_bounds: list[tuple[int, int]] = []
+        self._set_rows(None)
         #: emergencies received (in mailbox reads), newest last: (axis, error code, register)
         self.emergencies: deque[tuple[int, int, int]] = deque(maxlen=64)
-        self._rx_size = pdo.RXPDO_SIZE
-        self._tx_size = pdo.TXPDO_SIZE
 
     @classmethod
     def from_config(
@@ -168,7 +187,30 @@ class EtherCATTransport(Transport):
             for name in ("mailbox_retries", "pdo_watchdog"):
                 if getattr(opts, name, None) is not None:
                     kw[name] = getattr(opts, name)
+        from drivers.cia402.profiles import profiles_for
+
+        kw["profiles"] = profiles_for(bus.drives, "ethercat")
         return cls(bus.interface, bus.drives, cycle_time, axis_names, **kw)
+
+    def _set_rows(self, wire: Any) -> None:
+        """Byte views the cycle copies through: the canonical records themselves when every
+        drive runs the built-in layout, else the wire image's per-slave slices."""
+        self.wire = wire
+        self._direct = wire is None or wire.builtin
+        if self._direct:
+            rs, ts = pdo.RXPDO_SIZE, pdo.TXPDO_SIZE
+            tx_bytes = memoryview(self.tx.view(np.uint8))
+            self._tx_rows = [tx_bytes[i * ts : (i + 1) * ts] for i in range(self.n_axes)]
+            self._rx_bounds = [(i * rs, (i + 1) * rs) for i in range(self.n_axes)]
+        else:
+            tx_bytes = memoryview(wire.tx_in)
+            off = wire.tx_offsets
+            self._tx_rows = [tx_bytes[off[i] : off[i + 1]] for i in range(self.n_axes)]
+            ro = wire.rx_offsets
+            self._rx_bounds = [(int(ro[i]), int(ro[i + 1])) for i in range(self.n_axes)]
+        self._sizes = [
+            (b - a, len(t)) for (a, b), t in zip(self._rx_bounds, self._tx_rows, strict=True)
+        ]
 
     # -------------------------------------------------------------------- start-up
 
@@ -225,8 +267,19 @@ class EtherCATTransport(Transport):
         for s in self.slaves:
             s.add_emergency_callback(self._on_emergency)
         self._request(STATE_PREOP)
-        for s in self.slaves:
-            s.config_func = self._map_pdos
+        from drivers.cia402.wire import WireImage
+
+        self.startup_written = 0
+        layouts = []
+        for i in range(self.n_axes):
+            self._startup(i, ("IP", "PS"))
+            layouts.append(self._configure_pdos(i))
+        wire = WireImage(layouts, self.axis_names)
+        wire.bind_master(self.rx, self.tx)
+        self._set_rows(wire)
+        if self.pdo_watchdog is not None:
+            for s in self.slaves:
+                s.config_func = self._set_watchdog
         try:
             m.config_map()
         except pysoem.ConfigMapError as exc:
@@ -236,21 +289,26 @@ class EtherCATTransport(Transport):
             ) from None
         except pysoem.SdoError as exc:
             raise self._sdo_error(exc, "write") from None
+        for s in self.slaves:  # a lost slave that comes back (reconfig) is configured again
+            s.config_func = self._reconfigure
         for i, s in enumerate(self.slaves):
             sizes = (len(s.output), len(s.input))
-            if sizes != (self._rx_size, self._tx_size):
+            if sizes != self._sizes[i]:
+                want = self._sizes[i]
                 raise EtherCATError(
                     f"{self._who(i)}: process data is {sizes[0]} bytes out / {sizes[1]} in, "
-                    f"expected {self._rx_size} / {self._tx_size} (PDO mapping not applied)"
+                    f"expected {want[0]} / {want[1]} (PDO mapping not applied)"
                 )
         if self.dc_sync:
             if not m.config_dc():
                 raise EtherCATError(f"{self.interface}: no slave supports distributed clocks")
-            for s in self.slaves:
-                s.dc_sync(True, round(self.cycle_time * 1e9))
+            for i, s in enumerate(self.slaves):
+                self._program_dc(i, s)
         self._dc_prev = -1
         self.sample_dt = 0.0
         self._request(STATE_SAFEOP)
+        for i in range(self.n_axes):
+            self._startup(i, ("SO",))
         self.expected_wkc = m.expected_wkc
         self.rx.fill(0)
         self._request(STATE_OP, cyclic=True)
@@ -275,32 +333,52 @@ class EtherCATTransport(Transport):
                         got,
                     )
 
-    def _map_pdos(self, pos: int) -> None:
-        """PRE-OP -> SAFE-OP hook: write the PDO mapping and assignment by SDO (CiA 301),
-        then the SM watchdog time if configured."""
-        s = self.slaves[pos]  # pysoem passes the 0-based position
-        axis = pos
-        u8, u16, u32 = (struct.Struct(f).pack for f in ("<B", "<H", "<I"))
+    def _startup(self, axis: int, transitions: tuple[str, ...]) -> None:
+        """Write the profile's start-up SDOs of ``transitions``, in the profile's order."""
+        from drivers.cia402.profiles import write_startup
 
-        def write(index: int, sub: int, data: bytes) -> None:
-            self._retry(
-                lambda: s.sdo_write(index, sub, data), axis, f"SDO write 0x{index:04X}:{sub:02X}"
-            )
+        self.startup_written += write_startup(self, axis, self.profiles[axis], transitions)
 
-        for assign, pdo_index, entries in (
-            (pdo.RXPDO_ASSIGN_INDEX, pdo.RXPDO_INDEX, pdo.RXPDO_MAPPING),
-            (pdo.TXPDO_ASSIGN_INDEX, pdo.TXPDO_INDEX, pdo.TXPDO_MAPPING),
-        ):
-            write(assign, 0, u8(0))
-            write(pdo_index, 0, u8(0))
-            for k, e in enumerate(entries):
-                write(pdo_index, k + 1, u32(pdo.mapping_value(e)))
-            write(pdo_index, 0, u8(len(entries)))
-            write(assign, 1, u16(pdo_index))
-            write(assign, 0, u8(1))
+    def _configure_pdos(self, axis: int) -> Any:
+        """The profile's PDOs written, assigned and read back: the layout the drive reports
+        (:func:`drivers.cia402.profiles.configure_pdos`; a difference: EtherCATError)."""
+        from drivers.cia402.profiles import configure_pdos
+
+        return configure_pdos(self, axis, self.profiles[axis], EtherCATError)
+
+    def _program_dc(self, axis: int, slave: Any) -> None:
+        """SYNC0 (and SYNC1) of one slave as its profile says; without a ``dc`` section the
+        slave runs free unless ``bus.ethercat.dc_sync`` asks for SYNC0 at the loop period.
+
+        pysoem programs the activation register (0x0981, AssignActivate's high byte: 0x03
+        SYNC0, 0x07 SYNC0 + SYNC1); AssignActivate's low byte (latch/cyclic unit assignment,
+        0x0980) keeps the slave's default: pysoem has no public call for it."""
+        dc = self.profiles[axis].dc
+        if dc is None:
+            if self.dc_opt:
+                slave.dc_sync(True, self._cycle_ns)
+            return
+        cycle = dc.sync0_cycle_ns or self._cycle_ns
+        if (dc.assign_activate >> 8) & 0x04 and dc.sync1_cycle_ns is not None:
+            slave.dc_sync(True, cycle, dc.sync0_shift_ns, dc.sync1_cycle_ns)
+        else:
+            slave.dc_sync(True, cycle, dc.sync0_shift_ns)
+
+    def _reconfigure(self, pos: int) -> None:
+        """PRE-OP -> SAFE-OP hook of a slave brought back by :meth:`recover_slaves`: its
+        start-up SDOs and PDOs again, checked against the layout the bus runs with."""
+        self._startup(pos, ("IP", "PS"))
+        layout = self._configure_pdos(pos)
+        if self.wire is not None and layout != self.wire.layouts[pos]:
+            raise EtherCATError(f"{self._who(pos)}: came back with another PDO layout")
         if self.pdo_watchdog is not None:
-            ms = self.pdo_watchdog * 1000.0
-            self._retry(lambda: s.set_watchdog("processdata", ms), axis, "SM watchdog write")
+            self._set_watchdog(pos)
+
+    def _set_watchdog(self, pos: int) -> None:
+        """PRE-OP -> SAFE-OP hook: the SM watchdog time (``pdo_watchdog``)."""
+        s = self.slaves[pos]  # pysoem passes the 0-based position
+        ms = self.pdo_watchdog * 1000.0
+        self._retry(lambda: s.set_watchdog("processdata", ms), pos, "SM watchdog write")
 
     def _retry(self, fn: Any, axis: int, what: str) -> Any:
         """Call ``fn`` again when the mailbox/register access got no (valid) answer.
@@ -381,10 +459,13 @@ class EtherCATTransport(Transport):
 
     def _raw_exchange(self) -> int:
         m = self.master
-        raw = self.rx.tobytes()
-        size = self._rx_size
-        for i, s in enumerate(self.slaves):
-            s.output = raw[i * size : (i + 1) * size]
+        if self._direct:
+            raw = self.rx.tobytes()
+        else:
+            self.wire.encode_rx()
+            raw = self.wire.rx_out.tobytes()
+        for (a, b), s in zip(self._rx_bounds, self.slaves, strict=False):
+            s.output = raw[a:b]
         m.send_processdata()
         return m.receive_processdata(self._timeout_us)
 
@@ -411,6 +492,8 @@ class EtherCATTransport(Transport):
             return STATUS_WKC_MISMATCH
         for row, s in zip(self._tx_rows, self.slaves, strict=False):
             row[:] = s.input
+        if not self._direct:
+            self.wire.decode_tx()
         if self.dc_sync:
             self._sample_interval(self.master.dc_time)
         return STATUS_OK

@@ -45,10 +45,57 @@ CODE_BUS_OFF_RECOVERED = 0x8140
 CODE_PDO_LENGTH = 0x8210
 
 
-def add_canopen_objects(od: ObjectDictionary, node_id: int) -> None:
+def pdo_objects(profile: Any) -> list[tuple[str, int, int, int, int, bool]]:
+    """(name, communication index, mapping index, COB-ID base, transmission type, enabled)
+    of every PDO of a drive: its profile's (CANopen section), else the layout of
+    :mod:`drivers.canopen.layout`."""
+    if profile is None:
+        return [
+            (f"{kind}{k + 1}", p.comm_index, p.map_index, p.cob_base, layout.SYNC_EVERY, True)
+            for pdos, kind in ((layout.RPDOS, "RPDO"), (layout.TPDOS, "TPDO"))
+            for k, p in enumerate(pdos)
+        ]
+    out = []
+    for pdos, comms, base, kind in (
+        (profile.rx_pdos, profile.canopen.rpdo, 0x1400, "RPDO"),
+        (profile.tx_pdos, profile.canopen.tpdo, 0x1800, "TPDO"),
+    ):
+        for p, c in zip(pdos, comms, strict=True):
+            k = p.index & 0x1FF
+            out.append(
+                (
+                    f"{kind}{k + 1}",
+                    base + k,
+                    p.index,
+                    c.cob_id_base,
+                    c.transmission_type,
+                    c.enabled_by_default,
+                )
+            )
+    return out
+
+
+def add_canopen_objects(od: ObjectDictionary, node_id: int, profile: Any = None) -> None:
     """Add the CiA 301 communication objects of node ``node_id`` to a drive dictionary and
-    set the PDO mappings to :mod:`drivers.canopen.layout`'s defaults."""
+    set the PDO mappings to :mod:`drivers.canopen.layout`'s defaults; for a drive that
+    impersonates ``profile`` (its mapping objects already in ``od``): the communication
+    objects of its PDOs, disabled (COB-ID bit 31) where its file says so."""
     od.max_pdo_bits = 64
+    if profile is not None:
+        od.add_var(0x1005, "COB-ID SYNC", "u32", "rw", layout.SYNC_COB_ID)
+        od.add_var(0x1014, "COB-ID EMCY", "u32", "ro", layout.EMCY_BASE + node_id)
+        od.add_var(0x1017, "producer heartbeat time", "u16", "rw", 0)
+        for name, comm, _map, base, ttype, enabled in pdo_objects(profile):
+            cob = base + node_id | (0 if enabled else layout.COB_ID_INVALID)
+            od.add_record(
+                comm,
+                f"{name} communication parameter",
+                [
+                    OdEntry(comm, 1, "COB-ID used by PDO", "u32", "rw", cob),
+                    OdEntry(comm, 2, "transmission type", "u8", "rw", ttype),
+                ],
+            )
+        return
     od.add_var(0x1005, "COB-ID SYNC", "u32", "rw", layout.SYNC_COB_ID)
     od.add_var(0x1014, "COB-ID EMCY", "u32", "ro", layout.EMCY_BASE + node_id)
     od.add_var(0x1017, "producer heartbeat time", "u16", "rw", 0)
@@ -74,12 +121,20 @@ def add_canopen_objects(od: ObjectDictionary, node_id: int) -> None:
             od.set(p.map_index, 0, len(p.entries))
 
 
-def _indices(entries: Any, dtype: np.dtype, axis: int, size: int) -> np.ndarray:
-    plan = layout.copy_plan(tuple(entries), dtype)
-    out: list[int] = []
-    for _po, ro, n in plan:
-        out.extend(range(axis * size + ro, axis * size + ro + n))
-    return np.array(out, dtype=np.intp)
+def _indices(entries: Any, dtype: np.dtype, axis: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(payload byte, flat record byte) index arrays of the known objects of a mapping;
+    padding and vendor objects travel as bytes nothing reads (zero when sent)."""
+    payload: list[int] = []
+    record: list[int] = []
+    off = 0
+    for e in entries:
+        n = e.bit_length // 8
+        if e.field and e.field in (dtype.names or ()):
+            ro = dtype.fields[e.field][1]
+            payload.extend(range(off, off + n))
+            record.extend(range(axis * size + ro, axis * size + ro + n))
+        off += n
+    return np.array(payload, dtype=np.intp), np.array(record, dtype=np.intp)
 
 
 class CanopenDrives:
@@ -100,8 +155,10 @@ class CanopenDrives:
         self.n = n
         self.node_ids = list(node_ids) if node_ids is not None else list(range(1, n + 1))
         self.ods = drives.ods
-        for od, nid in zip(self.ods, self.node_ids, strict=True):
-            add_canopen_objects(od, nid)
+        self.profiles = list(getattr(drives, "profiles", [None] * n))
+        for od, nid, prof in zip(self.ods, self.node_ids, self.profiles, strict=True):
+            add_canopen_objects(od, nid, prof)
+        self._pdo_objects = [pdo_objects(p) for p in self.profiles]
         self.nmt = np.full(n, layout.NMT_PRE_OPERATIONAL, dtype=np.uint8)
         self.silent = np.zeros(n, dtype=bool)
         self.no_heartbeat = np.zeros(n, dtype=bool)
@@ -118,6 +175,9 @@ class CanopenDrives:
         self._thread: threading.Thread | None = None
         self._rx = drives.rx.copy()
         self._rx_flat = self._rx.view(np.uint8).reshape(-1)
+        self._drive_rx_flat = drives.rx.view(np.uint8).reshape(-1)
+        #: RxPDO record bytes no RPDO carries: the drive's own values (e.g. an SDO-set mode)
+        self._unmapped = np.ones(self._rx_flat.size, dtype=bool)
         self._tx_flat = drives.tx.view(np.uint8).reshape(-1)
         self._got_rpdo = False
         self._last_error = np.zeros(n, dtype=np.uint16)
@@ -125,8 +185,8 @@ class CanopenDrives:
         self._sdo: list[dict[str, Any]] = [{} for _ in range(n)]
         self._delayed: list[tuple[float, Any]] = []
         self._queued_until = np.zeros(n)  # [s] due time of each node's last delayed frame
-        self._rpdo: dict[int, tuple[int, np.ndarray, int]] = {}
-        self._tpdo: list[list[tuple[Any, np.ndarray, np.ndarray, int]]] = [[] for _ in range(n)]
+        self._rpdo: dict[int, tuple[int, tuple[np.ndarray, np.ndarray], int]] = {}
+        self._tpdo: list[list[tuple[Any, Any, np.ndarray, int]]] = [[] for _ in range(n)]
         self._by_sdo = {layout.SDO_RX_BASE + nid: i for i, nid in enumerate(self.node_ids)}
 
     # ------------------------------------------------------------------ sending
@@ -181,24 +241,26 @@ class CanopenDrives:
     def _build_pdos(self) -> None:
         """Copy plans from the PDO objects of every operational node (what the master wrote)."""
         self._rpdo.clear()
+        self._unmapped.fill(True)
         for i in range(self.n):
             self._tpdo[i] = []
             if self.nmt[i] != layout.NMT_OPERATIONAL:
                 continue
             od = self.ods[i]
-            for p in layout.RPDOS:
-                cob = od.get(p.comm_index, 1)
-                if not cob & layout.COB_ID_INVALID:
-                    entries = od.mapping(p.map_index)
+            for _name, comm, map_index, _base, _tt, _en in self._pdo_objects[i]:
+                cob = od.get(comm, 1)
+                if cob & layout.COB_ID_INVALID:
+                    continue
+                entries = od.mapping(map_index)
+                size = sum(e.bit_length for e in entries) // 8
+                if map_index < 0x1A00:
                     idx = _indices(entries, RXPDO_DTYPE, i, RXPDO_SIZE)
-                    self._rpdo[cob & 0x7FF] = (i, idx, len(idx))
-            for p in layout.TPDOS:
-                cob = od.get(p.comm_index, 1)
-                if not cob & layout.COB_ID_INVALID:
-                    entries = od.mapping(p.map_index)
+                    self._rpdo[cob & 0x7FF] = (i, idx, size)
+                    self._unmapped[idx[1]] = False
+                else:
                     idx = _indices(entries, TXPDO_DTYPE, i, TXPDO_SIZE)
-                    every = max(1, min(240, od.get(p.comm_index, 2)))
-                    payload = np.zeros(len(idx), dtype=np.uint8)
+                    every = max(1, min(240, od.get(comm, 2)))
+                    payload = np.zeros(size, dtype=np.uint8)
                     self._tpdo[i].append((cob & 0x7FF, idx, payload, every))
 
     # --------------------------------------------------------------------- SYNC
@@ -219,7 +281,7 @@ class CanopenDrives:
             for cob, idx, payload, every in self._tpdo[i]:
                 if self.syncs % every:
                     continue
-                np.take(self._tx_flat, idx, out=payload)
+                payload[idx[0]] = self._tx_flat[idx[1]]
                 if self.tpdo_late[i] > 0 or behind:
                     msg = self._can.Message(
                         arbitration_id=cob, data=payload.tobytes(), is_extended_id=False
@@ -234,6 +296,8 @@ class CanopenDrives:
                 self.tpdo_late[i] -= 1
         # TPDOs are sampled at the SYNC and sent first; then the RPDOs latched before this
         # SYNC take effect for one tick (the plant step does not delay the answer).
+        if self._got_rpdo:
+            np.copyto(self._rx_flat, self._drive_rx_flat, where=self._unmapped)
         self.drives.step(self._rx if self._got_rpdo else None)
         self._got_rpdo = False
         err = self.drives.tx["error_code"]
@@ -343,7 +407,7 @@ class CanopenDrives:
             if len(data) != size:
                 self._emcy(i, CODE_PDO_LENGTH, 0x11)
                 return
-            np.put(self._rx_flat, idx, np.frombuffer(data, dtype=np.uint8))
+            self._rx_flat[idx[1]] = np.frombuffer(data, dtype=np.uint8)[idx[0]]
             self._got_rpdo = True
         elif cob in self._by_sdo:
             i = self._by_sdo[cob]

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +30,12 @@ from drivers.cia402 import state_machine as sm
 from drivers.cia402.pdo import ImageFields, new_rx, new_tx
 from drivers.cia402.state_machine import Command, Mode, State
 from drivers.cia402.units import AxisScaling, Scaling
-from drivers.sim.object_dictionary import DriveObjects, ObjectDictionary, cia402_dictionary
+from drivers.sim.object_dictionary import (
+    DriveObjects,
+    ObjectDictionary,
+    cia402_dictionary,
+    impersonate,
+)
 from drivers.sim.plant import Plant
 from hofto_hw.config.drives import DriveConfig
 from hofto_hw.config.models import ExternalTorqueConfig
@@ -128,6 +134,7 @@ class EmulatedDrives(ImageFields):
         tuning: LoopTuning | None = None,
         watchdog_cycles: int = 3,
         names: Sequence[str] | None = None,
+        profiles: Sequence[Any] | None = None,
     ) -> None:
         n = plant.n
         if len(drives) != n:
@@ -188,6 +195,11 @@ class EmulatedDrives(ImageFields):
                     rated_current_ma=round(d.rated_current),
                 )
             )
+            prof = profiles[i] if profiles is not None else None
+            if prof is not None:
+                impersonate(self.ods[-1], prof, serial=0x5100 + i)
+        #: the profile each drive impersonates (None: the built-in hofto-sim drive)
+        self.profiles = list(profiles) if profiles is not None else [None] * n
 
         if tuning is None:
             inertia = np.diag(plant.data.mass_matrix(plant.q)).copy()

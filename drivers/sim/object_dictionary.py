@@ -15,6 +15,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -120,6 +121,11 @@ class ObjectDictionary:
         self.pdo_locked = False
         #: largest PDO accepted [bits]; a CANopen node sets 64 (one classic CAN frame)
         self.max_pdo_bits = MAX_PDO_BITS
+        #: assignment object -> the PDO indices it accepts (a profile's drive: its own)
+        self.assignable: dict[int, frozenset[int]] = {
+            RXPDO_ASSIGN_INDEX: frozenset({RXPDO_INDEX}),
+            TXPDO_ASSIGN_INDEX: frozenset({TXPDO_INDEX}),
+        }
 
     # ------------------------------------------------------------------ building
 
@@ -144,6 +150,12 @@ class ObjectDictionary:
         self.add(OdEntry(index, 0, "number of entries", "u8", sub0_access, len(subs)), name)
         for e in subs:
             self.add(e, name)
+
+    def remove(self, index: int) -> None:
+        """Delete object ``index`` (every sub-index): the drive does not have it."""
+        for key in [k for k in self._entries if k[0] == index]:
+            del self._entries[key]
+        self._names.pop(index, None)
 
     # ------------------------------------------------------------------- queries
 
@@ -233,7 +245,7 @@ class ObjectDictionary:
         if self.pdo_locked:
             raise SdoAbort(codes.ABORT_DEVICE_STATE, index, subindex)
         if index in (RXPDO_ASSIGN_INDEX, TXPDO_ASSIGN_INDEX):
-            if subindex > 0 and value not in (RXPDO_INDEX, TXPDO_INDEX):
+            if subindex > 0 and value not in self.assignable.get(index, ()):
                 raise SdoAbort(codes.ABORT_VALUE_RANGE, index, subindex)
             if subindex == 0 and value > len(self.subentries(index)) - 1:
                 raise SdoAbort(codes.ABORT_VALUE_HIGH, index, subindex)
@@ -255,6 +267,8 @@ class ObjectDictionary:
 
     def _check_mapped_object(self, index: int, subindex: int, raw: int) -> None:
         target = parse_mapping_value(raw)
+        if target.index == 0 and target.subindex == 0:  # padding: a gap of that many bits
+            return
         e = self._entries.get((target.index, target.subindex))
         if e is None:
             raise SdoAbort(codes.ABORT_NO_OBJECT, index, subindex)
@@ -462,3 +476,93 @@ def cia402_dictionary(
     for (index, sub), t in OBJECT_TYPES.items():  # every PDO object must be present
         assert (index, sub) in od, f"0x{index:04X} missing ({t})"
     return od
+
+
+# ------------------------------------------------------------------ drive profiles
+
+
+def impersonate(od: ObjectDictionary, profile: Any, serial: int) -> None:
+    """Turn a :func:`cia402_dictionary` into the dictionary of the drive ``profile``
+    (a :class:`hofto_hw.config.drive_profile.DriveProfile`) describes: its identity, only
+    the CiA-402 objects it has (``objects.absent`` removed), its PDO mapping objects with
+    their default mapping (fixed ones read-only: a write aborts 0x06010002 as a real drive's
+    does; configurable ones writable in PRE-OP only), the assignment accepting only its own
+    PDOs, the vendor objects it maps (plain values), 0x6502 from its modes."""
+    from hofto_hw.config.drive_profile import FIELD_OBJECTS, MODE_BITS
+
+    ident = profile.identity
+    for sub, value in (
+        (1, ident.vendor_id),
+        (2, ident.product_code),
+        (3, ident.revision_min or 0),
+        (4, serial),
+    ):
+        od.entry(0x1018, sub).value = value
+    for name in profile.objects.absent:
+        od.remove(FIELD_OBJECTS[name])
+    units = profile.units
+    for index, obj in ((0x608F, units.position_encoder_resolution), (0x6091, units.gear_ratio)):
+        if not obj.present:
+            od.remove(index)
+    od.entry(0x6502, 0).value = sum(1 << MODE_BITS[m] for m in profile.modes.supported)
+    kinds = {8: "u8", 16: "u16", 32: "u32"}
+    for w in profile.startup:  # the objects its start-up writes go to exist in the drive
+        if (w.index, w.subindex) in od or w.bits not in kinds:
+            continue
+        if w.subindex and (w.index, 0) not in od:
+            od.add(OdEntry(w.index, 0, "highest sub-index", "u8", "ro", w.subindex))
+        od.add(OdEntry(w.index, w.subindex, w.comment or "start-up object", kinds[w.bits]))
+    od.remove(RXPDO_INDEX)
+    od.remove(TXPDO_INDEX)
+    max_entries = profile.canopen.max_entries if profile.canopen is not None else 8
+    for assign, pdos, rx in (
+        (RXPDO_ASSIGN_INDEX, profile.rx_pdos, True),
+        (TXPDO_ASSIGN_INDEX, profile.tx_pdos, False),
+    ):
+        for p in pdos:
+            access = "ro" if p.fixed else "rw"
+            n_subs = len(p.entries) if p.fixed else max(len(p.entries), max_entries)
+            name = f"{'Rx' if rx else 'Tx'}PDO 0x{p.index:04X}"
+            od.add(
+                OdEntry(p.index, 0, "number of mapped objects", "u8", access, len(p.entries)), name
+            )
+            for k in range(n_subs):
+                value = 0
+                if k < len(p.entries):
+                    e = p.entries[k]
+                    value = (e.index << 16) | (e.subindex << 8) | e.bits
+                    if e.index and (e.index, e.subindex) not in od:
+                        kind = {8: "u8", 16: "u16", 32: "u32"}.get(e.bits, "u32")
+                        od.add(
+                            OdEntry(
+                                e.index,
+                                e.subindex,
+                                f"vendor object 0x{e.index:04X}",
+                                kind,
+                                "rw" if rx else "ro",
+                                0,
+                                pdo_mappable=True,
+                            )
+                        )
+                od.add(
+                    OdEntry(p.index, k + 1, f"mapped object {k + 1}", "u32", access, value), name
+                )
+        od.remove(assign)
+        subs = [
+            OdEntry(
+                assign,
+                k + 1,
+                f"assigned PDO {k + 1}",
+                "u16",
+                "rw",
+                pdos[k].index if k < len(pdos) else 0,
+            )
+            for k in range(max(len(pdos), 4))
+        ]
+        od.add(
+            OdEntry(assign, 0, "number of assigned PDOs", "u8", "rw", len(pdos)),
+            "SM2 PDO assignment" if rx else "SM3 PDO assignment",
+        )
+        for e in subs:
+            od.add(e)
+        od.assignable[assign] = frozenset(p.index for p in pdos)

@@ -15,6 +15,7 @@ Built from a whole config by :func:`hofto_hw.runtime.build.build_sim_bus`.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from drivers.transport import (
     STATUS_OK,
     SdoAbortError,
     Transport,
+    TransportError,
 )
 from hofto_hw.config.drives import BusConfig, DriveConfig
 
@@ -46,11 +48,22 @@ class SimBus(Transport):
         axis_names: list[str] | None = None,
         tuning: LoopTuning | None = None,
         watchdog_cycles: int = 3,
+        profiles: Sequence[Any] | None = None,
     ) -> None:
         super().__init__(len(drives), plant.dt, axis_names)
         self.drives = EmulatedDrives(
-            plant, drives, tuning=tuning, watchdog_cycles=watchdog_cycles, names=self.axis_names
+            plant,
+            drives,
+            tuning=tuning,
+            watchdog_cycles=watchdog_cycles,
+            names=self.axis_names,
+            profiles=profiles,
         )
+        #: the profile per drive (None: the built-in layout, the records go as they are)
+        self.profiles = list(profiles) if profiles is not None else [None] * self.n_axes
+        #: start-up SDOs written at the last open
+        self.startup_written = 0
+        self._wired = False
         self.plant = plant
         self.is_open = False
         self.cycles = 0
@@ -62,12 +75,49 @@ class SimBus(Transport):
         cls, bus: BusConfig, plant: Plant, axis_names: list[str] | None = None
     ) -> SimBus:
         """A SimBus for ``bus.drives`` on ``plant``; it cycles at ``plant.dt``."""
-        return cls(plant, bus.drives, axis_names=axis_names)
+        profiles = None
+        if any(d.profile for d in bus.drives):
+            from drivers.cia402.profiles import profiles_of_bus
+
+            profiles = profiles_of_bus(bus)
+        return cls(plant, bus.drives, axis_names=axis_names, profiles=profiles)
 
     # -------------------------------------------------------------- lifecycle
 
     def open(self) -> None:
-        """Start cyclic exchange (the emulated drives lock their PDO mapping)."""
+        """Start cyclic exchange (the emulated drives lock their PDO mapping).
+
+        Drives with a profile are configured as a master configures them (start-up SDOs,
+        PDOs written, assigned and read back, :func:`drivers.cia402.profiles.configure_pdos`)
+        and the process data then travels in each drive's own layout
+        (:class:`drivers.cia402.wire.WireImage`): what a drive does not map does not reach
+        it, and what it does not report keeps its defined value."""
+        if any(p is not None for p in self.profiles):
+            from drivers.cia402.profiles import configure_pdos, write_startup
+            from drivers.cia402.wire import BUILTIN_LAYOUT, WireImage
+
+            self.startup_written = 0
+            layouts = []
+            for i, prof in enumerate(self.profiles):
+                if prof is None:
+                    layouts.append(BUILTIN_LAYOUT)
+                    continue
+                self.startup_written += write_startup(self, i, prof, ("IP", "PS", "SO"))
+                layouts.append(configure_pdos(self, i, prof, TransportError))
+            self.wire = WireImage(layouts, self.axis_names)
+            self.wire.bind_master(self.rx, self.tx)
+            self._wired = not self.wire.builtin
+            if self._wired:
+                # in one process the bytes need no wire order: what each drive maps is
+                # copied in place (two masked copies a cycle); what it does not map keeps
+                # its value on either side (the master's: its defined default)
+                self._rx_mask, self._tx_mask = self.wire.mapped_bytes()
+                self._rx_flat = self.rx.view(np.uint8).reshape(-1)
+                self._tx_flat = self.tx.view(np.uint8).reshape(-1)
+                self._drv_rx_flat = self.drives.rx.view(np.uint8).reshape(-1)
+                self._drv_tx_flat = self.drives.tx.view(np.uint8).reshape(-1)
+                self.wire.drive_tx(self.drives.tx)
+                self.wire.decode_tx()
         self.is_open = True
         for od in self.drives.ods:
             od.pdo_locked = True
@@ -87,6 +137,11 @@ class SimBus(Transport):
             self._drop -= 1
             self.drives.step(None)
             return STATUS_NO_RESPONSE
+        if self._wired:
+            np.copyto(self._drv_rx_flat, self._rx_flat, where=self._rx_mask)
+            self.drives.step(self.drives.rx)
+            np.copyto(self._tx_flat, self._drv_tx_flat, where=self._tx_mask)
+            return STATUS_OK
         self.drives.step(self.rx)
         np.copyto(self.tx, self.drives.tx)
         return STATUS_OK

@@ -169,7 +169,19 @@ ACTIONS: dict[
         _run_import,
         "build a drive profile from a vendor ESI (EtherCAT) or EDS (CANopen) file",
     ),
+    "check": (
+        lambda p: _check_module().configure(p),
+        lambda a: _check_module().run(a),
+        "commissioning check: bring drives of a profile to OP, enable, move, read back",
+    ),
 }
+
+
+def _check_module():  # type: ignore[no-untyped-def]
+    """``drive check`` lives in its own module (hofto_hw/commands/drive_check.py)."""
+    from hofto_hw.commands import drive_check
+
+    return drive_check
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

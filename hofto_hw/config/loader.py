@@ -83,6 +83,13 @@ def _resolve_paths(cfg: SystemConfig, base_dir: Path) -> None:
         robot.urdf = (base_dir / robot.urdf).resolve()
     if robot.parameters is not None and not robot.parameters.is_absolute():
         robot.parameters = (base_dir / robot.parameters).resolve()
+    # a drive profile given as a path relative to the config (not a name in configs/drives/):
+    # made absolute here, so that the masters and emulators find it from any working folder
+    for drive in cfg.bus.drives if cfg.bus is not None else []:
+        spec = drive.profile
+        if spec and ("/" in spec or spec.endswith((".yaml", ".yml"))):
+            if not Path(spec).is_absolute() and (base_dir / spec).is_file():
+                drive.profile = str((base_dir / spec).resolve())
 
 
 #: largest YAML file any reader accepts [bytes]: the biggest shipped file (a parameters file)

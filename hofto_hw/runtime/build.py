@@ -88,7 +88,16 @@ def build_emulated_drives(
     plant = build_plant(cfg, external=external)
     if load:
         apply_true_load(plant, cfg)
-    return EmulatedDrives(plant, bus.drives, names=list(cfg.robot.joints))
+    return EmulatedDrives(plant, bus.drives, names=list(cfg.robot.joints), profiles=_profiles(bus))
+
+
+def _profiles(bus: BusConfig) -> list | None:
+    """The drives' profiles (None per drive without one); None when no drive names one."""
+    if not any(d.profile for d in bus.drives):
+        return None
+    from drivers.cia402.profiles import profiles_of_bus
+
+    return profiles_of_bus(bus)
 
 
 def build_emulated_network(
@@ -100,7 +109,8 @@ def build_emulated_network(
     from drivers.sim.esc.network import EmulatedNetwork
 
     drives = build_emulated_drives(cfg, external=external, load=load)
-    return EmulatedNetwork(slave_descriptions(_bus(cfg, "the network").drives), drives)
+    bus = _bus(cfg, "the network")
+    return EmulatedNetwork(slave_descriptions(bus.drives, drives.profiles), drives)
 
 
 #: backends that need more than ``Class.from_config(bus, axis_names=, cycle_time=)``

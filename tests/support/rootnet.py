@@ -191,13 +191,15 @@ def ethercat_run_config(
     ethercat: dict[str, Any] | None = None,
     run: dict[str, Any] | None = None,
     edit: Callable[[dict[str, Any]], None] | None = None,
+    base: Path = ER3A,
 ) -> tuple[Path, dict[str, Any]]:
-    """:func:`run_config` of configs/er3a.yaml with the bus on ``master``, the master end of
-    a veth pair, and the emulated slaves' SM watchdog at 2 s (their 100 ms one would take a
-    drive out of OP after a host stall) updated with ``ethercat``."""
+    """:func:`run_config` of ``base`` (configs/er3a.yaml) with the bus on ``master``, the
+    master end of a veth pair, and the emulated slaves' SM watchdog at 2 s (their 100 ms one
+    would take a drive out of OP after a host stall) updated with ``ethercat``."""
     return run_config(
         folder,
         name,
+        base=base,
         overrun_streak=overrun_streak,
         lost_cycles=lost_cycles,
         bus={"transport": "ethercat", "interface": master},

@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import pairwise
+from typing import Any
 
 from drivers.cia402 import pdo
 from hofto_hw.config.drives import DriveConfig
@@ -61,6 +62,13 @@ class SlaveDescription:
     complete_access: bool = True
     dc_supported: bool = True
     sm_watchdog_ms: float = 100.0
+    #: the drive refuses OP without SYNC0 (its profile has a ``dc`` section): AL 0x0030
+    dc_required: bool = False
+    #: SYNC0 cycle the drive insists on [ns] (None: any)
+    sync0_cycle_ns: int | None = None
+    #: SYNC0 shift [ns] and AssignActivate of its DC op mode (the SII's DC category)
+    sync0_shift_ns: int = 0
+    assign_activate: int = 0
 
     def __post_init__(self) -> None:
         for name in ("vendor_id", "product_code", "revision", "serial"):
@@ -104,11 +112,32 @@ class SlaveDescription:
         return pdo.TXPDO_SIZE
 
 
-def slave_descriptions(drives: Sequence[DriveConfig]) -> list[SlaveDescription]:
-    """One slave per drive: identity from ``drives[i].identity`` (``bus.drives``)."""
+def slave_descriptions(
+    drives: Sequence[DriveConfig], profiles: Sequence[Any] | None = None
+) -> list[SlaveDescription]:
+    """One slave per drive: identity from ``drives[i].identity`` (``bus.drives``), or, for
+    a drive with a profile (``profiles[i]``, a DriveProfile; None: none), the profile's
+    identity, name and DC requirements."""
     out = []
     for i, d in enumerate(drives):
         ident = d.identity
+        prof = profiles[i] if profiles is not None else None
+        if prof is not None and not prof.name.startswith("builtin-"):
+            dc = prof.dc
+            out.append(
+                SlaveDescription(
+                    vendor_id=prof.identity.vendor_id,
+                    product_code=prof.identity.product_code,
+                    revision=prof.identity.revision_min or 0,
+                    serial=0x5100 + i,
+                    name=prof.name[:60],
+                    dc_required=dc is not None,
+                    sync0_cycle_ns=dc.sync0_cycle_ns if dc is not None else None,
+                    sync0_shift_ns=dc.sync0_shift_ns if dc is not None else 0,
+                    assign_activate=dc.assign_activate if dc is not None else 0,
+                )
+            )
+            continue
         out.append(
             SlaveDescription(
                 vendor_id=ident.vendor_id,

@@ -44,6 +44,7 @@ AL_BOOTSTRAP_NOT_SUPPORTED = 0x0013
 AL_INVALID_MBX_CONFIG = 0x0016
 AL_INVALID_SM_CONFIG = 0x0017
 AL_SM_WATCHDOG = 0x001B
+AL_INVALID_DC_SYNC = 0x0030
 AL_INVALID_OUTPUT_CONFIG = 0x001D
 AL_INVALID_INPUT_CONFIG = 0x001E
 AL_INVALID_DC_SYNC = 0x0030
@@ -498,6 +499,11 @@ class Esc:
         if requested == r.STATE_SAFEOP:
             return self._prepare_process_data()
         if requested == r.STATE_OP:
+            if self.desc.dc_required:
+                cycle = struct.unpack_from("<I", self.mem, r.DC_SYNC0_CYCLE)[0]
+                fixed = self.desc.sync0_cycle_ns
+                if not self.sync0_active or (fixed is not None and cycle != fixed):
+                    return AL_INVALID_DC_SYNC
             self.last_output_ns = self.clock()
         return AL_NO_ERROR
 

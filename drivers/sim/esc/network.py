@@ -82,8 +82,11 @@ class EmulatedNetwork:
         self.stopping = False
         #: the last handled frame carried process data: call :meth:`step` after replying
         self.pending_step = False
-        self.rx = pdo.new_rx(n)
+        # the slaves' outputs go straight into the drives' own RxPDO records: bytes a drive
+        # does not map keep what it has (e.g. a mode written by a start-up SDO)
+        self.rx = drives.rx if drives is not None else pdo.new_rx(n)
         self._rx_u8 = self.rx.view(np.uint8).reshape(n, pdo.RXPDO_SIZE)
+        self._rx_cw = self.rx["controlword"]
         if drives is not None:
             self._tx_u8 = drives.tx.view(np.uint8).reshape(n, pdo.TXPDO_SIZE)
         self._last_error = np.zeros(n, dtype=np.uint16)
@@ -129,7 +132,7 @@ class EmulatedNetwork:
         rx_u8 = self._rx_u8
         for i, s in enumerate(self.slaves):
             if not s.pull_outputs(rx_u8[i]):
-                rx_u8[i] = 0
+                self._rx_cw[i] = 0  # not in OP: the drive sees no enable
         self.drives.step(self.rx)
         plant = self.drives.plant
         if plant.t <= self._trace_until:

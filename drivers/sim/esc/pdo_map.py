@@ -14,6 +14,12 @@ import numpy as np
 from drivers.cia402 import pdo
 from drivers.sim.object_dictionary import ObjectDictionary
 
+
+def pdo_known_indices() -> set[int]:
+    """Object indices of the canonical process image (others are carried, not decoded)."""
+    return {index for index, _sub in pdo.OBJECT_FIELDS}
+
+
 #: (sm_offset, record_offset, size) in bytes.
 CopyPlan = tuple[tuple[int, int, int], ...]
 
@@ -34,9 +40,12 @@ def copy_plan(entries: list[pdo.PdoEntry], dtype: np.dtype) -> tuple[CopyPlan, i
     runs: list[list[int]] = []
     sm_off = 0
     for e in entries:
+        size = e.bit_length // 8
+        if not e.field and e.index not in pdo_known_indices():
+            sm_off += size  # padding or a vendor object: bytes on the wire, no record field
+            continue
         if not e.field or e.field not in dtype.names:
             raise ValueError(f"object 0x{e.index:04X}:{e.subindex:02X} is not in this PDO")
-        size = e.bit_length // 8
         rec_off = dtype.fields[e.field][1]
         last = runs[-1] if runs else None
         if last and last[0] + last[2] == sm_off and last[1] + last[2] == rec_off:
@@ -49,7 +58,9 @@ def copy_plan(entries: list[pdo.PdoEntry], dtype: np.dtype) -> tuple[CopyPlan, i
 
 def check_mapping(entries: list[pdo.PdoEntry], required: str, dtype: np.dtype) -> str | None:
     """Why the drive cannot run with ``entries`` (``None`` when it can)."""
-    fields = [e.field for e in entries]
+    fields = [e.field for e in entries if e.field]
+    if any(e.bit_length % 8 for e in entries):
+        return "an entry is not a whole number of bytes"
     if required not in fields:
         return f"mapping lacks {required}"
     if len(set(fields)) != len(fields):

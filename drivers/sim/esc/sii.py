@@ -4,7 +4,8 @@ The image is a little-endian byte string addressed in 16-bit words: the fixed he
 (words 0x00-0x3F: ESC configuration, identity, mailbox layout) followed by categories, each
 ``type u16, length u16 (words), data``, ending with type 0xFFFF. The categories written are
 the ones a master needs when it maps PDOs by CoE: Strings (10), General (30), FMMU (40) and
-SyncM (41).
+SyncM (41), and for a drive that needs distributed clocks DC (60) with its one op mode (what
+``hofto-hw bus scan`` reads back into a profile's ``dc``).
 """
 
 from __future__ import annotations
@@ -18,7 +19,13 @@ CAT_STRINGS = 10
 CAT_GENERAL = 30
 CAT_FMMU = 40
 CAT_SYNCM = 41
+#: ETG.2010 DC category: the ESI's DC op modes (cycle/shift times, AssignActivate)
+CAT_DC = 60
 CAT_END = 0xFFFF
+#: one DC op mode: CycleTime0 u32 [ns] (0: the master's cycle), ShiftTime0 u32 [ns],
+#: ShiftTime1 u32 [ns], Sync1CycleFactor i16, AssignActivate u16, Sync0CycleFactor i16,
+#: name index u8, description index u8, 4 reserved bytes
+DC_OPMODE = struct.Struct("<IIIhHhBB4x")
 
 #: FMMU usage codes of the FMMU category.
 FMMU_USAGE_OUTPUTS = 1
@@ -124,6 +131,20 @@ def build_image(desc: d.SlaveDescription) -> bytes:
     image += _category(CAT_GENERAL, bytes(general))
     image += _category(CAT_FMMU, fmmu)
     image += _category(CAT_SYNCM, syncm)
+    if desc.dc_required:
+        image += _category(
+            CAT_DC,
+            DC_OPMODE.pack(
+                desc.sync0_cycle_ns or 0,
+                desc.sync0_shift_ns,
+                0,
+                0,
+                desc.assign_activate,
+                1,
+                0,
+                0,
+            ),
+        )
     image += struct.pack("<H", CAT_END)
     size = EEPROM_KBIT * 1024 // 8
     if len(image) > size:

@@ -58,7 +58,7 @@ MOVE_TIME = 4.0  # s of the demo path before the knock (contact-free motion)
 TARE_WAIT = 1.2  # s at rest in drag mode before the press (drag.tare_time, 1 s, and margin)
 
 
-def _config(folder: Path, master: str) -> tuple[Path, dict]:
+def _config(folder: Path, master: str, base: Path = CONFIG) -> tuple[Path, dict]:
     run = er3a_run("model_error", "path")
     # the demo path stays, scaled: the arm moves contact-free before the drag
     run["path"]["amplitude"] = [PATH_SCALE * a for a in run["path"]["amplitude"]]
@@ -76,6 +76,7 @@ def _config(folder: Path, master: str) -> tuple[Path, dict]:
         run=run,
         # the test holds the button
         edit=lambda data: data["drag"].update(enable_input={"source": "socket"}),
+        base=base,
     )
 
 
@@ -106,10 +107,12 @@ class DragRig:
         return self.service.request(line)
 
 
-@pytest.fixture()
-def rig(tmp_path: Path) -> Iterator[DragRig]:
+@pytest.fixture(params=["er3a.yaml", "er3a_mixed.yaml"])
+def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[DragRig]:
+    """configs/er3a.yaml, and configs/er3a_mixed.yaml: six drive models of six vendor
+    profiles on the bus (issue 25), with the same figures."""
     with veth_pair("dm", "ds") as (master, slave):
-        config, data = _config(tmp_path, master)
+        config, data = _config(tmp_path, master, ROOT / "configs" / request.param)
         with emulator(sim_ethercat_args(slave, config), tmp_path) as emu:
             service = ServiceRun(tmp_path, config)
             try:

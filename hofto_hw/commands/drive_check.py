@@ -1,0 +1,410 @@
+"""``hofto-hw drive check PROFILE (--emulated | --iface IF | --interface I --channel C)``:
+a commissioning check of one drive profile with the real master.
+
+Brings N drives to OP / operational with the stack's own EtherCAT or CANopen master (the
+drive configured as the profile says, its layout read back), enables them bumplessly in the
+profile's loop mode, moves each joint by a small CSP step and back (``--emulated``: 0.05 rad
+by default; on a real bus only when ``--move RAD`` is given), reads everything back and
+prints what it saw (``--json``: ``bus``, ``axes``, ``operational``, ``enabled``,
+``moved_rad``, ``process_image_bytes``, ``pdos``, ``startup_sdos``, ``faults``, ...).
+
+``--emulated`` runs the emulator itself: EtherCAT on a veth pair with ``hofto-hw
+sim-ethercat`` in its own process (root), CANopen on python-can's virtual bus in a thread.
+The emulated arm is the six-joint arm of the base config (``--config``; default
+configs/er3a.yaml for EtherCAT, configs/er3a_canopen.yaml for CANopen): the first N joints
+get drives of PROFILE, the others the built-in emulated drive. The base config also gives
+the scaling (counts per revolution, gear ratio, rated torque) of the real drives.
+
+Exit codes: 0 the check passed, 1 it ran and something failed (listed), 2 bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hofto_hw.errors import UserError
+
+ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_EMULATED_MOVE = 0.05  # [rad]
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "profile", metavar="PROFILE", help="drive profile: a YAML file or a name in configs/drives/"
+    )
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--emulated", action="store_true", help="run the emulator itself")
+    where.add_argument("--iface", metavar="IF", help="EtherCAT network interface")
+    where.add_argument("--interface", metavar="I", help="python-can interface (CANopen)")
+    p.add_argument("--channel", metavar="C", help="python-can channel (with --interface)")
+    p.add_argument(
+        "--axes",
+        type=int,
+        default=None,
+        metavar="N",
+        help="drives of this profile on the bus (default: 6 emulated, else the "
+        "base config's drive count)",
+    )
+    p.add_argument(
+        "--move",
+        type=float,
+        default=None,
+        metavar="RAD",
+        help=f"CSP step per joint [rad] (emulated default {DEFAULT_EMULATED_MOVE}; "
+        "a real bus moves only when given)",
+    )
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        metavar="CONFIG",
+        help="base config: the arm (emulated), the scaling and the loop rate",
+    )
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+# ------------------------------------------------------------------ input
+
+
+def _load_profile(spec: str) -> Any:
+    from hofto_hw.config.drive_profile import find_profile, load_profile
+
+    return load_profile(find_profile(spec))
+
+
+def _base_config(args: argparse.Namespace, bus: str) -> Path:
+    if args.config is not None:
+        if not args.config.is_file():
+            raise UserError(f"--config {args.config}: no such file")
+        return args.config
+    return ROOT / "configs" / ("er3a.yaml" if bus == "ethercat" else "er3a_canopen.yaml")
+
+
+def _check_args(args: argparse.Namespace, profile: Any) -> int:
+    """The number of profile axes N; UserError for what does not fit."""
+    if args.interface is not None and not args.channel:
+        raise UserError("--interface needs --channel (the python-can channel)")
+    if args.channel and args.interface is None:
+        raise UserError("--channel goes with --interface (CANopen)")
+    if args.iface is not None and profile.bus != "ethercat":
+        raise UserError(f"{args.profile}: a {profile.bus} profile; --iface is for EtherCAT")
+    if args.interface is not None and profile.bus != "canopen":
+        raise UserError(f"{args.profile}: a {profile.bus} profile; --interface is for CANopen")
+    if args.move is not None and not (np.isfinite(args.move) and 0 < abs(args.move) <= 0.5):
+        raise UserError(f"--move {args.move}: a step of at most 0.5 rad, not 0")
+    n = 6 if args.axes is None else args.axes
+    if not 1 <= n <= 6:
+        raise UserError(f"--axes {args.axes}: 1 to 6 drives")
+    return n
+
+
+def _check_config(
+    base: Path,
+    profile: Any,
+    n: int,
+    folder: Path,
+    emulated: bool,
+    interface: str | None,
+    options: dict[str, Any],
+) -> Path:
+    """A config for the check: the base config with its first ``n`` drives running
+    ``profile`` (identity from the profile), the bus on ``interface``, ``options`` merged
+    into ``bus.ethercat`` / ``bus.canopen``."""
+    import yaml
+
+    from hofto_hw.config.loader import read_yaml
+
+    data = read_yaml(base, "config")
+    bus = data.get("bus") or {}
+    drives = bus.get("drives") or []
+    if len(drives) < n:
+        raise UserError(f"{base}: bus.drives has {len(drives)} drives, --axes asks for {n}")
+    prof_file = folder / f"{profile.name}.yaml"
+    prof_file.write_text(yaml.safe_dump(profile.model_dump(mode="json"), sort_keys=False))
+    for d in drives[:n]:
+        d["profile"] = str(prof_file)
+        d["identity"] = {
+            "vendor_id": profile.identity.vendor_id,
+            "product_code": profile.identity.product_code,
+        }
+    if not emulated:
+        bus["drives"] = drives[:n]
+    bus["transport"] = profile.bus
+    if interface is not None:
+        bus["interface"] = interface
+    section = bus.get(profile.bus) or {}
+    section.update(options)
+    bus[profile.bus] = section
+    robot = data.get("robot") or {}
+    for key in ("urdf", "parameters"):
+        if isinstance(robot.get(key), str) and not Path(robot[key]).is_absolute():
+            robot[key] = str((base.parent / robot[key]).resolve())
+    out = folder / "check.yaml"
+    out.write_text(yaml.safe_dump(data, sort_keys=False))
+    return out
+
+
+# ---------------------------------------------------------------- emulators
+
+
+@contextlib.contextmanager
+def _emulated_ethercat(config: Path, folder: Path, master: str) -> Iterator[None]:
+    """veth pair ``master``/``dcs...`` + ``hofto-hw sim-ethercat`` serving ``config``."""
+    from drivers.sim.esc import veth
+
+    if os.geteuid() != 0:
+        raise UserError(
+            "drive check --emulated (EtherCAT) needs root: a veth pair and raw "
+            "sockets (run it with sudo)"
+        )
+    slave = "dcs" + master[3:]
+    veth.create_pair(master, slave)
+    proc = None
+    try:
+        veth.wait_up(master, slave)
+        ready = folder / "ready"
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "hofto_hw.cli",
+                "sim-ethercat",
+                "--iface",
+                slave,
+                "--config",
+                str(config),
+                "--quiet-arm",
+                "--ready-file",
+                str(ready),
+            ],
+            cwd=ROOT,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        deadline = time.monotonic() + 60
+        while not ready.exists():
+            if proc.poll() is not None:
+                err = (proc.stderr.read() if proc.stderr else "").strip().splitlines()
+                raise UserError(f"emulator did not start: {err[-1] if err else 'no message'}")
+            if time.monotonic() > deadline:
+                raise UserError("emulator did not start within 60 s")
+            time.sleep(0.02)
+        yield
+    finally:
+        if proc is not None and proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        veth.delete_pair(master)
+
+
+@contextlib.contextmanager
+def _emulated_canopen(cfg: Any) -> Iterator[None]:
+    """The config's drives as CANopen nodes on its python-can virtual channel (a thread)."""
+    import can
+
+    from drivers.sim.canopen_node import CanopenDrives
+    from hofto_hw.runtime.build import build_emulated_drives
+
+    channel = cfg.bus.interface
+    bus = can.Bus(interface="virtual", channel=channel)
+    opts = cfg.bus.canopen
+    node_ids = opts.node_ids if opts is not None and opts.node_ids else None
+    emu = CanopenDrives(build_emulated_drives(cfg, external=False), bus, node_ids).start()
+    try:
+        yield
+    finally:
+        emu.stop()
+        bus.shutdown()
+
+
+# ---------------------------------------------------------------- the check
+
+
+def _transport(cfg: Any, profile: Any) -> Any:
+    names = list(cfg.robot.joints)[: len(cfg.bus.drives)]
+    if profile.bus == "ethercat":
+        from drivers.ethercat.master import EtherCATTransport
+
+        return EtherCATTransport.from_config(cfg.bus, names, cycle_time=cfg.cycle_time)
+    from drivers.canopen.master import CANopenTransport
+
+    return CANopenTransport.from_config(cfg.bus, names, cycle_time=cfg.cycle_time)
+
+
+def _move(g: Any, t: Any, step: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """Ramp to q0 + step on ``joints`` and back; returns the step reached per joint [rad]."""
+    q0 = g.q.copy()
+    ramp = max(20, round(0.4 / t.cycle_time))
+    target = q0.copy()
+    for k in range(1, ramp + 1):
+        target[joints] = q0[joints] + step[joints] * (k / ramp)
+        g.command_position(target)
+        g.cycle()
+        t.wait_next_cycle()
+    settle = round(2.0 / t.cycle_time)
+    reached = g.q - q0
+    for _ in range(settle):  # wait for the state: within 5 % of the step, or time out
+        g.command_position(target)
+        g.cycle()
+        t.wait_next_cycle()
+        reached = g.q - q0
+        if np.all(np.abs(reached[joints] - step[joints]) <= 0.05 * np.abs(step[joints])):
+            break
+    for k in range(ramp - 1, -1, -1):
+        target[joints] = q0[joints] + step[joints] * (k / ramp)
+        g.command_position(target)
+        g.cycle()
+        t.wait_next_cycle()
+    return reached
+
+
+def check(cfg: Any, profile: Any, n: int, move: float | None, emulated: bool) -> dict[str, Any]:
+    """Run the check on the bus ``cfg`` describes; returns the report (see module)."""
+    from drivers.cia402.drive_group import DriveGroup
+    from drivers.cia402.state_machine import Mode, State
+    from drivers.errors import DriverError
+    from hofto_hw.config.drive_profile import MODE_NUMBERS
+
+    report: dict[str, Any] = {
+        "profile": profile.name,
+        "bus": profile.bus,
+        "emulated": emulated,
+        "axes": n,
+        "operational": False,
+        "enabled": False,
+        "moved_rad": [0.0] * n,
+        "process_image_bytes": [],
+        "pdos": [],
+        "startup_sdos": 0,
+        "unavailable": [],
+        "faults": [],
+    }
+    t = _transport(cfg, profile)
+    joints = np.arange(n)
+    try:
+        t.open()
+        report["operational"] = True
+        w = t.wire
+        report["process_image_bytes"] = [{"rx": w.rx_size(i), "tx": w.tx_size(i)} for i in range(n)]
+        report["pdos"] = [
+            {
+                "rx": [f"0x{x:04X}" for x in w.layouts[i].rx_pdos],
+                "tx": [f"0x{x:04X}" for x in w.layouts[i].tx_pdos],
+            }
+            for i in range(n)
+        ]
+        report["startup_sdos"] = t.startup_written
+        g = DriveGroup.from_config(t, cfg.bus)
+        report["unavailable"] = [u for u in g.unavailable() if int(u.split()[1]) < n]
+        g.cycle()
+        if g.any_fault():
+            g.fault_reset()
+        g.set_mode(Mode(MODE_NUMBERS[profile.modes.loop]))
+        g.enable()
+        report["enabled"] = bool(g.all_in(State.OPERATION_ENABLED))
+        if move is not None and profile.modes.loop == "csp":
+            step = np.zeros(t.n_axes)
+            step[joints] = move
+            reached = _move(g, t, step, joints)
+            report["moved_rad"] = [round(float(x), 5) for x in reached[joints]]
+        elif move is not None:
+            report["faults"].append(
+                f"no move: the profile's loop mode is {profile.modes.loop}, the step is CSP"
+            )
+        report["faults"] += g.fault_messages()
+        g.disable()
+    except DriverError as exc:
+        report["faults"].append(str(exc))
+    finally:
+        t.close()
+    return report
+
+
+def passed(report: dict[str, Any], move: float | None) -> bool:
+    """Operational, enabled, every joint within 10 % of the step (when moved), no fault."""
+    ok = report["operational"] and report["enabled"] and not report["faults"]
+    if move is not None:
+        ok = ok and all(abs(m - move) <= 0.1 * abs(move) for m in report["moved_rad"])
+    return bool(ok)
+
+
+def run(args: argparse.Namespace) -> int:
+    from hofto_hw.config.drive_profile import check_profile_against_loop
+    from hofto_hw.config.loader import load_config
+
+    profile = _load_profile(args.profile)
+    n = _check_args(args, profile)
+    move = args.move
+    if move is None and args.emulated:
+        move = DEFAULT_EMULATED_MOVE
+    base = _base_config(args, profile.bus)
+    # the check pauses between its steps (SDOs while cycling); a loop never does: generous
+    # watchdogs and deadlines on the emulated bus, a shared machine's frame timeout
+    if profile.bus == "ethercat":
+        options: dict[str, Any] = (
+            {"pdo_watchdog": 2.0, "receive_timeout": 0.02} if args.emulated else {}
+        )
+        iface = args.iface
+    else:
+        options = {"tpdo_deadline": 0.05, "sdo_timeout": 2.0} if args.emulated else {}
+        if args.emulated:
+            options["can_interface"] = "virtual"
+        else:
+            options["can_interface"] = args.interface
+        iface = f"hofto-drive-check-{os.getpid()}" if args.emulated else args.channel
+    with tempfile.TemporaryDirectory(prefix="hofto-drive-check-") as tmp:
+        folder = Path(tmp)
+        if args.emulated and profile.bus == "ethercat":
+            tag = f"{os.getpid() % 100000}"
+            iface = f"dcm{tag}"
+        path = _check_config(base, profile, n, folder, args.emulated, iface, options)
+        cfg = load_config(path)
+        check_profile_against_loop(profile, cfg.cycle_time, f"{base}: loop.rate_hz")
+        if args.emulated and profile.bus == "ethercat":
+            with _emulated_ethercat(path, folder, iface):
+                report = check(cfg, profile, n, move, True)
+        elif args.emulated:
+            with _emulated_canopen(cfg):
+                report = check(cfg, profile, n, move, True)
+        else:
+            report = check(cfg, profile, n, move, False)
+    ok = passed(report, move)
+    report["passed"] = ok
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        _print(report)
+    return 0 if ok else 1
+
+
+def _print(r: dict[str, Any]) -> None:
+    where = "emulated" if r["emulated"] else "live"
+    print(f"drive check: profile {r['profile']}, {r['bus']} ({where}), {r['axes']} axes")
+    print(f"  operational: {'yes' if r['operational'] else 'NO'}")
+    print(f"  enabled:     {'yes' if r['enabled'] else 'NO'}")
+    print(f"  start-up SDOs written: {r['startup_sdos']}")
+    for i, (b, p) in enumerate(zip(r["process_image_bytes"], r["pdos"], strict=False)):
+        print(f"  axis {i}: rx {b['rx']} B {' '.join(p['rx'])}, tx {b['tx']} B {' '.join(p['tx'])}")
+    print("  moved [rad]: " + " ".join(f"{m:+.4f}" for m in r["moved_rad"]))
+    for u in r["unavailable"]:
+        print(f"  note: {u}")
+    for f in r["faults"]:
+        print(f"  FAULT: {f}")
+    print("  passed" if r["passed"] else "  FAILED")

@@ -1,0 +1,155 @@
+"""The pysoem master runs six different drive profiles on one emulated bus (root): each
+emulated slave impersonates its profile (identity, fixed/configurable PDOs, padding,
+absent objects, start-up mode, DC requirement); the master configures each drive as its
+profile says, reads the layout back and runs the CiA-402 group over the mixed image."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import numpy as np
+import pytest
+from support.profiles import ELMO, INOVANCE, MIXED, NANOTEC, profile, write_mixed_config
+from support.rootnet import emulator, sim_ethercat_args, veth_pair
+
+from drivers.cia402.drive_group import DriveGroup
+from drivers.cia402.state_machine import Mode, State
+from drivers.ethercat.errors import EtherCATError, StateChangeError
+from drivers.ethercat.master import EtherCATTransport
+from drivers.transport import STATUS_OK, SdoAbortError
+from hofto_hw.config.loader import load_config
+
+pytestmark = pytest.mark.root
+
+
+@pytest.fixture()
+def mixed_bus(tmp_path: Path):
+    config = write_mixed_config(tmp_path)
+    cfg = load_config(config)
+    with (
+        veth_pair("pm", "ps") as (master, slave),
+        emulator(sim_ethercat_args(slave, config), tmp_path, timeout=30.0) as emu,
+    ):
+        yield master, cfg, emu
+
+
+def _transport(master: str, cfg, profiles=None) -> EtherCATTransport:
+    from drivers.cia402.profiles import profiles_for
+
+    return EtherCATTransport(
+        master,
+        cfg.bus.drives,
+        cfg.cycle_time,
+        list(cfg.robot.joints),
+        receive_timeout=0.02,
+        pdo_watchdog=2.0,
+        profiles=profiles if profiles is not None else profiles_for(cfg.bus.drives, "ethercat"),
+    )
+
+
+def test_six_profiles_run_on_one_bus_with_the_layouts_the_drives_report(mixed_bus) -> None:
+    master, cfg, emu = mixed_bus
+    t = _transport(master, cfg)
+    try:
+        t.open()
+        lay = t.wire.layouts
+        assert [x.rx_pdos for x in lay] == [
+            (0x1605,),
+            (0x1600,),
+            (0x1600, 0x1601),
+            (0x1600,),
+            (0x1600, 0x1601, 0x1602),
+            (0x1600,),
+        ]
+        assert [x.tx_pdos for x in lay][4] == (0x1A00, 0x1A01, 0x1A02, 0x1A03)
+        assert [len(s.output) for s in t.slaves] == [14, 14, 15, 14, 15, 15]
+        assert [len(s.input) for s in t.slaves] == [20, 20, 21, 16, 21, 21]
+        assert t.startup_written == 3  # Elmo's 0x60C2:1/2, Inovance's mode
+        assert t.read_value(0, 0x60C2, 1, "u8") == 1  # the loop period [ms]
+        assert t.read_value(1, 0x6060, 0, "i8") == 8
+        g = DriveGroup.from_config(t, cfg.bus)
+        assert g.present("torque_offset").tolist() == [False, True, True, False, True, True]
+        assert g.present("error_code").tolist() == [False, True, True, False, True, True]
+        assert any("axis 3" in line and "torque not mapped" in line for line in g.unavailable())
+        g.set_mode(Mode.CSP)
+        g.enable()
+        assert g.all_in(State.OPERATION_ENABLED)
+        q0 = g.q.copy()
+        plant0 = np.array(emu.call(op="status")["q"])
+        step = np.full(6, 0.05)
+        statuses = []
+        for k in range(400):
+            g.command_position(q0 + step * min(1.0, k / 200))
+            statuses.append(g.cycle())
+            t.wait_next_cycle()
+        assert statuses.count(STATUS_OK) >= 390
+        np.testing.assert_allclose(g.q - q0, step, atol=3e-3)
+        plant = np.array(emu.call(op="status")["q"])
+        np.testing.assert_allclose(plant - plant0, step, atol=3e-3)
+        g.disable()
+    finally:
+        t.close()
+
+
+def test_a_fixed_pdo_the_master_would_write_is_refused_by_the_drive(mixed_bus) -> None:
+    master, cfg, _emu = mixed_bus
+    profiles = [profile(p) for p in MIXED]
+    wrong = copy.deepcopy(ELMO)
+    wrong["rx_pdos"][0]["fixed"] = False  # the real Elmo's 0x1605 is read-only
+    profiles[0] = profile(wrong)
+    t = _transport(master, cfg, profiles)
+    with pytest.raises(SdoAbortError) as err:
+        t.open()
+    msg = str(err.value)
+    assert (
+        "0x1605" in msg
+        and "0x06010002 attempt to write a read-only object" in msg
+        and "\n" not in msg
+    )
+
+
+def test_a_layout_that_reads_back_different_is_refused_naming_axis_object_and_values(
+    mixed_bus,
+) -> None:
+    master, cfg, _emu = mixed_bus
+    profiles = [profile(p) for p in MIXED]
+    wrong = copy.deepcopy(ELMO)
+    entries = wrong["tx_pdos"][0]["entries"]
+    entries[0], entries[2] = entries[2], entries[0]  # position and velocity swapped
+    profiles[0] = profile(wrong)
+    t = _transport(master, cfg, profiles)
+    with pytest.raises(EtherCATError) as err:
+        t.open()
+    msg = str(err.value)
+    assert msg.startswith("slave 1 (")
+    assert "0x1A07 reads back [0x6064:00/32" in msg
+    assert "expects [0x606C:00/32" in msg and "\n" not in msg
+
+
+def test_op_without_the_dc_the_drive_requires_is_refused_with_its_al_code(mixed_bus) -> None:
+    master, cfg, _emu = mixed_bus
+    profiles = [profile(p) for p in MIXED]
+    no_dc = copy.deepcopy(INOVANCE)
+    del no_dc["dc"]  # the master thinks the drive runs free; the drive is DC-only
+    profiles[1] = profile(no_dc)
+    t = _transport(master, cfg, profiles)
+    with pytest.raises(StateChangeError) as err:
+        t.open()
+    msg = str(err.value)
+    assert "slave 2" in msg and "0x0030" in msg and "DC" in msg
+    assert "slave 3" not in msg  # the Nanotec got its 1 ms SYNC0 with the shift
+
+
+def test_the_master_programs_the_sync0_cycle_its_profile_names(mixed_bus) -> None:
+    master, cfg, _emu = mixed_bus
+    profiles = [profile(p) for p in MIXED]
+    other = copy.deepcopy(NANOTEC)
+    other["dc"]["sync0_cycle_ns"] = 2_000_000  # the emulated Nanotec insists on 1 ms
+    profiles[2] = profile(other)
+    t = _transport(master, cfg, profiles)
+    with pytest.raises(StateChangeError) as err:
+        t.open()
+    msg = str(err.value)
+    assert "slave 3" in msg and "0x0030" in msg
+    assert "slave 2" not in msg and "slave 1" not in msg

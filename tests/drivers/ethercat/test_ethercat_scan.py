@@ -1,0 +1,66 @@
+"""``hofto-hw bus scan`` of an emulated EtherCAT bus of six different drive models (root):
+the draft profiles it writes have the layout, DC and start-up list of the profiles the
+emulated drives were built from; the ``bus:`` section names them in line order."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+from support.profiles import MIXED, profile, write_mixed_config
+from support.rootnet import emulator, sim_ethercat_args, veth_pair
+
+from drivers.cia402.scan import ScanError, check_unique
+from hofto_hw.cli import main
+from hofto_hw.config.drive_profile import load_profile
+
+
+def _layout(p) -> tuple:
+    return (
+        [(x.index, [(e.index, e.subindex, e.bits) for e in x.entries]) for x in p.rx_pdos],
+        [(x.index, [(e.index, e.subindex, e.bits) for e in x.entries]) for x in p.tx_pdos],
+    )
+
+
+def _dc(p) -> tuple | None:
+    return None if p.dc is None else (p.dc.assign_activate, p.dc.sync0_cycle_ns,
+                                      p.dc.sync0_shift_ns)  # fmt: skip
+
+
+def _startup(p) -> list:
+    return [(w.index, w.subindex, w.value, w.bits, w.transition) for w in p.startup]
+
+
+@pytest.mark.root
+def test_scan_of_a_mixed_bus_gives_back_the_profiles_of_its_drives(tmp_path: Path, capsys) -> None:
+    config = write_mixed_config(tmp_path)
+    out = tmp_path / "scanned"
+    with (
+        veth_pair("sm", "ss") as (master, slave),
+        emulator(sim_ethercat_args(slave, config), tmp_path, timeout=30.0),
+    ):
+        code = main(["bus", "scan", "--iface", master, "-o", str(out)])
+        assert code == 0, capsys.readouterr().err
+        again = main(["bus", "scan", "--iface", master, "-o", str(out)])
+        err = capsys.readouterr().err.strip()
+        assert again == 2 and "exists; not overwritten" in err and "\n" not in err
+    bus = yaml.safe_load((out / "bus.yaml").read_text())["bus"]
+    assert bus["transport"] == "ethercat" and bus["interface"] == master
+    assert len(bus["drives"]) == 6
+    for want_data, drive in zip(MIXED, bus["drives"], strict=True):
+        want = profile(want_data)
+        got = load_profile(out / f"{drive['profile']}.yaml")
+        assert got.identity.vendor_id == want.identity.vendor_id
+        assert got.identity.product_code == want.identity.product_code
+        assert _layout(got) == _layout(want), want.name
+        assert _dc(got) == _dc(want), want.name
+        assert _startup(got) == _startup(want), want.name
+        assert got.modes.loop == want.modes.loop and got.modes.set_by == want.modes.set_by
+
+
+def test_two_drives_claiming_one_alias_are_refused_in_one_line() -> None:
+    with pytest.raises(ScanError) as err:
+        check_unique([(0, "slave 1"), (7, "slave 2"), (0, "slave 3"), (7, "slave 4")], "alias")
+    assert str(err.value).startswith("slave 2 and slave 4 both claim alias 7")
+    check_unique([(0, "slave 1"), (0, "slave 2"), (3, "slave 3")], "alias")  # 0: no claim

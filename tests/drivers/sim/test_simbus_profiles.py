@@ -1,0 +1,74 @@
+"""The in-process simulated bus with six drive profiles: configured as a master configures
+them (start-up SDOs, PDOs written and read back), the process data in each drive's own
+layout, and the CiA-402 group over the mixed image."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import numpy as np
+import pytest
+from support.profiles import INOVANCE, MIXED, SPARSE, write_mixed_config
+
+from drivers.cia402.drive_group import DriveGroup
+from drivers.cia402.state_machine import Mode, State
+from drivers.transport import STATUS_OK, TransportError
+from hofto_hw.config.loader import load_config
+from hofto_hw.runtime.build import build_sim_bus
+
+
+def _bus(tmp_path: Path, profiles=None):
+    cfg = load_config(write_mixed_config(tmp_path, profiles))
+    return cfg, build_sim_bus(cfg, external=False)
+
+
+def test_mixed_profiles_run_the_group_in_their_own_layouts(tmp_path: Path) -> None:
+    cfg, bus = _bus(tmp_path)
+    bus.open()
+    w = bus.wire
+    assert not w.builtin
+    assert [w.rx_size(i) for i in range(6)] == [14, 14, 15, 14, 15, 15]
+    assert bus.startup_written == 3
+    g = DriveGroup.from_config(bus, cfg.bus)
+    g.configure(cfg.bus.drives)
+    g.set_mode(Mode.CSP)
+    g.enable()
+    assert g.all_in(State.OPERATION_ENABLED)
+    # axis 1 has no 0x6061 mapped: the group read it by SDO and keeps it
+    assert int(g._tx_mode[1]) == Mode.CSP
+    q0 = g.q.copy()
+    for k in range(300):
+        g.command_position(q0 + 0.05 * min(1.0, k / 150), tau_offset=np.full(6, 0.5))
+        assert g.cycle() == STATUS_OK
+    np.testing.assert_allclose(g.q - q0, 0.05, atol=2e-3)
+    # what a drive does not map does not reach it; what it does not report reads 0
+    drives = bus.drives
+    assert drives.rx["torque_offset"][3] == 0 and drives.rx["torque_offset"][1] != 0
+    assert bus.tx["torque"][3] == 0 and drives.tx["torque"][3] != 0
+    assert g.present("torque").tolist() == [True, True, True, False, True, True]
+
+
+def test_a_drive_whose_mapping_cannot_be_written_is_refused(tmp_path: Path) -> None:
+    sparse = copy.deepcopy(SPARSE)
+    profiles = [INOVANCE, sparse, *MIXED[2:]]
+    cfg, bus = _bus(tmp_path, profiles)
+    # the drive's own dictionary lacks an object the profile maps: its mapping write aborts
+    bus.drives.ods[1].remove(0x60B8)
+    with pytest.raises(TransportError) as err:
+        bus.open()
+    assert "0x1600" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_profile_path_relative_to_the_config_is_found_from_any_folder(
+    tmp_path: Path, monkeypatch
+) -> None:
+    config = write_mixed_config(tmp_path)
+    text = config.read_text().replace(str(tmp_path) + "/", "")
+    assert "profile: test_elmo.yaml" in text
+    config.write_text(text)
+    monkeypatch.chdir("/")
+    cfg = load_config(config)
+    bus = build_sim_bus(cfg, external=False)
+    bus.open()
+    assert bus.wire.layouts[0].rx_pdos == (0x1605,)

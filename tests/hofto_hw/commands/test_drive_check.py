@@ -1,0 +1,89 @@
+"""``hofto-hw drive check``: every shipped drive profile brought up by the real master on
+an emulated bus (EtherCAT on veth as root, CANopen on python-can's virtual bus), enabled,
+moved 0.05 rad and back; bad input refused in one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from hofto_hw.cli import main
+
+ROOT = Path(__file__).resolve().parents[3]
+PROFILES = sorted((ROOT / "configs" / "drives").glob("*.yaml"))
+
+
+def _bus(path: Path) -> str:
+    return str(yaml.safe_load(path.read_text())["bus"])
+
+
+ETHERCAT = [p for p in PROFILES if _bus(p) == "ethercat"]
+CANOPEN = [p for p in PROFILES if _bus(p) == "canopen"]
+
+
+def _check(capsys, *argv: str) -> tuple[int, dict]:
+    code = main(["drive", "check", *argv, "--json"])
+    out = capsys.readouterr().out
+    return code, json.loads(out)
+
+
+def _assert_passed(code: int, report: dict, axes: int = 6) -> None:
+    assert report["faults"] == []
+    assert report["operational"] and report["enabled"]
+    assert report["axes"] == axes
+    assert len(report["moved_rad"]) == axes
+    assert all(abs(m - 0.05) <= 0.005 for m in report["moved_rad"]), report["moved_rad"]
+    assert len(report["process_image_bytes"]) == axes
+    assert all(b["rx"] > 0 and b["tx"] > 0 for b in report["process_image_bytes"])
+    assert all(p["rx"] and p["tx"] for p in report["pdos"])
+    assert report["passed"] and code == 0
+
+
+@pytest.mark.parametrize("path", CANOPEN, ids=[p.stem for p in CANOPEN])
+def test_canopen_profile_check_emulated(capsys, path: Path) -> None:
+    code, report = _check(capsys, str(path), "--emulated")
+    assert report["bus"] == "canopen"
+    _assert_passed(code, report)
+    prof = yaml.safe_load(path.read_text())
+    assert report["pdos"][0]["rx"] == [f"0x{p['index']:04X}" for p in prof["rx_pdos"]]
+    assert report["startup_sdos"] == 6 * len(prof.get("startup", []))
+
+
+@pytest.mark.root
+@pytest.mark.parametrize("path", ETHERCAT, ids=[p.stem for p in ETHERCAT])
+def test_ethercat_profile_check_emulated(capsys, path: Path) -> None:
+    from support.rootnet import require_root
+
+    require_root()
+    code, report = _check(capsys, str(path), "--emulated")
+    assert report["bus"] == "ethercat"
+    _assert_passed(code, report)
+    prof = yaml.safe_load(path.read_text())
+    assert report["pdos"][0]["tx"] == [f"0x{p['index']:04X}" for p in prof["tx_pdos"]]
+    writes = [w for w in prof.get("startup", []) if w["transition"] in ("IP", "PS", "SO")]
+    assert report["startup_sdos"] == 6 * len(writes)
+
+
+def test_canopen_check_on_fewer_axes_reports_those(capsys) -> None:
+    code, report = _check(capsys, str(CANOPEN[0]), "--emulated", "--axes", "2")
+    _assert_passed(code, report, axes=2)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["no_such_profile", "--emulated"], "no_such_profile"),
+        ([str(CANOPEN[0]) if CANOPEN else "x", "--iface", "eth0"], "--iface is for EtherCAT"),
+        ([str(ETHERCAT[0]) if ETHERCAT else "x", "--interface", "socketcan"], "--channel"),
+        ([str(CANOPEN[0]) if CANOPEN else "x", "--emulated", "--axes", "7"], "--axes 7"),
+        ([str(CANOPEN[0]) if CANOPEN else "x", "--emulated", "--move", "2"], "--move 2"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(capsys, argv: list[str], message: str) -> None:
+    code = main(["drive", "check", *argv])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert message in err and "\n" not in err and "Traceback" not in err
