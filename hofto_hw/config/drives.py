@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from hofto_hw.config.base import FileModel, PositiveFloat
 
@@ -24,6 +24,32 @@ class DriveIdentity(FileModel):
     vendor_id: U32 = Field(description="0x1018:1 vendor id")
     product_code: U32 = Field(description="0x1018:2 product code")
     revision: U32 | None = Field(None, description="0x1018:3 revision; None = any")
+
+
+class HomingConfig(FileModel):
+    """CiA 402 homing of one axis (mode 6), joint side SI; ``homing: none`` = absolute encoder.
+
+    ``offset``: the joint angle the home position stands for (written as 0x607C in counts).
+    """
+
+    method: Annotated[int, Field(ge=-128, le=127)] = Field(
+        description="0x6098 homing method (35/37: current position, 17: negative switch)"
+    )
+    speeds: tuple[PositiveFloat, PositiveFloat] = Field(
+        description="0x6099 search for switch, search for zero [rad/s]"
+    )
+    acceleration: PositiveFloat = Field(description="0x609A homing acceleration [rad/s²]")
+    offset: float = Field(0.0, description="joint angle at the home position, 0x607C [rad]")
+    timeout: PositiveFloat = Field(description="homing must end within this time [s]")
+    tolerance: PositiveFloat = Field(
+        0.01, description="largest distance of the end position from offset [rad]"
+    )
+
+    @model_validator(mode="after")
+    def _method(self) -> HomingConfig:
+        if self.method == 0:
+            raise ValueError("method 0 is 'no homing'; write homing: none")
+        return self
 
 
 class DriveConfig(FileModel):
@@ -51,6 +77,14 @@ class DriveConfig(FileModel):
     following_error_timeout: Annotated[float, Field(ge=0.0, le=65.535)] = Field(
         0.01, description="time outside the window before the fault, 0x6066 [s]"
     )
+    homing: HomingConfig | None = Field(
+        None, description="homing of an incremental axis; none = absolute encoder"
+    )
+
+    @field_validator("homing", mode="before")
+    @classmethod
+    def _no_homing(cls, value: object) -> object:
+        return None if value == "none" else value
 
 
 class EtherCATOptions(FileModel):
