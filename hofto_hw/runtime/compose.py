@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -148,8 +149,12 @@ def build(
     clock: str = "sim",
     sink: RecordSink | None = None,
     contact: bool = True,
+    positions: Path | None = None,
 ) -> System:
     """Build and start everything: drives enabled in CSP, holding; the loop not yet run.
+
+    ``positions``: the state file of the last clean shutdown (``runtime.positions``); a joint
+    read more than half a motor turn away from it is refused before any drive is enabled.
 
     The drives are enabled last, after every compiled kernel is warmed (seconds when the
     cache is cold): an enabled drive on a bus whose process data stops for longer than its
@@ -204,6 +209,8 @@ def build(
     tick.diag_every = max(1, round(rate / 10.0))
     if s.collision is not None:
         tick.settle_ticks = round(s.collision.settle_time * rate)
+    if positions is not None:
+        check_start_positions(cfg, bus, group, positions)
     if clock != "sim":
         collect_before_loop()  # the loop's own collection then fits inside the bus watchdog
     enable_drives(bus, group)
@@ -258,6 +265,21 @@ def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:
         bus.close()
         raise
     return bus, group
+
+
+def check_start_positions(cfg: SystemConfig, bus: Transport, group: DriveGroup, path: Path) -> None:
+    """The drives' positions against the last clean shutdown's (one line naming joint,
+    stored and read position; the bus is closed when refused)."""
+    from hofto_hw.runtime.positions import check_positions, load_positions, turn_bounds
+
+    assert cfg.bus is not None
+    try:
+        group.cycle()
+        bounds = turn_bounds([d.gear_ratio for d in cfg.bus.drives])
+        check_positions(load_positions(path), list(cfg.robot.joints), group.q, bounds, path)
+    except BaseException:
+        bus.close()
+        raise
 
 
 def enable_drives(bus: Transport, group: DriveGroup) -> None:
