@@ -22,11 +22,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from drivers.cia402 import state_machine as sm
 from drivers.cia402.state_machine import Mode
 from drivers.cia402.units import Scaling
 from hofto_hw.config.drives import HomingConfig
+
+if TYPE_CHECKING:
+    from drivers.cia402.drive_group import DriveGroup
 
 _MODE, _START, _RESTORE, _DONE = range(4)
 
@@ -145,3 +149,28 @@ class HomingSequence:
         if failure and "operation enabled" in failure:
             self._phase = _DONE  # nothing to restore on a drive that is not enabled
             self.result = failure
+
+
+def home_axes(group: DriveGroup, plans: list[HomingPlan], loop_mode: int = int(Mode.CSP)) -> str:
+    """Home the axes of ``plans`` one after the other on an enabled ``group`` (every other
+    axis holds its measured position); "" when all homed, else the first failure (one line)
+    and the axes after it are left alone. Each plan's objects are written by SDO first."""
+    t = group.transport
+    rx, tx = t.rx, t.tx
+    for plan in plans:
+        a = plan.axis
+        for index, sub, kind, value in plan.sdo_writes():
+            t.write_value(a, index, sub, kind, value)
+        seq = HomingSequence(plan, loop_mode)
+        while not seq.done:
+            group.hold()
+            rx["controlword"][a] = seq.controlword
+            rx["mode"][a] = seq.mode
+            t.wait_next_cycle()
+            group.cycle()
+            seq.step(int(tx["statusword"][a]), int(tx["mode_display"][a]), float(group.q[a]))
+        rx["controlword"][a] = seq.controlword
+        rx["mode"][a] = loop_mode
+        if seq.result:
+            return seq.result
+    return ""

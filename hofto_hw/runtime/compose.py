@@ -276,6 +276,8 @@ def check_start_positions(cfg: SystemConfig, bus: Transport, group: DriveGroup, 
     try:
         group.cycle()
         bounds = turn_bounds([d.gear_ratio for d in cfg.bus.drives])
+        # incremental axes (homing configured) start anywhere: homing sets their zero
+        bounds[[d.homing is not None for d in cfg.bus.drives]] = np.inf
         check_positions(load_positions(path), list(cfg.robot.joints), group.q, bounds, path)
     except BaseException:
         bus.close()
