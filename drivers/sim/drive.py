@@ -14,6 +14,12 @@ Per drive (all in joint-side SI internally, raw units only at the process image)
   0x6065/0x6066, communication watchdog;
 - a motor holding brake while the power stage is off (the plant has none): a saturated
   spring-damper holding the position where the brake closed, so a disabled arm stays put;
+  by default ideal (closes and opens with the power stage, the velocity integrator starts at
+  the torque it held); :meth:`EmulatedDrives.configure_brake` makes an axis's brake real:
+  it opens ``release_delay`` after Operation enabled and closes ``engage_delay`` after the
+  power stage goes off, acts on top of the motor while closed, holds at most
+  ``holding_torque`` (a worn brake slips) and the integrator starts at zero (the drive does
+  not know the load: the torque offset 0x60B2 is how a master preloads gravity);
 - fault injection (:meth:`EmulatedDrives.inject_fault`) with the CiA 402 error codes;
 - homing mode 6 (0x6098 method, 0x6099 speeds, 0x609A acceleration, 0x607C home offset;
   controlword bit 4 starts, statusword bits 10/12/13): method 35 (37) sets the current
@@ -279,6 +285,14 @@ class EmulatedDrives(ImageFields):
         self._neg_brake = -tuning.brake_torque
         self._inv_dt = 1.0 / self.dt
         self._encoder_ok = np.ones(n, dtype=bool)
+        # Real brakes (configure_brake): physical state, delays [s], holding torque [N·m].
+        self.real_brake = np.zeros(n, dtype=bool)
+        self.brake_engaged = np.ones(n, dtype=bool)
+        self.brake_release_delay = np.zeros(n)
+        self.brake_engage_delay = np.zeros(n)
+        self.brake_holding = np.zeros(n)
+        self._brake_target = np.ones(n, dtype=bool)
+        self._brake_timer = np.zeros(n)
         #: added to the reported position 0x6064 only [rad]: an encoder or transmission
         #: glitch the drive's own loop does not see (:meth:`jump_position`)
         self.position_offset = np.zeros(n)
@@ -324,6 +338,8 @@ class EmulatedDrives(ImageFields):
         self._fe_cycles.fill(0)
         self._encoder_ok.fill(True)
         self.homing.fill(_H_IDLE)
+        self.brake_engaged.fill(True)
+        self._brake_target.fill(True)
         self._home_v.fill(0.0)
         np.copyto(self._brake_q, self.plant.q_meas)
         self.rx.fill(0)
@@ -373,6 +389,25 @@ class EmulatedDrives(ImageFields):
         switched on (transition 2 is refused, a powered drive drops to Switch on disabled)
         and 0x60FD bit 16 is set."""
         self.sto[axis] = active
+
+    def configure_brake(
+        self, axis: int, release_delay: float, engage_delay: float, holding_torque: float
+    ) -> None:
+        """Give drive ``axis`` a real holding brake (see the module notes): delays [s] >= 0,
+        holding torque [N·m] > 0 (below the load's torque: a worn brake that slips)."""
+        if not (release_delay >= 0.0 and engage_delay >= 0.0 and holding_torque > 0.0):
+            raise ValueError("brake delays must be >= 0 s and the holding torque > 0 N·m")
+        self.real_brake[axis] = True
+        self.brake_release_delay[axis] = release_delay
+        self.brake_engage_delay[axis] = engage_delay
+        self.brake_holding[axis] = holding_torque
+        self.brake_engaged[axis] = self._brake_target[axis] = True
+        self._brake_q[axis] = self.plant.q_meas[axis]
+
+    def _command_brake(self, i: int, engaged: bool) -> None:
+        self._brake_target[i] = engaged
+        delay = self.brake_engage_delay[i] if engaged else self.brake_release_delay[i]
+        self._brake_timer[i] = delay
 
     def set_home_switch(self, axis: int, position: float | None) -> None:
         """Put drive ``axis``'s home switch edge at true joint position ``position`` [rad]
@@ -465,7 +500,9 @@ class EmulatedDrives(ImageFields):
             self.error_register[i] = 0
         if new == _OE and old != _QSA:
             # Brake opens; start the integrator at the torque the brake was holding.
-            self._integral[i] = self._brake_torque(i)
+            self._integral[i] = 0.0 if self.real_brake[i] else self._brake_torque(i)
+            if self.real_brake[i]:
+                self._command_brake(i, False)
             self._target_valid[i] = False
             self._fe_cycles[i] = 0
         elif new == _QSA:
@@ -557,6 +594,9 @@ class EmulatedDrives(ImageFields):
         # Holding brake where the power stage is off.
         np.logical_or(self._active, self._ramping, out=self._b1)
         np.logical_not(self._b1, out=self._b1)
+        if self.real_brake.any():
+            self._real_brakes()
+            self._b1 &= ~self.real_brake
         if self._b1.any():
             np.subtract(self._brake_q, q, out=w)
             w *= tn.brake_stiffness
@@ -564,6 +604,26 @@ class EmulatedDrives(ImageFields):
             w -= t
             np.clip(w, self._neg_brake, tn.brake_torque, out=w)
             np.copyto(self._tau, w, where=self._b1)
+
+    def _real_brakes(self) -> None:
+        """Delays, then the closed brakes' torque on top of the motor's (slipping beyond the
+        holding torque: the anchor is dragged along)."""
+        q, qd, tn = self.plant.q_meas, self.plant.qd_meas, self.tuning
+        for i in np.flatnonzero(self.real_brake):
+            if self.brake_engaged[i] != self._brake_target[i]:
+                self._brake_timer[i] -= self.dt
+                if self._brake_timer[i] <= 0.0:
+                    self.brake_engaged[i] = self._brake_target[i]
+                    self._brake_q[i] = q[i]
+            if not self.brake_engaged[i]:
+                continue
+            hold = self.brake_holding[i]
+            spring = tn.brake_stiffness[i] * (self._brake_q[i] - q[i])
+            if abs(spring) > hold:  # slipping: the friction lining slides with the joint
+                spring = math.copysign(hold, spring)
+                self._brake_q[i] = q[i] + spring / tn.brake_stiffness[i]
+            torque = spring - tn.brake_damping[i] * qd[i]
+            self._tau[i] += min(max(torque, -hold), hold)
 
     def _homing_edges(self, cw: np.ndarray) -> None:
         """Controlword bit 4 in homing mode: a rising edge starts, low interrupts."""
@@ -666,6 +726,10 @@ class EmulatedDrives(ImageFields):
         return self._ramp_v[i] == 0.0 and abs(qd) < 0.01
 
     def _close_brake(self, i: int) -> None:
+        if self.real_brake[i]:
+            if not self._brake_target[i]:
+                self._command_brake(i, True)
+            return
         self._brake_q[i] = self.plant.q_meas[i]
 
     def _brake_torque(self, i: int) -> float:
