@@ -87,7 +87,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--known-load",
         action="append",
-        default=[],
         metavar="FILE[@FIRST:LAST]:KG",
         help="a run with a load of known mass [kg] on the tool (with --drive-gains; repeatable)",
     )
@@ -109,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.model import RobotModel
     from hofto_hw.model.parameters import apply_parameters, read_parameters, write_parameters
 
-    known = [parse_known_load(spec) for spec in args.known_load]  # one line each if malformed
+    known = [parse_known_load(spec) for spec in args.known_load or []]  # one line each if malformed
     if args.drive_gains and not known:
         raise UserError("identify --drive-gains: give at least one --known-load FILE:KG")
     if known and not args.drive_gains:

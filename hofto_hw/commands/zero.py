@@ -25,13 +25,17 @@ from pathlib import Path
 
 import yaml
 
-from hofto_hw.commands.args import add_config
+from hofto_hw.commands.args import HelpFormatter, add_config
 from hofto_hw.errors import UserError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    st = sub.add_parser("set", help="rewrite a joint's zero offset so its position reads RAD")
+    st = sub.add_parser(
+        "set",
+        help="rewrite a joint's zero offset so its position reads RAD",
+        formatter_class=HelpFormatter,
+    )
     add_config(st, default="er3a")
     st.add_argument("--joint", required=True, help="joint name or number (1-based)")
     st.add_argument("--at", required=True, metavar="RAD", help="the joint's true angle [rad]")
