@@ -166,3 +166,29 @@ def test_shipped_gains_give_the_known_masses(run, low, high, capsys) -> None:
     assert code == 0, err
     mass = float(out.split()[1])
     assert low < mass < high, out
+
+
+def test_validate_puts_each_model_on_its_own_gains(tmp_path, capsys) -> None:
+    """--compare of the calibrated file with itself minus its drive_gains: the same model is
+    measured against the torque on its own gains, then on the column map's."""
+    shutil.copytree(CONFIGS / "ur10e", tmp_path / "ur10e")
+    shutil.copy(CONFIGS / "ur10e.yaml", tmp_path / "ur10e.yaml")
+    cal = tmp_path / "ur10e" / "parameters.yaml"
+    doc = yaml.safe_load(cal.read_text())
+    gains = np.array(doc["drive_gains"]["values"])
+    del doc["drive_gains"]
+    plain = tmp_path / "ur10e" / "plain.yaml"
+    plain.write_text(yaml.safe_dump(doc, sort_keys=False))
+    code, out, err = _run(
+        capsys, "validate", cal, EXCITATION, "--compare", plain, "--no-plot", "--json"
+    )
+    assert code == 0, err
+    report = json.loads(out)["files"][0]["models"]
+    a, b = report["parameters"], report["plain"]
+    configured = np.array(
+        yaml.safe_load((CONFIGS / "ur10e" / "columns_31.yaml").read_text())["current_to_torque"]
+    )
+    # joint 1 keeps its configured gain: same torque, same error; joints 2-5 differ
+    assert a["rmse"][0] == pytest.approx(b["rmse"][0])
+    changed = np.abs(gains / configured - 1.0) > 0.05
+    assert np.all(np.abs(np.array(a["rmse"]) - np.array(b["rmse"]))[changed] > 1e-3)
