@@ -241,6 +241,21 @@ class EmulatedDrives(ImageFields):
                 ],
             )
             od.add_var(0x609A, "homing acceleration", "u32", "rw", bound=(self.homing_accel, i))
+        # 0x60FE digital outputs: bit 0 releases the brake of an axis whose brake the
+        # master drives (configure_brake(by_output=True)); power off closes it regardless
+        self.digital_outputs = np.zeros(n, dtype=np.uint32)
+        self.output_mask = np.full(n, 0xFFFFFFFF, dtype=np.uint32)
+        for i, od in enumerate(self.ods):
+            od.add_record(
+                0x60FE,
+                "digital outputs",
+                [
+                    OdEntry(
+                        0x60FE, 1, "physical outputs", "u32", "rw", bound=(self.digital_outputs, i)
+                    ),
+                    OdEntry(0x60FE, 2, "bit mask", "u32", "rw", bound=(self.output_mask, i)),
+                ],
+            )
         #: true joint position of each axis's home switch edge [rad] (nan: no switch)
         self.home_switch = np.full(n, np.nan)
         #: travel [rad] a switch search may cover before it ends in homing error
@@ -287,6 +302,7 @@ class EmulatedDrives(ImageFields):
         self._encoder_ok = np.ones(n, dtype=bool)
         # Real brakes (configure_brake): physical state, delays [s], holding torque [N·m].
         self.real_brake = np.zeros(n, dtype=bool)
+        self.brake_by_output = np.zeros(n, dtype=bool)
         self.brake_engaged = np.ones(n, dtype=bool)
         self.brake_release_delay = np.zeros(n)
         self.brake_engage_delay = np.zeros(n)
@@ -391,13 +407,21 @@ class EmulatedDrives(ImageFields):
         self.sto[axis] = active
 
     def configure_brake(
-        self, axis: int, release_delay: float, engage_delay: float, holding_torque: float
+        self,
+        axis: int,
+        release_delay: float,
+        engage_delay: float,
+        holding_torque: float,
+        by_output: bool = False,
     ) -> None:
         """Give drive ``axis`` a real holding brake (see the module notes): delays [s] >= 0,
-        holding torque [N·m] > 0 (below the load's torque: a worn brake that slips)."""
+        holding torque [N·m] > 0 (below the load's torque: a worn brake that slips).
+        ``by_output``: the master releases it with 0x60FE:1 bit 0 while the drive is powered
+        (else the drive releases it on Operation enabled)."""
         if not (release_delay >= 0.0 and engage_delay >= 0.0 and holding_torque > 0.0):
             raise ValueError("brake delays must be >= 0 s and the holding torque > 0 N·m")
         self.real_brake[axis] = True
+        self.brake_by_output[axis] = by_output
         self.brake_release_delay[axis] = release_delay
         self.brake_engage_delay[axis] = engage_delay
         self.brake_holding[axis] = holding_torque
@@ -501,7 +525,7 @@ class EmulatedDrives(ImageFields):
         if new == _OE and old != _QSA:
             # Brake opens; start the integrator at the torque the brake was holding.
             self._integral[i] = 0.0 if self.real_brake[i] else self._brake_torque(i)
-            if self.real_brake[i]:
+            if self.real_brake[i] and not self.brake_by_output[i]:
                 self._command_brake(i, False)
             self._target_valid[i] = False
             self._fe_cycles[i] = 0
@@ -610,6 +634,11 @@ class EmulatedDrives(ImageFields):
         holding torque: the anchor is dragged along)."""
         q, qd, tn = self.plant.q_meas, self.plant.qd_meas, self.tuning
         for i in np.flatnonzero(self.real_brake):
+            if self.brake_by_output[i]:
+                release = bool(self.digital_outputs[i] & self.output_mask[i] & 1)
+                want = not (release and int(self.state[i]) in _POWERED)
+                if want != self._brake_target[i]:
+                    self._command_brake(i, want)
             if self.brake_engaged[i] != self._brake_target[i]:
                 self._brake_timer[i] -= self.dt
                 if self._brake_timer[i] <= 0.0:
