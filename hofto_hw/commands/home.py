@@ -25,7 +25,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from drivers.cia402.homing import home_axes, homing_plan
     from drivers.cia402.state_machine import State
-    from hofto_hw.commands.zero import _joint_index
+    from hofto_hw.commands.zero import joint_index
     from hofto_hw.config import load_config
     from hofto_hw.config.locate import find_config
     from hofto_hw.runtime.compose import build_bus, enable_drives
@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     joints = list(cfg.robot.joints)
     axes = [i for i, d in enumerate(cfg.bus.drives) if d.homing is not None]
     if args.joint is not None:
-        j = _joint_index(args.joint, joints)
+        j = joint_index(args.joint, joints)
         if cfg.bus.drives[j].homing is None:
             raise UserError(
                 f"{config_path}: bus.drives[{j}].homing: none: {joints[j]} has an absolute "

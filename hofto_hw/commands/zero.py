@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     if cfg.bus is None:
         raise UserError(f"{config_path}: bus: section missing: no drive zero offset to set")
     joints = list(cfg.robot.joints)
-    j = _joint_index(args.joint, joints)
+    j = joint_index(args.joint, joints)
     try:
         at = float(args.at)
     except ValueError:
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _joint_index(text: str, joints: list[str]) -> int:
+def joint_index(text: str, joints: list[str]) -> int:
     if text in joints:
         return joints.index(text)
     if text.isdigit() and 1 <= int(text) <= len(joints):
