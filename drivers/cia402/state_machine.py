@@ -106,6 +106,9 @@ CW_DISABLE_VOLTAGE = 0x0000
 CW_QUICK_STOP = 0x0002
 CW_FAULT_RESET = 0x0080
 CW_HALT = 0x0100
+#: 0x60FD digital input bit of an active safe torque off (the emulated drives' source; a
+#: real drive profile may name another bit or object)
+DIN_STO = 1 << 16
 #: homing mode (6): rising edge starts homing
 CW_HOMING_START = 0x0010
 

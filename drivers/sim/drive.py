@@ -794,7 +794,7 @@ class EmulatedDrives(ImageFields):
             self._homing_status(sw)
         np.copyto(self._tx_mode, self.mode_display)
         np.copyto(self._tx_err, self.fault_code)
-        np.multiply(self.sto, 1 << 16, out=self._tx_din, casting="unsafe")
+        np.multiply(self.sto, sm.DIN_STO, out=self._tx_din, casting="unsafe")
 
 
 def _homing_status_bits(progress: int, stopped: bool) -> int:
