@@ -156,3 +156,27 @@ def test_zero_set_adds_the_key_to_a_flow_mapping(config: Path) -> None:
     assert doc["bus"]["drives"][4]["zero_offset"] == 1234
     again = _with_zero_offset(new, 4, -5, config)
     assert yaml.safe_load(again)["bus"]["drives"][4]["zero_offset"] == -5
+
+
+def test_axes_state_shows_sto_and_brake_per_axis(er3a_config) -> None:
+    from types import SimpleNamespace
+
+    from hofto_hw.runtime.axes import axes_state, axes_text
+    from hofto_hw.runtime.compose import build_bus
+
+    bus, group = build_bus(er3a_config, "sim")
+    system = SimpleNamespace(group=group, bus=bus, cfg=er3a_config)
+    bus.drives.set_safe_torque_off(2, True)
+    bus.drives.configure_brake(1, 0.05, 0.05, 100.0)
+    group.cycle()
+    axes = axes_state(system)
+    assert [a["sto"] for a in axes] == [False, False, True, False, False, False]
+    assert all(a["brake"] == "closed" for a in axes)  # power stage off everywhere
+    assert "joint_3 ACTIVE/closed" in axes_text(axes)
+    bus.drives.set_safe_torque_off(2, False)
+    group.enable()
+    for _ in range(round(0.06 / bus.cycle_time) + 2):
+        group.cycle()
+    axes = axes_state(system)
+    assert [a["brake"] for a in axes] == ["open"] * 6 and not any(a["sto"] for a in axes)
+    bus.close()
