@@ -336,6 +336,12 @@ class EmulatedDrives(ImageFields):
         self._next_hold = f(n, dtype=np.uint8)
         self._flat = f(n, dtype=np.intp)
         self._pos_raw = f(n, dtype=np.int32)
+        for i, d in enumerate(drives):  # brakes the config describes are real
+            b = getattr(d, "brake", None)
+            if b is not None:
+                self.configure_brake(
+                    i, b.release_delay, b.engage_delay, b.holding_torque, b.control == "output"
+                )
         self._update_tx()
 
     def reset(self, q0: np.ndarray, qd0: np.ndarray | None = None) -> None:

@@ -52,6 +52,23 @@ class HomingConfig(FileModel):
         return self
 
 
+class BrakeConfig(FileModel):
+    """Holding brake of one axis. ``control``: ``drive`` (the drive opens it on Operation
+    enabled, after its own release delay) or ``output`` (the master sets 0x60FE:1 bit 0)."""
+
+    control: Literal["drive", "output"] = Field("drive", description="who opens the brake")
+    release_delay: Annotated[float, Field(ge=0.0, le=5.0)] = Field(
+        description="time the brake takes to open [s]; no motion before it"
+    )
+    engage_delay: Annotated[float, Field(ge=0.0, le=5.0)] = Field(
+        description="time the brake takes to close [s]; power stays on that long (cat 1)"
+    )
+    holding_torque: PositiveFloat = Field(description="rated holding torque, joint side [N·m]")
+    release_bound: PositiveFloat = Field(
+        5e-4, description="largest joint motion while the brake opens [rad]"
+    )
+
+
 class DriveConfig(FileModel):
     """One servo drive axis: identity, raw scaling, limits and supervision."""
 
@@ -80,8 +97,9 @@ class DriveConfig(FileModel):
     homing: HomingConfig | None = Field(
         None, description="homing of an incremental axis; none = absolute encoder"
     )
+    brake: BrakeConfig | None = Field(None, description="holding brake; none = no brake")
 
-    @field_validator("homing", mode="before")
+    @field_validator("homing", "brake", mode="before")
     @classmethod
     def _no_homing(cls, value: object) -> object:
         return None if value == "none" else value
