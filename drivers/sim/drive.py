@@ -309,6 +309,9 @@ class EmulatedDrives(ImageFields):
         self.brake_holding = np.zeros(n)
         self._brake_target = np.ones(n, dtype=bool)
         self._brake_timer = np.zeros(n)
+        #: [s] left of holding the motor at zero velocity while a real brake engages after
+        #: a controlled stop (the drive removes power only once the brake holds)
+        self.brake_hold_time = np.zeros(n)
         #: added to the reported position 0x6064 only [rad]: an encoder or transmission
         #: glitch the drive's own loop does not see (:meth:`jump_position`)
         self.position_offset = np.zeros(n)
@@ -362,6 +365,7 @@ class EmulatedDrives(ImageFields):
         self.homing.fill(_H_IDLE)
         self.brake_engaged.fill(True)
         self._brake_target.fill(True)
+        self.brake_hold_time.fill(0.0)
         self._home_v.fill(0.0)
         np.copyto(self._brake_q, self.plant.q_meas)
         self.rx.fill(0)
@@ -540,6 +544,10 @@ class EmulatedDrives(ImageFields):
             if self.quick_stop_option[i] == 0:
                 new = _SOD
         if new not in _POWERED and old in _POWERED:
+            controlled = old == _QSA or (old == _OE and new in (_SO, _RTSO))
+            if self.real_brake[i] and controlled and not self.sto[i]:
+                self.brake_hold_time[i] = self.brake_engage_delay[i]  # power until it holds
+                self._ramp_v[i] = 0.0
             self._close_brake(i)
         self.state[i] = new
 
@@ -566,6 +574,11 @@ class EmulatedDrives(ImageFields):
         np.equal(self.state, _FRA, out=self._b1)
         self._b1 &= self.fault_ramp
         self._ramping |= self._b1
+        if self.real_brake.any():  # powered at zero velocity while the brake engages
+            np.greater(self.brake_hold_time, 0.0, out=self._b1)
+            self._ramping |= self._b1
+            self.brake_hold_time -= self.dt
+            np.maximum(self.brake_hold_time, 0.0, out=self.brake_hold_time)
 
         # Velocity command: CSP = feed-forward + P on position; CSV = target; ramps override.
         np.subtract(self._qt, self._prev_target, out=self._vcmd)
@@ -754,6 +767,8 @@ class EmulatedDrives(ImageFields):
                     self._close_brake(i)
                     self.state[i] = _FLT  # transition 14 after the ramp
             elif s == _QSA and self.quick_stop_option[i] < 5 and self._stopped(i, qd[i]):
+                if self.real_brake[i] and not self.sto[i]:  # category 1: hold until it holds
+                    self.brake_hold_time[i] = self.brake_engage_delay[i]
                 self._close_brake(i)
                 self.state[i] = _SOD  # transition 12
 
