@@ -82,9 +82,10 @@ def run(args: argparse.Namespace) -> int:
     recorder = None if args.no_log else _start_recorder(cfg, args)
     from hofto_hw.runtime.positions import state_path
 
-    # Real arms only: the simulated plant starts at its configured pose on every run.
+    # Real buses with logs only: the simulated plant starts at its configured pose on every
+    # run, and the state file lives beside the logs (--no-log: neither checked nor written).
     positions = None
-    if cfg.bus is not None and str(cfg.bus.transport) != "sim":
+    if cfg.bus is not None and str(cfg.bus.transport) != "sim" and not args.no_log:
         positions = state_path(args.log_dir or _log_dir(cfg, args.config))
     try:
         system = build(

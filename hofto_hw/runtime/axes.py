@@ -16,6 +16,8 @@ def axes_state(system: Any) -> list[dict[str, Any]]:
     group = system.group
     din = group.transport.tx["digital_inputs"]
     drives = getattr(system.bus, "drives", None)  # the SimBus's emulated drives
+    if not hasattr(drives, "real_brake"):  # a real bus (its .drives, if any, is not the model)
+        drives = None
     out = []
     for i, name in enumerate(system.cfg.robot.joints):
         brake = None
