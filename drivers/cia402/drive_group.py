@@ -317,14 +317,6 @@ class DriveGroup(ImageFields):
         (0x60FD, ``sm.DIN_STO``: no power stage, not a fault) and DriveTimeoutError if an axis
         stays in one state longer than the transition timeout.
         """
-        self.cycle()
-        sto = np.flatnonzero(self._tx_din & sm.DIN_STO)
-        if sto.size:
-            names = ", ".join(f"axis {i} ({self.names[i]})" for i in sto)
-            raise DriveError(
-                f"{names}: safe torque off is active (0x60FD): the power stage cannot be "
-                "switched on; release STO, then enable"
-            )
         self._drive_to(State.OPERATION_ENABLED, hold=True)
 
     def disable(self) -> None:
@@ -334,6 +326,14 @@ class DriveGroup(ImageFields):
     def _drive_to(self, target: State, hold: bool, allow_fault: bool = False) -> None:
         n = self.n
         self.cycle()
+        if target == State.OPERATION_ENABLED:
+            sto = np.flatnonzero(self._tx_din & sm.DIN_STO)
+            if sto.size:
+                names = ", ".join(f"axis {i} ({self.names[i]})" for i in sto)
+                raise DriveError(
+                    f"{names}: safe torque off is active (0x60FD): the power stage cannot be "
+                    "switched on; release STO, then enable"
+                )
         since = np.zeros(n, dtype=np.int64)
         last = self.states.copy()
         for k in range(1, 100 * self.timeout_cycles):
