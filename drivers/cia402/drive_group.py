@@ -351,8 +351,9 @@ class DriveGroup(ImageFields):
         commanded before (e.g. gravity) from the first enabled cycle.
 
         Raises DriveFaultError if an axis is (or falls) in Fault (call :meth:`fault_reset`
-        first; faults latch) and DriveTimeoutError if an axis stays in one state longer
-        than the transition timeout.
+        first; faults latch), DriveError naming the axis while its safe torque off is active
+        (0x60FD, ``sm.DIN_STO``: no power stage, not a fault) and DriveTimeoutError if an axis
+        stays in one state longer than the transition timeout.
         """
         self._drive_to(State.OPERATION_ENABLED, hold=True)
 
@@ -363,6 +364,14 @@ class DriveGroup(ImageFields):
     def _drive_to(self, target: State, hold: bool, allow_fault: bool = False) -> None:
         n = self.n
         self.cycle()
+        if target == State.OPERATION_ENABLED:
+            sto = np.flatnonzero(self._tx_din & sm.DIN_STO)
+            if sto.size:
+                names = ", ".join(f"axis {i} ({self.names[i]})" for i in sto)
+                raise DriveError(
+                    f"{names}: safe torque off is active (0x60FD): the power stage cannot be "
+                    "switched on; release STO, then enable"
+                )
         since = np.zeros(n, dtype=np.int64)
         last = self.states.copy()
         for k in range(1, 100 * self.timeout_cycles):
@@ -379,9 +388,11 @@ class DriveGroup(ImageFields):
             late = ~at & (k - since > self.timeout_cycles)
             if late.any():
                 i = int(np.flatnonzero(late)[0])
+                sto = "; safe torque off active" if int(self._tx_din[i]) & sm.DIN_STO else ""
                 raise DriveTimeoutError(
                     f"axis {i} ({self.names[i]}): no transition toward {STATE_NAMES[target]} "
-                    f"within {self.transition_timeout:g} s; {self._describe(i)}" + self._bus_note(),
+                    f"within {self.transition_timeout:g} s; {self._describe(i)}{sto}"
+                    + self._bus_note(),
                     i,
                     int(self.states[i]),
                     int(self._tx_sw[i]),

@@ -80,6 +80,9 @@ SW_INTERNAL_LIMIT = 1 << 11
 #: CSP/CSV/CST: "drive follows the command value" (bit 12); CSP bit 13: following error.
 SW_FOLLOWING = 1 << 12
 SW_FOLLOWING_ERROR = 1 << 13
+#: homing mode (6): bit 12 = homing attained, bit 13 = homing error (CiA 402 homing mode)
+SW_HOMING_ATTAINED = 1 << 12
+SW_HOMING_ERROR = 1 << 13
 
 
 class Command(IntEnum):
@@ -103,6 +106,11 @@ CW_DISABLE_VOLTAGE = 0x0000
 CW_QUICK_STOP = 0x0002
 CW_FAULT_RESET = 0x0080
 CW_HALT = 0x0100
+#: 0x60FD digital input bit of an active safe torque off (the emulated drives' source; a
+#: real drive profile may name another bit or object)
+DIN_STO = 1 << 16
+#: homing mode (6): rising edge starts homing
+CW_HOMING_START = 0x0010
 
 
 class Mode(IntEnum):

@@ -14,7 +14,20 @@ Per drive (all in joint-side SI internally, raw units only at the process image)
   0x6065/0x6066, communication watchdog;
 - a motor holding brake while the power stage is off (the plant has none): a saturated
   spring-damper holding the position where the brake closed, so a disabled arm stays put;
-- fault injection (:meth:`EmulatedDrives.inject_fault`) with the CiA 402 error codes.
+  by default ideal (closes and opens with the power stage, the velocity integrator starts at
+  the torque it held); :meth:`EmulatedDrives.configure_brake` makes an axis's brake real:
+  it opens ``release_delay`` after Operation enabled and closes ``engage_delay`` after the
+  power stage goes off, acts on top of the motor while closed, holds at most
+  ``holding_torque`` (a worn brake slips) and the integrator starts at zero (the drive does
+  not know the load: the torque offset 0x60B2 is how a master preloads gravity);
+- fault injection (:meth:`EmulatedDrives.inject_fault`) with the CiA 402 error codes;
+- homing mode 6 (0x6098 method, 0x6099 speeds, 0x609A acceleration, 0x607C home offset;
+  controlword bit 4 starts, statusword bits 10/12/13): method 35 (37) sets the current
+  position as home; method 17 searches the home switch (:meth:`EmulatedDrives.
+  set_home_switch`) in the negative direction at the switch speed, returns at the zero speed
+  to its edge and makes that edge the home offset; no switch within ``homing_travel`` or an
+  unsupported method ends in homing error. Homing redefines the drive's position
+  (0x6064 and the targets it takes), never the plant.
 """
 
 from __future__ import annotations
@@ -33,6 +46,7 @@ from drivers.cia402.units import AxisScaling, Scaling
 from drivers.sim.object_dictionary import (
     DriveObjects,
     ObjectDictionary,
+    OdEntry,
     cia402_dictionary,
     impersonate,
 )
@@ -53,11 +67,14 @@ FAULTS: dict[str, tuple[int, bool]] = {
 }
 CODE_FOLLOWING_ERROR = 0x8611
 CODE_COMM_LOSS = 0x8130
-SUPPORTED_MODES = (Mode.NO_MODE, Mode.CSP, Mode.CSV, Mode.CST)
+SUPPORTED_MODES = (Mode.NO_MODE, Mode.CSP, Mode.CSV, Mode.CST, Mode.HOMING)
+HOMING_METHODS = (17, 35, 37)
+# homing progress per axis
+_H_IDLE, _H_SEARCH, _H_BACK, _H_STOP, _H_DONE, _H_ERROR = range(6)
 
 # Plain ints for the per-cycle code (enum attribute access is slow).
 _NR, _SOD, _RTSO, _SO, _OE, _QSA, _FRA, _FLT = (int(s) for s in list(State)[:8])
-_CSP, _CSV, _CST = int(Mode.CSP), int(Mode.CSV), int(Mode.CST)
+_CSP, _CSV, _CST, _HM = int(Mode.CSP), int(Mode.CSV), int(Mode.CST), int(Mode.HOMING)
 _N_COMMANDS = len(Command)
 _POWERED = (_OE, _QSA, _FRA)
 _WATCHED = (_SO, *_POWERED)  # states that fault when the bus goes silent
@@ -201,6 +218,62 @@ class EmulatedDrives(ImageFields):
         #: the profile each drive impersonates (None: the built-in hofto-sim drive)
         self.profiles = list(profiles) if profiles is not None else [None] * n
 
+        # Homing (mode 6): objects in raw units, drive-internal progress and position shift.
+        self.homing_method = np.full(n, 35, dtype=np.int8)  # 0x6098
+        self.homing_speeds = np.zeros((2, n), dtype=np.uint32)  # 0x6099:1 switch, :2 zero
+        self.homing_accel = np.zeros(n, dtype=np.uint32)  # 0x609A
+        self.home_offset = np.zeros(n, dtype=np.int32)  # 0x607C
+        for i, od in enumerate(self.ods):
+            od.add_var(0x607C, "home offset", "i32", "rw", bound=(self.home_offset, i))
+            od.add_var(0x6098, "homing method", "i8", "rw", bound=(self.homing_method, i))
+            od.add_record(
+                0x6099,
+                "homing speeds",
+                [
+                    OdEntry(
+                        0x6099,
+                        1,
+                        "speed during search for switch",
+                        "u32",
+                        "rw",
+                        bound=(self.homing_speeds[0], i),
+                    ),
+                    OdEntry(
+                        0x6099,
+                        2,
+                        "speed during search for zero",
+                        "u32",
+                        "rw",
+                        bound=(self.homing_speeds[1], i),
+                    ),
+                ],
+            )
+            od.add_var(0x609A, "homing acceleration", "u32", "rw", bound=(self.homing_accel, i))
+        # 0x60FE digital outputs: bit 0 releases the brake of an axis whose brake the
+        # master drives (configure_brake(by_output=True)); power off closes it regardless
+        self.digital_outputs = np.zeros(n, dtype=np.uint32)
+        self.output_mask = np.full(n, 0xFFFFFFFF, dtype=np.uint32)
+        for i, od in enumerate(self.ods):
+            od.add_record(
+                0x60FE,
+                "digital outputs",
+                [
+                    OdEntry(
+                        0x60FE, 1, "physical outputs", "u32", "rw", bound=(self.digital_outputs, i)
+                    ),
+                    OdEntry(0x60FE, 2, "bit mask", "u32", "rw", bound=(self.output_mask, i)),
+                ],
+            )
+        #: true joint position of each axis's home switch edge [rad] (nan: no switch)
+        self.home_switch = np.full(n, np.nan)
+        #: travel [rad] a switch search may cover before it ends in homing error
+        self.homing_travel = np.full(n, math.pi)
+        self.homing = np.zeros(n, dtype=np.uint8)
+        self._home_shift = np.zeros(n)  # drive position = plant position + shift [rad]
+        self._home_v = np.zeros(n)
+        self._home_start_q = np.zeros(n)
+        self._hm = np.zeros(n, dtype=bool)
+
         if tuning is None:
             inertia = np.diag(plant.data.mass_matrix(plant.q)).copy()
             limit = np.array([d.torque_limit for d in drives])
@@ -235,6 +308,18 @@ class EmulatedDrives(ImageFields):
         self._neg_brake = -tuning.brake_torque
         self._inv_dt = 1.0 / self.dt
         self._encoder_ok = np.ones(n, dtype=bool)
+        # Real brakes (configure_brake): physical state, delays [s], holding torque [N·m].
+        self.real_brake = np.zeros(n, dtype=bool)
+        self.brake_by_output = np.zeros(n, dtype=bool)
+        self.brake_engaged = np.ones(n, dtype=bool)
+        self.brake_release_delay = np.zeros(n)
+        self.brake_engage_delay = np.zeros(n)
+        self.brake_holding = np.zeros(n)
+        self._brake_target = np.ones(n, dtype=bool)
+        self._brake_timer = np.zeros(n)
+        #: [s] left of holding the motor at zero velocity while a real brake engages after
+        #: a controlled stop (the drive removes power only once the brake holds)
+        self.brake_hold_time = np.zeros(n)
         #: added to the reported position 0x6064 only [rad]: an encoder or transmission
         #: glitch the drive's own loop does not see (:meth:`jump_position`)
         self.position_offset = np.zeros(n)
@@ -262,6 +347,12 @@ class EmulatedDrives(ImageFields):
         self._next_hold = f(n, dtype=np.uint8)
         self._flat = f(n, dtype=np.intp)
         self._pos_raw = f(n, dtype=np.int32)
+        for i, d in enumerate(drives):  # brakes the config describes are real
+            b = getattr(d, "brake", None)
+            if b is not None:
+                self.configure_brake(
+                    i, b.release_delay, b.engage_delay, b.holding_torque, b.control == "output"
+                )
         self._update_tx()
 
     def reset(self, q0: np.ndarray, qd0: np.ndarray | None = None) -> None:
@@ -279,6 +370,11 @@ class EmulatedDrives(ImageFields):
         self._target_valid.fill(False)
         self._fe_cycles.fill(0)
         self._encoder_ok.fill(True)
+        self.homing.fill(_H_IDLE)
+        self.brake_engaged.fill(True)
+        self._brake_target.fill(True)
+        self.brake_hold_time.fill(0.0)
+        self._home_v.fill(0.0)
         np.copyto(self._brake_q, self.plant.q_meas)
         self.rx.fill(0)
         self._update_tx()
@@ -327,6 +423,38 @@ class EmulatedDrives(ImageFields):
         switched on (transition 2 is refused, a powered drive drops to Switch on disabled)
         and 0x60FD bit 16 is set."""
         self.sto[axis] = active
+
+    def configure_brake(
+        self,
+        axis: int,
+        release_delay: float,
+        engage_delay: float,
+        holding_torque: float,
+        by_output: bool = False,
+    ) -> None:
+        """Give drive ``axis`` a real holding brake (see the module notes): delays [s] >= 0,
+        holding torque [N·m] > 0 (below the load's torque: a worn brake that slips).
+        ``by_output``: the master releases it with 0x60FE:1 bit 0 while the drive is powered
+        (else the drive releases it on Operation enabled)."""
+        if not (release_delay >= 0.0 and engage_delay >= 0.0 and holding_torque > 0.0):
+            raise ValueError("brake delays must be >= 0 s and the holding torque > 0 N·m")
+        self.real_brake[axis] = True
+        self.brake_by_output[axis] = by_output
+        self.brake_release_delay[axis] = release_delay
+        self.brake_engage_delay[axis] = engage_delay
+        self.brake_holding[axis] = holding_torque
+        self.brake_engaged[axis] = self._brake_target[axis] = True
+        self._brake_q[axis] = self.plant.q_meas[axis]
+
+    def _command_brake(self, i: int, engaged: bool) -> None:
+        self._brake_target[i] = engaged
+        delay = self.brake_engage_delay[i] if engaged else self.brake_release_delay[i]
+        self._brake_timer[i] = delay
+
+    def set_home_switch(self, axis: int, position: float | None) -> None:
+        """Put drive ``axis``'s home switch edge at true joint position ``position`` [rad]
+        (the switch is made below it); None removes the switch."""
+        self.home_switch[axis] = np.nan if position is None else float(position)
 
     def clear_fault(self, axis: int) -> None:
         """Remove the cause of an injected fault (a fault reset can then succeed)."""
@@ -388,6 +516,9 @@ class EmulatedDrives(ImageFields):
             for i in np.flatnonzero(self._u16):
                 rising = not int(self.prev_controlword[i]) & 0x80
                 self._cmd[i] = Command.FAULT_RESET if rising else Command.NONE
+        np.equal(self.mode_display, _HM, out=self._hm)
+        if self._hm.any():
+            self._homing_edges(cw)
         np.copyto(self.prev_controlword, cw)
         np.multiply(self.state, _N_COMMANDS, out=self._flat)
         np.add(self._flat, self._cmd, out=self._flat)
@@ -411,7 +542,9 @@ class EmulatedDrives(ImageFields):
             self.error_register[i] = 0
         if new == _OE and old != _QSA:
             # Brake opens; start the integrator at the torque the brake was holding.
-            self._integral[i] = self._brake_torque(i)
+            self._integral[i] = 0.0 if self.real_brake[i] else self._brake_torque(i)
+            if self.real_brake[i] and not self.brake_by_output[i]:
+                self._command_brake(i, False)
             self._target_valid[i] = False
             self._fe_cycles[i] = 0
         elif new == _QSA:
@@ -419,6 +552,10 @@ class EmulatedDrives(ImageFields):
             if self.quick_stop_option[i] == 0:
                 new = _SOD
         if new not in _POWERED and old in _POWERED:
+            controlled = old == _QSA or (old == _OE and new in (_SO, _RTSO))
+            if self.real_brake[i] and controlled and not self.sto[i]:
+                self.brake_hold_time[i] = self.brake_engage_delay[i]  # power until it holds
+                self._ramp_v[i] = 0.0
             self._close_brake(i)
         self.state[i] = new
 
@@ -431,6 +568,7 @@ class EmulatedDrives(ImageFields):
         q, qd = p.q_meas, p.qd_meas
         w, t = self._w, self._w2
         sc.position_to_si(self._rx_pos, self._qt)
+        self._qt -= self._home_shift  # the drive's position reference -> the plant's
         sc.velocity_to_si(self._rx_vel, self._vt)
         sc.torque_to_si(self._rx_tau, self._tt)
         sc.torque_to_si(self._rx_off, self._toff)
@@ -444,6 +582,11 @@ class EmulatedDrives(ImageFields):
         np.equal(self.state, _FRA, out=self._b1)
         self._b1 &= self.fault_ramp
         self._ramping |= self._b1
+        if self.real_brake.any():  # powered at zero velocity while the brake engages
+            np.greater(self.brake_hold_time, 0.0, out=self._b1)
+            self._ramping |= self._b1
+            self.brake_hold_time -= self.dt
+            np.maximum(self.brake_hold_time, 0.0, out=self.brake_hold_time)
 
         # Velocity command: CSP = feed-forward + P on position; CSV = target; ramps override.
         np.subtract(self._qt, self._prev_target, out=self._vcmd)
@@ -454,6 +597,12 @@ class EmulatedDrives(ImageFields):
         np.multiply(self._err, tn.position_gain, out=w)
         self._vcmd += w
         np.copyto(self._vcmd, self._vt, where=self._csv)
+        np.equal(self.mode_display, _HM, out=self._hm)
+        self._hm &= self._enabled
+        if self._hm.any():
+            self._advance_homing()
+            np.copyto(self._vcmd, self._home_v, where=self._hm)
+            self._csv |= self._hm  # the velocity loop runs while homing
         if self._ramping.any():
             self._advance_ramp()
             np.copyto(self._vcmd, self._ramp_v, where=self._ramping)
@@ -496,6 +645,9 @@ class EmulatedDrives(ImageFields):
         # Holding brake where the power stage is off.
         np.logical_or(self._active, self._ramping, out=self._b1)
         np.logical_not(self._b1, out=self._b1)
+        if self.real_brake.any():
+            self._real_brakes()
+            self._b1 &= ~self.real_brake
         if self._b1.any():
             np.subtract(self._brake_q, q, out=w)
             w *= tn.brake_stiffness
@@ -503,6 +655,98 @@ class EmulatedDrives(ImageFields):
             w -= t
             np.clip(w, self._neg_brake, tn.brake_torque, out=w)
             np.copyto(self._tau, w, where=self._b1)
+
+    def _real_brakes(self) -> None:
+        """Delays, then the closed brakes' torque on top of the motor's (slipping beyond the
+        holding torque: the anchor is dragged along)."""
+        q, qd, tn = self.plant.q_meas, self.plant.qd_meas, self.tuning
+        for i in np.flatnonzero(self.real_brake):
+            if self.brake_by_output[i]:
+                release = bool(self.digital_outputs[i] & self.output_mask[i] & 1)
+                want = not (release and int(self.state[i]) in _POWERED)
+                if want != self._brake_target[i]:
+                    self._command_brake(i, want)
+            if self.brake_engaged[i] != self._brake_target[i]:
+                self._brake_timer[i] -= self.dt
+                if self._brake_timer[i] <= 0.0:
+                    self.brake_engaged[i] = self._brake_target[i]
+                    self._brake_q[i] = q[i]
+            if not self.brake_engaged[i]:
+                continue
+            hold = self.brake_holding[i]
+            spring = tn.brake_stiffness[i] * (self._brake_q[i] - q[i])
+            if abs(spring) > hold:  # slipping: the friction lining slides with the joint
+                spring = math.copysign(hold, spring)
+                self._brake_q[i] = q[i] + spring / tn.brake_stiffness[i]
+            torque = spring - tn.brake_damping[i] * qd[i]
+            self._tau[i] += min(max(torque, -hold), hold)
+
+    def _homing_edges(self, cw: np.ndarray) -> None:
+        """Controlword bit 4 in homing mode: a rising edge starts, low interrupts."""
+        for i in np.flatnonzero(self._hm):
+            bit = int(cw[i]) & sm.CW_HOMING_START
+            if bit and not int(self.prev_controlword[i]) & sm.CW_HOMING_START:
+                self._start_homing(int(i))
+            elif not bit and self.homing[i] in (_H_SEARCH, _H_BACK):
+                self.homing[i] = _H_STOP  # interrupted: stop, not attained
+
+    def _start_homing(self, i: int) -> None:
+        if int(self.state[i]) != _OE:
+            return
+        method = int(self.homing_method[i])
+        q = float(self.plant.q_meas[i])
+        offset = self._home_position(i)
+        if method in (35, 37):  # current position is home
+            self._home_shift[i] = offset - q
+            self._home_v[i] = 0.0
+            self.homing[i] = _H_DONE
+            self._target_valid[i] = False
+        elif method == 17:
+            self._home_start_q[i] = q
+            self.homing[i] = _H_SEARCH
+        else:
+            self.homing[i] = _H_ERROR
+
+    def _home_position(self, i: int) -> float:
+        """The joint angle [rad] the home offset 0x607C [counts] stands for: after homing
+        the drive reports 0x6064 = 0x607C at home."""
+        sc = self.scaling
+        return float(sc.rad_per_count[i] * (int(self.home_offset[i]) - sc.zero_offset[i]))
+
+    def _advance_homing(self) -> None:
+        q = self.plant.q_meas
+        rpc = self._abs_rpc
+        for i in np.flatnonzero(self._hm):
+            h = int(self.homing[i])
+            fast = float(self.homing_speeds[0, i]) * rpc[i]
+            slow = float(self.homing_speeds[1, i]) * rpc[i]
+            acc = max(float(self.homing_accel[i]) * rpc[i], 1e-6)
+            target = 0.0
+            switch = self.home_switch[i]
+            made = bool(q[i] <= switch)  # False for nan: no switch
+            if h == _H_SEARCH:
+                target = -fast
+                if made:
+                    self.homing[i] = h = _H_BACK
+                elif abs(q[i] - self._home_start_q[i]) > self.homing_travel[i] or fast <= 0.0:
+                    self.homing[i] = h = _H_ERROR
+            if h == _H_BACK:
+                target = slow
+                if not made:  # the edge: this position becomes the home offset
+                    self._home_shift[i] = self._home_position(i) - float(q[i])
+                    self._target_valid[i] = False
+                    self.homing[i] = h = _H_DONE
+            if h in (_H_DONE, _H_ERROR, _H_STOP):
+                target = 0.0
+            step = acc * self.dt
+            self._home_v[i] += min(max(target - self._home_v[i], -step), step)
+
+    def _homing_status(self, sw: np.ndarray) -> None:
+        for i in np.flatnonzero(self._hm):
+            stopped = self._home_v[i] == 0.0 and abs(float(self.plant.qd_meas[i])) < 0.01
+            # bits 12/13 mean homing attained/error in this mode, not following (error)
+            sw[i] &= ~np.uint16(sm.SW_FOLLOWING | sm.SW_FOLLOWING_ERROR | sm.SW_TARGET_REACHED)
+            sw[i] |= np.uint16(_homing_status_bits(int(self.homing[i]), stopped))
 
     def _advance_ramp(self) -> None:
         step, sign = self._w2, self._w3
@@ -531,6 +775,8 @@ class EmulatedDrives(ImageFields):
                     self._close_brake(i)
                     self.state[i] = _FLT  # transition 14 after the ramp
             elif s == _QSA and self.quick_stop_option[i] < 5 and self._stopped(i, qd[i]):
+                if self.real_brake[i] and not self.sto[i]:  # category 1: hold until it holds
+                    self.brake_hold_time[i] = self.brake_engage_delay[i]
                 self._close_brake(i)
                 self.state[i] = _SOD  # transition 12
 
@@ -538,6 +784,10 @@ class EmulatedDrives(ImageFields):
         return self._ramp_v[i] == 0.0 and abs(qd) < 0.01
 
     def _close_brake(self, i: int) -> None:
+        if self.real_brake[i]:
+            if not self._brake_target[i]:
+                self._command_brake(i, True)
+            return
         self._brake_q[i] = self.plant.q_meas[i]
 
     def _brake_torque(self, i: int) -> float:
@@ -550,6 +800,7 @@ class EmulatedDrives(ImageFields):
     def _update_tx(self) -> None:
         p, sc = self.plant, self.scaling
         np.add(p.q_meas, self.position_offset, out=self._q_rep)
+        self._q_rep += self._home_shift
         sc.position_to_raw(self._q_rep, self._pos_raw)
         np.copyto(self._tx_pos, self._pos_raw, where=self._encoder_ok)
         sc.velocity_to_raw(p.qd_meas, self._tx_vel)
@@ -567,9 +818,23 @@ class EmulatedDrives(ImageFields):
         sw |= u16
         np.multiply(self._fe_flag, sm.SW_FOLLOWING_ERROR, out=u16, casting="unsafe")
         sw |= u16
+        np.equal(self.mode_display, _HM, out=self._hm)
+        if self._hm.any():
+            self._homing_status(sw)
         np.copyto(self._tx_mode, self.mode_display)
         np.copyto(self._tx_err, self.fault_code)
-        np.multiply(self.sto, 1 << 16, out=self._tx_din, casting="unsafe")
+        np.multiply(self.sto, sm.DIN_STO, out=self._tx_din, casting="unsafe")
+
+
+def _homing_status_bits(progress: int, stopped: bool) -> int:
+    """Statusword bits 10 (target reached), 12 (attained), 13 (error) in homing mode."""
+    if progress == _H_DONE:
+        return sm.SW_HOMING_ATTAINED | (sm.SW_TARGET_REACHED if stopped else 0)
+    if progress == _H_ERROR:
+        return sm.SW_HOMING_ERROR | (sm.SW_TARGET_REACHED if stopped else 0)
+    if progress in (_H_IDLE, _H_STOP):
+        return sm.SW_TARGET_REACHED if stopped else 0  # not started / interrupted
+    return 0  # in progress
 
 
 def _gear_fraction(ratio: float) -> tuple[int, int]:

@@ -79,6 +79,23 @@ def configure(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="keep rest periods at the ends of runs (static holds, held friction)",
     )
+    parser.add_argument(
+        "--drive-gains",
+        action="store_true",
+        help="calibrate the current-to-torque gains with --known-load runs, then fit on them",
+    )
+    parser.add_argument(
+        "--known-load",
+        action="append",
+        metavar="FILE[@FIRST:LAST]:KG",
+        help="a run with a load of known mass [kg] on the tool (with --drive-gains; repeatable)",
+    )
+    parser.add_argument(
+        "--gains-from",
+        type=Path,
+        metavar="PARAMS",
+        help="read current with the calibrated drive_gains of this parameters file",
+    )
     parser.add_argument("--json", action="store_true", help="print the fit as JSON")
 
 
@@ -86,12 +103,23 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.config.loader import load_config
     from hofto_hw.config.locate import find_config
     from hofto_hw.errors import UserError
+    from hofto_hw.identify.drive_gains import parse_known_load
     from hofto_hw.identify.pipeline import identify
     from hofto_hw.model import RobotModel
-    from hofto_hw.model.parameters import apply_parameters, write_parameters
+    from hofto_hw.model.parameters import apply_parameters, read_parameters, write_parameters
 
+    known = [parse_known_load(spec) for spec in args.known_load or []]  # one line each if malformed
+    if args.drive_gains and not known:
+        raise UserError("identify --drive-gains: give at least one --known-load FILE:KG")
+    if known and not args.drive_gains:
+        raise UserError("identify: --known-load is used by --drive-gains; add --drive-gains")
+    if args.drive_gains and args.gains_from is not None:
+        raise UserError("identify: --drive-gains calibrates the gains; drop --gains-from")
+    if args.drive_gains and args.friction_only is not None:
+        raise UserError("identify: --drive-gains refits the whole model; drop --friction-only")
     config_path = find_config(args.config)
-    refuse_overwrite(args.output, [config_path, args.columns, *args.recordings], "--output")
+    inputs = [config_path, args.columns, *args.recordings, *(f for f, _ in known)]
+    refuse_overwrite(args.output, inputs, "--output")
     cfg = load_config(config_path)
     model = RobotModel.from_config(cfg.robot, apply_parameters=False)
     opts = Conditioning(
@@ -119,16 +147,31 @@ def run(args: argparse.Namespace) -> int:
         np.isfinite(args.held_velocity) and args.held_velocity > 0
     ):
         raise UserError(f"identify: --held-velocity must be > 0 rad/s, got {args.held_velocity}")
+    carried = None
+    if args.gains_from is not None:
+        carried = read_parameters(args.gains_from)
+        if carried.drive_gains is None:
+            raise UserError(f"{args.gains_from}: drive_gains: missing (no calibrated gains)")
     loaded = load_samples(
-        args.recordings, args.columns, parse_rows(args.rows), opts, search, robot=cfg.robot.name
+        args.recordings,
+        args.columns,
+        parse_rows(args.rows),
+        opts,
+        search,
+        robot=cfg.robot.name,
+        gains=None if carried is None else carried.drive_gains,
     )
     for _s, rec in loaded:
         say(f"loaded {rec.source}: {rec.n_samples} samples, {rec.duration:.1f} s")
     if args.friction_only is not None:
         return _friction_only(args, model, [s for s, _ in loaded], say)
+    samples = [s for s, _ in loaded]
+    gains = None
+    if args.drive_gains:
+        gains, samples = _drive_gains(args, cfg, model, known, samples, opts, vs, search, say)
     result = identify(
         model,
-        [s for s, _ in loaded],
+        samples,
         args.method,
         args.smooth_velocity,
         progress=say,
@@ -136,6 +179,14 @@ def run(args: argparse.Namespace) -> int:
         held_velocity=args.held_velocity,
         quadratic=args.quadratic,
     )
+    if gains is not None:
+        result.parameters.drive_gains = gains.gains.copy()
+        result.parameters.drive_gains_info = _gains_info(gains, known)
+    elif carried is not None:
+        result.parameters.drive_gains = carried.drive_gains
+        result.parameters.drive_gains_info = dict(
+            carried.drive_gains_info, source=args.gains_from.name
+        )
     apply_parameters(model, result.parameters, str(args.output))  # refuses a non-SPD M(q)
     try:
         write_parameters(args.output, result.parameters)
@@ -161,10 +212,25 @@ def run(args: argparse.Namespace) -> int:
                     "relative_rmse_percent": list(map(float, fit["relative_rmse_percent"])),
                     "condition_number": float(fit["condition_number"]),
                     "samples": int(fit["samples"]),
+                    **(
+                        {}
+                        if gains is None
+                        else {
+                            "drive_gains": {
+                                **_gains_info(gains, known),
+                                "values": gains.gains.tolist(),
+                                "free_estimate": gains.free.tolist(),
+                                "load_torque_to_noise": gains.load_snr.tolist(),
+                                "not_calibrated": gains.weak_joints(model.joint_names),
+                            }
+                        }
+                    ),
                 }
             )
         )
         return 0
+    if gains is not None:
+        _print_gains(gains, model.joint_names)
     print(f"{'base parameter':<28}{'value':>13}{'std':>12}{'rel std %':>11}")
     for b in result.parameters.base:
         rel = b.relative_std_percent
@@ -205,3 +271,64 @@ def _friction_only(args: argparse.Namespace, model, samples, say) -> int:
             f"{old.viscous[j]:9.3f}{new.viscous[j]:9.3f}{fh:>9}"
         )
     return 0
+
+
+def _drive_gains(args, cfg, model, known, samples, opts, vs, search, say):
+    """Calibrate the drive gains on the known-load runs; the runs' torque rescaled to them."""
+    from hofto_hw.identify.drive_gains import KnownLoad, estimate_drive_gains
+    from hofto_hw.identify.inputs import configured_gains
+    from hofto_hw.identify.pipeline import Samples
+
+    files = [f for f, _ in known]
+    configured = configured_gains(
+        [*args.recordings, *files], args.columns, search, robot=cfg.robot.name
+    )
+    runs = load_samples(
+        files, args.columns, parse_rows(args.rows), opts, search, robot=cfg.robot.name
+    )
+    loads = [KnownLoad(s, kg) for (s, _), (_, kg) in zip(runs, known, strict=True)]
+    est = estimate_drive_gains(
+        model,
+        samples,
+        loads,
+        configured,
+        smooth_velocity=args.smooth_velocity,
+        stribeck_velocity=vs,
+        held_velocity=args.held_velocity,
+        quadratic=args.quadratic,
+        progress=say,
+    )
+    weak = est.weak_joints(model.joint_names)
+    if weak:
+        say(f"the known load excites {', '.join(weak)} too weakly: configured gain kept")
+    scale = est.scale
+    scaled = [Samples(s.q, s.qd, s.qdd, s.tau * scale, s.source) for s in samples]
+    return est, scaled
+
+
+def _gains_info(gains, known) -> dict:
+    return {
+        "std": [float(v) for v in gains.std],
+        "calibrated": [bool(c) for c in gains.calibrated],
+        "configured": [float(v) for v in gains.configured],
+        "known_loads": [
+            {"file": Path(f).name, "mass": float(kg), "com": [float(c) for c in com]}
+            for (f, kg), com in zip(known, gains.load_com, strict=True)
+        ],
+    }
+
+
+def _print_gains(gains, joints) -> None:
+    print(
+        f"{'joint':<22}{'configured':>11}{'gain ± std [N·m/A]':>22}{'scale':>8}{'load/noise':>11}"
+    )
+    for j, name in enumerate(joints):
+        status = "" if gains.calibrated[j] else "  kept (weakly excited)"
+        print(
+            f"{name:<22}{gains.configured[j]:11.4f}{gains.gains[j]:12.4f} ± {gains.std[j]:<7.4f}"
+            f"{gains.scale[j]:8.4f}{gains.load_snr[j]:11.2f}{status}"
+        )
+    weak = gains.weak_joints(joints)
+    if weak:
+        print(f"not calibrated (configured gain kept): {', '.join(weak)}")
+    print()

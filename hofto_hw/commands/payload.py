@@ -54,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
     setup = load_setup(args.params, args.config)
     opts = Conditioning(args.cutoff, False, 1, args.drop_bad_rows, trim=False)
     search = [setup.robot_dir, setup.config.robot.urdf.parent]
-    loaded = load_samples(args.files, args.columns, None, opts, search)
+    gains = setup.parameters.drive_gains
+    loaded = load_samples(args.files, args.columns, None, opts, search, gains=gains)
     samples = [s for s, _ in loaded]
     est = identify_payload(setup.model, samples)
     full = identify_payload(setup.model, samples, inertia=True) if args.inertia else None

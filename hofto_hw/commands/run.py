@@ -126,8 +126,17 @@ def run(args: argparse.Namespace) -> int:
         print("hofto-hw run: run.live_view is off with --no-log (the log's writer serves it)",
               file=sys.stderr)  # fmt: skip
     recorder = None if args.no_log else _start_recorder(cfg, args)
+    from hofto_hw.runtime.positions import state_path
+
+    # Real buses with logs only: the simulated plant starts at its configured pose on every
+    # run, and the state file lives beside the logs (--no-log: neither checked nor written).
+    positions = None
+    if cfg.bus is not None and str(cfg.bus.transport) != "sim" and not args.no_log:
+        positions = state_path(args.log_dir or _log_dir(cfg, args.config))
     try:
-        system = build(cfg, clock=clock, sink=recorder, contact=not args.no_collision)
+        system = build(
+            cfg, clock=clock, sink=recorder, contact=not args.no_collision, positions=positions
+        )
     except BaseException:
         if recorder is not None:
             recorder.close()
@@ -174,7 +183,10 @@ def run(args: argparse.Namespace) -> int:
         saved = save_finished(tick, at_end=True)  # a drag --record still open at the end
         if saved:
             print(f"hofto-hw run: {saved}", file=sys.stderr)
+        last = _last_positions(system) if positions is not None else None
         system.close()
+        if positions is not None:
+            _save_positions(positions, last)
         if watch is not None:
             watch.stop()
         health = recorder.close() if recorder is not None else None
@@ -210,6 +222,31 @@ def _check_plot(args: argparse.Namespace) -> None:
     if args.plot is not None and args.no_log:
         raise UserError("--plot: draws the run from its flight log; drop --no-log")
     refuse_overwrite(args.plot, [args.config, args.summary_json], "--plot")
+
+
+def _last_positions(system: object) -> object:
+    """The joint positions to remember (issue 28), read before the drives are disabled."""
+    from hofto_hw.runtime.positions import LastPositions
+
+    g, cfg = system.group, system.cfg  # type: ignore[attr-defined]
+    return LastPositions(
+        list(cfg.robot.joints),
+        g.q.copy(),
+        [d.zero_offset for d in cfg.bus.drives],
+        at_rest=bool(abs(g.qd).max() < 1e-2),
+        latched=list(system.tick.stop.latched_names()),  # type: ignore[attr-defined]
+    )
+
+
+def _save_positions(path: Path, last: object) -> None:
+    """Write the positions file beside the logs; a failure is reported, not fatal."""
+    from hofto_hw.runtime.positions import save_positions
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        save_positions(path, last)  # type: ignore[arg-type]
+    except OSError as exc:
+        print(f"hofto-hw run: {path}: positions not saved: {exc.strerror}", file=sys.stderr)
 
 
 def _start_recorder(cfg: object, args: argparse.Namespace) -> object:

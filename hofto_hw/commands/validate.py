@@ -57,7 +57,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the numbers as JSON")
 
 
-def _model(params: Path, config: str | None) -> tuple[RobotModel, SystemConfig]:
+def _model(params: Path, config: str | None) -> tuple[RobotModel, SystemConfig, np.ndarray | None]:
     from hofto_hw.config.loader import load_config
     from hofto_hw.config.locate import find_config
     from hofto_hw.model import RobotModel
@@ -68,7 +68,7 @@ def _model(params: Path, config: str | None) -> tuple[RobotModel, SystemConfig]:
     cfg = load_config(cfg_path)
     model = RobotModel.from_config(cfg.robot, apply_parameters=False)
     apply_parameters(model, pf, str(params))
-    return model, cfg
+    return model, cfg, pf.drive_gains
 
 
 def run(args: argparse.Namespace) -> int:
@@ -79,28 +79,42 @@ def run(args: argparse.Namespace) -> int:
         png = Path("out") / f"validate_{args.parameters.stem}.png"
     inputs = [args.parameters, args.compare, args.config, args.columns, *args.recordings]
     refuse_overwrite(png, inputs, "--plot")
-    model, cfg = _model(args.parameters, args.config)
+    model, cfg, gains = _model(args.parameters, args.config)
     models = {args.parameters.stem: model}
+    model_gains = {args.parameters.stem: gains}
     if args.compare is not None:
-        other, _ = _model(args.compare, args.config)
+        other, _, other_gains = _model(args.compare, args.config)
         models[args.compare.stem] = other
+        model_gains[args.compare.stem] = other_gains
     opts = Conditioning(args.cutoff, args.filter_torque, 1, args.drop_bad_rows)
     search = [args.parameters.parent, cfg.robot.urdf.parent]
     rows = parse_rows(args.rows)
-    loaded = load_samples(args.recordings, args.columns, rows, opts, search, robot=cfg.robot.name)
+    # each model against the torque on its own drive gains (a calibrated model's scale)
+    by_gains: dict = {}
+    for g in model_gains.values():
+        key = None if g is None else tuple(g)
+        if key not in by_gains:
+            by_gains[key] = load_samples(
+                args.recordings, args.columns, rows, opts, search, robot=cfg.robot.name, gains=g
+            )
+    loaded = by_gains[None if gains is None else tuple(gains)]
 
     report: dict = {"files": [], "models": list(models)}
-    taus, preds = [], {k: [] for k in models}
-    for s, rec in loaded:
+    taus: dict = {k: [] for k in models}
+    preds: dict = {k: [] for k in models}
+    for i, (_s, rec) in enumerate(loaded):
         entry = {"file": rec.source, "samples": rec.n_samples, "models": {}}
-        taus.append(s.tau)
         for name, m in models.items():
-            tau_hat = predict(m, s.q, s.qd, s.qdd)
+            g = model_gains[name]
+            sm = by_gains[None if g is None else tuple(g)][i][0]
+            tau_hat = predict(m, sm.q, sm.qd, sm.qdd)
             preds[name].append(tau_hat)
-            entry["models"][name] = errors(s.tau, tau_hat).as_dict()
+            taus[name].append(sm.tau)
+            entry["models"][name] = errors(sm.tau, tau_hat).as_dict()
         report["files"].append(entry)
-    tau_all = np.vstack(taus)
-    report["overall"] = {name: errors(tau_all, np.vstack(p)).as_dict() for name, p in preds.items()}
+    report["overall"] = {
+        name: errors(np.vstack(taus[name]), np.vstack(p)).as_dict() for name, p in preds.items()
+    }
     if png is not None:
         report["plot"] = str(png)
     # numbers first: a figure that cannot be written must not cost the user the results

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from hofto_hw.config.base import FileModel, PositiveFloat
 
@@ -27,6 +27,49 @@ class DriveIdentity(FileModel):
     vendor_id: U32 = Field(description="0x1018:1 vendor id")
     product_code: U32 = Field(description="0x1018:2 product code")
     revision: U32 | None = Field(None, description="0x1018:3 revision; None = any")
+
+
+class HomingConfig(FileModel):
+    """CiA 402 homing of one axis (mode 6), joint side SI; ``homing: none`` = absolute encoder.
+
+    ``offset``: the joint angle the home position stands for (written as 0x607C in counts).
+    """
+
+    method: Annotated[int, Field(ge=-128, le=127)] = Field(
+        description="0x6098 homing method (35/37: current position, 17: negative switch)"
+    )
+    speeds: tuple[PositiveFloat, PositiveFloat] = Field(
+        description="0x6099 search for switch, search for zero [rad/s]"
+    )
+    acceleration: PositiveFloat = Field(description="0x609A homing acceleration [rad/s²]")
+    offset: float = Field(0.0, description="joint angle at the home position, 0x607C [rad]")
+    timeout: PositiveFloat = Field(description="homing must end within this time [s]")
+    tolerance: PositiveFloat = Field(
+        0.01, description="largest distance of the end position from offset [rad]"
+    )
+
+    @model_validator(mode="after")
+    def _method(self) -> HomingConfig:
+        if self.method == 0:
+            raise ValueError("method 0 is 'no homing'; write homing: none")
+        return self
+
+
+class BrakeConfig(FileModel):
+    """Holding brake of one axis. ``control``: ``drive`` (the drive opens it on Operation
+    enabled, after its own release delay) or ``output`` (the master sets 0x60FE:1 bit 0)."""
+
+    control: Literal["drive", "output"] = Field("drive", description="who opens the brake")
+    release_delay: Annotated[float, Field(ge=0.0, le=5.0)] = Field(
+        description="time the brake takes to open [s]; no motion before it"
+    )
+    engage_delay: Annotated[float, Field(ge=0.0, le=5.0)] = Field(
+        description="time the brake takes to close [s]; power stays on that long (cat 1)"
+    )
+    holding_torque: PositiveFloat = Field(description="rated holding torque, joint side [N·m]")
+    release_bound: PositiveFloat = Field(
+        5e-4, description="largest joint motion while the brake opens [rad]"
+    )
 
 
 class DriveConfig(FileModel):
@@ -62,6 +105,15 @@ class DriveConfig(FileModel):
         "(drivers/cia402/pdo.py). `hofto-hw config check` loads it and checks it against "
         "loop.rate_hz",
     )
+    homing: HomingConfig | None = Field(
+        None, description="homing of an incremental axis; none = absolute encoder"
+    )
+    brake: BrakeConfig | None = Field(None, description="holding brake; none = no brake")
+
+    @field_validator("homing", "brake", mode="before")
+    @classmethod
+    def _no_homing(cls, value: object) -> object:
+        return None if value == "none" else value
 
     @model_validator(mode="after")
     def _raw_ranges(self) -> DriveConfig:

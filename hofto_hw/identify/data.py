@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -181,6 +181,21 @@ class ColumnMap(FileModel):
         for c in self.extra.values():
             cols += c
         return cols
+
+
+def with_drive_gains(cmap: ColumnMap, gains: Sequence[float] | np.ndarray | None) -> ColumnMap:
+    """``cmap`` reading current with ``gains`` [N·m/A] (n,) instead of its own
+    ``current_to_torque`` (a parameters file's calibrated ``drive_gains``); a map that reads
+    torque, or ``gains`` None, is returned as it is."""
+    if gains is None or cmap.current is None:
+        return cmap
+    values = [float(g) for g in np.asarray(gains, dtype=float).reshape(-1)]
+    if len(values) != cmap.n_joints:
+        raise ConfigError(
+            f"{cmap.name}: the model's drive_gains has {len(values)} gains, the column map "
+            f"reads {cmap.n_joints} currents"
+        )
+    return cmap.model_copy(update={"current_to_torque": values})
 
 
 def load_column_map(path: str | Path | ColumnMap, robot: str | None = None) -> ColumnMap:

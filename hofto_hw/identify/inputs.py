@@ -8,6 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from hofto_hw.commands.args import parse_rows
 from hofto_hw.errors import UserError
 from hofto_hw.identify.data import (
@@ -17,6 +19,7 @@ from hofto_hw.identify.data import (
     count_columns,
     load_column_map,
     load_recording,
+    with_drive_gains,
 )
 from hofto_hw.identify.pipeline import Samples
 
@@ -63,10 +66,13 @@ def load_samples(
     search: list[Path],
     *,
     robot: str | None = None,
+    gains: np.ndarray | None = None,
 ) -> list[tuple[Samples, Recording]]:
     """Load and condition every recording; (samples for the fit, the conditioned recording).
 
     With ``robot`` set, a column map written for another robot is refused (its ``robot``).
+    ``gains`` (n,) [N·m/A]: a model's drive gains, replacing the current-to-torque gains of a
+    map that reads current (``data.with_drive_gains``).
     """
     out = []
     for spec in specs:
@@ -75,7 +81,7 @@ def load_samples(
         if cmap is None and path.suffix.lower() != ".mcap":
             cmap = find_column_map(path, search)
         if cmap is not None:
-            cmap = load_column_map(cmap, robot=robot)
+            cmap = with_drive_gains(load_column_map(cmap, robot=robot), gains)
         rec = load_recording(
             path,
             cmap,
@@ -92,3 +98,28 @@ def load_samples(
         assert rec.qdd is not None
         out.append((Samples(rec.q, rec.qd, rec.qdd, rec.tau, rec.source), rec))
     return out
+
+
+def configured_gains(
+    specs: list[str], columns: Path | None, search: list[Path], robot: str | None = None
+) -> np.ndarray:
+    """The current-to-torque gains (n,) [N·m/A] the column maps of ``specs`` read current
+    with; UserError when a recording has no current column map or the maps differ."""
+    found: np.ndarray | None = None
+    for spec in specs:
+        path, _ = split_spec(spec)
+        if columns is None and path.suffix.lower() == ".mcap":
+            raise UserError(f"{path}: an MCAP log holds joint torque, not current: no gain")
+        where = columns if columns is not None else find_column_map(path, search)
+        cmap = load_column_map(where, robot=robot)
+        if cmap.current_to_torque is None:
+            raise UserError(f"{where}: reads torque columns, not current: no gain to calibrate")
+        g = np.asarray(cmap.current_to_torque, dtype=float)
+        if found is not None and not np.array_equal(found, g):
+            raise UserError(
+                f"{where}: current_to_torque {g.tolist()} differs from the other recordings' "
+                f"{found.tolist()}; calibrate recordings read with the same gains"
+            )
+        found = g
+    assert found is not None
+    return found

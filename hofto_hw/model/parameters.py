@@ -37,6 +37,12 @@ Format (YAML, UTF-8; ``version`` 1). All values SI at the joint side.
           std: 0.01                        # standard deviation (OLS/WLS), null if unknown
           relative_std_percent: 0.8
           definition: {shoulder_pan_joint.Izz: 1.0, shoulder_lift_joint.m: 0.031, ...}
+    drive_gains:                 # optional: current -> joint torque [N·m/A] the model is on
+      values: [...]              # replaces a current column map's current_to_torque wherever
+      std: [...]                 # recordings are read for this model (replay, payload, tune)
+      calibrated: [true, ...]    # per joint: calibrated with a known load, else as configured
+      configured: [...]          # the column map's gains they replace
+      known_loads: [{file: run.csv, mass: 2.805}]
     fit:                         # statistics on the identification data
       samples: 5000
       condition_number: 85.2
@@ -120,6 +126,8 @@ class ParametersFile:
     sources: list[str] = field(default_factory=list)
     base: list[BaseParameterEntry] = field(default_factory=list)
     fit: dict[str, Any] = field(default_factory=dict)
+    drive_gains: np.ndarray | None = None
+    drive_gains_info: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -202,6 +210,11 @@ def to_dict(pf: ParametersFile) -> dict[str, Any]:
             "friction": friction,
         },
         "base": {"count": len(base), "parameters": base},
+        **(
+            {"drive_gains": {"values": _floats(pf.drive_gains), **_plain(pf.drive_gains_info)}}
+            if pf.drive_gains is not None
+            else {}
+        ),
         "fit": _plain(pf.fit),
     }
 
@@ -315,6 +328,15 @@ def read_parameters(path: str | Path) -> ParametersFile:
     quadratic = (
         r.array(fr["quadratic"], "model.friction.quadratic", (n,)) if "quadratic" in fr else None
     )
+    gains, gains_info = None, {}
+    if data.get("drive_gains") is not None:
+        block = data["drive_gains"]
+        if not isinstance(block, dict) or "values" not in block:
+            raise r.fail("drive_gains", "expected a mapping with values: [n gains N·m/A]")
+        gains = r.array(block["values"], "drive_gains.values", (n,))
+        if np.any(gains <= 0.0):
+            raise r.fail("drive_gains.values", f"gains must be > 0 N·m/A, got {gains.tolist()}")
+        gains_info = {k: v for k, v in block.items() if k != "values"}
     robot = r.get(data, "robot", "")
     sha = r.get(data, "urdf_sha256", "")
     smooth_velocity = r.number(fr.get("smooth_velocity") or 0.0, "model.friction.smooth_velocity")
@@ -341,6 +363,8 @@ def read_parameters(path: str | Path) -> ParametersFile:
         sources=[str(s) for s in data.get("sources") or []],
         base=base_entries,
         fit=dict(data.get("fit") or {}),
+        drive_gains=gains,
+        drive_gains_info=gains_info,
     )
     check_physical(pf, src)
     return pf

@@ -11,7 +11,13 @@ import numpy as np
 
 from hofto_hw.config.models import ObserverConfig
 from hofto_hw.errors import ConfigError, UserError
-from hofto_hw.identify.data import BadRows, Recording, load_column_map, load_recording
+from hofto_hw.identify.data import (
+    BadRows,
+    Recording,
+    load_column_map,
+    load_recording,
+    with_drive_gains,
+)
 from hofto_hw.observers import Observer, make_observer
 from hofto_hw.observers.kernels import Backend
 from hofto_hw.observers.stability import check_observer
@@ -73,7 +79,11 @@ def load_for_replay(
     """The recording, with the robot's default column map when none is given (a map for
     another robot is refused). Replay needs no ``extra`` columns: they are not read."""
     cmap_path = columns if columns is not None else default_columns(setup, path)
-    cmap = None if cmap_path is None else load_column_map(cmap_path, setup.config.robot.name)
+    cmap = None
+    if cmap_path is not None:  # current read with the model's calibrated gains, if it has them
+        cmap = with_drive_gains(
+            load_column_map(cmap_path, setup.config.robot.name), setup.parameters.drive_gains
+        )
     rec = load_recording(
         path,
         cmap,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -149,8 +150,12 @@ def build(
     clock: str = "sim",
     sink: RecordSink | None = None,
     contact: bool = True,
+    positions: Path | None = None,
 ) -> System:
     """Build and start everything: drives enabled in CSP, holding; the loop not yet run.
+
+    ``positions``: the state file of the last clean shutdown (``runtime.positions``); a joint
+    read more than half a motor turn away from it is refused before any drive is enabled.
 
     The drives are enabled last, after every compiled kernel is warmed (seconds when the
     cache is cold): an enabled drive on a bus whose process data stops for longer than its
@@ -206,9 +211,14 @@ def build(
     tick.diag_every = max(1, round(rate / 10.0))
     if s.collision is not None:
         tick.settle_ticks = round(s.collision.settle_time * rate)
+    if positions is not None:
+        check_start_positions(cfg, bus, group, positions)
+    braked = preload_braked_axes(cfg, model, group)
     if clock != "sim":
         collect_before_loop()  # the loop's own collection then fits inside the bus watchdog
     enable_drives(bus, group)
+    if braked.size:
+        await_brake_release(cfg, bus, group, braked)
     tick.start()
     period_ns = round(1e9 / rate)
     clk: RealClock | SimClock = SimClock(period_ns) if clock == "sim" else RealClock(period_ns)
@@ -260,6 +270,73 @@ def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:
         bus.close()
         raise
     return bus, group
+
+
+def check_start_positions(cfg: SystemConfig, bus: Transport, group: DriveGroup, path: Path) -> None:
+    """The drives' positions against the last clean shutdown's (one line naming joint,
+    stored and read position; the bus is closed when refused)."""
+    from hofto_hw.runtime.positions import check_positions, load_positions, turn_bounds
+
+    assert cfg.bus is not None
+    try:
+        group.cycle()
+        bounds = turn_bounds([d.gear_ratio for d in cfg.bus.drives])
+        # incremental axes (homing configured) start anywhere: homing sets their zero
+        bounds[[d.homing is not None for d in cfg.bus.drives]] = np.inf
+        check_positions(load_positions(path), list(cfg.robot.joints), group.q, bounds, path)
+    except BaseException:
+        bus.close()
+        raise
+
+
+def preload_braked_axes(cfg: SystemConfig, model: RobotModel, group: DriveGroup) -> np.ndarray:
+    """Before enabling: the gravity torque of the identified model as the torque offset
+    (0x60B2) of every axis with a holding brake (``bus.drives[i].brake``), so the drive holds
+    the load the moment the brake opens; returns those axes (int array, maybe empty)."""
+    assert cfg.bus is not None
+    braked = np.array([i for i, d in enumerate(cfg.bus.drives) if d.brake is not None], int)
+    if braked.size:
+        group.cycle()
+        gravity = model.create_data().gravity(group.q)
+        offset = np.zeros(group.n)
+        offset[braked] = gravity[braked]
+        group.command_position(group.q.copy(), tau_offset=offset)
+    return braked
+
+
+def await_brake_release(
+    cfg: SystemConfig, bus: Transport, group: DriveGroup, braked: np.ndarray
+) -> None:
+    """After enabling: open the master-controlled brakes (0x60FE:1 bit 0), hold the position
+    for the longest release delay, then refuse (one line naming the joint; the bus is closed)
+    a joint that moved more than its ``release_bound`` while its brake opened."""
+    from hofto_hw.errors import UserError
+
+    assert cfg.bus is not None
+    drives = cfg.bus.drives
+    try:
+        q0 = group.q.copy()
+        for i in braked:
+            if drives[i].brake.control == "output":  # type: ignore[union-attr]
+                bus.write_value(int(i), 0x60FE, 1, "u32", 1)
+        wait = max(drives[i].brake.release_delay for i in braked)  # type: ignore[union-attr]
+        for _ in range(int(np.ceil(wait / bus.cycle_time)) + 3):
+            group.hold()
+            bus.wait_next_cycle()
+            group.cycle()
+        names = list(cfg.robot.joints)
+        for i in braked:
+            moved = float(group.q[i] - q0[i])
+            bound = drives[i].brake.release_bound  # type: ignore[union-attr]
+            if abs(moved) > bound:
+                raise UserError(
+                    f"{names[i]}: moved {moved * 1e3:+.2f} mrad while its brake opened (bound "
+                    f"{bound * 1e3:g} mrad): the load is not held (gravity preload) or the "
+                    "brake drags; motion refused"
+                )
+    except BaseException:
+        bus.close()
+        raise
 
 
 def enable_drives(bus: Transport, group: DriveGroup) -> None:

@@ -34,6 +34,7 @@ from drivers.sim.control_socket import claim_control_path
 from hofto_hw.control.joint_motion import DRAG, HOLD, MODE_NAMES, MOVE
 from hofto_hw.errors import UserError
 from hofto_hw.runtime import teach
+from hofto_hw.runtime.axes import axes_state
 from hofto_hw.runtime.notify import Notifier, NotifyError, Watchdog
 
 
@@ -62,6 +63,7 @@ def status_of(system: Any) -> dict[str, Any]:
         "recorder": _recorder_status(getattr(system, "sink", None)),
         "teach": None if tick.recording is None else tick.recording.status(),
         "playback": _playback_status(tick.playback),
+        "axes": axes_state(system),
     }
 
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from drivers.cia402.codes import describe_error_code
 from drivers.transport import describe_status
+from hofto_hw.runtime.axes import axes_state, axes_text
 from safety.stop import EventKind, Fault, kind_name
 
 _CATEGORY_WORDS = {
@@ -91,6 +92,7 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
         "observers": observers,
         "latched": tick.stop.latched_names(),
         "log": log,
+        "axes": axes_state(system),
     }
     script = getattr(system, "drag_script", None)
     if script is not None:
@@ -147,6 +149,8 @@ def format_summary(s: dict[str, Any]) -> str:
         lines.append(text)
     if not s["events"]:
         lines.append("no safety events")
+    if s.get("axes"):
+        lines.append(axes_text(s["axes"]))
     d = s.get("drag")
     if d is not None:
         if d["steady_speed_mps"] is None:

@@ -662,6 +662,11 @@ class Tick:
         FAULT_RESET_TICKS ticks (the drive leaves Fault only if its cause is gone); then the
         reset is tried once more and refused if any cause persists."""
         self.reset_requested = False
+        din = self.group.transport.tx["digital_inputs"]
+        if (din & sm.DIN_STO).any():  # STO is a state: no reset enables through it
+            names = [self.group.names[i] for i in np.flatnonzero(din & sm.DIN_STO)]
+            self.reset_result = "reset refused, safe torque off active: " + ", ".join(names)
+            return
         done, msg = self.stop.reset()
         if not done and not self._edges_tried and self.stop.active & _DRIVE_CAUSES:
             if not self.stop.active & self.stop.latched & ~_DRIVE_CAUSES:

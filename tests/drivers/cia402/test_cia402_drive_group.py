@@ -248,8 +248,16 @@ def test_persistent_fault_refuses_reset_with_the_decoded_cause(
 
 
 def test_enable_timeout_names_axis_state_and_statusword(group: DriveGroup, bus: SimBus) -> None:
-    bus.drives.set_safe_torque_off(2, True)
     group.set_mode(Mode.CSP)
+    real_cycle, calls = group.cycle, [0]
+
+    def cycle() -> int:  # STO asserted just after enable()'s STO check: a stuck transition
+        calls[0] += 1
+        if calls[0] == 2:
+            bus.drives.set_safe_torque_off(2, True)
+        return real_cycle()
+
+    group.cycle = cycle  # type: ignore[method-assign]
     t0 = bus.plant.t
     with pytest.raises(DriveTimeoutError) as e:
         group.enable()

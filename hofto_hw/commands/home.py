@@ -1,0 +1,74 @@
+"""``hofto-hw home [--joint J]``: CiA 402 homing of the incremental axes (``homing:`` per
+drive in ``bus.drives``; ``homing: none`` = absolute encoder, never homed).
+
+Commissioning step run while the service is stopped: it opens the bus itself, refuses when a
+drive is in Fault (faults latch: reset them first), enables the drives holding their
+positions, homes each axis in turn (drivers/cia402/homing.py: method, speeds, acceleration,
+offset, timeout), returns it to the loop's mode (CSP), disables the drives and closes the bus.
+One line per homed axis; a failure (timeout, homing error, end position off the offset) is one
+error line (exit code 2), the axes after it are not homed.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from hofto_hw.commands.args import add_config
+from hofto_hw.errors import UserError
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    add_config(parser, default="er3a")
+    parser.add_argument("--joint", help="home only this joint (name or 1-based number)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from drivers.cia402.homing import home_axes, homing_plan
+    from drivers.cia402.state_machine import State
+    from hofto_hw.commands.zero import joint_index
+    from hofto_hw.config import load_config
+    from hofto_hw.config.locate import find_config
+    from hofto_hw.runtime.compose import build_bus, enable_drives
+
+    config_path = find_config(args.config)
+    cfg = load_config(config_path)
+    if cfg.bus is None:
+        raise UserError(f"{config_path}: bus: section missing: no drive to home")
+    joints = list(cfg.robot.joints)
+    axes = [i for i, d in enumerate(cfg.bus.drives) if d.homing is not None]
+    if args.joint is not None:
+        j = joint_index(args.joint, joints)
+        if cfg.bus.drives[j].homing is None:
+            raise UserError(
+                f"{config_path}: bus.drives[{j}].homing: none: {joints[j]} has an absolute "
+                "encoder, nothing to home"
+            )
+        axes = [j]
+    if not axes:
+        print("home: every axis has homing: none (absolute encoders): nothing to home")
+        return 0
+    clock = "sim" if str(cfg.bus.transport) == "sim" else "real"
+    bus, group = build_bus(cfg, clock)
+    try:
+        group.cycle()
+        faulted = [
+            joints[i] for i in range(group.n) if group.states[i] >= State.FAULT_REACTION_ACTIVE
+        ]
+        if faulted:
+            raise UserError(
+                f"home: refused: {', '.join(faulted)} in Fault (latched); reset the faults first"
+            )
+        enable_drives(bus, group)
+        plans = [
+            homing_plan(cfg.bus.drives[i].homing, group.scaling, i, bus.cycle_time, joints[i])  # type: ignore[arg-type]
+            for i in axes
+        ]
+        failure = home_axes(group, plans)
+        group.disable()
+    finally:
+        bus.close()
+    for plan in plans:
+        if failure.startswith(plan.name + ":"):
+            raise UserError(f"home: {failure}")
+        print(f"home: {plan.name} homed (method {plan.method}) at {plan.offset:.4f} rad")
+    return 0
