@@ -75,9 +75,9 @@ def _sim(observer: str, **kw) -> DragSim:
 def _scratch_config(config: Path, lipschitz: float, folder: Path) -> Path:
     """A copy of ``config`` in ``folder`` whose loop HOFTO's last gain row (its Lipschitz
     constant) is ``lipschitz``; relative paths keep working through links."""
-    import yaml
 
     from hofto_hw.config import read_yaml
+    from hofto_hw.config.loader import dump_yaml
 
     data = read_yaml(config, "config file")
     hofto = (data.get("loop") or {}).get("observers", {}).get("hofto")
@@ -88,7 +88,7 @@ def _scratch_config(config: Path, lipschitz: float, folder: Path) -> Path:
         if item != config:
             (folder / item.name).symlink_to(item.resolve())
     out = folder / config.name
-    out.write_text(yaml.safe_dump(data, sort_keys=False))
+    out.write_text(dump_yaml(data, sort_keys=False))
     return out
 
 

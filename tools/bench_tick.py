@@ -676,10 +676,9 @@ def ethercat_loop(config: Path, quick: bool, floor: float) -> dict:
     (``runs_stopped_before``)."""
     if os.geteuid() != 0:
         return {"skipped": "needs root (a veth pair and raw sockets)"}
-    import yaml
-
     from drivers.sim.esc import veth
     from hofto_hw.config import load_config, read_yaml
+    from hofto_hw.config.loader import dump_yaml
     from hofto_hw.errors import UserError
 
     sys.path.insert(0, str(ROOT / "tools"))
@@ -704,7 +703,7 @@ def ethercat_loop(config: Path, quick: bool, floor: float) -> dict:
     try:
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "ethercat.yaml"
-            path.write_text(yaml.safe_dump(data))
+            path.write_text(dump_yaml(data))
             cfg = load_config(path)
             for _ in range(ETHERCAT_ATTEMPTS):
                 try:  # a fresh arm for every run

@@ -122,9 +122,7 @@ def _check_config(
     """A config for the check: the base config with its first ``n`` drives running
     ``profile`` (identity from the profile), the bus on ``interface``, ``options`` merged
     into ``bus.ethercat`` / ``bus.canopen``."""
-    import yaml
-
-    from hofto_hw.config.loader import read_yaml
+    from hofto_hw.config.loader import dump_yaml, read_yaml
 
     data = read_yaml(base, "config")
     bus = data.get("bus") or {}
@@ -132,7 +130,7 @@ def _check_config(
     if len(drives) < n:
         raise UserError(f"{base}: bus.drives has {len(drives)} drives, --axes asks for {n}")
     prof_file = folder / f"{profile.name}.yaml"
-    prof_file.write_text(yaml.safe_dump(profile.model_dump(mode="json"), sort_keys=False))
+    prof_file.write_text(dump_yaml(profile.model_dump(mode="json"), sort_keys=False))
     for d in drives[:n]:
         d["profile"] = str(prof_file)
         d["identity"] = {
@@ -152,7 +150,7 @@ def _check_config(
         if isinstance(robot.get(key), str) and not Path(robot[key]).is_absolute():
             robot[key] = str((base.parent / robot[key]).resolve())
     out = folder / "check.yaml"
-    out.write_text(yaml.safe_dump(data, sort_keys=False))
+    out.write_text(dump_yaml(data, sort_keys=False))
     return out
 
 

@@ -11,14 +11,13 @@ import argparse
 import json
 from pathlib import Path
 
-import yaml
-
 from hofto_hw.commands.args import (
     HelpFormatter,
     finite_positive_float,
     output_file,
     refuse_overwrite,
 )
+from hofto_hw.config.loader import dump_yaml
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -64,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         text = "# written by hofto-hw payload identify from " + ", ".join(
             Path(s.source).name for s, _ in loaded
         )
-        body = text + "\n" + yaml.safe_dump(block, sort_keys=False)
+        body = text + "\n" + dump_yaml(block, sort_keys=False)
         write_atomic(args.output, body, "the payload block")
     if args.json:
         out = {

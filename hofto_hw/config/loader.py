@@ -233,6 +233,19 @@ def excerpt(value: Any, limit: int = 80) -> str:
     return shown if len(shown) <= limit else shown[: limit - 3] + "..."
 
 
+class NoAliasDumper(yaml.SafeDumper):
+    """YAML writer for every file the stack writes: values written out, never as aliases
+    (:func:`read_yaml` refuses aliases, so a file we write must read back)."""
+
+    def ignore_aliases(self, data: Any) -> bool:
+        return True
+
+
+def dump_yaml(data: Any, **kwargs: Any) -> str:
+    """``yaml.safe_dump`` without anchors and aliases (see :class:`NoAliasDumper`)."""
+    return yaml.dump(data, Dumper=NoAliasDumper, **kwargs)
+
+
 def read_yaml(
     path: str | Path,
     what: str,

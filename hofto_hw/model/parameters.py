@@ -69,9 +69,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import yaml
 
-from hofto_hw.config.loader import excerpt, read_yaml
+from hofto_hw.config.loader import dump_yaml, excerpt, read_yaml
 from hofto_hw.errors import ModelError
 from hofto_hw.model.friction import FrictionParams
 from hofto_hw.outputs import write_atomic
@@ -234,7 +233,7 @@ def _plain(obj: Any) -> Any:
 def write_parameters(path: str | Path, pf: ParametersFile) -> None:
     """Write ``pf`` as YAML to ``path`` (atomically; UserError naming the file on failure)."""
     text = "# Identified dynamic parameters; format: hofto_hw/model/parameters.py\n"
-    text += yaml.safe_dump(to_dict(pf), sort_keys=False, default_flow_style=None, width=100)
+    text += dump_yaml(to_dict(pf), sort_keys=False, default_flow_style=None, width=100)
     write_atomic(path, text, "parameters file")
 
 

@@ -34,7 +34,7 @@ from pydantic import Field
 
 from hofto_hw.config.base import FileModel
 from hofto_hw.config.collision import CollisionConfig
-from hofto_hw.config.loader import read_model
+from hofto_hw.config.loader import NoAliasDumper, read_model
 from hofto_hw.config.models import ObserverConfig
 from hofto_hw.errors import ConfigError
 from hofto_hw.outputs import write_atomic
@@ -102,7 +102,7 @@ def read_thresholds(path: str | Path) -> ThresholdsFile:
 def write_thresholds(path: str | Path, content: ThresholdsFile) -> None:
     """Write ``content`` as YAML (lists of numbers in flow style, one line each)."""
 
-    class _Dumper(yaml.SafeDumper):
+    class _Dumper(NoAliasDumper):
         pass
 
     def _list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:

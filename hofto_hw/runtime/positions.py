@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from hofto_hw.config.loader import dump_yaml
 from hofto_hw.errors import UserError
 
 STATE_FILE = "last_positions.yaml"
@@ -88,7 +89,7 @@ def save_positions(path: Path, last: LastPositions) -> None:
     write_atomic(
         path,
         "# hofto-hw: joint positions at the last clean shutdown\n"
-        + yaml.safe_dump(doc, sort_keys=False),
+        + dump_yaml(doc, sort_keys=False),
     )
 
 

@@ -10,6 +10,7 @@ from typing import Any
 import yaml
 
 from hofto_hw.config.drive_profile import DriveProfile
+from hofto_hw.config.loader import dump_yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -280,7 +281,7 @@ def write_mixed_config(
     data = yaml.safe_load((base or ROOT / "configs" / "er3a.yaml").read_text())
     for i, (d, p) in enumerate(zip(data["bus"]["drives"], profiles, strict=True)):
         path = folder / f"{p['name']}.yaml"
-        path.write_text(yaml.safe_dump(p, sort_keys=False))
+        path.write_text(dump_yaml(p, sort_keys=False))
         d["profile"] = str(path)
         d["identity"] = {
             "vendor_id": p["identity"]["vendor_id"],
@@ -293,7 +294,7 @@ def write_mixed_config(
             if isinstance(section.get(key), str) and not Path(section[key]).is_absolute():
                 section[key] = str((ROOT / "configs" / section[key]).resolve())
     out = folder / "mixed.yaml"
-    out.write_text(yaml.safe_dump(data, sort_keys=False))
+    out.write_text(dump_yaml(data, sort_keys=False))
     return out
 
 

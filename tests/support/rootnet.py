@@ -163,6 +163,8 @@ def run_config(
     """
     import yaml
 
+    from hofto_hw.config.loader import dump_yaml
+
     data = yaml.safe_load(base.read_text())
     data["robot"]["urdf"] = str((base.parent / data["robot"]["urdf"]).resolve())
     data["bus"].update(bus or {})
@@ -177,7 +179,7 @@ def run_config(
     if edit is not None:
         edit(data)
     path = folder / name
-    path.write_text(yaml.safe_dump(data))
+    path.write_text(dump_yaml(data))
     return path, data
 
 

@@ -139,10 +139,12 @@ def profile_yaml(profile: DriveProfile, header: str = "") -> str:
     schema order, ``header`` as leading comment lines. :func:`load_profile` reads it back equal."""
     import yaml
 
+    from hofto_hw.config.loader import NoAliasDumper
+
     class _Hex(int):
         width = 4
 
-    class _Dumper(yaml.SafeDumper):
+    class _Dumper(NoAliasDumper):
         pass
 
     def _hex(dumper: yaml.SafeDumper, value: _Hex) -> yaml.ScalarNode:
