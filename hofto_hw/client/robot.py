@@ -260,7 +260,7 @@ class Robot:
         """Replay a taught path (``hofto-hw mode drag --record``'s file): a move to its
         start, then the path time-scaled into the limits."""
         path = str(Path(path_file).resolve())
-        r = self._call({"cmd": "replay", "file": path}, timeout=120.0)
+        r = self._call({"cmd": "replay", "file": path}, timeout=600.0)  # planning: CPU-bound
         m = Motion(self, "replay", str(r.get("message", "")), float(r.get("duration_s", 0.0)))
         if wait:
             m.wait(timeout)

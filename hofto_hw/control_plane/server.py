@@ -5,7 +5,8 @@ Every client is served by one selector loop without blocking the others: reads a
 are non-blocking, a request line is at most ``protocol.MAX_LINE`` bytes (a longer one is
 answered with one line and the connection closed), a line that does not complete within
 ``line_timeout`` is answered and closed (a client trickling bytes), at most ``max_clients``
-connections are open (one more is answered "too many clients" and closed), a client that
+connections are open (one more closes the connection idle longest, or is answered "too many
+clients" when none is idle: an operator's stop always gets in), a client that
 does not read its replies is closed when ``MAX_PENDING_OUT`` bytes wait for it. Lines are
 taken at most ``LINES_PER_TURN`` per connection per turn, and every turn handles the ``stop``
 requests of all connections first: a stop writes the channel's stop word and is answered at
@@ -200,17 +201,28 @@ class ControlPlane:
             c.pid = struct.unpack("3i", cred)[0]
         except OSError:
             pass
-        if len(self.conns) >= self.max_clients:
+        if len(self.conns) >= self.max_clients and not self._evict_idle():
             try:
-                sock.send(
-                    pr.dumps({"ok": False, "message": f"too many clients ({self.max_clients})"})
-                )
+                msg = f"too many clients ({self.max_clients}), none idle"
+                sock.send(pr.dumps({"ok": False, "message": msg}))
             except OSError:
                 pass
             sock.close()
             return
         self.conns[c.ident] = c
         self.sel.register(sock, selectors.EVENT_READ, c)
+
+    def _evict_idle(self) -> bool:
+        """At ``max_clients``: close the connection idle longest (not the holder, nothing in
+        progress), so that a new one (an operator's stop) is always served."""
+        idle = [
+            c for c in self.conns.values() if c is not self.holder and not c.busy and not c.lines
+        ]
+        if not idle:
+            return False
+        c = min(idle, key=lambda c: c.last)
+        self._refuse_and_close(c, f"closed: {self.max_clients} clients, this one idle longest")
+        return True
 
     def _read(self, c: Conn, now: float) -> None:
         try:

@@ -1,0 +1,141 @@
+"""The Python client against a real ``hofto-hw run --clock real --socket S`` on the simulated
+bus: stream, move, drag with the lease, a client killed mid-drag, ``on()``."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from support.control_service import ROOT, Service, socket_config, wait_for
+
+from hofto_hw.client import Refused, Robot
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory):
+    tmp = tmp_path_factory.mktemp("svc")
+    svc = Service(tmp, "--hold", "--no-collision")
+    try:
+        yield svc
+    finally:
+        svc.stop()
+
+
+def _at_rest(robot: Robot) -> bool:
+    s = robot.state()
+    return s.mode == "hold" and float(np.abs(s.qd).max()) < 0.01
+
+
+def test_stream_1000_states_at_100_hz_none_missed(service: Service) -> None:
+    with Robot.connect(socket=service.sock) as robot:
+        recs = list(robot.stream(rate_hz=100.0, count=1000))
+    ticks = np.array([r.tick for r in recs])
+    assert len(ticks) == 1000
+    assert np.all(np.diff(ticks) == 10), "a state missed or repeated"
+    assert sum(r.skipped for r in recs) == 0
+    assert all(np.isfinite(r.q).all() and r.q.shape == (6,) for r in recs)
+
+
+def test_state_is_a_typed_snapshot(service: Service) -> None:
+    with Robot.connect(socket=service.sock) as robot:
+        s = robot.state()
+    assert s.q.shape == (6,) and s.qd.shape == (6,) and s.tau.shape == (6,)
+    assert set(s.tau_ext) == {"hofto", "momentum"}
+    assert s.tcp_position.shape == (3,) and s.tcp_rotation.shape == (3, 3)
+    np.testing.assert_allclose(s.tcp_rotation @ s.tcp_rotation.T, np.eye(3), atol=1e-9)
+    assert s.enabling.source == "socket" and not s.enabling.pressed
+    assert s.faults == [] and s.category == -1 and s.tick > 0
+
+
+def test_move_joints_waits_and_reaches_the_target(service: Service) -> None:
+    with Robot.connect(socket=service.sock) as robot:
+        wait_for(lambda: _at_rest(robot), "hold at rest")
+        q0 = robot.state().q_cmd
+        target = q0 + np.array([0.1, -0.05, 0.05, 0.1, -0.1, 0.1])
+        m = robot.move_joints(target, speed=0.5, acceleration=0.5, timeout=120.0)
+        assert m.result == "completed"
+        wait_for(lambda: _at_rest(robot), "rest after the move")
+        assert np.abs(robot.state().q - target).max() < 2e-3
+        with pytest.raises(Refused, match="outside its limits"):
+            robot.move_joints(q0 + np.array([0, 0, 9.0, 0, 0, 0]))
+        m = robot.move_joints(q0, wait=True, timeout=120.0)  # back
+        assert m.done
+
+
+def test_drag_holds_the_lease_and_another_client_is_refused(service: Service) -> None:
+    with Robot.connect(socket=service.sock) as robot, Robot.connect(socket=service.sock) as other:
+        wait_for(lambda: _at_rest(robot), "hold at rest")
+        with robot.drag():
+            s = wait_for(lambda: (st := robot.state()).enabling.drag_active and st, "drag active")
+            assert s.mode == "drag" and s.enabling.pressed
+            with pytest.raises(Refused, match="held by client"):
+                other.move_joints(s.q_cmd)
+            # held for many leases: the renewals keep it
+            t0 = s.t
+            wait_for(lambda: robot.state().t > t0 + 4 * robot.lease_s, "four leases")
+            s = robot.state()
+            assert s.enabling.drag_active and s.faults == []
+        wait_for(lambda: robot.state().mode == "hold", "hold after the drag")
+        assert robot.state().faults == []
+
+
+CLIENT = textwrap.dedent(
+    """
+    import sys, time
+    from hofto_hw.client import Robot
+    robot = Robot.connect(socket=sys.argv[1])
+    with robot.drag():
+        while not robot.state().enabling.drag_active:
+            time.sleep(0.01)
+        print("dragging", flush=True)
+        time.sleep(600)
+    """
+)
+
+
+@pytest.mark.parametrize("how", ["SIGKILL", "SIGSTOP"])
+def test_client_killed_or_hung_mid_drag_stops_the_arm_category_2(
+    service: Service, tmp_path: Path, how: str
+) -> None:
+    """SIGKILL: the connection closes (released at once); SIGSTOP: the connection stays and
+    the lease lapses. Either way: enabling_released, category 2, the arm at rest."""
+    with Robot.connect(socket=service.sock) as robot:
+        wait_for(lambda: _at_rest(robot), "hold at rest")
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        child = subprocess.Popen(
+            [sys.executable, "-c", CLIENT, str(service.sock)],
+            env=env,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        try:
+            assert child.stdout is not None
+            assert child.stdout.readline().strip() == "dragging"
+            child.send_signal(getattr(signal, how))
+            s = wait_for(lambda: (st := robot.state()).faults and st, "a latched stop")
+            assert s.faults == ["enabling_released"] and s.category == 2
+            wait_for(lambda: float(np.abs(robot.state().qd).max()) < 0.01, "at rest")
+        finally:
+            child.kill()
+            child.wait()
+        robot.reset()
+        assert robot.state().faults == []
+
+
+def test_on_sees_the_scripted_collision(tmp_path: Path) -> None:
+    svc = Service(tmp_path, config=socket_config(tmp_path, collision_start=6.0))
+    try:
+        seen: list[dict] = []
+        with Robot.connect(socket=svc.sock) as robot:
+            robot.on("collision", seen.append)
+            wait_for(lambda: seen, "the collision event")
+            assert seen[0]["kind"] == "collision" and seen[0]["category"] == 1
+            assert "collision" in robot.state().faults
+    finally:
+        svc.stop()
