@@ -29,7 +29,6 @@ import os
 import selectors
 import socket
 import struct
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,6 +46,7 @@ from hofto_hw.runtime.timing import percentile_of, summarize
 from safety.stop import EVENT_NAMES, FAULT_NAMES, N_FAULTS
 
 LINES_PER_TURN = 8
+PLAN_CHUNK = 4096  # rows per message from the planner process
 MAX_PENDING_OUT = 1 << 20
 LOOP_ANSWER_TIMEOUT = 5.0  # [s] the loop answers a request within a few ticks
 _MODE_CODE = {"hold": HOLD, "move": MOVE, "drag": DRAG}
@@ -66,6 +66,7 @@ class Conn:
     busy: bool = False  # a request of this connection is being answered
     closing: bool = False
     last: float = 0.0
+    requests: int = 0  # request lines taken
 
     def who(self) -> str:
         name = f"{self.name!r} " if self.name else ""
@@ -129,9 +130,9 @@ class ControlPlane:
         self._seq = 0
         self.events: collections.deque[dict[str, Any]] = collections.deque(maxlen=1024)
         self.events_total = 0
-        # planning (worker thread) and the plan being streamed
-        self._plan_lock = threading.Lock()
-        self._plan_done: list[tuple[Conn, dict, Any, str]] = []
+        # planning (a forked process: Planner) and the plan being streamed
+        self._planner: Planner | None = None
+        self._planner_for: tuple[Conn, dict[str, Any]] | None = None
         self._planning = False
         self.plan_id = 0
         self.plan_traj: Any = None
@@ -160,6 +161,8 @@ class ControlPlane:
             if key.data is None:
                 self._accept(now)
                 continue
+            if key.data == "planner":
+                continue  # read in _planned, one message a turn
             c: Conn = key.data
             if mask & selectors.EVENT_READ:
                 self._read(c, now)
@@ -213,14 +216,15 @@ class ControlPlane:
         self.sel.register(sock, selectors.EVENT_READ, c)
 
     def _evict_idle(self) -> bool:
-        """At ``max_clients``: close the connection idle longest (not the holder, nothing in
-        progress), so that a new one (an operator's stop) is always served."""
+        """At ``max_clients``: close an idle connection (not the holder, nothing in
+        progress; one that never sent a request first, then the one idle longest), so that a
+        new one (an operator's stop) is always served."""
         idle = [
             c for c in self.conns.values() if c is not self.holder and not c.busy and not c.lines
         ]
         if not idle:
             return False
-        c = min(idle, key=lambda c: c.last)
+        c = min(idle, key=lambda c: (c.requests > 0, c.last))  # silent ones first
         self._refuse_and_close(c, f"closed: {self.max_clients} clients, this one idle longest")
         return True
 
@@ -352,6 +356,7 @@ class ControlPlane:
             while c.lines and not c.busy and not c.closing and n < LINES_PER_TURN:
                 n += 1
                 raw = c.lines.popleft()
+                c.requests += 1
                 try:
                     req = pr.parse_request(raw)
                 except pr.ProtocolError as exc:
@@ -555,22 +560,10 @@ class ControlPlane:
         c.busy = True
         self._planning = True
         dt = 1.0 / self.rate_hz
-
-        def work() -> None:
-            try:
-                if cmd == "replay":
-                    pb = teach.plan_replay(Path(req["file"]), q_now, self.model, limits, dt)
-                else:
-                    pb = teach.plan_move(q, q_now, self.model, limits, dt)
-                out = (c, req, pb, "")
-            except UserError as exc:
-                out = (c, req, None, str(exc))
-            except Exception as exc:  # a planner bug: one line, the service goes on
-                out = (c, req, None, f"planning failed: {type(exc).__name__}: {exc}")
-            with self._plan_lock:
-                self._plan_done.append(out)
-
-        threading.Thread(target=work, name="hofto-plan", daemon=True).start()
+        target = q if cmd == "move_joints" else None
+        self._planner = Planner(cmd, req.get("file"), target, q_now, self.model, limits, dt)
+        self._planner_for = (c, req)
+        self.sel.register(self._planner.conn, selectors.EVENT_READ, "planner")
 
     def _joint_target(self, values: list[Any]) -> np.ndarray:
         """move_joints.q -> (n,) [rad]; one line naming the joint for a value that is not a
@@ -587,9 +580,17 @@ class ControlPlane:
         return out
 
     def _planned(self) -> None:
-        with self._plan_lock:
-            done, self._plan_done = self._plan_done, []
-        for c, req, pb, err in done:
+        pl = self._planner
+        if pl is None or not pl.step():
+            return
+        self._planner = None
+        try:
+            self.sel.unregister(pl.conn)
+        except (KeyError, ValueError):
+            pass
+        pl.close()
+        c, req = self._planner_for
+        for pb, err in ((pl.result, pl.error),):
             self._planning = False
             if pb is None:
                 c.busy = False
@@ -910,3 +911,110 @@ class ControlPlane:
         if self._rec_block is not None:
             self._rec_block.close()
             self._rec_block = None
+
+
+class Planner:
+    """Planning in a forked child process (ruckig and the taught path's timing hold the GIL
+    for seconds on a 300 s path: in a thread they would hold the socket up). The child sends
+    the trajectory back in chunks of PLAN_CHUNK rows, one message per turn of the server
+    (:meth:`step`), so a stop is never behind more than one chunk."""
+
+    def __init__(self, cmd, file, target, q_now, model, limits, dt) -> None:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("fork")
+        self.conn, child = ctx.Pipe(duplex=False)
+        self.proc = ctx.Process(
+            target=_plan_child,
+            args=(child, cmd, file, target, q_now, model, limits, dt),
+            name="hofto-plan",
+            daemon=True,
+        )
+        self.proc.start()
+        child.close()
+        self.result: Any = None
+        self.error = ""
+        self._head: dict[str, Any] | None = None
+        self._parts: dict[str, list[np.ndarray]] = {"q": [], "qd": [], "qdd": []}
+
+    def step(self) -> bool:
+        """Read one message if there is one; True when the plan (or its error) is complete."""
+        if not self.conn.poll():
+            if not self.proc.is_alive() and not self.conn.poll():
+                self.error = self.error or "planning failed: the planner process died"
+                return True
+            return False
+        try:
+            kind, payload = self.conn.recv()
+        except (EOFError, OSError):
+            self.error = "planning failed: the planner process died"
+            return True
+        if kind == "error":
+            self.error = payload
+            return True
+        if kind == "head":
+            self._head = payload
+            return False
+        if kind in self._parts:
+            self._parts[kind].append(payload)
+            return False
+        h = self._head
+        assert h is not None
+        from hofto_hw.control.path_timing import Sampled
+
+        traj = Sampled(
+            h["dt"],
+            np.concatenate(self._parts["q"]),
+            np.concatenate(self._parts["qd"]),
+            np.concatenate(self._parts["qdd"]),
+            h["segments"],
+            h["scale"],
+        )
+        self.result = _Planned(h["kind"], h["mode"], h["file"], traj)
+        return True
+
+    def close(self) -> None:
+        self.conn.close()
+        self.proc.join(timeout=1.0)
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+
+
+@dataclass
+class _Planned:
+    kind: str
+    mode: int
+    file: Path | None
+    traj: Any
+
+
+def _plan_child(conn, cmd, file, target, q_now, model, limits, dt) -> None:
+    """The planner process: plan, send the head, the rows in chunks, then "end"."""
+    try:
+        os.nice(5)
+    except OSError:
+        pass
+    try:
+        if cmd == "replay":
+            pb = teach.plan_replay(Path(file), q_now, model, limits, dt)
+        else:
+            pb = teach.plan_move(target, q_now, model, limits, dt)
+    except UserError as exc:
+        conn.send(("error", str(exc)))
+        conn.close()
+        return
+    except Exception as exc:  # a planner bug: one line, the service goes on
+        conn.send(("error", f"planning failed: {type(exc).__name__}: {exc}"))
+        conn.close()
+        return
+    tr = pb.traj
+    head = {"kind": pb.kind, "mode": pb.mode, "file": pb.file, "dt": tr.dt,
+            "segments": list(tr.segments), "scale": float(tr.scale)}  # fmt: skip
+    conn.send(("head", head))
+    for name in ("q", "qd", "qdd"):
+        a = getattr(tr, name)
+        for i in range(0, a.shape[0], PLAN_CHUNK):
+            conn.send((name, np.ascontiguousarray(a[i : i + PLAN_CHUNK])))
+    conn.send(("end", None))
+    conn.close()
