@@ -111,7 +111,7 @@ def _state_of(r: dict[str, Any], n: int) -> State:
                 float(en["lease_left_s"]),
                 None if en["holder"] is None else str(en["holder"]),
             ),
-            profile=None if r.get("profile") is None else str(r["profile"]),
+            profile=None if r.get("profile") is None else str(r["profile"]["name"]),
             overruns=int(r["overruns"]),
             timing_us={str(k): float(v) for k, v in r["timing_us"].items()},
         )
@@ -313,9 +313,10 @@ class Robot:
         """Not served by this version (Refused): the payload is ``safety.payload``."""
         raise Refused("set_payload: not served by this version; set safety.payload in the config")
 
-    def set_safety_profile(self, name: str) -> None:
-        """Not served by this version (Refused)."""
-        raise Refused("set_safety_profile: not served by this version")
+    def set_safety_profile(self, name: str) -> dict[str, Any]:
+        """Make the config's ``safety.profiles.sets[name]`` active (collision thresholds
+        scaled, motion speed limited); only at standstill, else Refused. Returns its content."""
+        return dict(self._call({"cmd": "set_safety_profile", "name": str(name)})["profile"])
 
     # ------------------------------------------------------------------ events, stream
 

@@ -44,13 +44,13 @@ X_WORDS = 32
 (X_CATEGORY, X_ACTIVE, X_STOPPING, X_ENABLING, X_EXIT, X_OVERRUNS, X_LOOP_TICKS, X_DRAG_ACTIVE,
  X_PRESSED, X_PLAN_ID, X_PLAN_K, X_PLAN_DONE, X_TEACH_STATE, X_TEACH_SAMPLES, X_WAKE_MAX,
  X_COMP_MAX, X_HAS_PATH, X_HAS_DRAG, X_ENABLE_SOURCE, X_PLAYING_KIND, X_STOP_REQUESTED,
- X_MOVING) = range(22)  # fmt: skip
+ X_MOVING, X_PROFILE) = range(23)  # fmt: skip
 
 #: enabling-input source codes (X_ENABLE_SOURCE)
 SOURCES = ("scripted", "digital_input", "socket")
 
 #: request kinds (REQUEST_DTYPE.kind)
-REQ_RESET, REQ_MODE, REQ_PLAY, REQ_PAYLOAD = 1, 2, 3, 4
+REQ_RESET, REQ_MODE, REQ_PLAY, REQ_PROFILE = 1, 2, 3, 4
 REQUEST_DTYPE = np.dtype(
     [
         ("seq", "<u8"),

@@ -23,7 +23,9 @@ import numpy as np
 from hofto_hw.control.joint_motion import DRAG, HOLD, MODE_NAMES, MOVE, MOVE_TO, REPLAY
 from hofto_hw.control_plane import channel as ch
 from hofto_hw.runtime.teach import RECORDING
+from hofto_hw.runtime.tick import STANDSTILL
 from hofto_hw.runtime.timing import Histogram
+from safety.stop import EventKind
 
 STARVED = 2  # StreamPlayer.step: the next row is not there yet (JointMotion ramps down)
 _NO_REQ, _RESET_WAIT, _RESET_ANSWER, _MODE_ANSWER = 0, 1, 2, 3
@@ -151,6 +153,8 @@ class LoopPort:
         self.extra[ch.X_ENABLE_SOURCE] = ch.SOURCES.index(src) if src in ch.SOURCES else -1
         self.extra[ch.X_HAS_PATH] = 1.0 if tick.motion.path is not None else 0.0
         self.extra[ch.X_HAS_DRAG] = 1.0 if tick.drag is not None else 0.0
+        prof = system.cfg.safety.profiles
+        self.extra[ch.X_PROFILE] = -1 if prof is None else prof.names().index(prof.active)
         self._state = _NO_REQ
         self._seq = 0
         self._reset_at = 0
@@ -259,10 +263,27 @@ class LoopPort:
             else:
                 self._start_reset()
             return
+        if kind == ch.REQ_PROFILE:
+            self._profile(int(r["arg"]), float(r["value"][0]))
+            return
         if kind == ch.REQ_MODE or kind == ch.REQ_PLAY:
             self._mode(kind, int(r["mode"]), int(r["arg"]), int(r["flag"]))
             return
         self._reply(False, f"unknown request kind {kind}")
+
+    def _profile(self, index: int, collision_scale: float) -> None:
+        """Switch the safety profile: only at standstill (holding, every joint slower than
+        STANDSTILL; after a stop too); a flight-log event (PROFILE: its index, its scale)."""
+        tick = self.tick
+        moving = tick.motion.mode != HOLD or float(np.abs(tick.group.qd).max()) >= STANDSTILL
+        if moving or tick.enabling:
+            self._reply(False, "refused: the arm is moving; a safety profile changes at standstill")
+            return
+        if tick.collision is not None:
+            tick.collision.scale_thresholds(collision_scale)
+        tick.stop.note(EventKind.PROFILE, index, collision_scale)
+        self.extra[ch.X_PROFILE] = index
+        self._reply(True, "profile active")
 
     def _start_reset(self) -> None:
         tick = self.tick

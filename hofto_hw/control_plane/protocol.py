@@ -48,9 +48,12 @@ COMMANDS: dict[str, dict[str, tuple[tuple[type, ...], bool]]] = {
     "release": {},
     "events": {"since": ((int,), False)},
     "stream_info": {},
+    "set_safety_profile": {"name": ((str,), True)},
 }
 #: commands that move the arm or hold the enabling input: one client at a time
-MOTION = frozenset({"mode", "replay", "move_joints", "move_linear", "cancel", "enable"})
+MOTION = frozenset(
+    {"mode", "replay", "move_joints", "move_linear", "cancel", "enable", "set_safety_profile"}
+)
 
 
 class ProtocolError(ValueError):

@@ -81,6 +81,7 @@ class LoopJob:
     mode: int = 0
     arg: int = 0
     flag: int = 0
+    value: float = 0.0
     seq: int = 0
     sent_at: float = 0.0
     done: Any = None  # callable(ok, text) -> reply dict, or None
@@ -415,10 +416,54 @@ class ControlPlane:
             self._mode(c, req)
         elif cmd == "cancel":
             self._queue(LoopJob(c, req, ch.REQ_MODE, mode=HOLD))
+        elif cmd == "set_safety_profile":
+            self._set_profile(c, req)
         elif cmd in ("replay", "move_joints", "move_linear"):
             self._plan_request(c, req)
         else:  # pragma: no cover - protocol.COMMANDS and this table agree
             self._send(c, {"ok": False, "message": f"{cmd}: not served"}, req)
+
+    # ------------------------------------------------------------------ profiles
+
+    def _profiles(self) -> Any:
+        return self.cfg.safety.profiles
+
+    def active_profile(self, x: np.ndarray | None = None) -> tuple[str | None, dict | None]:
+        """The loop's active safety profile: (name, content), (None, None) without any."""
+        prof = self._profiles()
+        if prof is None:
+            return None, None
+        if x is None:
+            got = self.chan.read_state()
+            x = None if got is None else got[1]
+        names = prof.names()
+        i = names.index(prof.active) if x is None else int(x[ch.X_PROFILE])
+        name = names[i] if 0 <= i < len(names) else prof.active
+        return name, prof.sets[name].model_dump()
+
+    def _set_profile(self, c: Conn, req: dict[str, Any]) -> None:
+        prof = self._profiles()
+        name = req["name"]
+        if prof is None:
+            raise UserError("set_safety_profile: the config has no safety.profiles")
+        if name not in prof.sets:
+            raise UserError(
+                f"set_safety_profile: {name!r} is not a profile ({', '.join(prof.names())})"
+            )
+        content = prof.sets[name].model_dump()
+
+        def done(ok: bool, text: str) -> dict[str, Any]:
+            if not ok:
+                return {"ok": False, "message": text}
+            print(f"hofto-hw run: safety profile {name} active: {content}", flush=True)
+            return {"ok": True, "message": f"safety profile {name} active", "profile": content}
+
+        self._queue(
+            LoopJob(
+                c, req, ch.REQ_PROFILE, arg=prof.names().index(name),
+                value=float(content["collision_scale"]), done=done,
+            )
+        )  # fmt: skip
 
     def _enable(self, c: Conn, req: dict[str, Any]) -> None:
         got = self.chan.read_state()
@@ -495,6 +540,7 @@ class ControlPlane:
         r = np.zeros((), ch.REQUEST_DTYPE)
         r["seq"], r["kind"], r["mode"] = job.seq, job.kind, job.mode
         r["arg"], r["flag"] = job.arg, job.flag
+        r["value"][0] = job.value
         if not self.chan.requests.push(r):
             self._answer(job, {"ok": False, "message": "the loop's request ring is full"})
             self._send_next()
@@ -550,6 +596,10 @@ class ControlPlane:
         for key, v in (("speed", speed), ("acceleration", acc)):
             if not 0.0 < v <= 1.0:
                 raise UserError(f"{req['cmd']}.{key}: {v} is not a fraction of the limit in (0, 1]")
+        _, prof = self.active_profile(x)
+        if prof is not None:  # the active safety profile's fraction of the motion limits
+            speed *= prof["speed_scale"]
+            acc *= prof["speed_scale"]
         limits = Limits(limits.velocity * speed, limits.acceleration * acc, limits.jerk * acc)
         cmd = req["cmd"]
         if cmd == "move_joints":
@@ -774,7 +824,12 @@ class ControlPlane:
             "teach": self._teach_status(x),
             "playback": self._playback_status(x),
             "holder": None if self.holder is None else self.holder.who(),
+            "profile": self._profile_status(x),
         }
+
+    def _profile_status(self, x: np.ndarray) -> dict[str, Any] | None:
+        name, content = self.active_profile(x)
+        return None if name is None else {"name": name, **(content or {})}
 
     def _teach_status(self, x: np.ndarray) -> dict[str, Any] | None:
         rec = self.recording
@@ -879,7 +934,7 @@ class ControlPlane:
                 "lease_left_s": round(lease_left, 4),
                 "holder": None if self.holder is None else self.holder.who(),
             },
-            "profile": None,
+            "profile": self._profile_status(x),
             "overruns": int(x[ch.X_OVERRUNS]),
             "timing_us": {
                 "wakeup_us": float(rec["wakeup_us"]),

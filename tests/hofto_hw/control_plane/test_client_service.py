@@ -139,3 +139,34 @@ def test_on_sees_the_scripted_collision(tmp_path: Path) -> None:
             assert "collision" in robot.state().faults
     finally:
         svc.stop()
+
+
+def test_safety_profile_switch_refused_while_moving_accepted_at_standstill(tmp_path: Path) -> None:
+    from hofto_hw.replay.flight_log import read_flight_log
+
+    svc = Service(tmp_path, "--hold", "--no-collision")
+    try:
+        with Robot.connect(socket=svc.sock) as robot:
+            assert robot.state().profile == "normal"
+            wait_for(lambda: _at_rest(robot), "hold at rest")
+            q0 = robot.state().q_cmd
+            m = robot.move_joints(q0 + 0.2, speed=0.1, acceleration=0.1, wait=False)  # seconds
+            wait_for(lambda: robot.state().moving, "moving")
+            with pytest.raises(Refused, match="changes at standstill"):
+                robot.set_safety_profile("reduced")
+            assert robot.state().profile == "normal"
+            m.wait(timeout=120.0)
+            wait_for(lambda: _at_rest(robot), "at rest after the move")
+            content = robot.set_safety_profile("reduced")
+            assert content == {"collision_scale": 0.8, "speed_scale": 0.25}
+            assert robot.state().profile == "reduced"
+            assert robot.status()["profile"]["name"] == "reduced"
+            with pytest.raises(Refused, match="not a profile"):
+                robot.set_safety_profile("turbo")
+        svc.stop()
+    finally:
+        svc.kill()
+    (log,) = sorted(svc.logs.glob("run-*.mcap"))
+    ev = [e for e in read_flight_log(log).events if e.kind_name == "profile"]
+    assert len(ev) == 1 and ev[0].value == pytest.approx(0.8)
+    assert ev[0].joint == ["contact-task", "normal", "reduced"].index("reduced")
