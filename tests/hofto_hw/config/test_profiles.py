@@ -37,7 +37,8 @@ def test_the_shipped_profiles_load() -> None:
             "sets.a.collision_scale: 1.5 is above bounds.collision_scale_max = 1.2",
         ),
         (
-            {"active": "a", "bounds": {"speed_scale_max": 0.5}, "sets": {"a": {"speed_scale": 0.8}}},
+            {"active": "a", "bounds": {"speed_scale_max": 0.5},
+             "sets": {"a": {"speed_scale": 0.8}}},
             "sets.a.speed_scale: 0.8 is above bounds.speed_scale_max = 0.5",
         ),
         ({"active": "a", "sets": {"a": {"speed_scale": 1.5}}}, "speed_scale"),  # robot's limit
