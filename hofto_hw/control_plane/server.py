@@ -152,7 +152,11 @@ class ControlPlane:
     def serve(self, done: Any = None, tick_s: float = 0.005) -> None:
         """Serve until ``done()`` is true or the loop has ended (LOOP_DONE)."""
         while not (done is not None and done()) and not self.chan.ctl[ch.LOOP_DONE]:
-            self.turn(tick_s)
+            # sockets wake the select at once; the loop's replies, a plan to stream, a taught
+            # path to drain are polled: every tick_s while one is in progress, else 4x slower
+            busy = self.inflight is not None or self._planner is not None
+            busy = busy or self.plan_traj is not None or self.recording is not None
+            self.turn(tick_s if busy else 4.0 * tick_s)
         self.finish()
 
     def turn(self, timeout: float) -> None:
@@ -691,6 +695,7 @@ class ControlPlane:
         rows = tr.q.shape[0]
         w = self.plan_written
         if w >= rows:
+            self.plan_traj = None  # every row is in the ring
             return
         tail = int(ctl[ch.PLAN_TAIL]) if int(ctl[ch.PLAN_TAIL_ID]) == self.plan_id else 0
         end = min(rows, tail + ch.PLAN_CAP)
