@@ -99,8 +99,8 @@ def run(args: argparse.Namespace) -> int:
         if recorder is not None:
             recorder.close()
         raise
-    if control is not None:
-        control.attach(system)
+    if control is not None:  # it also watches the flight recorder (a safety input)
+        control.attach(system, watch_log=recorder is not None)
     tick = system.tick
 
     def _on_signal(signum: int, frame: object) -> None:
@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
 
     old = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     watch = None
-    if recorder is not None:
+    if recorder is not None and control is None:
         from hofto_hw.runtime.log_watch import LogWatch
 
         watch = LogWatch(recorder, tick).start()

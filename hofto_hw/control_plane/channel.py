@@ -35,7 +35,7 @@ from hofto_hw.recording.shared import _attach
 CTL_WORDS = 64
 (STOP_SEQ, STOP_ACK, LEASE_NS, PLAN_ID, PLAN_ROWS, PLAN_HEAD, PLAN_TAIL_ID, PLAN_TAIL,
  TICKS, EXIT, LOOP_DONE, TEACH_STATE, STATE_SEQ, CP_PID, CP_BEAT,
- EVENTS_LOST) = range(16)  # fmt: skip
+ EVENTS_LOST, LOG_FAILING, LOG_LOST) = range(18)  # fmt: skip
 F_WORDS = 8
 WAKE_P99, COMP_P99 = range(2)
 

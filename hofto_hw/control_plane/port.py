@@ -148,6 +148,7 @@ class LoopPort:
         self.playback = StreamedPlayback(chan)
         self.recording = StreamRecording(chan)
         self._stop_seen = int(self.ctl[ch.STOP_SEQ])
+        self._watch_log = False
         src = tick.enable_input.source
         self._lease = src == "socket"
         self.extra[ch.X_ENABLE_SOURCE] = ch.SOURCES.index(src) if src in ch.SOURCES else -1
@@ -164,9 +165,11 @@ class LoopPort:
         loop.compute = Histogram(counts=chan.compute_counts)
         self._mono = time.monotonic_ns
 
-    def attach(self) -> LoopPort:
-        """Poll after every tick of ``system.loop``."""
+    def attach(self, watch_log: bool = False) -> LoopPort:
+        """Poll after every tick of ``system.loop``; ``watch_log``: the control plane
+        watches the flight recorder (the tick's ``log_failure`` comes from the channel)."""
         self.loop.port = self
+        self._watch_log = watch_log
         return self
 
     # ------------------------------------------------------------------ per tick
@@ -180,6 +183,9 @@ class LoopPort:
             ctl[ch.STOP_ACK] = s
         if self._lease:
             tick.enable_input.pressed = int(ctl[ch.LEASE_NS]) > self._mono()
+        if self._watch_log:
+            tick.log_failure = int(ctl[ch.LOG_FAILING]) != 0
+            tick.log_failure_value = float(ctl[ch.LOG_LOST])
         self._publish()
         if tick.stop.events.count != self._events_seen:
             self._forward_events()

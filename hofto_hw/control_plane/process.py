@@ -130,10 +130,11 @@ class ControlPlaneProcess:
         if listener is not None:
             listener.close()  # the child serves it
 
-    def attach(self, system: Any) -> None:
-        """The loop polls the channel after every tick from now on."""
+    def attach(self, system: Any, watch_log: bool = False) -> None:
+        """The loop polls the channel after every tick from now on (``watch_log``: the
+        control plane watches the flight recorder, started with ``recorder``)."""
         self.system = system
-        self.port = LoopPort(self.chan, system).attach()
+        self.port = LoopPort(self.chan, system).attach(watch_log)
 
     def wait_ready(self, timeout: float = 60.0) -> bool:
         """Whether the process is up (it writes its pid into the channel)."""

@@ -144,6 +144,8 @@ class ControlPlane:
         self.rec_waiters: list[tuple[Conn, dict[str, Any], float]] = []
         self.teach_info: dict[str, Any] | None = None
         self._p99_at = 0.0
+        self._log_at = 0.0
+        self._log_watch: Any = None
         self._data = model.create_data()
         self.stop_answered = 0
 
@@ -181,6 +183,9 @@ class ControlPlane:
         self._teach(now)
         self._drain_events()
         self._timeouts(now)
+        if self.recorder_info and now >= self._log_at:
+            self._log_at = now + 0.1
+            self._watch_log()
         if now >= self._p99_at:
             self._p99_at = now + 1.0
             x = self.chan.extra
@@ -861,6 +866,40 @@ class ControlPlane:
             "duration_s": info["duration_s"],
         }
 
+    def _watch_log(self) -> None:
+        """The flight recorder's health as a safety input (runtime/log_watch.py's check,
+        here instead of a thread of the loop's process): the channel's LOG_* words."""
+        from types import SimpleNamespace
+
+        from hofto_hw.runtime.log_watch import LogWatch
+
+        chan = self.chan
+
+        class _Words:
+            def __setattr__(self, key: str, value: Any) -> None:
+                if key == "log_failure":
+                    chan.ctl[ch.LOG_FAILING] = 1 if value else 0
+                elif key == "log_failure_value":
+                    chan.ctl[ch.LOG_LOST] = int(value)
+
+        def health() -> Any:
+            st = self._recorder_status()
+            if st is None:
+                raise RuntimeError("no recorder")
+            return SimpleNamespace(
+                writer_alive=st["writer_alive"],
+                disk_failing=st["failing"],
+                dropped=st["dropped"],
+                records_lost=st["records_lost"],
+            )
+
+        if self._log_watch is None:
+            self._log_watch = LogWatch(SimpleNamespace(health=health), _Words())
+        try:
+            self._log_watch.check()
+        except RuntimeError:
+            pass
+
     def _recorder_status(self) -> dict[str, Any] | None:
         info = self.recorder_info
         if not info:
@@ -879,13 +918,7 @@ class ControlPlane:
             pid = int(c[sh.PID])
         except (OSError, ValueError, KeyError):
             return None
-        alive = False
-        if pid:
-            try:
-                os.kill(pid, 0)
-                alive = True
-            except OSError:
-                alive = False
+        alive = _alive(pid)
         return {
             "writer_alive": alive,
             "state": sh.STATE_NAMES.get(int(c[sh.STATE]), "?"),
@@ -895,6 +928,7 @@ class ControlPlane:
             "records_lost": int(c[sh.LOST]),
             "write_errors": int(c[sh.ERRORS]),
             "pending": b.ticks.pending(),
+            "failing": bool(c[sh.FAILING]),
         }
 
     def state(self) -> dict[str, Any]:
@@ -1078,3 +1112,14 @@ def _plan_child(conn, cmd, file, target, q_now, model, limits, dt) -> None:
             conn.send((name, np.ascontiguousarray(a[i : i + PLAN_CHUNK])))
     conn.send(("end", None))
     conn.close()
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie does not: the writer is the loop's child)."""
+    if pid <= 0:
+        return False
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):
+        return False

@@ -170,3 +170,33 @@ def test_safety_profile_switch_refused_while_moving_accepted_at_standstill(tmp_p
     ev = [e for e in read_flight_log(log).events if e.kind_name == "profile"]
     assert len(ev) == 1 and ev[0].value == pytest.approx(0.8)
     assert ev[0].joint == ["contact-task", "normal", "reduced"].index("reduced")
+
+
+def _children(pid: int) -> list[tuple[int, str]]:
+    out = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            stat = (d / "stat").read_text()
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            out.append((int(d.name), cmd))
+    return out
+
+
+def test_the_control_plane_watches_the_flight_recorder(tmp_path: Path) -> None:
+    """The log watch runs in the control plane, not in a thread of the loop's process: a
+    dead writer process still reaches the loop as log_failure."""
+    svc = Service(tmp_path, "--hold", "--no-collision")
+    try:
+        (writer,) = [p for p, cmd in _children(svc.proc.pid) if "writer_process" in cmd]
+        with Robot.connect(socket=svc.sock) as robot:
+            assert "log_failure" not in robot.state().faults
+            os.kill(writer, signal.SIGKILL)
+            wait_for(lambda: "log_failure" in robot.state().faults, "log_failure")
+            assert robot.status()["recorder"]["writer_alive"] is False
+    finally:
+        svc.kill()
