@@ -43,6 +43,14 @@ def _print(s: dict) -> None:
         f"compute median {c['median']:.0f} µs, p99 {c['p99']:.0f} µs; "
         f"wake-up median {w['median']:.0f} µs, p99 {w['p99']:.0f} µs"
     )
+    prof = s.get("profile")
+    if prof:
+        print(
+            f"safety profile: {prof['name']} (collision thresholds x{prof['collision_scale']:g}, "
+            f"speed x{prof['speed_scale']:g})"
+        )
+    if s.get("holder"):
+        print(f"motion held by {s['holder']}")
     print(f"log: {s['log'] or 'not yet written'}")
     rec = s.get("teach")
     if rec:

@@ -82,3 +82,34 @@ def wait_for(cond: Callable[[], Any], what: str, timeout: float = 120.0) -> Any:
         if time.monotonic() > end:
             raise AssertionError(f"not reached: {what}")
         time.sleep(0.02)
+
+
+class LeaseHolder:
+    """Holds the remote enabling input of the service at ``sock``: ``enable on`` renewed
+    every 50 ms on a connection of its own (the lease is 0.25 s) until :meth:`release`."""
+
+    def __init__(self, sock: Path) -> None:
+        import threading
+
+        from hofto_hw.client.connection import Connection
+
+        self.conn = Connection(sock)
+        r = self.conn.call({"cmd": "enable", "on": True})
+        assert r["ok"], r
+        self._done = threading.Event()
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._renew, daemon=True)
+        self._thread.start()
+
+    def _renew(self) -> None:
+        while not self._done.wait(0.05):
+            with self._lock:
+                self.conn.call({"cmd": "enable", "on": True})
+
+    def release(self) -> dict[str, Any]:
+        """Stop renewing, ``enable off``, close; returns the reply."""
+        self._done.set()
+        self._thread.join()
+        r = self.conn.call({"cmd": "enable", "on": False})
+        self.conn.close()
+        return r
