@@ -9,7 +9,8 @@ measures phase by phase: ``quiet`` (nobody but this script), ``flood`` (a client
 status requests without reading the replies, reconnecting when closed), ``line_10mb`` (a
 client sending 10 MB lines without a newline, again and again), ``trickle`` (eight clients
 sending one byte every 0.2 s), ``idle`` (20 idle connections, more than allowed),
-``replay_300s`` (a 300 s taught path planned and then played). Per phase: the loop's missed
+``replay_300s`` (a 300 s taught path planned and then played), ``quiet_end`` (quiet again:
+on a shared machine the two quiet phases show what the machine's own noise is). Per phase: the loop's missed
 deadlines (the status' ``overruns`` difference), the wake-up latency median / p99 / max [µs]
 of every tick of the phase (read from the flight recorder's ring, read-only), and the time
 [ms] from sending ``stop`` on a new connection to its answer (median, max of ``--stops``;
@@ -62,7 +63,9 @@ def _start(tmp: Path) -> tuple[subprocess.Popen, Path]:
     cmd += ["--clock", "real", "--duration", "100000", "--socket", str(sock), "--hold"]
     cmd += ["--no-collision", "--log-dir", str(tmp / "logs")]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
     assert proc.stderr is not None
     for line in proc.stderr:
         if line.startswith("hofto-hw run: running"):
@@ -225,6 +228,7 @@ def main() -> int:
                     r2._call({"cmd": "cancel"})
 
             out.append(_phase(robot, sock, reader, "replay_300s", args, replay))
+            out.append(_phase(robot, sock, reader, "quiet_end", args))  # the machine's noise
             reader.close()
     finally:
         proc.terminate()

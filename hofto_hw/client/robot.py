@@ -172,6 +172,11 @@ class Robot:
         self.timeout = timeout
         self._lock = threading.Lock()
         self.info = self._call({"cmd": "hello", "name": "hofto_hw.client"})
+        end = time.monotonic() + timeout  # a service just started: its loop's first tick
+        while self._call({"cmd": "status"})["state"] == "starting":
+            if time.monotonic() > end:
+                raise ServiceError(f"{socket}: the loop has not started within {timeout:g} s")
+            time.sleep(0.01)
         self.n = len(self.info["joints"])
         self.lease_s = float(self.info["lease_s"])
         self._watchers: list[threading.Thread] = []

@@ -126,25 +126,42 @@ class Channel:
         self.wakeup_counts = np.ndarray((HIST_BINS,), "<i8", buf, off["wakeup_counts"])
         self.compute_counts = np.ndarray((HIST_BINS,), "<i8", buf, off["compute_counts"])
 
+    _last: tuple[np.ndarray, np.ndarray] | None = None
+    stale_reads = 0
+
     @property
     def name(self) -> str:
         return self.shm.name
 
-    def read_state(self, tries: int = 1000) -> tuple[np.ndarray, np.ndarray] | None:
+    def read_state(self, timeout: float = 0.2) -> tuple[np.ndarray, np.ndarray] | None:
         """A consistent copy of (tick record, extra words) (reader side of the seqlock);
-        None before the loop's first tick or when the loop kept writing through every try."""
+        None before the loop's first tick. When no consistent copy can be taken within
+        ``timeout`` [s] (the loop was preempted in the middle of a write), the last one
+        taken (``stale_reads`` counts those)."""
+        import time
+
         ctl = self.ctl
-        for _ in range(tries):
+        end = 0.0
+        spins = 0
+        while True:
             s1 = int(ctl[STATE_SEQ])
             if s1 == 0:
                 return None
-            if s1 & 1:
-                continue
-            rec = self.state_rec.copy()
-            extra = self.extra.copy()
-            if int(ctl[STATE_SEQ]) == s1:
-                return rec, extra
-        return None
+            if not s1 & 1:
+                rec = self.state_rec.copy()
+                extra = self.extra.copy()
+                if int(ctl[STATE_SEQ]) == s1:
+                    self._last = (rec, extra)
+                    return rec, extra
+            spins += 1
+            if spins > 100:  # the writer was preempted mid-write: let it finish
+                now = time.monotonic()
+                if end == 0.0:
+                    end = now + timeout
+                elif now > end:
+                    self.stale_reads += 1
+                    return self._last
+                time.sleep(0.0002)
 
     def close(self) -> None:
         """Drop this side's views; the creator also unlinks the segment."""

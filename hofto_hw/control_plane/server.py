@@ -5,21 +5,23 @@ Every client is served by one selector loop without blocking the others: reads a
 are non-blocking, a request line is at most ``protocol.MAX_LINE`` bytes (a longer one is
 answered with one line and the connection closed), a line that does not complete within
 ``line_timeout`` is answered and closed (a client trickling bytes), at most ``max_clients``
-connections are open (one more closes the connection idle longest, or is answered "too many
+connections are open (one more closes an idle one, or is answered "too many
 clients" when none is idle: an operator's stop always gets in), a client that
-does not read its replies is closed when ``MAX_PENDING_OUT`` bytes wait for it. Lines are
-taken at most ``LINES_PER_TURN`` per connection per turn, and every turn handles the ``stop``
-requests of all connections first: a stop writes the channel's stop word and is answered at
-once, whatever else is queued or being planned.
+does not read its replies is closed when ``MAX_PENDING_OUT`` bytes wait for it. A ``stop``
+line is answered as soon as it is read (it writes the channel's stop word), never queued
+behind anything; other lines are taken at most ``LINES_PER_TURN`` per connection and
+``TURN_BUDGET`` in all per turn, round robin, so that one turn stays short whoever floods;
+``status`` is built at most every ``STATUS_CACHE_S``.
 
 Requests for the loop (reset, mode, play) go one at a time through the request ring and
 are answered when the loop's reply record arrives; planning (ruckig moves, the taught
-path's timing) runs in a worker thread, and the plan is streamed into the plan ring ahead of
-the loop while it plays. One client at a time holds motion and the enabling input (the first
-that asks; until it disconnects or sends ``release``); another one's motion request is
-refused naming the holder. The remote enabling input is a lease: ``enable on`` holds it for
-``lease`` seconds (``drag.enable_input.lease``) from now; it expires unless renewed, and the
-holder's disconnect releases it at once.
+path's timing) runs in a forked planner process (:class:`Planner`), and the plan is
+streamed into the plan ring ahead of the loop while it plays. One client at a time holds
+motion and the enabling input (the first that asks; until it disconnects or sends
+``release``); another one's motion request is refused naming the holder. The remote
+enabling input is a lease: ``enable on`` holds it for ``lease`` seconds
+(``drag.enable_input.lease``) from now; it expires unless renewed, and the holder's
+disconnect releases it at once.
 """
 
 from __future__ import annotations
@@ -46,6 +48,8 @@ from hofto_hw.runtime.timing import percentile_of, summarize
 from safety.stop import EVENT_NAMES, FAULT_NAMES, N_FAULTS
 
 LINES_PER_TURN = 8
+TURN_BUDGET = 32  # request lines handled per turn over all connections
+STATUS_CACHE_S = 0.02  # a status is built at most every 20 ms (a flood asks it back to back)
 PLAN_CHUNK = 4096  # rows per message from the planner process
 MAX_PENDING_OUT = 1 << 20
 LOOP_ANSWER_TIMEOUT = 5.0  # [s] the loop answers a request within a few ticks
@@ -145,6 +149,9 @@ class ControlPlane:
         self.teach_info: dict[str, Any] | None = None
         self._p99_at = 0.0
         self._log_at = 0.0
+        self._rr = 0
+        self._status_at = -1.0
+        self._status: dict[str, Any] | None = None
         self._log_watch: Any = None
         self._data = model.create_data()
         self.stop_answered = 0
@@ -256,8 +263,11 @@ class ControlPlane:
             i = buf.find(b"\n")
             if i < 0:
                 break
-            c.lines.append(bytes(buf[:i]))
+            raw = bytes(buf[:i])
             del buf[: i + 1]
+            if b'"stop"' in raw and self._stop_line(c, raw):
+                continue  # answered now, ahead of everything queued
+            c.lines.append(raw)
         if buf and not c.partial_since:
             c.partial_since = now
         elif not buf:
@@ -342,29 +352,32 @@ class ControlPlane:
 
     # ------------------------------------------------------------------ requests
 
+    def _stop_line(self, c: Conn, raw: bytes) -> bool:
+        """A line that may be a stop (it holds '"stop"'): handled as it arrives. True when
+        it was one."""
+        try:
+            req = pr.parse_request(raw)
+        except pr.ProtocolError:
+            return False
+        if req["cmd"] != "stop":
+            return False
+        self._stop(c, req)
+        return True
+
     def _lines(self, now: float) -> None:
-        """Stops of every connection first, then up to LINES_PER_TURN lines each."""
-        for c in list(self.conns.values()):
-            if not c.lines:
-                continue
-            keep: collections.deque = collections.deque()
-            while c.lines:
-                raw = c.lines.popleft()
-                if b'"stop"' in raw:  # cheap pre-check; parsed properly below
-                    try:
-                        req = pr.parse_request(raw)
-                    except pr.ProtocolError:
-                        keep.append(raw)
-                        continue
-                    if req["cmd"] == "stop":
-                        self._stop(c, req)
-                        continue
-                keep.append(raw)
-            c.lines = keep
-        for c in list(self.conns.values()):
+        """Queued lines (stops never queue: _read answers them as they arrive): up to
+        LINES_PER_TURN per connection and TURN_BUDGET in all, starting with a different
+        connection each turn, so one turn stays short whoever floods."""
+        conns = list(self.conns.values())
+        if not conns:
+            return
+        self._rr = (self._rr + 1) % len(conns)
+        budget = TURN_BUDGET
+        for c in conns[self._rr :] + conns[: self._rr]:
             n = 0
-            while c.lines and not c.busy and not c.closing and n < LINES_PER_TURN:
+            while c.lines and not c.busy and not c.closing and n < LINES_PER_TURN and budget > 0:
                 n += 1
+                budget -= 1
                 raw = c.lines.popleft()
                 c.requests += 1
                 try:
@@ -382,6 +395,7 @@ class ControlPlane:
     def _stop(self, c: Conn, req: dict[str, Any]) -> None:
         self.chan.ctl[ch.STOP_SEQ] += 1
         self.chan.ctl[ch.LEASE_NS] = 0
+        self._status = None
         self.stop_answered += 1
         self._send(c, {"ok": True, "message": "stop requested"}, req)
 
@@ -403,7 +417,9 @@ class ControlPlane:
             c.name = str(req.get("name", ""))[:64]
             self._send(c, {"ok": True, **self.hello()}, req)
         elif cmd == "status":
-            self._send(c, {"ok": True, **self.status()}, req)
+            if self._status is None or now - self._status_at > STATUS_CACHE_S:
+                self._status, self._status_at = self.status(), now
+            self._send(c, {"ok": True, **self._status}, req)
         elif cmd == "state":
             self._send(c, {"ok": True, **self.state()}, req)
         elif cmd == "stream_info":
@@ -559,6 +575,7 @@ class ControlPlane:
 
     def _answer(self, job: LoopJob, reply: dict[str, Any] | None) -> None:
         job.conn.busy = False
+        self._status = None  # the loop acted: the next status is built anew
         if reply is not None:
             self._send(job.conn, reply, job.req)
 
