@@ -10,11 +10,13 @@ status requests without reading the replies, reconnecting when closed), ``line_1
 client sending 10 MB lines without a newline, again and again), ``trickle`` (eight clients
 sending one byte every 0.2 s), ``idle`` (20 idle connections, more than allowed),
 ``replay_300s`` (a 300 s taught path planned and then played), ``quiet_end`` (quiet again:
-on a shared machine the two quiet phases show what the machine's own noise is). Per phase: the loop's missed
-deadlines (the status' ``overruns`` difference), the wake-up latency median / p99 / max [µs]
-of every tick of the phase (read from the flight recorder's ring, read-only), and the time
-[ms] from sending ``stop`` on a new connection to its answer (median, max of ``--stops``;
-each stop is reset before the next). Figures only: the tests assert behaviour.
+on a shared machine the two quiet phases show what the machine's own noise is). Per phase:
+the loop's missed deadlines (the status' ``overruns`` difference), the wake-up latency
+median / p99 / max [µs] of every tick of the phase (read from the flight recorder's ring,
+read-only), and the time [ms] from sending ``stop`` on a new connection to its answer
+(median, max of ``--stops``; each stop is reset before the next). First, the cost of the loop's poll of the channel
+(``LoopPort.poll``, between ticks) on a sim-clock loop. Figures only: the tests assert
+behaviour.
 """
 
 from __future__ import annotations
@@ -198,6 +200,33 @@ def _phase(robot: Robot, sock: Path, reader: RingReader, name: str, args, work=N
     }
 
 
+def poll_cost(ticks: int = 5000) -> dict:
+    """LoopPort.poll on a sim-clock loop (nothing pending: the common case) [µs]."""
+    from hofto_hw.config.loader import load_config
+    from hofto_hw.control_plane.channel import Channel
+    from hofto_hw.control_plane.port import LoopPort
+    from hofto_hw.runtime.compose import build
+
+    system = build(load_config(CONFIG), clock="sim", contact=False)
+    chan = Channel(system.tick.n, len(system.tick.observers), create=True)
+    port = LoopPort(chan, system).attach()
+    system.loop.run(max_ticks=500)
+    port.detach()
+    times = np.zeros(ticks)
+    perf = time.perf_counter_ns
+    for i in range(ticks):
+        system.loop.run(max_ticks=1)
+        t0 = perf()
+        port.poll()
+        times[i] = (perf() - t0) * 1e-3
+    chan.close()
+    system.close()
+    return {
+        "median_us": round(float(np.median(times)), 2),
+        "p99_us": round(float(np.percentile(times, 99)), 2),
+    }
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=10.0, help="per phase")
@@ -205,6 +234,7 @@ def main() -> int:
     ap.add_argument("--replay-seconds", type=float, default=300.0, help="taught path length")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
+    poll = poll_cost()
     tmp = Path(tempfile.mkdtemp(prefix="bench-control-"))
     proc, sock = _start(tmp)
     out = []
@@ -234,8 +264,10 @@ def main() -> int:
         proc.terminate()
         proc.wait(timeout=120)
     if args.json:
-        print(json.dumps({"phases": out, "machine": os.uname().nodename}, indent=2))
+        print(json.dumps({"poll": poll, "phases": out, "machine": os.uname().nodename}, indent=2))
     else:
+        print(f"LoopPort.poll (sim clock, nothing pending): median {poll['median_us']} µs, "
+              f"p99 {poll['p99_us']} µs")  # fmt: skip
         for p in out:
             w, s = p["wakeup_us"], p["stop_ms"]
             print(
