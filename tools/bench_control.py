@@ -14,9 +14,9 @@ on a shared machine the two quiet phases show what the machine's own noise is). 
 the loop's missed deadlines (the status' ``overruns`` difference), the wake-up latency
 median / p99 / max [µs] of every tick of the phase (read from the flight recorder's ring,
 read-only), and the time [ms] from sending ``stop`` on a new connection to its answer
-(median, max of ``--stops``; each stop is reset before the next). First, the cost of the loop's poll of the channel
-(``LoopPort.poll``, between ticks) on a sim-clock loop. Figures only: the tests assert
-behaviour.
+(median, max of ``--stops``; each stop is reset before the next). First, the cost of the
+loop's poll of the channel (``LoopPort.poll``, between ticks) on a sim-clock loop. Figures
+only: the tests assert behaviour.
 """
 
 from __future__ import annotations
