@@ -253,11 +253,28 @@ class Robot:
             m.wait(timeout)
         return m
 
-    def move_linear(self, pose: Any, speed: float = 1.0, acceleration: float = 1.0,
-                    wait: bool = True, timeout: float | None = None) -> Motion:  # fmt: skip
-        """A Cartesian move: not served by this version (Refused, one line)."""
-        self._call({"cmd": "move_linear", "pose": [float(v) for v in np.ravel(pose)]})
-        raise ServiceError("move_linear: unexpected answer")  # pragma: no cover
+    def move_linear(
+        self,
+        pose: Any,
+        speed: float = 1.0,
+        acceleration: float = 1.0,
+        wait: bool = True,
+        timeout: float | None = None,
+    ) -> Motion:
+        """The tool frame along a straight line to ``pose`` = [x, y, z, rx, ry, rz] (base
+        frame, [m] and rotation vector [rad]), jerk-limited within the ``motion:`` limits
+        (fractions ``speed``, ``acceleration``); refused before moving when the line leaves
+        the reach, crosses a singularity or needs a joint outside its limits."""
+        p = [float(v) for v in np.asarray(pose, dtype=float).ravel()]
+        if len(p) != 6 or not all(np.isfinite(p)):
+            raise Refused("move_linear: pose must be 6 finite numbers [x, y, z, rx, ry, rz]")
+        req = {"cmd": "move_linear", "pose": p, "speed": float(speed),
+               "acceleration": float(acceleration)}  # fmt: skip
+        r = self._call(req, timeout=120.0)
+        m = Motion(self, "linear", str(r.get("message", "")), float(r.get("duration_s", 0.0)))
+        if wait:
+            m.wait(timeout)
+        return m
 
     def replay(
         self, path_file: Path | str, wait: bool = True, timeout: float | None = None

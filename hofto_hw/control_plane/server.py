@@ -632,11 +632,11 @@ class ControlPlane:
             q = self._joint_target(req["q"])
             teach.check_target(q, self.model)  # before any thread: one line at once
         elif cmd == "move_linear":
-            raise UserError("move_linear: not available in this version (use move_joints)")
+            q = np.array(pr.numbers(req["pose"], "move_linear.pose", 6))  # the target pose
         c.busy = True
         self._planning = True
         dt = 1.0 / self.rate_hz
-        target = q if cmd == "move_joints" else None
+        target = q if cmd in ("move_joints", "move_linear") else None
         self._planner = Planner(cmd, req.get("file"), target, q_now, self.model, limits, dt)
         self._planner_for = (c, req)
         self.sel.register(self._planner.conn, selectors.EVENT_READ, "planner")
@@ -702,6 +702,8 @@ class ControlPlane:
                         f"replaying {arg}: {to_start:.2f} s to its start, then "
                         f"{tr.duration - to_start:.2f} s along it (time scale {tr.scale:.2f})"
                     )
+                elif pb.kind == "linear":
+                    text = f"moving the tool along a line in {tr.duration:.2f} s"
                 else:
                     text = f"moving to the joint target in {tr.duration:.2f} s"
                 return {"ok": True, "message": text, "duration_s": round(tr.duration, 3)}
@@ -1109,6 +1111,8 @@ def _plan_child(conn, cmd, file, target, q_now, model, limits, dt) -> None:
     try:
         if cmd == "replay":
             pb = teach.plan_replay(Path(file), q_now, model, limits, dt)
+        elif cmd == "move_linear":
+            pb = teach.plan_linear(target, q_now, model, limits, dt)
         else:
             pb = teach.plan_move(target, q_now, model, limits, dt)
     except UserError as exc:

@@ -68,6 +68,26 @@ def test_move_joints_waits_and_reaches_the_target(service: Service) -> None:
         assert m.done
 
 
+def test_move_linear_moves_the_tool_along_a_line(service: Service) -> None:
+    with Robot.connect(socket=service.sock) as robot:
+        wait_for(lambda: _at_rest(robot), "hold at rest")
+        s = robot.state()
+        from scipy.spatial.transform import Rotation
+
+        rv = Rotation.from_matrix(s.tcp_rotation).as_rotvec()
+        start = np.concatenate([s.tcp_position, rv])
+        target = start + np.array([0.03, 0.0, -0.02, 0, 0, 0])
+        q_before = robot.state().q_cmd
+        with pytest.raises(Refused, match="leaves the arm's reach"):
+            robot.move_linear(start + np.array([2.0, 0, 0, 0, 0, 0]))
+        assert np.array_equal(robot.state().q_cmd, q_before)  # refused before moving
+        m = robot.move_linear(target, speed=0.5, timeout=120.0)
+        assert m.result == "completed"
+        wait_for(lambda: _at_rest(robot), "rest after the line")
+        assert np.abs(robot.state().tcp_position - target[:3]).max() < 1e-3
+        robot.move_linear(start, timeout=120.0)  # back
+
+
 def test_drag_holds_the_lease_and_another_client_is_refused(service: Service) -> None:
     with Robot.connect(socket=service.sock) as robot, Robot.connect(socket=service.sock) as other:
         wait_for(lambda: _at_rest(robot), "hold at rest")
