@@ -211,14 +211,21 @@ def poll_cost(ticks: int = 5000) -> dict:
     chan = Channel(system.tick.n, len(system.tick.observers), create=True)
     port = LoopPort(chan, system).attach()
     system.loop.run(max_ticks=500)
-    port.detach()
     times = np.zeros(ticks)
     perf = time.perf_counter_ns
-    for i in range(ticks):
-        system.loop.run(max_ticks=1)
-        t0 = perf()
-        port.poll()
-        times[i] = (perf() - t0) * 1e-3
+    k = [0]
+
+    class Timed:  # the loop calls poll() after every tick: time the real one
+        def poll(self) -> None:
+            t0 = perf()
+            port.poll()
+            if k[0] < ticks:
+                times[k[0]] = (perf() - t0) * 1e-3
+                k[0] += 1
+
+    system.loop.port = Timed()
+    system.loop.run(max_ticks=ticks)
+    port.detach()
     chan.close()
     system.close()
     return {
