@@ -23,7 +23,7 @@ from hofto_hw.control.taught_path import (
     save_taught_path,
 )
 from hofto_hw.control_plane.channel import PLAN_CAP
-from hofto_hw.control_plane.process import InProcessControl as ControlServer
+from hofto_hw.control_plane.process import InProcessControl
 from hofto_hw.runtime.compose import build
 
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
@@ -45,7 +45,7 @@ def service(tmp_path_factory: pytest.TempPathFactory):
     cfg = cfg.model_copy(update={"drag": cfg.drag.model_copy(update={"enable_input": enable})})
     system = build(cfg, clock="sim", contact=False)
     sock = tmp_path_factory.mktemp("sock") / "control.sock"
-    server = ControlServer(sock, system)
+    server = InProcessControl(sock, system)
     server.start()
     done = threading.Event()
     runner = threading.Thread(target=lambda: system.loop.run(should_stop=done.is_set))

@@ -156,7 +156,7 @@ def test_control_socket_mode_drag_and_enable(cfg: SystemConfig, tmp_path: Path) 
     import threading
 
     from hofto_hw.client.connection import Connection
-    from hofto_hw.control_plane.process import InProcessControl as ControlServer
+    from hofto_hw.control_plane.process import InProcessControl
     from hofto_hw.runtime.control_client import request
 
     drag = cfg.drag.model_copy(
@@ -166,7 +166,7 @@ def test_control_socket_mode_drag_and_enable(cfg: SystemConfig, tmp_path: Path) 
     tick = system.tick
     done = threading.Event()
     sock = tmp_path / "control.sock"
-    server = ControlServer(sock, system)
+    server = InProcessControl(sock, system)
     server.start()
     runner = threading.Thread(target=lambda: system.loop.run(should_stop=done.is_set))
     runner.start()
