@@ -1006,6 +1006,10 @@ class ControlPlane:
 
     def finish(self) -> None:
         """The loop has ended: save a taught path still open, answer who waits, close."""
+        if self._planner is not None:  # a plan nobody will play
+            self._planner.proc.kill()
+            self._planner.close()
+            self._planner = None
         self._teach(time.monotonic())
         self._save_recording(time.monotonic(), at_end=True)
         for job in list(self.jobs) + ([self.inflight] if self.inflight else []):
@@ -1039,7 +1043,7 @@ class Planner:
         self.conn, child = ctx.Pipe(duplex=False)
         self.proc = ctx.Process(
             target=_plan_child,
-            args=(child, cmd, file, target, q_now, model, limits, dt),
+            args=(child, self.conn, cmd, file, target, q_now, model, limits, dt),
             name="hofto-plan",
             daemon=True,
         )
@@ -1102,8 +1106,27 @@ class _Planned:
     traj: Any
 
 
-def _plan_child(conn, cmd, file, target, q_now, model, limits, dt) -> None:
-    """The planner process: plan, send the head, the rows in chunks, then "end"."""
+def _plan_child(conn, parent_end, cmd, file, target, q_now, model, limits, dt) -> None:
+    """The planner process: plan, send the head, the rows in chunks, then "end". It dies
+    with the control plane (PR_SET_PDEATHSIG) and on SIGTERM (not the server's handler), and
+    holds no read end of its pipe (a write to a gone reader fails instead of blocking)."""
+    import signal
+
+    parent_end.close()
+    import stat
+
+    # the server's sockets (listener, clients): a client the server closes must see it now,
+    # not when this plan is done
+    for name in os.listdir("/proc/self/fd"):
+        fd = int(name)
+        if fd > 2 and fd != conn.fileno():
+            try:
+                if stat.S_ISSOCK(os.fstat(fd).st_mode):
+                    os.close(fd)
+            except OSError:
+                pass
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    _die_with_parent()
     try:
         os.nice(5)
     except OSError:
@@ -1133,6 +1156,18 @@ def _plan_child(conn, cmd, file, target, q_now, model, limits, dt) -> None:
             conn.send((name, np.ascontiguousarray(a[i : i + PLAN_CHUNK])))
     conn.send(("end", None))
     conn.close()
+
+
+def _die_with_parent() -> None:
+    """SIGKILL this process when its parent (the control plane) dies (Linux prctl)."""
+    import ctypes
+    import signal
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        pass
 
 
 def _alive(pid: int) -> bool:
