@@ -222,3 +222,15 @@ def test_drag_record_then_hold_saves_the_taught_path(service, capsys, tmp_path: 
     code, _, err = _run(capsys, sock, "drag", "--record", out)
     one_line_error(code, err, "exists; not overwriting it")
     assert out.read_bytes() == before
+
+
+def test_enable_on_holds_the_lease_for_its_seconds_then_lets_go(service, capsys) -> None:
+    system, sock = service
+    tick = system.tick
+    _wait(lambda: tick.motion.mode == HOLD and np.abs(system.group.qd).max() < 0.01)
+    assert main(["enable", "on", "--seconds", "0.6", "--socket", str(sock)]) == 0
+    out = capsys.readouterr().out
+    assert "enabling input held (lease 0.25 s, renewed)" in out and "enabling input off" in out
+    _wait(lambda: not tick.enable_input.pressed)
+    code = main(["enable", "off", "--seconds", "1", "--socket", str(sock)])
+    one_line_error(code, capsys.readouterr().err, "--seconds: only with enable on")
