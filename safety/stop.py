@@ -44,6 +44,7 @@ class EventKind(IntEnum):
     CONTACT = 100  # a contact-level crossing (reported, clears itself)
     RESET = 101  # the latched faults were reset
     STANDSTILL = 102  # the arm came to rest after a stop
+    PROFILE = 103  # a safety profile became active (joint: its index, value: collision scale)
 
 
 #: Fault -> name used in config (``safety.categories``), events and messages

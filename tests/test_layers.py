@@ -43,6 +43,8 @@ APPLICATION = (
     "hofto_hw.identify",
     "hofto_hw.recording",
     "hofto_hw.progress",
+    "hofto_hw.control_plane",
+    "hofto_hw.client",
 )
 #: layer -> layers it may import (besides third-party and standard-library modules)
 ALLOWED: dict[str, set[str]] = {

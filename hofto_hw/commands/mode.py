@@ -16,8 +16,8 @@ refusal of the running service (a latched stop, not at standstill) exit 1.
 from __future__ import annotations
 
 import argparse
+import math
 import os
-import shlex
 from pathlib import Path
 
 from hofto_hw.errors import UserError
@@ -36,7 +36,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_socket_argument(parser)
 
 
-def request_line(args: argparse.Namespace) -> str:
+def request_of(args: argparse.Namespace) -> dict:
     """The control-socket request for ``args``; UserError (one line) for a bad combination."""
     from hofto_hw.runtime.teach import parse_joints
 
@@ -54,15 +54,16 @@ def request_line(args: argparse.Namespace) -> str:
     if mode == "replay":
         if args.file is None:
             raise UserError("mode replay: needs the taught-path FILE")
-        return f"mode replay {shlex.quote(os.path.abspath(args.file))}"
+        return {"cmd": "replay", "file": os.path.abspath(args.file)}
     if mode == "drag" and args.record is not None:
-        line = f"mode drag --record {shlex.quote(os.path.abspath(args.record))}"
-        return line + (" --force" if args.force else "")
+        req = {"cmd": "mode", "mode": "drag", "record": os.path.abspath(args.record)}
+        return {**req, "force": True} if args.force else req
     if mode == "move" and args.joints is not None:
         q = parse_joints(args.joints, degrees=args.degrees)
-        return "mode move-to " + ",".join(repr(float(v)) for v in q)
-    return f"mode {mode}"
+        # a non-finite value goes as its word: the service names the joint (JSON has no NaN)
+        return {"cmd": "move_joints", "q": [float(v) if math.isfinite(v) else str(v) for v in q]}
+    return {"cmd": "mode", "mode": mode}
 
 
 def run(args: argparse.Namespace) -> int:
-    return answer(request(args.socket, request_line(args)))
+    return answer(request(args.socket, request_of(args)))

@@ -18,6 +18,8 @@ import time
 from pathlib import Path
 
 from hofto_hw.commands.args import output_file
+from hofto_hw.control_plane.process import remove_socket
+from hofto_hw.errors import UserError
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "er3a.yaml"
 
@@ -106,6 +108,10 @@ def run(args: argparse.Namespace) -> int:
     if args.summary_json is not None:
         check_output(args.summary_json, "--summary-json", inputs=[args.config])
     _check_plot(args)
+    if args.socket is not None:  # before anything is created (log, shared memory, socket)
+        from hofto_hw.control_plane.process import check_socket_path
+
+        args.socket = check_socket_path(args.socket)
     cfg = load_config(args.config)
     _check_interface(cfg, args.interface)
     if args.interface is not None and cfg.bus is not None:
@@ -133,14 +139,22 @@ def run(args: argparse.Namespace) -> int:
     positions = None
     if cfg.bus is not None and str(cfg.bus.transport) != "sim" and not args.no_log:
         positions = state_path(args.log_dir or _log_dir(cfg, args.config))
+    control = None
     try:
+        control = _start_control_plane(cfg, args, recorder)
         system = build(
             cfg, clock=clock, sink=recorder, contact=not args.no_collision, positions=positions
         )
     except BaseException:
+        if control is not None:
+            control.close(timeout=2.0)
+            if args.socket is not None:
+                remove_socket(args.socket)
         if recorder is not None:
             recorder.close()
         raise
+    if control is not None:  # it also watches the flight recorder (a safety input)
+        control.attach(system, watch_log=recorder is not None)
     tick = system.tick
 
     def _on_signal(signum: int, frame: object) -> None:
@@ -148,20 +162,8 @@ def run(args: argparse.Namespace) -> int:
         tick.exit_requested = True
 
     old = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
-    service = None
-    if args.socket is not None:
-        from hofto_hw.runtime.service import ControlServer
-
-        service = ControlServer(args.socket, system, mode=cfg.service.socket_mode)
-        service.start()
-    supervisor = None
-    if os.environ.get("NOTIFY_SOCKET"):
-        from hofto_hw.runtime.service import Supervisor
-
-        supervisor = Supervisor(system, cfg.service.watchdog_fraction, cfg.service.status_interval)
-        supervisor.start()
     watch = None
-    if recorder is not None:
+    if recorder is not None and control is None:
         from hofto_hw.runtime.log_watch import LogWatch
 
         watch = LogWatch(recorder, tick).start()
@@ -176,8 +178,10 @@ def run(args: argparse.Namespace) -> int:
         realtime.drop_realtime()
         for s, h in old.items():
             signal.signal(s, h)
-        if service is not None:
-            service.close()
+        if control is not None:
+            control.close()  # saves a taught path still being recorded
+            if args.socket is not None:
+                remove_socket(args.socket)
         from hofto_hw.runtime.teach import save_finished
 
         saved = save_finished(tick, at_end=True)  # a drag --record still open at the end
@@ -190,8 +194,6 @@ def run(args: argparse.Namespace) -> int:
         if watch is not None:
             watch.stop()
         health = recorder.close() if recorder is not None else None
-        if supervisor is not None:
-            supervisor.stop()
     log = None
     if health is not None:
         log = str(health.current_file or recorder.spec.path)
@@ -247,6 +249,45 @@ def _save_positions(path: Path, last: object) -> None:
         save_positions(path, last)  # type: ignore[arg-type]
     except OSError as exc:
         print(f"hofto-hw run: {path}: positions not saved: {exc.strerror}", file=sys.stderr)
+
+
+def _start_control_plane(cfg: object, args: argparse.Namespace, recorder: object):
+    """The control plane's process (control socket, planning, sd_notify) when the run serves
+    a socket or runs under systemd; None otherwise."""
+    notify = bool(os.environ.get("NOTIFY_SOCKET"))
+    if args.socket is None and not notify:
+        return None
+    from hofto_hw.control_plane.process import ControlPlaneProcess, listen
+    from hofto_hw.runtime.compose import loop_observer_names
+
+    listener = None
+    if args.socket is not None:
+        listener = listen(args.socket, cfg.service.socket_mode)  # type: ignore[attr-defined]
+    info = None
+    log_path = None
+    if recorder is not None:
+        name = recorder.shm_name  # type: ignore[attr-defined]
+        caps = recorder.caps  # type: ignore[attr-defined]
+        info = {"shm": name, "caps": [caps.tick, caps.event, caps.diag]}
+        log_path = str(recorder.spec.path)  # type: ignore[attr-defined]
+    try:
+        control = ControlPlaneProcess(
+            cfg,
+            args.config,
+            listener,
+            observers=loop_observer_names(cfg),  # type: ignore[arg-type]
+            log_path=log_path,
+            recorder=info,
+            notify=notify,
+        )
+    except BaseException:
+        if args.socket is not None:
+            remove_socket(args.socket)
+        raise
+    if not control.wait_ready():
+        control.close(timeout=1.0)
+        raise UserError("the control plane process did not start (see the lines above)")
+    return control
 
 
 def _start_recorder(cfg: object, args: argparse.Namespace) -> object:

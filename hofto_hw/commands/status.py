@@ -7,7 +7,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from hofto_hw.runtime.control_client import add_socket_argument, request
+from hofto_hw.errors import UserError
+from hofto_hw.runtime.control_client import add_socket_argument, answer, request
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -20,6 +21,18 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(s, indent=2))
         return 0
+    if not s.get("ok"):
+        return answer(s)
+    try:
+        _print(s)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise UserError(
+            f"{args.socket}: malformed status answer: {type(exc).__name__}: {exc}"
+        ) from None
+    return 0
+
+
+def _print(s: dict) -> None:
     c = s["timing_us"]["compute"]
     w = s["timing_us"]["wakeup"]
     print(f"state: {s['state']} (mode {s['mode']}), {s['ticks']} ticks, {s['overruns']} missed")
@@ -30,6 +43,14 @@ def run(args: argparse.Namespace) -> int:
         f"compute median {c['median']:.0f} µs, p99 {c['p99']:.0f} µs; "
         f"wake-up median {w['median']:.0f} µs, p99 {w['p99']:.0f} µs"
     )
+    prof = s.get("profile")
+    if prof:
+        print(
+            f"safety profile: {prof['name']} (collision thresholds x{prof['collision_scale']:g}, "
+            f"speed x{prof['speed_scale']:g})"
+        )
+    if s.get("holder"):
+        print(f"motion held by {s['holder']}")
     print(f"log: {s['log'] or 'not yet written'}")
     rec = s.get("teach")
     if rec:
@@ -41,4 +62,3 @@ def run(args: argparse.Namespace) -> int:
         what = "replay of " + pb["file"] if pb["kind"] == "replay" else "move to joint target"
         done = "done" if pb["completed"] else f"{100.0 * pb['progress']:.0f} %"
         print(f"last trajectory: {what}, {pb['duration_s']:.2f} s, {done}")
-    return 0

@@ -49,11 +49,20 @@ class EnableInputConfig(FileModel):
 
     ``digital_input``: bit ``bit`` (0-31) of the drive digital inputs 0x60FD of drive
     ``axis`` (CiA 402: bits 16-31 are manufacturer inputs); ``scripted``: a simulation script
-    sets it; ``socket``: the control socket sets it (tests, a GUI button)."""
+    sets it; ``socket``: a client of the control socket holds it as a lease of ``lease``
+    seconds that it renews (``enable on``); not renewed in time, it is released (category 2
+    while dragging), as a hand letting go of an enabling device."""
 
     source: Literal["digital_input", "scripted", "socket"] = "scripted"
     axis: int = Field(0, ge=0)
     bit: int = Field(17, ge=0, le=31)  # the emulated drives use bit 16 for STO
+    lease: float = Field(
+        0.25,
+        ge=0.02,
+        le=0.25,
+        description="[s] how long one renewal of the remote (socket) enabling input holds it: "
+        "a client that stops renewing (crashed, hung, cut off) releases it within this time",
+    )
 
 
 class DragConfig(FileModel):

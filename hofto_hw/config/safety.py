@@ -19,6 +19,7 @@ from pydantic import Field, model_validator
 from hofto_hw.config.base import FileModel
 from hofto_hw.config.collision import ThresholdTerms
 from hofto_hw.config.payload import PayloadConfig
+from hofto_hw.config.profiles import ProfilesConfig
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
@@ -145,6 +146,7 @@ class SafetyConfig(FileModel):
     bus: BusHealthConfig = Field(default_factory=BusHealthConfig)
     collision: CollisionLevelsConfig | None = None
     payload: PayloadConfig = Field(default_factory=PayloadConfig)
+    profiles: ProfilesConfig | None = None  # runtime safety profiles (config/profiles.py)
     overrun_streak: Annotated[int, Field(ge=1, le=100000)] = Field(
         20, description="consecutive missed deadlines that make a fault (Franka: 20)"
     )

@@ -224,7 +224,10 @@ class JointMotion:
             self.path.evaluate(t - self.t0, self.q0, self.q, self.qd, self.qdd)
         elif self.mode == REPLAY or self.mode == MOVE_TO:
             assert self.player is not None
-            if self.player.step(self.q, self.qd, self.qdd):
+            r = self.player.step(self.q, self.qd, self.qdd)
+            if r == 2:  # a streamed plan's next row is not there yet: decelerate, hold
+                self.mode = RAMP_DOWN
+            elif r:
                 self.mode = HOLD  # the last sample is at rest: hold it
         elif self.mode == RAMP_DOWN:
             if self._use_kernel:

@@ -99,6 +99,17 @@ class Ring:
         """Records published and not yet drained."""
         return int(self._ctr[_HEAD]) - int(self._ctr[_TAIL])
 
+    def pop_into(self, out: np.ndarray) -> bool:
+        """Copy the oldest published record into ``out`` (a 0-d record of ``dtype``) and
+        release its slot; False when there is none. Consumer only; allocates no array (the
+        loop's side of a ring the control plane produces)."""
+        tail = int(self._ctr[_TAIL])
+        if int(self._ctr[_HEAD]) == tail:
+            return False
+        out[...] = self._slots[tail & self._mask]
+        self._ctr[_TAIL] = tail + 1
+        return True
+
     def drain(self, max_records: int | None = None) -> np.ndarray:
         """Copy out the published records not yet drained (oldest first, at most
         ``max_records``) and release their slots. Consumer only."""

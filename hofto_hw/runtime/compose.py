@@ -185,6 +185,8 @@ def build(
         backend=backend,
     )
     collision = CollisionLevels(s.collision, names, model, backend=backend) if s.collision else None
+    if collision is not None and s.profiles is not None:  # the active safety profile's scale
+        collision.scale_thresholds(s.profiles.sets[s.profiles.active].collision_scale)
     accel = np.where(np.isfinite(model.limits.acceleration), model.limits.acceleration, 10.0)
     p = cfg.run.path
     path = DemoPath(p.amplitude, p.period, p.phase, p.ramp, backend) if p is not None else None

@@ -1,10 +1,11 @@
-"""Client side of the control socket (``hofto-hw status|reset|stop|mode``)."""
+"""Client side of the control socket for the CLI (``hofto-hw status|reset|stop|mode|enable``)
+and tests: one request, one checked reply (hofto_hw/control_plane/protocol.py). Programs use
+:class:`hofto_hw.client.Robot`."""
 
 from __future__ import annotations
 
 import argparse
 import json
-import socket
 from pathlib import Path
 from typing import Any
 
@@ -19,21 +20,40 @@ def add_socket_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def request(path: Path, line: str, timeout: float = 10.0) -> dict[str, Any]:
-    """Send one request line, return the JSON reply; UserError when nobody answers."""
-    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
-        s.settimeout(timeout)
-        try:
-            s.connect(str(path))
-        except FileNotFoundError:
-            raise UserError(f"{path}: no control socket (is hofto-hw run serving it?)") from None
-        except OSError as exc:
-            raise UserError(f"{path}: cannot connect: {exc.strerror}") from None
-        s.sendall((line + "\n").encode())
-        data = s.makefile("r").readline()
-    if not data:
-        raise UserError(f"{path}: the service closed the connection without an answer")
-    return json.loads(data)
+def request_of(line: str) -> dict[str, Any]:
+    """A request in words (``status``, ``mode move``, ``enable on``, ``mode drag --record F``,
+    ``mode replay F``, ``mode move-to q1,...,qn``; words split at blanks) -> its JSON form."""
+    words = line.split()
+    if not words:
+        return {"cmd": ""}
+    cmd, rest = words[0], words[1:]
+    if cmd == "mode" and rest:
+        what, more = rest[0], rest[1:]
+        if what == "replay" and len(more) == 1:
+            return {"cmd": "replay", "file": more[0]}
+        if what == "move-to" and len(more) == 1:
+            return {"cmd": "move_joints", "q": [float(v) for v in more[0].split(",")]}
+        req: dict[str, Any] = {"cmd": "mode", "mode": what}
+        if "--force" in more:
+            req["force"] = True
+            more = [w for w in more if w != "--force"]
+        if len(more) == 2 and more[0] == "--record":
+            req["record"] = more[1]
+        return req
+    if cmd == "enable" and len(rest) == 1 and rest[0] in ("on", "off"):
+        return {"cmd": "enable", "on": rest[0] == "on"}
+    return {"cmd": cmd}
+
+
+def request(path: Path, req: str | dict[str, Any], timeout: float = 10.0) -> dict[str, Any]:
+    """Send one request (a dict, or words for :func:`request_of`), return the checked reply;
+    UserError (one line) when nobody answers or the reply is malformed."""
+    from hofto_hw.client.connection import Connection
+
+    if isinstance(req, str):
+        req = request_of(req)
+    with Connection(path, timeout=timeout) as conn:
+        return conn.call(req)
 
 
 def answer(reply: dict[str, Any]) -> int:

@@ -96,6 +96,9 @@ class Loop:
         #: the first ticks of a real-time run warm caches and fault in pages (measured here:
         #: up to ~20 ms once): their missed deadlines are counted but start no streak
         self.grace_ticks = 0 if clock.sim else round(0.1e9 / clock.period_ns)
+        #: the control channel's loop side (hofto_hw.control_plane.port.LoopPort): polled
+        #: after every tick, before the next wait (never waits itself)
+        self.port = None
 
     def run(self, max_ticks: int | None = None, should_stop: Callable[[], bool] | None = None):
         """Run up to ``max_ticks`` more ticks (gc frozen and off inside); returns the total."""
@@ -125,6 +128,8 @@ class Loop:
                 self.compute.add(compute_us)
                 self.ticks += 1
                 self.alive_ns = mono()
+                if self.port is not None:
+                    self.port.poll()
                 if should_stop is not None and should_stop():
                     break
         self.running = False

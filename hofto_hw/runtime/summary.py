@@ -101,7 +101,7 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
         d = system.cfg.drag
         out["drag"] = drag_summary(script, d.damping, d.standstill_speed)
     pb = tick.playback
-    if pb is not None:
+    if pb is not None and getattr(pb, "traj", None) is not None:  # not a control-plane stream
         fig = pb.figures(system.model, system.group.q)
         del fig["kind"]
         out[pb.kind] = fig

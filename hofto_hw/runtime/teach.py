@@ -269,3 +269,21 @@ def plan_move(
     """A jerk-limited rest-to-rest move (ruckig) to a checked joint target [rad]."""
     check_target(q_target, model)
     return Playback("move", jerk_limited_move(q_now, q_target, limits, dt), limits)
+
+
+def plan_linear(
+    target: np.ndarray, q_now: np.ndarray, model: RobotModel, limits: Limits, dt: float
+) -> Playback:
+    """A straight tool line to ``target`` ([x, y, z, rx, ry, rz], base frame) from the held
+    position: the joint path of hofto_hw.control.cartesian (refused before anything moves
+    when unreachable or out of limits), at rest at both ends (a cosine profile along the
+    line), time-scaled into the limits like a taught path (jerk-limited)."""
+    from hofto_hw.control.cartesian import linear_joint_path
+
+    qs = linear_joint_path(model.create_data(), q_now, target)
+    k = qs.shape[0]
+    tau = np.linspace(0.0, 1.0, max(k, 200))
+    s = 0.5 * (1.0 - np.cos(np.pi * tau)) * (k - 1)  # sample index along the line
+    q = np.column_stack([np.interp(s, np.arange(k), qs[:, j]) for j in range(qs.shape[1])])
+    traj = replay_trajectory(q_now, tau * max(1.0, 0.01 * k), q, limits, dt)
+    return Playback("linear", traj, limits)

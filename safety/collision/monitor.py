@@ -94,6 +94,8 @@ class CollisionLevels:
         np.copyto(s.par, p.par)
         np.copyto(s.scal, p.scal)
         np.copyto(s.deciding, p.deciding)
+        self._par0 = p.par.copy()  # the configured thresholds (scale_thresholds' reference)
+        self.threshold_scale = 1.0
         self._numpy = NumpyStep(p, s)
         self.tool_force = tool_force
         self.tool_force_value = 0.0
@@ -230,6 +232,14 @@ class CollisionLevels:
             if self.deciding[i] and r[i, j] > best:
                 best = float(r[i, j])
         return best
+
+    def scale_thresholds(self, factor: float) -> None:
+        """Every threshold term of every level, row and joint = the configured one ·
+        ``factor`` (a safety profile; both paths, in place: no allocation, the arrays the
+        fused tick addresses stay the same)."""
+        np.multiply(self._par0, factor, out=self.params.par)
+        np.copyto(self.state.par, self.params.par)
+        self.threshold_scale = factor
 
     def _warm(self) -> None:
         """Compile the kernel on scratch state (the real state stays untouched)."""

@@ -13,6 +13,7 @@ import pytest
 from support.cli import one_line_error
 
 from hofto_hw.cli import main
+from hofto_hw.client import Robot
 from hofto_hw.config.loader import load_config
 from hofto_hw.control.joint_motion import HOLD
 from hofto_hw.control.taught_path import (
@@ -21,8 +22,9 @@ from hofto_hw.control.taught_path import (
     load_taught_path,
     save_taught_path,
 )
+from hofto_hw.control_plane.channel import PLAN_CAP
+from hofto_hw.control_plane.process import InProcessControl
 from hofto_hw.runtime.compose import build
-from hofto_hw.runtime.service import ControlServer
 
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
@@ -43,7 +45,7 @@ def service(tmp_path_factory: pytest.TempPathFactory):
     cfg = cfg.model_copy(update={"drag": cfg.drag.model_copy(update={"enable_input": enable})})
     system = build(cfg, clock="sim", contact=False)
     sock = tmp_path_factory.mktemp("sock") / "control.sock"
-    server = ControlServer(sock, system)
+    server = InProcessControl(sock, system)
     server.start()
     done = threading.Event()
     runner = threading.Thread(target=lambda: system.loop.run(should_stop=done.is_set))
@@ -180,7 +182,9 @@ def test_move_joints_and_replay_play_through_the_loop(service, capsys, tmp_path:
     _wait(lambda: np.abs(system.group.qd).max() < 0.01)
     assert np.abs(system.group.q - target).max() < 2e-3
     # replay: first the move back to the path's start (home), then the path
-    file = save_taught_path(_path(model), tmp_path / "taught.csv")
+    # 6 s of path: more rows than the plan ring holds (streamed while it plays)
+    taught = _path(model, seconds=6.0)
+    file = save_taught_path(taught, tmp_path / "taught.csv")
     code, stdout, err = _run(capsys, sock, "replay", file)
     assert code == 0, err
     assert f"replaying {file}" in stdout and "to its start" in stdout
@@ -190,8 +194,9 @@ def test_move_joints_and_replay_play_through_the_loop(service, capsys, tmp_path:
     assert code == 1 and "mode hold first" in stdout, (stdout, err)
     _wait(lambda: pb.completed)
     _wait(lambda: tick.motion.mode == HOLD)
-    fig = pb.figures(model)
-    assert fig["completed"] and fig["max_path_error_mm"] <= 2.0, fig
+    assert pb.completed and pb.player.rows > PLAN_CAP
+    _wait(lambda: np.abs(system.group.qd).max() < 0.01)
+    assert np.abs(system.group.q - taught.q[-1]).max() < 2e-3  # at the path's end
     assert main(["status", "--socket", str(sock)]) == 0
     assert f"last trajectory: replay of {file}, " in capsys.readouterr().out
 
@@ -201,14 +206,10 @@ def test_drag_record_then_hold_saves_the_taught_path(service, capsys, tmp_path: 
     tick = system.tick
     _wait(lambda: tick.motion.mode == HOLD and np.abs(system.group.qd).max() < 0.01)
     out = tmp_path / "held.csv"
-    code, stdout, err = _run(capsys, sock, "drag", "--record", out)
-    assert code == 0, (stdout, err)
-    assert main(["enable", "on", "--socket", str(sock)]) == 0
-    _wait(lambda: tick.recording.recorder.count > 500)  # held, nobody pushes: it still records
-    code, stdout, err = _run(capsys, sock, "hold")
-    assert code == 0, err
-    assert f"saved to {out}" in stdout, stdout
-    assert main(["enable", "off", "--socket", str(sock)]) == 0
+    with Robot.connect(socket=sock) as robot:
+        with robot.drag(record=out):  # the enabling lease held by the client
+            _wait(lambda: tick.recording.recorder.count > 500)  # held, no push: it records
+        assert f"saved to {out}" in robot.last_drag_message, robot.last_drag_message
     capsys.readouterr()
     path = load_taught_path(out, system.model)
     assert path.t.shape[0] == tick.recording.recorder.count > 500
@@ -221,3 +222,15 @@ def test_drag_record_then_hold_saves_the_taught_path(service, capsys, tmp_path: 
     code, _, err = _run(capsys, sock, "drag", "--record", out)
     one_line_error(code, err, "exists; not overwriting it")
     assert out.read_bytes() == before
+
+
+def test_enable_on_holds_the_lease_for_its_seconds_then_lets_go(service, capsys) -> None:
+    system, sock = service
+    tick = system.tick
+    _wait(lambda: tick.motion.mode == HOLD and np.abs(system.group.qd).max() < 0.01)
+    assert main(["enable", "on", "--seconds", "0.6", "--socket", str(sock)]) == 0
+    out = capsys.readouterr().out
+    assert "enabling input held (lease 0.25 s, renewed)" in out and "enabling input off" in out
+    _wait(lambda: not tick.enable_input.pressed)
+    code = main(["enable", "off", "--seconds", "1", "--socket", str(sock)])
+    one_line_error(code, capsys.readouterr().err, "--seconds: only with enable on")

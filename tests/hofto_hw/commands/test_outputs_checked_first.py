@@ -119,7 +119,7 @@ def test_log_recover_output_is_checked_before_reading(tmp_path: Path, capsys) ->
 
 
 def test_drag_record_into_an_unwritable_place_is_refused_when_requested() -> None:
-    # hofto_hw.runtime.service.ControlServer._recording calls this when it accepts
+    # hofto_hw.control_plane.server calls this when it accepts
     # `mode drag --record FILE`; before, os.access let root "write" into /proc
     from hofto_hw.errors import UserError
     from hofto_hw.runtime.teach import check_output

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from support.control_service import LeaseHolder
 from support.rootnet import (
     ROOT,
     Emulator,
@@ -218,7 +219,7 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest before the press", r.proc)
     t_tared = rig.plant_time() + TARE_WAIT
     wait_for(lambda: rig.plant_time() > t_tared, 30, "the tare's wait", r.proc)
-    _until_ok(rig, "enable on")
+    lease = LeaseHolder(r.socket)  # the enabling input: a lease, renewed while held
     # the true arm's state at every plant step from the push on, traced by the emulator (a
     # test process starved of CPU would sample it too rarely to judge the steady window)
     t0 = rig.push((PUSH, 0.0, 0.0), PUSH_TIME, ramp=RAMP, trace=PUSH_TIME + 0.3)
@@ -229,9 +230,10 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     samples = list(zip(trace["t"], trace["q"], trace["qd"], strict=True))
     st = r.status()
     if st["mode"] != "drag":
+        lease.release()
         _, s = r.terminate()
         raise AssertionError(f"left drag mode during the push: {st}; events {s['events']}")
-    _until_ok(rig, "enable off")
+    assert lease.release()["ok"]
     r.wait_latched("enabling_released")
     status = r.status()
     # the file leaves this class at the schema's default

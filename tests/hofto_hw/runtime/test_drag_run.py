@@ -155,8 +155,9 @@ def test_run_summary_has_the_drag_keys(tmp_path: Path) -> None:
 def test_control_socket_mode_drag_and_enable(cfg: SystemConfig, tmp_path: Path) -> None:
     import threading
 
+    from hofto_hw.client.connection import Connection
+    from hofto_hw.control_plane.process import InProcessControl
     from hofto_hw.runtime.control_client import request
-    from hofto_hw.runtime.service import ControlServer
 
     drag = cfg.drag.model_copy(
         update={"enable_input": cfg.drag.enable_input.model_copy(update={"source": "socket"})}
@@ -165,7 +166,7 @@ def test_control_socket_mode_drag_and_enable(cfg: SystemConfig, tmp_path: Path) 
     tick = system.tick
     done = threading.Event()
     sock = tmp_path / "control.sock"
-    server = ControlServer(sock, system)
+    server = InProcessControl(sock, system)
     server.start()
     runner = threading.Thread(target=lambda: system.loop.run(should_stop=done.is_set))
     runner.start()
@@ -173,19 +174,24 @@ def test_control_socket_mode_drag_and_enable(cfg: SystemConfig, tmp_path: Path) 
         end = time.monotonic() + 30.0
         while system.loop.ticks < 600 and time.monotonic() < end:
             time.sleep(0.01)  # the arm settles in hold after the drives are enabled
-        r = request(sock, "mode drag")
-        assert r["ok"], r
-        assert request(sock, "status")["mode"] == "drag"
-        assert request(sock, "enable on")["ok"]
-        end = time.monotonic() + 30.0
-        while not tick.drag.active and time.monotonic() < end:
-            time.sleep(0.01)
-        assert tick.drag.active
-        assert request(sock, "enable off")["ok"]
-        end = time.monotonic() + 30.0
-        while not tick.stop.latched and time.monotonic() < end:
-            time.sleep(0.01)
-        assert tick.stop.latched_names() == ["enabling_released"]
+        with Connection(sock) as conn:  # a client that holds the lease, then stops renewing
+            r = conn.call({"cmd": "mode", "mode": "drag"})
+            assert r["ok"], r
+            assert request(sock, "status")["mode"] == "drag"
+            end = time.monotonic() + 30.0
+            while not tick.drag.active and time.monotonic() < end:
+                assert conn.call({"cmd": "enable", "on": True})["ok"]  # renewed
+                time.sleep(0.02)
+            assert tick.drag.active
+            # another client may read, not move nor take the enabling input
+            other = request(sock, "enable on")
+            assert not other["ok"] and "held by client" in other["message"], other
+            # no renewal: the lease lapses (while the holder is still connected)
+            end = time.monotonic() + 30.0
+            while not tick.stop.latched and time.monotonic() < end:
+                time.sleep(0.01)
+            assert tick.stop.latched_names() == ["enabling_released"]
+            assert tick.stop.category == 2
         r = request(sock, "mode drag")
         assert not r["ok"] and "reset" in r["message"]
     finally:

@@ -50,6 +50,8 @@ def test_control_socket_status_stop_reset_mode(tmp_path: Path) -> None:
     proc = _start(tmp_path, None, "--socket", str(sock), "--hold")
     try:
         assert stat.S_IMODE(sock.lstat().st_mode) == 0o660
+        # the socket answers from the start; "starting" until the loop's first tick
+        _wait(lambda: request(sock, "status")["state"] != "starting")
         s = request(sock, "status")
         assert s["ok"] and s["state"] == "running" and s["faults"] == []
         assert request(sock, "stop")["ok"]

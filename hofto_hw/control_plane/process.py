@@ -1,0 +1,287 @@
+"""Starting the control plane: the socket path's checks, the listening socket, the process.
+
+:func:`check_socket_path` runs before ``hofto-hw run`` creates anything (flight log,
+shared memory): a path too long for AF_UNIX (108 bytes with its NUL), in a folder that does
+not exist or is not writable, under /proc or /sys, or taken by anything but a stale socket
+is one line naming ``--socket``. :func:`listen` binds it (mode from ``service.socket_mode``,
+never world-accessible between bind and chmod).
+
+:class:`ControlPlaneProcess` starts ``python -m hofto_hw.control_plane.process`` with the
+listening socket's descriptor and the pickled arguments on stdin (as the flight recorder's
+writer), at normal priority. It serves until the loop sets LOOP_DONE or its parent dies; a
+SIGTERM to the whole service only starts a grace period (the loop still stops the arm and
+says so), SIGINT is the loop's. :class:`InProcessControl` runs the same server in a thread
+of the loop's process: for tests and tools that drive a sim-clock loop themselves.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import socket
+import stat
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from drivers.sim.control_socket import check_control_path, claim_control_path
+from hofto_hw.control_plane.channel import LOOP_DONE, Channel
+from hofto_hw.control_plane.port import LoopPort
+from hofto_hw.errors import UserError
+
+AF_UNIX_PATH_MAX = 107  # bytes of a socket path (sun_path is 108 with the NUL)
+TERM_GRACE = 10.0
+
+
+def check_socket_path(path: Path | str, option: str = "--socket") -> Path:
+    """Refuse (UserError, one line) a control-socket path before anything is created."""
+    raw = os.fsencode(path)
+    if not raw or b"\0" in raw:
+        raise UserError(f"{option}: {str(path)!r} is not a usable path")
+    p = Path(os.path.abspath(path))
+    if len(os.fsencode(p)) > AF_UNIX_PATH_MAX:
+        raise UserError(
+            f"{option}: {str(p)!r} is {len(os.fsencode(p))} bytes; a Unix socket path holds at "
+            f"most {AF_UNIX_PATH_MAX} (use a shorter folder, e.g. /run/hofto-hw)"
+        )
+    real = os.path.realpath(p.parent)
+    for pseudo in ("/proc", "/sys"):
+        if real == pseudo or real.startswith(pseudo + "/"):
+            raise UserError(f"{option}: {str(p)!r} is under {pseudo}, where no socket can live")
+    folder = p.parent
+    if folder.exists() and not folder.is_dir():
+        raise UserError(f"{option}: {str(folder)!r} (the socket's folder) is not a folder")
+    check_control_path(p, option)  # folder exists; a file, folder or live socket refused
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise UserError(f"{option}: folder {str(folder)!r} is not writable")
+    return p
+
+
+def listen(path: Path, mode: int = 0o660, option: str = "--socket") -> socket.socket:
+    """Bind and listen at ``path`` (checked; a stale socket there is replaced)."""
+    claim_control_path(path, option)
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
+    old = os.umask(0o177)
+    try:
+        sock.bind(str(path))
+    except OSError as exc:
+        sock.close()
+        raise UserError(
+            f"{option}: cannot create the socket {str(path)!r}: {exc.strerror}"
+        ) from None
+    finally:
+        os.umask(old)
+    os.chmod(path, mode)
+    sock.listen(16)
+    return sock
+
+
+def remove_socket(path: Path) -> None:
+    """Unlink ``path`` if it is (still) a socket."""
+    try:
+        if stat.S_ISSOCK(path.lstat().st_mode):
+            path.unlink()
+    except FileNotFoundError:
+        pass
+
+
+class ControlPlaneProcess:
+    """The control plane in its own process (see the module docstring)."""
+
+    def __init__(
+        self,
+        cfg: Any,
+        config_path: Path,
+        listener: socket.socket | None,
+        *,
+        observers: list[str],
+        log_path: str | None = None,
+        recorder: dict[str, Any] | None = None,
+        notify: bool = False,
+    ) -> None:
+        self.system: Any = None
+        self.port: LoopPort | None = None
+        self.chan = Channel(len(cfg.robot.joints), max(1, len(observers)), create=True)
+        fds = [] if listener is None else [listener.fileno()]
+        args = (
+            self.chan.name,
+            self.chan.n,
+            self.chan.k,
+            cfg,
+            str(config_path),
+            list(observers),
+            None if listener is None else listener.fileno(),
+            log_path,
+            recorder,
+            notify,
+        )
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "hofto_hw.control_plane.process"],
+            stdin=subprocess.PIPE,
+            pass_fds=fds,
+        )
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(pickle.dumps(args))
+        self.proc.stdin.close()
+        if listener is not None:
+            listener.close()  # the child serves it
+
+    def attach(self, system: Any, watch_log: bool = False) -> None:
+        """The loop polls the channel after every tick from now on (``watch_log``: the
+        control plane watches the flight recorder, started with ``recorder``)."""
+        self.system = system
+        self.port = LoopPort(self.chan, system).attach(watch_log)
+
+    def wait_ready(self, timeout: float = 60.0) -> bool:
+        """Whether the process is up (it writes its pid into the channel)."""
+        from hofto_hw.control_plane.channel import CP_PID
+
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if int(self.chan.ctl[CP_PID]):
+                return True
+            if self.proc.poll() is not None:
+                return False
+            time.sleep(0.01)
+        return False
+
+    def close(self, timeout: float = 10.0) -> None:
+        """After the loop: tell the process, wait for it (it saves an open taught path)."""
+        from hofto_hw.control_plane.channel import EXIT
+
+        if self.port is not None:
+            self.port.finish()
+        else:
+            self.chan.ctl[EXIT] = 1
+            self.chan.ctl[LOOP_DONE] = 1
+        try:
+            self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        if self.port is not None:
+            self.port.detach()
+        self.chan.close()
+
+
+class InProcessControl:
+    """The control plane served by a thread of this process (tests, sim-clock tools)."""
+
+    def __init__(self, path: Path, system: Any, mode: int = 0o660) -> None:
+        from hofto_hw.control_plane.server import ControlPlane
+
+        self.path = check_socket_path(path)
+        self.system = system
+        tick = system.tick
+        self.chan = Channel(tick.n, max(1, len(tick.observers)), create=True)
+        self.port = LoopPort(self.chan, system).attach()
+        self.listener = listen(self.path, mode)
+        self.server = ControlPlane(
+            self.listener,
+            self.chan,
+            system.cfg,
+            system.model,
+            observer_names=list(system.observer_names),
+        )
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._serve, name="hofto-control", daemon=True)
+
+    def _serve(self) -> None:
+        self.server.serve(done=self._done.is_set)
+
+    def start(self) -> InProcessControl:
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        self.port.finish()
+        self._done.set()
+        self._thread.join(timeout=10.0)
+        self.port.detach()
+        remove_socket(self.path)
+        self.chan.close()
+
+
+def _drop_realtime() -> None:
+    try:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass
+
+
+class _NotifyView:
+    """What runtime.service.Supervisor reads, from the channel (heartbeat: the loop's ticks)."""
+
+    def __init__(self, chan: Channel) -> None:
+        from hofto_hw.control_plane.channel import EXIT, TICKS
+
+        class _Loop:
+            @property
+            def alive_ns(self_inner) -> int:
+                return int(chan.ctl[TICKS])
+
+        class _Tick:
+            @property
+            def exit_requested(self_inner) -> bool:
+                return bool(chan.ctl[EXIT])
+
+        self.loop = _Loop()
+        self.tick = _Tick()
+
+
+def main() -> int:
+    """The control-plane process (see the module docstring)."""
+    _drop_realtime()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    term = [0.0]
+    signal.signal(signal.SIGTERM, lambda *_: term.__setitem__(0, time.monotonic()))
+    args = pickle.load(sys.stdin.buffer)
+    sys.stdin.close()
+    (name, n, k, cfg, config_path, observers, fd, log_path, recorder, notify) = args
+    from hofto_hw.control_plane.channel import CP_PID
+    from hofto_hw.control_plane.server import ControlPlane
+    from hofto_hw.runtime.compose import build_model
+
+    chan = Channel(n, k, name=name)
+    model = build_model(cfg)
+    listener = None
+    if fd is not None:
+        listener = socket.socket(fileno=fd)
+    server = ControlPlane(
+        listener, chan, cfg, model, observer_names=observers, log_path=log_path, recorder=recorder
+    )
+    sup = None
+    if notify:
+        from hofto_hw.runtime.service import Supervisor
+
+        sup = Supervisor(
+            _NotifyView(chan),
+            cfg.service.watchdog_fraction,
+            cfg.service.status_interval,
+            status=lambda _view: server.status(),
+        )
+        sup.start()
+    chan.ctl[CP_PID] = os.getpid()
+    parent = os.getppid()
+
+    def done() -> bool:
+        if os.getppid() != parent:
+            return True
+        return term[0] > 0.0 and time.monotonic() - term[0] > TERM_GRACE
+
+    try:
+        server.serve(done=done)
+    finally:
+        if sup is not None:
+            sup.stop()
+        ended = bool(chan.ctl[LOOP_DONE])
+        chan.close()
+    return 0 if ended else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

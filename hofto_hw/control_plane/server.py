@@ -1,0 +1,1181 @@
+"""The control-plane server: the control socket (selectors, non-blocking), the requests'
+checks, planning, taught-path saving and the status, against a :class:`Channel`.
+
+Every client is served by one selector loop without blocking the others: reads and writes
+are non-blocking, a request line is at most ``protocol.MAX_LINE`` bytes (a longer one is
+answered with one line and the connection closed), a line that does not complete within
+``line_timeout`` is answered and closed (a client trickling bytes), at most ``max_clients``
+connections are open (one more closes an idle one, or is answered "too many
+clients" when none is idle: an operator's stop always gets in), a client that
+does not read its replies is closed when ``MAX_PENDING_OUT`` bytes wait for it. A ``stop``
+line is answered as soon as it is read (it writes the channel's stop word), never queued
+behind anything; other lines are taken at most ``LINES_PER_TURN`` per connection and
+``TURN_BUDGET`` in all per turn, round robin, so that one turn stays short whoever floods;
+``status`` is built at most every ``STATUS_CACHE_S``.
+
+Requests for the loop (reset, mode, play) go one at a time through the request ring and
+are answered when the loop's reply record arrives; planning (ruckig moves, the taught
+path's timing) runs in a forked planner process (:class:`Planner`), and the plan is
+streamed into the plan ring ahead of the loop while it plays. One client at a time holds
+motion and the enabling input (the first that asks; until it disconnects or sends
+``release``); another one's motion request is refused naming the holder. The remote
+enabling input is a lease: ``enable on`` holds it for ``lease`` seconds
+(``drag.enable_input.lease``) from now; it expires unless renewed, and the holder's
+disconnect releases it at once.
+"""
+
+from __future__ import annotations
+
+import collections
+import os
+import selectors
+import socket
+import struct
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hofto_hw.control.joint_motion import DRAG, HOLD, MODE_NAMES, MOVE
+from hofto_hw.control.path_timing import Limits
+from hofto_hw.control_plane import channel as ch
+from hofto_hw.control_plane import protocol as pr
+from hofto_hw.errors import UserError
+from hofto_hw.runtime import teach
+from hofto_hw.runtime.timing import percentile_of, summarize
+from safety.stop import EVENT_NAMES, FAULT_NAMES, N_FAULTS
+
+LINES_PER_TURN = 8
+TURN_BUDGET = 32  # request lines handled per turn over all connections
+STATUS_CACHE_S = 0.02  # a status is built at most every 20 ms (a flood asks it back to back)
+PLAN_CHUNK = 4096  # rows per message from the planner process
+MAX_PENDING_OUT = 1 << 20
+LOOP_ANSWER_TIMEOUT = 5.0  # [s] the loop answers a request within a few ticks
+_MODE_CODE = {"hold": HOLD, "move": MOVE, "drag": DRAG}
+
+
+@dataclass
+class Conn:
+    sock: socket.socket
+    ident: int
+    opened: float
+    pid: int = 0
+    name: str = ""
+    inbuf: bytearray = field(default_factory=bytearray)
+    outbuf: bytearray = field(default_factory=bytearray)
+    partial_since: float = 0.0  # when the incomplete line in inbuf began (0: none)
+    lines: collections.deque = field(default_factory=collections.deque)
+    busy: bool = False  # a request of this connection is being answered
+    closing: bool = False
+    last: float = 0.0
+    requests: int = 0  # request lines taken
+
+    def who(self) -> str:
+        name = f"{self.name!r} " if self.name else ""
+        return f"client {name}(pid {self.pid}, connection {self.ident})"
+
+
+@dataclass
+class LoopJob:
+    conn: Conn
+    req: dict[str, Any]
+    kind: int
+    mode: int = 0
+    arg: int = 0
+    flag: int = 0
+    value: float = 0.0
+    seq: int = 0
+    sent_at: float = 0.0
+    done: Any = None  # callable(ok, text) -> reply dict, or None
+
+
+class ControlPlane:
+    """See the module docstring. ``listener``: a bound, listening AF_UNIX socket.
+    ``model``: the robot model (planning, TCP pose); ``cfg``: the SystemConfig."""
+
+    def __init__(
+        self,
+        listener: socket.socket | None,
+        chan: ch.Channel,
+        cfg: Any,
+        model: Any,
+        *,
+        observer_names: list[str],
+        log_path: str | None = None,
+        recorder: dict[str, Any] | None = None,
+        max_clients: int = 16,
+        line_timeout: float = 2.0,
+        idle_timeout: float = 3600.0,
+    ) -> None:
+        self.listener = listener
+        self.chan = chan
+        self.cfg = cfg
+        self.model = model
+        self.observer_names = list(observer_names)
+        self.rate_hz = float(cfg.loop.rate_hz)
+        self.log_path = log_path
+        self.recorder_info = recorder
+        self._rec_block = None
+        self.max_clients = int(max_clients)
+        self.line_timeout = float(line_timeout)
+        self.idle_timeout = float(idle_timeout)
+        drag = getattr(cfg, "drag", None)
+        self.lease_s = float(getattr(drag.enable_input, "lease", 0.25)) if drag else 0.25
+        self.sel = selectors.DefaultSelector()
+        if listener is not None:
+            listener.setblocking(False)
+            self.sel.register(listener, selectors.EVENT_READ, None)
+        self.conns: dict[int, Conn] = {}
+        self._next_ident = 1
+        self.holder: Conn | None = None
+        self.jobs: collections.deque[LoopJob] = collections.deque()
+        self.inflight: LoopJob | None = None
+        self._seq = 0
+        self.events: collections.deque[dict[str, Any]] = collections.deque(maxlen=1024)
+        self.events_total = 0
+        # planning (a forked process: Planner) and the plan being streamed
+        self._planner: Planner | None = None
+        self._planner_for: tuple[Conn, dict[str, Any]] | None = None
+        self._planning = False
+        self.plan_id = 0
+        self.plan_traj: Any = None
+        self.plan_written = 0
+        self.playback_info: dict[str, Any] | None = None
+        # taught path being recorded
+        self.recording: teach.Recording | None = None
+        self.rec_waiters: list[tuple[Conn, dict[str, Any], float]] = []
+        self.teach_info: dict[str, Any] | None = None
+        self._p99_at = 0.0
+        self._log_at = 0.0
+        self._rr = 0
+        self._status_at = -1.0
+        self._status: dict[str, Any] | None = None
+        self._log_watch: Any = None
+        self._data = model.create_data()
+        self.stop_answered = 0
+
+    # ------------------------------------------------------------------ main loop
+
+    def serve(self, done: Any = None, tick_s: float = 0.005) -> None:
+        """Serve until ``done()`` is true or the loop has ended (LOOP_DONE)."""
+        while not (done is not None and done()) and not self.chan.ctl[ch.LOOP_DONE]:
+            # sockets wake the select at once; the loop's replies, a plan to stream, a taught
+            # path to drain are polled: every tick_s while one is in progress, else 4x slower
+            busy = self.inflight is not None or self._planner is not None
+            busy = busy or self.plan_traj is not None or self.recording is not None
+            self.turn(tick_s if busy else 4.0 * tick_s)
+        self.finish()
+
+    def turn(self, timeout: float) -> None:
+        """One turn: socket I/O, stops first, other lines, the loop's replies, streaming."""
+        now = time.monotonic()
+        for key, mask in self.sel.select(timeout):
+            if key.data is None:
+                self._accept(now)
+                continue
+            if key.data == "planner":
+                continue  # read in _planned, one message a turn
+            c: Conn = key.data
+            if mask & selectors.EVENT_READ:
+                self._read(c, now)
+            if mask & selectors.EVENT_WRITE and not c.closing:
+                self._flush(c)
+        now = time.monotonic()
+        self._lines(now)
+        self._loop_replies(now)
+        self._planned()
+        self._stream_plan()
+        self._teach(now)
+        self._drain_events()
+        self._timeouts(now)
+        if self.recorder_info and now >= self._log_at:
+            self._log_at = now + 0.1
+            self._watch_log()
+        if now >= self._p99_at:
+            self._p99_at = now + 1.0
+            x = self.chan.extra
+            self.chan.fctl[ch.WAKE_P99] = percentile_of(
+                self.chan.wakeup_counts, 99.0, float(x[ch.X_WAKE_MAX])
+            )
+            self.chan.fctl[ch.COMP_P99] = percentile_of(
+                self.chan.compute_counts, 99.0, float(x[ch.X_COMP_MAX])
+            )
+        self.chan.ctl[ch.CP_BEAT] += 1
+
+    # ------------------------------------------------------------------ sockets
+
+    def _accept(self, now: float) -> None:
+        try:
+            sock, _ = self.listener.accept()  # type: ignore[union-attr]
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            return
+        sock.setblocking(False)
+        c = Conn(sock, self._next_ident, now, last=now)
+        self._next_ident += 1
+        try:
+            cred = sock.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i"))
+            c.pid = struct.unpack("3i", cred)[0]
+        except OSError:
+            pass
+        if len(self.conns) >= self.max_clients and not self._evict_idle():
+            try:
+                msg = f"too many clients ({self.max_clients}), none idle"
+                sock.send(pr.dumps({"ok": False, "message": msg}))
+            except OSError:
+                pass
+            sock.close()
+            return
+        self.conns[c.ident] = c
+        self.sel.register(sock, selectors.EVENT_READ, c)
+
+    def _evict_idle(self) -> bool:
+        """At ``max_clients``: close an idle connection (not the holder, nothing in
+        progress; one that never sent a request first, then the one idle longest), so that a
+        new one (an operator's stop) is always served."""
+        idle = [
+            c for c in self.conns.values() if c is not self.holder and not c.busy and not c.lines
+        ]
+        if not idle:
+            return False
+        c = min(idle, key=lambda c: (c.requests > 0, c.last))  # silent ones first
+        self._refuse_and_close(c, f"closed: {self.max_clients} clients, this one idle longest")
+        return True
+
+    def _read(self, c: Conn, now: float) -> None:
+        try:
+            data = c.sock.recv(65536)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            self._close(c)
+            return
+        if not data:
+            self._close(c)
+            return
+        c.last = now
+        buf = c.inbuf
+        buf += data
+        while True:
+            i = buf.find(b"\n")
+            if i < 0:
+                break
+            raw = bytes(buf[:i])
+            del buf[: i + 1]
+            if b'"stop"' in raw and self._stop_line(c, raw):
+                continue  # answered now, ahead of everything queued
+            c.lines.append(raw)
+        if buf and not c.partial_since:
+            c.partial_since = now
+        elif not buf:
+            c.partial_since = 0.0
+        if len(buf) > pr.MAX_LINE:
+            self._refuse_and_close(c, f"request longer than {pr.MAX_LINE} bytes")
+            return
+        if len(c.lines) > 256:  # a flood: stop reading until its lines are handled
+            self._interest(c)
+
+    def _interest(self, c: Conn) -> None:
+        if c.closing:
+            return
+        ev = 0
+        if len(c.lines) <= 256:
+            ev |= selectors.EVENT_READ
+        if c.outbuf:
+            ev |= selectors.EVENT_WRITE
+        try:
+            if ev:
+                self.sel.modify(c.sock, ev, c)
+            else:
+                self.sel.modify(c.sock, selectors.EVENT_READ, c)
+        except (KeyError, ValueError, OSError):
+            pass
+
+    def _send(self, c: Conn, reply: dict[str, Any], req: dict[str, Any] | None = None) -> None:
+        if c.closing:
+            return
+        if req is not None and "id" in req:
+            reply = {"id": req["id"], **reply}
+        try:
+            c.outbuf += pr.dumps(reply)
+        except ValueError:  # a non-finite number in a reply: a bug; say so, never send NaN
+            c.outbuf += pr.dumps({"ok": False, "message": "internal error: non-finite reply"})
+        if len(c.outbuf) > MAX_PENDING_OUT:
+            self._close(c)
+            return
+        self._flush(c)
+
+    def _flush(self, c: Conn) -> None:
+        if c.outbuf:
+            try:
+                n = c.sock.send(c.outbuf)
+                del c.outbuf[:n]
+            except (BlockingIOError, InterruptedError):
+                pass
+            except OSError:
+                self._close(c)
+                return
+        self._interest(c)
+
+    def _refuse_and_close(self, c: Conn, message: str) -> None:
+        try:
+            c.sock.send(pr.dumps({"ok": False, "input_error": True, "message": message}))
+        except OSError:
+            pass
+        self._close(c)
+
+    def _close(self, c: Conn) -> None:
+        if c.closing:
+            return
+        c.closing = True
+        try:
+            self.sel.unregister(c.sock)
+        except (KeyError, ValueError):
+            pass
+        c.sock.close()
+        self.conns.pop(c.ident, None)
+        if self.holder is c:
+            self.holder = None
+            self.chan.ctl[ch.LEASE_NS] = 0  # the holder is gone: its enabling input too
+
+    def _timeouts(self, now: float) -> None:
+        for c in list(self.conns.values()):
+            if c.partial_since and now - c.partial_since > self.line_timeout:
+                self._refuse_and_close(
+                    c, f"request line not completed within {self.line_timeout:g} s"
+                )
+            elif not c.busy and not c.lines and now - c.last > self.idle_timeout:
+                self._close(c)
+
+    # ------------------------------------------------------------------ requests
+
+    def _stop_line(self, c: Conn, raw: bytes) -> bool:
+        """A line that may be a stop (it holds '"stop"'): handled as it arrives. True when
+        it was one."""
+        try:
+            req = pr.parse_request(raw)
+        except pr.ProtocolError:
+            return False
+        if req["cmd"] != "stop":
+            return False
+        self._stop(c, req)
+        return True
+
+    def _lines(self, now: float) -> None:
+        """Queued lines (stops never queue: _read answers them as they arrive): up to
+        LINES_PER_TURN per connection and TURN_BUDGET in all, starting with a different
+        connection each turn, so one turn stays short whoever floods."""
+        conns = list(self.conns.values())
+        if not conns:
+            return
+        self._rr = (self._rr + 1) % len(conns)
+        budget = TURN_BUDGET
+        for c in conns[self._rr :] + conns[: self._rr]:
+            n = 0
+            while c.lines and not c.busy and not c.closing and n < LINES_PER_TURN and budget > 0:
+                n += 1
+                budget -= 1
+                raw = c.lines.popleft()
+                c.requests += 1
+                try:
+                    req = pr.parse_request(raw)
+                except pr.ProtocolError as exc:
+                    self._send(c, {"ok": False, "input_error": True, "message": str(exc)})
+                    continue
+                try:
+                    self._handle(c, req, now)
+                except UserError as exc:
+                    self._send(c, {"ok": False, "input_error": True, "message": str(exc)}, req)
+            if len(c.lines) <= 256:
+                self._interest(c)
+
+    def _stop(self, c: Conn, req: dict[str, Any]) -> None:
+        self.chan.ctl[ch.STOP_SEQ] += 1
+        self.chan.ctl[ch.LEASE_NS] = 0
+        self._status = None
+        self.stop_answered += 1
+        self._send(c, {"ok": True, "message": "stop requested"}, req)
+
+    def _holder_refusal(self, c: Conn) -> str:
+        h = self.holder
+        if h is None or h is c or h.closing:
+            self.holder = c
+            return ""
+        return f"refused: motion and enabling are held by {h.who()}"
+
+    def _handle(self, c: Conn, req: dict[str, Any], now: float) -> None:
+        cmd = req["cmd"]
+        if cmd in pr.MOTION:
+            why = self._holder_refusal(c)
+            if why:
+                self._send(c, {"ok": False, "message": why}, req)
+                return
+        if cmd == "hello":
+            c.name = str(req.get("name", ""))[:64]
+            self._send(c, {"ok": True, **self.hello()}, req)
+        elif cmd == "status":
+            if self._status is None or now - self._status_at > STATUS_CACHE_S:
+                self._status, self._status_at = self.status(), now
+            self._send(c, {"ok": True, **self._status}, req)
+        elif cmd == "state":
+            self._send(c, {"ok": True, **self.state()}, req)
+        elif cmd == "stream_info":
+            self._send(c, {"ok": True, **self.stream_info()}, req)
+        elif cmd == "events":
+            since = int(req.get("since", 0))
+            evs = [e for e in self.events if e["seq"] >= since]
+            self._send(c, {"ok": True, "events": evs, "next": self.events_total}, req)
+        elif cmd == "release":
+            if self.holder is c:
+                self.holder = None
+                self.chan.ctl[ch.LEASE_NS] = 0
+            self._send(c, {"ok": True, "message": "released"}, req)
+        elif cmd == "reset":
+            self._queue(LoopJob(c, req, ch.REQ_RESET))
+        elif cmd == "enable":
+            self._enable(c, req)
+        elif cmd == "mode":
+            self._mode(c, req)
+        elif cmd == "cancel":
+            self._queue(LoopJob(c, req, ch.REQ_MODE, mode=HOLD))
+        elif cmd == "set_safety_profile":
+            self._set_profile(c, req)
+        elif cmd in ("replay", "move_joints", "move_linear"):
+            self._plan_request(c, req)
+        else:  # pragma: no cover - protocol.COMMANDS and this table agree
+            self._send(c, {"ok": False, "message": f"{cmd}: not served"}, req)
+
+    # ------------------------------------------------------------------ profiles
+
+    def _profiles(self) -> Any:
+        return self.cfg.safety.profiles
+
+    def active_profile(self, x: np.ndarray | None = None) -> tuple[str | None, dict | None]:
+        """The loop's active safety profile: (name, content), (None, None) without any."""
+        prof = self._profiles()
+        if prof is None:
+            return None, None
+        if x is None:
+            got = self.chan.read_state()
+            x = None if got is None else got[1]
+        names = prof.names()
+        i = names.index(prof.active) if x is None else int(x[ch.X_PROFILE])
+        name = names[i] if 0 <= i < len(names) else prof.active
+        return name, prof.sets[name].model_dump()
+
+    def _set_profile(self, c: Conn, req: dict[str, Any]) -> None:
+        prof = self._profiles()
+        name = req["name"]
+        if prof is None:
+            raise UserError("set_safety_profile: the config has no safety.profiles")
+        if name not in prof.sets:
+            raise UserError(
+                f"set_safety_profile: {name!r} is not a profile ({', '.join(prof.names())})"
+            )
+        content = prof.sets[name].model_dump()
+
+        def done(ok: bool, text: str) -> dict[str, Any]:
+            if not ok:
+                return {"ok": False, "message": text}
+            print(f"hofto-hw run: safety profile {name} active: {content}", flush=True)
+            return {"ok": True, "message": f"safety profile {name} active", "profile": content}
+
+        self._queue(
+            LoopJob(
+                c, req, ch.REQ_PROFILE, arg=prof.names().index(name),
+                value=float(content["collision_scale"]), done=done,
+            )
+        )  # fmt: skip
+
+    def _enable(self, c: Conn, req: dict[str, Any]) -> None:
+        got = self.chan.read_state()
+        src = -1 if got is None else int(got[1][ch.X_ENABLE_SOURCE])
+        name = ch.SOURCES[src] if 0 <= src < len(ch.SOURCES) else "?"
+        if name != "socket":
+            msg = f"drag.enable_input.source is {name!r}, not 'socket'"
+            self._send(c, {"ok": False, "message": msg}, req)
+            return
+        if req["on"]:
+            self.chan.ctl[ch.LEASE_NS] = time.monotonic_ns() + int(self.lease_s * 1e9)
+            msg = f"enabling input on for {self.lease_s:g} s (renew to hold it)"
+        else:
+            self.chan.ctl[ch.LEASE_NS] = 0
+            msg = "enabling input off"
+        self._send(c, {"ok": True, "message": msg, "lease_s": self.lease_s}, req)
+
+    def _mode(self, c: Conn, req: dict[str, Any]) -> None:
+        what = req["mode"]
+        rec_file = req.get("record")
+        if (rec_file is not None or req.get("force")) and what != "drag":
+            raise UserError(f"mode {what}: record/force only with mode drag")
+        got = self.chan.read_state()
+        if got is not None and got[1][ch.X_STOPPING]:
+            self._send(c, {"ok": False, "message": "a stop is latched: reset first"}, req)
+            return
+        if what == "drag":
+            rec = None
+            if rec_file is not None:
+                file = teach.check_output(rec_file, bool(req.get("force", False)))
+                cap = round(self.cfg.motion.record_seconds * self.rate_hz)
+                rec = teach.Recording(file, bool(req.get("force", False)), self.model, cap)
+                self._save_recording(0.0)  # a finished earlier one first
+            drained = self.chan.taught.drain()  # leftovers of an earlier recording
+            del drained
+
+            def done(ok: bool, text: str, rec=rec) -> dict[str, Any]:
+                if not ok:
+                    return {"ok": False, "message": text}
+                if rec is not None:
+                    self.recording = rec
+                where = f", recording the taught path to {rec.file}" if rec is not None else ""
+                return {"ok": True, "message": f"mode drag{where}"}
+
+            self._queue(
+                LoopJob(c, req, ch.REQ_MODE, mode=DRAG, flag=int(rec is not None), done=done)
+            )
+            return
+
+        def after(ok: bool, text: str) -> dict[str, Any] | None:
+            if ok and what == "hold" and self.recording is not None:
+                self.rec_waiters.append((c, {"ok": True, "message": text}, time.monotonic() + 2.0))
+                return None  # answered when the taught path is saved
+            return {"ok": ok, "message": text}
+
+        self._queue(LoopJob(c, req, ch.REQ_MODE, mode=_MODE_CODE[what], done=after))
+
+    # ------------------------------------------------------------------ the loop's ring
+
+    def _queue(self, job: LoopJob) -> None:
+        job.conn.busy = True
+        self.jobs.append(job)
+        self._send_next()
+
+    def _send_next(self) -> None:
+        if self.inflight is not None or not self.jobs:
+            return
+        job = self.jobs.popleft()
+        if job.conn.closing and job.kind != ch.REQ_PLAY:
+            self._send_next()
+            return
+        self._seq += 1
+        job.seq = self._seq
+        r = np.zeros((), ch.REQUEST_DTYPE)
+        r["seq"], r["kind"], r["mode"] = job.seq, job.kind, job.mode
+        r["arg"], r["flag"] = job.arg, job.flag
+        r["value"][0] = job.value
+        if not self.chan.requests.push(r):
+            self._answer(job, {"ok": False, "message": "the loop's request ring is full"})
+            self._send_next()
+            return
+        job.sent_at = time.monotonic()
+        self.inflight = job
+
+    def _answer(self, job: LoopJob, reply: dict[str, Any] | None) -> None:
+        job.conn.busy = False
+        self._status = None  # the loop acted: the next status is built anew
+        if reply is not None:
+            self._send(job.conn, reply, job.req)
+
+    def _loop_replies(self, now: float) -> None:
+        for rep in self.chan.replies.drain():
+            job = self.inflight
+            if job is None or int(rep["seq"]) != job.seq:
+                continue
+            self.inflight = None
+            ok = bool(rep["code"])
+            text = bytes(rep["text"]).decode("utf-8", "replace")
+            reply = job.done(ok, text) if job.done else {"ok": ok, "message": text}
+            self._answer(job, reply)
+        job = self.inflight
+        if job is not None and now - job.sent_at > LOOP_ANSWER_TIMEOUT:
+            self.inflight = None
+            self._answer(job, {"ok": False, "message": "the loop did not answer the request"})
+        self._send_next()
+
+    # ------------------------------------------------------------------ planning
+
+    def _plan_request(self, c: Conn, req: dict[str, Any]) -> None:
+        got = self.chan.read_state()
+        if got is None:
+            self._send(c, {"ok": False, "message": "the loop has not started"}, req)
+            return
+        rec, x = got
+        if x[ch.X_STOPPING]:
+            self._send(c, {"ok": False, "message": "a stop is latched: reset first"}, req)
+            return
+        mode = int(rec["mode"])
+        if mode != HOLD:
+            name = MODE_NAMES.get(mode, "?")
+            msg = f"refused: the arm is in mode {name}: mode hold first"
+            self._send(c, {"ok": False, "message": msg}, req)
+            return
+        if self._planning:
+            self._send(c, {"ok": False, "message": "refused: another plan is being made"}, req)
+            return
+        q_now = np.array(rec["q_cmd"], dtype=float)
+        limits = teach.motion_limits(self.cfg, self.model)
+        speed = float(req.get("speed", 1.0))
+        acc = float(req.get("acceleration", 1.0))
+        for key, v in (("speed", speed), ("acceleration", acc)):
+            if not 0.0 < v <= 1.0:
+                raise UserError(f"{req['cmd']}.{key}: {v} is not a fraction of the limit in (0, 1]")
+        _, prof = self.active_profile(x)
+        if prof is not None:  # the active safety profile's fraction of the motion limits
+            speed *= prof["speed_scale"]
+            acc *= prof["speed_scale"]
+        limits = Limits(limits.velocity * speed, limits.acceleration * acc, limits.jerk * acc)
+        cmd = req["cmd"]
+        if cmd == "move_joints":
+            q = self._joint_target(req["q"])
+            teach.check_target(q, self.model)  # before any thread: one line at once
+        elif cmd == "move_linear":
+            q = np.array(pr.numbers(req["pose"], "move_linear.pose", 6))  # the target pose
+        c.busy = True
+        self._planning = True
+        dt = 1.0 / self.rate_hz
+        target = q if cmd in ("move_joints", "move_linear") else None
+        self._planner = Planner(cmd, req.get("file"), target, q_now, self.model, limits, dt)
+        self._planner_for = (c, req)
+        self.sel.register(self._planner.conn, selectors.EVENT_READ, "planner")
+
+    def _joint_target(self, values: list[Any]) -> np.ndarray:
+        """move_joints.q -> (n,) [rad]; one line naming the joint for a value that is not a
+        finite number (a client may send "nan"/"inf" as words: JSON has no NaN)."""
+        model = self.model
+        if len(values) != model.n:
+            raise UserError(f"move_joints: {len(values)} values, {model.name} has {model.n} joints")
+        out = np.zeros(model.n)
+        for j, v in enumerate(values):
+            name = model.joint_names[j]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                raise UserError(f"move_joints: {name}: {str(v)[:40]} is not a finite number")
+            out[j] = v
+        return out
+
+    def _planned(self) -> None:
+        pl = self._planner
+        if pl is None or not pl.step():
+            return
+        self._planner = None
+        try:
+            self.sel.unregister(pl.conn)
+        except (KeyError, ValueError):
+            pass
+        pl.close()
+        c, req = self._planner_for
+        for pb, err in ((pl.result, pl.error),):
+            self._planning = False
+            if pb is None:
+                c.busy = False
+                self._send(c, {"ok": False, "input_error": True, "message": err}, req)
+                continue
+            ctl = self.chan.ctl
+            self.plan_id += 1
+            traj = pb.traj
+            ctl[ch.PLAN_HEAD] = 0
+            self.chan.plan_start[:] = traj.q[0]
+            ctl[ch.PLAN_ROWS] = traj.q.shape[0]
+            self.plan_traj = traj
+            self.plan_written = 0
+            ctl[ch.PLAN_ID] = self.plan_id
+            self._stream_plan()
+            arg = req.get("file", "")
+
+            def done(ok: bool, text: str, pb=pb, arg=arg) -> dict[str, Any]:
+                if not ok:
+                    self.plan_traj = None
+                    return {"ok": False, "message": text}
+                tr = pb.traj
+                self.playback_info = {
+                    "kind": pb.kind,
+                    "file": None if pb.file is None else str(pb.file),
+                    "rows": int(tr.q.shape[0]),
+                    "duration_s": round(tr.duration, 3),
+                    "plan_id": self.plan_id,
+                }
+                if pb.kind == "replay":
+                    to_start = tr.segments[1] * tr.dt
+                    text = (
+                        f"replaying {arg}: {to_start:.2f} s to its start, then "
+                        f"{tr.duration - to_start:.2f} s along it (time scale {tr.scale:.2f})"
+                    )
+                elif pb.kind == "linear":
+                    text = f"moving the tool along a line in {tr.duration:.2f} s"
+                else:
+                    text = f"moving to the joint target in {tr.duration:.2f} s"
+                return {"ok": True, "message": text, "duration_s": round(tr.duration, 3)}
+
+            c.busy = False
+            self._queue(LoopJob(c, req, ch.REQ_PLAY, mode=pb.mode, arg=self.plan_id, done=done))
+
+    def _stream_plan(self) -> None:
+        tr = self.plan_traj
+        if tr is None:
+            return
+        ctl = self.chan.ctl
+        rows = tr.q.shape[0]
+        w = self.plan_written
+        if w >= rows:
+            self.plan_traj = None  # every row is in the ring
+            return
+        tail = int(ctl[ch.PLAN_TAIL]) if int(ctl[ch.PLAN_TAIL_ID]) == self.plan_id else 0
+        end = min(rows, tail + ch.PLAN_CAP)
+        mask = ch.PLAN_CAP - 1
+        while w < end:
+            s = w & mask
+            m = min(end - w, ch.PLAN_CAP - s)
+            self.chan.plan_q[s : s + m] = tr.q[w : w + m]
+            self.chan.plan_qd[s : s + m] = tr.qd[w : w + m]
+            self.chan.plan_qdd[s : s + m] = tr.qdd[w : w + m]
+            w += m
+        self.plan_written = w
+        ctl[ch.PLAN_HEAD] = w  # published after the rows
+
+    # ------------------------------------------------------------------ teach
+
+    def _teach(self, now: float) -> None:
+        rec = self.recording
+        if rec is not None:
+            rows = self.chan.taught.drain()
+            for r in rows:
+                rec.recorder.push(float(r["t"]), r["q"])
+        self._save_recording(now)
+        if self.rec_waiters and self.recording is None:
+            for c, reply, _ in self.rec_waiters:
+                if self.teach_info and self.teach_info.get("message"):
+                    reply = {
+                        **reply,
+                        "message": f"{reply['message']}; {self.teach_info['message']}",
+                    }
+                c.busy = False
+                self._send(c, reply)
+            self.rec_waiters = []
+        for c, reply, until in list(self.rec_waiters):
+            if now > until:
+                self.rec_waiters.remove((c, reply, until))
+                c.busy = False
+                self._send(c, reply)
+
+    def _save_recording(self, now: float, at_end: bool = False) -> str:
+        rec = self.recording
+        if rec is None:
+            return ""
+        got = self.chan.read_state()
+        state = teach.FINISHED if got is None else int(got[1][ch.X_TEACH_STATE])
+        if state < teach.FINISHED and not at_end:
+            rec.state = state
+            return ""
+        for r in self.chan.taught.drain():
+            rec.recorder.push(float(r["t"]), r["q"])
+        rec.state = teach.FINISHED
+        msg = rec.save()
+        self.teach_info = rec.status()
+        self.recording = None
+        print(f"hofto-hw run: {msg}", flush=True)
+        return msg
+
+    # ------------------------------------------------------------------ events
+
+    def _drain_events(self) -> None:
+        for e in self.chan.events.drain():
+            kind = int(e["kind"])
+            self.events.append(
+                {
+                    "seq": self.events_total,
+                    "t": float(e["t"]),
+                    "tick": int(e["tick"]),
+                    "kind": EVENT_NAMES.get(kind, f"kind {kind}"),
+                    "joint": int(e["joint"]),
+                    "category": int(e["category"]),
+                    "value": float(e["value"]) if np.isfinite(e["value"]) else None,
+                }
+            )
+            self.events_total += 1
+
+    # ------------------------------------------------------------------ answers
+
+    def hello(self) -> dict[str, Any]:
+        return {
+            "robot": self.model.name,
+            "joints": list(self.model.joint_names),
+            "observers": self.observer_names,
+            "rate_hz": self.rate_hz,
+            "lease_s": self.lease_s,
+            "protocol": 1,
+        }
+
+    def stream_info(self) -> dict[str, Any]:
+        info = self.recorder_info
+        if not info:
+            return {"shm": None, "message": "this run keeps no flight recorder (--no-log)"}
+        return {**info, "n": self.model.n, "k": len(self.observer_names)}
+
+    def _faults(self, mask: int) -> list[str]:
+        return [FAULT_NAMES[f] for f in range(N_FAULTS) if mask & (1 << f)]
+
+    def status(self) -> dict[str, Any]:
+        got = self.chan.read_state()
+        if got is None:
+            return {"state": "starting", "mode": "?", "category": -1, "faults": [],
+                    "persisting": [], "ticks": 0, "overruns": 0,
+                    "timing_us": {"compute": summarize(self.chan.compute_counts, 0.0),
+                                  "wakeup": summarize(self.chan.wakeup_counts, 0.0)},
+                    "log": self.log_path, "recorder": self._recorder_status(),
+                    "teach": self.teach_info, "playback": None}  # fmt: skip
+        rec, x = got
+        if x[ch.X_EXIT]:
+            state = "stopping"
+        elif x[ch.X_STOPPING]:
+            state = "stopped"
+        elif x[ch.X_ENABLING]:
+            state = "enabling"
+        else:
+            state = "running"
+        latched = int(rec["faults"])
+        cat = int(x[ch.X_CATEGORY])
+        return {
+            "state": state,
+            "mode": MODE_NAMES.get(int(rec["mode"]), "?"),
+            "category": cat,
+            "faults": self._faults(latched),
+            "persisting": self._faults(latched & int(x[ch.X_ACTIVE])),
+            "ticks": int(x[ch.X_LOOP_TICKS]),
+            "overruns": int(x[ch.X_OVERRUNS]),
+            "timing_us": {
+                "compute": summarize(self.chan.compute_counts.copy(), float(x[ch.X_COMP_MAX])),
+                "wakeup": summarize(self.chan.wakeup_counts.copy(), float(x[ch.X_WAKE_MAX])),
+            },
+            "log": self.log_path,
+            "recorder": self._recorder_status(),
+            "teach": self._teach_status(x),
+            "playback": self._playback_status(x),
+            "holder": None if self.holder is None else self.holder.who(),
+            "profile": self._profile_status(x),
+        }
+
+    def _profile_status(self, x: np.ndarray) -> dict[str, Any] | None:
+        name, content = self.active_profile(x)
+        return None if name is None else {"name": name, **(content or {})}
+
+    def _teach_status(self, x: np.ndarray) -> dict[str, Any] | None:
+        rec = self.recording
+        if rec is None:
+            return self.teach_info
+        return {
+            "file": str(rec.file),
+            "state": teach.STATE_NAMES.get(int(x[ch.X_TEACH_STATE]), "?"),
+            "samples": int(x[ch.X_TEACH_SAMPLES]),
+            "message": "",
+        }
+
+    def _playback_status(self, x: np.ndarray) -> dict[str, Any] | None:
+        info = self.playback_info
+        if info is None:
+            return None
+        k = int(x[ch.X_PLAN_K]) if int(x[ch.X_PLAN_ID]) == info["plan_id"] else 0
+        done = bool(x[ch.X_PLAN_DONE]) and int(x[ch.X_PLAN_ID]) == info["plan_id"]
+        return {
+            "kind": info["kind"],
+            "file": info["file"],
+            "progress": round(min(1.0, (k + 1) / info["rows"]), 4),
+            "completed": done,
+            "duration_s": info["duration_s"],
+        }
+
+    def _watch_log(self) -> None:
+        """The flight recorder's health as a safety input (runtime/log_watch.py's check,
+        here instead of a thread of the loop's process): the channel's LOG_* words."""
+        from types import SimpleNamespace
+
+        from hofto_hw.runtime.log_watch import LogWatch
+
+        chan = self.chan
+
+        class _Words:
+            def __setattr__(self, key: str, value: Any) -> None:
+                if key == "log_failure":
+                    chan.ctl[ch.LOG_FAILING] = 1 if value else 0
+                elif key == "log_failure_value":
+                    chan.ctl[ch.LOG_LOST] = int(value)
+
+        def health() -> Any:
+            st = self._recorder_status()
+            if st is None:
+                raise RuntimeError("no recorder")
+            return SimpleNamespace(
+                writer_alive=st["writer_alive"],
+                disk_failing=st["failing"],
+                dropped=st["dropped"],
+                records_lost=st["records_lost"],
+            )
+
+        if self._log_watch is None:
+            self._log_watch = LogWatch(SimpleNamespace(health=health), _Words())
+        try:
+            self._log_watch.check()
+        except RuntimeError:
+            pass
+
+    def _recorder_status(self) -> dict[str, Any] | None:
+        info = self.recorder_info
+        if not info:
+            return None
+        from hofto_hw.recording import shared as sh
+        from hofto_hw.recording.record import tick_dtype
+
+        try:
+            if self._rec_block is None:
+                caps = sh.Capacities(*info["caps"])
+                self._rec_block = sh.SharedBlock(
+                    tick_dtype(self.model.n, len(self.observer_names)), caps, name=info["shm"]
+                )
+            b = self._rec_block
+            c = b.control
+            pid = int(c[sh.PID])
+        except (OSError, ValueError, KeyError):
+            return None
+        alive = _alive(pid)
+        return {
+            "writer_alive": alive,
+            "state": sh.STATE_NAMES.get(int(c[sh.STATE]), "?"),
+            "records_written": int(c[sh.RECORDS]),
+            "records_flushed": int(c[sh.FLUSHED]),
+            "dropped": b.ticks.dropped + b.events.dropped + b.diags.dropped,
+            "records_lost": int(c[sh.LOST]),
+            "write_errors": int(c[sh.ERRORS]),
+            "pending": b.ticks.pending(),
+            "failing": bool(c[sh.FAILING]),
+        }
+
+    def state(self) -> dict[str, Any]:
+        """The typed snapshot of ``Robot.state()`` (SI units)."""
+        got = self.chan.read_state()
+        if got is None:
+            raise UserError("state: the loop has not run a tick yet")
+        rec, x = got
+        q = rec["q"]
+        pos, rot = self._data.tool_pose(q)
+        src = int(x[ch.X_ENABLE_SOURCE])
+        lease_left = 0.0
+        if int(self.chan.ctl[ch.LEASE_NS]):
+            lease_left = max(0.0, (int(self.chan.ctl[ch.LEASE_NS]) - time.monotonic_ns()) * 1e-9)
+        latched = int(rec["faults"])
+
+        def finite(a: np.ndarray) -> list[Any]:
+            return [float(v) if np.isfinite(v) else None for v in np.ravel(a)]
+
+        return {
+            "t": float(rec["t"]),
+            "tick": int(rec["tick"]),
+            "mode": MODE_NAMES.get(int(rec["mode"]), "?"),
+            "faults": self._faults(latched),
+            "category": int(x[ch.X_CATEGORY]),
+            "stop_requested": bool(x[ch.X_STOP_REQUESTED]),
+            "moving": bool(x[ch.X_MOVING]),
+            "q": finite(q),
+            "qd": finite(rec["qd"]),
+            "tau": finite(rec["tau"]),
+            "q_cmd": finite(rec["q_cmd"]),
+            "tau_ext": {
+                name: finite(rec["tau_ext"][i]) for i, name in enumerate(self.observer_names)
+            },
+            "wrench": finite(rec["wrench"]),
+            "tcp_position": finite(pos),
+            "tcp_rotation": [finite(row) for row in np.asarray(rot)],
+            "enabling": {
+                "source": ch.SOURCES[src] if 0 <= src < len(ch.SOURCES) else "?",
+                "pressed": bool(x[ch.X_PRESSED]),
+                "drag_active": bool(x[ch.X_DRAG_ACTIVE]),
+                "lease_left_s": round(lease_left, 4),
+                "holder": None if self.holder is None else self.holder.who(),
+            },
+            "profile": self._profile_status(x),
+            "overruns": int(x[ch.X_OVERRUNS]),
+            "timing_us": {
+                "wakeup_us": float(rec["wakeup_us"]),
+                "compute_us": float(rec["compute_us"]),
+                "wakeup_p99": float(self.chan.fctl[ch.WAKE_P99]),
+                "compute_p99": float(self.chan.fctl[ch.COMP_P99]),
+            },
+        }
+
+    # ------------------------------------------------------------------ end
+
+    def finish(self) -> None:
+        """The loop has ended: save a taught path still open, answer who waits, close."""
+        if self._planner is not None:  # a plan nobody will play
+            self._planner.proc.kill()
+            self._planner.close()
+            self._planner = None
+        self._teach(time.monotonic())
+        self._save_recording(time.monotonic(), at_end=True)
+        for job in list(self.jobs) + ([self.inflight] if self.inflight else []):
+            self._answer(job, {"ok": False, "message": "the service is stopping"})
+        self.jobs.clear()
+        self.inflight = None
+        for c in list(self.conns.values()):
+            self._flush(c)
+            self._close(c)
+        if self.listener is not None:
+            try:
+                self.sel.unregister(self.listener)
+            except (KeyError, ValueError):
+                pass
+            self.listener.close()
+        if self._rec_block is not None:
+            self._rec_block.close()
+            self._rec_block = None
+
+
+class Planner:
+    """Planning in a forked child process (ruckig and the taught path's timing hold the GIL
+    for seconds on a 300 s path: in a thread they would hold the socket up). The child sends
+    the trajectory back in chunks of PLAN_CHUNK rows, one message per turn of the server
+    (:meth:`step`), so a stop is never behind more than one chunk."""
+
+    def __init__(self, cmd, file, target, q_now, model, limits, dt) -> None:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("fork")
+        self.conn, child = ctx.Pipe(duplex=False)
+        self.proc = ctx.Process(
+            target=_plan_child,
+            args=(child, self.conn, cmd, file, target, q_now, model, limits, dt),
+            name="hofto-plan",
+            daemon=True,
+        )
+        self.proc.start()
+        child.close()
+        self.result: Any = None
+        self.error = ""
+        self._head: dict[str, Any] | None = None
+        self._parts: dict[str, list[np.ndarray]] = {"q": [], "qd": [], "qdd": []}
+
+    def step(self) -> bool:
+        """Read one message if there is one; True when the plan (or its error) is complete."""
+        if not self.conn.poll():
+            if not self.proc.is_alive() and not self.conn.poll():
+                self.error = self.error or "planning failed: the planner process died"
+                return True
+            return False
+        try:
+            kind, payload = self.conn.recv()
+        except (EOFError, OSError):
+            self.error = "planning failed: the planner process died"
+            return True
+        if kind == "error":
+            self.error = payload
+            return True
+        if kind == "head":
+            self._head = payload
+            return False
+        if kind in self._parts:
+            self._parts[kind].append(payload)
+            return False
+        h = self._head
+        assert h is not None
+        from hofto_hw.control.path_timing import Sampled
+
+        traj = Sampled(
+            h["dt"],
+            np.concatenate(self._parts["q"]),
+            np.concatenate(self._parts["qd"]),
+            np.concatenate(self._parts["qdd"]),
+            h["segments"],
+            h["scale"],
+        )
+        self.result = _Planned(h["kind"], h["mode"], h["file"], traj)
+        return True
+
+    def close(self) -> None:
+        self.conn.close()
+        self.proc.join(timeout=1.0)
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+
+
+@dataclass
+class _Planned:
+    kind: str
+    mode: int
+    file: Path | None
+    traj: Any
+
+
+def _plan_child(conn, parent_end, cmd, file, target, q_now, model, limits, dt) -> None:
+    """The planner process: plan, send the head, the rows in chunks, then "end". It dies
+    with the control plane (PR_SET_PDEATHSIG) and on SIGTERM (not the server's handler), and
+    holds no read end of its pipe (a write to a gone reader fails instead of blocking)."""
+    import signal
+
+    parent_end.close()
+    import stat
+
+    # the server's sockets (listener, clients): a client the server closes must see it now,
+    # not when this plan is done
+    for name in os.listdir("/proc/self/fd"):
+        fd = int(name)
+        if fd > 2 and fd != conn.fileno():
+            try:
+                if stat.S_ISSOCK(os.fstat(fd).st_mode):
+                    os.close(fd)
+            except OSError:
+                pass
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    _die_with_parent()
+    try:
+        os.nice(5)
+    except OSError:
+        pass
+    try:
+        if cmd == "replay":
+            pb = teach.plan_replay(Path(file), q_now, model, limits, dt)
+        elif cmd == "move_linear":
+            pb = teach.plan_linear(target, q_now, model, limits, dt)
+        else:
+            pb = teach.plan_move(target, q_now, model, limits, dt)
+    except UserError as exc:
+        conn.send(("error", str(exc)))
+        conn.close()
+        return
+    except Exception as exc:  # a planner bug: one line, the service goes on
+        conn.send(("error", f"planning failed: {type(exc).__name__}: {exc}"))
+        conn.close()
+        return
+    tr = pb.traj
+    head = {"kind": pb.kind, "mode": pb.mode, "file": pb.file, "dt": tr.dt,
+            "segments": list(tr.segments), "scale": float(tr.scale)}  # fmt: skip
+    conn.send(("head", head))
+    for name in ("q", "qd", "qdd"):
+        a = getattr(tr, name)
+        for i in range(0, a.shape[0], PLAN_CHUNK):
+            conn.send((name, np.ascontiguousarray(a[i : i + PLAN_CHUNK])))
+    conn.send(("end", None))
+    conn.close()
+
+
+def _die_with_parent() -> None:
+    """SIGKILL this process when its parent (the control plane) dies (Linux prctl)."""
+    import ctypes
+    import signal
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        pass
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie does not: the writer is the loop's child)."""
+    if pid <= 0:
+        return False
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):
+        return False

@@ -1,0 +1,115 @@
+"""A real ``hofto-hw run --clock real --socket S`` child process for the control-plane tests
+(simulated bus), with a config whose enabling input is the socket's lease."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIG = ROOT / "configs" / "er3a.yaml"
+
+
+def socket_config(tmp: Path, collision_start: float | None = None) -> Path:
+    """er3a.yaml with ``drag.enable_input.source: socket``, no scripted drag,
+    ``safety.overrun_streak: 100`` (see below); the
+    scripted collision at ``collision_start`` [s] of loop time (None: as configured)."""
+    data = yaml.safe_load(CONFIG.read_text())
+    data["robot"]["urdf"] = str((CONFIG.parent / data["robot"]["urdf"]).resolve())
+    data["drag"]["enable_input"] = {"source": "socket"}
+    # 100 missed deadlines in a row (0.1 s) latch the overrun fault here, not 20: the CI
+    # machine (2 shared cores, other real-time loops) stalls a loop by ~20 ms now and then;
+    # what the control plane must never cause (a request parsed or a path planned in the
+    # loop's process: seconds) still latches it
+    data["safety"]["overrun_streak"] = 100
+    data["run"].pop("drag", None)
+    if collision_start is not None:
+        data["run"]["collision"]["start"] = collision_start
+    out = tmp / "socket.yaml"
+    out.write_text(yaml.safe_dump(data))
+    return out
+
+
+class Service:
+    """The child process; ``sock`` its control socket, ``logs`` its log folder."""
+
+    def __init__(self, tmp: Path, *args: str, config: Path | None = None, log: bool = True):
+        self.sock = tmp / "c.sock"
+        self.logs = tmp / "logs"
+        config = config or socket_config(tmp)
+        cmd = [sys.executable, "-m", "hofto_hw.cli", "run", "--config", str(config)]
+        cmd += ["--clock", "real", "--duration", "600", "--socket", str(self.sock), *args]
+        cmd += ["--log-dir", str(self.logs)] if log else ["--no-log"]
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            if line.startswith("hofto-hw run: running"):
+                break
+        else:
+            self.proc.kill()
+            raise AssertionError("run did not start: " + self.proc.stderr.read())
+
+    def stop(self) -> str:
+        """SIGTERM, wait for exit 0; returns the rest of stderr."""
+        self.proc.send_signal(signal.SIGTERM)
+        _, err = self.proc.communicate(timeout=120)
+        assert self.proc.returncode == 0, err
+        return err
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def wait_for(cond: Callable[[], Any], what: str, timeout: float = 120.0) -> Any:
+    """Poll ``cond`` until truthy (a state reached, not a time waited); fail after a long
+    ``timeout`` naming ``what``."""
+    end = time.monotonic() + timeout
+    while True:
+        got = cond()
+        if got:
+            return got
+        if time.monotonic() > end:
+            raise AssertionError(f"not reached: {what}")
+        time.sleep(0.02)
+
+
+class LeaseHolder:
+    """Holds the remote enabling input of the service at ``sock``: ``enable on`` renewed
+    every 50 ms on a connection of its own (the lease is 0.25 s) until :meth:`release`."""
+
+    def __init__(self, sock: Path) -> None:
+        import threading
+
+        from hofto_hw.client.connection import Connection
+
+        self.conn = Connection(sock)
+        r = self.conn.call({"cmd": "enable", "on": True})
+        assert r["ok"], r
+        self._done = threading.Event()
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._renew, daemon=True)
+        self._thread.start()
+
+    def _renew(self) -> None:
+        while not self._done.wait(0.05):
+            with self._lock:
+                self.conn.call({"cmd": "enable", "on": True})
+
+    def release(self) -> dict[str, Any]:
+        """Stop renewing, ``enable off``, close; returns the reply."""
+        self._done.set()
+        self._thread.join()
+        r = self.conn.call({"cmd": "enable", "on": False})
+        self.conn.close()
+        return r

@@ -1,0 +1,289 @@
+"""The loop's timing while clients abuse the control socket, and how fast ``stop`` is answered.
+
+    .venv/bin/python tools/bench_control.py [--seconds 10] [--stops 20] [--replay-seconds 300]
+                                            [--json]
+
+Starts ``hofto-hw run --clock real --socket S`` (simulated bus, hold, no scripted collision,
+``safety.overrun_streak`` raised to 100000 so that nothing latches and every phase runs) and
+measures phase by phase: ``quiet`` (nobody but this script), ``flood`` (a client sending
+status requests without reading the replies, reconnecting when closed), ``line_10mb`` (a
+client sending 10 MB lines without a newline, again and again), ``trickle`` (eight clients
+sending one byte every 0.2 s), ``idle`` (20 idle connections, more than allowed),
+``replay_300s`` (a 300 s taught path planned and then played), ``quiet_end`` (quiet again:
+on a shared machine the two quiet phases show what the machine's own noise is). Per phase:
+the loop's missed deadlines (the status' ``overruns`` difference), the wake-up latency
+median / p99 / max [µs] of every tick of the phase (read from the flight recorder's ring,
+read-only), and the time [ms] from sending ``stop`` on a new connection to its answer
+(median, max of ``--stops``; each stop is reset before the next). First, the cost of the
+loop's poll of the channel (``LoopPort.poll``, between ticks) on a sim-clock loop. Figures
+only: the tests assert behaviour.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from hofto_hw.client import Refused, Robot  # noqa: E402
+from hofto_hw.client.connection import Connection  # noqa: E402
+from hofto_hw.client.stream import RingReader  # noqa: E402
+from hofto_hw.control.taught_path import TaughtPathRecorder, save_taught_path  # noqa: E402
+from hofto_hw.control_plane import protocol as pr  # noqa: E402
+from hofto_hw.model.robot import RobotModel  # noqa: E402
+
+CONFIG = ROOT / "configs" / "er3a.yaml"
+
+
+def _config(tmp: Path) -> Path:
+    data = yaml.safe_load(CONFIG.read_text())
+    data["robot"]["urdf"] = str((CONFIG.parent / data["robot"]["urdf"]).resolve())
+    data["drag"]["enable_input"] = {"source": "socket"}
+    data["run"].pop("drag", None)
+    data["safety"]["overrun_streak"] = 100000
+    out = tmp / "bench.yaml"
+    out.write_text(yaml.safe_dump(data))
+    return out
+
+
+def _start(tmp: Path) -> tuple[subprocess.Popen, Path]:
+    sock = tmp / "c.sock"
+    cmd = [sys.executable, "-m", "hofto_hw.cli", "run", "--config", str(_config(tmp))]
+    cmd += ["--clock", "real", "--duration", "100000", "--socket", str(sock), "--hold"]
+    cmd += ["--no-collision", "--log-dir", str(tmp / "logs")]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        if line.startswith("hofto-hw run: running"):
+            break
+    threading.Thread(target=proc.stderr.read, daemon=True).start()
+    return proc, sock
+
+
+def _raw(path: Path) -> socket.socket:
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    s.connect(str(path))
+    return s
+
+
+def _flood(sock: Path, done: threading.Event) -> None:
+    line = pr.dumps({"cmd": "status"}) * 100
+    while not done.is_set():
+        try:
+            with _raw(sock) as s:
+                while not done.is_set():
+                    s.sendall(line)
+        except OSError:
+            pass
+
+
+def _big(sock: Path, done: threading.Event) -> None:
+    blob = b"a" * (10 << 20)
+    while not done.is_set():
+        try:
+            with _raw(sock) as s:
+                s.sendall(blob)
+        except OSError:
+            pass
+
+
+def _trickle(sock: Path, done: threading.Event) -> None:
+    while not done.is_set():
+        try:
+            with _raw(sock) as s:
+                while not done.is_set():
+                    s.sendall(b"{")
+                    time.sleep(0.2)
+        except OSError:
+            pass
+
+
+def _idle(sock: Path, done: threading.Event) -> None:
+    conns = []
+    try:
+        for _ in range(20):
+            conns.append(_raw(sock))
+        done.wait()
+    finally:
+        for c in conns:
+            c.close()
+
+
+def _stop_latency(robot: Robot, sock: Path) -> float:
+    t0 = time.perf_counter()
+    with Connection(sock) as c:
+        r = c.call({"cmd": "stop"})
+    dt = (time.perf_counter() - t0) * 1e3
+    assert r["ok"], r
+    while "stop_request" not in robot.state().faults:
+        time.sleep(0.01)
+    for _ in range(100):  # a log_failure (records dropped on a loaded machine) may persist
+        try:
+            robot.reset()
+        except Refused:
+            time.sleep(0.1)
+            continue
+        break
+    return dt
+
+
+def _long_path(tmp: Path, seconds: float, home: np.ndarray) -> Path:
+    from hofto_hw.config.loader import load_config
+
+    model = RobotModel.from_config(load_config(CONFIG).robot)
+    rec = TaughtPathRecorder(model.n, int(seconds * 1000) + 1)
+    t = np.arange(0.0, seconds, 1e-3)
+    wave = 0.05 * (1.0 - np.cos(2 * np.pi * t / 20.0))
+    for tk, w in zip(t, wave, strict=True):
+        rec.push(tk, home + w)
+    return save_taught_path(rec.path(model), tmp / "long.csv")
+
+
+def _phase(robot: Robot, sock: Path, reader: RingReader, name: str, args, work=None) -> dict:
+    for _ in reader.read():  # skip to now
+        pass
+    before = robot.status()["overruns"]
+    done = threading.Event()
+    threads = []
+    if work is not None:
+        for f in work if isinstance(work, list) else [work]:
+            t = threading.Thread(target=f, args=(sock, done), daemon=True)
+            t.start()
+            threads.append(t)
+    wake: list[float] = []
+    stops: list[float] = []
+    end = time.monotonic() + args.seconds
+    next_stop = time.monotonic() + args.seconds / (args.stops + 1)
+    while time.monotonic() < end:
+        wake.extend(float(r["wakeup_us"]) for r, _ in reader.read())
+        if time.monotonic() >= next_stop and len(stops) < args.stops:
+            stops.append(_stop_latency(robot, sock))
+            next_stop += args.seconds / (args.stops + 1)
+        time.sleep(0.05)
+    wake.extend(float(r["wakeup_us"]) for r, _ in reader.read())
+    done.set()
+    for t in threads:
+        t.join(timeout=30.0)
+    after = robot.status()["overruns"]
+    w = np.array(wake) if wake else np.zeros(1)
+    return {
+        "phase": name,
+        "ticks": len(wake),
+        "overruns": int(after - before),
+        "wakeup_us": {
+            "median": round(float(np.median(w)), 1),
+            "p99": round(float(np.percentile(w, 99)), 1),
+            "max": round(float(w.max()), 1),
+        },
+        "stop_ms": {
+            "median": round(float(np.median(stops)), 2) if stops else None,
+            "max": round(float(np.max(stops)), 2) if stops else None,
+            "n": len(stops),
+        },
+        "skipped_by_reader": reader.skipped,
+    }
+
+
+def poll_cost(ticks: int = 5000) -> dict:
+    """LoopPort.poll on a sim-clock loop (nothing pending: the common case) [µs]."""
+    from hofto_hw.config.loader import load_config
+    from hofto_hw.control_plane.channel import Channel
+    from hofto_hw.control_plane.port import LoopPort
+    from hofto_hw.runtime.compose import build
+
+    system = build(load_config(CONFIG), clock="sim", contact=False)
+    chan = Channel(system.tick.n, len(system.tick.observers), create=True)
+    port = LoopPort(chan, system).attach()
+    system.loop.run(max_ticks=500)
+    times = np.zeros(ticks)
+    perf = time.perf_counter_ns
+    k = [0]
+
+    class Timed:  # the loop calls poll() after every tick: time the real one
+        def poll(self) -> None:
+            t0 = perf()
+            port.poll()
+            if k[0] < ticks:
+                times[k[0]] = (perf() - t0) * 1e-3
+                k[0] += 1
+
+    system.loop.port = Timed()
+    system.loop.run(max_ticks=ticks)
+    port.detach()
+    chan.close()
+    system.close()
+    return {
+        "median_us": round(float(np.median(times)), 2),
+        "p99_us": round(float(np.percentile(times, 99)), 2),
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seconds", type=float, default=10.0, help="per phase")
+    ap.add_argument("--stops", type=int, default=20, help="stops timed per phase")
+    ap.add_argument("--replay-seconds", type=float, default=300.0, help="taught path length")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    poll = poll_cost()
+    tmp = Path(tempfile.mkdtemp(prefix="bench-control-"))
+    proc, sock = _start(tmp)
+    out = []
+    try:
+        with Robot.connect(socket=sock) as robot:
+            while robot.state().mode != "hold" or np.abs(robot.state().qd).max() > 0.01:
+                time.sleep(0.05)
+            info = robot._call({"cmd": "stream_info"})
+            reader = RingReader(info["shm"], info["caps"][0], robot.n, robot.info["observers"])
+            out.append(_phase(robot, sock, reader, "quiet", args))
+            out.append(_phase(robot, sock, reader, "flood", args, _flood))
+            out.append(_phase(robot, sock, reader, "line_10mb", args, _big))
+            out.append(_phase(robot, sock, reader, "trickle", args, [_trickle] * 8))
+            out.append(_phase(robot, sock, reader, "idle", args, _idle))
+            file = _long_path(tmp, args.replay_seconds, robot.state().q_cmd)
+
+            def replay(sock_: Path, done: threading.Event) -> None:
+                with Robot.connect(socket=sock_) as r2:
+                    r2.replay(file, wait=False)
+                    done.wait()
+                    r2._call({"cmd": "cancel"})
+
+            out.append(_phase(robot, sock, reader, "replay_300s", args, replay))
+            out.append(_phase(robot, sock, reader, "quiet_end", args))  # the machine's noise
+            reader.close()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=120)
+    if args.json:
+        print(json.dumps({"poll": poll, "phases": out, "machine": os.uname().nodename}, indent=2))
+    else:
+        print(f"LoopPort.poll (sim clock, nothing pending): median {poll['median_us']} µs, "
+              f"p99 {poll['p99_us']} µs")  # fmt: skip
+        for p in out:
+            w, s = p["wakeup_us"], p["stop_ms"]
+            print(
+                f"{p['phase']:12s} {p['ticks']:6d} ticks, {p['overruns']:4d} missed, wake-up "
+                f"median {w['median']:.0f} p99 {w['p99']:.0f} max {w['max']:.0f} µs; stop "
+                f"answered median {s['median']} ms, max {s['max']} ms (n={s['n']})"
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
