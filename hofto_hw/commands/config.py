@@ -16,7 +16,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     sub.add_parser("schema", help="print the JSON schema of the config files")
     check = sub.add_parser("check", help="validate config files (and their URDFs)")
-    check.add_argument("files", type=Path, nargs="+", metavar="FILE")
+    check.add_argument(
+        "files", type=Path, nargs="+", metavar="FILE|ROBOT", help="config files or robot names"
+    )
 
 
 def check_transport(cfg: SystemConfig, source: str) -> None:
@@ -36,6 +38,7 @@ def check_transport(cfg: SystemConfig, source: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.config import json_schema, load_config
+    from hofto_hw.config.locate import find_config
     from hofto_hw.errors import ConfigError
 
     if args.action == "schema":
@@ -45,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.observers import make_observer
     from hofto_hw.observers.stability import check_observer
 
-    for path in args.files:
+    for spec in args.files:
+        path = find_config(spec)
         cfg = load_config(path)
         check_transport(cfg, str(path))
         model = RobotModel.from_config(cfg.robot)  # URDF, joints and tool frame exist

@@ -1,9 +1,11 @@
 """``hofto-hw run``: the controller process (the fixed-rate loop on the drives).
 
-On the simulated arm (bus ``sim``, the default) the arm moves along the demo path, a scripted
-collision hits a link, the monitor stops the arm and a short summary is printed (or written
-with ``--summary-json``). SIGTERM or SIGINT: category 1 stop -> drives disabled -> log
-closed -> exit 0.
+The default config (``er3a``, configs/er3a.yaml) is the README's main job on the simulated arm:
+the arm moves along the demo path, a scripted collision hits a link, the monitor stops the
+arm, a scripted drag and replay follow and a short summary is printed (or written with
+``--summary-json``). A deployment config (configs/er3a_service.yaml) scripts nothing and runs
+until stopped (``run.duration: null``). SIGTERM or SIGINT: category 1 stop -> drives
+disabled -> log closed -> exit 0.
 """
 
 from __future__ import annotations
@@ -17,14 +19,26 @@ import sys
 import time
 from pathlib import Path
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "er3a.yaml"
+DEFAULT_CONFIG = "er3a"  # the README's main job: the simulated arm's scripted scenario
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="system config")
-    parser.add_argument("--duration", type=float, default=None, help="run time [s]")
+    from hofto_hw.commands.args import add_config
+
+    add_config(parser, default=DEFAULT_CONFIG)
     parser.add_argument(
-        "--clock", choices=("sim", "real"), default=None, help="sim: ticks back to back"
+        "--duration",
+        type=float,
+        default=None,
+        help="run time [s] (default: the config's run.duration; er3a: 12 s; null in the "
+        "config: until stopped by SIGTERM, Ctrl-C or `hofto-hw stop`)",
+    )
+    parser.add_argument(
+        "--clock",
+        choices=("sim", "real"),
+        default=None,
+        help="real: the loop's period in wall time; sim: ticks back to back in simulated "
+        "time (sim bus only) (default: the config's run.clock, real unless set)",
     )
     parser.add_argument("--summary-json", type=Path, default=None, help="write the summary")
     parser.add_argument(
@@ -57,14 +71,20 @@ def _check_output(path: Path | None, what: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.config import load_config
+    from hofto_hw.config.locate import find_config
     from hofto_hw.control.joint_motion import MOVE
-    from hofto_hw.runtime import realtime
+    from hofto_hw.errors import ConfigError
+    from hofto_hw.runtime import acceleration, realtime
     from hofto_hw.runtime.compose import build
     from hofto_hw.runtime.drag_script import run_loop
+    from hofto_hw.runtime.startup import StartupProgress
     from hofto_hw.runtime.summary import build_summary, format_summary
 
     _check_duration(args.duration)
     _check_output(args.summary_json, "--summary-json")
+    progress = StartupProgress()
+    progress.phase("reading the config")
+    args.config = find_config(args.config)
     cfg = load_config(args.config)
     if args.interface is not None and cfg.bus is not None:
         cfg = cfg.model_copy(
@@ -73,16 +93,36 @@ def run(args: argparse.Namespace) -> int:
     duration = args.duration if args.duration is not None else cfg.run.duration
     clock = args.clock or cfg.run.clock
     lc = cfg.loop
+    progress.phase("loading the native dynamics")
+    acceleration.require(lc.acceleration, str(args.config))
     latency = lc.cpu_latency_us if clock != "sim" else None  # the sim clock never sleeps
-    rt = realtime.setup(lc.realtime, lc.priority, lc.cpus, latency)
-    rt_text = rt.describe() if lc.realtime != "off" else "real-time off"
-    if clock == "sim":
+    if clock == "sim" and lc.realtime != "required":
+        rt_text = "real-time not used with the sim clock"  # nothing to set up, nothing to warn
+    else:
+        rt = realtime.setup(lc.realtime, lc.priority, lc.cpus, latency)
+        rt_text = rt.describe() if lc.realtime != "off" else "real-time off"
+    if clock == "sim" and lc.realtime == "required":
         realtime.drop_realtime()  # back-to-back ticks must not starve the machine
         rt_text += "; checked, then normal priority for the sim clock"
+    progress.phase("starting the flight recorder")
     recorder = None if args.no_log else _start_recorder(cfg, args)
     try:
-        system = build(cfg, clock=clock, sink=recorder, contact=not args.no_collision)
+        system = build(
+            cfg,
+            clock=clock,
+            sink=recorder,
+            contact=not args.no_collision,
+            progress=progress.phase,
+        )
+        system.acceleration = acceleration.report(system)
+        if lc.acceleration == "required" and not system.acceleration["compiled"]:
+            system.close()
+            raise ConfigError(
+                f"{args.config}: loop.acceleration: required, but the tick runs the Python "
+                f"reference ({system.acceleration['why']})"
+            )
     except BaseException:
+        progress.done()
         if recorder is not None:
             recorder.close()
         raise
@@ -110,10 +150,16 @@ def run(args: argparse.Namespace) -> int:
         from hofto_hw.runtime.log_watch import LogWatch
 
         watch = LogWatch(recorder, tick).start()
-    if not args.hold:
-        tick.mode_request = MOVE
-    n_ticks = round(duration * system.rate_hz)
-    print(f"hofto-hw run: running (pid {os.getpid()})", file=sys.stderr, flush=True)
+    if not args.hold and cfg.run.path is not None:
+        tick.mode_request = MOVE  # the demo path; without one the arm holds until asked
+    n_ticks = None if duration is None else round(duration * system.rate_hz)
+    progress.done()
+    print(
+        f"hofto-hw run: running (pid {os.getpid()}; tick: "
+        f"{acceleration.describe(system.acceleration)})",
+        file=sys.stderr,
+        flush=True,
+    )
     try:
         run_loop(system, n_ticks, lambda: tick.exit_requested and tick.stopped_and_off())
     finally:
@@ -159,6 +205,7 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
     from hofto_hw.recording.attachments import run_attachments, run_metadata
     from hofto_hw.recording.flight_file import LogSpec
     from hofto_hw.recording.recorder import FlightRecorder
+    from hofto_hw.runtime import acceleration
     from hofto_hw.runtime.compose import loop_observer_names
     from safety.stop import EVENT_NAMES
 
@@ -176,6 +223,7 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
         metadata={
             **run_metadata(args.config, cfg, names[0]),  # type: ignore[arg-type]
             "observer_backend": kernels.resolve(observer_backend()),
+            "acceleration": acceleration.missing() or "compiled",  # else why not
         },
         event_kinds=dict(EVENT_NAMES),
     )

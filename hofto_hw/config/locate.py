@@ -3,6 +3,10 @@
 One resolver for every command: ``--config`` takes a path (``configs/ur10e.yaml``) or a robot
 name (``ur10e`` -> ``configs/ur10e.yaml``); without it, the config of a parameters file's
 robot is ``<robot>.yaml`` in that file's folder, the folder above, or ``configs/``.
+
+The shipped configs (the project's ``configs/`` folder) are package data: an installed wheel
+holds them as ``hofto_hw/robot_configs`` (setup.py maps the folder there); a source checkout,
+editable or not installed, reads ``configs/`` beside the package.
 """
 
 from __future__ import annotations
@@ -11,8 +15,16 @@ from pathlib import Path
 
 from hofto_hw.errors import UserError
 
-#: the configs/ folder shipped with the project (next to the package)
-PROJECT_CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+def _shipped_configs() -> Path:
+    """The shipped configs: the installed package's data, else the checkout's configs/."""
+    package = Path(__file__).resolve().parents[1]
+    installed = package / "robot_configs"
+    return installed if installed.is_dir() else package.parent / "configs"
+
+
+#: the configs shipped with the project (see the module docstring)
+PROJECT_CONFIGS = _shipped_configs()
 
 
 def config_dirs() -> list[Path]:

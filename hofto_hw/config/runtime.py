@@ -86,7 +86,9 @@ class ScriptedDragConfig(FileModel):
 class RunConfig(FileModel):
     """The ``run:`` section: what ``hofto-hw run`` does on the simulated arm."""
 
-    duration: Positive = Field(5.0, description="default run time [s]")
+    duration: Positive | None = Field(
+        5.0, description="default run time [s]; None: until stopped (SIGTERM, `hofto-hw stop`)"
+    )
     clock: Literal["sim", "real"] = "real"
     path: DemoPathConfig | None = None
     collision: ScriptedCollisionConfig | None = Field(default_factory=ScriptedCollisionConfig)

@@ -62,6 +62,7 @@ def status_of(system: Any) -> dict[str, Any]:
         "recorder": _recorder_status(getattr(system, "sink", None)),
         "teach": None if tick.recording is None else tick.recording.status(),
         "playback": _playback_status(tick.playback),
+        "acceleration": getattr(system, "acceleration", None),  # what the tick runs
     }
 
 

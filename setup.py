@@ -1,0 +1,98 @@
+"""hofto-hw's one compiled part, built when the package is built: the native dynamics library.
+
+``hofto_hw/model/native/dynamics.cpp`` (pinocchio's algorithms behind plain C functions, called
+by name from numba kernels) is compiled here against the headers of the ``pin``, ``cmeel-eigen``
+and ``cmeel-boost`` wheels that ``[build-system] requires`` installs into the build environment
+(their cmeel prefix), and ships inside the wheel as ``hofto_hw/model/native/_dynamics*.so``.
+The robot PC needs no compiler and builds nothing at run time. ``pip install -e .`` builds it
+in place (next to dynamics.cpp); after editing dynamics.cpp run that again (the loader refuses
+a library whose recorded source hash differs from the file beside it).
+
+Why setuptools and not CMake: the library is one translation unit of header-only pinocchio
+(no libpinocchio to link, no Python binding: ctypes and numba call its ``extern "C"``
+functions), so a compiler call with two include folders is the whole build; pinocchio's CMake
+config would add CMake, a find of Boost/urdfdom and a link to libpinocchio that nothing uses.
+
+Everything else (metadata, dependencies, packages) is in pyproject.toml; this file adds the
+extension and maps ``configs/`` into the package as ``hofto_hw.robot_configs``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+from pathlib import Path
+
+from setuptools import Extension, find_packages, setup
+from setuptools.command.build_ext import build_ext
+
+HERE = Path(__file__).resolve().parent
+SOURCE = "hofto_hw/model/native/dynamics.cpp"
+
+#: pinocchio's own compile definitions (its CMake config exports them); -O3: the algorithms ran
+#: ~15 % faster than at -O2 (same numbers: no -ffast-math, no -march: the wheel runs on any
+#: x86-64); -g0 after Python's own -g: debug info would make the library ~10x larger
+FLAGS = [
+    "-std=c++17",
+    "-O3",
+    "-g0",
+    "-DNDEBUG",
+    "-DBOOST_MPL_LIMIT_LIST_SIZE=30",
+    "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
+    "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS",
+    "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
+]
+
+
+def header_prefix() -> Path:
+    """The cmeel prefix of the build environment's pinocchio (its include/ holds pinocchio's,
+    Eigen's and Boost's headers), found without importing pinocchio."""
+    spec = importlib.util.find_spec("pinocchio")
+    if spec is None or spec.origin is None:
+        raise SystemExit("hofto-hw build: pinocchio (the pin package) is not installed")
+    here = Path(spec.origin).resolve()
+    prefix = next((p for p in here.parents if p.name == "cmeel.prefix"), None)
+    if prefix is None:
+        raise SystemExit(f"hofto-hw build: pinocchio at {here.parent} is not a cmeel install")
+    inc = prefix / "include"
+    for need, package in (
+        ("pinocchio/multibody.hpp", "pin"),
+        ("eigen3/Eigen/Core", "cmeel-eigen"),
+        ("boost/variant.hpp", "cmeel-boost"),
+    ):
+        if not (inc / need).is_file():
+            raise SystemExit(f"hofto-hw build: no {inc / need} (the {package} package's headers)")
+    return prefix
+
+
+class BuildNative(build_ext):
+    """build_ext with the cmeel include folders and without Python's debug flags."""
+
+    def build_extensions(self) -> None:
+        inc = header_prefix() / "include"
+        sha = hashlib.sha256((HERE / SOURCE).read_bytes()).hexdigest()
+        for ext in self.extensions:
+            ext.include_dirs += [str(inc), str(inc / "eigen3")]
+            ext.define_macros.append(("HOFTO_DYN_SOURCE_SHA256", f'"{sha}"'))
+        # Python's CFLAGS carry -g and -Wall; -g0 above turns the first off, this the noise
+        self.compiler.compiler_so = [a for a in self.compiler.compiler_so if a != "-Wall"]
+        super().build_extensions()
+
+
+setup(
+    packages=[
+        *find_packages(include=["hofto_hw*", "drivers*", "safety*"]),
+        "hofto_hw.robot_configs",
+    ],
+    package_dir={"hofto_hw.robot_configs": "configs"},
+    ext_modules=[
+        Extension(
+            "hofto_hw.model.native._dynamics",
+            sources=[SOURCE],
+            language="c++",
+            extra_compile_args=FLAGS,
+            extra_link_args=["-s"],  # stripped: the symbols numba binds are dynamic ones
+        )
+    ],
+    cmdclass={"build_ext": BuildNative},
+)
