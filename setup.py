@@ -69,6 +69,7 @@ class BuildNative(build_ext):
     """build_ext with the cmeel include folders and without Python's debug flags."""
 
     def build_extensions(self) -> None:
+        self.force = True  # an object file of another pinocchio's headers is never reused
         inc = header_prefix() / "include"
         sha = hashlib.sha256((HERE / SOURCE).read_bytes()).hexdigest()
         for ext in self.extensions:

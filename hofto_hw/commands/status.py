@@ -31,6 +31,10 @@ def run(args: argparse.Namespace) -> int:
         f"wake-up median {w['median']:.0f} µs, p99 {w['p99']:.0f} µs"
     )
     print(f"log: {s['log'] or 'not yet written'}")
+    if s.get("acceleration"):
+        from hofto_hw.runtime.acceleration import describe
+
+        print(f"tick: {describe(s['acceleration'])}")
     rec = s.get("teach")
     if rec:
         print(f"taught path: {rec['state']}, {rec['samples']} samples -> {rec['file']}")
