@@ -31,7 +31,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=None,
         help="run time [s] (default: the config's run.duration; er3a: 12 s; null in the "
-        "config: until stopped by SIGTERM, Ctrl-C or `hofto-hw stop`)",
+        "config: until SIGTERM or Ctrl-C)",
     )
     parser.add_argument(
         "--clock",

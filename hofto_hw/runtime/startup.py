@@ -26,6 +26,7 @@ class StartupProgress:
         self.stream = stream if stream is not None else sys.stderr
         self.t0 = time.monotonic()
         self.spoke = False  # a line was printed
+        self._late = False  # the start-up took longer than ``after``
         self._phase = ""
         self._said = ""
         self._lock = threading.Lock()
@@ -37,7 +38,7 @@ class StartupProgress:
         """The start-up now does ``text`` (e.g. "enabling the drives")."""
         with self._lock:
             self._phase = text
-            if self.spoke:
+            if self._late:
                 self._say()
 
     def done(self) -> float:
@@ -54,6 +55,7 @@ class StartupProgress:
         if self._end.wait(self.after):
             return
         with self._lock:
+            self._late = True
             self._say()
 
     def _say(self) -> None:

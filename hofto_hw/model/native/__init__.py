@@ -114,6 +114,13 @@ def _built_from(lib: ctypes.CDLL) -> tuple[tuple[int, int, int], str]:
     )
 
 
+def built_against() -> str:
+    """The pinocchio version the loaded library was built against ('' when not loaded)."""
+    if _LIB is None:
+        return ""
+    return ".".join(map(str, _built_from(_LIB)[0]))
+
+
 def mismatch(built: tuple[int, int, int], sha: str, source: Path | None) -> str:
     """Why a library built from pinocchio ``built`` and a dynamics.cpp of hash ``sha`` must not
     be loaded here ('' when it may): another pinocchio major.minor installed, or (in a source
