@@ -48,6 +48,8 @@ INSTALLED = "/opt/hofto-hw/bin/hofto-hw"
 #: a start-up may compile every kernel (cold numba cache) on a loaded 2-core machine
 START_TIMEOUT = 900.0
 NOBODY = 65534
+#: what a checkout holds besides its sources
+BUILD_LEFTOVERS = (".git", ".venv", "build", "dist", "out", "*.egg-info", "__pycache__", "*.so")
 
 
 @dataclass
@@ -94,9 +96,12 @@ def install() -> Iterator[Install]:
     top.chmod(0o755)  # the deployment tests run the install as nobody
     try:
         dist = top / "dist"
+        # the sources alone (no build/ of an earlier build: its files would go into the wheel)
+        src = top / "src"
+        shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(*BUILD_LEFTOVERS))
         t0 = time.monotonic()
         subprocess.run(
-            [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist), str(ROOT)],
+            [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist), str(src)],
             check=True,
             capture_output=True,
             timeout=3600,
