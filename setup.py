@@ -45,8 +45,11 @@ FLAGS = [
 
 
 def header_prefix() -> Path:
-    """The cmeel prefix of the build environment's pinocchio (its include/ holds pinocchio's,
-    Eigen's and Boost's headers), found without importing pinocchio."""
+    """The cmeel prefix of the first pinocchio on the build's path (its include/ holds
+    pinocchio's, Eigen's and Boost's headers), found without importing pinocchio. That is pip's
+    isolated build environment's, or the invoking venv's when it has one (pip's isolation does
+    not hide paths that .pth files added, as cmeel's does); the loader checks the version the
+    library records against the installed pinocchio either way."""
     spec = importlib.util.find_spec("pinocchio")
     if spec is None or spec.origin is None:
         raise SystemExit("hofto-hw build: pinocchio (the pin package) is not installed")
