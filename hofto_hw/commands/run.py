@@ -83,30 +83,31 @@ def run(args: argparse.Namespace) -> int:
     _check_duration(args.duration)
     _check_output(args.summary_json, "--summary-json")
     progress = StartupProgress()
-    progress.phase("reading the config")
-    args.config = find_config(args.config)
-    cfg = load_config(args.config)
-    if args.interface is not None and cfg.bus is not None:
-        cfg = cfg.model_copy(
-            update={"bus": cfg.bus.model_copy(update={"interface": args.interface})}
-        )
-    duration = args.duration if args.duration is not None else cfg.run.duration
-    clock = args.clock or cfg.run.clock
-    lc = cfg.loop
-    progress.phase("loading the native dynamics")
-    acceleration.require(lc.acceleration, str(args.config))
-    latency = lc.cpu_latency_us if clock != "sim" else None  # the sim clock never sleeps
-    if clock == "sim" and lc.realtime != "required":
-        rt_text = "real-time not used with the sim clock"  # nothing to set up, nothing to warn
-    else:
-        rt = realtime.setup(lc.realtime, lc.priority, lc.cpus, latency)
-        rt_text = rt.describe() if lc.realtime != "off" else "real-time off"
-    if clock == "sim" and lc.realtime == "required":
-        realtime.drop_realtime()  # back-to-back ticks must not starve the machine
-        rt_text += "; checked, then normal priority for the sim clock"
-    progress.phase("starting the flight recorder")
-    recorder = None if args.no_log else _start_recorder(cfg, args)
+    recorder = None
     try:
+        progress.phase("reading the config")
+        args.config = find_config(args.config)
+        cfg = load_config(args.config)
+        if args.interface is not None and cfg.bus is not None:
+            cfg = cfg.model_copy(
+                update={"bus": cfg.bus.model_copy(update={"interface": args.interface})}
+            )
+        duration = args.duration if args.duration is not None else cfg.run.duration
+        clock = args.clock or cfg.run.clock
+        lc = cfg.loop
+        progress.phase("loading the native dynamics")
+        acceleration.require(lc.acceleration, str(args.config))
+        latency = lc.cpu_latency_us if clock != "sim" else None  # the sim clock never sleeps
+        if clock == "sim" and lc.realtime != "required":
+            rt_text = "real-time not used with the sim clock"  # nothing to set up or warn about
+        else:
+            rt = realtime.setup(lc.realtime, lc.priority, lc.cpus, latency)
+            rt_text = rt.describe() if lc.realtime != "off" else "real-time off"
+        if clock == "sim" and lc.realtime == "required":
+            realtime.drop_realtime()  # back-to-back ticks must not starve the machine
+            rt_text += "; checked, then normal priority for the sim clock"
+        progress.phase("starting the flight recorder")
+        recorder = None if args.no_log else _start_recorder(cfg, args)
         system = build(
             cfg,
             clock=clock,
@@ -123,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
             )
     except BaseException:
         progress.done()
+        realtime.drop_realtime()
         if recorder is not None:
             recorder.close()
         raise
