@@ -91,6 +91,23 @@ class Install:
         return out.stdout.strip()
 
 
+def _interpreter() -> str:
+    """The Python for the fresh venv: this one, unless we are root and the system's
+    /usr/bin/python3 has this version (the deployment tests run the venv as nobody, who may
+    not reach this interpreter, e.g. one under /root)."""
+    system = Path("/usr/bin/python3")
+    if os.geteuid() == 0 and system.is_file():
+        version = subprocess.run(
+            [str(system), "-c", "import sys; print(sys.version_info[:2])"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        ).stdout.strip()
+        if version == str(tuple(sys.version_info[:2])):
+            return str(system)
+    return sys.executable
+
+
 @pytest.fixture(scope="module")
 def install() -> Iterator[Install]:
     top = Path(tempfile.mkdtemp(prefix="hofto-hw-install-"))
@@ -128,7 +145,7 @@ def install() -> Iterator[Install]:
             f"{time.monotonic() - t0:.0f} s"
         )
         venv = top / "venv"
-        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=600)
+        subprocess.run([_interpreter(), "-m", "venv", str(venv)], check=True, timeout=600)
         site = Path(
             subprocess.run(
                 [
