@@ -266,6 +266,7 @@ class Service:
     env: dict[str, str] = field(default_factory=dict)
     proc: subprocess.Popen | None = None
     stderr: list[str] = field(default_factory=list)
+    logs_before: set[Path] = field(default_factory=set)
 
     @property
     def socket(self) -> Path:
@@ -308,6 +309,7 @@ class Service:
     def start(self) -> float:
         """Start and wait for READY; returns the seconds from exec to READY."""
         self.stderr = []
+        self.logs_before = set(self.logs.glob("*.mcap"))
         notify = Notify(self.top / f"notify-{len(list(self.top.glob('notify-*')))}")
         t0 = time.monotonic()
         self.proc = subprocess.Popen(
@@ -389,11 +391,10 @@ def numba_cache(folder: Path) -> dict[str, tuple[int, int]]:
 
 def check_stop(svc: Service) -> None:
     """SIGTERM -> exit 0, a summary naming the compiled tick, a readable log of this run."""
-    before = set(svc.logs.glob("*.mcap"))
     code, out = svc.terminate()
     assert code == 0, "".join(svc.stderr)[-3000:]
     assert "tick: compiled" in out, out
-    (log,) = set(svc.logs.glob("*.mcap")) - before
+    (log,) = set(svc.logs.glob("*.mcap")) - svc.logs_before
     res = svc.install.run("log", "info", "--json", str(log), timeout=120)
     assert res.returncode == 0, res.stderr
     info = json.loads(res.stdout)

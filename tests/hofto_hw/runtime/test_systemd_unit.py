@@ -46,7 +46,7 @@ def test_unit_is_notify_with_watchdog_capabilities_and_hardening():
     s = service_section()
     assert s["Type"] == "notify" and s["NotifyAccess"] == "main"
     assert s["WatchdogSec"] and s["ExecStart"].startswith(INSTALLED_AT + " run ")
-    caps = {"CAP_NET_RAW", "CAP_SYS_NICE", "CAP_IPC_LOCK"}
+    caps = {"CAP_NET_RAW", "CAP_NET_ADMIN", "CAP_SYS_NICE", "CAP_IPC_LOCK"}
     assert set(s["AmbientCapabilities"].split()) == caps
     assert set(s["CapabilityBoundingSet"].split()) == caps
     assert s["User"] == "hofto-hw" and s["LimitMEMLOCK"] == "infinity" and s["LimitRTPRIO"]
