@@ -18,6 +18,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 DEFAULT_CONFIG = "er3a"  # the README's main job: the simulated arm's scripted scenario
 
@@ -106,6 +107,9 @@ def run(args: argparse.Namespace) -> int:
         if clock == "sim" and lc.realtime == "required":
             realtime.drop_realtime()  # back-to-back ticks must not starve the machine
             rt_text += "; checked, then normal priority for the sim clock"
+        if cfg.bus is not None and cfg.bus.transport != "sim":
+            progress.phase("compiling the tick on the simulated arm, before the bus opens")
+            _compile_first(cfg)
         progress.phase("starting the flight recorder")
         recorder = None if args.no_log else _start_recorder(cfg, args)
         system = build(
@@ -197,6 +201,18 @@ def run(args: argparse.Namespace) -> int:
     print(format_summary(summary))
     sys.stdout.flush()
     return 0
+
+
+def _compile_first(cfg: Any) -> None:
+    """Build (and close) the system once on the simulated arm: every kernel the tick runs is
+    compiled or loaded from numba's cache before a real bus opens. Between opening a bus and
+    enabling its drives the master exchanges no process data; a cold cache's ~10-60 s of
+    compiling there outlasts the drives' watchdog (EtherCAT SM watchdog), they leave OP, and
+    enabling fails (found by tests/test_install.py on a first start). Warm: ~1 s."""
+    from hofto_hw.runtime.compose import build
+
+    sim = cfg.model_copy(update={"bus": cfg.bus.model_copy(update={"transport": "sim"})})
+    build(sim, clock="sim", contact=False).close()
 
 
 def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
