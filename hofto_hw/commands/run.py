@@ -71,21 +71,23 @@ def _check_output(path: Path | None, what: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hofto_hw.config import load_config
-    from hofto_hw.config.locate import find_config
-    from hofto_hw.control.joint_motion import MOVE
-    from hofto_hw.errors import ConfigError
-    from hofto_hw.runtime import acceleration, realtime
-    from hofto_hw.runtime.compose import build
-    from hofto_hw.runtime.drag_script import run_loop
     from hofto_hw.runtime.startup import StartupProgress
-    from hofto_hw.runtime.summary import build_summary, format_summary
 
     _check_duration(args.duration)
     _check_output(args.summary_json, "--summary-json")
-    progress = StartupProgress()
+    progress = StartupProgress()  # from here: the imports take seconds on a loaded machine
     recorder = None
     try:
+        progress.phase("importing numpy, pinocchio, numba")
+        from hofto_hw.config import load_config
+        from hofto_hw.config.locate import find_config
+        from hofto_hw.control.joint_motion import MOVE
+        from hofto_hw.errors import ConfigError
+        from hofto_hw.runtime import acceleration, realtime
+        from hofto_hw.runtime.compose import build
+        from hofto_hw.runtime.drag_script import run_loop
+        from hofto_hw.runtime.summary import build_summary, format_summary
+
         progress.phase("reading the config")
         args.config = find_config(args.config)
         cfg = load_config(args.config)
@@ -110,8 +112,9 @@ def run(args: argparse.Namespace) -> int:
         if cfg.bus is not None and cfg.bus.transport != "sim":
             progress.phase("compiling the tick on the simulated arm, before the bus opens")
             _compile_first(cfg)
-        progress.phase("starting the flight recorder")
-        recorder = None if args.no_log else _start_recorder(cfg, args)
+        if not args.no_log:
+            progress.phase("starting the flight recorder")
+            recorder = _start_recorder(cfg, args)
         system = build(
             cfg,
             clock=clock,
@@ -128,6 +131,8 @@ def run(args: argparse.Namespace) -> int:
             )
     except BaseException:
         progress.done()
+        from hofto_hw.runtime import realtime
+
         realtime.drop_realtime()
         if recorder is not None:
             recorder.close()
