@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.observers.stability import check_observer
 
     for spec in args.files:
-        path = find_config(spec)
+        path = find_config(spec, option="config check")
         cfg = load_config(path)
         check_transport(cfg, str(path))
         model = RobotModel.from_config(cfg.robot)  # URDF, joints and tool frame exist

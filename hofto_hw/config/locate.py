@@ -37,7 +37,10 @@ def config_dirs() -> list[Path]:
 
 
 def find_config(
-    spec: str | Path | None, robot: str | None = None, near: Path | None = None
+    spec: str | Path | None,
+    robot: str | None = None,
+    near: Path | None = None,
+    option: str = "--config",
 ) -> Path:
     """The config file named by ``spec`` (a path or a robot name), else the one of ``robot``.
 
@@ -46,6 +49,7 @@ def find_config(
             ``robot`` instead.
         robot: the robot name of a parameters/thresholds file (used when ``spec`` is None).
         near: the folder of that file: ``<robot>.yaml`` there or one folder up comes first.
+        option: how the user gave ``spec``, for the error message.
 
     Raises:
         UserError: naming what was looked for and where.
@@ -55,17 +59,17 @@ def find_config(
         if path.is_file():
             return path
         if path.is_dir():
-            raise UserError(f"--config: {path} is a folder, not a config file")
+            raise UserError(f"{option}: {path} is a folder, not a config file")
         name = str(spec)
         if "/" in name or path.suffix in (".yaml", ".yml"):
-            raise UserError(f"--config: {path}: config file not found")
+            raise UserError(f"{option}: {path}: config file not found")
         for folder in config_dirs():
             candidate = folder / f"{name}.yaml"
             if candidate.is_file():
                 return candidate
         known = sorted({p.stem for d in config_dirs() for p in d.glob("*.yaml")})
         raise UserError(
-            f"--config: {name!r} is neither a file nor a known robot (have: "
+            f"{option}: {name!r} is neither a file nor a known robot (have: "
             f"{', '.join(known) or 'none'})"
         )
     if robot is None:
