@@ -83,11 +83,25 @@ class BuildNative(build_ext):
         super().build_extensions()
 
 
+#: configs/ and its folders (URDFs, parameters, the unit...) as data-only packages: listed, so
+#: that setuptools does not warn that each folder "would be ignored"
+CONFIG_PACKAGES = [
+    "hofto_hw.robot_configs",
+    *(
+        f"hofto_hw.robot_configs.{d.name}"
+        for d in sorted((HERE / "configs").iterdir())
+        if d.is_dir()
+    ),
+]
+
 setup(
-    packages=[
-        *find_packages(include=["hofto_hw*", "drivers*", "safety*"]),
-        "hofto_hw.robot_configs",
-    ],
+    packages=[*find_packages(include=["hofto_hw*", "drivers*", "safety*"]), *CONFIG_PACKAGES],
+    package_data={
+        "hofto_hw": ["py.typed"],
+        "hofto_hw.robot_configs": ["*.yaml"],
+        **{p: ["*"] for p in CONFIG_PACKAGES[1:]},
+    },
+    exclude_package_data={"hofto_hw.model.native": ["*.cpp"]},  # compiled into _dynamics*.so
     package_dir={"hofto_hw.robot_configs": "configs"},
     ext_modules=[
         Extension(
