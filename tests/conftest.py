@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -46,12 +47,14 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
-    """Fail the session when it left shared-memory segments behind: ones created since its
-    start that no live process maps (a recorder ring nobody unlinked)."""
+    """Shared-memory segments left behind (created since the session's start, mapped by no
+    live process: a recorder ring nobody unlinked) fail the session under CI, which runs
+    alone; elsewhere other sessions on the machine may have left them: a warning line."""
     left = sorted(_shm_names() - _shm_before - _mapped_shm())
     if left:
         print(f"\nshared-memory segments left behind in {SHM}: {', '.join(left)}")
-        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+        if os.environ.get("CI"):
+            session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 @pytest.fixture(scope="session")
