@@ -20,7 +20,7 @@ extension and maps ``configs/`` into the package as ``hofto_hw.robot_configs``.
 from __future__ import annotations
 
 import hashlib
-import importlib.util
+import sys
 from pathlib import Path
 
 from setuptools import Extension, find_packages, setup
@@ -44,28 +44,36 @@ FLAGS = [
 ]
 
 
+HEADERS = (
+    ("pinocchio/multibody.hpp", "pin"),
+    ("eigen3/Eigen/Core", "cmeel-eigen"),
+    ("boost/variant.hpp", "cmeel-boost"),
+)
+
+
 def header_prefix() -> Path:
-    """The cmeel prefix of the first pinocchio on the build's path (its include/ holds
-    pinocchio's, Eigen's and Boost's headers), found without importing pinocchio. That is pip's
-    isolated build environment's, or the invoking venv's when it has one (pip's isolation does
-    not hide paths that .pth files added, as cmeel's does); the loader checks the version the
-    library records against the installed pinocchio either way."""
-    spec = importlib.util.find_spec("pinocchio")
-    if spec is None or spec.origin is None:
+    """The first cmeel prefix on the build's path that holds pinocchio's, Eigen's and Boost's
+    headers (in include/), found without importing pinocchio. pip's isolated build environment
+    has one (``[build-system] requires``); the invoking venv's cmeel prefix comes first when it
+    has all three (pip's isolation does not hide paths that .pth files added, as cmeel's do),
+    and is skipped when it lacks one. The loader checks the pinocchio version the library
+    records against the installed one either way."""
+    seen: list[Path] = []
+    for entry in map(Path, sys.path):
+        prefix = next((p for p in (entry, *entry.parents) if p.name == "cmeel.prefix"), None)
+        if prefix is None or prefix in seen or not (entry / "pinocchio").is_dir():
+            continue
+        seen.append(prefix)
+        if all((prefix / "include" / need).is_file() for need, _ in HEADERS):
+            return prefix
+    if not seen:
         raise SystemExit("hofto-hw build: pinocchio (the pin package) is not installed")
-    here = Path(spec.origin).resolve()
-    prefix = next((p for p in here.parents if p.name == "cmeel.prefix"), None)
-    if prefix is None:
-        raise SystemExit(f"hofto-hw build: pinocchio at {here.parent} is not a cmeel install")
-    inc = prefix / "include"
-    for need, package in (
-        ("pinocchio/multibody.hpp", "pin"),
-        ("eigen3/Eigen/Core", "cmeel-eigen"),
-        ("boost/variant.hpp", "cmeel-boost"),
-    ):
-        if not (inc / need).is_file():
-            raise SystemExit(f"hofto-hw build: no {inc / need} (the {package} package's headers)")
-    return prefix
+    inc = seen[0] / "include"
+    missing = [pkg for need, pkg in HEADERS if not (inc / need).is_file()]
+    raise SystemExit(
+        f"hofto-hw build: {inc} lacks the headers of {', '.join(missing)} (and no other cmeel "
+        "prefix on the path has them all)"
+    )
 
 
 class BuildNative(build_ext):
