@@ -123,7 +123,7 @@ def install() -> Iterator[Install]:
         shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(*BUILD_LEFTOVERS))
         t0 = time.monotonic()
         if not given:
-            subprocess.run(
+            built = subprocess.run(
                 [
                     sys.executable,
                     "-m",
@@ -135,10 +135,11 @@ def install() -> Iterator[Install]:
                     str(dist),
                     str(src),
                 ],
-                check=True,
                 capture_output=True,
+                text=True,
                 timeout=3600,
             )
+            assert built.returncode == 0, built.stderr[-4000:]  # the build's own last lines
         (wheel,) = dist.glob("hofto_hw-*.whl")
         print(
             f"\nwheel {wheel.name}: {wheel.stat().st_size / 1e6:.2f} MB, built in "
