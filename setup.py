@@ -54,18 +54,23 @@ HEADERS = (
 def header_prefix() -> Path:
     """The first cmeel prefix on the build's path that holds pinocchio's, Eigen's and Boost's
     headers (in include/), found without importing pinocchio. pip's isolated build environment
-    has one (``[build-system] requires``); the invoking venv's cmeel prefix comes first when it
-    has all three (pip's isolation does not hide paths that .pth files added, as cmeel's do),
-    and is skipped when it lacks one. The loader checks the pinocchio version the library
-    records against the installed one either way."""
+    has one (``[build-system] requires``, in its site-packages); the invoking venv's cmeel
+    prefix comes first when it has all three (pip's isolation does not hide paths that .pth
+    files added, as cmeel's do), and is skipped when it lacks one. The loader checks the
+    pinocchio version the library records against the installed one either way."""
     seen: list[Path] = []
     for entry in map(Path, sys.path):
-        prefix = next((p for p in (entry, *entry.parents) if p.name == "cmeel.prefix"), None)
-        if prefix is None or prefix in seen or not (entry / "pinocchio").is_dir():
-            continue
-        seen.append(prefix)
-        if all((prefix / "include" / need).is_file() for need, _ in HEADERS):
-            return prefix
+        # a path a cmeel .pth added (inside the prefix), or a site-packages holding one (pip's
+        # build environment is on the path without its .pth files having run)
+        inside = next((p for p in (entry, *entry.parents) if p.name == "cmeel.prefix"), None)
+        for prefix in (inside, entry / "cmeel.prefix"):
+            if prefix is None or prefix in seen or not prefix.is_dir():
+                continue
+            if not (prefix / "include" / HEADERS[0][0]).is_file():
+                continue  # a cmeel prefix without pinocchio
+            seen.append(prefix)
+            if all((prefix / "include" / need).is_file() for need, _ in HEADERS):
+                return prefix
     if not seen:
         raise SystemExit("hofto-hw build: pinocchio (the pin package) is not installed")
     inc = seen[0] / "include"
