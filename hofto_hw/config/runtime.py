@@ -87,7 +87,7 @@ class RunConfig(FileModel):
     """The ``run:`` section: what ``hofto-hw run`` does on the simulated arm."""
 
     duration: Positive | None = Field(
-        5.0, description="default run time [s]; None: until stopped (SIGTERM, `hofto-hw stop`)"
+        5.0, description="default run time [s]; None: until stopped (SIGTERM, Ctrl-C)"
     )
     clock: Literal["sim", "real"] = "real"
     path: DemoPathConfig | None = None
