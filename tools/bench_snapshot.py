@@ -131,16 +131,13 @@ def measure(config: Path, blocks: int, per_block: int = 300) -> dict:
 
 
 def _build_info() -> str:
-    """The native library's build record: the compile time of its cold build (cached since)."""
-    from hofto_hw.model.native import build
+    """The native library in use: its file and the pinocchio it was built against."""
+    from hofto_hw.model import native
 
-    try:
-        lib = build.library(build=False)
-    except build.BuildError as exc:
-        return str(exc)
-    info = lib.parent / (lib.stem.removeprefix("libhofto_dyn-") + ".info")
-    lines = info.read_text().splitlines() if info.is_file() else []
-    return f"{lib.name}: {lines[-1] if lines else 'no build record'}"
+    lib = native.library_path()
+    if lib is None or not native.ready():
+        return native.unavailable_reason() or "no native library in this install"
+    return f"{lib.name} (built against pinocchio {native.built_against()})"
 
 
 def main() -> None:

@@ -16,7 +16,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     sub.add_parser("schema", help="print the JSON schema of the config files")
     check = sub.add_parser("check", help="validate config files (and their URDFs)")
-    check.add_argument("files", type=Path, nargs="+", metavar="FILE")
+    check.add_argument(
+        "files", type=Path, nargs="+", metavar="FILE|ROBOT", help="config files or robot names"
+    )
 
 
 def check_transport(cfg: SystemConfig, source: str) -> None:
@@ -36,6 +38,7 @@ def check_transport(cfg: SystemConfig, source: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hofto_hw.config import json_schema, load_config
+    from hofto_hw.config.locate import find_config
     from hofto_hw.errors import ConfigError
 
     if args.action == "schema":
@@ -47,7 +50,8 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.runtime.compose import build_model
     from hofto_hw.runtime.motion_check import check_motion
 
-    for path in args.files:
+    for spec in args.files:
+        path = find_config(spec, option="config check")
         cfg = load_config(path)
         check_transport(cfg, str(path))
         model = RobotModel.from_config(cfg.robot)  # URDF, joints and tool frame exist

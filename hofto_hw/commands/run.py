@@ -1,9 +1,11 @@
 """``hofto-hw run``: the controller process (the fixed-rate loop on the drives).
 
-On the simulated arm (bus ``sim``, the default) the arm moves along the demo path, a scripted
-collision hits a link, the monitor stops the arm and a short summary is printed (or written
-with ``--summary-json``). SIGTERM or SIGINT: category 1 stop -> drives disabled -> log
-closed -> exit 0.
+The default config (``er3a``, configs/er3a.yaml) is the README's main job on the simulated arm:
+the arm moves along the demo path, a scripted collision hits a link, the monitor stops the
+arm, a scripted drag and replay follow and a short summary is printed (or written with
+``--summary-json``). A deployment config (configs/er3a_service.yaml) scripts nothing and runs
+until stopped (``run.duration: null``). SIGTERM or SIGINT: category 1 stop -> drives
+disabled -> log closed -> exit 0.
 """
 
 from __future__ import annotations
@@ -16,19 +18,32 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from hofto_hw.commands.args import output_file
 from hofto_hw.control_plane.process import remove_socket
 from hofto_hw.errors import UserError
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "er3a.yaml"
+DEFAULT_CONFIG = "er3a"  # the README's main job: the simulated arm's scripted scenario
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="system config")
-    parser.add_argument("--duration", type=float, default=None, help="run time [s]")
+    from hofto_hw.commands.args import add_config
+
+    add_config(parser, default=DEFAULT_CONFIG)
     parser.add_argument(
-        "--clock", choices=("sim", "real"), default=None, help="sim: ticks back to back"
+        "--duration",
+        type=float,
+        default=None,
+        help="run time [s] (default: the config's run.duration; er3a: 12 s; null in the "
+        "config: until SIGTERM or Ctrl-C)",
+    )
+    parser.add_argument(
+        "--clock",
+        choices=("sim", "real"),
+        default=None,
+        help="real: the loop's period in wall time; sim: ticks back to back in simulated "
+        "time (sim bus only) (default: the config's run.clock, real unless set)",
     )
     parser.add_argument("--summary-json", type=Path, default=None, help="write the summary")
     parser.add_argument(
@@ -96,13 +111,8 @@ def _check_interface(cfg: object, interface: str | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hofto_hw.config import load_config
-    from hofto_hw.control.joint_motion import MOVE
     from hofto_hw.outputs import check_output, write_atomic
-    from hofto_hw.runtime import realtime
-    from hofto_hw.runtime.compose import build
-    from hofto_hw.runtime.drag_script import run_loop
-    from hofto_hw.runtime.summary import build_summary, format_summary
+    from hofto_hw.runtime.startup import StartupProgress
 
     _check_duration(args.duration)
     if args.summary_json is not None:
@@ -112,40 +122,79 @@ def run(args: argparse.Namespace) -> int:
         from hofto_hw.control_plane.process import check_socket_path
 
         args.socket = check_socket_path(args.socket)
-    cfg = load_config(args.config)
-    _check_interface(cfg, args.interface)
-    if args.interface is not None and cfg.bus is not None:
-        cfg = cfg.model_copy(
-            update={"bus": cfg.bus.model_copy(update={"interface": args.interface})}
-        )
-    duration = args.duration if args.duration is not None else cfg.run.duration
-    _check_ticks(duration, cfg.loop.rate_hz, args.duration is not None)
-    clock = args.clock or cfg.run.clock
-    lc = cfg.loop
-    latency = lc.cpu_latency_us if clock != "sim" else None  # the sim clock never sleeps
-    rt = realtime.setup(lc.realtime, lc.priority, lc.cpus, latency)
-    rt_text = rt.describe() if lc.realtime != "off" else "real-time off"
-    if clock == "sim":
-        realtime.drop_realtime()  # back-to-back ticks must not starve the machine
-        rt_text += "; checked, then normal priority for the sim clock"
-    if args.no_log and cfg.run.live_view is not None:
-        print("hofto-hw run: run.live_view is off with --no-log (the log's writer serves it)",
-              file=sys.stderr)  # fmt: skip
-    recorder = None if args.no_log else _start_recorder(cfg, args)
-    from hofto_hw.runtime.positions import state_path
-
-    # Real buses with logs only: the simulated plant starts at its configured pose on every
-    # run, and the state file lives beside the logs (--no-log: neither checked nor written).
-    positions = None
-    if cfg.bus is not None and str(cfg.bus.transport) != "sim" and not args.no_log:
-        positions = state_path(args.log_dir or _log_dir(cfg, args.config))
+    progress = StartupProgress()  # from here: the imports take seconds on a loaded machine
+    recorder = None
     control = None
     try:
+        progress.phase("importing numpy, pinocchio, numba")
+        from hofto_hw.config import load_config
+        from hofto_hw.config.locate import find_config
+        from hofto_hw.control.joint_motion import MOVE
+        from hofto_hw.errors import ConfigError
+        from hofto_hw.runtime import acceleration, realtime
+        from hofto_hw.runtime.compose import build
+        from hofto_hw.runtime.drag_script import run_loop
+        from hofto_hw.runtime.positions import state_path
+        from hofto_hw.runtime.summary import build_summary, format_summary
+
+        progress.phase("reading the config")
+        args.config = find_config(args.config)
+        cfg = load_config(args.config)
+        _check_interface(cfg, args.interface)
+        if args.interface is not None and cfg.bus is not None:
+            cfg = cfg.model_copy(
+                update={"bus": cfg.bus.model_copy(update={"interface": args.interface})}
+            )
+        duration = args.duration if args.duration is not None else cfg.run.duration
+        _check_ticks(duration, cfg.loop.rate_hz, args.duration is not None)
+        clock = args.clock or cfg.run.clock
+        lc = cfg.loop
+        progress.phase("loading the native dynamics")
+        acceleration.require(lc.acceleration, str(args.config))
+        latency = lc.cpu_latency_us if clock != "sim" else None  # the sim clock never sleeps
+        if clock == "sim" and lc.realtime != "required":
+            rt_text = "real-time not used with the sim clock"  # nothing to set up or warn about
+        else:
+            rt = realtime.setup(lc.realtime, lc.priority, lc.cpus, latency)
+            rt_text = rt.describe() if lc.realtime != "off" else "real-time off"
+        if clock == "sim" and lc.realtime == "required":
+            realtime.drop_realtime()  # back-to-back ticks must not starve the machine
+            rt_text += "; checked, then normal priority for the sim clock"
+        if cfg.bus is not None and cfg.bus.transport != "sim":
+            progress.phase("compiling the tick on the simulated arm, before the bus opens")
+            _compile_first(cfg)
+        if args.no_log and cfg.run.live_view is not None:
+            print("hofto-hw run: run.live_view is off with --no-log (the log's writer serves it)",
+                  file=sys.stderr)  # fmt: skip
+        if not args.no_log:
+            progress.phase("starting the flight recorder")
+            recorder = _start_recorder(cfg, args)
+        # Real buses with logs only: the simulated plant starts at its configured pose on every
+        # run, and the state file lives beside the logs (--no-log: neither checked nor written).
+        positions = None
+        if cfg.bus is not None and str(cfg.bus.transport) != "sim" and not args.no_log:
+            positions = state_path(args.log_dir or _log_dir(cfg, args.config))
         control = _start_control_plane(cfg, args, recorder)
         system = build(
-            cfg, clock=clock, sink=recorder, contact=not args.no_collision, positions=positions
+            cfg,
+            clock=clock,
+            sink=recorder,
+            contact=not args.no_collision,
+            positions=positions,
+            progress=progress.phase,
         )
+        system.acceleration = acceleration.report(system)
+        if lc.acceleration == "required" and not system.acceleration["compiled"]:
+            system.close()
+            raise ConfigError(
+                f"{args.config}: loop.acceleration: required, but the tick runs the Python "
+                f"reference ({system.acceleration['why']})"
+            )
     except BaseException:
+        progress.done()
+        from hofto_hw.runtime import realtime
+
+        realtime.drop_realtime()
         if control is not None:
             control.close(timeout=2.0)
             if args.socket is not None:
@@ -167,11 +216,17 @@ def run(args: argparse.Namespace) -> int:
         from hofto_hw.runtime.log_watch import LogWatch
 
         watch = LogWatch(recorder, tick).start()
-    if not args.hold:
-        tick.mode_request = MOVE
-    n_ticks = round(duration * system.rate_hz)
+    if not args.hold and cfg.run.path is not None:
+        tick.mode_request = MOVE  # the demo path; without one the arm holds until asked
+    n_ticks = None if duration is None else round(duration * system.rate_hz)
+    progress.done()
     print(f"hofto-hw run: {_observer_choice(cfg)}", file=sys.stderr)
-    print(f"hofto-hw run: running (pid {os.getpid()})", file=sys.stderr, flush=True)
+    print(
+        f"hofto-hw run: running (pid {os.getpid()}; tick: "
+        f"{acceleration.describe(system.acceleration)})",
+        file=sys.stderr,
+        flush=True,
+    )
     try:
         run_loop(system, n_ticks, lambda: tick.exit_requested and tick.stopped_and_off())
     finally:
@@ -290,6 +345,18 @@ def _start_control_plane(cfg: object, args: argparse.Namespace, recorder: object
     return control
 
 
+def _compile_first(cfg: Any) -> None:
+    """Build (and close) the system once on the simulated arm: every kernel the tick runs is
+    compiled or loaded from numba's cache before a real bus opens. Between opening a bus and
+    enabling its drives the master exchanges no process data; a cold cache's ~10-60 s of
+    compiling there outlasts the drives' watchdog (EtherCAT SM watchdog), they leave OP, and
+    enabling fails (found by tests/test_install.py on a first start). Warm: ~1 s."""
+    from hofto_hw.runtime.compose import build
+
+    sim = cfg.model_copy(update={"bus": cfg.bus.model_copy(update={"transport": "sim"})})
+    build(sim, clock="sim", contact=False).close()
+
+
 def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
     """The MCAP flight recorder (its writer process started) for this run's log file."""
     from hofto_hw.commands.backend import observer_backend
@@ -298,6 +365,7 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
     from hofto_hw.recording.attachments import run_attachments, run_metadata
     from hofto_hw.recording.flight_file import LogSpec
     from hofto_hw.recording.recorder import FlightRecorder
+    from hofto_hw.runtime import acceleration
     from hofto_hw.runtime.compose import loop_observer_names
     from safety.stop import EVENT_NAMES
 
@@ -315,6 +383,7 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
         metadata={
             **run_metadata(args.config, cfg, names[0]),  # type: ignore[arg-type]
             "observer_backend": kernels.resolve(observer_backend()),
+            "acceleration": acceleration.missing() or "compiled",  # else why not
         },
         event_kinds=dict(EVENT_NAMES),
         tool_frame=cfg.robot.tool_frame,  # type: ignore[attr-defined]

@@ -52,6 +52,10 @@ def _print(s: dict) -> None:
     if s.get("holder"):
         print(f"motion held by {s['holder']}")
     print(f"log: {s['log'] or 'not yet written'}")
+    if s.get("acceleration"):
+        from hofto_hw.runtime.acceleration import describe
+
+        print(f"tick: {describe(s['acceleration'])}")
     rec = s.get("teach")
     if rec:
         print(f"taught path: {rec['state']}, {rec['samples']} samples -> {rec['file']}")

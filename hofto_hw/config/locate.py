@@ -3,6 +3,10 @@
 One resolver for every command: ``--config`` takes a path (``configs/ur10e.yaml``) or a robot
 name (``ur10e`` -> ``configs/ur10e.yaml``); without it, the config of a parameters file's
 robot is ``<robot>.yaml`` in that file's folder, the folder above, or ``configs/``.
+
+The shipped configs (the project's ``configs/`` folder) are package data: an installed wheel
+holds them as ``hofto_hw/robot_configs`` (setup.py maps the folder there); a source checkout,
+editable or not installed, reads ``configs/`` beside the package.
 """
 
 from __future__ import annotations
@@ -11,8 +15,16 @@ from pathlib import Path
 
 from hofto_hw.errors import UserError
 
-#: the configs/ folder shipped with the project (next to the package)
-PROJECT_CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+def _shipped_configs() -> Path:
+    """The shipped configs: the installed package's data, else the checkout's configs/."""
+    package = Path(__file__).resolve().parents[1]
+    installed = package / "robot_configs"
+    return installed if installed.is_dir() else package.parent / "configs"
+
+
+#: the configs shipped with the project (see the module docstring)
+PROJECT_CONFIGS = _shipped_configs()
 
 
 def config_dirs() -> list[Path]:
@@ -25,7 +37,10 @@ def config_dirs() -> list[Path]:
 
 
 def find_config(
-    spec: str | Path | None, robot: str | None = None, near: Path | None = None
+    spec: str | Path | None,
+    robot: str | None = None,
+    near: Path | None = None,
+    option: str = "--config",
 ) -> Path:
     """The config file named by ``spec`` (a path or a robot name), else the one of ``robot``.
 
@@ -34,6 +49,7 @@ def find_config(
             ``robot`` instead.
         robot: the robot name of a parameters/thresholds file (used when ``spec`` is None).
         near: the folder of that file: ``<robot>.yaml`` there or one folder up comes first.
+        option: how the user gave ``spec``, for the error message.
 
     Raises:
         UserError: naming what was looked for and where.
@@ -43,17 +59,17 @@ def find_config(
         if path.is_file():
             return path
         if path.is_dir():
-            raise UserError(f"--config: {path} is a folder, not a config file")
+            raise UserError(f"{option}: {path} is a folder, not a config file")
         name = str(spec)
         if "/" in name or path.suffix in (".yaml", ".yml"):
-            raise UserError(f"--config: {path}: config file not found")
+            raise UserError(f"{option}: {path}: config file not found")
         for folder in config_dirs():
             candidate = folder / f"{name}.yaml"
             if candidate.is_file():
                 return candidate
         known = sorted({p.stem for d in config_dirs() for p in d.glob("*.yaml")})
         raise UserError(
-            f"--config: {name!r} is neither a file nor a known robot (have: "
+            f"{option}: {name!r} is neither a file nor a known robot (have: "
             f"{', '.join(known) or 'none'})"
         )
     if robot is None:

@@ -345,6 +345,12 @@ class LoopConfig(FileModel):
         description="SCHED_FIFO + mlockall: required refuses to start without them, "
         "preferred warns once, off does not try",
     )
+    acceleration: Literal["required", "preferred"] = Field(
+        "preferred",
+        description="the compiled tick (numba kernels and the native dynamics shipped in the "
+        "wheel): required refuses to start without it, naming why in one line (a service); "
+        "preferred runs the Python reference instead and says so once",
+    )
     priority: int = Field(50, ge=1, le=99, description="SCHED_FIFO priority")
     cpus: list[Annotated[int, Field(ge=0)]] | None = Field(
         None, description="CPU affinity of the loop; None = leave as is"

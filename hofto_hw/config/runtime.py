@@ -101,7 +101,11 @@ class LiveViewConfig(FileModel):
 class RunConfig(FileModel):
     """The ``run:`` section: what ``hofto-hw run`` does on the simulated arm."""
 
-    duration: Positive = Field(5.0, le=MAX_RUN_SECONDS, description="default run time [s]")
+    duration: Positive | None = Field(
+        5.0,
+        le=MAX_RUN_SECONDS,
+        description="default run time [s]; None: until stopped (SIGTERM, Ctrl-C)",
+    )
     clock: Literal["sim", "real"] = "real"
     path: DemoPathConfig | None = None
     collision: ScriptedCollisionConfig | None = Field(default_factory=ScriptedCollisionConfig)

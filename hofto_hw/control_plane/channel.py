@@ -44,7 +44,10 @@ X_WORDS = 32
 (X_CATEGORY, X_ACTIVE, X_STOPPING, X_ENABLING, X_EXIT, X_OVERRUNS, X_LOOP_TICKS, X_DRAG_ACTIVE,
  X_PRESSED, X_PLAN_ID, X_PLAN_K, X_PLAN_DONE, X_TEACH_STATE, X_TEACH_SAMPLES, X_WAKE_MAX,
  X_COMP_MAX, X_HAS_PATH, X_HAS_DRAG, X_ENABLE_SOURCE, X_PLAYING_KIND, X_STOP_REQUESTED,
- X_MOVING, X_PROFILE) = range(23)  # fmt: skip
+ X_MOVING, X_PROFILE, X_ACCEL) = range(24)  # fmt: skip
+
+#: X_ACCEL bits: what the tick runs (hofto_hw.runtime.acceleration.report), set once
+ACCEL_COMPILED, ACCEL_NUMBA, ACCEL_NATIVE, ACCEL_HAS_FUSED, ACCEL_FUSED = 1, 2, 4, 8, 16
 
 #: enabling-input source codes (X_ENABLE_SOURCE)
 SOURCES = ("scripted", "digital_input", "socket")

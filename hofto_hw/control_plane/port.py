@@ -130,6 +130,16 @@ class StreamRecording:
         return {"file": None, "state": "streamed", "samples": self.recorder.count, "message": ""}
 
 
+def accel_bits(acc: dict[str, Any]) -> int:
+    """hofto_hw.runtime.acceleration.report as the channel's X_ACCEL bits."""
+    bits = ch.ACCEL_COMPILED if acc.get("compiled") else 0
+    bits |= ch.ACCEL_NUMBA if acc.get("kernels") == "numba" else 0
+    bits |= ch.ACCEL_NATIVE if acc.get("native") else 0
+    if "fused" in acc:
+        bits |= ch.ACCEL_HAS_FUSED | (ch.ACCEL_FUSED if acc["fused"] else 0)
+    return bits
+
+
 class LoopPort:
     """See the module docstring. ``system``: the composed run (tick, loop, motion)."""
 
@@ -156,6 +166,8 @@ class LoopPort:
         self.extra[ch.X_HAS_DRAG] = 1.0 if tick.drag is not None else 0.0
         prof = system.cfg.safety.profiles
         self.extra[ch.X_PROFILE] = -1 if prof is None else prof.names().index(prof.active)
+        acc = getattr(system, "acceleration", None)
+        self.extra[ch.X_ACCEL] = -1 if acc is None else accel_bits(acc)
         self._state = _NO_REQ
         self._seq = 0
         self._reset_at = 0

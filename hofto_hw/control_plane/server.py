@@ -854,6 +854,7 @@ class ControlPlane:
             "playback": self._playback_status(x),
             "holder": None if self.holder is None else self.holder.who(),
             "profile": self._profile_status(x),
+            "acceleration": _acceleration(int(x[ch.X_ACCEL])),
         }
 
     def _profile_status(self, x: np.ndarray) -> dict[str, Any] | None:
@@ -1179,3 +1180,18 @@ def _alive(pid: int) -> bool:
             return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
     except (OSError, IndexError):
         return False
+
+
+def _acceleration(bits: int) -> dict[str, Any] | None:
+    """The loop's X_ACCEL bits as hofto_hw.runtime.acceleration.report's dict (None: unknown)."""
+    if bits < 0:
+        return None
+    out: dict[str, Any] = {
+        "compiled": bool(bits & ch.ACCEL_COMPILED),
+        "kernels": "numba" if bits & ch.ACCEL_NUMBA else "numpy",
+        "native": bool(bits & ch.ACCEL_NATIVE),
+    }
+    if bits & ch.ACCEL_HAS_FUSED:
+        out["fused"] = bool(bits & ch.ACCEL_FUSED)
+    out["why"] = "" if out["compiled"] else "the tick did not take the compiled path (see its log)"
+    return out

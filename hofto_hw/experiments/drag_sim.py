@@ -28,6 +28,7 @@ from drivers.sim.plant import Plant
 from drivers.sim.simbus import SimBus
 from hofto_hw.config.drag import DragConfig
 from hofto_hw.config.loader import load_config
+from hofto_hw.config.locate import PROJECT_CONFIGS
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.control.drag import DragController
 from hofto_hw.control.taught_path import TaughtPathRecorder
@@ -35,7 +36,7 @@ from hofto_hw.model.payload import apply_payload, payload_from_config
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers import make_observer
 
-ER3A = Path(__file__).resolve().parents[2] / "configs" / "er3a.yaml"
+ER3A = PROJECT_CONFIGS / "er3a.yaml"
 #: where the README main job's arm stands after its collision stop (measured, sim clock,
 #: configs/er3a.yaml): the pose its scripted 20 N drag starts from [rad]
 MAIN_JOB_POSE = [-0.79995, -0.06658, 0.98506, 0.97171, 1.04007, 0.72998]

@@ -110,12 +110,17 @@ class FlightRecorder:
         # A fresh interpreter (not multiprocessing): it does not depend on how the loop's
         # __main__ was started, inherits no threads or locks, and owns no resource tracker
         # of ours. It notices our death by its parent pid changing.
-        self._proc = subprocess.Popen(
-            [sys.executable, "-m", "hofto_hw.recording.writer_process", b.name],
-            stdin=subprocess.PIPE,
-            close_fds=True,
-            env=_child_env(),
-        )
+        try:
+            self._proc = subprocess.Popen(
+                [sys.executable, "-m", "hofto_hw.recording.writer_process", b.name],
+                stdin=subprocess.PIPE,
+                close_fds=True,
+                env=_child_env(),
+            )
+        except BaseException:  # no writer: the segment must not outlive us in /dev/shm
+            b.close()
+            self._block = None
+            raise
         assert self._proc.stdin is not None
         cpus = self._cpus if self._cpus is not None else _other_cpus()
         args = (self.n_joints, self.n_observers, self.caps, self.spec, cpus)

@@ -9,6 +9,7 @@ consumer owns its workspace (``model.create_data()``).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -78,6 +79,7 @@ class System:
     contact: ScriptedContact | None = None
     observer_names: list[str] = field(default_factory=list)
     drag_script: Any = None  # hofto_hw.runtime.drag_script.DragScript of run.drag
+    acceleration: dict[str, Any] | None = None  # hofto_hw.runtime.acceleration.report
 
     def close(self) -> None:
         """Stop the drives (category 1 if still powered), disable them, close the bus."""
@@ -151,6 +153,7 @@ def build(
     sink: RecordSink | None = None,
     contact: bool = True,
     positions: Path | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> System:
     """Build and start everything: drives enabled in CSP, holding; the loop not yet run.
 
@@ -160,7 +163,9 @@ def build(
     The drives are enabled last, after every compiled kernel is warmed (seconds when the
     cache is cold): an enabled drive on a bus whose process data stops for longer than its
     watchdog (EtherCAT SM watchdog, 100 ms by default) leaves Operation enabled, and the
-    loop's first tick would latch a disabled drive."""
+    loop's first tick would latch a disabled drive. ``progress(text)`` is told each phase as
+    it begins (hofto_hw.runtime.startup)."""
+    say = progress if progress is not None else _silent
     rate = float(cfg.loop.rate_hz)
     model = build_model(cfg)
     check_motion(cfg, model)  # home and demo path inside the monitored limits
@@ -168,11 +173,14 @@ def build(
     names = loop_observer_names(cfg)
     for name in names:
         check_observer(name, table[name], model, rate)
+    say("loading the compiled kernels (compiling them when numba's cache is cold)")
     backend = observer_backend()  # compiled kernels when numba is there, warmed here
     observers = [make_observer(table[name], model, backend=backend) for name in names]
     sink = sink if sink is not None else MemorySink(tick_dtype(model.n, len(names)))
 
+    say("opening the bus")
     bus, group = build_bus(cfg, clock)
+    say("loading the safety checks and the tick (compiled code)")
 
     s = cfg.safety
     stop = StopController.from_config(s.categories)
@@ -217,7 +225,9 @@ def build(
         check_start_positions(cfg, bus, group, positions)
     braked = preload_braked_axes(cfg, model, group)
     if clock != "sim":
+        say("collecting garbage")
         collect_before_loop()  # the loop's own collection then fits inside the bus watchdog
+    say("enabling the drives")
     enable_drives(bus, group)
     if braked.size:
         await_brake_release(cfg, bus, group, braked)
@@ -240,6 +250,10 @@ def build(
                 cfg.run.drag, bus.plant, rate, model=model_for_replay
             )
     return system
+
+
+def _silent(text: str) -> None:
+    """No progress lines."""
 
 
 def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:

@@ -161,13 +161,14 @@ class DragScript:
         return ""
 
 
-def run_loop(system: Any, n_ticks: int, should_stop: Callable[[], bool]) -> None:
-    """``system.loop.run(max_ticks=n_ticks, should_stop=...)``; with a scripted replay, the
+def run_loop(system: Any, n_ticks: int | None, should_stop: Callable[[], bool]) -> None:
+    """``system.loop.run(max_ticks=n_ticks, should_stop=...)`` (None: until ``should_stop``,
+    which a scripted replay does not support); with a scripted replay, the
     loop stops where the script asks for a plan, plans off the tick and goes on (sim clock:
     the loop time does not advance meanwhile, so the run stays deterministic)."""
     script = system.drag_script
     loop = system.loop
-    if script is None or script.recording is None:
+    if script is None or script.recording is None or n_ticks is None:
         loop.run(max_ticks=n_ticks, should_stop=should_stop)
         return
     end = loop.ticks + n_ticks

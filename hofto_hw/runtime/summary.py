@@ -3,7 +3,8 @@
 Keys: ticks, rate_hz, overruns, timing_us.{compute,wakeup}.{median,p99,p999,max}, events
 [{t, tick, kind, joint, category, detection_delay_ms, stopping_time_ms,
 stopping_distance_rad}], observers {name: detection delay [ms] of the scripted collision},
-log (path), plus realtime and clock; with ``run.drag``: drag.{steady_speed_mps, expected_speed_mps,
+log (path), acceleration (hofto_hw.runtime.acceleration.report: what the tick ran), plus
+realtime and clock; with ``run.drag``: drag.{steady_speed_mps, expected_speed_mps,
 rest_time_ms, max_speed_mps, drift_mps}; after a taught-path replay (the last trajectory the
 loop played): replay.{max_path_error_mm, duration_s, max_jerk_ratio, time_scale, completed};
 after a ``mode move --joints``: move.{final_error_rad, duration_s, max_jerk_ratio, completed}.
@@ -86,6 +87,7 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
         "clock": "sim" if system.clock.sim else "real",
         "realtime": realtime,
         "bus": _bus_text(system),
+        "acceleration": getattr(system, "acceleration", None),
         "overruns": int(tick.overruns),
         "timing_us": {"compute": loop.compute.summary(), "wakeup": loop.wakeup.summary()},
         "events": events,
@@ -113,7 +115,8 @@ def _bus_text(system: Any) -> str:
     bus = system.cfg.bus
     name = str(bus.transport)
     if name == "sim":
-        return "sim (simulated arm, scripted contact)"
+        scripted = ", scripted contact" if getattr(system, "contact", None) is not None else ""
+        return f"sim (simulated arm{scripted})"
     return f"{name} on {bus.interface} (no scripted contact: that exists on the simulated bus only)"
 
 
@@ -124,6 +127,10 @@ def format_summary(s: dict[str, Any]) -> str:
         f"{s['overruns']} missed deadlines",
         f"bus: {s['bus']}",
     ]
+    if s.get("acceleration"):
+        from hofto_hw.runtime.acceleration import describe
+
+        lines.append(f"tick: {describe(s['acceleration'])}")
     obs = s["observers"]
     if obs:
         shown = ", ".join(

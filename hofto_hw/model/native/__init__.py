@@ -17,19 +17,27 @@ armature, gravity): exactly the same values, so the same algorithms give the sam
 (tests/hofto_hw/model/test_native.py: within 1e-12). A :class:`NativeModel` follows
 ``RobotModel.revision`` (bumped by the model's parameter setters and ``apply_payload``).
 
-Availability: the library is built once per machine (:mod:`.build`; ~40 s of CPU, cached); it needs
-numba (the caller), a C++ compiler and the headers of the ``pin``, ``cmeel-eigen`` and
-``cmeel-boost`` wheels. Without them, when the build fails, or with ``HOFTO_HW_NO_NATIVE=1``
-(or ``HOFTO_HW_NO_NUMBA=1``), :func:`ready` is False, :func:`unavailable_reason` says why
-(printed once per process on stderr) and the pinocchio-Python path runs.
+Availability: the library is built when the package is built (setup.py, against the headers of
+the build environment's ``pin``, ``cmeel-eigen`` and ``cmeel-boost``) and ships in the wheel as
+``_dynamics*.so`` next to this file; nothing is compiled at run time. It is loaded only when
+the pinocchio it was built against has the installed pinocchio's major.minor version (the
+algorithms compiled in must be the ones the Python model is made for) and, in a source checkout
+(``pip install -e .``), only when ``dynamics.cpp`` beside it is the source it was built from.
+Without it, on a mismatch, without numba or with ``HOFTO_HW_NO_NATIVE=1`` (or
+``HOFTO_HW_NO_NUMBA=1``) :func:`ready` is False, :func:`unavailable_reason` says why in one
+line (printed once per process on stderr) and the pinocchio-Python path runs, unless
+``loop.acceleration: required`` refuses to start (hofto_hw.runtime.acceleration).
 """
 
 from __future__ import annotations
 
 import ctypes
+import hashlib
+import importlib.machinery
 import os
 import sys
 import weakref
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -65,9 +73,8 @@ def say_once(line: str) -> None:
 
 
 def ready() -> bool:
-    """True when the native library is built and loaded (building it now if needed; the first
-    call of a process decides). When False, :func:`unavailable_reason` says why and it is
-    printed once per process."""
+    """True when the native library is loaded (the first call of a process decides). When
+    False, :func:`unavailable_reason` says why and it is printed once per process."""
     global _REASON
     if _LIB is not None:
         return True
@@ -83,8 +90,59 @@ def unavailable_reason() -> str:
     return "" if _LIB is not None else _REASON
 
 
+def library_path() -> Path | None:
+    """The native library shipped next to this module (None when the package was installed
+    without it)."""
+    here = Path(__file__).resolve().parent
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        path = here / f"_dynamics{suffix}"
+        if path.is_file():
+            return path
+    return None
+
+
+def _built_from(lib: ctypes.CDLL) -> tuple[tuple[int, int, int], str]:
+    """The pinocchio version (major, minor, patch) and the dynamics.cpp hash ``lib`` was built
+    from (dynamics.cpp's hofto_dyn1_pinocchio_version / hofto_dyn1_source_sha256)."""
+    version = (ctypes.c_int64 * 3)()
+    lib.hofto_dyn1_pinocchio_version.restype = None
+    lib.hofto_dyn1_pinocchio_version.argtypes = [ctypes.c_void_p]
+    lib.hofto_dyn1_pinocchio_version(ctypes.addressof(version))
+    lib.hofto_dyn1_source_sha256.restype = ctypes.c_char_p
+    return (int(version[0]), int(version[1]), int(version[2])), (
+        lib.hofto_dyn1_source_sha256().decode()
+    )
+
+
+def built_against() -> str:
+    """The pinocchio version the loaded library was built against ('' when not loaded)."""
+    if _LIB is None:
+        return ""
+    return ".".join(map(str, _built_from(_LIB)[0]))
+
+
+def mismatch(built: tuple[int, int, int], sha: str, source: Path | None) -> str:
+    """Why a library built from pinocchio ``built`` and a dynamics.cpp of hash ``sha`` must not
+    be loaded here ('' when it may): another pinocchio major.minor installed, or (in a source
+    checkout) a ``source`` file that is not the one it was built from."""
+    import pinocchio
+
+    have = tuple(int(x) for x in pinocchio.__version__.split(".")[:2])
+    if have != built[:2]:
+        b = ".".join(map(str, built))
+        return (
+            f"the native library was built against pinocchio {b} but pinocchio "
+            f"{pinocchio.__version__} is installed (install pin=={built[0]}.{built[1]}.* or "
+            "reinstall hofto-hw from source against this pinocchio)"
+        )
+    if source is not None and source.is_file():
+        if hashlib.sha256(source.read_bytes()).hexdigest() != sha:
+            return f"{source} changed since the library was built (pip install -e . again)"
+    return ""
+
+
 def _load() -> str:
-    """Build if needed and load the library; '' on success, else the reason."""
+    """Load the shipped library; '' on success, else the reason."""
     global _LIB
     if os.environ.get("HOFTO_HW_NO_NATIVE", "") not in ("", "0"):
         return "disabled by HOFTO_HW_NO_NATIVE"
@@ -92,19 +150,24 @@ def _load() -> str:
 
     if not kernels.available():
         return kernels.unavailable_reason() or "numba unavailable"
-    from hofto_hw.model.native import build
-
+    path = library_path()
+    if path is None:
+        return "this install has no native library (hofto_hw/model/native/_dynamics*.so)"
     try:
-        path = build.library(say=_say)
+        lib = ctypes.CDLL(str(path))
+        built, sha = _built_from(lib)
+    except (OSError, AttributeError) as exc:
+        return f"loading {path} failed ({exc})"
+    why = mismatch(built, sha, path.with_name("dynamics.cpp"))
+    if why:
+        return why
+    try:
         import llvmlite.binding
 
         # numba's kernels bind the C functions by name (hofto_hw.model.kernels)
         llvmlite.binding.load_library_permanently(str(path))
-        lib = ctypes.CDLL(str(path))
-    except build.BuildError as exc:
-        return str(exc)
-    except (OSError, RuntimeError) as exc:
-        return f"loading the native library failed ({exc})"
+    except RuntimeError as exc:
+        return f"loading {path} failed ({exc})"
     p, i64 = ctypes.c_void_p, ctypes.c_int64
     lib.hofto_dyn1_create.restype = p
     lib.hofto_dyn1_create.argtypes = [i64, p, p, p, p, p, p, p]
@@ -153,8 +216,8 @@ def model_numbers(model: RobotModel) -> dict[str, np.ndarray]:
 
 
 def model_for(model: RobotModel) -> NativeModel | None:
-    """A :class:`NativeModel` of ``model`` when the library is ready here (building it if
-    needed) and knows every joint of ``model``; else None, with one line said once."""
+    """A :class:`NativeModel` of ``model`` when the library is ready here and knows every
+    joint of ``model``; else None, with one line said once."""
     if not ready():
         return None
     try:

@@ -3,7 +3,8 @@
 // recursion of ours for Cᵀ·qd (ct_qd_of: pinocchio has it only as the whole Coriolis matrix),
 // on a copy of the robot's pinocchio model, called from numba kernels
 // (hofto_hw/model/kernels.py) so that a snapshot or a feed-forward is one Python->compiled
-// call. Built and loaded by hofto_hw/model/native/build.py.
+// call. Built at install time by setup.py (into the wheel), loaded by
+// hofto_hw/model/native/__init__.py.
 //
 // Compile time is the reason for ArmJointsTpl (pinocchio's documented extension point: a Model
 // over one's own joint collection): pinocchio's default collection (~25 joint types in one
@@ -264,7 +265,27 @@ namespace hofto_native
 
 using namespace hofto_native;
 
+// What the library was built from (setup.py defines HOFTO_DYN_SOURCE_SHA256, the source's
+// hash): checked when it is loaded (hofto_hw/model/native/__init__.py).
+#ifndef HOFTO_DYN_SOURCE_SHA256
+  #define HOFTO_DYN_SOURCE_SHA256 "unknown"
+#endif
+
 extern "C" {
+
+// The pinocchio version whose headers this library was compiled from: major, minor, patch.
+void hofto_dyn1_pinocchio_version(std::int64_t * out)
+{
+  out[0] = PINOCCHIO_MAJOR_VERSION;
+  out[1] = PINOCCHIO_MINOR_VERSION;
+  out[2] = PINOCCHIO_PATCH_VERSION;
+}
+
+// The SHA-256 of dynamics.cpp as it was compiled (hex).
+const char * hofto_dyn1_source_sha256()
+{
+  return HOFTO_DYN_SOURCE_SHA256;
+}
 
 // A model of n joints, joint j's parent parent[j] (0 = the base, else a joint 1..n), kind[j]
 // (Kind), axis[3j..] (unaligned kinds), placement[12j..] (rotation row-major, then

@@ -101,3 +101,16 @@ def test_a_canopen_tpdo_resync_within_the_bus_loss_streak_is_one_line(
     err = _refused(path, capsys)
     assert f"{path}: " in err and "bus.canopen.tpdo_resync = 0.01 s is 2 cycles at 200 Hz" in err
     assert "safety.bus.lost_cycles = 3" in err
+
+
+def test_check_takes_robot_names_and_names_an_unknown_one(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)  # the shipped configs, not ./configs
+    assert main(["config", "check", "er3a", "er3a_service"]) == 0
+    out = capsys.readouterr().out
+    assert "er3a.yaml: ok (er3a" in out and "er3a_service.yaml: ok (er3a" in out
+    assert main(["config", "check", "nobot"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("hofto-hw config: error: config check: 'nobot' is neither a file")
+    assert "er3a_service" in err and "\n" not in err

@@ -38,7 +38,7 @@ NEEDS_SETS = {
 def _native_built() -> None:
     if not native.ready():
         reason = native.unavailable_reason()
-        if os.environ.get("CI"):  # CI builds it up front (python -m hofto_hw.model.native)
+        if os.environ.get("CI"):  # CI installs it (pip install -e . builds it in place)
             pytest.fail(f"native dynamics unavailable in CI: {reason}")
         pytest.skip(f"native dynamics unavailable: {reason}")
 

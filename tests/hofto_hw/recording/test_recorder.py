@@ -195,3 +195,28 @@ def test_the_writer_leaves_the_pinned_loops_cpu(tmp_path):
         assert cpus[-1] not in os.sched_getaffinity(rec.writer_pid)
     finally:
         rec.close()
+
+
+def test_a_writer_that_cannot_start_leaves_no_segment(tmp_path: Path, monkeypatch) -> None:
+    """The writer process fails to start (an interpreter the user may not execute, as a
+    service user met): the error reaches the caller and the ring's segment is unlinked."""
+    import hofto_hw.recording.recorder as recorder_module
+    from hofto_hw.recording import shared
+
+    made: list[shared.SharedBlock] = []
+    real_block = shared.SharedBlock
+
+    def block(*args, **kw):
+        made.append(real_block(*args, **kw))
+        return made[-1]
+
+    def no_exec(*args, **kw):
+        raise PermissionError(13, "Permission denied", args[0][0])
+
+    monkeypatch.setattr(recorder_module.sh, "SharedBlock", block)
+    monkeypatch.setattr(recorder_module.subprocess, "Popen", no_exec)
+    rec = FlightRecorder(spec(tmp_path / "run.mcap"))
+    with pytest.raises(PermissionError):
+        rec.start()
+    assert len(made) == 1
+    assert not Path("/dev/shm", made[0].name.lstrip("/")).exists()

@@ -106,10 +106,20 @@ def test_realtime_required_on_the_real_clock_names_the_cpu_latency_device(
 
 def test_realtime_preferred_runs_unprivileged_with_one_warning(public_dir: Path) -> None:
     cfg = _config_file(public_dir, "preferred")
-    r = _as_nobody(["run", "--config", str(cfg), "--clock", "sim", "--duration", "0.2", "--no-log"])
+    args = ["run", "--config", str(cfg), "--clock", "real", "--duration", "0.2", "--no-log"]
+    r = _as_nobody(args)
     assert r.returncode == 0, r.stderr
     assert r.stderr.count("warning: real-time setup incomplete") == 1
     assert "ran 200 ticks" in r.stdout
+
+
+def test_sim_clock_run_unprivileged_says_nothing_about_real_time(public_dir: Path) -> None:
+    """The sim clock never sleeps and runs at normal priority: nothing to set up or warn."""
+    cfg = _config_file(public_dir, "preferred")
+    r = _as_nobody(["run", "--config", str(cfg), "--clock", "sim", "--duration", "0.2", "--no-log"])
+    assert r.returncode == 0, r.stderr
+    assert "real-time" not in r.stderr and "realtime" not in r.stderr
+    assert "ran 200 ticks" in r.stdout and "real-time not used with the sim clock" in r.stdout
 
 
 def test_tick_allocates_nothing_after_warm_up(cfg: SystemConfig) -> None:

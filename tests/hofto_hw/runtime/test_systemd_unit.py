@@ -47,7 +47,7 @@ def test_unit_is_notify_with_watchdog_capabilities_and_hardening():
     # sd_notify comes from the control-plane process (a child of the main one)
     assert s["Type"] == "notify" and s["NotifyAccess"] == "all"
     assert s["WatchdogSec"] and s["ExecStart"].startswith(INSTALLED_AT + " run ")
-    caps = {"CAP_NET_RAW", "CAP_SYS_NICE", "CAP_IPC_LOCK"}
+    caps = {"CAP_NET_RAW", "CAP_NET_ADMIN", "CAP_SYS_NICE", "CAP_IPC_LOCK"}
     assert set(s["AmbientCapabilities"].split()) == caps
     assert set(s["CapabilityBoundingSet"].split()) == caps
     assert s["User"] == "hofto-hw" and s["LimitMEMLOCK"] == "infinity" and s["LimitRTPRIO"]

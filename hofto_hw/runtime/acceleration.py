@@ -1,0 +1,65 @@
+"""Which tick runs: the compiled path or the Python reference (``loop.acceleration``).
+
+The compiled path is the numba kernels (a dependency of the package) and the native dynamics
+library shipped in the wheel (hofto_hw/model/native). Without either the tick runs the same
+arithmetic in Python, 10-20x slower: fine for tests and a laptop, not what the benchmarks
+measure. ``loop.acceleration: required`` (the service's configs) refuses to start then, in one
+line naming why; ``preferred`` runs the reference and says so once on stderr.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hofto_hw.errors import ConfigError
+
+
+def missing() -> str:
+    """Why the compiled path cannot run in this process ('' when it can). Loads the native
+    library (the first call of a process decides)."""
+    from hofto_hw.model import native
+    from hofto_hw.observers import kernels
+
+    if not kernels.available():
+        return kernels.unavailable_reason() or "numba is not importable"
+    if not native.ready():
+        return native.unavailable_reason()
+    return ""
+
+
+def require(mode: str, source: str) -> None:
+    """``loop.acceleration`` of the config file ``source``: ConfigError when ``required`` and
+    the compiled path is missing."""
+    why = missing()
+    if why and mode == "required":
+        raise ConfigError(
+            f"{source}: loop.acceleration: required, but the compiled tick is unavailable: {why}"
+        )
+
+
+def report(system: Any) -> dict[str, Any]:
+    """What the built ``system``'s tick runs: ``compiled`` (numba kernels and native dynamics
+    both in use), ``kernels`` (numba | numpy), ``native`` (the snapshot runs the native
+    dynamics), ``fused`` (the tick's fused call, while the tick has one) and ``why`` (what is
+    missing, '' when compiled)."""
+    tick = system.tick
+    kernels = "numba" if getattr(tick, "backend", "numpy") == "numba" else "numpy"
+    native = bool(getattr(tick.snapshot, "native", False))
+    out: dict[str, Any] = {
+        "compiled": kernels == "numba" and native,
+        "kernels": kernels,
+        "native": native,
+    }
+    if hasattr(tick, "_fz"):
+        out["fused"] = tick._fz is not None
+    out["why"] = "" if out["compiled"] else (missing() or "the tick did not take the compiled path")
+    return out
+
+
+def describe(rep: dict[str, Any]) -> str:
+    """One line for the summary and the log: ``compiled (numba kernels, native dynamics)`` or
+    ``Python reference (why)``."""
+    if rep["compiled"]:
+        fused = ", fused call" if rep.get("fused") else ""
+        return f"compiled (numba kernels, native dynamics{fused})"
+    return f"Python reference ({rep['why']})"
