@@ -58,6 +58,8 @@ def find_config(
         path = Path(spec)
         if path.is_file():
             return path
+        if path.exists() and not path.is_dir():
+            return path  # a FIFO, a device: the safe reader (loader.read_bounded) names what it is
         if path.is_dir():
             raise UserError(f"{option}: {path} is a folder, not a config file")
         name = str(spec)
