@@ -36,35 +36,13 @@ def _cpu_seconds(pid: int) -> float:
 def start_emulator(iface: str, config: Path, workdir: Path) -> subprocess.Popen:
     """``hofto-hw sim-ethercat`` on ``iface`` for ``config`` (its own process, quiet arm),
     returned once its ready file exists in ``workdir``; SystemExit when it fails to start."""
-    ready = workdir / "ready"
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "hofto_hw.cli",
-            "sim-ethercat",
-            "--iface",
-            iface,
-            "--config",
-            str(config),
-            "--quiet-arm",
-            "--ready-file",
-            str(ready),
-        ],
-        cwd=ROOT,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    deadline = time.monotonic() + 30
-    while not ready.exists():
-        if proc.poll() is not None:
-            raise SystemExit(f"emulator exited: {proc.stderr.read() if proc.stderr else ''}")
-        if time.monotonic() > deadline:
-            proc.kill()
-            raise SystemExit("emulator did not start within 30 s")
-        time.sleep(0.02)
-    return proc
+    from hofto_hw.commands.sim_ethercat import start_emulator as start
+    from hofto_hw.errors import UserError
+
+    try:
+        return start(iface, config, workdir / "ready", timeout=30.0)
+    except UserError as exc:
+        raise SystemExit(str(exc)) from None
 
 
 def _set_fifo(pid: int, priority: int) -> None:

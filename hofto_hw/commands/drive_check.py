@@ -25,9 +25,7 @@ import contextlib
 import json
 import os
 import subprocess
-import sys
 import tempfile
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -172,34 +170,9 @@ def _emulated_ethercat(config: Path, folder: Path, master: str) -> Iterator[None
     proc = None
     try:
         veth.wait_up(master, slave)
-        ready = folder / "ready"
-        proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "hofto_hw.cli",
-                "sim-ethercat",
-                "--iface",
-                slave,
-                "--config",
-                str(config),
-                "--quiet-arm",
-                "--ready-file",
-                str(ready),
-            ],
-            cwd=ROOT,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        deadline = time.monotonic() + 60
-        while not ready.exists():
-            if proc.poll() is not None:
-                err = (proc.stderr.read() if proc.stderr else "").strip().splitlines()
-                raise UserError(f"emulator did not start: {err[-1] if err else 'no message'}")
-            if time.monotonic() > deadline:
-                raise UserError("emulator did not start within 60 s")
-            time.sleep(0.02)
+        from hofto_hw.commands.sim_ethercat import start_emulator
+
+        proc = start_emulator(slave, config, folder / "ready", timeout=60.0)
         yield
     finally:
         if proc is not None and proc.poll() is None:

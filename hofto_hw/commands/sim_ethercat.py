@@ -12,6 +12,10 @@ from __future__ import annotations
 
 import argparse
 import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 from types import FrameType
 
 from hofto_hw.commands.args import add_config, run_seconds
@@ -84,3 +88,34 @@ def run(args: argparse.Namespace) -> int:
         if args.create_veth:
             veth.delete_pair(master)
     return 0
+
+
+def start_emulator(iface: str, config: Path, ready: Path, timeout: float = 60.0):
+    """``hofto-hw sim-ethercat`` on ``iface`` for ``config`` in its own process (quiet arm),
+    returned (a ``subprocess.Popen``) once it has written the file ``ready``.
+
+    Raises:
+        UserError: it exited first (naming its last line on stderr) or did not get ready
+            within ``timeout`` seconds (then it is killed).
+    """
+    from hofto_hw.errors import UserError
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hofto_hw.cli", "sim-ethercat", "--iface", iface,
+         "--config", str(config), "--quiet-arm", "--ready-file", str(ready)],
+        cwd=Path(__file__).resolve().parents[2],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + timeout
+    while not ready.exists():
+        if proc.poll() is not None:
+            err = (proc.stderr.read() if proc.stderr else "").strip().splitlines()
+            raise UserError(f"emulator did not start: {err[-1] if err else 'no message'}")
+        if time.monotonic() > deadline:
+            proc.kill()
+            proc.wait()
+            raise UserError(f"emulator did not start within {timeout:g} s")
+        time.sleep(0.02)
+    return proc
