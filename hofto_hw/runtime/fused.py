@@ -14,19 +14,20 @@ reference takes over for the rest of the SAME tick (the :data:`STAGES` codes); i
 written anything the reference redoes from there (every earlier stage is done as the reference
 would have done it, every later one untouched).
 
-Arguments: the parts' own arrays, one tuple per part (:meth:`FusedTick.args`, rebuilt from
-the parts whenever the tick leaves the fused path, so it always holds the arrays their owners
-hold; None for a part the tick does not have), the tick's state (:func:`tick_state_dtype`:
-its scalars and arrays as one record), the tick record (a one-element structured array) and
-this tick's scalars (loop time, dt, the bus's sample interval, tick number, the loop's
-timings). Numba types each array by its dtype, dimensions and layout and keeps it alive
-during the call; with numba's JIT switched off (NUMBA_DISABLE_JIT=1) the same source runs
-as Python.
+Arguments: few, so that numba's dispatch unboxes little on every call (each array argument
+costs ~0.1-0.3 µs, more with the caches cold after the exchange): the tick's one hot record
+(:func:`hot_dtype`: the tick's state and the parts' hot arrays as its fields, the parts'
+arrays being views into it, :func:`relocate`), the observer bank's tuple (its observers'
+own records), the process images' bytes, the tick record (a one-element structured array)
+and this tick's scalars (loop time, dt, the bus's sample interval, tick number, the loop's
+timings). Numba types each field by its dtype and shape; with numba's JIT switched off
+(NUMBA_DISABLE_JIT=1) the same source runs as Python.
 """
 
 from __future__ import annotations
 
 import sys
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -37,6 +38,7 @@ from hofto_hw.control.kernels import friction_learn, path_eval
 from hofto_hw.model import kernels as MK
 from hofto_hw.model.kernels import inverse_dynamics_native, snapshot_native
 from hofto_hw.observers import kernels as K
+from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.observers.kernels import bank_update
 from hofto_hw.recording.kernels import fill_tick
 from hofto_hw.runtime.tick_kernels import (
@@ -90,6 +92,21 @@ def tick_state_dtype(n: int, k: int) -> np.dtype:
             ("period", f8),
             ("stall", f8),
             ("two", f8),
+            # the parts' constants, copied at each refresh (FusedTick.args): the drive codes,
+            # the native models' handles, the demo path's ramp [s], the friction learning's
+            # row, speed [rad/s], time constant [s], minimum speed [rad/s] and decimation
+            ("fault_min", i8),
+            ("op_enabled", i8),
+            ("snap_h", i8),
+            ("ff_h", i8),
+            ("ramp", f8),
+            ("has_coll", b1),
+            ("has_learn", b1),
+            ("l_row", i8),
+            ("l_vs", f8),
+            ("l_tau", f8),
+            ("l_min", f8),
+            ("l_every", i8),
             # what the fused call found on a tick it did not finish
             ("finite", b1),  # the sample was finite
             ("mflags", i8),  # the monitor's flags
@@ -109,16 +126,10 @@ HOLD_STILL, MOVE_PATH, OTHER = 0, 1, 2
 
 @K.jit
 def fused_tick(
-    io: Any,
-    snap: Any,
+    hot: np.ndarray,
     obs: Any,
-    tk: Any,
-    lim: np.ndarray,
-    coll: Any,
-    learn: Any,
-    motion: Any,
-    path: Any,
-    ff: Any,
+    tx: np.ndarray,
+    rx: np.ndarray,
     rec: np.ndarray,
     t_loop: float,
     dt: float,
@@ -127,14 +138,16 @@ def fused_tick(
     wake: float,
     comp: float,
 ) -> int:
-    """One tick's common path (module docstring) on the parts' arrays (:meth:`FusedTick.args`)
-    and the tick record ``rec`` (1,), for loop time ``t_loop`` [s], ``dt`` [s] since the last
-    tick, the bus's sample interval ``sdt`` [s] (0: unknown, -1: no sample), tick number
+    """One tick's common path (module docstring) on the tick's hot record ``hot`` (1,)
+    (:func:`hot_dtype`), the observer bank's tuple ``obs``, the process images' bytes ``tx``,
+    ``rx`` and the tick record ``rec`` (1,), for loop time ``t_loop`` [s], ``dt`` [s] since the
+    last tick, the bus's sample interval ``sdt`` [s] (0: unknown, -1: no sample), tick number
     ``tick`` and the loop's wake-up and compute times [µs]. Returns the stage code where the
     reference goes on."""
-    tx, rx, si, states, fault_min, op_enabled = io
-    ts = tk[0]
+    h = hot[0]
+    ts = h["tick"]
     tau_ext, prev, q_sent, tau_ff = ts["tau_ext"], ts["prev"], ts["q_sent"], ts["tau_ff"]
+    si, states = h["si"], h["states"]
     # 1-2. the drive read (the exchange is the caller's)
     read_si(tx, si, states)
     sample = si[:3]
@@ -145,8 +158,8 @@ def fused_tick(
     if not obs_dt <= ts["stall"]:
         return READ  # a stall: the reference integrates the gap in sub-steps
     # 3. snapshot and observers
-    sw, so, sh = snap
-    finite = snapshot_native(q, qd, tau, sw, so, sh)
+    sw, so = h["snap_w"], h["snap_o"]
+    finite = snapshot_native(q, qd, tau, sw, so, ts["snap_h"])
     n = q.shape[0]
     terms = (so[:n], so[n + 2], sw[MK.F], so[n], so[n + 3], so[n + 1])
     bank_update(obs, terms, tau_ext, q, qd, tau, finite, obs_dt)
@@ -161,53 +174,50 @@ def fused_tick(
     ts["finite"] = finite
     # 4. safety (good data: the caller checked the status; no fault latched or active)
     expect = ts["expect"]
-    if drive_scan(states, fault_min, op_enabled if expect else -1) >= 0:
+    if drive_scan(states, ts["fault_min"], ts["op_enabled"] if expect else -1) >= 0:
         return SAFETY
     if not finite:
         return SAFETY
-    ms = motion[0]
+    ms = h["motion"]
     mq, mqd, mqdd, q0 = ms["q"], ms["qd"], ms["qdd"], ms["q0"]
     flags = tick_flags(tau_ext, states, POWERED, mqdd, rec[0]["qdd_cmd"])
     if not flags & ESTIMATES_FINITE:
         return SAFETY
     gap = _jump_gap(ts["since_fresh"] + dt, period)
-    if limits_quiet(sample, q_sent, lim, 1 + 2 * expect, gap) == 0:
+    if limits_quiet(sample, q_sent, h["lim"], 1 + 2 * expect, gap) == 0:
         return SAFETY
     ts["since_fresh"] = 0.0  # good data (what bus.check and Tick._safety do on it)
-    monitored = coll is not None and _judged(tick, ts["judge_from"], flags)
+    monitored = ts["has_coll"] and _judged(tick, ts["judge_from"], flags)
     if monitored != ts["monitored"]:
         ts["monitored"] = monitored
         rec[0]["monitored"] = monitored
     ts["mflags"] = 0
-    if coll is not None and monitored:
+    if monitored:
         mdt = obs_dt if obs_dt > 0.0 else dt
-        cr, bbuf = coll
-        c = cr[0]
+        c = h["coll"]
+        bbuf = h["bbuf"].view(np.bool_)  # numba has no boolean subarray fields: uint8 bytes
         f = monitor_tick(c["fbuf"], bbuf, c["first_tick"], tau_ext, qd, mqdd, mdt, tick)
         ts["mflags"] = f
         if f != 0 or ts["was_contact"]:
             return MONITOR
-        if learn is not None:
-            lr, row, v_s, l_tau, l_min, every = learn
-            lrn = lr[0]
+        if ts["has_learn"]:
+            lrn = h["learn"]
             friction_learn(
-                qd, tau_ext[row], mdt, v_s, l_tau, l_min, every, lrn["S"], lrn["b"], lrn["st"]
-            )
+                qd, tau_ext[ts["l_row"]], mdt, ts["l_vs"], ts["l_tau"], ts["l_min"],
+                ts["l_every"], lrn["S"], lrn["b"], lrn["st"],
+            )  # fmt: skip
     # 5. controller (HOLD at rest: nothing; MOVE: the demo path)
     kind = ts["kind"]
     if kind == OTHER:
         return CONTROL
     moved = kind == MOVE_PATH
-    if path is not None and moved:
-        pk, ramp = path
+    if moved:
         t = t_cmd - ts["t0"]
         # the exponent 2 from the state: the compiler cannot turn libm's pow into x·x
-        b, bd, bdd = _fade_in(t, ramp, ts["two"])
-        path_eval(pk, t, b, bd, bdd, q0, mq, mqd, mqdd)
-    # the feed-forward: when the reference moved
-    if moved:
-        fw, fh = ff
-        inverse_dynamics_native(mq, mqd, mqdd, fw, tau_ff, fh)
+        b, bd, bdd = _fade_in(t, ts["ramp"], ts["two"])
+        path_eval(h["path"], t, b, bd, bdd, q0, mq, mqd, mqdd)
+        # the feed-forward: when the reference moved
+        inverse_dynamics_native(mq, mqd, mqdd, h["ff_w"], tau_ff, ts["ff_h"])
     # 6. command (CSP with the torque offset)
     command_raw(mq, tau_ff, rx, si, 2)
     # 7. the record (and q_sent = the command just sent)
@@ -216,6 +226,124 @@ def fused_tick(
         np.int64(0), wake, comp, obs_dt,
     )  # fmt: skip
     return DONE
+
+
+def hot_dtype(t: Tick) -> np.dtype:
+    """The tick's one hot record: its state (:func:`tick_state_dtype`) and, as fields of
+    their own dtypes and shapes, the hot arrays of its parts (:func:`hot_arrays`)."""
+    fields: list[tuple[Any, ...]] = [("tick", t.state.dtype)]
+    for name, arr in hot_arrays(t):
+        if arr.dtype.names:  # a part's record (1,): a nested record field
+            fields.append((name, arr.dtype))
+        else:  # numba has no boolean subarray fields: booleans as their bytes
+            dt = np.uint8 if arr.dtype == np.bool_ else arr.dtype
+            fields.append((name, dt, arr.shape))
+    return np.dtype(fields, align=True)
+
+
+def hot_arrays(t: Tick) -> list[tuple[str, np.ndarray]]:
+    """The parts' arrays the fused call reads and writes (name: the hot record's field), and
+    the owners that may hold views of them (:func:`relocate`'s ``holders``)."""
+    g, snap, ff, m = t.group, t.snapshot, t.feedforward, t.motion
+    out = [
+        ("si", g._si), ("states", g.states), ("snap_w", snap._W), ("snap_o", snap._O),
+        ("ff_w", ff._W), ("lim", t.limits._w), ("motion", m.state),
+    ]  # fmt: skip
+    c = t.collision
+    # absent parts: small stand-ins of the right types (the call checks has_coll/has_learn)
+    if c is not None:
+        out += [("coll", c.state.record), ("bbuf", c.state.bbuf)]
+    else:
+        k = max(1, len(t.observers))
+        stand = np.dtype([("fbuf", np.float64, (1,)), ("first_tick", np.int64, (k,))])
+        out += [("coll", np.zeros(1, stand)), ("bbuf", np.zeros(1, dtype=bool))]
+    fr = _learning(t)
+    if fr is not None:
+        out.append(("learn", fr.record))
+    else:
+        n = t.n
+        stand = np.dtype([("S", np.float64, (n, 3, 3)), ("b", np.float64, (n, 3)),
+                          ("st", np.float64, (3,))])  # fmt: skip
+        out.append(("learn", np.zeros(1, stand)))
+    p = m.path
+    out.append(("path", p._k if _path_ok(p) else np.zeros((1, t.n))))
+    return out
+
+
+def _learning(t: Tick) -> Any:
+    """The drag's friction learning the tick runs outside drag mode, or None."""
+    if t._learn is not None and t.drag is not None:
+        return t.drag.friction
+    return None
+
+
+def _path_ok(p: Any) -> bool:
+    """``p`` is a demo path the fused call evaluates (its compiled form)."""
+    return p is not None and p._use_kernel and p._eval is path_eval
+
+
+def _holders(t: Tick) -> list[Any]:
+    """Every object that may hold a view of a hot array (its attributes, tuples, partials)."""
+    snap, ff = t.snapshot, t.feedforward
+    out = [t, t.group, snap, getattr(snap, "data", None), ff, t.limits, t.motion]
+    out += [t.motion.path, t.collision, getattr(t.collision, "state", None)]
+    out += [t.drag, _learning(t)]
+    return [o for o in out if o is not None]
+
+
+def relocate(t: Tick, hot: np.ndarray) -> list[tuple[Any, str, np.ndarray]]:
+    """Move the tick's state and its parts' hot arrays into ``hot`` (a zeroed (1,) record of
+    :func:`hot_dtype`): each array's numbers are copied into its field, and every attribute of
+    the holders (:func:`_holders`) that views one of them (an array, a tuple's or a partial's
+    array) is replaced by the same view into ``hot`` (one new view per old one: identities
+    between the parts stay). Returns (owner, attribute, array) of each part's array, which
+    :meth:`FusedTick.bound` checks later."""
+    buf = hot.view(np.uint8)
+    base = hot.ctypes.data
+    olds = [("tick", t.state)] + hot_arrays(t)
+    spans = []
+    for name, old in olds:
+        field = hot[name][0] if old.dtype.names is None else hot[name]
+        np.copyto(field.view(old.dtype) if field.dtype != old.dtype else field, old)
+        lo = old.ctypes.data
+        spans.append((lo, lo + old.nbytes, field.ctypes.data - base))
+    memo: dict[int, tuple[Any, Any]] = {}
+
+    def moved(v: Any) -> Any:
+        if isinstance(v, np.ndarray) and v.nbytes:
+            if id(v) in memo:
+                return memo[id(v)][1]
+            p = v.ctypes.data
+            for lo, hi, at in spans:
+                if lo <= p < hi:
+                    nv = np.ndarray(v.shape, v.dtype, buf, at + p - lo, v.strides)
+                    memo[id(v)] = (v, nv)
+                    return nv
+            return v
+        if isinstance(v, tuple):
+            new = tuple(moved(x) for x in v)
+            return new if any(a is not b for a, b in zip(new, v, strict=True)) else v
+        if isinstance(v, partial):
+            args = moved(v.args)
+            return v if args is v.args else partial(v.func, *args, **v.keywords)
+        return v
+
+    for owner in _holders(t):
+        for attr, v in list(getattr(owner, "__dict__", {}).items()):
+            nv = moved(v)
+            if nv is not v:
+                setattr(owner, attr, nv)
+    t.st = t.state[0]
+    g, snap, ff, c, fr, m = t.group, t.snapshot, t.feedforward, t.collision, _learning(t), t.motion
+    kept = [(t, "state"), (g, "_si"), (g, "states"), (snap, "_W"), (snap, "_O"), (ff, "_W")]
+    kept += [(t.limits, "_w"), (m, "state")]
+    if c is not None:
+        kept += [(c.state, "record"), (c.state, "bbuf")]
+    if fr is not None:
+        kept.append((fr, "record"))
+    if _path_ok(m.path):
+        kept.append((m.path, "_k"))
+    return [(o, a, getattr(o, a)) for o, a in kept]
 
 
 _SAID: list[str] = []
@@ -229,20 +357,31 @@ def say_once(line: str) -> None:
 
 
 class FusedTick:
-    """The fused call's arguments for one :class:`~hofto_hw.runtime.tick.Tick` (built from
-    its parts; ``why`` says why not when ``ok`` is False)."""
+    """The fused call's arguments for one :class:`~hofto_hw.runtime.tick.Tick`: its hot
+    record, into which the tick's state and its parts' hot arrays are moved when this is
+    built (``why`` says why not when ``ok`` is False; then nothing was moved)."""
 
     def __init__(self, tick: Tick) -> None:
         self.tick = tick
         self.why = self._check(tick)
         self.ok = not self.why
         self.path: Any = None
+        self.kept: list[tuple[Any, str, np.ndarray]] = []
         if self.ok:
+            self.hot = np.zeros(1, hot_dtype(tick))
+            self.kept = relocate(tick, self.hot)
+            # a new bank: its model terms and output rows are views of the moved arrays
+            tick._bank = ObserverBank(tick.observers, tick.snapshot, tick.tau_ext)
             try:
                 self._warm()
             except Exception as exc:  # numba's TypingError/LoweringError, a cache problem
                 self.ok = False
                 self.why = f"compiling the fused tick failed ({type(exc).__name__})"
+
+    def bound(self) -> bool:
+        """The parts still hold the arrays moved into the hot record (a part that replaced
+        one, e.g. a snapshot rebuilt for a new model, needs a new FusedTick)."""
+        return all(getattr(o, a) is arr for o, a, arr in self.kept)
 
     def _check(self, t: Tick) -> str:
         """'' when every part can be fused, else why not."""
@@ -256,7 +395,7 @@ class FusedTick:
             return "the snapshot and the feed-forward use different models"
         if snap._native is None:
             return "the snapshot does not run the native dynamics"
-        bank = self.bank = t._bank
+        bank = t._bank
         if not (bank._any and bank._only) or bank._kernel is not bank_update:
             return "an observer is not fused in the bank: " + ", ".join(bank.rest)
         if t._flags is not tick_flags or t._fill is not fill_tick:
@@ -266,7 +405,7 @@ class FusedTick:
         c = t.collision
         if c is not None and (not c._use_kernel or c._tool is not None):
             return "the collision monitor runs its numpy path or a tool-force check"
-        fr = t.drag.friction if t._learn is not None and t.drag is not None else None
+        fr = _learning(t)
         if fr is not None and not fr._use_kernel:
             return "the friction learning runs its numpy path"
         ff = t.feedforward
@@ -275,37 +414,33 @@ class FusedTick:
         return ""
 
     def args(self) -> tuple[Any, ...]:
-        """The call's arguments before this tick's scalars: the parts' arrays as they hold
-        them now (:attr:`path_ok`: the motion's path is the compiled one)."""
+        """The call's arguments before this tick's scalars, and the parts' constants into the
+        tick's state (:attr:`path_ok`: the motion's path is the compiled one moved here)."""
         t = self.tick
-        g, snap, m, c, ff = t.group, t.snapshot, t.motion, t.collision, t.feedforward
-        coll = None if c is None else (c.state.record, c.state.bbuf)
-        learn = None
-        if t._learn is not None and t.drag is not None and t.drag.friction is not None:
-            fr = t.drag.friction
-            learn = (fr.record, t.drag_row, fr.v_s, fr.tau, fr.min_speed, fr.every)
+        g, m, st = t.group, t.motion, t.st
+        st["fault_min"], st["op_enabled"] = t.bus.fault_min, t.bus.op_enabled
+        st["snap_h"] = t.snapshot._native.handle  # type: ignore[union-attr]
+        st["ff_h"] = t.feedforward._native.handle  # type: ignore[union-attr]
+        st["has_coll"] = t.collision is not None
+        fr = _learning(t)
+        st["has_learn"] = fr is not None
+        if fr is not None:
+            st["l_row"], st["l_vs"], st["l_tau"] = t.drag_row, fr.v_s, fr.tau
+            st["l_min"], st["l_every"] = fr.min_speed, fr.every
         p = self.path = m.path
-        self.path_ok = p is not None and p._use_kernel and p._eval is path_eval
-        return (
-            (g._tx_bytes, g._rx_bytes, g._si, g.states, t.bus.fault_min, t.bus.op_enabled),
-            (snap._W, snap._O, snap._native.handle),  # type: ignore[union-attr]
-            t._bank.args,
-            t.state,
-            t.limits._w,
-            coll,
-            learn,
-            m.state,
-            (p._k, float(p.ramp)) if self.path_ok else None,  # type: ignore[union-attr]
-            (ff._W, ff._native.handle),  # type: ignore[union-attr]
-            t._rec1,
-        )
+        self.path_ok = _path_ok(p) and self.hot_path(p)
+        if self.path_ok:
+            st["ramp"] = p.ramp
+        return (self.hot, t._bank.args, g._tx_bytes, g._rx_bytes, t._rec1)
+
+    def hot_path(self, p: Any) -> bool:
+        """The path's workspace is the one moved into the hot record."""
+        return any(o is p and a == "_k" and arr is p._k for o, a, arr in self.kept)
 
     def _warm(self) -> None:
         """Compile the kernel (all of it) with a lost sample, which returns after the drive
-        read, here into scratch rows: no state of the tick is touched."""
-        io, *rest = self.args()
-        tx, rx, si, states, fault_min, op_enabled = io
-        scratch = (tx, rx, si.copy(), states.copy(), fault_min, op_enabled)
-        # a lost sample (sdt -1): the read into the scratch rows, then READ; the argument
+        read, here on a copy of the hot record: no state of the tick is touched."""
+        hot, obs, tx, rx, rec = self.args()
+        # a lost sample (sdt -1): the read into the copy's rows, then READ; the argument
         # types the tick passes (Tick._fused_step)
-        fused_tick(scratch, *rest, 0.0, 0.0, -1.0, 0, 0.0, 0.0)
+        fused_tick(hot.copy(), obs, tx, rx, rec, 0.0, 0.0, -1.0, 0, 0.0, 0.0)

@@ -523,13 +523,15 @@ class Tick:
         fz = self._fz
         if fz is None:
             return
-        if self._bank is not fz.bank:  # a new bank (a reset): checked again
+        if self._fz_args and self._fz_args[1] is not self._bank.args or not fz.bound():
+            # a new bank (a reset) or a part that replaced a hot array: moved and checked again
             self._fz = fz = FusedTick(self)
             if not fz.ok:
                 fused_say_once("the tick runs without its fused call: " + fz.why)
                 self._fz, self._fuse_quiet = None, False
                 return
-        if rebuild or not self._fz_args or self._fz_args[2] is not self._bank.args:
+            rebuild = True
+        if rebuild or not self._fz_args:
             self._fz_args = fz.args()
         stop, m, g, snap = self.stop, self.motion, self.group, self.snapshot
         model = self.feedforward.model
