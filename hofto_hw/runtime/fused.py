@@ -301,12 +301,22 @@ def relocate(t: Tick, hot: np.ndarray) -> list[tuple[Any, str, np.ndarray]]:
     buf = hot.view(np.uint8)
     base = hot.ctypes.data
     olds = [("tick", t.state)] + hot_arrays(t)
-    spans = []
-    for name, old in olds:
-        field = hot[name][0] if old.dtype.names is None else hot[name]
-        np.copyto(field.view(old.dtype) if field.dtype != old.dtype else field, old)
-        lo = old.ctypes.data
-        spans.append((lo, lo + old.nbytes, field.ctypes.data - base))
+    fields = [hot[name][0] if old.dtype.names is None else hot[name] for name, old in olds]
+    spans = [
+        (old.ctypes.data, old.ctypes.data + old.nbytes, f.ctypes.data - base)
+        for (_, old), f in zip(olds, fields, strict=True)
+    ]
+    for owner in _holders(t):  # before anything moves: a view we could not rebind
+        for attr, v in getattr(owner, "__dict__", {}).items():
+            for x in v if isinstance(v, list | set) else v.values() if isinstance(v, dict) else ():
+                if isinstance(x, np.ndarray) and any(
+                    lo <= x.ctypes.data < hi for lo, hi, _ in spans
+                ):
+                    raise ValueError(
+                        f"{type(owner).__name__}.{attr} holds a hot array in a container"
+                    )
+    for (_, old), f in zip(olds, fields, strict=True):
+        np.copyto(f.view(old.dtype) if f.dtype != old.dtype else f, old)
     memo: dict[int, tuple[Any, Any]] = {}
 
     def moved(v: Any) -> Any:
@@ -369,7 +379,11 @@ class FusedTick:
         self.kept: list[tuple[Any, str, np.ndarray]] = []
         if self.ok:
             self.hot = np.zeros(1, hot_dtype(tick))
-            self.kept = relocate(tick, self.hot)
+            try:
+                self.kept = relocate(tick, self.hot)
+            except ValueError as exc:
+                self.ok, self.why = False, f"the hot record cannot take over: {exc}"
+                return
             # a new bank: its model terms and output rows are views of the moved arrays
             tick._bank = ObserverBank(tick.observers, tick.snapshot, tick.tau_ext)
             try:

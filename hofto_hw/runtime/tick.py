@@ -523,7 +523,7 @@ class Tick:
         fz = self._fz
         if fz is None:
             return
-        if self._fz_args and self._fz_args[1] is not self._bank.args or not fz.bound():
+        if (self._fz_args and self._fz_args[1] is not self._bank.args) or not fz.bound():
             # a new bank (a reset) or a part that replaced a hot array: moved and checked again
             self._fz = fz = FusedTick(self)
             if not fz.ok:
