@@ -287,10 +287,13 @@ def check(cfg: Any, profile: Any, n: int, move: float | None, emulated: bool) ->
         g.cycle()
         if g.any_fault():
             g.fault_reset()
-        g.set_mode(Mode(MODE_NUMBERS[profile.modes.loop]))
+        loop = profile.modes.loop
+        g.set_mode(Mode.CSP if loop in ("ip", "pv") else Mode(MODE_NUMBERS[loop]))
         g.enable()
         report["enabled"] = bool(g.all_in(State.OPERATION_ENABLED))
-        if move is not None and profile.modes.loop == "csp":
+        # ip and pv drives take the CSP step too: the driver layer turns it into the target
+        # 0x60C1:01 (ip) or the streamed velocity (pv; drivers/cia402/csp_adapter.py)
+        if move is not None and profile.modes.loop in ("csp", "ip", "pv"):
             step = np.zeros(t.n_axes)
             step[joints] = move
             reached = _move(g, t, step, joints)
