@@ -94,9 +94,13 @@ def test_handwritten_profile_loads(tmp_path):
 def test_field_names_agree_with_pdo_layout():
     from drivers.cia402.pdo import OBJECT_FIELDS
 
+    from hofto_hw.config.drive_profile import SUB_OBJECTS
+
     for (index, sub), name in OBJECT_FIELDS.items():
-        assert sub == 0
-        assert CIA402_OBJECTS[index][0] == name
+        if sub == 0:
+            assert CIA402_OBJECTS[index][0] == name
+        else:  # 0x60C1:01, the ip target
+            assert SUB_OBJECTS[(index, sub)][0] == name
 
 
 def test_helpers():
@@ -309,7 +313,9 @@ def test_shipped_profiles_load(path):
     check_profile_against_loop(p, 0.001, str(path))  # every shipped drive runs a 1 kHz loop
 
 
-def test_seven_profiles_are_shipped():
-    # the six vendor drives, and the Elmo ESI's second product (elmo_gold_30925: the sixth
-    # EtherCAT model of configs/er3a_mixed.yaml)
-    assert len(SHIPPED) == 7
+def test_nine_profiles_are_shipped():
+    # the eight vendor drives (Technosoft in ip, Faulhaber in pv), and the Elmo ESI's second
+    # product (elmo_gold_30925: the sixth EtherCAT model of configs/er3a_mixed.yaml)
+    assert len(SHIPPED) == 9
+    loops = {p.stem: load_profile(p).modes.loop for p in SHIPPED}
+    assert loops["technosoft_ipos"] == "ip" and loops["faulhaber_mcbl300x"] == "pv"
