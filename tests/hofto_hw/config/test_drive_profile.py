@@ -93,7 +93,6 @@ def test_handwritten_profile_loads(tmp_path):
 
 def test_field_names_agree_with_pdo_layout():
     from drivers.cia402.pdo import OBJECT_FIELDS
-
     from hofto_hw.config.drive_profile import SUB_OBJECTS
 
     for (index, sub), name in OBJECT_FIELDS.items():
