@@ -102,7 +102,7 @@ class SimBus(Transport):
                 if prof is None:
                     layouts.append(BUILTIN_LAYOUT)
                     continue
-                self.startup_written += write_startup(self, i, prof, ("IP", "PS", "SO"))
+                self.startup_written += write_startup(self, i, prof, ("IP", "PS", "SO", "PO"))
                 layouts.append(configure_pdos(self, i, prof, TransportError))
             self.wire = WireImage(layouts, self.axis_names)
             self.wire.bind_master(self.rx, self.tx)
