@@ -292,6 +292,7 @@ def check(
     report: dict[str, Any] = {
         "profile": profile.name,
         "bus": profile.bus,
+        "loop": profile.modes.loop,
         "emulated": emulated,
         "axes": n,
         "operational": False,
@@ -411,7 +412,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _print(r: dict[str, Any]) -> None:
     where = "emulated" if r["emulated"] else "live"
-    print(f"drive check: profile {r['profile']}, {r['bus']} ({where}), {r['axes']} axes")
+    print(
+        f"drive check: profile {r['profile']}, {r['bus']} ({where}), {r['axes']} axes, "
+        f"loop {r['loop']}"
+    )
     print(f"  operational: {'yes' if r['operational'] else 'NO'}")
     print(f"  enabled:     {'yes' if r['enabled'] else 'NO'}")
     print(f"  start-up SDOs written: {r['startup_sdos']}")

@@ -75,6 +75,7 @@ def test_ip_and_pv_profiles_checked_over_udp_multicast(capsys, name: str) -> Non
     path = ROOT / "configs" / "drives" / f"{name}.yaml"
     code, report = _check(capsys, str(path), "--emulated", "--can-interface", "udp_multicast")
     assert report["can_interface"] == "udp_multicast"
+    assert report["loop"] == {"technosoft_ipos": "ip", "faulhaber_mcbl300x": "pv"}[name]
     _assert_passed(code, report)
     prof = yaml.safe_load(path.read_text())
     assert report["startup_sdos"] == 6 * len(prof.get("startup", []))
