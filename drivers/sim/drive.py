@@ -58,6 +58,7 @@ from drivers.sim.object_dictionary import (
     impersonate,
 )
 from drivers.sim.plant import Plant
+from hofto_hw.config.drive_profile import MODE_NUMBERS
 from hofto_hw.config.drives import DriveConfig
 from hofto_hw.config.models import ExternalTorqueConfig
 
@@ -354,6 +355,16 @@ class EmulatedDrives(ImageFields):
         self._q_rep = np.zeros(n)
         self._bind_image(self.rx, self.tx)
         self._rx_mode_u8 = self._rx_mode.view(np.uint8)
+        # per drive and mode byte: whether the drive takes the mode (a drive impersonating a
+        # profile only the modes its profile has, e.g. the Faulhaber no ip: 0x6060 <= 6)
+        table = np.tile(_MODE_SUPPORTED, (n, 1))
+        for i, prof in enumerate(self.profiles):
+            if prof is not None:
+                has = {0} | {MODE_NUMBERS[m] for m in prof.modes.supported}
+                table[i] &= [(m - 256 if m > 127 else m) in has for m in range(256)]
+        self._mode_table = table.ravel()
+        self._mode_base = np.arange(n, dtype=np.intp) * 256
+        self._mode_flat = np.zeros(n, dtype=np.intp)
         # Scratch (no allocation per cycle).
         f = np.zeros
         self._tau, self._qt, self._vt, self._tt, self._toff = (f(n) for _ in range(5))
@@ -649,7 +660,8 @@ class EmulatedDrives(ImageFields):
         self.state[i] = new
 
     def _mode(self) -> None:
-        np.take(_MODE_SUPPORTED, self._rx_mode_u8, out=self._b1)
+        np.add(self._mode_base, self._rx_mode_u8, out=self._mode_flat)
+        np.take(self._mode_table, self._mode_flat, out=self._b1)
         np.copyto(self.mode_display, self._rx_mode, where=self._b1)
 
     def _control(self) -> None:

@@ -122,3 +122,17 @@ def test_ip_drive_without_an_interpolation_period_never_acknowledges(bus) -> Non
     assert msg.startswith("axis 0 (joint_1): interpolated position mode not active")
     assert "statusword bit 12" in msg and "0x60C2" in msg and "\n" not in msg
     assert emu.drives.state[0] == State.OPERATION_ENABLED  # enabled, holding, not following
+
+
+def test_emulated_drives_take_only_their_profiles_modes(bus) -> None:
+    """The emulated Faulhaber has no ip (its 0x6060 stops at 6), the Technosoft no CSP: a
+    group that asks them for those modes times out naming the axis and the mode shown."""
+    cfg, t, emu = bus
+    t.open()
+    g = DriveGroup.from_config(t, cfg.bus)
+    with pytest.raises(DriveTimeoutError) as err:
+        g.set_mode(Mode.INTERPOLATED_POSITION)
+    assert "axis 1 (joint_2)" in str(err.value) and "selecting 7" in str(err.value)
+    assert emu.drives.mode_display.tolist() == [7, 0] * 3
+    with pytest.raises(DriveTimeoutError):
+        g.set_mode(Mode.CSV)  # neither drive has a cyclic synchronous mode
