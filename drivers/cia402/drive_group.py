@@ -348,8 +348,8 @@ class DriveGroup(ImageFields):
         t = self.transport
         if mode == Mode.CSP and adapter is not None and self.profile_acceleration is not None:
             for i in np.flatnonzero(adapter.pv):
-                raw = min(0xFFFFFFFF, max(1, self.scaling.acceleration_to_raw(
-                    int(i), float(self.profile_acceleration[i]))))  # fmt: skip
+                accel = float(self.profile_acceleration[i])
+                raw = min(0xFFFFFFFF, max(1, self.scaling.acceleration_to_raw(int(i), accel)))
                 t.write_value(int(i), 0x6083, 0, "u32", raw)
                 t.write_value(int(i), 0x6084, 0, "u32", raw)
         for i in np.flatnonzero(~self.present("mode")):
