@@ -315,6 +315,13 @@ def _ethercat_side(
 ) -> tuple[list[PdoOption], str]:
     options = [p for p in desc.pdos if p.direction == side]
     notes = []
+    if loop == "ip":  # a fixed PDO with 0x607A (pp's target) would map the target twice
+        dropped = [p for p in options if p.fixed and any(i == 0x607A for i, _, _ in p.entries)]
+        options = [p for p in options if p not in dropped]
+        if dropped:
+            notes.append(
+                f"{len(dropped)} fixed PDO(s) with 0x607A left out: ip's target is 0x60C1:01"
+            )
     if not desc.pdo_config:  # mappings cannot be written: every PDO is as the file gives it
         options = [replace(p, fixed=True) for p in options if p.entries]
         notes.append("PdoConfig=0: no mapping is written")

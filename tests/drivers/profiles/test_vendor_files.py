@@ -234,3 +234,22 @@ def test_interpolation_period_written_where_writable():
     assert [s.transition for s in zeroerr.startup] == ["PO", "PO"]
     inovance = _import("inovance_SV660N.xml").profile  # no writable 0x60C2
     assert inovance.startup == []
+
+
+def test_ethercat_drive_with_ip_only_writes_the_ip_target_into_a_configurable_pdo():
+    """None of the ESIs lacks csp; the Inovance file made into an ip-only drive shows the
+    EtherCAT side of the choice: 0x60C1:01 written into the configurable RxPDO, no 0x607A."""
+    from drivers.profiles.description import ObjectInfo
+
+    d = read_vendor_description(DATA / "inovance_SV660N.xml")[0]
+    d.objects[(0x6502, 0)].default = 1 << 6  # ip only
+    d.objects[(0x60C1, 1)] = ObjectInfo(0x60C1, 1, 32, mappable="rx", access="rw")
+    d.objects.setdefault((0x60C2, 1), ObjectInfo(0x60C2, 1, 8, access="rw"))
+    d.objects[(0x60C2, 1)].access = "rw"
+    c = choose(d)
+    p = c.profile
+    assert p.modes.loop == "ip"
+    rx = [(e.index, e.subindex) for pdo in p.rx_pdos for e in pdo.entries]
+    assert (0x60C1, 1) in rx and (0x607A, 0) not in rx
+    assert all(not pdo.fixed for pdo in p.rx_pdos)
+    assert p.startup_value(0x60C2, 1) == "loop_period"
