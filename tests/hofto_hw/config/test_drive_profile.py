@@ -318,3 +318,45 @@ def test_nine_profiles_are_shipped():
     assert len(SHIPPED) == 9
     loops = {p.stem: load_profile(p).modes.loop for p in SHIPPED}
     assert loops["technosoft_ipos"] == "ip" and loops["faulhaber_mcbl300x"] == "pv"
+
+
+def _shipped(name: str) -> dict:
+    path = next(p for p in SHIPPED if p.stem == name)
+    return yaml.safe_load(path.read_text())
+
+
+def _refused(data: dict, expect: str) -> None:
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError) as err:
+        DriveProfile.model_validate(data)
+    assert expect in str(err.value)
+
+
+def test_ip_and_pv_profiles_are_checked():
+    ip, pv = _shipped("technosoft_ipos"), _shipped("faulhaber_mcbl300x")
+    assert DriveProfile.model_validate(ip).modes.loop == "ip"
+    # pv needs its position-loop gain, and only pv takes one
+    bad = copy.deepcopy(pv)
+    del bad["modes"]["position_gain"]
+    _refused(bad, "loop pv needs position_gain")
+    bad = copy.deepcopy(ip)
+    bad["modes"]["position_gain"] = 10.0
+    _refused(bad, "position_gain is for loop pv only (loop is ip)")
+    # ip's target is 0x60C1:01, not pp's 0x607A
+    bad = copy.deepcopy(ip)
+    entry = next(e for e in bad["rx_pdos"][0]["entries"] if e["index"] == 0x60C1)
+    entry.update(index=0x607A, subindex=0)
+    _refused(bad, "modes.loop ip: its target target_position goes through 0x60C1:01")
+    # one object carries a field: 0x607A next to 0x60C1:01 maps the position target twice
+    bad = copy.deepcopy(ip)
+    bad["rx_pdos"].append(
+        {"index": 0x1601, "fixed": False, "entries": [{"index": 0x607A, "bits": 32}]}
+    )
+    bad["canopen"]["rpdo"].append(copy.deepcopy(bad["canopen"]["rpdo"][0]))
+    bad["canopen"]["rpdo"][-1]["cob_id_base"] = 0x300
+    _refused(bad, "target_position is mapped twice (0x60C1:01, 0x607A:00)")
+    # ip needs the interpolation period written at start-up
+    bad = copy.deepcopy(ip)
+    bad["startup"] = [s for s in bad["startup"] if s["index"] != 0x60C2]
+    _refused(bad, "modes.loop ip needs a start-up write of 0x60C2:01")
