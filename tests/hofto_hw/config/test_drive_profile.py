@@ -325,7 +325,7 @@ def _shipped(name: str) -> dict:
     return yaml.safe_load(path.read_text())
 
 
-def _refused(data: dict, expect: str) -> None:
+def _invalid(data: dict, expect: str) -> None:
     from pydantic import ValidationError
 
     with pytest.raises(ValidationError) as err:
@@ -339,15 +339,15 @@ def test_ip_and_pv_profiles_are_checked():
     # pv needs its position-loop gain, and only pv takes one
     bad = copy.deepcopy(pv)
     del bad["modes"]["position_gain"]
-    _refused(bad, "loop pv needs position_gain")
+    _invalid(bad, "loop pv needs position_gain")
     bad = copy.deepcopy(ip)
     bad["modes"]["position_gain"] = 10.0
-    _refused(bad, "position_gain is for loop pv only (loop is ip)")
+    _invalid(bad, "position_gain is for loop pv only (loop is ip)")
     # ip's target is 0x60C1:01, not pp's 0x607A
     bad = copy.deepcopy(ip)
     entry = next(e for e in bad["rx_pdos"][0]["entries"] if e["index"] == 0x60C1)
     entry.update(index=0x607A, subindex=0)
-    _refused(bad, "modes.loop ip: its target target_position goes through 0x60C1:01")
+    _invalid(bad, "modes.loop ip: its target target_position goes through 0x60C1:01")
     # one object carries a field: 0x607A next to 0x60C1:01 maps the position target twice
     bad = copy.deepcopy(ip)
     bad["rx_pdos"].append(
@@ -355,8 +355,8 @@ def test_ip_and_pv_profiles_are_checked():
     )
     bad["canopen"]["rpdo"].append(copy.deepcopy(bad["canopen"]["rpdo"][0]))
     bad["canopen"]["rpdo"][-1]["cob_id_base"] = 0x300
-    _refused(bad, "target_position is mapped twice (0x60C1:01, 0x607A:00)")
+    _invalid(bad, "target_position is mapped twice (0x60C1:01, 0x607A:00)")
     # ip needs the interpolation period written at start-up
     bad = copy.deepcopy(ip)
     bad["startup"] = [s for s in bad["startup"] if s["index"] != 0x60C2]
-    _refused(bad, "modes.loop ip needs a start-up write of 0x60C2:01")
+    _invalid(bad, "modes.loop ip needs a start-up write of 0x60C2:01")
