@@ -177,6 +177,9 @@ class CANopenTransport(Transport):
         # encode and one decode per cycle; the frames are slices of it
         self.wire = WireImage([layout_of(p) for p in self.profiles], self.axis_names)
         self.wire.bind_master(self.rx, self.tx)
+        from drivers.cia402.profiles import csp_adapter
+
+        self.wire.set_adapter(csp_adapter(self.profiles, cycle_time))  # ip / pv drives
         self._rpdos: list[list[_Pdo]] = []
         self._tpdos: list[list[_Pdo]] = []
         for prof, nid in zip(self.profiles, self.node_ids, strict=True):

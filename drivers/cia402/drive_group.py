@@ -68,6 +68,7 @@ class DriveGroup(ImageFields):
         *,
         transition_timeout: float = 0.5,
         backend: Backend = "numpy",
+        profile_acceleration: Sequence[float] | None = None,
     ) -> None:
         n = transport.n_axes
         if scaling.n != n:
@@ -78,6 +79,11 @@ class DriveGroup(ImageFields):
         self.names = transport.axis_names
         self.timeout_cycles = max(1, round(transition_timeout / transport.cycle_time))
         self.transition_timeout = transition_timeout
+        #: [rad/s²] per axis: profile acceleration/deceleration 0x6083/0x6084 written to the
+        #: axes streamed in profile velocity (pv) when CSP is selected; None: not written
+        self.profile_acceleration = (
+            None if profile_acceleration is None else np.asarray(profile_acceleration, float)
+        )
         # the group's SI values as the first rows of one float64 workspace, the scale rows the
         # compiled read and command use after them (one argument: drivers/cia402/kernels.py)
         self._si = np.zeros((10, n))
@@ -147,7 +153,13 @@ class DriveGroup(ImageFields):
         """From a :class:`hofto_hw.config.drives.BusConfig`; ``backend`` as the constructor's
         (``numpy``, ``numba`` or ``auto``: compiled read/command when numba is available)."""
         scaling = Scaling([AxisScaling.from_config(d) for d in bus.drives])
-        return cls(transport, scaling, transition_timeout=bus.transition_timeout, backend=backend)
+        return cls(
+            transport,
+            scaling,
+            transition_timeout=bus.transition_timeout,
+            backend=backend,
+            profile_acceleration=[d.quick_stop_deceleration for d in bus.drives],
+        )
 
     # ------------------------------------------------------------ hot path (tick)
 
@@ -314,32 +326,51 @@ class DriveGroup(ImageFields):
                 out.append(f"axis {i} ({self.names[i]}): {field} not mapped: {what}")
         return out
 
+    def _adapter(self) -> Any:
+        return getattr(getattr(self.transport, "wire", None), "adapter", None)
+
     def set_mode(self, mode: Mode | int) -> None:
         """Select the mode of operation on every axis and wait for 0x6061 to show it.
 
-        Axes whose drive does not map 0x6060 get it by SDO; those that do not map 0x6061
-        have it read by SDO (and kept as the canonical mode display of that axis)."""
+        CSP on an axis whose drive has no cyclic synchronous mode selects the mode its
+        profile runs instead (interpolated position 7 or profile velocity 3; the loop keeps
+        commanding positions, :mod:`drivers.cia402.csp_adapter`); a profile-velocity axis
+        gets its profile acceleration and deceleration 0x6083/0x6084 from
+        :attr:`profile_acceleration` first. Axes whose drive does not map 0x6060 get it by
+        SDO; those that do not map 0x6061 have it read by SDO (and kept as the canonical
+        mode display of that axis)."""
         mode = Mode(int(mode))
-        self._rx_mode.fill(mode)
+        adapter = self._adapter()
+        modes = np.full(self.n, int(mode), dtype=np.int8)
+        if mode == Mode.CSP and adapter is not None:
+            np.copyto(modes, adapter.csp_modes)
+        np.copyto(self._rx_mode, modes)
         t = self.transport
+        if mode == Mode.CSP and adapter is not None and self.profile_acceleration is not None:
+            for i in np.flatnonzero(adapter.pv):
+                accel = float(self.profile_acceleration[i])
+                raw = min(0xFFFFFFFF, max(1, self.scaling.acceleration_to_raw(int(i), accel)))
+                t.write_value(int(i), 0x6083, 0, "u32", raw)
+                t.write_value(int(i), 0x6084, 0, "u32", raw)
         for i in np.flatnonzero(~self.present("mode")):
-            t.write_value(int(i), 0x6060, 0, "i8", int(mode))
+            t.write_value(int(i), 0x6060, 0, "i8", int(modes[i]))
         by_sdo = [int(i) for i in np.flatnonzero(~self.present("mode_display"))]
         for _ in range(self.timeout_cycles):
             self._step()
             for i in by_sdo:
                 t.wire.set_default(i, "mode_display", t.read_value(i, 0x6061, 0, "i8"))
                 self._tx_mode[i] = t.wire.defaults["mode_display"][i]
-            np.equal(self._tx_mode, mode, out=self._flags)
+            np.equal(self._tx_mode, modes, out=self._flags)
             if self._flags.all():
                 return
-        bad = int(np.flatnonzero(self._tx_mode != mode)[0])
+        bad = int(np.flatnonzero(self._tx_mode != modes)[0])
         shown = int(self._tx_mode[bad])
         shown_name = Mode(shown).name if shown in Mode._value2member_map_ else "unknown mode"
+        want = Mode(int(modes[bad]))
         raise DriveTimeoutError(
             f"axis {bad} ({self.names[bad]}): mode of operation display 0x6061 shows "
             f"{shown} ({shown_name}) {self.transition_timeout:g} s after selecting "
-            f"{int(mode)} ({mode.name}); {self._describe(bad)}",
+            f"{int(want)} ({want.name}); {self._describe(bad)}",
             bad,
             int(self.states[bad]),
             int(self._tx_sw[bad]),
@@ -353,9 +384,36 @@ class DriveGroup(ImageFields):
         Raises DriveFaultError if an axis is (or falls) in Fault (call :meth:`fault_reset`
         first; faults latch), DriveError naming the axis while its safe torque off is active
         (0x60FD, ``sm.DIN_STO``: no power stage, not a fault) and DriveTimeoutError if an axis
-        stays in one state longer than the transition timeout.
+        stays in one state longer than the transition timeout, or an axis in interpolated
+        position mode does not acknowledge "enable ip mode" (statusword bit 12) within it.
         """
         self._drive_to(State.OPERATION_ENABLED, hold=True)
+        adapter = self._adapter()
+        if adapter is not None and adapter.ip.any():
+            self._await_ip(adapter.ip & (self._tx_mode == Mode.INTERPOLATED_POSITION))
+
+    def _await_ip(self, ip: np.ndarray) -> None:
+        """Cycle (holding) until every ``ip`` axis reports ip mode active (statusword bit 12:
+        the drive took controlword bit 4, which the adapter sets once it is enabled)."""
+        from drivers.cia402.csp_adapter import SW_IP_ACTIVE
+
+        for _ in range(self.timeout_cycles + 2):
+            self.hold()
+            self._step()
+            if self.any_fault():
+                self._raise_fault()
+            if not ((self._tx_sw & SW_IP_ACTIVE) == 0)[ip].any():
+                return
+        i = int(np.flatnonzero(ip & ((self._tx_sw & SW_IP_ACTIVE) == 0))[0])
+        raise DriveTimeoutError(
+            f"axis {i} ({self.names[i]}): interpolated position mode not active "
+            f"{self.transition_timeout:g} s after controlword bit 4 (enable ip mode) in "
+            "Operation enabled: statusword bit 12 stays 0 (check 0x60C2, the interpolation "
+            f"period, is the loop period); {self._describe(i)}" + self._bus_note(),
+            i,
+            int(self.states[i]),
+            int(self._tx_sw[i]),
+        )
 
     def disable(self) -> None:
         """Bring every axis to Switch on disabled (power stage off, brakes closed)."""

@@ -70,12 +70,18 @@ OBJECT_TYPES: dict[tuple[int, int], str] = {
     (0x6078, 0): "<i2",
     (0x603F, 0): "<u2",
     (0x60FD, 0): "<u4",
+    (0x60C1, 1): "<i4",
 }
+
+#: objects that carry a canonical field on the wire besides the built-in layout's own:
+#: 0x60C1:01, the first interpolation data record entry (X1), is the position target of
+#: interpolated position mode (ip); the loop's CSP target goes there on an ip drive
+EXTRA_FIELDS: dict[tuple[int, int], str] = {(0x60C1, 1): "target_position"}
 
 #: process-image field name of every PDO-mappable object.
 OBJECT_FIELDS: dict[tuple[int, int], str] = {
     (e.index, e.subindex): e.field for e in RXPDO_MAPPING + TXPDO_MAPPING
-}
+} | EXTRA_FIELDS
 
 
 def layout_dtype(entries: tuple[PdoEntry, ...] | list[PdoEntry]) -> np.dtype:

@@ -121,6 +121,16 @@ def layout_of(profile: DriveProfile) -> AxisLayout:
     )
 
 
+def csp_adapter(profiles: Sequence[DriveProfile | None], cycle_time: float) -> Any:
+    """The :class:`~drivers.cia402.csp_adapter.CspAdapter` of axes running ``profiles`` (None:
+    the built-in CSP drive) at ``cycle_time`` [s]: ip and pv axes adapted, others untouched."""
+    from drivers.cia402.csp_adapter import CspAdapter
+
+    loops = [p.modes.loop if p is not None else "csp" for p in profiles]
+    gains = [p.modes.position_gain if p is not None else None for p in profiles]
+    return CspAdapter(loops, gains, cycle_time)
+
+
 def mode_number(profile: DriveProfile) -> int:
     """0x6060 value of the profile's loop mode."""
     from hofto_hw.config.drive_profile import MODE_NUMBERS

@@ -120,6 +120,7 @@ class Mode(IntEnum):
     PROFILE_POSITION = 1
     PROFILE_VELOCITY = 3
     HOMING = 6
+    INTERPOLATED_POSITION = 7
     CSP = 8
     CSV = 9
     CST = 10

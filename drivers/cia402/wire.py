@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -48,8 +48,11 @@ from drivers.cia402.pdo import (
 from drivers.errors import DriverError
 
 #: canonical fields a drive must map (the stack cannot run an axis without them)
-REQUIRED_RX = ("controlword", "target_position")
+REQUIRED_RX = ("controlword",)
 REQUIRED_TX = ("statusword", "position")
+#: and at least one target (the profile's loop mode says which: position for csp and ip,
+#: velocity for csv and pv, torque for cst)
+TARGETS = ("target_position", "target_velocity", "target_torque")
 
 
 class LayoutError(DriverError):
@@ -101,7 +104,7 @@ class AxisLayout:
         """Raise LayoutError (one line naming ``who``) when the stack cannot run this layout:
         an entry off whole bytes, a known object with another length than its data type, an
         object mapped twice or in the wrong direction, controlword/target position or
-        statusword/position missing. Returns self."""
+        statusword/position or every target missing. Returns self."""
         for direction, entries, dtype, required in (
             ("rx", self.rx, RXPDO_DTYPE, REQUIRED_RX),
             ("tx", self.tx, TXPDO_DTYPE, REQUIRED_TX),
@@ -133,6 +136,8 @@ class AxisLayout:
             for f in required:
                 if f not in have:
                     raise LayoutError(f"{who}: the {direction} PDOs do not map {f}")
+            if direction == "rx" and not have & set(TARGETS):
+                raise LayoutError(f"{who}: the rx PDOs map no target ({', '.join(TARGETS)})")
         return self
 
 
@@ -220,6 +225,7 @@ class WireImage:
         self._dtx = dtx
         self._rx_src = np.zeros(n * RXPDO_SIZE + 1, dtype=np.uint8)
         self._drive_tx_src = np.zeros(n * TXPDO_SIZE + 1, dtype=np.uint8)
+        self._adapter: Any = None
         #: True when every axis runs the built-in layout (the wire IS the canonical image)
         self.builtin = all(
             lay.rx == BUILTIN_LAYOUT.rx and lay.tx == BUILTIN_LAYOUT.tx for lay in layouts
@@ -258,10 +264,37 @@ class WireImage:
         # the canonical RxPDO is copied into a buffer with one zero byte after it, which
         # padding and unused objects gather from: two calls, both without allocation
         self._rx_head = self._rx_src[: self._rx_flat.size]
+        #: the copy as records (what an adapter changes) and the master's TxPDO it reads
+        self._rx_copy = self._rx_head.view(RXPDO_DTYPE)
+        self._tx_rec = tx
+
+    def set_adapter(self, adapter: Any) -> None:
+        """Run ``adapter.apply(rx_copy, tx)`` (:class:`drivers.cia402.csp_adapter.CspAdapter`)
+        on the copy of the canonical RxPDO each :meth:`encode_rx` encodes (ip / pv axes);
+        None or an adapter without such axes: nothing runs. Call after :meth:`bind_master`."""
+        self._adapter = adapter if adapter is not None and adapter.active else None
+
+    @property
+    def adapter(self) -> Any:
+        """The adapter set with :meth:`set_adapter` (None: every axis takes CSP as it is)."""
+        return self._adapter
+
+    def adapt_rx(self) -> np.ndarray:
+        """The canonical RxPDO's bytes as the drives take them (uint8, n records): after the
+        adapter (a copy) when one is set, else the record itself. For an in-process bus that
+        copies records, not wire bytes. No allocation."""
+        if self._adapter is None:
+            return self._rx_flat
+        np.copyto(self._rx_head, self._rx_flat)
+        self._adapter.apply(self._rx_copy, self._tx_rec)
+        return self._rx_head
 
     def encode_rx(self) -> None:
-        """Canonical RxPDO -> :attr:`rx_out` (every axis, its own layout). No allocation."""
+        """Canonical RxPDO -> :attr:`rx_out` (every axis, its own layout; ip / pv axes
+        through the adapter, see :meth:`set_adapter`). No allocation."""
         np.copyto(self._rx_head, self._rx_flat)
+        if self._adapter is not None:
+            self._adapter.apply(self._rx_copy, self._tx_rec)
         self._rx_src.take(self._enc, out=self.rx_out, mode="clip")
 
     def decode_tx(self) -> None:

@@ -276,6 +276,9 @@ class EtherCATTransport(Transport):
             layouts.append(self._configure_pdos(i))
         wire = WireImage(layouts, self.axis_names)
         wire.bind_master(self.rx, self.tx)
+        from drivers.cia402.profiles import csp_adapter
+
+        wire.set_adapter(csp_adapter(self.profiles, self.cycle_time))  # ip / pv drives
         self._set_rows(wire)
         if self.pdo_watchdog is not None:
             for s in self.slaves:

@@ -35,7 +35,10 @@ from hofto_hw.config.drive_profile import (
     CYCLIC_TARGETS,
     FIELD_OBJECTS,
     LOOP_OBJECTS,
+    LOOP_TARGET_OBJECTS,
+    LOOP_TARGETS,
     MODE_NUMBERS,
+    SUB_OBJECTS,
     DriveProfile,
     format_profile_error,
     modes_from_bits,
@@ -68,6 +71,12 @@ CAN_RX = ("controlword", "target_position", "torque_offset", "target_velocity", 
           "mode")  # fmt: skip
 CAN_TX = ("statusword", "position", "torque", "velocity", "current", "mode_display")
 CAN_FRAME_BITS = 64
+#: ip / pv: the wanted RxPDO objects (the target is the mode's own; no other target travels)
+NON_CYCLIC_RX = ("controlword", "target", "torque_offset", "mode")
+#: loop pv: the master's position-loop gain [1/s] the importer writes (modes.position_gain):
+#: a quarter of the 40 rad/s velocity-loop bandwidth a drive keeps at a 200 Hz CANopen cycle
+#: (bandwidth x period <= 0.2), and 0.05 per cycle of the two cycles a SYNC round trip lags
+PV_POSITION_GAIN = 10.0
 #: PDO configuration objects an ESI InitCmd may write: the profile's PDO lists replace them
 PDO_CONFIG = (range(0x1600, 0x1800), range(0x1A00, 0x1C00), range(0x1C12, 0x1C14))
 
@@ -96,8 +105,49 @@ def slug(text: str) -> str:
 
 
 def _field(index: int, sub: int) -> str | None:
-    known = CIA402_OBJECTS.get(index) if sub == 0 else None
+    known = CIA402_OBJECTS.get(index) if sub == 0 else SUB_OBJECTS.get((index, sub))
     return known[0] if known else None
+
+
+def _key(name: str, loop: str) -> tuple[int, int]:
+    """(index, sub-index) that carries process-image field ``name`` when the loop runs
+    ``loop``: the loop target's own object (ip: 0x60C1:01), else the CiA-402 object."""
+    if name == LOOP_TARGETS[loop]:
+        return LOOP_TARGET_OBJECTS[loop]
+    return FIELD_OBJECTS[name], 0
+
+
+def _bits(key: tuple[int, int]) -> int:
+    return (CIA402_OBJECTS[key[0]] if key[1] == 0 else SUB_OBJECTS[key])[1]
+
+
+def _rx_mappable(desc: DeviceDescription, key: tuple[int, int]) -> bool:
+    return "rx" in getattr(desc.objects.get(key), "mappable", "")
+
+
+def _non_cyclic_loop(desc: DeviceDescription, modes: list[str], reasons: list[str]) -> str | None:
+    """ip or pv for a drive without a cyclic synchronous mode (None: neither can run)."""
+    period = desc.objects.get((0x60C2, 1))
+    if "ip" in modes and _rx_mappable(desc, (0x60C1, 1)) and period and period.writable:
+        reasons.append(
+            "loop: ip (interpolated position, 0x6060 = 7): no cyclic synchronous mode; the "
+            "loop's position target goes to 0x60C1:01 every SYNC, the interpolation period "
+            "0x60C2 is the loop period and controlword bit 4 enables ip mode once the drive "
+            "is in Operation enabled (statusword bit 12 acknowledges): csp to the loop"
+        )
+        return "ip"
+    if "pv" in modes and _rx_mappable(desc, (0x60FF, 0)):
+        reasons.append(
+            "loop: pv (profile velocity, 0x6060 = 3) streamed: no cyclic synchronous mode"
+            + (" and no ip" if "ip" not in modes else " and ip cannot be mapped")
+            + "; the target velocity 0x60FF is sent every SYNC and the master closes the "
+            f"position loop on top (modes.position_gain {PV_POSITION_GAIN:g}/s, velocity "
+            "feed-forward from the target's change per cycle): csp to the loop; the profile "
+            "acceleration/deceleration 0x6083/0x6084 are written when the mode is selected "
+            "(the joint's quick_stop_deceleration), so the drive's ramp does not filter the stream"
+        )
+        return "pv"
+    return None
 
 
 def _fields(pdo: PdoOption) -> set[str]:
@@ -145,18 +195,21 @@ def choose(desc: DeviceDescription, loop: str | None = None, name: str | None = 
     reasons: list[str] = []
     modes = supported_modes(desc, reasons)
     cyclic = [m for m in CYCLIC_TARGETS if m in modes]
-    if loop is None:
-        if not cyclic:
+    if loop is None and not cyclic:
+        loop = _non_cyclic_loop(desc, modes, reasons)
+        if loop is None:
             absent = [
                 f"0x{FIELD_OBJECTS[n]:04X} {n}"
                 for n in LOOP_OBJECTS
                 if not desc.has(FIELD_OBJECTS[n])
             ]
             raise ProfileImportError(
-                f"{where}: no cyclic synchronous mode (csp, csv, cst) for the loop: the drive "
-                f"supports {', '.join(modes) or 'none'}"
+                f"{where}: no cyclic synchronous mode (csp, csv, cst) for the loop, nor ip "
+                "with 0x60C1:01 mappable and 0x60C2:01 writable, nor pv with 0x60FF mappable: "
+                f"the drive supports {', '.join(modes) or 'none'}"
                 + (f"; absent too: {', '.join(absent)}" if absent else "")
             )
+    elif loop is None:
         mappable = [
             m
             for m in cyclic
@@ -173,19 +226,24 @@ def choose(desc: DeviceDescription, loop: str | None = None, name: str | None = 
         raise ProfileImportError(
             f"{where}: --loop {loop}: the drive supports {', '.join(modes) or 'none'}"
         )
-    target = CYCLIC_TARGETS[loop]
-    if desc.bus == "ethercat":
-        rx, rx_why = _ethercat_side(desc, "rx", WANTED_RX)
-        tx, tx_why = _ethercat_side(desc, "tx", WANTED_TX)
+    target = LOOP_TARGETS[loop]
+    if loop not in CYCLIC_TARGETS:
+        wanted_rx = tuple(target if n == "target" else n for n in NON_CYCLIC_RX)
+        can_rx = wanted_rx
     else:
-        rx, rx_why = _can_side(desc, "rx", CAN_RX, target)
-        tx, tx_why = _can_side(desc, "tx", CAN_TX, target)
+        wanted_rx, can_rx = WANTED_RX, CAN_RX
+    if desc.bus == "ethercat":
+        rx, rx_why = _ethercat_side(desc, "rx", wanted_rx, loop)
+        tx, tx_why = _ethercat_side(desc, "tx", WANTED_TX, loop)
+    else:
+        rx, rx_why = _can_side(desc, "rx", can_rx, target, loop)
+        tx, tx_why = _can_side(desc, "tx", CAN_TX, target, loop)
     reasons += [rx_why, tx_why]
     mapped = set().union(*(_fields(p) for p in rx + tx))
     for needed in ("controlword", "statusword", "position", target):
         if needed not in mapped:
             raise ProfileImportError(
-                f"{where}: cannot map {needed} (0x{FIELD_OBJECTS[needed]:04X}) that the {loop} "
+                f"{where}: cannot map {needed} (0x{_key(needed, loop)[0]:04X}) that the {loop} "
                 "loop needs: no PDO of the file carries it"
             )
     fallbacks, objects = _fallbacks(desc, mapped, reasons)
@@ -211,7 +269,8 @@ def choose(desc: DeviceDescription, loop: str | None = None, name: str | None = 
         },
         "bus": desc.bus,
         "axes": 1,
-        "modes": {"supported": modes, "loop": loop, "set_by": set_by},
+        "modes": {"supported": modes, "loop": loop, "set_by": set_by}
+        | ({"position_gain": PV_POSITION_GAIN} if loop == "pv" else {}),
         "rx_pdos": [_pdo_dict(p) for p in rx],
         "tx_pdos": [_pdo_dict(p) for p in tx],
         "objects": objects,
@@ -252,10 +311,17 @@ def _max_entries(desc: DeviceDescription, pdo: PdoOption) -> int:
 
 
 def _ethercat_side(
-    desc: DeviceDescription, side: str, wanted: tuple[str, ...]
+    desc: DeviceDescription, side: str, wanted: tuple[str, ...], loop: str = "csp"
 ) -> tuple[list[PdoOption], str]:
     options = [p for p in desc.pdos if p.direction == side]
     notes = []
+    if loop == "ip":  # a fixed PDO with 0x607A (pp's target) would map the target twice
+        dropped = [p for p in options if p.fixed and any(i == 0x607A for i, _, _ in p.entries)]
+        options = [p for p in options if p not in dropped]
+        if dropped:
+            notes.append(
+                f"{len(dropped)} fixed PDO(s) with 0x607A left out: ip's target is 0x60C1:01"
+            )
     if not desc.pdo_config:  # mappings cannot be written: every PDO is as the file gives it
         options = [replace(p, fixed=True) for p in options if p.entries]
         notes.append("PdoConfig=0: no mapping is written")
@@ -265,7 +331,9 @@ def _ethercat_side(
     limit = desc.sm_rx_bytes if side == "rx" else desc.sm_tx_bytes
     fixed = _greedy_fixed([p for p in options if p.fixed and p.entries], wanted, limit)
     mandatory = [p for p in options if p.fixed and p.mandatory]
-    conf = _configurable(desc, [p for p in options if not p.fixed], side, wanted, limit, mandatory)
+    conf = _configurable(
+        desc, [p for p in options if not p.fixed], side, wanted, limit, mandatory, loop
+    )
     if all(p.fixed for p in conf):
         conf = []  # nothing configurable: the fixed branch holds the mandatory PDOs too
     got_fixed = set().union(*(_fields(p) for p in fixed)) & set(wanted)
@@ -343,15 +411,17 @@ def _configurable(
     wanted: tuple[str, ...],
     limit: int | None,
     mandatory: list[PdoOption] = (),  # type: ignore[assignment]
+    loop: str = "csp",
 ) -> list[PdoOption]:
     """Wanted objects mappable in ``side``, written into the configurable PDOs in order
     (default-assigned ones first), each up to its mapping entries, within the sync manager;
     after the ``mandatory`` fixed PDOs, whose objects are not mapped again."""
     objs = []
     for name in wanted:
-        info = desc.objects.get((FIELD_OBJECTS[name], 0))
+        key = _key(name, loop)
+        info = desc.objects.get(key)
         if info is not None and side in info.mappable:
-            objs.append((FIELD_OBJECTS[name], 0, CIA402_OBJECTS[FIELD_OBJECTS[name]][1]))
+            objs.append((*key, _bits(key)))
     out = [p for p in mandatory if p.direction == side]  # assigned whatever is written
     carried = {(i, s) for p in out for i, s, _ in p.entries}
     objs = [o for o in objs if o[:2] not in carried]
@@ -376,7 +446,7 @@ def _configurable(
 
 
 def _can_side(
-    desc: DeviceDescription, side: str, order: tuple[str, ...], target: str
+    desc: DeviceDescription, side: str, order: tuple[str, ...], target: str, loop: str = "csp"
 ) -> tuple[list[PdoOption], str]:
     names = list(order)
     if side == "rx":  # controlword, then the loop's target
@@ -388,9 +458,10 @@ def _can_side(
     objs = []
     skipped = []
     for n in names:
-        info = desc.objects.get((FIELD_OBJECTS[n], 0))
+        key = _key(n, loop)
+        info = desc.objects.get(key)
         if info is not None and side in info.mappable:
-            objs.append((FIELD_OBJECTS[n], 0, CIA402_OBJECTS[FIELD_OBJECTS[n]][1]))
+            objs.append((*key, _bits(key)))
         else:
             skipped.append(n)
     frames: list[list[tuple[int, int, int]]] = []
@@ -534,6 +605,18 @@ def _startup(desc: DeviceDescription, loop: str, set_by: str, reasons: list[str]
                 "comment": "interpolation period unit 1e-3 s (the master's loop_period unit)",
             }
         )
+    submode = desc.objects.get((0x60C0, 0))
+    if loop == "ip" and (0x60C0, 0) not in has and submode is not None and submode.writable:
+        out.append(
+            {
+                "index": 0x60C0,
+                "subindex": 0,
+                "value": 0,
+                "bits": 16,
+                "transition": "PO" if can else "PS",
+                "comment": "interpolation sub-mode 0: linear interpolation (CiA 402)",
+            }
+        )
     if set_by == "startup" and (0x6060, 0) not in has:
         out.append(
             {
@@ -554,7 +637,7 @@ def _startup(desc: DeviceDescription, loop: str, set_by: str, reasons: list[str]
 
 
 def _signed(index: int) -> bool:
-    return index in (0x6060, 0x60C2)
+    return index in (0x6060, 0x60C2, 0x60C0)
 
 
 def _dc(desc: DeviceDescription, reasons: list[str]) -> dict | None:

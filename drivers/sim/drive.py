@@ -10,6 +10,13 @@ Per drive (all in joint-side SI internally, raw units only at the process image)
 - CiA 402 state machine (drivers.cia402.state_machine), quick-stop option codes 0-8;
 - modes CSP (cascaded P position / PI velocity loop with velocity feed-forward from the
   target increments), CSV (PI velocity loop) and CST (torque), torque offset 0x60B2 in all;
+- for a drive impersonating a profile that has them: interpolated position (7: the CSP
+  loops on the target 0x60C1:01, active only while controlword bit 4 is set in Operation
+  enabled and an interpolation period 0x60C2 is set, acknowledged in statusword bit 12;
+  inactive it holds where it was; the feed-forward is the target's change per 0x60C2
+  period) and profile velocity (3: the PI velocity loop on the target velocity 0x60FF
+  ramped with the profile acceleration/deceleration 0x6083/0x6084; statusword bit 12
+  "speed zero", bit 10 "target reached");
 - torque limit 0x6072, quick-stop ramp 0x6085 then disable, following-error supervision
   0x6065/0x6066, communication watchdog;
 - a motor holding brake while the power stage is off (the plant has none): a saturated
@@ -51,6 +58,7 @@ from drivers.sim.object_dictionary import (
     impersonate,
 )
 from drivers.sim.plant import Plant
+from hofto_hw.config.drive_profile import MODE_NUMBERS
 from hofto_hw.config.drives import DriveConfig
 from hofto_hw.config.models import ExternalTorqueConfig
 
@@ -67,7 +75,15 @@ FAULTS: dict[str, tuple[int, bool]] = {
 }
 CODE_FOLLOWING_ERROR = 0x8611
 CODE_COMM_LOSS = 0x8130
-SUPPORTED_MODES = (Mode.NO_MODE, Mode.CSP, Mode.CSV, Mode.CST, Mode.HOMING)
+SUPPORTED_MODES = (
+    Mode.NO_MODE,
+    Mode.CSP,
+    Mode.CSV,
+    Mode.CST,
+    Mode.HOMING,
+    Mode.INTERPOLATED_POSITION,
+    Mode.PROFILE_VELOCITY,
+)
 HOMING_METHODS = (17, 35, 37)
 # homing progress per axis
 _H_IDLE, _H_SEARCH, _H_BACK, _H_STOP, _H_DONE, _H_ERROR = range(6)
@@ -75,6 +91,9 @@ _H_IDLE, _H_SEARCH, _H_BACK, _H_STOP, _H_DONE, _H_ERROR = range(6)
 # Plain ints for the per-cycle code (enum attribute access is slow).
 _NR, _SOD, _RTSO, _SO, _OE, _QSA, _FRA, _FLT = (int(s) for s in list(State)[:8])
 _CSP, _CSV, _CST, _HM = int(Mode.CSP), int(Mode.CSV), int(Mode.CST), int(Mode.HOMING)
+_IP, _PV = int(Mode.INTERPOLATED_POSITION), int(Mode.PROFILE_VELOCITY)
+_CW_ENABLE_IP = 0x0010  # controlword bit 4 in ip mode
+_PV_SPEED_ZERO = 0.01  # [rad/s] below which pv reports speed zero (statusword bit 12)
 _N_COMMANDS = len(Command)
 _POWERED = (_OE, _QSA, _FRA)
 _WATCHED = (_SO, *_POWERED)  # states that fault when the bus goes silent
@@ -194,6 +213,8 @@ class EmulatedDrives(ImageFields):
             self.error_register,
         )
         self.ods: list[ObjectDictionary] = []
+        #: some drive impersonates a profile with ip / pv (their objects and loops exist)
+        self._ip_pv_drive = False
         for i, d in enumerate(drives):
             motor, shaft = _gear_fraction(d.gear_ratio)
             self.ods.append(
@@ -214,10 +235,18 @@ class EmulatedDrives(ImageFields):
             )
             prof = profiles[i] if profiles is not None else None
             if prof is not None:
+                self._mode_objects(i, self.ods[-1], prof.modes.supported)
                 impersonate(self.ods[-1], prof, serial=0x5100 + i)
         #: the profile each drive impersonates (None: the built-in hofto-sim drive)
         self.profiles = list(profiles) if profiles is not None else [None] * n
 
+        self._ip_hold = plant.q_meas.copy()  # where an ip drive holds while ip is inactive
+        self._ip_on = np.zeros(n, dtype=bool)
+        self._ip_was = np.zeros(n, dtype=bool)
+        self._ipm = np.zeros(n, dtype=bool)
+        self._pvm = np.zeros(n, dtype=bool)
+        self._pv_v = np.zeros(n)  # the pv ramp's velocity [rad/s]
+        self._ff = np.ones(n)  # CSP / ip feed-forward scale: loop period / ip period
         # Homing (mode 6): objects in raw units, drive-internal progress and position shift.
         self.homing_method = np.full(n, 35, dtype=np.int8)  # 0x6098
         self.homing_speeds = np.zeros((2, n), dtype=np.uint32)  # 0x6099:1 switch, :2 zero
@@ -326,6 +355,16 @@ class EmulatedDrives(ImageFields):
         self._q_rep = np.zeros(n)
         self._bind_image(self.rx, self.tx)
         self._rx_mode_u8 = self._rx_mode.view(np.uint8)
+        # per drive and mode byte: whether the drive takes the mode (a drive impersonating a
+        # profile only the modes its profile has, e.g. the Faulhaber no ip: 0x6060 <= 6)
+        table = np.tile(_MODE_SUPPORTED, (n, 1))
+        for i, prof in enumerate(self.profiles):
+            if prof is not None:
+                has = {0} | {MODE_NUMBERS[m] for m in prof.modes.supported}
+                table[i] &= [(m - 256 if m > 127 else m) in has for m in range(256)]
+        self._mode_table = table.ravel()
+        self._mode_base = np.arange(n, dtype=np.intp) * 256
+        self._mode_flat = np.zeros(n, dtype=np.intp)
         # Scratch (no allocation per cycle).
         f = np.zeros
         self._tau, self._qt, self._vt, self._tt, self._toff = (f(n) for _ in range(5))
@@ -355,6 +394,67 @@ class EmulatedDrives(ImageFields):
                 )
         self._update_tx()
 
+    def _mode_objects(self, i: int, od: ObjectDictionary, modes: Sequence[str]) -> None:
+        """The objects of interpolated position / profile velocity for a drive whose
+        profile supports them (bound to this drive's arrays)."""
+        if not self._ip_pv_drive:
+            self._ip_pv_drive = True
+            n = self.n
+            #: 0x60C2:01 interpolation period value, 0x60C2:02 its exponent (10^x s)
+            self.ip_period = np.zeros(n, dtype=np.uint8)
+            self.ip_exponent = np.full(n, -3, dtype=np.int8)
+            #: 0x60C0 interpolation sub-mode (0: linear)
+            self.ip_submode = np.zeros(n, dtype=np.int16)
+            #: 0x6083 / 0x6084 profile acceleration / deceleration [counts/s²]
+            self.profile_accel = np.zeros(n, dtype=np.uint32)
+            self.profile_decel = np.zeros(n, dtype=np.uint32)
+        if "ip" in modes:
+            od.add_var(0x60C0, "interpolation sub mode select", "i16", "rw",
+                       bound=(self.ip_submode, i), pdo_mappable=True)  # fmt: skip
+            od.add_record(
+                0x60C1,
+                "interpolation data record",
+                [
+                    OdEntry(
+                        0x60C1,
+                        1,
+                        "X1: position",
+                        "i32",
+                        "rw",
+                        pdo_mappable=True,
+                        bound=(self.rx["target_position"], i),
+                    ),
+                    OdEntry(0x60C1, 2, "X2", "i32", "rw", pdo_mappable=True),
+                ],
+            )
+            od.add_record(
+                0x60C2,
+                "interpolation time period",
+                [
+                    OdEntry(
+                        0x60C2,
+                        1,
+                        "interpolation time period value",
+                        "u8",
+                        "rw",
+                        bound=(self.ip_period, i),
+                    ),
+                    OdEntry(
+                        0x60C2,
+                        2,
+                        "interpolation time index",
+                        "i8",
+                        "rw",
+                        bound=(self.ip_exponent, i),
+                    ),
+                ],
+            )
+        if "pv" in modes:
+            od.add_var(0x6083, "profile acceleration", "u32", "rw",
+                       bound=(self.profile_accel, i), pdo_mappable=True)  # fmt: skip
+            od.add_var(0x6084, "profile deceleration", "u32", "rw",
+                       bound=(self.profile_decel, i), pdo_mappable=True)  # fmt: skip
+
     def reset(self, q0: np.ndarray, qd0: np.ndarray | None = None) -> None:
         """Power-cycle the drives and put the plant at ``q0`` [rad] (``qd0`` [rad/s])."""
         self.plant.reset(q0, qd0)
@@ -375,6 +475,10 @@ class EmulatedDrives(ImageFields):
         self._brake_target.fill(True)
         self.brake_hold_time.fill(0.0)
         self._home_v.fill(0.0)
+        self._ip_on.fill(False)
+        self._ip_was.fill(False)
+        self._pv_v.fill(0.0)
+        np.copyto(self._ip_hold, self.plant.q_meas)
         np.copyto(self._brake_q, self.plant.q_meas)
         self.rx.fill(0)
         self._update_tx()
@@ -560,7 +664,8 @@ class EmulatedDrives(ImageFields):
         self.state[i] = new
 
     def _mode(self) -> None:
-        np.take(_MODE_SUPPORTED, self._rx_mode_u8, out=self._b1)
+        np.add(self._mode_base, self._rx_mode_u8, out=self._mode_flat)
+        np.take(self._mode_table, self._mode_flat, out=self._b1)
         np.copyto(self.mode_display, self._rx_mode, where=self._b1)
 
     def _control(self) -> None:
@@ -588,15 +693,25 @@ class EmulatedDrives(ImageFields):
             self.brake_hold_time -= self.dt
             np.maximum(self.brake_hold_time, 0.0, out=self.brake_hold_time)
 
+        np.equal(self.mode_display, _IP, out=self._ipm)
+        self._ipm &= self._enabled
+        np.equal(self.mode_display, _PV, out=self._pvm)
+        self._pvm &= self._enabled
+        if self._ip_pv_drive:
+            self._ip_pv()
+
         # Velocity command: CSP = feed-forward + P on position; CSV = target; ramps override.
         np.subtract(self._qt, self._prev_target, out=self._vcmd)
         self._vcmd *= self._inv_dt
+        self._vcmd *= self._ff
         self._vcmd *= self._target_valid
         np.copyto(self._prev_target, self._qt)
         np.subtract(self._qt, q, out=self._err)
         np.multiply(self._err, tn.position_gain, out=w)
         self._vcmd += w
         np.copyto(self._vcmd, self._vt, where=self._csv)
+        if self._pvm.any():
+            np.copyto(self._vcmd, self._pv_v, where=self._pvm)
         np.equal(self.mode_display, _HM, out=self._hm)
         self._hm &= self._enabled
         if self._hm.any():
@@ -655,6 +770,42 @@ class EmulatedDrives(ImageFields):
             w -= t
             np.clip(w, self._neg_brake, tn.brake_torque, out=w)
             np.copyto(self._tau, w, where=self._b1)
+
+    def _ip_pv(self) -> None:
+        """Interpolated position and profile velocity: which axes run which loop, and their
+        targets (the CSP loops run ip, the velocity loop pv; see the module docstring)."""
+        q = self.plant.q_meas
+        # ip active: Operation enabled, bit 4 set, an interpolation period given
+        np.bitwise_and(self._rx_cw, _CW_ENABLE_IP, out=self._u16)
+        np.not_equal(self._u16, 0, out=self._ip_on)
+        self._ip_on &= self._ipm
+        self._ip_on &= self.ip_period > 0
+        # activation: no feed-forward from the hold position to the first target
+        np.logical_not(self._ip_was, out=self._b1)
+        self._b1 &= self._ip_on
+        self._target_valid[self._b1] = False
+        np.copyto(self._ip_was, self._ip_on)
+        # inactive: hold where the drive was when it was enabled / ip went off
+        np.logical_and(self._ipm, ~self._ip_on, out=self._b1)
+        np.copyto(self._qt, self._ip_hold, where=self._b1)
+        np.copyto(self._ip_hold, q, where=~self._ipm)
+        np.copyto(self._ip_hold, q, where=self._ip_on)
+        self._csp |= self._ipm  # the position loops run (holding or interpolating)
+        period = self.ip_period * np.power(10.0, self.ip_exponent)
+        np.copyto(self._ff, np.where(period > 0, self.dt / np.maximum(period, 1e-12), 1.0),
+                  where=self._ipm)  # fmt: skip
+        np.copyto(self._ff, 1.0, where=~self._ipm)
+        # pv: the target velocity through the profile ramp
+        if self._pvm.any():
+            rpc = self._abs_rpc
+            for i in np.flatnonzero(self._pvm):
+                v, target = float(self._pv_v[i]), float(self._vt[i])
+                speeding = abs(target) > abs(v) and target * v >= 0.0
+                rate = self.profile_accel[i] if speeding else self.profile_decel[i]
+                step = float(rate) * rpc[i] * self.dt
+                self._pv_v[i] = v + min(max(target - v, -step), step)
+        np.copyto(self._pv_v, self.plant.qd_meas, where=~self._pvm)
+        self._csv |= self._pvm  # the velocity loop runs
 
     def _real_brakes(self) -> None:
         """Delays, then the closed brakes' torque on top of the motor's (slipping beyond the
@@ -748,6 +899,22 @@ class EmulatedDrives(ImageFields):
             sw[i] &= ~np.uint16(sm.SW_FOLLOWING | sm.SW_FOLLOWING_ERROR | sm.SW_TARGET_REACHED)
             sw[i] |= np.uint16(_homing_status_bits(int(self.homing[i]), stopped))
 
+    def _ip_pv_status(self, sw: np.ndarray) -> None:
+        """Statusword bit 12 in ip: ip mode active; in pv: speed zero (bit 10: the ramp
+        reached the target velocity; bit 13, max slippage, never)."""
+        bits = np.uint16(sm.SW_FOLLOWING | sm.SW_FOLLOWING_ERROR | sm.SW_TARGET_REACHED)
+        for i in np.flatnonzero(self._ipm | self._pvm):
+            sw[i] &= ~bits
+            if self._ipm[i]:
+                sw[i] |= np.uint16(sm.SW_FOLLOWING if self._ip_on[i] else 0)
+                if self._fe_flag[i]:
+                    sw[i] |= np.uint16(sm.SW_FOLLOWING_ERROR)
+                continue
+            if abs(float(self.plant.qd_meas[i])) < _PV_SPEED_ZERO:
+                sw[i] |= np.uint16(sm.SW_FOLLOWING)
+            if self._pv_v[i] == self._vt[i]:
+                sw[i] |= np.uint16(sm.SW_TARGET_REACHED)
+
     def _advance_ramp(self) -> None:
         step, sign = self._w2, self._w3
         np.multiply(self.quick_stop_decel, self._abs_rpc, out=step)
@@ -821,6 +988,8 @@ class EmulatedDrives(ImageFields):
         np.equal(self.mode_display, _HM, out=self._hm)
         if self._hm.any():
             self._homing_status(sw)
+        if self._ipm.any() or self._pvm.any():
+            self._ip_pv_status(sw)
         np.copyto(self._tx_mode, self.mode_display)
         np.copyto(self._tx_err, self.fault_code)
         np.multiply(self.sto, sm.DIN_STO, out=self._tx_din, casting="unsafe")

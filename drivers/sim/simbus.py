@@ -93,7 +93,7 @@ class SimBus(Transport):
         (:class:`drivers.cia402.wire.WireImage`): what a drive does not map does not reach
         it, and what it does not report keeps its defined value."""
         if any(p is not None for p in self.profiles):
-            from drivers.cia402.profiles import configure_pdos, write_startup
+            from drivers.cia402.profiles import configure_pdos, csp_adapter, write_startup
             from drivers.cia402.wire import BUILTIN_LAYOUT, WireImage
 
             self.startup_written = 0
@@ -102,10 +102,11 @@ class SimBus(Transport):
                 if prof is None:
                     layouts.append(BUILTIN_LAYOUT)
                     continue
-                self.startup_written += write_startup(self, i, prof, ("IP", "PS", "SO"))
+                self.startup_written += write_startup(self, i, prof, ("IP", "PS", "SO", "PO"))
                 layouts.append(configure_pdos(self, i, prof, TransportError))
             self.wire = WireImage(layouts, self.axis_names)
             self.wire.bind_master(self.rx, self.tx)
+            self.wire.set_adapter(csp_adapter(self.profiles, self.cycle_time))
             self._wired = not self.wire.builtin
             if self._wired:
                 # in one process the bytes need no wire order: what each drive maps is
@@ -138,7 +139,7 @@ class SimBus(Transport):
             self.drives.step(None)
             return STATUS_NO_RESPONSE
         if self._wired:
-            np.copyto(self._drv_rx_flat, self._rx_flat, where=self._rx_mask)
+            np.copyto(self._drv_rx_flat, self.wire.adapt_rx(), where=self._rx_mask)
             self.drives.step(self.drives.rx)
             np.copyto(self._tx_flat, self._drv_tx_flat, where=self._tx_mask)
             return STATUS_OK

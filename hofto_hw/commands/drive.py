@@ -33,8 +33,9 @@ def _configure_import(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--loop",
-        choices=("csp", "csv", "cst"),
-        help="cyclic mode the loop runs the drive in (default: csp, else csv, else cst)",
+        choices=("csp", "csv", "cst", "ip", "pv"),
+        help="mode the loop runs the drive in (default: csp, else csv, else cst; a drive "
+        "without them: ip, else pv)",
     )
     p.add_argument(
         "-o",

@@ -9,7 +9,9 @@ prints what it saw (``--json``: ``bus``, ``axes``, ``operational``, ``enabled``,
 ``moved_rad``, ``process_image_bytes``, ``pdos``, ``startup_sdos``, ``faults``, ...).
 
 ``--emulated`` runs the emulator itself: EtherCAT on a veth pair with ``hofto-hw
-sim-ethercat`` in its own process (root), CANopen on python-can's virtual bus in a thread.
+sim-ethercat`` in its own process (root), CANopen on python-can's virtual bus in a thread
+(``--can-interface udp_multicast``: over UDP multicast instead, on a group and port of this
+run's own, no root needed).
 The emulated arm is the six-joint arm of the base config (``--config``; default
 configs/er3a.yaml for EtherCAT, configs/er3a_canopen.yaml for CANopen): the first N joints
 get drives of PROFILE, the others the built-in emulated drive. The base config also gives
@@ -70,6 +72,13 @@ def configure(p: argparse.ArgumentParser) -> None:
         metavar="CONFIG",
         help="base config: the arm (emulated), the scaling and the loop rate",
     )
+    p.add_argument(
+        "--can-interface",
+        choices=("virtual", "udp_multicast"),
+        default=None,
+        help="--emulated CANopen only: python-can interface the emulated bus runs on "
+        "(default virtual; udp_multicast: a group and free port of this run)",
+    )
     p.add_argument("--json", action="store_true", help="print the result as JSON")
 
 
@@ -100,6 +109,8 @@ def _check_args(args: argparse.Namespace, profile: Any) -> int:
         raise UserError(f"{args.profile}: a {profile.bus} profile; --iface is for EtherCAT")
     if args.interface is not None and profile.bus != "canopen":
         raise UserError(f"{args.profile}: a {profile.bus} profile; --interface is for CANopen")
+    if args.can_interface is not None and not (args.emulated and profile.bus == "canopen"):
+        raise UserError("--can-interface goes with --emulated and a CANopen profile")
     if args.move is not None and not (np.isfinite(args.move) and 0 < abs(args.move) <= 0.5):
         raise UserError(f"--move {args.move}: a step of at most 0.5 rad, not 0")
     n = 6 if args.axes is None else args.axes
@@ -185,16 +196,32 @@ def _emulated_ethercat(config: Path, folder: Path, master: str) -> Iterator[None
         veth.delete_pair(master)
 
 
+def _udp_multicast_where() -> tuple[str, dict[str, Any]]:
+    """A multicast group and a free UDP port of this run (``--can-interface
+    udp_multicast``): python-can binds every such bus to the port on any address, so a port
+    of its own keeps another run's frames out."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("", 0))
+        port = probe.getsockname()[1]
+    pid = os.getpid()
+    return f"239.74.{(pid >> 8) & 0xFF}.{pid & 0xFF}", {"port": port}
+
+
 @contextlib.contextmanager
-def _emulated_canopen(cfg: Any) -> Iterator[None]:
-    """The config's drives as CANopen nodes on its python-can virtual channel (a thread)."""
+def _emulated_canopen(cfg: Any, bus_kwargs: dict[str, Any]) -> Iterator[None]:
+    """The config's drives as CANopen nodes on its python-can channel (a thread): the
+    virtual bus, or udp_multicast with ``bus_kwargs`` (the port)."""
     import can
 
+    from drivers.canopen.socket_buffer import widen_receive_buffer
     from drivers.sim.canopen_node import CanopenDrives
     from hofto_hw.runtime.build import build_emulated_drives
 
     channel = cfg.bus.interface
-    bus = can.Bus(interface="virtual", channel=channel)
+    bus = can.Bus(interface=cfg.bus.canopen.can_interface, channel=channel, **bus_kwargs)
+    widen_receive_buffer(bus)
     opts = cfg.bus.canopen
     node_ids = opts.node_ids if opts is not None and opts.node_ids else None
     emu = CanopenDrives(build_emulated_drives(cfg, external=False), bus, node_ids).start()
@@ -208,7 +235,7 @@ def _emulated_canopen(cfg: Any) -> Iterator[None]:
 # ---------------------------------------------------------------- the check
 
 
-def _transport(cfg: Any, profile: Any) -> Any:
+def _transport(cfg: Any, profile: Any, bus_kwargs: dict[str, Any]) -> Any:
     names = list(cfg.robot.joints)[: len(cfg.bus.drives)]
     if profile.bus == "ethercat":
         from drivers.ethercat.master import EtherCATTransport
@@ -216,7 +243,9 @@ def _transport(cfg: Any, profile: Any) -> Any:
         return EtherCATTransport.from_config(cfg.bus, names, cycle_time=cfg.cycle_time)
     from drivers.canopen.master import CANopenTransport
 
-    return CANopenTransport.from_config(cfg.bus, names, cycle_time=cfg.cycle_time)
+    t = CANopenTransport.from_config(cfg.bus, names, cycle_time=cfg.cycle_time)
+    t.bus_kwargs.update(bus_kwargs)
+    return t
 
 
 def _move(g: Any, t: Any, step: np.ndarray, joints: np.ndarray) -> np.ndarray:
@@ -246,7 +275,14 @@ def _move(g: Any, t: Any, step: np.ndarray, joints: np.ndarray) -> np.ndarray:
     return reached
 
 
-def check(cfg: Any, profile: Any, n: int, move: float | None, emulated: bool) -> dict[str, Any]:
+def check(
+    cfg: Any,
+    profile: Any,
+    n: int,
+    move: float | None,
+    emulated: bool,
+    bus_kwargs: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """Run the check on the bus ``cfg`` describes; returns the report (see module)."""
     from drivers.cia402.drive_group import DriveGroup
     from drivers.cia402.state_machine import Mode, State
@@ -256,6 +292,7 @@ def check(cfg: Any, profile: Any, n: int, move: float | None, emulated: bool) ->
     report: dict[str, Any] = {
         "profile": profile.name,
         "bus": profile.bus,
+        "loop": profile.modes.loop,
         "emulated": emulated,
         "axes": n,
         "operational": False,
@@ -267,7 +304,7 @@ def check(cfg: Any, profile: Any, n: int, move: float | None, emulated: bool) ->
         "unavailable": [],
         "faults": [],
     }
-    t = _transport(cfg, profile)
+    t = _transport(cfg, profile, bus_kwargs or {})
     joints = np.arange(n)
     try:
         t.open()
@@ -287,10 +324,13 @@ def check(cfg: Any, profile: Any, n: int, move: float | None, emulated: bool) ->
         g.cycle()
         if g.any_fault():
             g.fault_reset()
-        g.set_mode(Mode(MODE_NUMBERS[profile.modes.loop]))
+        loop = profile.modes.loop
+        g.set_mode(Mode.CSP if loop in ("ip", "pv") else Mode(MODE_NUMBERS[loop]))
         g.enable()
         report["enabled"] = bool(g.all_in(State.OPERATION_ENABLED))
-        if move is not None and profile.modes.loop == "csp":
+        # ip and pv drives take the CSP step too: the driver layer turns it into the target
+        # 0x60C1:01 (ip) or the streamed velocity (pv; drivers/cia402/csp_adapter.py)
+        if move is not None and profile.modes.loop in ("csp", "ip", "pv"):
             step = np.zeros(t.n_axes)
             step[joints] = move
             reached = _move(g, t, step, joints)
@@ -335,11 +375,15 @@ def run(args: argparse.Namespace) -> int:
         iface = args.iface
     else:
         options = {"tpdo_deadline": 0.05, "sdo_timeout": 2.0} if args.emulated else {}
+        bus_kwargs: dict[str, Any] = {}
         if args.emulated:
-            options["can_interface"] = "virtual"
+            options["can_interface"] = args.can_interface or "virtual"
+            iface = f"hofto-drive-check-{os.getpid()}"
+            if options["can_interface"] == "udp_multicast":
+                iface, bus_kwargs = _udp_multicast_where()
         else:
             options["can_interface"] = args.interface
-        iface = f"hofto-drive-check-{os.getpid()}" if args.emulated else args.channel
+            iface = args.channel
     with tempfile.TemporaryDirectory(prefix="hofto-drive-check-") as tmp:
         folder = Path(tmp)
         if args.emulated and profile.bus == "ethercat":
@@ -352,8 +396,9 @@ def run(args: argparse.Namespace) -> int:
             with _emulated_ethercat(path, folder, iface):
                 report = check(cfg, profile, n, move, True)
         elif args.emulated:
-            with _emulated_canopen(cfg):
-                report = check(cfg, profile, n, move, True)
+            with _emulated_canopen(cfg, bus_kwargs):
+                report = check(cfg, profile, n, move, True, bus_kwargs)
+            report["can_interface"] = cfg.bus.canopen.can_interface
         else:
             report = check(cfg, profile, n, move, False)
     ok = passed(report, move)
@@ -367,7 +412,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _print(r: dict[str, Any]) -> None:
     where = "emulated" if r["emulated"] else "live"
-    print(f"drive check: profile {r['profile']}, {r['bus']} ({where}), {r['axes']} axes")
+    print(
+        f"drive check: profile {r['profile']}, {r['bus']} ({where}), {r['axes']} axes, "
+        f"loop {r['loop']}"
+    )
     print(f"  operational: {'yes' if r['operational'] else 'NO'}")
     print(f"  enabled:     {'yes' if r['enabled'] else 'NO'}")
     print(f"  start-up SDOs written: {r['startup_sdos']}")

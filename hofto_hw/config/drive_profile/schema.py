@@ -58,6 +58,10 @@ CIA402_OBJECTS: dict[int, tuple[str, int]] = {
     0x60B9: ("touch_probe_status", 16),
 }
 FIELD_OBJECTS: dict[str, int] = {name: index for index, (name, _) in CIA402_OBJECTS.items()}
+#: CiA-402 objects at a sub-index other than 0 that carry a process-image field: 0x60C1:01,
+#: X1 of the interpolation data record, is the position target of interpolated position
+#: mode (``modes.loop: ip``; ``drivers.cia402.pdo.EXTRA_FIELDS``)
+SUB_OBJECTS: dict[tuple[int, int], tuple[str, int]] = {(0x60C1, 1): ("target_position", 32)}
 
 #: the objects the stack's loop reads or writes, and the direction (rx: master -> drive)
 LOOP_OBJECTS: dict[str, Literal["rx", "tx"]] = {
@@ -122,6 +126,22 @@ CYCLIC_TARGETS: dict[str, str] = {
     "csp": "target_position",
     "csv": "target_velocity",
     "cst": "target_torque",
+}
+#: the modes the loop can run a drive in, and the process-image field of their target: the
+#: cyclic synchronous ones, and for drives without them interpolated position (ip, target
+#: 0x60C1:01, controlword bit 4) and profile velocity streamed every cycle (pv, target
+#: 0x60FF); with ip and pv the loop still commands positions (drivers/cia402/csp_adapter.py)
+LOOP_TARGETS: dict[str, str] = CYCLIC_TARGETS | {
+    "ip": "target_position",
+    "pv": "target_velocity",
+}
+#: the object that carries the loop mode's target: (index, sub-index)
+LOOP_TARGET_OBJECTS: dict[str, tuple[int, int]] = {
+    "csp": (0x607A, 0),
+    "csv": (0x60FF, 0),
+    "cst": (0x6071, 0),
+    "ip": (0x60C1, 1),
+    "pv": (0x60FF, 0),
 }
 
 #: EtherCAT state transitions a start-up SDO may belong to (ETG.2000 InitCmd ``Transition``;
@@ -191,14 +211,31 @@ class ProfileModes(FileModel):
     supported: list[Mode] = Field(
         min_length=1, description="modes the drive supports (0x6502 or the vendor file)"
     )
-    loop: Literal["csp", "csv", "cst"] = Field(
-        "csp", description="the cyclic synchronous mode the loop runs the drive in"
+    loop: Literal["csp", "csv", "cst", "ip", "pv"] = Field(
+        "csp",
+        description="the mode the loop runs the drive in: a cyclic synchronous one, or for a "
+        "drive without them ip (interpolated position, target 0x60C1:01) or pv (profile "
+        "velocity streamed every cycle, the position loop in the master)",
     )
     set_by: Literal["pdo", "startup"] = Field(
         "pdo",
         description="'pdo': 0x6060 is mapped and written every cycle; 'startup': written once "
         "as a start-up SDO (the drive cannot map it)",
     )
+    position_gain: Annotated[float, Field(gt=0.0, le=1000.0)] | None = Field(
+        None,
+        description="loop pv only: gain [1/s] of the master's position loop over the drive's "
+        "profile velocity mode (velocity command = the target's change per cycle + gain x "
+        "position error); well below the drive's velocity-loop bandwidth",
+    )
+
+    @model_validator(mode="after")
+    def _gain(self) -> ProfileModes:
+        if self.loop == "pv" and self.position_gain is None:
+            raise ValueError("loop pv needs position_gain (the master's position loop [1/s])")
+        if self.loop != "pv" and self.position_gain is not None:
+            raise ValueError(f"position_gain is for loop pv only (loop is {self.loop})")
+        return self
 
 
 class ProfilePdoEntry(FileModel):
@@ -224,6 +261,8 @@ class ProfilePdoEntry(FileModel):
             return self
         found = cia402_object(self.index)
         known = CIA402_OBJECTS.get(found[0]) if found and self.subindex == 0 else None
+        if found and self.subindex:
+            known = SUB_OBJECTS.get((found[0], self.subindex))
         if known is None:
             if self.field is not None:
                 raise ValueError(
@@ -542,7 +581,7 @@ class DriveProfile(FileModel):
                 raise ValueError(
                     f"objects.mapped {sorted(o.mapped)} differs from the PDOs' {sorted(mapped)}"
                 )
-            for name in ALWAYS_NEEDED + (CYCLIC_TARGETS[self.modes.loop],):
+            for name in ALWAYS_NEEDED + (LOOP_TARGETS[self.modes.loop],):
                 if name not in mapped:
                     raise ValueError(
                         f"{name} (0x{FIELD_OBJECTS[name]:04X}) of axis {axis} is not mapped: "
@@ -580,6 +619,30 @@ class DriveProfile(FileModel):
 
     def _check_modes(self) -> None:
         m = self.modes
+        carriers: dict[str, list[tuple[int, int]]] = {}
+        for p in self.rx_pdos:
+            for e in p.entries:
+                if e.field is not None and e.axis == 0:
+                    carriers.setdefault(e.field, []).append((e.index, e.subindex))
+        for name, keys in carriers.items():
+            if len(keys) > 1:
+                raise ValueError(
+                    f"{name} is mapped twice ({', '.join(_hex(*k) for k in keys)}): one object "
+                    "carries it"
+                )
+        target = LOOP_TARGETS[m.loop]
+        want = LOOP_TARGET_OBJECTS[m.loop]
+        got = carriers.get(target, [want])[0]
+        if got != want:
+            raise ValueError(
+                f"modes.loop {m.loop}: its target {target} goes through {_hex(*want)}, the PDOs "
+                f"map {_hex(*got)}"
+            )
+        if m.loop == "ip" and self.startup_value(0x60C2, 1) is None:
+            raise ValueError(
+                "modes.loop ip needs a start-up write of 0x60C2:01 (the interpolation period: "
+                "'loop_period')"
+            )
         if m.loop not in m.supported:
             raise ValueError(
                 f"modes.loop: {m.loop} is not among the drive's modes ({', '.join(m.supported)})"

@@ -1,6 +1,6 @@
 """Every real vendor file of ../shared/data/drives imports with the expected layout facts (or
-is refused in one line: the I/O module, and the two CANopen drives without a cyclic
-synchronous mode)."""
+is refused in one line: the I/O module); the two CANopen drives without a cyclic synchronous
+mode run interpolated position (Technosoft) and streamed profile velocity (Faulhaber)."""
 
 from __future__ import annotations
 
@@ -122,22 +122,74 @@ def test_zeroerr_one_megabit_and_disabled_pdos():
     assert p.fallbacks == {"error_code": "emcy", "digital_inputs": "none"}
 
 
-@pytest.mark.parametrize(
-    ("name", "absent"),
-    [
-        ("faulhaber_MCBL300x-CO.eds", ("0x60B2", "0x603F", "0x6071", "0x6077")),
-        ("technosoft_iPOS.eds", ("0x60B2", "0x603F")),
-    ],
-)
-def test_can_drives_without_cyclic_mode_refused(name, absent):
-    d = read_vendor_description(DATA / name)[0]
+def test_technosoft_runs_interpolated_position():
+    """No csp/csv/cst (0x6502 = 0x001F0065: pp, pv, hm, ip): the loop runs ip, its target
+    through 0x60C1:01, the interpolation period written at start-up."""
+    d = read_vendor_description(DATA / "technosoft_iPOS.eds")[0]
     assert not d.has(0x60B2) and not d.has(0x603F)
+    c = choose(d)
+    p = c.profile
+    assert p.modes.loop == "ip" and p.modes.supported == ["pp", "pv", "hm", "ip"]
+    assert p.modes.position_gain is None
+    rx = [(e.index, e.subindex, e.field) for pdo in p.rx_pdos for e in pdo.entries]
+    assert (0x60C1, 1, "target_position") in rx
+    assert not any(i == 0x607A for i, _, _ in rx)  # 0x607A is pp's target, not ip's
+    assert not any(i == 0x60FF for i, _, _ in rx)  # no other target travels
+    assert p.startup_value(0x60C2, 1) == "loop_period"
+    assert p.startup_value(0x60C2, 2) == -3
+    assert p.startup_value(0x60C0) == 0  # linear interpolation
+    assert p.fallbacks["error_code"] == "emcy" and p.fallbacks["torque_offset"] == "unavailable"
+    assert any(r.startswith("loop: ip") and "0x60C1:01" in r for r in c.reasons)
+    check_profile_against_loop(p, 0.005, "test")  # 5 ms fits 0x60C2's UNSIGNED8 ms
+
+
+def test_faulhaber_runs_streamed_profile_velocity():
+    """pp, pv, hm only (0x6502 = 0x25; 0x6060 limited to 6: no ip): the loop runs pv, the
+    target velocity 0x60FF every SYNC, the master's position loop gain in the profile."""
+    d = read_vendor_description(DATA / "faulhaber_MCBL300x-CO.eds")[0]
+    assert d.objects[(0x6060, 0)].high == 6
+    c = choose(d)
+    p = c.profile
+    assert p.modes.loop == "pv" and p.modes.supported == ["pp", "pv", "hm"]
+    assert p.modes.position_gain == 10.0
+    rx = [e.field for pdo in p.rx_pdos for e in pdo.entries]
+    assert rx == ["controlword", "target_velocity", "mode"]  # 56 bits, 3 of 4 entries
+    assert p.fallbacks["torque"] == "current" and "target_position" in p.objects.sdo
+    assert any(r.startswith("loop: pv") and "0x60FF" in r for r in c.reasons)
+
+
+def test_drive_with_neither_ip_nor_pv_refused_naming_what_is_missing():
+    """A drive whose 0x6502 offers only pp and hm (the Faulhaber file with pv taken out) is
+    refused in one line saying which modes and objects the loop would need."""
+    d = read_vendor_description(DATA / "faulhaber_MCBL300x-CO.eds")[0]
+    d.objects[(0x6502, 0)].default = 0x21  # pp, hm
     with pytest.raises(ProfileImportError) as err:
         choose(d)
     msg = str(err.value)
-    assert "\n" not in msg and "no cyclic synchronous mode" in msg
-    for index in absent:
+    assert "\n" not in msg
+    assert "no cyclic synchronous mode" in msg and "the drive supports pp, hm" in msg
+    assert "nor ip with 0x60C1:01 mappable" in msg and "nor pv with 0x60FF mappable" in msg
+    for index in ("0x60B2", "0x603F", "0x6071", "0x6077"):
         assert index in msg
+
+
+def test_ip_drive_whose_interpolation_period_is_read_only_falls_back_to_pv():
+    d = read_vendor_description(DATA / "technosoft_iPOS.eds")[0]
+    d.objects[(0x60C2, 1)].access = "ro"  # the loop period could not be written
+    p = choose(d).profile
+    assert p.modes.loop == "pv"
+    assert [e.index for pdo in p.rx_pdos for e in pdo.entries][:2] == [0x6040, 0x60FF]
+
+
+@pytest.mark.parametrize("loop", ["ip", "pv"])
+def test_loop_option_picks_ip_or_pv(loop):
+    p = _import("technosoft_iPOS.eds", loop=loop).profile
+    assert p.modes.loop == loop
+
+
+def test_loop_option_refuses_a_mode_the_drive_lacks():
+    with pytest.raises(ProfileImportError, match="--loop ip: the drive supports pp, pv, hm"):
+        _import("faulhaber_MCBL300x-CO.eds", loop="ip")
 
 
 def test_faulhaber_four_entries_per_pdo():
@@ -182,3 +234,22 @@ def test_interpolation_period_written_where_writable():
     assert [s.transition for s in zeroerr.startup] == ["PO", "PO"]
     inovance = _import("inovance_SV660N.xml").profile  # no writable 0x60C2
     assert inovance.startup == []
+
+
+def test_ethercat_drive_with_ip_only_writes_the_ip_target_into_a_configurable_pdo():
+    """None of the ESIs lacks csp; the Inovance file made into an ip-only drive shows the
+    EtherCAT side of the choice: 0x60C1:01 written into the configurable RxPDO, no 0x607A."""
+    from drivers.profiles.description import ObjectInfo
+
+    d = read_vendor_description(DATA / "inovance_SV660N.xml")[0]
+    d.objects[(0x6502, 0)].default = 1 << 6  # ip only
+    d.objects[(0x60C1, 1)] = ObjectInfo(0x60C1, 1, 32, mappable="rx", access="rw")
+    d.objects.setdefault((0x60C2, 1), ObjectInfo(0x60C2, 1, 8, access="rw"))
+    d.objects[(0x60C2, 1)].access = "rw"
+    c = choose(d)
+    p = c.profile
+    assert p.modes.loop == "ip"
+    rx = [(e.index, e.subindex) for pdo in p.rx_pdos for e in pdo.entries]
+    assert (0x60C1, 1) in rx and (0x607A, 0) not in rx
+    assert all(not pdo.fixed for pdo in p.rx_pdos)
+    assert p.startup_value(0x60C2, 1) == "loop_period"

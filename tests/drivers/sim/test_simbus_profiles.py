@@ -72,3 +72,30 @@ def test_a_profile_path_relative_to_the_config_is_found_from_any_folder(
     bus = build_sim_bus(cfg, external=False)
     bus.open()
     assert bus.wire.layouts[0].rx_pdos == (0x1605,)
+
+
+def test_ip_and_pv_drives_on_the_in_process_bus(tmp_path: Path) -> None:
+    """The shipped Technosoft (ip) and Faulhaber (pv) profiles on the sim bus: their CANopen
+    start-up writes (transition PO) are written too (the interpolation period), the group in
+    CSP selects modes 7 / 3, and a CSP step reaches both kinds of drive through the adapter."""
+    import yaml
+
+    root = Path(__file__).resolve().parents[3] / "configs" / "drives"
+    ip = yaml.safe_load((root / "technosoft_ipos.yaml").read_text())
+    pv = yaml.safe_load((root / "faulhaber_mcbl300x.yaml").read_text())
+    cfg, bus = _bus(tmp_path, [ip, pv] * 3)
+    bus.open()
+    assert bus.startup_written == 3 * len(ip["startup"])
+    drives = bus.drives
+    assert drives.ip_period[::2].tolist() == [1] * 3  # 1 kHz: 1 x 1e-3 s
+    g = DriveGroup.from_config(bus, cfg.bus)
+    g.set_mode(Mode.CSP)
+    assert drives.mode_display.tolist() == [7, 3] * 3
+    g.enable()
+    assert (bus.tx["statusword"][::2] & 0x1000).all()  # ip mode active
+    q0 = g.q.copy()
+    for k in range(1500):
+        g.command_position(q0 + 0.05 * min(1.0, k / 400))
+        assert g.cycle() == STATUS_OK
+    np.testing.assert_allclose(g.q - q0, 0.05, atol=5e-3)
+    assert (bus.rx["target_velocity"] == 0).all()  # the loop's record stayed CSP

@@ -1,5 +1,6 @@
 """``hofto-hw drive check``: every shipped drive profile brought up by the real master on
-an emulated bus (EtherCAT on veth as root, CANopen on python-can's virtual bus), enabled,
+an emulated bus (EtherCAT on veth as root, CANopen on python-can's virtual bus, the ip and pv
+profiles once over udp_multicast too), enabled,
 moved 0.05 rad and back; bad input refused in one line."""
 
 from __future__ import annotations
@@ -67,6 +68,19 @@ def test_ethercat_profile_check_emulated(capsys, path: Path) -> None:
     assert report["startup_sdos"] == 6 * len(writes)
 
 
+@pytest.mark.parametrize("name", ["technosoft_ipos", "faulhaber_mcbl300x"])
+def test_ip_and_pv_profiles_checked_over_udp_multicast(capsys, name: str) -> None:
+    """The two drives without a cyclic synchronous mode (loop ip / pv) over UDP multicast:
+    the emulated drives on their own group and port, in this process, no root."""
+    path = ROOT / "configs" / "drives" / f"{name}.yaml"
+    code, report = _check(capsys, str(path), "--emulated", "--can-interface", "udp_multicast")
+    assert report["can_interface"] == "udp_multicast"
+    assert report["loop"] == {"technosoft_ipos": "ip", "faulhaber_mcbl300x": "pv"}[name]
+    _assert_passed(code, report)
+    prof = yaml.safe_load(path.read_text())
+    assert report["startup_sdos"] == 6 * len(prof.get("startup", []))
+
+
 def test_canopen_check_on_fewer_axes_reports_those(capsys) -> None:
     code, report = _check(capsys, str(CANOPEN[0]), "--emulated", "--axes", "2")
     _assert_passed(code, report, axes=2)
@@ -80,6 +94,10 @@ def test_canopen_check_on_fewer_axes_reports_those(capsys) -> None:
         ([str(ETHERCAT[0]) if ETHERCAT else "x", "--interface", "socketcan"], "--channel"),
         ([str(CANOPEN[0]) if CANOPEN else "x", "--emulated", "--axes", "7"], "--axes 7"),
         ([str(CANOPEN[0]) if CANOPEN else "x", "--emulated", "--move", "2"], "--move 2"),
+        (
+            [str(ETHERCAT[0]) if ETHERCAT else "x", "--emulated", "--can-interface", "virtual"],
+            "--can-interface goes with --emulated and a CANopen profile",
+        ),
     ],
 )
 def test_bad_input_is_one_line_exit_2(capsys, argv: list[str], message: str) -> None:

@@ -127,8 +127,8 @@ EXPECTED = {
     "maxon_EPOS4-Micro-24-5_IgH-SII-dump_NOT-VENDOR-ESI.xml": ([], 0, "SII dump"),
     "zeroerr_eRob-eDriver.eds": ([], 0, "bitrates 1000 kbit/s"),
     "itegva_E7x-IO_NEGATIVE.xml": ([], 2, "no CiA-402 drive described"),
-    "faulhaber_MCBL300x-CO.eds": ([], 2, "no cyclic synchronous mode"),
-    "technosoft_iPOS.eds": ([], 2, "no cyclic synchronous mode"),
+    "faulhaber_MCBL300x-CO.eds": ([], 0, "loop: pv (profile velocity, 0x6060 = 3) streamed"),
+    "technosoft_iPOS.eds": ([], 0, "loop: ip (interpolated position, 0x6060 = 7)"),
 }
 
 

@@ -93,10 +93,13 @@ def test_handwritten_profile_loads(tmp_path):
 
 def test_field_names_agree_with_pdo_layout():
     from drivers.cia402.pdo import OBJECT_FIELDS
+    from hofto_hw.config.drive_profile import SUB_OBJECTS
 
     for (index, sub), name in OBJECT_FIELDS.items():
-        assert sub == 0
-        assert CIA402_OBJECTS[index][0] == name
+        if sub == 0:
+            assert CIA402_OBJECTS[index][0] == name
+        else:  # 0x60C1:01, the ip target
+            assert SUB_OBJECTS[(index, sub)][0] == name
 
 
 def test_helpers():
@@ -309,7 +312,51 @@ def test_shipped_profiles_load(path):
     check_profile_against_loop(p, 0.001, str(path))  # every shipped drive runs a 1 kHz loop
 
 
-def test_seven_profiles_are_shipped():
-    # the six vendor drives, and the Elmo ESI's second product (elmo_gold_30925: the sixth
-    # EtherCAT model of configs/er3a_mixed.yaml)
-    assert len(SHIPPED) == 7
+def test_nine_profiles_are_shipped():
+    # the eight vendor drives (Technosoft in ip, Faulhaber in pv), and the Elmo ESI's second
+    # product (elmo_gold_30925: the sixth EtherCAT model of configs/er3a_mixed.yaml)
+    assert len(SHIPPED) == 9
+    loops = {p.stem: load_profile(p).modes.loop for p in SHIPPED}
+    assert loops["technosoft_ipos"] == "ip" and loops["faulhaber_mcbl300x"] == "pv"
+
+
+def _shipped(name: str) -> dict:
+    path = next(p for p in SHIPPED if p.stem == name)
+    return yaml.safe_load(path.read_text())
+
+
+def _invalid(data: dict, expect: str) -> None:
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError) as err:
+        DriveProfile.model_validate(data)
+    assert expect in str(err.value)
+
+
+def test_ip_and_pv_profiles_are_checked():
+    ip, pv = _shipped("technosoft_ipos"), _shipped("faulhaber_mcbl300x")
+    assert DriveProfile.model_validate(ip).modes.loop == "ip"
+    # pv needs its position-loop gain, and only pv takes one
+    bad = copy.deepcopy(pv)
+    del bad["modes"]["position_gain"]
+    _invalid(bad, "loop pv needs position_gain")
+    bad = copy.deepcopy(ip)
+    bad["modes"]["position_gain"] = 10.0
+    _invalid(bad, "position_gain is for loop pv only (loop is ip)")
+    # ip's target is 0x60C1:01, not pp's 0x607A
+    bad = copy.deepcopy(ip)
+    entry = next(e for e in bad["rx_pdos"][0]["entries"] if e["index"] == 0x60C1)
+    entry.update(index=0x607A, subindex=0)
+    _invalid(bad, "modes.loop ip: its target target_position goes through 0x60C1:01")
+    # one object carries a field: 0x607A next to 0x60C1:01 maps the position target twice
+    bad = copy.deepcopy(ip)
+    bad["rx_pdos"].append(
+        {"index": 0x1601, "fixed": False, "entries": [{"index": 0x607A, "bits": 32}]}
+    )
+    bad["canopen"]["rpdo"].append(copy.deepcopy(bad["canopen"]["rpdo"][0]))
+    bad["canopen"]["rpdo"][-1]["cob_id_base"] = 0x300
+    _invalid(bad, "target_position is mapped twice (0x60C1:01, 0x607A:00)")
+    # ip needs the interpolation period written at start-up
+    bad = copy.deepcopy(ip)
+    bad["startup"] = [s for s in bad["startup"] if s["index"] != 0x60C2]
+    _invalid(bad, "modes.loop ip needs a start-up write of 0x60C2:01")

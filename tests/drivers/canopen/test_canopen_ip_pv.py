@@ -1,0 +1,142 @@
+"""Drives without a cyclic synchronous mode on the CANopen master: the shipped Technosoft iPOS
+profile (interpolated position, mode 7) and Faulhaber MCBL 300x profile (profile velocity
+streamed, mode 3) on one virtual bus with the emulator impersonating them. The loop commands
+CSP; the wire carries 0x60C1:01 + controlword bit 4, or a velocity every SYNC."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from support.canopen import CONFIG, unique_channel
+from support.profiles import write_mixed_config
+
+from drivers.cia402.csp_adapter import CW_ENABLE_IP, SW_IP_ACTIVE
+from drivers.cia402.drive_group import DriveGroup, DriveTimeoutError
+from drivers.cia402.state_machine import CW_ENABLE_OPERATION, Mode, State
+from drivers.transport import STATUS_OK
+
+ROOT = Path(__file__).resolve().parents[3]
+TECHNOSOFT = yaml.safe_load((ROOT / "configs/drives/technosoft_ipos.yaml").read_text())
+FAULHABER = yaml.safe_load((ROOT / "configs/drives/faulhaber_mcbl300x.yaml").read_text())
+IP = np.array([True, False] * 3)
+PV = ~IP
+
+
+@pytest.fixture()
+def bus(tmp_path: Path):
+    import can
+
+    from drivers.canopen.master import CANopenTransport
+    from drivers.cia402.profiles import profiles_for
+    from drivers.sim.canopen_node import CanopenDrives
+    from hofto_hw.config.loader import load_config
+    from hofto_hw.runtime.build import build_emulated_drives
+
+    cfg = load_config(write_mixed_config(tmp_path, [TECHNOSOFT, FAULHABER] * 3, base=CONFIG))
+    channel = unique_channel()
+    can_bus = can.Bus(interface="virtual", channel=channel)
+    emu = CanopenDrives(build_emulated_drives(cfg, external=False), can_bus).start()
+    t = CANopenTransport(
+        channel,
+        cfg.bus.drives,
+        cfg.cycle_time,
+        list(cfg.robot.joints),
+        can_interface="virtual",
+        tpdo_deadline=0.05,
+        heartbeat_timeout=0.5,
+        sdo_timeout=2.0,
+        profiles=profiles_for(cfg.bus.drives, "canopen"),
+    )
+    try:
+        yield cfg, t, emu
+    finally:
+        t.close()
+        emu.stop()
+        can_bus.shutdown()
+
+
+def _cycles(g: DriveGroup, k: int, target: np.ndarray | None = None) -> int:
+    """``k`` cycles commanding ``target``; returns how many brought fresh data (a loaded
+    machine may miss a TPDO deadline now and then: the emulator steps once per SYNC anyway)."""
+    fresh = 0
+    for _ in range(k):
+        if target is not None:
+            g.command_position(target)
+        fresh += g.cycle() == STATUS_OK
+        g.transport.wait_next_cycle()
+    return fresh
+
+
+def test_loop_in_csp_drives_run_ip_and_pv(bus) -> None:
+    cfg, t, emu = bus
+    t.open()
+    drives = emu.drives
+    # start-up: the interpolation period is the loop's (200 Hz: 5 x 1e-3 s), linear sub-mode
+    assert cfg.cycle_time == pytest.approx(0.005)
+    assert drives.ip_period[IP].tolist() == [5] * 3
+    assert drives.ip_exponent[IP].tolist() == [-3] * 3
+    assert t.startup_written == 3 * 3
+    g = DriveGroup.from_config(t, cfg.bus)
+    g.set_mode(Mode.CSP)  # the loop asks CSP; each drive gets its own mode
+    assert drives.mode_display.tolist() == [7, 3] * 3
+    accel = [g.scaling.acceleration_to_raw(i, d.quick_stop_deceleration)
+             for i, d in enumerate(cfg.bus.drives)]  # fmt: skip
+    assert drives.profile_accel[PV].tolist() == np.array(accel)[PV].tolist()
+    assert drives.profile_decel[PV].tolist() == np.array(accel)[PV].tolist()
+    g.enable()
+    assert g.all_in(State.OPERATION_ENABLED)
+    # ip acknowledged (statusword bit 12) after controlword bit 4, which the loop never wrote
+    assert ((g.transport.tx["statusword"] & SW_IP_ACTIVE) != 0)[IP].all()
+    assert (drives.rx["controlword"][IP] & CW_ENABLE_IP).all()
+    assert not (drives.rx["controlword"][PV] & CW_ENABLE_IP).any()
+    assert (t.rx["controlword"] == CW_ENABLE_OPERATION).all()
+    # a CSP ramp of 0.05 rad: ip drives take it in 0x60C1:01, pv drives as velocities
+    q0 = g.q.copy()
+    ramp = 80
+    streamed = np.zeros(6)
+    for k in range(1, ramp + 1):
+        _cycles(g, 1, q0 + 0.05 * k / ramp)
+        streamed = np.maximum(streamed, np.abs(drives.rx["target_velocity"]))
+    # the emulated arm at 200 Hz swings about the target for ~2 s as it does with CSP drives
+    # (±5 mrad, the same with the zeroerr_erob CSP profile): 10 % as the drive check
+    assert _cycles(g, 400, q0 + 0.05) > 200
+    np.testing.assert_allclose(g.q - q0, 0.05, atol=5e-3)
+    assert (streamed[PV] > 0).all()  # 0x60FF carried the motion
+    assert (t.rx["target_velocity"] == 0).all()  # the loop's own record stayed CSP
+    np.testing.assert_array_equal(drives.rx["target_position"][IP], t.rx["target_position"][IP])
+    assert (g.transport.tx["statusword"][PV] & 0x1000).all()  # pv at rest: speed zero
+    # a quick stop: bit 4 falls with the command, the drives ramp to rest and switch off
+    g.quick_stop()
+    assert not (drives.rx["controlword"] & CW_ENABLE_IP).any()
+    assert all(s in (State.SWITCH_ON_DISABLED, State.QUICK_STOP_ACTIVE) for s in g.states)
+
+
+def test_ip_drive_without_an_interpolation_period_never_acknowledges(bus) -> None:
+    cfg, t, emu = bus
+    t.open()
+    t.write_value(0, 0x60C2, 1, "u8", 0)  # as if the start-up write had not happened
+    g = DriveGroup.from_config(t, cfg.bus)
+    g.set_mode(Mode.CSP)
+    with pytest.raises(DriveTimeoutError) as err:
+        g.enable()
+    msg = str(err.value)
+    assert msg.startswith("axis 0 (joint_1): interpolated position mode not active")
+    assert "statusword bit 12" in msg and "0x60C2" in msg and "\n" not in msg
+    assert emu.drives.state[0] == State.OPERATION_ENABLED  # enabled, holding, not following
+
+
+def test_emulated_drives_take_only_their_profiles_modes(bus) -> None:
+    """The emulated Faulhaber has no ip (its 0x6060 stops at 6), the Technosoft no CSP: a
+    group that asks them for those modes times out naming the axis and the mode shown."""
+    cfg, t, emu = bus
+    t.open()
+    g = DriveGroup.from_config(t, cfg.bus)
+    with pytest.raises(DriveTimeoutError) as err:
+        g.set_mode(Mode.INTERPOLATED_POSITION)
+    assert "axis 1 (joint_2)" in str(err.value) and "selecting 7" in str(err.value)
+    assert emu.drives.mode_display.tolist() == [7, 0] * 3
+    with pytest.raises(DriveTimeoutError):
+        g.set_mode(Mode.CSV)  # neither drive has a cyclic synchronous mode
