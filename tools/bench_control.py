@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing as mp
 import os
 import socket
 import subprocess
@@ -155,17 +156,29 @@ def _long_path(tmp: Path, seconds: float, home: np.ndarray) -> Path:
     return save_taught_path(rec.path(model), tmp / "long.csv")
 
 
-def _phase(robot: Robot, sock: Path, reader: RingReader, name: str, args, work=None) -> dict:
+def _phase(
+    robot: Robot, sock: Path, reader: RingReader, name: str, args, work=None, thread=None
+) -> dict:
+    """``work``: abusers, each in a process of its own (as a real client is: in a thread of
+    this one it would share the GIL with the stop being timed); ``thread``: a function run
+    in a thread of this process (it returns facts added to the phase's figures)."""
     for _ in reader.read():  # skip to now
         pass
     before = robot.status()["overruns"]
-    done = threading.Event()
-    threads = []
+    ctx = mp.get_context("fork")
+    done = ctx.Event()
+    procs = []
     if work is not None:
         for f in work if isinstance(work, list) else [work]:
-            t = threading.Thread(target=f, args=(sock, done), daemon=True)
-            t.start()
-            threads.append(t)
+            pr_ = ctx.Process(target=f, args=(sock, done), daemon=True)
+            pr_.start()
+            procs.append(pr_)
+    extra: dict = {}
+    threads = []
+    if thread is not None:
+        t = threading.Thread(target=lambda: extra.update(thread(sock, done) or {}), daemon=True)
+        t.start()
+        threads.append(t)
     wake: list[float] = []
     stops: list[float] = []
     end = time.monotonic() + args.seconds
@@ -180,6 +193,10 @@ def _phase(robot: Robot, sock: Path, reader: RingReader, name: str, args, work=N
     done.set()
     for t in threads:
         t.join(timeout=30.0)
+    for pr_ in procs:
+        pr_.join(timeout=30.0)
+        if pr_.is_alive():
+            pr_.kill()
     after = robot.status()["overruns"]
     w = np.array(wake) if wake else np.zeros(1)
     return {
@@ -197,6 +214,7 @@ def _phase(robot: Robot, sock: Path, reader: RingReader, name: str, args, work=N
             "n": len(stops),
         },
         "skipped_by_reader": reader.skipped,
+        **extra,
     }
 
 
@@ -258,13 +276,20 @@ def main() -> int:
             out.append(_phase(robot, sock, reader, "idle", args, _idle))
             file = _long_path(tmp, args.replay_seconds, robot.state().q_cmd)
 
-            def replay(sock_: Path, done: threading.Event) -> None:
+            def replay(sock_: Path, done) -> dict:
+                # planning ends when the replay is answered: the overruns until then (the
+                # planner's CPU) and after (the loop playing the plan) are told apart
                 with Robot.connect(socket=sock_) as r2:
+                    t0, o0 = time.monotonic(), r2.status()["overruns"]
                     r2.replay(file, wait=False)
+                    t1, o1 = time.monotonic(), r2.status()["overruns"]
                     done.wait()
+                    o2 = r2.status()["overruns"]
                     r2._call({"cmd": "cancel"})
+                return {"planning_s": round(t1 - t0, 2), "overruns_planning": o1 - o0,
+                        "overruns_playing": o2 - o1}  # fmt: skip
 
-            out.append(_phase(robot, sock, reader, "replay_300s", args, replay))
+            out.append(_phase(robot, sock, reader, "replay_300s", args, thread=replay))
             out.append(_phase(robot, sock, reader, "quiet_end", args))  # the machine's noise
             reader.close()
     finally:
@@ -282,6 +307,11 @@ def main() -> int:
                 f"median {w['median']:.0f} p99 {w['p99']:.0f} max {w['max']:.0f} µs; stop "
                 f"answered median {s['median']} ms, max {s['max']} ms (n={s['n']})"
             )
+            if "planning_s" in p:
+                print(
+                    f"{'':12s} planned in {p['planning_s']} s: {p['overruns_planning']} missed "
+                    f"while planning, {p['overruns_playing']} while playing"
+                )
     return 0
 
 

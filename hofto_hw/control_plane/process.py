@@ -16,6 +16,7 @@ of the loop's process: for tests and tools that drive a sim-clock loop themselve
 
 from __future__ import annotations
 
+import gc
 import os
 import pickle
 import signal
@@ -206,10 +207,20 @@ class InProcessControl:
         self.chan.close()
 
 
+#: the control plane's nice value: ahead of its clients and the planner (nice 0 and
+#: PLANNER_NICE) for CPU, behind the loop (SCHED_FIFO); kept at 0 where not permitted
+SERVER_NICE = -5
+
+
 def _drop_realtime() -> None:
+    """SCHED_OTHER at SERVER_NICE (the loop's SCHED_FIFO is not inherited)."""
     try:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except (AttributeError, OSError):
+        pass
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, SERVER_NICE)
+    except (AttributeError, OSError):  # unprivileged: the nice value it was started with
         pass
 
 
@@ -254,6 +265,11 @@ def main() -> int:
     server = ControlPlane(
         listener, chan, cfg, model, observer_names=observers, log_path=log_path, recorder=recorder
     )
+    # what is built by now (config, model, imports: most of the heap) lives until exit: out
+    # of the collector's sight, so a full collection during a flood of requests walks only
+    # the objects made since (tens of ms less on a stop's answer)
+    gc.collect()
+    gc.freeze()
     sup = None
     if notify:
         from hofto_hw.runtime.service import Supervisor
