@@ -52,7 +52,7 @@ READ_CHUNK = 8192  # [bytes] read per connection per turn: a flood's turn stays 
 TURN_BUDGET = 32  # request lines handled per turn over all connections
 STATUS_CACHE_S = 0.02  # a status is built at most every 20 ms (a flood asks it back to back)
 PLAN_CHUNK = 4096  # rows per message from the planner process
-PLANNER_NICE = 10  # the planner's nice value (see _plan_child)
+PLANNER_NICE = 5  # the planner's nice value: behind the control plane and its clients
 MAX_PENDING_OUT = 1 << 20
 LOOP_ANSWER_TIMEOUT = 5.0  # [s] the loop answers a request within a few ticks
 _MODE_CODE = {"hold": HOLD, "move": MOVE, "drag": DRAG}
@@ -1156,7 +1156,7 @@ def _plan_child(conn, parent_end, cmd, file, target, q_now, model, limits, dt) -
                 pass
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     _die_with_parent()
-    try:  # behind the control plane (SERVER_NICE) and its clients for CPU
+    try:  # behind the control plane and its clients for CPU
         os.setpriority(os.PRIO_PROCESS, 0, PLANNER_NICE)
     except OSError:
         pass
