@@ -1,16 +1,19 @@
 """The loop's timing while clients abuse the control socket, and how fast ``stop`` is answered.
 
     .venv/bin/python tools/bench_control.py [--seconds 10] [--stops 20] [--replay-seconds 300]
-                                            [--json]
+                                            [--phases quiet,flood,...] [--json]
 
 Starts ``hofto-hw run --clock real --socket S`` (simulated bus, hold, no scripted collision,
 ``safety.overrun_streak`` raised to 100000 so that nothing latches and every phase runs) and
 measures phase by phase: ``quiet`` (nobody but this script), ``flood`` (a client sending
 status requests without reading the replies, reconnecting when closed), ``line_10mb`` (a
 client sending 10 MB lines without a newline, again and again), ``trickle`` (eight clients
-sending one byte every 0.2 s), ``idle`` (20 idle connections, more than allowed),
-``replay_300s`` (a 300 s taught path planned and then played), ``quiet_end`` (quiet again:
-on a shared machine the two quiet phases show what the machine's own noise is). Per phase:
+sending one byte every 0.2 s), ``idle`` (20 idle connections, more than allowed), each
+abuser a process of its own (in a thread of this one it would hold up the stop being timed
+on this one's GIL), ``replay`` (a ``--replay-seconds`` taught path planned, then played for
+``--seconds``: missed deadlines while planning and while playing apart; no stop is timed
+while planning, one at the end), ``quiet_end`` (quiet again: on a shared machine the two
+quiet phases show what the machine's own noise is). Per phase:
 the loop's missed deadlines (the status' ``overruns`` difference), the wake-up latency
 median / p99 / max [µs] of every tick of the phase (read from the flight recorder's ring,
 read-only), and the time [ms] from sending ``stop`` on a new connection to its answer
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing as mp
 import os
 import socket
 import subprocess
@@ -46,6 +50,7 @@ from hofto_hw.control_plane import protocol as pr  # noqa: E402
 from hofto_hw.model.robot import RobotModel  # noqa: E402
 
 CONFIG = ROOT / "configs" / "er3a.yaml"
+PHASES = ("quiet", "flood", "line_10mb", "trickle", "idle", "replay", "quiet_end")
 
 
 def _config(tmp: Path) -> Path:
@@ -72,7 +77,12 @@ def _start(tmp: Path) -> tuple[subprocess.Popen, Path]:
     for line in proc.stderr:
         if line.startswith("hofto-hw run: running"):
             break
-    threading.Thread(target=proc.stderr.read, daemon=True).start()
+
+    def forward() -> None:  # the service's own lines (a refusal, a fault) to ours
+        for line in proc.stderr:  # type: ignore[union-attr]
+            sys.stderr.write("service: " + line)
+
+    threading.Thread(target=forward, daemon=True).start()
     return proc, sock
 
 
@@ -156,16 +166,19 @@ def _long_path(tmp: Path, seconds: float, home: np.ndarray) -> Path:
 
 
 def _phase(robot: Robot, sock: Path, reader: RingReader, name: str, args, work=None) -> dict:
+    """``work``: abusers, each in a process of its own (as a real client is: in a thread of
+    this one it would share the GIL with the stop being timed)."""
     for _ in reader.read():  # skip to now
         pass
     before = robot.status()["overruns"]
-    done = threading.Event()
-    threads = []
+    ctx = mp.get_context("fork")
+    done = ctx.Event()
+    procs = []
     if work is not None:
         for f in work if isinstance(work, list) else [work]:
-            t = threading.Thread(target=f, args=(sock, done), daemon=True)
-            t.start()
-            threads.append(t)
+            pr_ = ctx.Process(target=f, args=(sock, done), daemon=True)
+            pr_.start()
+            procs.append(pr_)
     wake: list[float] = []
     stops: list[float] = []
     end = time.monotonic() + args.seconds
@@ -178,8 +191,10 @@ def _phase(robot: Robot, sock: Path, reader: RingReader, name: str, args, work=N
         time.sleep(0.05)
     wake.extend(float(r["wakeup_us"]) for r, _ in reader.read())
     done.set()
-    for t in threads:
-        t.join(timeout=30.0)
+    for pr_ in procs:
+        pr_.join(timeout=30.0)
+        if pr_.is_alive():
+            pr_.kill()
     after = robot.status()["overruns"]
     w = np.array(wake) if wake else np.zeros(1)
     return {
@@ -197,6 +212,64 @@ def _phase(robot: Robot, sock: Path, reader: RingReader, name: str, args, work=N
             "n": len(stops),
         },
         "skipped_by_reader": reader.skipped,
+    }
+
+
+def _replay_phase(robot: Robot, sock: Path, reader: RingReader, tmp: Path, args) -> dict:
+    """A ``--replay-seconds`` taught path planned (no stop timed meanwhile: a stop moves the
+    hold, and the plan made from it is refused) and then played for ``--seconds``; one
+    stop timed at the end (it ends the replay). The missed deadlines while planning (the
+    planner's CPU beside the loop) and while playing (the loop following the plan, the
+    control plane streaming it) are told apart."""
+    for _ in range(100):  # a log_failure of an earlier phase (a loaded machine) is reset
+        if not robot.state().faults:
+            break
+        try:
+            robot.reset()
+        except Refused:
+            time.sleep(0.1)
+    file = _long_path(tmp, args.replay_seconds, robot.state().q_cmd)
+    for _ in reader.read():  # skip to now
+        pass
+    wake: list[float] = []
+    got: dict = {}
+
+    def plan() -> None:
+        with Robot.connect(socket=sock) as r2:
+            got["message"] = r2.replay(file, wait=False).message
+
+    o0, t0 = robot.status()["overruns"], time.monotonic()
+    t = threading.Thread(target=plan, daemon=True)
+    t.start()
+    while t.is_alive():
+        wake.extend(float(r["wakeup_us"]) for r, _ in reader.read())
+        time.sleep(0.05)
+    o1, t1 = robot.status()["overruns"], time.monotonic()
+    if "message" not in got:  # refused (a fault latched on a loaded machine): said, not fatal
+        return {"phase": "replay", "error": "the replay was refused (see the service's output)"}
+    end = t1 + args.seconds
+    while time.monotonic() < end:
+        wake.extend(float(r["wakeup_us"]) for r, _ in reader.read())
+        time.sleep(0.05)
+    wake.extend(float(r["wakeup_us"]) for r, _ in reader.read())
+    o2 = robot.status()["overruns"]
+    stop = _stop_latency(robot, sock)
+    w = np.array(wake) if wake else np.zeros(1)
+    return {
+        "phase": "replay",
+        "ticks": len(wake),
+        "overruns": int(o2 - o0),
+        "wakeup_us": {
+            "median": round(float(np.median(w)), 1),
+            "p99": round(float(np.percentile(w, 99)), 1),
+            "max": round(float(w.max()), 1),
+        },
+        "stop_ms": {"median": round(stop, 2), "max": round(stop, 2), "n": 1},
+        "skipped_by_reader": reader.skipped,
+        "path_s": args.replay_seconds,
+        "planning_s": round(t1 - t0, 2),
+        "overruns_planning": int(o1 - o0),
+        "overruns_playing": int(o2 - o1),
     }
 
 
@@ -239,8 +312,14 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=10.0, help="per phase")
     ap.add_argument("--stops", type=int, default=20, help="stops timed per phase")
     ap.add_argument("--replay-seconds", type=float, default=300.0, help="taught path length")
+    ap.add_argument(
+        "--phases", default=",".join(PHASES), help="comma-separated, of " + ",".join(PHASES)
+    )
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
+    phases = args.phases.split(",")
+    if not set(phases) <= set(PHASES):
+        ap.error(f"--phases: {args.phases!r}: each one of {','.join(PHASES)}")
     poll = poll_cost()
     tmp = Path(tempfile.mkdtemp(prefix="bench-control-"))
     proc, sock = _start(tmp)
@@ -251,21 +330,19 @@ def main() -> int:
                 time.sleep(0.05)
             info = robot._call({"cmd": "stream_info"})
             reader = RingReader(info["shm"], info["caps"][0], robot.n, robot.info["observers"])
-            out.append(_phase(robot, sock, reader, "quiet", args))
-            out.append(_phase(robot, sock, reader, "flood", args, _flood))
-            out.append(_phase(robot, sock, reader, "line_10mb", args, _big))
-            out.append(_phase(robot, sock, reader, "trickle", args, [_trickle] * 8))
-            out.append(_phase(robot, sock, reader, "idle", args, _idle))
-            file = _long_path(tmp, args.replay_seconds, robot.state().q_cmd)
-
-            def replay(sock_: Path, done: threading.Event) -> None:
-                with Robot.connect(socket=sock_) as r2:
-                    r2.replay(file, wait=False)
-                    done.wait()
-                    r2._call({"cmd": "cancel"})
-
-            out.append(_phase(robot, sock, reader, "replay_300s", args, replay))
-            out.append(_phase(robot, sock, reader, "quiet_end", args))  # the machine's noise
+            for name, work in (
+                ("quiet", None),
+                ("flood", _flood),
+                ("line_10mb", _big),
+                ("trickle", [_trickle] * 8),
+                ("idle", _idle),
+            ):
+                if name in phases:
+                    out.append(_phase(robot, sock, reader, name, args, work))
+            if "replay" in phases:
+                out.append(_replay_phase(robot, sock, reader, tmp, args))
+            if "quiet_end" in phases:  # the machine's noise
+                out.append(_phase(robot, sock, reader, "quiet_end", args))
             reader.close()
     finally:
         proc.terminate()
@@ -276,12 +353,20 @@ def main() -> int:
         print(f"LoopPort.poll (sim clock, nothing pending): median {poll['median_us']} µs, "
               f"p99 {poll['p99_us']} µs")  # fmt: skip
         for p in out:
+            if "error" in p:
+                print(f"{p['phase']:12s} {p['error']}")
+                continue
             w, s = p["wakeup_us"], p["stop_ms"]
             print(
                 f"{p['phase']:12s} {p['ticks']:6d} ticks, {p['overruns']:4d} missed, wake-up "
                 f"median {w['median']:.0f} p99 {w['p99']:.0f} max {w['max']:.0f} µs; stop "
                 f"answered median {s['median']} ms, max {s['max']} ms (n={s['n']})"
             )
+            if "planning_s" in p:
+                print(
+                    f"{'':12s} planned in {p['planning_s']} s: {p['overruns_planning']} missed "
+                    f"while planning, {p['overruns_playing']} while playing"
+                )
     return 0
 
 

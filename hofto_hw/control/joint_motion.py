@@ -6,7 +6,7 @@ quintic fade-in over ``ramp`` seconds, so the path starts at rest at q0 and move
 ``move`` (follow the demo path from where the arm is), ``play`` (a precomputed jerk-limited
 trajectory: a taught-path replay or a move to a joint target, planned outside the tick by
 hofto_hw.control.path_timing), and a ramp to standstill at the acceleration limits (used for
-mode changes to hold and for stop category 2).
+mode changes to hold and for stop category 2), or at a starved streamed plan's own limits.
 
 Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick. ``JointMotion.version``
 changes whenever the reference (q, qd, qdd) may have changed: the tick's feed-forward, a
@@ -158,6 +158,9 @@ class JointMotion:
         self.player: TrajectoryPlayer | None = None
         self._step = np.zeros(n)
         self._sign = np.zeros(n)
+        #: the deceleration [rad/s²] (n,) of the ramp to standstill (see ramp_down)
+        self.ramp_accel = self.accel.copy()
+        self._play_accel = self.accel.copy()  # the playing plan's limits (see play)
         #: bumped whenever q, qd or qdd may have changed (see the class docstring)
         self.version = 0
         self._still = True  # qd and qdd hold +0.0: a hold's update has nothing to write
@@ -201,12 +204,21 @@ class JointMotion:
             return False
         self.player = player
         self.mode = mode
+        acc = getattr(player, "accel", None)  # a streamed plan's own acceleration limits
+        np.copyto(self._play_accel, self.accel if acc is None else acc)
         return True
 
-    def ramp_down(self) -> None:
-        """Decelerate at the acceleration limits to standstill, then hold."""
-        if self.mode != HOLD:
-            self.mode = RAMP_DOWN
+    def ramp_down(self, accel: np.ndarray | None = None) -> None:
+        """Decelerate to standstill, then hold: at the acceleration limits (a mode change,
+        stop category 2), or at ``accel`` [rad/s²] (n,) where lower (a starved plan: its own
+        limits, which its motion was planned within)."""
+        if self.mode == HOLD:
+            return
+        if accel is None:
+            np.copyto(self.ramp_accel, self.accel)
+        else:
+            np.fmin(accel, self.accel, out=self.ramp_accel)  # fmin: a NaN is no limit
+        self.mode = RAMP_DOWN
 
     def update(self, t: float, dt: float) -> None:
         """Advance the reference to time ``t`` [s] (``dt`` [s] since the last update)."""
@@ -226,27 +238,33 @@ class JointMotion:
             assert self.player is not None
             r = self.player.step(self.q, self.qd, self.qdd)
             if r == 2:  # a streamed plan's next row is not there yet: decelerate, hold
-                self.mode = RAMP_DOWN
+                self.ramp_down(self._play_accel)
+                self._ramp(dt)  # from this tick on: a reference standing still for a tick
+                # at speed is a following error the position loop answers with a torque kick
             elif r:
                 self.mode = HOLD  # the last sample is at rest: hold it
         elif self.mode == RAMP_DOWN:
-            if self._use_kernel:
-                if ramp_step(self.accel, dt, self.q, self.qd, self.qdd):
-                    self.mode = HOLD
-                return
-            step, sign = self._step, self._sign
-            np.multiply(self.accel, dt, out=step)
-            np.abs(self.qd, out=sign)
-            np.minimum(step, sign, out=step)
-            np.sign(self.qd, out=sign)
-            step *= sign
-            self.qd -= step
-            np.multiply(step, -1.0 / dt, out=self.qdd)
-            np.multiply(self.qd, dt, out=step)
-            self.q += step
-            if not self.qd.any():
-                self.mode = HOLD
-                self.qdd.fill(0.0)
+            self._ramp(dt)
         else:  # DRAG: the reference is the drag controller's (see follow)
             self.qd.fill(0.0)
+            self.qdd.fill(0.0)
+
+    def _ramp(self, dt: float) -> None:
+        """One tick of the ramp to standstill at ``ramp_accel``; then hold."""
+        if self._use_kernel:
+            if ramp_step(self.ramp_accel, dt, self.q, self.qd, self.qdd):
+                self.mode = HOLD
+            return
+        step, sign = self._step, self._sign
+        np.multiply(self.ramp_accel, dt, out=step)
+        np.abs(self.qd, out=sign)
+        np.minimum(step, sign, out=step)
+        np.sign(self.qd, out=sign)
+        step *= sign
+        self.qd -= step
+        np.multiply(step, -1.0 / dt, out=self.qdd)
+        np.multiply(self.qd, dt, out=step)
+        self.q += step
+        if not self.qd.any():
+            self.mode = HOLD
             self.qdd.fill(0.0)

@@ -1,4 +1,5 @@
-"""The shared-memory segment between the loop and the control-plane process.
+"""The shared-memory segment between the loop and the control-plane process (created,
+reserved, named and cleaned up by hofto_hw.recording.shared.Segment, as the recorder's).
 
 Every word, ring counter and slot has exactly one writer, so neither side locks or waits:
 
@@ -15,7 +16,9 @@ Every word, ring counter and slot has exactly one writer, so neither side locks 
   ``taught`` (loop -> control plane): (t, q) samples of a taught path being recorded.
 - the plan: ``plan_q``, ``plan_qd``, ``plan_qdd`` (``PLAN_CAP`` rows of n) filled by the
   control plane ahead of the loop (row r in slot r mod PLAN_CAP, published by ``PLAN_HEAD``,
-  released by ``PLAN_TAIL``), ``plan_start`` (n): the plan's first row.
+  released by ``PLAN_TAIL``), ``plan_start`` (n): the plan's first row, ``plan_accel`` (n):
+  the acceleration limits [rad/s²] it was planned within (a starved plan ramps down at
+  them).
 - the state slot (a seqlock: ``STATE_SEQ`` odd while the loop writes it): the tick record of
   the last tick and ``extra`` (float64 words ``X_*``).
 - ``wakeup_counts``, ``compute_counts``: the loop's timing histograms (1 µs bins,
@@ -24,13 +27,11 @@ Every word, ring counter and slot has exactly one writer, so neither side locks 
 
 from __future__ import annotations
 
-from multiprocessing import shared_memory
-
 import numpy as np
 
 from hofto_hw.recording.record import EVENT_DTYPE, tick_dtype
 from hofto_hw.recording.ring import Ring, ring_nbytes
-from hofto_hw.recording.shared import _attach
+from hofto_hw.recording.shared import Segment, remove_stale
 
 CTL_WORDS = 64
 (STOP_SEQ, STOP_ACK, LEASE_NS, PLAN_ID, PLAN_ROWS, PLAN_HEAD, PLAN_TAIL_ID, PLAN_TAIL,
@@ -96,19 +97,25 @@ class Channel:
             ("plan_qd", PLAN_CAP * n * 8),
             ("plan_qdd", PLAN_CAP * n * 8),
             ("plan_start", n * 8),
+            ("plan_accel", n * 8),
             ("state_rec", _round8(self.rec_dtype.itemsize)),
             ("extra", X_WORDS * 8),
             ("wakeup_counts", HIST_BINS * 8),
             ("compute_counts", HIST_BINS * 8),
         ]
         total = sum(s for _, s in sizes)
-        self.shm = (
-            shared_memory.SharedMemory(create=True, size=total) if create else _attach(name or "")
+        if create:
+            remove_stale()  # segments of killed runs (a run with --no-log starts no recorder)
+        self.segment = Segment(
+            total,
+            name=name,
+            create=create,
+            what="the control plane's shared memory",
+            hint="free space there",
         )
+        self.shm = self.segment.shm
         self.owner = create
         buf = self.shm.buf
-        if create:
-            np.ndarray((total,), dtype=np.uint8, buffer=buf)[:] = 0  # every page now
         off = {}
         o = 0
         for key, size in sizes:
@@ -124,6 +131,9 @@ class Channel:
         self.plan_qd = np.ndarray((PLAN_CAP, n), "<f8", buf, off["plan_qd"])
         self.plan_qdd = np.ndarray((PLAN_CAP, n), "<f8", buf, off["plan_qdd"])
         self.plan_start = np.ndarray((n,), "<f8", buf, off["plan_start"])
+        self.plan_accel = np.ndarray((n,), "<f8", buf, off["plan_accel"])
+        if create:
+            self.plan_accel[:] = np.inf  # until a plan says: the robot's limits
         self.state_rec = np.ndarray((), self.rec_dtype, buf, off["state_rec"])
         self.extra = np.ndarray((X_WORDS,), "<f8", buf, off["extra"])
         self.wakeup_counts = np.ndarray((HIST_BINS,), "<i8", buf, off["wakeup_counts"])
@@ -169,17 +179,9 @@ class Channel:
     def close(self) -> None:
         """Drop this side's views; the creator also unlinks the segment."""
         for attr in list(self.__dict__):
-            if attr not in ("shm", "owner", "n", "k", "rec_dtype"):
+            if attr not in ("segment", "shm", "owner", "n", "k", "rec_dtype"):
                 self.__dict__.pop(attr, None)
-        try:
-            self.shm.close()
-        except BufferError:  # a caller still holds a view: leave the mapping to exit
-            pass
-        if self.owner:
-            try:
-                self.shm.unlink()
-            except FileNotFoundError:
-                pass
+        self.segment.close()
 
 
 def _round8(n: int) -> int:

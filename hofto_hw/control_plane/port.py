@@ -42,6 +42,9 @@ class StreamPlayer:
         self.k = 0
         self.rows = 0
         self.mask = ch.PLAN_CAP - 1
+        #: the plan's acceleration limits [rad/s²]: a starved plan ramps down at them
+        #: (JointMotion.play reads it), never steeper than the motion it interrupts
+        self.accel = chan.plan_accel
 
     def begin(self, rows: int) -> None:
         self.k = 0

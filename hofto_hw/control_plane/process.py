@@ -16,6 +16,7 @@ of the loop's process: for tests and tools that drive a sim-clock loop themselve
 
 from __future__ import annotations
 
+import gc
 import os
 import pickle
 import signal
@@ -207,6 +208,10 @@ class InProcessControl:
 
 
 def _drop_realtime() -> None:
+    """SCHED_OTHER (the loop's SCHED_FIFO is not inherited), at the nice value it was
+    started with: not ahead of the flight recorder's writer (nice 5), whose records the
+    safety checks watch, nor of its clients (a bench run with it at nice -5, flooded, on a
+    machine at load 17, dropped 54,372 records and latched log_failure)."""
     try:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except (AttributeError, OSError):
@@ -254,6 +259,11 @@ def main() -> int:
     server = ControlPlane(
         listener, chan, cfg, model, observer_names=observers, log_path=log_path, recorder=recorder
     )
+    # what is built by now (config, model, imports: most of the heap) lives until exit: out
+    # of the collector's sight, so a full collection during a flood of requests walks only
+    # the objects made since (tens of ms less on a stop's answer)
+    gc.collect()
+    gc.freeze()
     sup = None
     if notify:
         from hofto_hw.runtime.service import Supervisor

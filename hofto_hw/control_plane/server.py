@@ -48,9 +48,11 @@ from hofto_hw.runtime.timing import percentile_of, summarize
 from safety.stop import EVENT_NAMES, FAULT_NAMES, N_FAULTS
 
 LINES_PER_TURN = 8
+READ_CHUNK = 8192  # [bytes] read per connection per turn: a flood's turn stays short
 TURN_BUDGET = 32  # request lines handled per turn over all connections
 STATUS_CACHE_S = 0.02  # a status is built at most every 20 ms (a flood asks it back to back)
 PLAN_CHUNK = 4096  # rows per message from the planner process
+PLANNER_NICE = 5  # the planner's nice value: behind the control plane and its clients
 MAX_PENDING_OUT = 1 << 20
 LOOP_ANSWER_TIMEOUT = 5.0  # [s] the loop answers a request within a few ticks
 _MODE_CODE = {"hold": HOLD, "move": MOVE, "drag": DRAG}
@@ -138,6 +140,7 @@ class ControlPlane:
         # planning (a forked process: Planner) and the plan being streamed
         self._planner: Planner | None = None
         self._planner_for: tuple[Conn, dict[str, Any]] | None = None
+        self._plan_accel: Any = None
         self._planning = False
         self.plan_id = 0
         self.plan_traj: Any = None
@@ -171,13 +174,18 @@ class ControlPlane:
     def turn(self, timeout: float) -> None:
         """One turn: socket I/O, stops first, other lines, the loop's replies, streaming."""
         now = time.monotonic()
-        for key, mask in self.sel.select(timeout):
+        ready = self.sel.select(timeout)
+        for key, _ in ready:  # new connections first: an operator's stop comes on one
             if key.data is None:
-                self._accept(now)
-                continue
-            if key.data == "planner":
-                continue  # read in _planned, one message a turn
+                for _ in range(8):  # a burst of connections: up to 8 a turn
+                    if not self._accept(now):
+                        break
+        for key, mask in ready:
+            if key.data is None or key.data == "planner":
+                continue  # the planner's pipe is read in _planned, one message a turn
             c: Conn = key.data
+            if c.closing:
+                continue
             if mask & selectors.EVENT_READ:
                 self._read(c, now)
             if mask & selectors.EVENT_WRITE and not c.closing:
@@ -206,13 +214,14 @@ class ControlPlane:
 
     # ------------------------------------------------------------------ sockets
 
-    def _accept(self, now: float) -> None:
+    def _accept(self, now: float) -> bool:
+        """Accept one pending connection; False when none was pending."""
         try:
             sock, _ = self.listener.accept()  # type: ignore[union-attr]
         except (BlockingIOError, InterruptedError):
-            return
+            return False
         except OSError:
-            return
+            return False
         sock.setblocking(False)
         c = Conn(sock, self._next_ident, now, last=now)
         self._next_ident += 1
@@ -222,15 +231,32 @@ class ControlPlane:
         except OSError:
             pass
         if len(self.conns) >= self.max_clients and not self._evict_idle():
-            try:
-                msg = f"too many clients ({self.max_clients}), none idle"
-                sock.send(pr.dumps({"ok": False, "message": msg}))
-            except OSError:
-                pass
-            sock.close()
-            return
+            self._full(c)
+            return True
         self.conns[c.ident] = c
         self.sel.register(sock, selectors.EVENT_READ, c)
+        self._read(c, now)  # its first line (a stop?) may be here already: no select round
+        return True
+
+    def _full(self, c: Conn) -> None:
+        """No room for ``c`` (every connection busy): a stop already sent on it is still
+        served; anything else is answered "too many clients" and the connection closed."""
+        try:
+            data = c.sock.recv(READ_CHUNK)
+        except OSError:
+            data = b""
+        for raw in data.split(b"\n")[:-1]:
+            if b'"stop"' in raw and self._stop_line(c, raw):
+                break
+        else:
+            msg = f"too many clients ({self.max_clients}), none idle"
+            c.outbuf += pr.dumps({"ok": False, "message": msg})
+        try:
+            c.sock.send(c.outbuf)
+        except OSError:
+            pass
+        c.closing = True
+        c.sock.close()
 
     def _evict_idle(self) -> bool:
         """At ``max_clients``: close an idle connection (not the holder, nothing in
@@ -247,7 +273,7 @@ class ControlPlane:
 
     def _read(self, c: Conn, now: float) -> None:
         try:
-            data = c.sock.recv(65536)
+            data = c.sock.recv(READ_CHUNK)
         except (BlockingIOError, InterruptedError):
             return
         except OSError:
@@ -639,6 +665,7 @@ class ControlPlane:
         target = q if cmd in ("move_joints", "move_linear") else None
         self._planner = Planner(cmd, req.get("file"), target, q_now, self.model, limits, dt)
         self._planner_for = (c, req)
+        self._plan_accel = limits.acceleration
         self.sel.register(self._planner.conn, selectors.EVENT_READ, "planner")
 
     def _joint_target(self, values: list[Any]) -> np.ndarray:
@@ -677,6 +704,7 @@ class ControlPlane:
             traj = pb.traj
             ctl[ch.PLAN_HEAD] = 0
             self.chan.plan_start[:] = traj.q[0]
+            self.chan.plan_accel[:] = self._plan_accel
             ctl[ch.PLAN_ROWS] = traj.q.shape[0]
             self.plan_traj = traj
             self.plan_written = 0
@@ -1128,8 +1156,8 @@ def _plan_child(conn, parent_end, cmd, file, target, q_now, model, limits, dt) -
                 pass
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     _die_with_parent()
-    try:
-        os.nice(5)
+    try:  # behind the control plane and its clients for CPU
+        os.setpriority(os.PRIO_PROCESS, 0, PLANNER_NICE)
     except OSError:
         pass
     try:

@@ -71,16 +71,11 @@ class SharedBlock:
             ring_nbytes(DIAG_DTYPE, caps.diag),
         ]
         total = CONTROL_BYTES + sum(sizes)
-        if create:
-            self.shm = _create(total)
-        else:
-            self.shm = _attach(name or "")
+        self.segment = Segment(total, name=name, create=create)
+        self.shm = self.segment.shm
         self.owner = create
         buf = self.shm.buf
         self.control = np.ndarray((CONTROL_BYTES // 8,), dtype="<u8", buffer=buf)
-        if create:
-            # touch every page now: the loop's first pushes must not page-fault
-            np.ndarray((total,), dtype=np.uint8, buffer=buf)[:] = 0
         off = CONTROL_BYTES
         self.ticks = Ring(buf, off, tick_dtype, caps.tick, init=create)
         off += sizes[0]
@@ -96,9 +91,44 @@ class SharedBlock:
         """Drop this side's views; the creator also unlinks the segment."""
         for attr in ("control", "ticks", "events", "diags"):
             self.__dict__.pop(attr, None)
+        self.segment.close()
+
+
+class Segment:
+    """One shared-memory segment of ``size`` bytes, the one implementation of its life:
+    ``create=True`` checks the free space, names it after this process, reserves its pages
+    (``posix_fallocate``) and touches every one (the loop's first writes must not
+    page-fault), and :meth:`close` unlinks it; else it attaches to ``name`` untracked.
+    ``what`` names the segment in the one-line refusal, ``hint`` says what to do."""
+
+    def __init__(
+        self,
+        size: int,
+        *,
+        name: str | None = None,
+        create: bool = False,
+        what: str = "the flight recorder's shared memory",
+        hint: str = "free space there, or run with --no-log",
+    ) -> None:
+        self.shm = _create(size, what, hint) if create else _attach(name or "")
+        self.owner = create
+        if create:
+            np.ndarray((size,), dtype=np.uint8, buffer=self.shm.buf)[:] = 0  # every page now
+
+    @property
+    def name(self) -> str:
+        return self.shm.name
+
+    @property
+    def buf(self) -> memoryview:
+        return self.shm.buf  # type: ignore[return-value]
+
+    def close(self) -> None:
+        """Unmap (the creator also unlinks). A view some caller still holds keeps the
+        mapping until exit instead of raising."""
         try:
             self.shm.close()
-        except BufferError:  # a caller still holds a view: leave the mapping to exit
+        except BufferError:
             pass
         if self.owner:
             try:
@@ -107,24 +137,20 @@ class SharedBlock:
                 pass
 
 
-def _create(size: int) -> shared_memory.SharedMemory:
+def _create(size: int, what: str, hint: str) -> shared_memory.SharedMemory:
     """A new segment of ``size`` bytes named after this process, its pages reserved now.
 
-    Raises UserError (one line naming /dev/shm and the size) when /dev/shm has not the room:
-    checked with statvfs first, then ``posix_fallocate`` (ENOSPC here, not a SIGBUS later
-    when a page is first touched)."""
+    Raises UserError (one line naming /dev/shm, ``what`` and the size) when /dev/shm has not
+    the room: checked with statvfs first, then ``posix_fallocate`` (ENOSPC here, not a SIGBUS
+    later when a page is first touched)."""
     need = f"{size / 1e6:.2f} MB ({size} bytes)"
-    hint = "free space there, or run with --no-log"
     try:
         st = os.statvfs(SHM_DIR)
     except OSError as exc:
         raise UserError(f"{SHM_DIR}: cannot use POSIX shared memory: {exc.strerror}") from None
     free = st.f_bavail * st.f_frsize
     if free < size:
-        raise UserError(
-            f"{SHM_DIR}: {free / 1e6:.2f} MB free, the flight recorder's shared memory needs "
-            f"{need}; {hint}"
-        )
+        raise UserError(f"{SHM_DIR}: {free / 1e6:.2f} MB free, {what} needs {need}; {hint}")
     name = f"{PREFIX}{os.getpid()}-{secrets.token_hex(4)}"
     path = SHM_DIR / name
     try:
@@ -137,8 +163,7 @@ def _create(size: int) -> shared_memory.SharedMemory:
         os.close(fd)
         _unlink(path)
         raise UserError(
-            f"{SHM_DIR}: cannot reserve {need} for the flight recorder's shared memory: "
-            f"{exc.strerror}; {hint}"
+            f"{SHM_DIR}: cannot reserve {need} for {what}: {exc.strerror}; {hint}"
         ) from None
     os.close(fd)
     try:

@@ -18,7 +18,6 @@ from hofto_hw.control_plane import channel as ch
 from hofto_hw.control_plane.port import LoopPort
 from hofto_hw.runtime import teach
 from hofto_hw.runtime.compose import build
-from safety.stop import Fault
 
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
@@ -65,20 +64,23 @@ def test_the_stop_word_latches_a_stop_request_in_the_next_tick(wired) -> None:
     assert int(chan.ctl[ch.STOP_ACK]) == int(chan.ctl[ch.STOP_SEQ])
 
 
-def test_a_streamed_plan_plays_and_ramps_down_when_rows_are_not_there_yet(wired) -> None:
-    system, chan, _ = wired
+def _starve(system, chan, plan_accel: np.ndarray) -> tuple[list[int], np.ndarray]:
+    """Play a fast move of which only the rows up to its fastest are written (the control
+    plane "falls behind" there), with ``plan_accel`` as the plan's limits in the channel;
+    returns the motion's mode per tick and the largest |qdd| [rad/s²] per joint seen."""
     tick, model = system.tick, system.model
+    limits = teach.motion_limits(system.cfg, model)
     q0 = tick.motion.q.copy()
-    pb = teach.plan_move(
-        q0 + 0.3, q0, model, teach.motion_limits(system.cfg, model), 1.0 / system.rate_hz
-    )
+    target = q0 + np.array([0.8, -0.6, 0.6, 1.0, 1.0, 1.0])
+    pb = teach.plan_move(target, q0, model, limits, 1.0 / system.rate_hz)
     rows = pb.traj.q.shape[0]
-    assert rows > 400
-    given = 250  # the control plane "falls behind": only these rows are written
+    given = int(np.argmax(np.abs(pb.traj.qd).sum(axis=1)))  # starved at full speed
+    assert 100 < given < rows - 100
     chan.plan_q[:given] = pb.traj.q[:given]
     chan.plan_qd[:given] = pb.traj.qd[:given]
     chan.plan_qdd[:given] = pb.traj.qdd[:given]
     chan.plan_start[:] = pb.traj.q[0]
+    chan.plan_accel[:] = plan_accel
     chan.ctl[ch.PLAN_ROWS] = rows
     chan.ctl[ch.PLAN_HEAD] = given
     chan.ctl[ch.PLAN_ID] = 7
@@ -87,16 +89,32 @@ def test_a_streamed_plan_plays_and_ramps_down_when_rows_are_not_there_yet(wired)
     assert tick.motion.mode == MOVE_TO
     rep = chan.replies.drain()
     assert len(rep) == 1 and rep[0]["code"] == 1 and bytes(rep[0]["text"]) == b"playing"
-    seen = []
-    for _ in range(600):  # the loop never waits for the missing rows
+    seen, peak = [], np.zeros(model.n)
+    for _ in range(given + 2000):  # the loop never waits for the missing rows
         system.loop.run(max_ticks=1)
         seen.append(tick.motion.mode)
-    assert RAMP_DOWN in seen and seen[-1] == HOLD
+        if tick.motion.mode == RAMP_DOWN:
+            np.maximum(peak, np.abs(tick.motion.qdd), out=peak)
+        if tick.motion.mode == HOLD or tick.stop.latched:
+            break
     assert int(chan.ctl[ch.PLAN_TAIL]) == given
+    return seen, peak
+
+
+def test_a_starved_plan_ramps_down_at_its_own_limits_and_trips_nothing(wired) -> None:
+    system, chan, _ = wired
+    tick = system.tick
+    limits = teach.motion_limits(system.cfg, system.model)
+    seen, peak = _starve(system, chan, limits.acceleration)
+    assert RAMP_DOWN in seen and seen[-1] == HOLD
     assert float(np.abs(tick.motion.qd).max()) == 0.0
-    # the ramp is at the robot's acceleration limits (JointMotion.ramp_down), steeper than
-    # the plan's: on this arm it may trip the torque limit (a category 1 stop), never more
-    assert not tick.stop.latched & ~(1 << Fault.TORQUE_LIMIT), tick.stop.latched_names()
+    assert tick.stop.latched == 0, tick.stop.latched_names()
+    # at the plan's limits (half the robot's here), not the robot's; before, the reference
+    # also stood still for the starved tick: at 2 rad/s that kick latched torque_limit
+    # (joint 1 at its 120 N·m) and collision
+    assert np.all(peak <= limits.acceleration * (1 + 1e-9)), (peak, limits.acceleration)
+    assert np.any(peak > 0.5 * limits.acceleration)  # it did decelerate from speed
+    assert np.all(limits.acceleration < system.model.limits.acceleration)
 
 
 def test_the_enabling_input_is_pressed_only_within_the_lease(wired) -> None:

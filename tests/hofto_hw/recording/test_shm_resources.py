@@ -11,44 +11,18 @@ a small tmpfs over /dev/shm (root: CI runs them; elsewhere they skip and say why
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 import time
 from pathlib import Path
 
-import pytest
-from support.cli import one_line_error, read_only_reason
+from support.cli import one_line_error
+from support.small_shm import in_small_shm as _in_small_shm
+from support.small_shm import need_root as _need_root
 
 from hofto_hw.recording import shared as sh
 from hofto_hw.recording.flight_file import LogSpec
 from hofto_hw.recording.recorder import FlightRecorder
 
-ROOT = Path(__file__).resolve().parents[3]
 SHM = Path("/dev/shm")
-
-
-def _need_root() -> None:
-    reason = read_only_reason()  # the same needs: root and unshare(1)
-    if reason is not None:
-        reason = reason.replace("a read-only mount", "a private /dev/shm")
-        if os.environ.get("CI"):
-            pytest.fail(reason)
-        pytest.skip(reason)
-
-
-def _in_small_shm(code: str, size: str = "256k", timeout: float = 300.0):
-    """Run ``python -c CODE`` with a ``size`` tmpfs over /dev/shm (private mount namespace)."""
-    script = f'mount -t tmpfs -o size={size} tmpfs /dev/shm && exec "$@"'
-    cmd = ["unshare", "--mount", "--propagation", "private", "sh", "-c", script, "sh"]
-    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
-    return subprocess.run(
-        [*cmd, sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-        env=env,
-    )
 
 
 def test_run_with_a_full_dev_shm_is_one_line_not_a_bus_error(tmp_path: Path) -> None:
