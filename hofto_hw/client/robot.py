@@ -244,6 +244,12 @@ class Robot:
             raise Refused(str(r.get("message")), r)
         return str(r.get("message", ""))
 
+    def release(self) -> None:
+        """Give up motion and the enabling input (held since this client's first motion
+        request, :meth:`set_payload` or :meth:`set_safety_profile`), so that another
+        client may take them; closing the connection does the same."""
+        self._call({"cmd": "release"})
+
     def reset(self) -> str:
         """Reset the latched faults (Refused naming the cause that persists)."""
         return str(self._call({"cmd": "reset"}).get("message", ""))

@@ -152,3 +152,45 @@ def test_the_payload_is_refused_while_the_arm_moves(wired) -> None:
     code, text = _reply(system, chan)
     assert code == 0 and "moving" in text and "standstill" in text
     assert system.model.revision == rev and system.model.payload is None
+
+
+def test_a_profile_switch_scales_the_drag_admittance_and_the_collision_thresholds() -> None:
+    """The profile's content reaches the loop: M_a, B_a and every drag speed limit scaled
+    in place from the drag section's, the collision thresholds too; back with 'normal'."""
+    cfg: SystemConfig = load_config(CONFIG)
+    system = build(cfg, clock="sim", contact=False)
+    chan = ch.Channel(system.tick.n, len(system.tick.observers), create=True)
+    port = LoopPort(chan, system).attach()
+    try:
+        system.loop.run(max_ticks=300)
+        tick = system.tick
+        adm = tick.drag.admittance
+        sh = adm.shaping
+        inv_mass, damping = adm.inv_mass.copy(), adm.damping.copy()
+        v_max, vmax, v_tool = adm.v_max, sh.vmax.copy(), sh.v_tool
+        arrays = (adm.inv_mass, adm.damping, sh.vmax)
+        names = cfg.safety.profiles.names()
+        task = cfg.safety.profiles.sets["contact-task"]
+        r = np.zeros((), ch.REQUEST_DTYPE)
+        r["seq"], r["kind"], r["arg"] = 1, ch.REQ_PROFILE, names.index("contact-task")
+        r["value"][:4] = [task.collision_scale, *task.drag_factors()]
+        assert chan.requests.push(r)
+        assert _reply(system, chan) == (1, "profile active")
+        np.testing.assert_allclose(adm.inv_mass, inv_mass / 2.0)
+        np.testing.assert_allclose(adm.damping, damping * 2.0)
+        np.testing.assert_allclose(sh.vmax, vmax * 0.4)
+        assert adm.v_max == pytest.approx(v_max * 0.4) and sh.v_tool == pytest.approx(v_tool * 0.4)
+        assert tick.collision.threshold_scale == 1.4
+        assert all(
+            a is b for a, b in zip(arrays, (adm.inv_mass, adm.damping, sh.vmax), strict=True)
+        )
+        r["seq"], r["arg"], r["value"][:4] = 2, names.index("normal"), [1.0, 1.0, 1.0, 1.0]
+        assert chan.requests.push(r)
+        assert _reply(system, chan) == (1, "profile active")
+        np.testing.assert_array_equal(adm.inv_mass, inv_mass)
+        np.testing.assert_array_equal(adm.damping, damping)
+        assert adm.v_max == v_max and tick.collision.threshold_scale == 1.0
+    finally:
+        port.detach()
+        chan.close()
+        system.close()
