@@ -26,6 +26,9 @@ def run_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     data = yaml.safe_load(path.read_text())
     # a slow push: the thresholds' scale moves its detection by many ticks
     data["run"]["collision"].update(rise_time=0.05)
+    # what is replayed here is the collision decision: a stall of this shared machine must
+    # not stop the run before the scripted collision (replay integrates stalls as the loop)
+    data["safety"]["overrun_streak"] = 2000
     path.write_text(yaml.safe_dump(data))
     svc = Service(tmp, "--hold", config=path)
     try:
