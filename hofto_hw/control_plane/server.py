@@ -156,12 +156,16 @@ class ControlPlane:
         self._data = model.create_data()
         self.stop_answered = 0
         # the payload: the configured one until a client sets another (set_payload)
+        from hofto_hw.errors import ModelError
         from hofto_hw.model.payload import LinkSwap, bare_link
 
         held = cfg.safety.payload
         self.payload = {"mass": float(held.mass), "com": [float(v) for v in held.com]}
-        self._bare_link = bare_link(model)
-        self._payload_swap = LinkSwap(model)
+        try:
+            self._bare_link = bare_link(model)
+            self._payload_swap: LinkSwap | None = LinkSwap(model)
+        except ModelError:  # the tool is not on a moving link: set_payload is refused
+            self._payload_swap = None
 
     # ------------------------------------------------------------------ main loop
 
@@ -529,6 +533,8 @@ class ControlPlane:
                 f"set_payload.com: {dist:.4g} m from the tool frame, more than "
                 f"robot.rated_payload.com_max = {rated.com_max:g} m"
             )
+        if self._payload_swap is None:
+            raise UserError(f"set_payload: {self.model.name}'s tool frame is not on a moving link")
         new = Payload(float(mass), (com[0], com[1], com[2]))
         link = link_numbers(self.model, self._bare_link, new)
 
@@ -536,6 +542,7 @@ class ControlPlane:
             if not ok:
                 return {"ok": False, "message": text}
             swap = self._payload_swap
+            assert swap is not None
             if swap.model.payload != new:  # (the loop's own model in InProcessControl)
                 np.copyto(swap.values, link)
                 swap.apply(new)  # the plans' model (torque checks) carries it too

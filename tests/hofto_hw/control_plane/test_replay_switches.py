@@ -76,3 +76,26 @@ def _diff(r, log) -> float:
     """Largest |replayed - recorded| estimate [N·m] after the first 100 ticks (a real-clock
     run's start differs by its first wake-ups: reproduce.py's _run_with_dt)."""
     return max(float(np.abs(r.replayed[o][100:] - log.tau_ext[o][100:]).max()) for o in r.replayed)
+
+
+def test_the_runs_figure_scales_its_thresholds_at_the_switch(run_log) -> None:
+    from hofto_hw.replay.levels_track import detector_levels, track_thresholds
+    from hofto_hw.replay.reproduce import loop_dt, profile_switches
+
+    log = read_flight_log(run_log)
+    ((tick, scale),) = profile_switches(log)
+    assert scale == pytest.approx(0.8)
+    est = np.stack([log.tau_ext[o] for o in log.observers], axis=1)
+    h = loop_dt(log, 1000.0)
+    h = np.where(log.sample_dt > 0.0, log.sample_dt, h) if log.sample_dt is not None else h
+    tracks = []
+    for switches in (profile_switches(log), []):
+        _, row, mon = detector_levels(log)
+        mon.reset()
+        args = (est, log.qd, log.qdd_cmd, h, log.ticks, log.monitored)
+        tracks.append(track_thresholds(mon, row, *args, switches))
+    after = (log.ticks > tick) & (log.monitored != 0)
+    before = (log.ticks <= tick) & (log.monitored != 0)
+    assert after.sum() > 1000 and before.sum() > 0
+    np.testing.assert_array_equal(tracks[0][before], tracks[1][before])
+    np.testing.assert_allclose(tracks[0][after], 0.8 * tracks[1][after], rtol=1e-12)
