@@ -45,6 +45,7 @@ class EventKind(IntEnum):
     RESET = 101  # the latched faults were reset
     STANDSTILL = 102  # the arm came to rest after a stop
     PROFILE = 103  # a safety profile became active (joint: its index, value: collision scale)
+    PAYLOAD = 104  # a payload became active: joint -1 its mass [kg]; 0, 1, 2 its com x, y, z [m]
 
 
 #: Fault -> name used in config (``safety.categories``), events and messages

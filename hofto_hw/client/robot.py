@@ -43,6 +43,15 @@ class Enabling:
 
 
 @dataclass
+class ActivePayload:
+    """The load the service's model carries: ``mass`` [kg] at ``com`` (3,) [m] in the tool
+    frame (``safety.payload`` until a client sets another, :meth:`Robot.set_payload`)."""
+
+    mass: float
+    com: np.ndarray
+
+
+@dataclass
 class State:
     """A snapshot of the arm (SI): loop time ``t`` [s] and ``tick``; ``mode``; latched
     ``faults`` and stop ``category`` (-1: none); ``q``, ``qd``, ``q_cmd`` (n,) [rad,
@@ -50,7 +59,7 @@ class State:
     external torques; ``wrench`` (6,) [N, N·m] tool wrench (NaN outside drag);
     ``tcp_position`` (3,) [m] and ``tcp_rotation`` (3, 3) of the tool frame in the base
     frame; ``enabling``; ``profile`` (active safety profile, None: the config's);
-    ``overruns``; ``timing_us``."""
+    ``overruns``; ``timing_us``; ``payload`` (:class:`ActivePayload`)."""
 
     t: float
     tick: int
@@ -70,6 +79,13 @@ class State:
     profile: str | None
     overruns: int
     timing_us: dict[str, float]
+    payload: ActivePayload | None = None
+
+
+def _payload_of(p: Any) -> ActivePayload | None:
+    if p is None:
+        return None
+    return ActivePayload(float(p["mass"]), _arr(p["com"], "payload.com", (3,)))
 
 
 def _arr(v: Any, what: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
@@ -114,6 +130,7 @@ def _state_of(r: dict[str, Any], n: int) -> State:
             profile=None if r.get("profile") is None else str(r["profile"]["name"]),
             overruns=int(r["overruns"]),
             timing_us={str(k): float(v) for k, v in r["timing_us"].items()},
+            payload=_payload_of(r.get("payload")),
         )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ServiceError(f"malformed answer: state: {type(exc).__name__}: {exc}") from None
@@ -227,6 +244,12 @@ class Robot:
             raise Refused(str(r.get("message")), r)
         return str(r.get("message", ""))
 
+    def release(self) -> None:
+        """Give up motion and the enabling input (held since this client's first motion
+        request, :meth:`set_payload` or :meth:`set_safety_profile`), so that another
+        client may take them; closing the connection does the same."""
+        self._call({"cmd": "release"})
+
     def reset(self) -> str:
         """Reset the latched faults (Refused naming the cause that persists)."""
         return str(self._call({"cmd": "reset"}).get("message", ""))
@@ -331,13 +354,26 @@ class Robot:
         if err:
             raise ServiceError(f"drag: the enabling lease was not renewed: {err[0]}")
 
-    def set_payload(self, mass: float, com: Any) -> None:
-        """Not served by this version (Refused): the payload is ``safety.payload``."""
-        raise Refused("set_payload: not served by this version; set safety.payload in the config")
+    def set_payload(self, mass: float, com: Any) -> ActivePayload:
+        """The load on the tool from now on: ``mass`` [kg] at ``com`` (3,) [m] in the tool
+        frame (as ur_rtde's setPayload). The service checks it against
+        ``robot.rated_payload`` (0 <= mass <= the rated mass, com within its ``com_max``)
+        and the loop takes it at standstill only (Refused while the arm moves or the
+        enabling input is pressed); from the next tick its observers' and feed-forward's
+        model carry it. Returns the active payload."""
+        c = np.asarray(com, dtype=float).ravel()
+        if c.shape != (3,) or not np.all(np.isfinite(c)) or not np.isfinite(float(mass)):
+            raise Refused("set_payload: mass must be a finite number and com 3 finite numbers")
+        r = self._call({"cmd": "set_payload", "mass": float(mass), "com": c.tolist()})
+        p = _payload_of(r.get("payload"))
+        if p is None:
+            raise ServiceError("malformed answer: set_payload: no payload in the reply")
+        return p
 
     def set_safety_profile(self, name: str) -> dict[str, Any]:
         """Make the config's ``safety.profiles.sets[name]`` active (collision thresholds
-        scaled, motion speed limited); only at standstill, else Refused. Returns its content."""
+        scaled, motion speed limited, the drag's virtual mass, damping and speed limits
+        scaled); only at standstill, else Refused. Returns its content."""
         return dict(self._call({"cmd": "set_safety_profile", "name": str(name)})["profile"])
 
     # ------------------------------------------------------------------ events, stream

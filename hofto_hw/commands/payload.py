@@ -3,6 +3,10 @@ frame, with standard deviations; ``-o`` writes the ``payload:`` block for the ro
 ``--inertia`` also fits the inertia about the com (6 values, with std devs) and says whether
 the motion made it identifiable; only an identifiable inertia goes into the block (else the
 block keeps mass and com of the 4-parameter fit).
+
+``hofto-hw payload set MASS --com X Y Z [--socket S]``: the load a running service's model
+carries from now on (``Robot.set_payload``): checked against ``robot.rated_payload``, taken
+at standstill only (refused while the arm moves, exit 1).
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ from pathlib import Path
 
 from hofto_hw.commands.args import (
     HelpFormatter,
+    finite_float,
     finite_positive_float,
     output_file,
     refuse_overwrite,
@@ -40,9 +45,35 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     idp.add_argument("--drop-bad-rows", action="store_true", help="drop corrupt rows")
     idp.add_argument("--json", action="store_true", help="print the estimate as JSON")
+    setp = sub.add_parser(
+        "set",
+        help="the load a running service carries from now on (at standstill)",
+        formatter_class=HelpFormatter,
+    )
+    setp.add_argument("mass", type=finite_float, help="payload mass [kg]")
+    setp.add_argument(
+        "--com",
+        type=finite_float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        default=[0.0, 0.0, 0.0],
+        help="centre of mass in the tool frame [m]",
+    )
+    from hofto_hw.runtime.control_client import add_socket_argument
+
+    add_socket_argument(setp)
+
+
+def _set(args: argparse.Namespace) -> int:
+    from hofto_hw.runtime.control_client import answer, request
+
+    req = {"cmd": "set_payload", "mass": args.mass, "com": list(args.com)}
+    return answer(request(args.socket, req))
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.action == "set":
+        return _set(args)
     from hofto_hw.identify.inputs import Conditioning, load_samples
     from hofto_hw.identify.payload import identify_payload
     from hofto_hw.outputs import write_atomic

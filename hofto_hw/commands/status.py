@@ -47,8 +47,14 @@ def _print(s: dict) -> None:
     if prof:
         print(
             f"safety profile: {prof['name']} (collision thresholds x{prof['collision_scale']:g}, "
-            f"speed x{prof['speed_scale']:g})"
+            f"speed x{prof['speed_scale']:g}; drag mass x{prof.get('drag_mass_scale', 1.0):g}, "
+            f"damping x{prof.get('drag_damping_scale', 1.0):g}, "
+            f"speed x{prof.get('drag_speed_scale', 1.0):g})"
         )
+    load = s.get("payload")
+    if load:
+        com = ", ".join(f"{v:g}" for v in load["com"])
+        print(f"payload: {load['mass']:g} kg at com [{com}] m (tool frame)")
     if s.get("holder"):
         print(f"motion held by {s['holder']}")
     print(f"log: {s['log'] or 'not yet written'}")

@@ -20,7 +20,7 @@ from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.config.drag import DragConfig
 from hofto_hw.config.drives import BusConfig
 from hofto_hw.config.motion import MotionConfig
-from hofto_hw.config.payload import PayloadConfig
+from hofto_hw.config.payload import PayloadConfig, RatedPayload
 from hofto_hw.config.runtime import RunConfig, ServiceConfig
 from hofto_hw.config.safety import SafetyConfig
 
@@ -87,6 +87,9 @@ class RobotConfig(FileModel):
     home: list[float] | None = Field(None, description="home configuration [rad]")
     payload: PayloadConfig | None = Field(
         None, description="tool or load on the tool frame (hofto-hw payload identify)"
+    )
+    rated_payload: RatedPayload | None = Field(
+        None, description="the load the arm is rated for (bounds of Robot.set_payload)"
     )
     parameters: Path | None = Field(
         None, description="identified-parameters file (hofto-hw identify); overrides URDF"
@@ -434,6 +437,11 @@ class SystemConfig(FileModel):
                 self.drag.check_rate(self.loop.rate_hz, n)
             except ValueError as exc:
                 raise ValueError(f"drag.{exc}") from None
+            if self.safety.profiles is not None:
+                try:
+                    self.safety.profiles.check_drag(self.drag, self.loop.rate_hz, n)
+                except ValueError as exc:
+                    raise ValueError(f"safety.profiles.{exc}") from None
             if self.drag.observer not in self.observers:
                 raise ValueError(
                     f"drag.observer: {self.drag.observer!r} is not in observers "

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from hofto_hw.config.base import FileModel, NonNegFloat
+from hofto_hw.config.base import FileModel, NonNegFloat, PositiveFloat
 
 
 class PayloadConfig(FileModel):
@@ -25,3 +25,12 @@ class PayloadConfig(FileModel):
     inertia: tuple[float, float, float, float, float, float] | None = Field(
         None, description="about the com, tool axes: Ixx, Ixy, Iyy, Ixz, Iyz, Izz [kg·m²]"
     )
+
+
+class RatedPayload(FileModel):
+    """``robot.rated_payload``: the load the arm is rated for, the bounds a payload set at run
+    time (``Robot.set_payload``, ``hofto-hw payload set``) must keep: ``mass`` [kg] at most,
+    its centre of mass at most ``com_max`` [m] from the tool frame's origin."""
+
+    mass: PositiveFloat = Field(description="rated payload [kg]")
+    com_max: PositiveFloat = Field(description="largest distance of its com from the tool [m]")

@@ -49,11 +49,19 @@ class JointShaping:
         self.box_hi = np.array(cfg.workspace.upper if cfg.workspace else (1e9,) * 3)
         self.v_tool = cfg.command_tool_speed
         self.w_tool = cfg.command_tool_rotation_speed
+        self._vmax0, self._v_tool0, self._w_tool0 = self.vmax.copy(), self.v_tool, self.w_tool
         self._hi = np.zeros(n)
         self._lo = np.zeros(n)
         self._ratio = np.zeros(n)
         self._tv = np.zeros(6)
         self.limited = 0  # bit 0 joint wall, 1 joint speed, 2 workspace, 3 tool speed
+
+    def scale_speeds(self, factor: float) -> None:
+        """Joint and tool speed limits = the drag section's · ``factor`` (a safety profile's
+        ``drag_speed_scale``, <= 1), in place."""
+        np.multiply(self._vmax0, factor, out=self.vmax)
+        self.v_tool = self._v_tool0 * factor
+        self.w_tool = self._w_tool0 * factor
 
     def workspace(self, twist: np.ndarray) -> None:
         """Cap the linear part of ``twist`` (6,) toward each face of the box (in place)."""
@@ -147,6 +155,7 @@ class CartesianAdmittance:
         self.alpha_max = cfg.max_tool_angular_acceleration
         self.w0 = cfg.singular_manipulability
         self.min_scale = cfg.singular_min_scale
+        self._gains0 = (self.inv_mass.copy(), self.damping.copy(), self.v_max, self.w_max)
         self.twist = np.zeros(6)
         self.qd = np.zeros(model.n)
         self.scale = 1.0
@@ -158,6 +167,15 @@ class CartesianAdmittance:
         """At rest."""
         self.twist.fill(0.0)
         self.qd.fill(0.0)
+
+    def apply_profile(self, mass: float, damping: float, speed: float) -> None:
+        """M_a, B_a and the speed limits = the drag section's · the factors (a safety
+        profile's), in place; at rest only (the caller's rule)."""
+        inv_mass, damp, v_max, w_max = self._gains0
+        np.multiply(inv_mass, 1.0 / mass, out=self.inv_mass)
+        np.multiply(damp, damping, out=self.damping)
+        self.v_max, self.w_max = v_max * speed, w_max * speed
+        self.shaping.scale_speeds(speed)
 
     def update(
         self, wrench: np.ndarray, q_cmd: np.ndarray, dt: float, arm_speed: float = 0.0
@@ -208,6 +226,7 @@ class JointAdmittance:
         self.damping = np.asarray(b, dtype=float)
         self.dead = cfg.joint_deadband
         self.release = cfg.release_damping
+        self._gains0 = (self.inv_mass.copy(), self.damping.copy())
         self.qd = np.zeros(n)
         self.scale = 1.0
         self._t = np.zeros(n)
@@ -217,6 +236,13 @@ class JointAdmittance:
     def reset(self) -> None:
         """At rest."""
         self.qd.fill(0.0)
+
+    def apply_profile(self, mass: float, damping: float, speed: float) -> None:
+        """M_a, B_a and the speed limits = the drag section's · the factors, in place."""
+        inv_mass, damp = self._gains0
+        np.multiply(inv_mass, 1.0 / mass, out=self.inv_mass)
+        np.multiply(damp, damping, out=self.damping)
+        self.shaping.scale_speeds(speed)
 
     def update(
         self, tau_ext: np.ndarray, q_cmd: np.ndarray, dt: float, arm_speed: float = 0.0

@@ -135,6 +135,7 @@ class DragController:
         self.limited = 0
         self.event = 0
         self._mismatch_time = 0.0
+        self.profile = (1.0, 1.0, 1.0)  # the active safety profile's drag factors
         self._zero6 = np.zeros(6)
         self._zero_n = np.zeros(n)
         self._qd_prev = np.zeros(n)
@@ -152,6 +153,13 @@ class DragController:
         self._filtering = False  # False: the next update starts the filters at their input
         self._tare_time = float(cfg.tare_time)
         self._tare_n = 0  # samples in the tare's mean so far
+
+    def apply_profile(self, mass: float, damping: float, speed: float) -> None:
+        """A safety profile's drag factors: virtual mass, damping and every speed limit of
+        the admittance = the drag section's · ``mass``, ``damping``, ``speed`` (in place; off
+        the drag mode: the loop switches profiles at standstill only)."""
+        self.admittance.apply_profile(mass, damping, speed)
+        self.profile = (mass, damping, speed)
 
     def start(self, q: np.ndarray) -> None:
         """Enter drag mode holding the measured position ``q`` (n,) [rad]."""

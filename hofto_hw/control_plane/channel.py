@@ -54,7 +54,11 @@ ACCEL_COMPILED, ACCEL_NUMBA, ACCEL_NATIVE, ACCEL_HAS_FUSED, ACCEL_FUSED = 1, 2, 
 SOURCES = ("scripted", "digital_input", "socket")
 
 #: request kinds (REQUEST_DTYPE.kind)
-REQ_RESET, REQ_MODE, REQ_PLAY, REQ_PROFILE = 1, 2, 3, 4
+REQ_RESET, REQ_MODE, REQ_PLAY, REQ_PROFILE, REQ_PAYLOAD = 1, 2, 3, 4, 5
+#: REQ_PAYLOAD's ``value``: mass [kg], com (3) [m], then the tool link's new inertia (10
+#: numbers, hofto_hw.model.payload.LINK_NUMBERS) the control plane computed;
+#: REQ_PROFILE's: collision scale, drag mass, damping and speed scales
+VALUE_WORDS = 16
 REQUEST_DTYPE = np.dtype(
     [
         ("seq", "<u8"),
@@ -62,7 +66,7 @@ REQUEST_DTYPE = np.dtype(
         ("mode", "<i4"),
         ("arg", "<i8"),
         ("flag", "<i4"),
-        ("value", "<f8", (4,)),
+        ("value", "<f8", (VALUE_WORDS,)),
     ]
 )
 #: reply codes (REPLY_DTYPE.code): 1 ok, 0 refused

@@ -143,6 +143,17 @@ def accel_bits(acc: dict[str, Any]) -> int:
     return bits
 
 
+def _link_swap(model: Any) -> Any:
+    """The payload swap of the loop's model (None when the tool is not on a moving link)."""
+    from hofto_hw.errors import ModelError
+    from hofto_hw.model.payload import LinkSwap
+
+    try:
+        return LinkSwap(model)
+    except ModelError:
+        return None
+
+
 class LoopPort:
     """See the module docstring. ``system``: the composed run (tick, loop, motion)."""
 
@@ -171,6 +182,7 @@ class LoopPort:
         self.extra[ch.X_PROFILE] = -1 if prof is None else prof.names().index(prof.active)
         acc = getattr(system, "acceleration", None)
         self.extra[ch.X_ACCEL] = -1 if acc is None else accel_bits(acc)
+        self._swap = _link_swap(system.model)
         self._state = _NO_REQ
         self._seq = 0
         self._reset_at = 0
@@ -285,26 +297,71 @@ class LoopPort:
                 self._start_reset()
             return
         if kind == ch.REQ_PROFILE:
-            self._profile(int(r["arg"]), float(r["value"][0]))
+            v = r["value"]
+            self._profile(int(r["arg"]), float(v[0]), float(v[1]), float(v[2]), float(v[3]))
+            return
+        if kind == ch.REQ_PAYLOAD:
+            self._payload(r["value"])
             return
         if kind == ch.REQ_MODE or kind == ch.REQ_PLAY:
             self._mode(kind, int(r["mode"]), int(r["arg"]), int(r["flag"]))
             return
         self._reply(False, f"unknown request kind {kind}")
 
-    def _profile(self, index: int, collision_scale: float) -> None:
-        """Switch the safety profile: only at standstill (holding, every joint slower than
-        STANDSTILL; after a stop too); a flight-log event (PROFILE: its index, its scale)."""
+    def _moving(self) -> str:
+        """Why the arm is not at standstill for a safety setting ('' when it is: holding,
+        every joint slower than STANDSTILL, not enabling; after a stop too)."""
         tick = self.tick
-        moving = tick.motion.mode != HOLD or float(np.abs(tick.group.qd).max()) >= STANDSTILL
-        if moving or tick.enabling:
-            self._reply(False, "refused: the arm is moving; a safety profile changes at standstill")
+        if tick.motion.mode != HOLD or float(np.abs(tick.group.qd).max()) >= STANDSTILL:
+            return "the arm is moving"
+        if tick.enabling:
+            return "the enabling input is pressed"
+        return ""
+
+    def _profile(
+        self, index: int, collision_scale: float, drag_mass: float, drag_damping: float,
+        drag_speed: float,
+    ) -> None:  # fmt: skip
+        """Switch the safety profile: only at standstill (after a stop too); the collision
+        thresholds and the drag's virtual mass, damping and speed limits, in place; a
+        flight-log event (PROFILE: its index, its collision scale)."""
+        tick = self.tick
+        why = self._moving()
+        if why:
+            self._reply(False, f"refused: {why}; a safety profile changes at standstill")
             return
         if tick.collision is not None:
             tick.collision.scale_thresholds(collision_scale)
+        if tick.drag is not None:
+            tick.drag.apply_profile(drag_mass, drag_damping, drag_speed)
         tick.stop.note(EventKind.PROFILE, index, collision_scale)
         self.extra[ch.X_PROFILE] = index
         self._reply(True, "profile active")
+
+    def _payload(self, value: np.ndarray) -> None:
+        """A new payload (mass, com, and the tool link's inertia the control plane computed
+        with it): only at standstill; swapped into the model the observers, the feed-forward
+        and the drag share, between two ticks, in place (hofto_hw.model.payload.LinkSwap);
+        flight-log events PAYLOAD (joint -1: the mass [kg]; 0, 1, 2: the com's x, y, z [m])."""
+        from hofto_hw.model.payload import LINK_NUMBERS, Payload
+
+        why = self._moving()
+        if why:
+            self._reply(False, f"refused: {why}; the payload changes at standstill")
+            return
+        swap = self._swap
+        if swap is None:
+            self._reply(False, "refused: the tool frame is not on a moving link")
+            return
+        mass = float(value[0])
+        com = (float(value[1]), float(value[2]), float(value[3]))
+        np.copyto(swap.values, value[4 : 4 + LINK_NUMBERS])
+        swap.apply(Payload(mass, com))
+        stop = self.tick.stop
+        stop.note(EventKind.PAYLOAD, -1, mass)
+        for i in range(3):
+            stop.note(EventKind.PAYLOAD, i, com[i])
+        self._reply(True, "payload active")
 
     def _start_reset(self) -> None:
         tick = self.tick

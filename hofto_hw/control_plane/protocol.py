@@ -49,10 +49,20 @@ COMMANDS: dict[str, dict[str, tuple[tuple[type, ...], bool]]] = {
     "events": {"since": ((int,), False)},
     "stream_info": {},
     "set_safety_profile": {"name": ((str,), True)},
+    "set_payload": {"mass": (_FLOAT, True), "com": ((list,), True)},
 }
 #: commands that move the arm or hold the enabling input: one client at a time
 MOTION = frozenset(
-    {"mode", "replay", "move_joints", "move_linear", "cancel", "enable", "set_safety_profile"}
+    {
+        "mode",
+        "replay",
+        "move_joints",
+        "move_linear",
+        "cancel",
+        "enable",
+        "set_safety_profile",
+        "set_payload",
+    }
 )
 
 

@@ -87,7 +87,7 @@ class LoopJob:
     mode: int = 0
     arg: int = 0
     flag: int = 0
-    value: float = 0.0
+    value: Any = 0.0  # a float, or up to channel.VALUE_WORDS numbers
     seq: int = 0
     sent_at: float = 0.0
     done: Any = None  # callable(ok, text) -> reply dict, or None
@@ -158,6 +158,17 @@ class ControlPlane:
         self._log_watch: Any = None
         self._data = model.create_data()
         self.stop_answered = 0
+        # the payload: the configured one until a client sets another (set_payload)
+        from hofto_hw.errors import ModelError
+        from hofto_hw.model.payload import LinkSwap, bare_link
+
+        held = cfg.safety.payload
+        self.payload = {"mass": float(held.mass), "com": [float(v) for v in held.com]}
+        try:
+            self._bare_link = bare_link(model)
+            self._payload_swap: LinkSwap | None = LinkSwap(model)
+        except ModelError:  # the tool is not on a moving link: set_payload is refused
+            self._payload_swap = None
 
     # ------------------------------------------------------------------ main loop
 
@@ -469,6 +480,8 @@ class ControlPlane:
             self._queue(LoopJob(c, req, ch.REQ_MODE, mode=HOLD))
         elif cmd == "set_safety_profile":
             self._set_profile(c, req)
+        elif cmd == "set_payload":
+            self._set_payload(c, req)
         elif cmd in ("replay", "move_joints", "move_linear"):
             self._plan_request(c, req)
         else:  # pragma: no cover - protocol.COMMANDS and this table agree
@@ -509,12 +522,63 @@ class ControlPlane:
             print(f"hofto-hw run: safety profile {name} active: {content}", flush=True)
             return {"ok": True, "message": f"safety profile {name} active", "profile": content}
 
+        p = prof.sets[name]
         self._queue(
             LoopJob(
                 c, req, ch.REQ_PROFILE, arg=prof.names().index(name),
-                value=float(content["collision_scale"]), done=done,
+                value=[p.collision_scale, *p.drag_factors()], done=done,
             )
         )  # fmt: skip
+
+    # ------------------------------------------------------------------ payload
+
+    def _set_payload(self, c: Conn, req: dict[str, Any]) -> None:
+        """Checked here (finite, within ``robot.rated_payload``), the tool link's inertia
+        with it computed here (hofto_hw.model.payload), swapped in by the loop at standstill."""
+        from hofto_hw.model.payload import Payload, link_numbers
+
+        rated = self.cfg.robot.rated_payload
+        if rated is None:
+            raise UserError(
+                "set_payload: the config has no robot.rated_payload (the load the arm is "
+                "rated for): the payload is safety.payload"
+            )
+        mass = req["mass"]
+        if not np.isfinite(mass) or not 0.0 <= mass <= rated.mass:
+            raise UserError(
+                f"set_payload.mass: {mass} kg is not within [0, {rated.mass:g}] kg "
+                "(robot.rated_payload.mass)"
+            )
+        try:
+            com = pr.numbers(req["com"], "set_payload.com", 3)
+        except pr.ProtocolError as exc:
+            raise UserError(str(exc)) from None
+        dist = float(np.linalg.norm(com))
+        if dist > rated.com_max:
+            raise UserError(
+                f"set_payload.com: {dist:.4g} m from the tool frame, more than "
+                f"robot.rated_payload.com_max = {rated.com_max:g} m"
+            )
+        if self._payload_swap is None:
+            raise UserError(f"set_payload: {self.model.name}'s tool frame is not on a moving link")
+        new = Payload(float(mass), (com[0], com[1], com[2]))
+        link = link_numbers(self.model, self._bare_link, new)
+
+        def done(ok: bool, text: str) -> dict[str, Any]:
+            if not ok:
+                return {"ok": False, "message": text}
+            swap = self._payload_swap
+            assert swap is not None
+            if swap.model.payload != new:  # (the loop's own model in InProcessControl)
+                np.copyto(swap.values, link)
+                swap.apply(new)  # the plans' model (torque checks) carries it too
+            self.payload = {"mass": new.mass, "com": list(new.com)}
+            msg = f"payload {new.mass:g} kg at com {list(new.com)} m (tool frame) active"
+            print(f"hofto-hw run: {msg}", flush=True)
+            return {"ok": True, "message": msg, "payload": dict(self.payload)}
+
+        value = [new.mass, *new.com, *link]
+        self._queue(LoopJob(c, req, ch.REQ_PAYLOAD, value=value, done=done))
 
     def _enable(self, c: Conn, req: dict[str, Any]) -> None:
         got = self.chan.read_state()
@@ -591,7 +655,8 @@ class ControlPlane:
         r = np.zeros((), ch.REQUEST_DTYPE)
         r["seq"], r["kind"], r["mode"] = job.seq, job.kind, job.mode
         r["arg"], r["flag"] = job.arg, job.flag
-        r["value"][0] = job.value
+        v = np.atleast_1d(np.asarray(job.value, dtype=float))
+        r["value"][: v.size] = v
         if not self.chan.requests.push(r):
             self._answer(job, {"ok": False, "message": "the loop's request ring is full"})
             self._send_next()
@@ -882,6 +947,7 @@ class ControlPlane:
             "playback": self._playback_status(x),
             "holder": None if self.holder is None else self.holder.who(),
             "profile": self._profile_status(x),
+            "payload": dict(self.payload),
             "acceleration": _acceleration(int(x[ch.X_ACCEL])),
         }
 
@@ -1022,6 +1088,7 @@ class ControlPlane:
                 "holder": None if self.holder is None else self.holder.who(),
             },
             "profile": self._profile_status(x),
+            "payload": dict(self.payload),
             "overruns": int(x[ch.X_OVERRUNS]),
             "timing_us": {
                 "wakeup_us": float(rec["wakeup_us"]),

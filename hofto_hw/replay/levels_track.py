@@ -43,13 +43,19 @@ def track_thresholds(
     h: np.ndarray,
     ticks: np.ndarray,
     monitored: np.ndarray,
+    switches: list[tuple[int, float]] | None = None,
 ) -> np.ndarray:
     """Step ``mon`` (CollisionLevels, state carried between calls) on N ticks: estimates
     (N, k, n) [N·m], qd (N, n) [rad/s], commanded acceleration (N, n) [rad/s²], the observers'
-    interval h (N,) [s], tick numbers (N,), judged flags (N,). Returns the thresholds (N, L, n)
-    [N·m] of ``row``; NaN on ticks the loop did not judge."""
+    interval h (N,) [s], tick numbers (N,), judged flags (N,); ``switches``: the run's safety
+    profile switches (tick, collision scale; reproduce.profile_switches), each taken after
+    its tick as the loop did. Returns the thresholds (N, L, n) [N·m] of ``row``; NaN on ticks
+    the loop did not judge."""
     out = np.full((len(h), mon.L, est.shape[2]), np.nan)
+    pending = list(switches or [])
     for k in np.flatnonzero(monitored):
+        while pending and pending[0][0] < ticks[k]:
+            mon.scale_thresholds(pending.pop(0)[1])
         mon.step(est[k], qd[k], qdd_cmd[k], float(h[k]), int(ticks[k]))
         out[k] = mon.threshold[:, row, :]
     return out

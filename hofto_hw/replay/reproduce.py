@@ -10,6 +10,12 @@ Bit-exact reproduction needs the loop to do what replay does: t from integer nan
 (the stamp stores t exactly then), dt = t[k] - t[k-1], observers reset on the first tick's
 q, qd and updated from the second. ``max_abs_diff`` per observer shows whether they did.
 
+What a client changed while the run went on is replayed at its tick, as the loop took it
+(between that tick and the next): a safety profile switch (``profile`` event: the collision
+thresholds scaled by its value from the next tick on; the run's first profile is the config's
+``safety.profiles.active``) and a payload (``payload`` events: the observers' model carries it
+from the next tick on).
+
 :func:`make_detector` is the single place that builds the monitor from the recorded config:
 the two-level monitor of the service branch plugs in there.
 """
@@ -39,6 +45,8 @@ from hofto_hw.runtime.tick import gap_steps, lerp
 #: event kind name of a collision stop (the safety fault class's name in event_kinds)
 COLLISION_KIND = "collision"
 RESET_KIND = "reset"  # the loop resets its observers on the state of the tick it resets in
+PROFILE_KIND = "profile"  # a safety profile switch (value: its collision scale)
+PAYLOAD_KIND = "payload"  # a payload set at run time (joint -1: mass; 0, 1, 2: com)
 
 
 class Monitor(Protocol):
@@ -164,6 +172,9 @@ def make_detector(log: FlightLog, setup: RunSetup) -> Detector:
             )
         except ValueError as exc:
             raise UserError(f"{log.path}: safety.collision: {exc}") from None
+        prof = setup.config.safety.profiles
+        if prof is not None:  # the run started with the active profile's thresholds
+            levels.scale_thresholds(prof.sets[prof.active].collision_scale)
         return Detector(levels_cfg.observer, levels)
     if setup.config.collision is not None:
         return Detector(name, CollisionMonitor(setup.config.collision))
@@ -198,13 +209,63 @@ def replay_levels(
     stop = StopController.from_config(cfg.safety.categories)
     levels.reset()
     h = dt if log.sample_dt is None else np.where(log.sample_dt > 0.0, log.sample_dt, dt)
+    switches = profile_switches(log)
     for k in range(log.n_ticks):
-        if not log.monitored[k]:
-            continue
-        stop.begin_tick(int(log.ticks[k]))
-        if levels.update(stop, estimates[k], log.q[k], log.qd[k], log.qdd_cmd[k], h[k]) & COLLIDED:
-            return k, [int(j) for j in np.flatnonzero(levels.collision_joints)]
+        if log.monitored[k]:
+            stop.begin_tick(int(log.ticks[k]))
+            qdd = log.qdd_cmd[k]
+            if levels.update(stop, estimates[k], log.q[k], log.qd[k], qdd, h[k]) & COLLIDED:
+                return k, [int(j) for j in np.flatnonzero(levels.collision_joints)]
+        while switches and switches[0][0] <= log.ticks[k]:  # taken after that tick
+            levels.scale_thresholds(switches.pop(0)[1])
     return None, []
+
+
+def profile_switches(log: FlightLog) -> list[tuple[int, float]]:
+    """The run's safety profile switches: (tick, collision scale), in tick order."""
+    return sorted((e.tick, e.value) for e in log.events if e.kind_name == PROFILE_KIND)
+
+
+def payload_changes(log: FlightLog) -> list[tuple[int, Any]]:
+    """The payloads a client set during the run: (tick, hofto_hw.model.payload.Payload), in
+    tick order (each one four events of its tick: the mass, then the com's x, y, z)."""
+    from hofto_hw.model.payload import Payload
+
+    out: list[tuple[int, Any]] = []
+    parts: dict[int, list[float]] = {}
+    for e in sorted(
+        (e for e in log.events if e.kind_name == PAYLOAD_KIND), key=lambda e: (e.tick, e.joint)
+    ):
+        if e.joint == -1:
+            parts[e.tick] = [e.value, 0.0, 0.0, 0.0]
+        elif e.tick in parts and 0 <= e.joint < 3:
+            parts[e.tick][1 + e.joint] = e.value
+    for tick, (m, x, y, z) in sorted(parts.items()):
+        out.append((tick, Payload(m, (x, y, z))))
+    return out
+
+
+class _PayloadReplay:
+    """Swaps the recorded payloads into an observer's own model at their ticks (the loop's
+    LinkSwap, with the numbers the control plane computed: the same arithmetic)."""
+
+    def __init__(self, model: Any, changes: list[tuple[int, Any]]) -> None:
+        from hofto_hw.model.payload import LinkSwap, bare_link
+
+        self.model = model
+        self.changes = list(changes)
+        self.bare = bare_link(model) if changes else None
+        self.swap = LinkSwap(model) if changes else None
+
+    def after(self, tick: int) -> None:
+        """The loop's tick ``tick`` ended: the payloads set in it from now on."""
+        from hofto_hw.model.payload import link_numbers
+
+        while self.changes and self.changes[0][0] <= tick:
+            _, p = self.changes.pop(0)
+            assert self.swap is not None
+            np.copyto(self.swap.values, link_numbers(self.model, self.bare, p))
+            self.swap.apply(p)
 
 
 def as_recording(log: FlightLog) -> Recording:
@@ -256,11 +317,15 @@ def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
             ocfg = table[name]
         else:
             ocfg = observer_config(setup, name, log.path)
-        obs = make_observer(ocfg, model, backend=recorded_backend(log))
+        changes = payload_changes(log) if dt is not None else []
+        own = model.copy() if changes else model  # each observer's payloads from the start
+        obs = make_observer(ocfg, own, backend=recorded_backend(log))
         replayed[name] = (
             run_observer(as_recording(log), obs)
             if dt is None
-            else _run_with_dt(obs, log, dt, 1.0 / float(setup.config.loop.rate_hz))
+            else _run_with_dt(
+                obs, log, dt, 1.0 / float(setup.config.loop.rate_hz), _PayloadReplay(own, changes)
+            )
         )
         diffs[name] = float(np.max(np.abs(replayed[name] - log.tau_ext[name])))
     if levels:
@@ -281,7 +346,9 @@ def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:
     )
 
 
-def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray, period: float = 0.0) -> np.ndarray:
+def _run_with_dt(
+    obs: Any, log: FlightLog, dt: np.ndarray, period: float = 0.0, payloads: Any = None
+) -> np.ndarray:
     """Estimates (N, n) as the loop computes them: reset, then updated on every tick with the
     loop's dt. The loop resets on the state read just before its first tick, which is not
     recorded: it is taken one period back along the first tick's velocity (q0 - qd0·dt0,
@@ -300,7 +367,10 @@ def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray, period: float = 0.0) 
     Logs that record the observers' own interval per tick (``sample_dt``: the drives' sample
     interval with EtherCAT DC, 0 where the loop held its observers over a lost sample) are
     integrated over it instead of ``dt``; a held tick keeps the last estimate, and the next
-    gap is interpolated from the last sample the observers took, as the loop does."""
+    gap is interpolated from the last sample the observers took, as the loop does.
+
+    ``payloads`` (:class:`_PayloadReplay` of the observer's own model): the payloads a client
+    set, swapped in after the tick they were set in, as the loop took them."""
     h_obs = dt if log.sample_dt is None else log.sample_dt
     est = np.zeros_like(log.q)
     index = {int(tk): k for k, tk in enumerate(log.ticks)}
@@ -327,4 +397,6 @@ def _run_with_dt(obs: Any, log: FlightLog, dt: np.ndarray, period: float = 0.0) 
             last = k
         if k in resets:
             obs.reset(log.q[k], log.qd[k])
+        if payloads is not None:
+            payloads.after(int(log.ticks[k]))
     return est

@@ -52,7 +52,7 @@ def _thresholds(log: FlightLog) -> tuple[str, np.ndarray | None, tuple[str, ...]
     """(detector observer, thresholds (N, L, n) [N·m] of its row (NaN on ticks the monitor
     did not judge) or None, level names) by re-running the run's monitor on the log."""
     from hofto_hw.replay.levels_track import detector_levels, level_names, track_thresholds
-    from hofto_hw.replay.reproduce import loop_dt, run_setup
+    from hofto_hw.replay.reproduce import loop_dt, profile_switches, run_setup
 
     found = detector_levels(log)
     if found is None:
@@ -64,7 +64,9 @@ def _thresholds(log: FlightLog) -> tuple[str, np.ndarray | None, tuple[str, ...]
     dt = loop_dt(log, float(rate))
     h = dt if log.sample_dt is None else np.where(log.sample_dt > 0.0, log.sample_dt, dt)
     mon.reset()
-    thr = track_thresholds(mon, row, est, log.qd, log.qdd_cmd, h, log.ticks, log.monitored)
+    thr = track_thresholds(
+        mon, row, est, log.qd, log.qdd_cmd, h, log.ticks, log.monitored, profile_switches(log)
+    )
     return observer, thr, level_names(mon)
 
 

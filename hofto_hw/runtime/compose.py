@@ -200,6 +200,8 @@ def build(
     path = DemoPath(p.amplitude, p.period, p.phase, p.ramp, backend) if p is not None else None
     motion = JointMotion(model.n, accel, path, backend=backend)
     drag, enable, drag_row = _build_drag(cfg, model, names, backend)
+    if drag is not None and s.profiles is not None:  # the active safety profile's drag
+        drag.apply_profile(*s.profiles.sets[s.profiles.active].drag_factors())
     tick = Tick(
         group,
         observers,

@@ -140,6 +140,15 @@ def format_summary(s: dict[str, Any]) -> str:
     for e in s["events"]:
         if e["kind"] in ("contact", "reset"):
             continue
+        if e["kind"] == "payload":  # four events: the mass (joint -1), the com's x, y, z
+            if e["joint"] == -1:
+                lines.append(f"t = {e['t']:.3f} s: payload {e['value']:g} kg set")
+            continue
+        if e["kind"] == "profile":  # joint: the profile's index, value: its collision scale
+            lines.append(
+                f"t = {e['t']:.3f} s: safety profile switched (collision scale {e['value']:g})"
+            )
+            continue
         where = f" on joint {e['joint'] + 1}" if e["joint"] >= 0 else ""
         text = f"t = {e['t']:.3f} s: {e['kind'].replace('_', ' ')}{where}"
         if e["category"] >= 0:

@@ -173,6 +173,8 @@ def _load() -> str:
     lib.hofto_dyn1_create.argtypes = [i64, p, p, p, p, p, p, p]
     lib.hofto_dyn1_destroy.restype = None
     lib.hofto_dyn1_destroy.argtypes = [p]
+    lib.hofto_dyn1_set_inertia.restype = i64
+    lib.hofto_dyn1_set_inertia.argtypes = [p, i64, p]
     _LIB = lib
     return ""
 
@@ -239,6 +241,7 @@ class NativeModel:
         self.revision = -1
         self._finalizer: weakref.finalize | None = None
         self.sync()
+        _NATIVES.add(self)
 
     def sync(self) -> None:
         """Make the C++ model the Python model's current numbers (a new handle)."""
@@ -267,3 +270,26 @@ class NativeModel:
     def stale(self) -> bool:
         """True when the model's parameters changed since the handle was made."""
         return self.model.revision != self.revision
+
+    def set_inertia(self, joint: int, address: int) -> None:
+        """Joint ``joint``'s (0-based) link inertia := the 10 numbers at ``address`` (the
+        layout of :func:`model_numbers`), in place: same handle, nothing allocated."""
+        assert _LIB is not None
+        if _LIB.hofto_dyn1_set_inertia(self.handle, joint, address) != 0:
+            raise ValueError(f"{self.model.name}: no joint {joint} in the native model")
+
+
+#: every live NativeModel (set_link_inertia finds a model's copies here)
+_NATIVES: weakref.WeakSet[NativeModel] = weakref.WeakSet()
+
+
+def set_link_inertia(model: RobotModel, joint: int, values: np.ndarray) -> None:
+    """After ``model``'s link ``joint`` (0-based) got the inertia ``values`` (10 numbers, the
+    layout of :func:`model_numbers`) and its revision one more: every native copy that was in
+    step before takes the same numbers in place and stays in step (no rebuild, no new handle:
+    the tick's compiled calls keep their addresses). A copy already behind syncs as before."""
+    address = values.ctypes.data
+    for nm in _NATIVES:
+        if nm.model is model and nm.revision == model.revision - 1:
+            nm.set_inertia(joint, address)
+            nm.revision = model.revision

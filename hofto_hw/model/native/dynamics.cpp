@@ -336,6 +336,21 @@ void hofto_dyn1_destroy(void * handle)
   delete static_cast<Handle *>(handle);
 }
 
+// Joint `joint`'s (0-based) link inertia := inertia[0..9] (the layout of hofto_dyn1_create),
+// in place: the handle, its Data and every address the kernels hold stay (a payload swapped
+// in between two ticks, hofto_hw/model/payload.py LinkSwap). 0, or -1 for no such joint.
+std::int64_t hofto_dyn1_set_inertia(void * handle, std::int64_t joint, const double * inertia)
+{
+  Handle & h = *static_cast<Handle *>(handle);
+  if (joint < 0 || joint >= h.n)
+    return -1;
+  const double * I = inertia;
+  h.model.inertias[static_cast<std::size_t>(joint) + 1] = pinocchio::Inertia(
+    I[0], Eigen::Vector3d(I[1], I[2], I[3]),
+    pinocchio::Symmetric3(I[4], I[5], I[6], I[7], I[8], I[9]));
+  return 0;
+}
+
 std::int64_t hofto_dyn1_dof(void * handle)
 {
   return static_cast<Handle *>(handle)->n;

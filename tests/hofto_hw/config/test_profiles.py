@@ -26,6 +26,8 @@ def test_the_shipped_profiles_load() -> None:
     p = load_config(CONFIG).safety.profiles
     assert p is not None and p.active == "normal"
     assert set(p.sets) == {"normal", "reduced", "contact-task"}
+    assert p.sets["contact-task"].drag_factors() == (2.0, 2.0, 0.4)
+    assert p.sets["normal"].drag_factors() == (1.0, 1.0, 1.0)
 
 
 @pytest.mark.parametrize(
@@ -46,6 +48,27 @@ def test_the_shipped_profiles_load() -> None:
         ({"active": "b", "sets": {"a": {}}}, "active: 'b' is not one of sets (a)"),
         ({"active": "a", "sets": {"a": {"collision_scale": -1}}}, "collision_scale"),
         ({"active": "a", "sets": {"a": {"collision_scale": ".nan"}}}, "collision_scale"),
+        (
+            {"active": "a", "bounds": {"drag_speed_scale_max": 0.5},
+             "sets": {"a": {"drag_speed_scale": 0.8}}},
+            "sets.a.drag_speed_scale: 0.8 is above bounds.drag_speed_scale_max = 0.5",
+        ),
+        ({"active": "a", "sets": {"a": {"drag_speed_scale": 1.2}}}, "drag_speed_scale"),
+        (
+            {"active": "a", "bounds": {"drag_mass_scale_min": 0.8},
+             "sets": {"a": {"drag_mass_scale": 0.5}}},
+            "sets.a.drag_mass_scale: 0.5 is below bounds.drag_mass_scale_min = 0.8",
+        ),
+        (
+            {"active": "a", "bounds": {"drag_damping_scale_min": 1.0},
+             "sets": {"a": {"drag_damping_scale": 0.9}}},
+            "sets.a.drag_damping_scale: 0.9 is below bounds.drag_damping_scale_min = 1.0",
+        ),
+        (  # B_a x5 with M_a x0.05: explicit Euler of the admittance would ring at 1 kHz
+            {"active": "a", "bounds": {"drag_mass_scale_min": 0.01},
+             "sets": {"a": {"drag_mass_scale": 0.05, "drag_damping_scale": 5.0}}},
+            "sets.a (drag factors): mass/damping: k·B_a·dt/M_a",
+        ),
     ],
 )  # fmt: skip
 def test_a_profile_beyond_its_bounds_is_one_line(tmp_path: Path, profiles, needle: str) -> None:

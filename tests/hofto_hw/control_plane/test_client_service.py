@@ -178,7 +178,10 @@ def test_safety_profile_switch_refused_while_moving_accepted_at_standstill(tmp_p
             m.wait(timeout=120.0)
             wait_for(lambda: _at_rest(robot), "at rest after the move")
             content = robot.set_safety_profile("reduced")
-            assert content == {"collision_scale": 0.8, "speed_scale": 0.25}
+            assert content == {
+                "collision_scale": 0.8, "speed_scale": 0.25, "drag_mass_scale": 1.0,
+                "drag_damping_scale": 1.0, "drag_speed_scale": 0.5,
+            }  # fmt: skip
             assert robot.state().profile == "reduced"
             assert robot.status()["profile"]["name"] == "reduced"
             with pytest.raises(Refused, match="not a profile"):
