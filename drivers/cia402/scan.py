@@ -5,8 +5,9 @@ The bus readers (:mod:`drivers.ethercat.scan`, :mod:`drivers.canopen.scan`) fill
 their mappings, read back), which CiA-402 objects its dictionary has, 0x6502, the units
 objects, EtherCAT's DC op mode from the SII, CANopen's PDO communication parameters.
 :func:`draft_profile` turns that into a :class:`~hofto_hw.config.drive_profile.DriveProfile`
-a user reviews: the layout is the one the drive runs (marked fixed: the master then only
-assigns and reads back, it does not rewrite a mapping it cannot know to be writable), the
+a user reviews: the layout is the one the drive runs (each PDO fixed or configurable as the
+scan found it; a PDO the scan could not probe is marked fixed: the master then only assigns
+and reads back, it does not rewrite a mapping it cannot know to be writable), the
 fallbacks are chosen for what is not mapped, and the start-up writes are those the drive's
 dictionary calls for (the mode when 0x6060 is not mapped; the interpolation period when
 0x60C2 exists).
@@ -45,6 +46,9 @@ class ScannedPdo:
     cob_id_base: int | None = None
     transmission_type: int | None = None
     enabled: bool = True
+    #: True: the mapping refused a write (fixed); False: it took one (configurable); None:
+    #: not probed (the draft then says fixed: the master only assigns it)
+    fixed: bool | None = None
 
 
 @dataclass
@@ -231,7 +235,7 @@ def draft_profile(d: ScannedDrive, name: str | None = None) -> DriveProfile:
 def _pdo(p: ScannedPdo) -> dict[str, Any]:
     return {
         "index": p.index,
-        "fixed": True,
+        "fixed": p.fixed is not False,
         "entries": [{"index": i, "subindex": s, "bits": b} for i, s, b in p.entries],
     }
 

@@ -43,6 +43,7 @@ them back when they answer again, :meth:`drive_faults` reads 0x603F of faulted d
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -99,6 +100,25 @@ def _pysoem() -> Any:
     return pysoem
 
 
+#: what SOEM's dc_sync writes to ESC register 0x0980 (AssignActivate's low byte)
+SOEM_CYCLIC_UNIT_CONTROL = 0x00
+
+
+def assign_activate_warning(who: str, profile: Any) -> str | None:
+    """One line when ``profile``'s AssignActivate low byte (ESC 0x0980, cyclic unit
+    control) is not what SOEM writes (0x00), else None. ``who`` names the slave."""
+    dc = profile.dc
+    if dc is None or dc.assign_activate & 0xFF == SOEM_CYCLIC_UNIT_CONTROL:
+        return None
+    low = dc.assign_activate & 0xFF
+    return (
+        f"{who}: profile {profile.name}: AssignActivate 0x{dc.assign_activate:04X} asks "
+        f"0x{low:02X} in ESC register 0x0980 (sync/latch units to the drive's PDI); SOEM's "
+        f"dc_sync writes 0x{SOEM_CYCLIC_UNIT_CONTROL:02X} and pysoem has no public register "
+        "write, so the drive's latch (touch probe) stays with the master (the loop uses none)"
+    )
+
+
 class EtherCATTransport(Transport):
     """CiA-402 drives on EtherCAT through pysoem (see the module docstring).
 
@@ -139,11 +159,14 @@ class EtherCATTransport(Transport):
         ]
         if len(self.profiles) != len(self.drives):
             raise ValueError(f"{len(self.profiles)} profiles for {len(self.drives)} drives")
+        self.use_fallbacks(self.profiles)
         self.dc_opt = dc_sync
         #: DC runs when asked for or when any drive's profile programs it
         self.dc_sync = dc_sync or any(p.dc is not None for p in self.profiles)
         #: start-up SDOs written at the last open (for commissioning reports)
         self.startup_written = 0
+        #: one-line warnings of the last open (also printed on stderr once)
+        self.warnings: list[str] = []
         self._cycle_ns = max(1, round(cycle_time * 1e9))
         self._dc_prev = -1  # DC system time of the last good exchange [ns]; -1: none
         self.recover = recover
@@ -236,11 +259,14 @@ class EtherCATTransport(Transport):
                 "CAP_NET_RAW"
             ) from None
         self.master = master
+        self.warnings = []
         try:
             self._start(pysoem)
         except BaseException:
             self._shutdown()
             raise
+        for note in self.warnings:
+            print(f"hofto-hw: warning: {note}", file=sys.stderr)
         self.is_open = True
         self.stopped = False
 
@@ -306,6 +332,8 @@ class EtherCATTransport(Transport):
                 self._program_dc(i, s)
         self._dc_prev = -1
         self.sample_dt = 0.0
+        if self.derived is not None:
+            self.derived.reset()
         self._request(STATE_SAFEOP)
         for i in range(self.n_axes):
             self._startup(i, ("SO",))
@@ -350,14 +378,22 @@ class EtherCATTransport(Transport):
         """SYNC0 (and SYNC1) of one slave as its profile says; without a ``dc`` section the
         slave runs free unless ``bus.ethercat.dc_sync`` asks for SYNC0 at the loop period.
 
-        pysoem programs the activation register (0x0981, AssignActivate's high byte: 0x03
-        SYNC0, 0x07 SYNC0 + SYNC1); AssignActivate's low byte (latch/cyclic unit assignment,
-        0x0980) keeps the slave's default: pysoem has no public call for it."""
+        pysoem's ``dc_sync`` (SOEM's ecx_dcsync0 / ecx_dcsync01) writes the activation
+        register 0x0981 (AssignActivate's high byte: 0x03 SYNC0, 0x07 SYNC0 + SYNC1) and
+        always 0x00 to 0x0980 (AssignActivate's low byte: sync and latch units controlled by
+        EtherCAT). pysoem 1.1.13 has no public register write (only the private
+        ``CdefSlave._fpwr``), so a profile asking for another low byte (Nanotec's 0x330: the
+        latch units to the drive's PDI) gets a one-line warning in :attr:`warnings` and on
+        stderr (:func:`assign_activate_warning`): the loop uses no latch (touch probe), so
+        the drive still runs."""
         dc = self.profiles[axis].dc
         if dc is None:
             if self.dc_opt:
                 slave.dc_sync(True, self._cycle_ns)
             return
+        note = assign_activate_warning(self._who(axis), self.profiles[axis])
+        if note is not None:
+            self.warnings.append(note)
         cycle = dc.sync0_cycle_ns or self._cycle_ns
         if (dc.assign_activate >> 8) & 0x04 and dc.sync1_cycle_ns is not None:
             slave.dc_sync(True, cycle, dc.sync0_shift_ns, dc.sync1_cycle_ns)
@@ -496,6 +532,8 @@ class EtherCATTransport(Transport):
             self.wire.decode_tx()
         if self.dc_sync:
             self._sample_interval(self.master.dc_time)
+        if self.derived is not None:
+            self.derived.apply(self.sample_dt)
         return STATUS_OK
 
     def _sample_interval(self, dc_now: int) -> None:

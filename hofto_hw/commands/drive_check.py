@@ -265,6 +265,7 @@ def check(cfg: Any, profile: Any, n: int, move: float | None, emulated: bool) ->
         "pdos": [],
         "startup_sdos": 0,
         "unavailable": [],
+        "warnings": [],
         "faults": [],
     }
     t = _transport(cfg, profile)
@@ -282,6 +283,7 @@ def check(cfg: Any, profile: Any, n: int, move: float | None, emulated: bool) ->
             for i in range(n)
         ]
         report["startup_sdos"] = t.startup_written
+        report["warnings"] = list(getattr(t, "warnings", []))
         g = DriveGroup.from_config(t, cfg.bus)
         report["unavailable"] = [u for u in g.unavailable() if int(u.split()[1]) < n]
         g.cycle()
