@@ -160,6 +160,23 @@ class EtherCATTransport(Transport):
         if len(self.profiles) != len(self.drives):
             raise ValueError(f"{len(self.profiles)} profiles for {len(self.drives)} drives")
         self.use_fallbacks(self.profiles)
+        from hofto_hw.config.drives import device_map
+
+        #: (slave, CiA-402 axis of that slave) per axis: several axes may share a multi-axis
+        #: drive (``bus.drives[i].device`` / ``device_axis``)
+        self.serve = device_map(self.drives)
+        self.n_devices = max(d for d, _k in self.serve) + 1
+        #: the first axis on each slave (its configuration goes through it)
+        devices = [d for d, _k in self.serve]
+        self._first = [devices.index(d) for d in range(self.n_devices)]
+        #: slaves whose axes are named with their axis number in messages
+        self._multi = [
+            devices.count(d) > 1 or self.profiles[self._first[d]].axes > 1
+            for d in range(self.n_devices)
+        ]
+        #: SDO index shift of each axis's CiA-402 objects (0x800 per device axis)
+        self._shift = [0x800 * k for _d, k in self.serve]
+        self._raw_sdo = False  # device-level access (start-up, PDOs): no index shift
         self.dc_opt = dc_sync
         #: DC runs when asked for or when any drive's profile programs it
         self.dc_sync = dc_sync or any(p.dc is not None for p in self.profiles)
@@ -223,14 +240,16 @@ class EtherCATTransport(Transport):
         if self._direct:
             rs, ts = pdo.RXPDO_SIZE, pdo.TXPDO_SIZE
             tx_bytes = memoryview(self.tx.view(np.uint8))
-            self._tx_rows = [tx_bytes[i * ts : (i + 1) * ts] for i in range(self.n_axes)]
-            self._rx_bounds = [(i * rs, (i + 1) * rs) for i in range(self.n_axes)]
+            n = self.n_axes
+            self._tx_rows = [tx_bytes[i * ts : (i + 1) * ts] for i in range(n)]
+            self._rx_bounds = [(i * rs, (i + 1) * rs) for i in range(n)]
         else:
             tx_bytes = memoryview(wire.tx_in)
             off = wire.tx_offsets
-            self._tx_rows = [tx_bytes[off[i] : off[i + 1]] for i in range(self.n_axes)]
+            n = wire.n_devices
+            self._tx_rows = [tx_bytes[off[i] : off[i + 1]] for i in range(n)]
             ro = wire.rx_offsets
-            self._rx_bounds = [(int(ro[i]), int(ro[i + 1])) for i in range(self.n_axes)]
+            self._rx_bounds = [(int(ro[i]), int(ro[i + 1])) for i in range(n)]
         self._sizes = [
             (b - a, len(t)) for (a, b), t in zip(self._rx_bounds, self._tx_rows, strict=True)
         ]
@@ -238,7 +257,16 @@ class EtherCATTransport(Transport):
     # -------------------------------------------------------------------- start-up
 
     def _who(self, axis: int) -> str:
-        return f"slave {axis + 1} ({self.axis_names[axis]}) on {self.interface}"
+        d, k = self.serve[axis]
+        on = f" axis {k}" if self._multi[d] else ""
+        return f"slave {d + 1}{on} ({self.axis_names[axis]}) on {self.interface}"
+
+    def _who_slave(self, d: int) -> str:
+        """Slave ``d`` (0-based) with the axes it drives."""
+        if not 0 <= d < self.n_devices:
+            return f"slave {d + 1} on {self.interface}"
+        names = [self.axis_names[i] for i, (dev, _k) in enumerate(self.serve) if dev == d]
+        return f"slave {d + 1} ({', '.join(names)}) on {self.interface}"
 
     def open(self) -> None:
         """Bring every slave to OP (steps in the module docstring); raises EtherCATError."""
@@ -283,10 +311,12 @@ class EtherCATTransport(Transport):
             found = m.config_init()
         if found <= 0:
             raise EtherCATError(f"no EtherCAT slave answered on {self.interface}")
-        if found != self.n_axes:
+        if found != self.n_devices:
+            has = f"{self.n_devices} drives (bus.drives)"
+            if self.n_devices != self.n_axes:
+                has = f"{self.n_devices} drive devices for {self.n_axes} axes (bus.drives)"
             raise EtherCATError(
-                f"{self.interface}: found {found} EtherCAT slaves, the config has "
-                f"{self.n_axes} drives (bus.drives)"
+                f"{self.interface}: found {found} EtherCAT slaves, the config has {has}"
             )
         self.slaves = list(m.slaves)
         self._check_identities()
@@ -297,10 +327,10 @@ class EtherCATTransport(Transport):
 
         self.startup_written = 0
         layouts = []
-        for i in range(self.n_axes):
+        for i in self._first:  # per slave, through its first axis
             self._startup(i, ("IP", "PS"))
             layouts.append(self._configure_pdos(i))
-        wire = WireImage(layouts, self.axis_names)
+        wire = WireImage(layouts, self.axis_names, self.serve)
         wire.bind_master(self.rx, self.tx)
         self._set_rows(wire)
         if self.pdo_watchdog is not None:
@@ -322,27 +352,28 @@ class EtherCATTransport(Transport):
             if sizes != self._sizes[i]:
                 want = self._sizes[i]
                 raise EtherCATError(
-                    f"{self._who(i)}: process data is {sizes[0]} bytes out / {sizes[1]} in, "
+                    f"{self._who_slave(i)}: process data is {sizes[0]} bytes out / {sizes[1]} in, "
                     f"expected {want[0]} / {want[1]} (PDO mapping not applied)"
                 )
         if self.dc_sync:
             if not m.config_dc():
                 raise EtherCATError(f"{self.interface}: no slave supports distributed clocks")
             for i, s in enumerate(self.slaves):
-                self._program_dc(i, s)
+                self._program_dc(self._first[i], s)
         self._dc_prev = -1
         self.sample_dt = 0.0
         if self.derived is not None:
             self.derived.reset()
         self._request(STATE_SAFEOP)
-        for i in range(self.n_axes):
+        for i in self._first:
             self._startup(i, ("SO",))
         self.expected_wkc = m.expected_wkc
         self.rx.fill(0)
         self._request(STATE_OP, cyclic=True)
 
     def _check_identities(self) -> None:
-        for i, (s, d) in enumerate(zip(self.slaves, self.drives, strict=True)):
+        for i, d in enumerate(self.drives):
+            s = self.slaves[self.serve[i][0]]
             ident = d.identity
             checks = [
                 ("vendor id", ident.vendor_id, s.man),
@@ -361,18 +392,32 @@ class EtherCATTransport(Transport):
                         got,
                     )
 
+    def _axis_of_slave(self, d: int) -> int:
+        """The first axis on slave ``d`` (0-based); 0 for a position off the bus."""
+        return self._first[d] if 0 <= d < self.n_devices else 0
+
     def _startup(self, axis: int, transitions: tuple[str, ...]) -> None:
-        """Write the profile's start-up SDOs of ``transitions``, in the profile's order."""
+        """Write the profile's start-up SDOs of ``transitions`` to the slave of ``axis``, in
+        the profile's order (indices as the profile gives them: device level)."""
         from drivers.cia402.profiles import write_startup
 
-        self.startup_written += write_startup(self, axis, self.profiles[axis], transitions)
+        self._raw_sdo = True
+        try:
+            self.startup_written += write_startup(self, axis, self.profiles[axis], transitions)
+        finally:
+            self._raw_sdo = False
 
     def _configure_pdos(self, axis: int) -> Any:
-        """The profile's PDOs written, assigned and read back: the layout the drive reports
-        (:func:`drivers.cia402.profiles.configure_pdos`; a difference: EtherCATError)."""
+        """The profile's PDOs written, assigned and read back on the slave of ``axis``: the
+        layout the drive reports (:func:`drivers.cia402.profiles.configure_pdos`; a
+        difference: EtherCATError)."""
         from drivers.cia402.profiles import configure_pdos
 
-        return configure_pdos(self, axis, self.profiles[axis], EtherCATError)
+        self._raw_sdo = True
+        try:
+            return configure_pdos(self, axis, self.profiles[axis], EtherCATError)
+        finally:
+            self._raw_sdo = False
 
     def _program_dc(self, axis: int, slave: Any) -> None:
         """SYNC0 (and SYNC1) of one slave as its profile says; without a ``dc`` section the
@@ -391,7 +436,7 @@ class EtherCATTransport(Transport):
             if self.dc_opt:
                 slave.dc_sync(True, self._cycle_ns)
             return
-        note = assign_activate_warning(self._who(axis), self.profiles[axis])
+        note = assign_activate_warning(self._who_slave(self.serve[axis][0]), self.profiles[axis])
         if note is not None:
             self.warnings.append(note)
         cycle = dc.sync0_cycle_ns or self._cycle_ns
@@ -403,10 +448,10 @@ class EtherCATTransport(Transport):
     def _reconfigure(self, pos: int) -> None:
         """PRE-OP -> SAFE-OP hook of a slave brought back by :meth:`recover_slaves`: its
         start-up SDOs and PDOs again, checked against the layout the bus runs with."""
-        self._startup(pos, ("IP", "PS"))
-        layout = self._configure_pdos(pos)
+        self._startup(self._first[pos], ("IP", "PS"))
+        layout = self._configure_pdos(self._first[pos])
         if self.wire is not None and layout != self.wire.layouts[pos]:
-            raise EtherCATError(f"{self._who(pos)}: came back with another PDO layout")
+            raise EtherCATError(f"{self._who_slave(pos)}: came back with another PDO layout")
         if self.pdo_watchdog is not None:
             self._set_watchdog(pos)
 
@@ -414,7 +459,9 @@ class EtherCATTransport(Transport):
         """PRE-OP -> SAFE-OP hook: the SM watchdog time (``pdo_watchdog``)."""
         s = self.slaves[pos]  # pysoem passes the 0-based position
         ms = self.pdo_watchdog * 1000.0
-        self._retry(lambda: s.set_watchdog("processdata", ms), pos, "SM watchdog write")
+        self._retry(
+            lambda: s.set_watchdog("processdata", ms), self._first[pos], "SM watchdog write"
+        )
 
     def _retry(self, fn: Any, axis: int, what: str) -> Any:
         """Call ``fn`` again when the mailbox/register access got no (valid) answer.
@@ -466,7 +513,7 @@ class EtherCATTransport(Transport):
         target = STATE_NAMES.get(state, hex(state))
         parts = []
         for slave, (st, code) in problems.items():
-            who = self._who(slave - 1)
+            who = self._who_slave(slave - 1)
             if st == 0:
                 parts.append(f"{who} does not answer")
             else:
@@ -560,10 +607,10 @@ class EtherCATTransport(Transport):
             if s.state == STATE_OP:
                 continue
             if s.state == 0:
-                out.append(f"{self._who(i)} does not answer (lost)")
+                out.append(f"{self._who_slave(i)} does not answer (lost)")
             else:
                 out.append(
-                    f"{self._who(i)} is in {describe_state(s.state)}, AL status "
+                    f"{self._who_slave(i)} is in {describe_state(s.state)}, AL status "
                     f"{describe_al_status_code(s.al_status)}"
                 )
         return out
@@ -588,15 +635,16 @@ class EtherCATTransport(Transport):
                 continue
             if s.state == 0:
                 if not self._until(lambda s=s: s.recover(20_000) > 0):
-                    done.append(f"{self._who(i)} still does not answer")
+                    done.append(f"{self._who_slave(i)} still does not answer")
                     continue
                 self._until(lambda s=s: s.reconfig(50_000) >= STATE_PREOP)
-                done.append(f"{self._who(i)} answered again and was reconfigured")
+                done.append(f"{self._who_slave(i)} answered again and was reconfigured")
             elif s.state & 0x10:
                 s.state = (s.state & 0x0F) | _STATE_ACK
                 s.write_state()
                 done.append(
-                    f"{self._who(i)}: acknowledged AL status {describe_al_status_code(s.al_status)}"
+                    f"{self._who_slave(i)}: acknowledged AL status "
+                    f"{describe_al_status_code(s.al_status)}"
                 )
             if s.state & 0x0F == STATE_SAFEOP or s.state & 0x10:
                 s.state = pysoem.OP_STATE
@@ -638,7 +686,11 @@ class EtherCATTransport(Transport):
 
     def _on_emergency(self, emcy: Any) -> None:
         self.emergencies.append(
-            (int(emcy.slave_pos) - 1, int(emcy.error_code), int(emcy.error_reg))
+            (
+                self._axis_of_slave(int(emcy.slave_pos) - 1),
+                int(emcy.error_code),
+                int(emcy.error_reg),
+            )
         )
 
     def emergency_messages(self) -> list[str]:
@@ -656,26 +708,36 @@ class EtherCATTransport(Transport):
         if isinstance(exc, pysoem.SdoError):
             return str(self._sdo_error(exc, "access"))
         pos = getattr(exc, "slave_pos", 0)
-        who = self._who(pos - 1) if 1 <= pos <= self.n_axes else f"slave {pos}"
+        who = self._who_slave(pos - 1) if 1 <= pos <= self.n_devices else f"slave {pos}"
         desc = _describe_exc(exc)
         return f"{who}: {desc}"
 
     def _sdo_error(self, exc: Any, action: str) -> SdoAbortError:
         pos = int(getattr(exc, "slave_pos", 1))
-        axis = pos - 1 if 1 <= pos <= self.n_axes else 0
+        axis = self._axis_of_slave(pos - 1)
         return SdoAbortError(
             axis, exc.index, exc.subindex, exc.abort_code, action, self.axis_names[axis]
         )
 
     def sdo_read(self, axis: int, index: int, subindex: int) -> bytes:
         """Upload ``index:subindex`` of drive ``axis``; raises SdoAbortError/EtherCATError."""
+        index = self._object(axis, index)
         return bytes(
             self._sdo(axis, index, subindex, "read", lambda s: s.sdo_read(index, subindex))
         )
 
+    def _object(self, axis: int, index: int) -> int:
+        """The slave's index of ``axis``'s object ``index``: a CiA-402 object (0x6000..0x67FF)
+        of axis k of a multi-axis drive sits at index + 0x800·k (not for the device-level
+        start-up and PDO configuration, which name their objects as the profile does)."""
+        if not self._raw_sdo and 0x6000 <= index < 0x6800 and 0 <= axis < self.n_axes:
+            return index + self._shift[axis]
+        return index
+
     def sdo_write(self, axis: int, index: int, subindex: int, data: bytes) -> None:
         """Download ``data`` to ``index:subindex`` of drive ``axis``; raises SdoAbortError."""
         payload = bytes(data)
+        index = self._object(axis, index)
         self._sdo(axis, index, subindex, "write", lambda s: s.sdo_write(index, subindex, payload))
 
     def _sdo(self, axis: int, index: int, subindex: int, action: str, call: Any) -> Any:
@@ -684,7 +746,7 @@ class EtherCATTransport(Transport):
         pysoem = _pysoem()
         if self.master is None:
             raise EtherCATError(f"EtherCAT master on {self.interface} is not open")
-        slave = self.slaves[axis]
+        slave = self.slaves[self.serve[axis][0]]
         what = f"SDO {action} 0x{index:04X}:{subindex:02X}"
         try:
             return self._retry(lambda: call(slave), axis, what)
