@@ -194,6 +194,7 @@ def draft_profile(d: ScannedDrive, name: str | None = None) -> DriveProfile:
             "revision_min": d.revision,
         },
         "bus": d.bus,
+        "axes": _axes(d),
         "modes": {"supported": supported, "loop": loop, "set_by": set_by},
         "rx_pdos": [_pdo(p) for p in d.rx_pdos],
         "tx_pdos": [_pdo(p) for p in d.tx_pdos],
@@ -230,6 +231,17 @@ def draft_profile(d: ScannedDrive, name: str | None = None) -> DriveProfile:
             "tpdo": [_comm(p) for p in d.tx_pdos],
         }
     return DriveProfile.model_validate(data)
+
+
+def _axes(d: ScannedDrive) -> int:
+    """CiA-402 axes the drive's PDOs map objects of (axis k at 0x6000 + 0x800·k)."""
+    most = 0
+    for p in d.rx_pdos + d.tx_pdos:
+        for index, sub, _bits in p.entries:
+            found = cia402_object(index) if sub == 0 else None
+            if found and found[0] in CIA402_OBJECTS:
+                most = max(most, found[1])
+    return most + 1
 
 
 def _pdo(p: ScannedPdo) -> dict[str, Any]:

@@ -132,3 +132,24 @@ def test_drive_check_runs_a_two_axis_profile_on_three_slaves(tmp_path: Path, cap
     assert r["process_image_bytes"] == [{"rx": 30, "tx": 42}] * 6
     assert r["pdos"][1] == {"rx": ["0x1600", "0x1610"], "tx": ["0x1A00", "0x1A10"]}
     assert all(abs(m - 0.05) <= 0.005 for m in r["moved_rad"])
+
+
+@pytest.mark.root
+def test_scan_of_two_axis_slaves_drafts_a_two_axis_profile(two_axis_bus, tmp_path, capsys) -> None:
+    import yaml
+
+    from hofto_hw.config.drive_profile import load_profile
+
+    master, _cfg, _emu = two_axis_bus
+    out = tmp_path / "scanned"
+    code = main(["bus", "scan", "--iface", master, "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    bus = yaml.safe_load((out / "bus.yaml").read_text())["bus"]
+    # one joint per axis of each slave, one draft for the model
+    assert [(d["device"], d["device_axis"]) for d in bus["drives"]] == [
+        (dev, k) for dev in range(3) for k in range(2)
+    ]
+    got = load_profile(out / f"{bus['drives'][0]['profile']}.yaml")
+    assert got.axes == 2
+    assert [(p.index, p.fixed) for p in got.rx_pdos] == [(0x1600, False), (0x1610, False)]
+    assert got.field_offsets("rx", 1)["controlword"] == (120, 16)
