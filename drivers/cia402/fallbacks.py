@@ -88,7 +88,8 @@ class DerivedSignals:
         self.velocity = np.zeros(n)
         self._started = False
         self._dt = -1.0
-        self._alpha = 1.0
+        self._keep = np.zeros(n)
+        self._gain = np.zeros(n)
 
     def reset(self) -> None:
         """Forget the previous position (after a restart of the exchange)."""
@@ -108,14 +109,18 @@ class DerivedSignals:
             self._started = True
         elif sample_dt >= 0.0:
             dt = sample_dt if sample_dt > 0.0 else self.cycle_time
-            if dt != self._dt:  # the filter gain of this interval (recomputed on a change)
+            if dt != self._dt:  # the filter's coefficients for this interval (on a change)
                 self._dt = dt
-                self._alpha = 1.0 - math.exp(-2.0 * math.pi * self.cutoff_hz * dt)
+                alpha = 1.0 - math.exp(-2.0 * math.pi * self.cutoff_hz * dt)
+                self._keep.fill(1.0 - alpha)
+                self._gain.fill(alpha / dt)
             np.subtract(self._pos, self._prev, out=self._step)  # int32: wraps like the encoder
             np.copyto(self._prev, self._pos)
-            np.multiply(self._step, 1.0 / dt, out=self._rate)
-            np.subtract(self._rate, self.velocity, out=self._rate)
-            self._rate *= self._alpha
-            self.velocity += self._rate
+            np.copyto(self._rate, self._step)
+            # v += alpha·(step/dt - v)  as  v = (1 - alpha)·v + (alpha/dt)·step; coefficient
+            # arrays, not Python floats: a scalar operand costs a conversion per call
+            np.multiply(self._rate, self._gain, out=self._rate)
+            np.multiply(self.velocity, self._keep, out=self.velocity)
+            np.add(self.velocity, self._rate, out=self.velocity)
         np.rint(self.velocity, out=self._rate)
         np.copyto(self._vel, self._rate, where=self.vel_mask, casting="unsafe")
