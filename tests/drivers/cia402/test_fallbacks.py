@@ -9,6 +9,7 @@ import tracemalloc
 from pathlib import Path
 
 import numpy as np
+import pytest
 from support.profiles import BUILTINLIKE, INOVANCE, MIXED, SPARSE, write_mixed_config
 
 from drivers.cia402.drive_group import DriveGroup
@@ -139,3 +140,48 @@ def test_a_drive_without_torque_offset_is_named_at_start_up(tmp_path: Path) -> N
     assert notes[1].startswith("axis 3 (") and "no gravity feed-forward" in notes[1]
     in_cst = g.feedforward_notes(Mode.CST)
     assert len(in_cst) == 1 and in_cst[0].startswith("axis 3 (")
+
+
+@pytest.mark.root
+def test_velocity_from_position_over_the_ethercat_emulator_with_dc(tmp_path: Path) -> None:
+    """The real master on the emulated bus, DC on (the sample interval from the reference
+    clock): a drive without 0x606C reads the velocity of the true arm while it moves."""
+    from support.rootnet import emulator, sim_ethercat_args, veth_pair
+
+    from drivers.cia402.profiles import profiles_for
+    from drivers.ethercat.master import EtherCATTransport
+
+    config = write_mixed_config(tmp_path, [NO_VELOCITY, *MIXED[1:]])
+    cfg = load_config(config)
+    with (
+        veth_pair("fm", "fs") as (master, slave),
+        emulator(sim_ethercat_args(slave, config), tmp_path, timeout=30.0) as emu,
+    ):
+        t = EtherCATTransport(
+            master, cfg.bus.drives, cfg.cycle_time, list(cfg.robot.joints),
+            dc_sync=True, receive_timeout=0.02, pdo_watchdog=2.0,
+            profiles=profiles_for(cfg.bus.drives, "ethercat"),
+        )  # fmt: skip
+        try:
+            t.open()
+            g = DriveGroup.from_config(t, cfg.bus)
+            g.set_mode(Mode.CSP)
+            g.enable()
+            assert g.all_in(State.OPERATION_ENABLED)
+            q0 = g.q.copy()
+            rate = 0.3  # rad/s on joint 0 for 1 s
+            pairs = []
+            for k in range(1300):
+                target = q0.copy()
+                target[0] += rate * min(k, 1000) * cfg.cycle_time
+                g.command_position(target)
+                g.cycle()
+                t.wait_next_cycle()
+                if k in (500, 650, 800):  # steady motion: the master's figure and the arm's
+                    pairs.append((float(g.qd[0]), float(emu.call(op="status")["qd"][0])))
+            for measured, true in pairs:
+                assert abs(measured - true) < 0.05 * rate, pairs
+            assert abs(g.qd[0]) < 0.02 * rate  # at rest after the ramp
+            g.disable()
+        finally:
+            t.close()
