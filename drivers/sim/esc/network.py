@@ -252,12 +252,12 @@ class EmulatedNetwork:
             elif op == "position_jump":
                 if self.drives is None:
                     raise ValueError("no drives on this network")
-                k = self._slave_index(request["slave"])
+                k = self._drive_index(request["slave"])
                 self.drives.jump_position(k, float(request["offset"]))
             elif op == "clear_drive_fault":
                 if self.drives is None:
                     raise ValueError("no drives on this network")
-                self.drives.clear_fault(self._slave_index(request["slave"]))
+                self.drives.clear_fault(self._drive_index(request["slave"]))
             elif op == "sdo_abort":
                 s = self.slaves[self._slave_index(request["slave"])]
                 if s.coe is None:
@@ -305,6 +305,15 @@ class EmulatedNetwork:
             raise ValueError(f"slave {i} does not exist (0..{self.n - 1})")
         return i
 
+    def _drive_index(self, value: Any) -> int:
+        """A drive (joint) of the drive requests (``slave`` = the drive: one per slave, or
+        one per axis of a multi-axis slave)."""
+        i = int(value)
+        n = self.drives.n if self.drives is not None else self.n
+        if not 0 <= i < n:
+            raise ValueError(f"drive {i} does not exist (0..{n - 1})")
+        return i
+
     def _drive_fault(self, request: dict[str, Any]) -> None:
         if self.drives is None:
             raise ValueError("no drives on this network")
@@ -314,7 +323,7 @@ class EmulatedNetwork:
             known = ", ".join(f"0x{c:04X}" for c in sorted(_FAULT_KINDS))
             raise ValueError(f"no injectable drive fault with code 0x{code:04X} (known: {known})")
         self.drives.inject_fault(
-            self._slave_index(request["slave"]), kind, bool(request.get("persistent", False))
+            self._drive_index(request["slave"]), kind, bool(request.get("persistent", False))
         )
 
     def status(self) -> dict[str, Any]:

@@ -153,3 +153,27 @@ def test_scan_of_two_axis_slaves_drafts_a_two_axis_profile(two_axis_bus, tmp_pat
     assert got.axes == 2
     assert [(p.index, p.fixed) for p in got.rx_pdos] == [(0x1600, False), (0x1610, False)]
     assert got.field_offsets("rx", 1)["controlword"] == (120, 16)
+
+
+@pytest.mark.root
+def test_a_fault_on_axis_1_of_a_slave_is_named_by_slave_axis_and_joint(two_axis_bus) -> None:
+    _master, cfg, emu = two_axis_bus
+    t = _transport(cfg)
+    try:
+        t.open()
+        g = DriveGroup.from_config(t, cfg.bus)
+        g.set_mode(Mode.CSP)
+        g.enable()
+        assert emu.call(op="drive_fault", slave=5, code=0x2310)["ok"]  # joint 6: slave 3 axis 1
+        for _ in range(2000):  # wait for the state, not for a time
+            g.command_position(g.q.copy())
+            g.cycle()
+            t.wait_next_cycle()
+            if g.any_fault():
+                break
+        assert g.states.tolist().count(State.FAULT) == 1 and g.states[5] == State.FAULT
+        faults = t.drive_faults()
+        assert len(faults) == 1
+        assert faults[0].startswith("slave 3 axis 1 (joint_6)") and "0x2310" in faults[0]
+    finally:
+        t.close()
