@@ -4,12 +4,15 @@ Start-up (:meth:`EtherCATTransport.open`, blocking, raises errors that name the 
 the slave and the values involved):
 
 1. open the interface (must exist; raw sockets need root or CAP_NET_RAW);
-2. scan (``config_init``): the slave count must equal the configured drive count, and each
-   slave's SII identity (vendor id, product code, revision) must match ``bus.drives[i]``;
+2. scan (``config_init``): the slave count must equal the configured drive devices (one per
+   drive, or one per multi-axis drive: ``bus.drives[i].device`` / ``device_axis`` put several
+   joints on one slave, axis k's CiA-402 objects at 0x6000 + 0x800·k), and each slave's SII
+   identity (vendor id, product code, revision) must match its ``bus.drives[i]``;
 3. INIT -> PRE-OP; each drive configured as its profile says (``bus.drives[i].profile``,
    :mod:`drivers.cia402.profiles`; no profile: the built-in 0x1600/0x1A00 layout): start-up
-   SDOs of INIT -> PRE-OP and PRE-OP -> SAFE-OP in their order, the configurable PDOs
-   written (count 0, entries, count), the assignment 0x1C12/0x1C13 written when it differs
+   SDOs of INIT -> PRE-OP and PRE-OP -> SAFE-OP in their order (once per slave), the
+   configurable PDOs written (count 0, entries, count), the assignment 0x1C12/0x1C13 written
+   when it differs
    (fixed PDOs are only assigned, never written); then the assignment and every assigned
    mapping are READ BACK and the wire layout is built from what the drive reports
    (:class:`drivers.cia402.wire.WireImage`): a difference from the profile is a one-line
