@@ -83,7 +83,28 @@ class Transport(ABC):
         #: the drives' own wire layouts (:class:`drivers.cia402.wire.WireImage`) when the
         #: backend runs per-axis profiles; None: every drive has every canonical field
         self.wire: Any = None
+        #: signals some drives do not report, computed after each fresh decode
+        #: (:class:`drivers.cia402.fallbacks.DerivedSignals`); None: nothing to compute
+        self.derived: Any = None
         self._deadline = 0.0
+
+    def use_fallbacks(self, profiles: Any) -> None:
+        """Compute what the drives' ``profiles`` (one per axis, None: built-in) say they do
+        not report (torque from current, velocity from position): sets :attr:`derived`."""
+        from drivers.cia402.fallbacks import DerivedSignals, derived_masks
+
+        tau, vel = derived_masks(profiles)
+        self.derived = (
+            DerivedSignals(self.tx, tau, vel, self.cycle_time) if tau.any() or vel.any() else None
+        )
+
+    @property
+    def torque_from_current(self) -> np.ndarray:
+        """bool (n_axes,): axes whose canonical torque field carries the drive's current
+        (profile fallback ``torque: current``; the drive group scales it with kt)."""
+        if self.derived is None:
+            return np.zeros(self.n_axes, dtype=bool)
+        return self.derived.tau_mask
 
     def present(self, field: str) -> np.ndarray:
         """bool (n_axes,): which drives map canonical process-image ``field`` (e.g.

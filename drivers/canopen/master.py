@@ -173,6 +173,7 @@ class CANopenTransport(Transport):
             for p in (profiles if profiles is not None else [None] * n)
         ]
         self.startup_written = 0
+        self.use_fallbacks(self.profiles)
         # the wire image of every node: its PDO payloads end to end (RPDOs / TPDOs), one
         # encode and one decode per cycle; the frames are slices of it
         self.wire = WireImage([layout_of(p) for p in self.profiles], self.axis_names)
@@ -352,6 +353,8 @@ class CANopenTransport(Transport):
         except BaseException:
             self._shutdown()
             raise
+        if self.derived is not None:
+            self.derived.reset()
         self.is_open = True
 
     def _heartbeat_cb(self, axis: int) -> Any:
@@ -553,6 +556,8 @@ class CANopenTransport(Transport):
             return STATUS_BUS_ERROR
         self._write_off_backlog()
         self.wire.decode_tx()
+        if self.derived is not None:
+            self.derived.apply(self.sample_dt)
         np.copyto(self._tx_err, self._emcy_code, where=self._err_by_emcy)
         now = time.monotonic()
         np.subtract(now, self._hb_time, out=self._age)

@@ -95,10 +95,14 @@ class DriveGroup(ImageFields):
         self.tau = self._si[2]
         #: motor current [A] in the joint's sense, (n,)
         self.current = self._si[3]
+        from drivers.cia402.fallbacks import torque_scale
+
         self._si[4:] = (
             scaling.zero_offset,
             scaling.rad_per_count,
-            scaling.nm_per_permille,
+            # N·m per raw torque unit: the current's x kt x gear where the drive reports
+            # no torque (profile fallback ``torque: current``)
+            torque_scale(scaling, transport.torque_from_current),
             scaling.amp_per_permille,
             scaling.count_per_rad,
             scaling.permille_per_nm,
@@ -169,7 +173,7 @@ class DriveGroup(ImageFields):
         sc = self.scaling
         sc.position_to_si(self._tx_pos, self.q)
         sc.velocity_to_si(self._tx_vel, self.qd)
-        sc.torque_to_si(self._tx_tau, self.tau)
+        np.multiply(self._tx_tau, self._si[6], out=self.tau)  # torque_scale's row
         sc.current_to_si(self._tx_cur, self.current)
         sm.decode_states(self._tx_sw, self.states, self._u16)
 
@@ -316,14 +320,44 @@ class DriveGroup(ImageFields):
             "mode_display": "the mode display is read by SDO",
             "torque": "no measured torque",
             "current": "no measured current",
-            "velocity": "no measured velocity",
+            "velocity": "computed from the position difference over the sample interval "
+            "(low-pass filtered)",
             "target_velocity": "no CSV",
             "target_torque": "no CST",
         }
+        from_current = self.transport.torque_from_current
         out = []
         for field, what in how.items():
             for i in np.flatnonzero(~self.present(field)):
-                out.append(f"axis {i} ({self.names[i]}): {field} not mapped: {what}")
+                if field == "torque" and from_current[i]:
+                    what_i = "computed from the current x torque_constant x gear_ratio"
+                else:
+                    what_i = what
+                out.append(f"axis {i} ({self.names[i]}): {field} not mapped: {what_i}")
+        return out
+
+    def feedforward_notes(self, mode: Mode | int = Mode.CSP) -> list[str]:
+        """One line per axis whose drive has no torque offset (0x60B2) mapped, saying what
+        becomes of the gravity feed-forward in ``mode`` (the loop prints them at start-up;
+        setup, not the tick). The profile's fallback says which: ``target_torque_in_cst``
+        (the feed-forward is part of the target torque in CST, absent in CSP/CSV) or
+        ``unavailable``."""
+        profiles = getattr(self.transport, "profiles", None) or [None] * self.n
+        cst = int(mode) == Mode.CST
+        out = []
+        for i in np.flatnonzero(~self.present("torque_offset")):
+            p = profiles[i]
+            how = "unavailable" if p is None else p.fallbacks.get("torque_offset", "unavailable")
+            who = f"axis {i} ({self.names[i]}): no torque offset 0x60B2 mapped"
+            if how == "target_torque_in_cst" and cst:
+                continue  # the target torque carries the whole command, feed-forward included
+            if how == "target_torque_in_cst":
+                out.append(
+                    f"{who}: the gravity feed-forward reaches this drive only through the "
+                    f"target torque in CST; in {Mode(int(mode)).name} this joint runs without it"
+                )
+            else:
+                out.append(f"{who}: no gravity feed-forward on this joint (profile: unavailable)")
         return out
 
     def _adapter(self) -> Any:

@@ -5,8 +5,9 @@ The bus readers (:mod:`drivers.ethercat.scan`, :mod:`drivers.canopen.scan`) fill
 their mappings, read back), which CiA-402 objects its dictionary has, 0x6502, the units
 objects, EtherCAT's DC op mode from the SII, CANopen's PDO communication parameters.
 :func:`draft_profile` turns that into a :class:`~hofto_hw.config.drive_profile.DriveProfile`
-a user reviews: the layout is the one the drive runs (marked fixed: the master then only
-assigns and reads back, it does not rewrite a mapping it cannot know to be writable), the
+a user reviews: the layout is the one the drive runs (each PDO fixed or configurable as the
+scan found it; a PDO the scan could not probe is marked fixed: the master then only assigns
+and reads back, it does not rewrite a mapping it cannot know to be writable), the
 fallbacks are chosen for what is not mapped, and the start-up writes are those the drive's
 dictionary calls for (the mode when 0x6060 is not mapped; the interpolation period when
 0x60C2 exists).
@@ -45,6 +46,9 @@ class ScannedPdo:
     cob_id_base: int | None = None
     transmission_type: int | None = None
     enabled: bool = True
+    #: True: the mapping refused a write (fixed); False: it took one (configurable); None:
+    #: not probed (the draft then says fixed: the master only assigns it)
+    fixed: bool | None = None
 
 
 @dataclass
@@ -190,6 +194,7 @@ def draft_profile(d: ScannedDrive, name: str | None = None) -> DriveProfile:
             "revision_min": d.revision,
         },
         "bus": d.bus,
+        "axes": _axes(d),
         "modes": {"supported": supported, "loop": loop, "set_by": set_by},
         "rx_pdos": [_pdo(p) for p in d.rx_pdos],
         "tx_pdos": [_pdo(p) for p in d.tx_pdos],
@@ -228,10 +233,21 @@ def draft_profile(d: ScannedDrive, name: str | None = None) -> DriveProfile:
     return DriveProfile.model_validate(data)
 
 
+def _axes(d: ScannedDrive) -> int:
+    """CiA-402 axes the drive's PDOs map objects of (axis k at 0x6000 + 0x800·k)."""
+    most = 0
+    for p in d.rx_pdos + d.tx_pdos:
+        for index, sub, _bits in p.entries:
+            found = cia402_object(index) if sub == 0 else None
+            if found and found[0] in CIA402_OBJECTS:
+                most = max(most, found[1])
+    return most + 1
+
+
 def _pdo(p: ScannedPdo) -> dict[str, Any]:
     return {
         "index": p.index,
-        "fixed": True,
+        "fixed": p.fixed is not False,
         "entries": [{"index": i, "subindex": s, "bits": b} for i, s, b in p.entries],
     }
 

@@ -95,16 +95,23 @@ class AxisLayout:
         """Input bytes on the wire."""
         return sum(e.bits for e in self.tx) // 8
 
-    def fields(self, direction: str) -> set[str]:
-        """Canonical fields this layout carries in ``direction`` ('rx' or 'tx')."""
+    def fields(self, direction: str, axis: int = 0) -> set[str]:
+        """Canonical fields this layout carries in ``direction`` ('rx' or 'tx') for CiA-402
+        axis ``axis`` of the device (its objects at 0x6000 + 0x800·axis)."""
         entries = self.rx if direction == "rx" else self.tx
-        return {OBJECT_FIELDS[(e.index, e.subindex)] for e in entries if _known(e)}
+        out = set()
+        for e in entries:
+            found = _split(e)
+            if found is not None and found[1] == axis:
+                out.add(OBJECT_FIELDS[(found[0], e.subindex)])
+        return out
 
-    def check(self, who: str = "drive") -> AxisLayout:
+    def check(self, who: str = "drive", axes: Sequence[int] = (0,)) -> AxisLayout:
         """Raise LayoutError (one line naming ``who``) when the stack cannot run this layout:
         an entry off whole bytes, a known object with another length than its data type, an
         object mapped twice or in the wrong direction, controlword/target position or
-        statusword/position or every target missing. Returns self."""
+        statusword/position or every target missing on one of the device's ``axes`` the stack
+        runs. Returns self."""
         for direction, entries, dtype, required in (
             ("rx", self.rx, RXPDO_DTYPE, REQUIRED_RX),
             ("tx", self.tx, TXPDO_DTYPE, REQUIRED_TX),
@@ -118,10 +125,11 @@ class AxisLayout:
                     )
                 if e.index == 0:
                     continue
-                key = (e.index, e.subindex)
-                if key in seen:
+                if (e.index, e.subindex) in seen:
                     raise LayoutError(f"{who}: {direction} entry {_fmt(e)} is mapped twice")
-                seen.add(key)
+                seen.add((e.index, e.subindex))
+                found = _split(e)
+                key = (found[0], e.subindex) if found is not None else (e.index, e.subindex)
                 if key in OBJECT_TYPES:
                     size = np.dtype(OBJECT_TYPES[key]).itemsize * 8
                     if size != e.bits:
@@ -132,17 +140,32 @@ class AxisLayout:
                         raise LayoutError(
                             f"{who}: {direction} entry {_fmt(e)} belongs to the other direction"
                         )
-            have = self.fields(direction)
-            for f in required:
-                if f not in have:
-                    raise LayoutError(f"{who}: the {direction} PDOs do not map {f}")
-            if direction == "rx" and not have & set(TARGETS):
-                raise LayoutError(f"{who}: the rx PDOs map no target ({', '.join(TARGETS)})")
+            for k in axes:
+                have = self.fields(direction, k)
+                on = f" of axis {k}" if k else ""
+                for f in required:
+                    if f not in have:
+                        raise LayoutError(f"{who}: the {direction} PDOs do not map {f}{on}")
+                if direction == "rx" and not have & set(TARGETS):
+                    raise LayoutError(
+                        f"{who}: the rx PDOs map no target ({', '.join(TARGETS)}){on}"
+                    )
         return self
 
 
-def _known(e: WireEntry) -> bool:
-    return e.index != 0 and (e.index, e.subindex) in OBJECT_FIELDS
+def split_object(index: int, subindex: int) -> tuple[int, int] | None:
+    """(axis-0 object index, device axis k) of a canonical CiA-402 object at
+    ``0x6000 + 0x800·k`` (CiA 402-1: axis k of a multi-axis device); None for padding and
+    objects the canonical image does not carry."""
+    if not 0x6000 <= index <= 0x9FFF:
+        return None
+    k, base = divmod(index - 0x6000, 0x800)
+    base += 0x6000
+    return (base, k) if (base, subindex) in OBJECT_FIELDS else None
+
+
+def _split(e: WireEntry) -> tuple[int, int] | None:
+    return split_object(e.index, e.subindex)
 
 
 #: the stack's own layout: RxPDO 0x1600 and TxPDO 0x1A00 of drivers.cia402.pdo
@@ -154,14 +177,18 @@ BUILTIN_LAYOUT = AxisLayout(
 )
 
 
-def _byte_pairs(entries: Sequence[WireEntry], dtype: np.dtype) -> list[tuple[int, int]]:
-    """(wire byte, record byte) of every byte of a known object, wire order."""
+def _byte_pairs(
+    entries: Sequence[WireEntry], dtype: np.dtype, axis: int = 0
+) -> list[tuple[int, int]]:
+    """(wire byte, record byte) of every byte of a known object of device axis ``axis``,
+    wire order."""
     out = []
     off = 0
     for e in entries:
         size = e.bits // 8
-        if _known(e):
-            field = OBJECT_FIELDS[(e.index, e.subindex)]
+        found = _split(e)
+        if found is not None and found[1] == axis:
+            field = OBJECT_FIELDS[(found[0], e.subindex)]
             rec = dtype.fields[field][1]  # type: ignore[index]
             out.extend((off + k, rec + k) for k in range(size))
         off += size
@@ -169,19 +196,41 @@ def _byte_pairs(entries: Sequence[WireEntry], dtype: np.dtype) -> list[tuple[int
 
 
 class WireImage:
-    """The wire bytes of n drives and the tables between them and canonical records.
+    """The wire bytes of the drive devices and the tables between them and the n canonical
+    records (one per axis the stack runs).
 
-    ``layouts``: one :class:`AxisLayout` per axis (checked). ``rx_out`` / ``tx_in``: the
-    wire buffers (uint8, all axes end to end; axis i at ``rx_offsets[i]`` /
-    ``tx_offsets[i]``). :attr:`present`: canonical field name -> bool (n,) whether that
-    axis's drive maps the object.
+    ``layouts``: one :class:`AxisLayout` per device (checked), in bus order. ``serve``: per
+    canonical axis, (device, CiA-402 axis of that device); default: axis i is axis 0 of
+    device i (one axis per device). A multi-axis device's axis k has its objects at
+    0x6000 + 0x800·k in its PDOs. ``rx_out`` / ``tx_in``: the wire buffers (uint8, all devices
+    end to end; device d at ``rx_offsets[d]`` / ``tx_offsets[d]``). :attr:`present`:
+    canonical field name -> bool (n,) whether that axis's drive maps the object.
     """
 
-    def __init__(self, layouts: Sequence[AxisLayout], names: Sequence[str] | None = None):
-        n = len(layouts)
+    def __init__(
+        self,
+        layouts: Sequence[AxisLayout],
+        names: Sequence[str] | None = None,
+        serve: Sequence[tuple[int, int]] | None = None,
+    ):
+        serve = [(i, 0) for i in range(len(layouts))] if serve is None else list(serve)
+        n = len(serve)
         names = list(names) if names else [f"axis{i}" for i in range(n)]
         self.n = n
-        self.layouts = tuple(lay.check(f"axis {i} ({names[i]})") for i, lay in enumerate(layouts))
+        #: (device, device axis) per canonical axis
+        self.serve = tuple((int(d), int(k)) for d, k in serve)
+        #: the device of each canonical axis, (n,)
+        self.device_of = np.array([d for d, _k in self.serve], dtype=np.intp)
+        checked = []
+        for d, lay in enumerate(layouts):
+            mine = [i for i, (dev, _k) in enumerate(self.serve) if dev == d]
+            if not mine:
+                raise LayoutError(f"device {d} serves no axis")
+            who = f"axis {mine[0]} ({names[mine[0]]})"
+            if len(mine) > 1:
+                who = "axes " + ", ".join(f"{i} ({names[i]})" for i in mine)
+            checked.append(lay.check(who, sorted({self.serve[i][1] for i in mine})))
+        self.layouts = tuple(checked)
         rx_sizes = [lay.rx_size for lay in layouts]
         tx_sizes = [lay.tx_size for lay in layouts]
         self.rx_offsets = np.concatenate(([0], np.cumsum(rx_sizes))).astype(np.intp)
@@ -198,15 +247,18 @@ class WireImage:
         self.present: dict[str, np.ndarray] = {}
         for dtype, direction in ((RXPDO_DTYPE, "rx"), (TXPDO_DTYPE, "tx")):
             for f in dtype.names or ():
-                self.present[f] = np.array([f in lay.fields(direction) for lay in layouts])
+                self.present[f] = np.array(
+                    [f in layouts[d].fields(direction, k) for d, k in self.serve], dtype=bool
+                )
 
         zero = n * RXPDO_SIZE  # the zero byte past the canonical RxPDO (see encode_rx)
         enc = np.full(rx_total, zero, dtype=np.intp)
         dec = np.empty(n * TXPDO_SIZE, dtype=np.intp)
         drx_w, drx_r, dtx = [], [], np.full(tx_total, n * TXPDO_SIZE, dtype=np.intp)
-        for i, lay in enumerate(layouts):
-            ro, to = int(self.rx_offsets[i]), int(self.tx_offsets[i])
-            for w, r in _byte_pairs(lay.rx, RXPDO_DTYPE):
+        for i, (d, k) in enumerate(self.serve):
+            lay = layouts[d]
+            ro, to = int(self.rx_offsets[d]), int(self.tx_offsets[d])
+            for w, r in _byte_pairs(lay.rx, RXPDO_DTYPE, k):
                 enc[ro + w] = i * RXPDO_SIZE + r
                 drx_w.append(ro + w)
                 drx_r.append(i * RXPDO_SIZE + r)
@@ -214,7 +266,7 @@ class WireImage:
             dec[i * TXPDO_SIZE : (i + 1) * TXPDO_SIZE] = (
                 tx_total + i * TXPDO_SIZE + np.arange(TXPDO_SIZE)
             )
-            for w, r in _byte_pairs(lay.tx, TXPDO_DTYPE):
+            for w, r in _byte_pairs(lay.tx, TXPDO_DTYPE, k):
                 dec[i * TXPDO_SIZE + r] = to + w
                 dtx[to + w] = i * TXPDO_SIZE + r
         self._enc = enc
@@ -227,27 +279,29 @@ class WireImage:
         self._drive_tx_src = np.zeros(n * TXPDO_SIZE + 1, dtype=np.uint8)
         self._adapter: Any = None
         #: True when every axis runs the built-in layout (the wire IS the canonical image)
-        self.builtin = all(
+        self.builtin = self.serve == tuple((i, 0) for i in range(len(layouts))) and all(
             lay.rx == BUILTIN_LAYOUT.rx and lay.tx == BUILTIN_LAYOUT.tx for lay in layouts
         )
+        #: number of devices
+        self.n_devices = len(layouts)
 
     # ----------------------------------------------------------- sizes and info
 
-    def rx_size(self, axis: int) -> int:
-        """Output bytes of ``axis``."""
-        return int(self.rx_offsets[axis + 1] - self.rx_offsets[axis])
+    def rx_size(self, device: int) -> int:
+        """Output bytes of ``device`` (= axis ``device`` with one axis per device)."""
+        return int(self.rx_offsets[device + 1] - self.rx_offsets[device])
 
-    def tx_size(self, axis: int) -> int:
-        """Input bytes of ``axis``."""
-        return int(self.tx_offsets[axis + 1] - self.tx_offsets[axis])
+    def tx_size(self, device: int) -> int:
+        """Input bytes of ``device``."""
+        return int(self.tx_offsets[device + 1] - self.tx_offsets[device])
 
-    def rx_slice(self, axis: int) -> np.ndarray:
-        """View of ``axis``'s outputs in :attr:`rx_out`."""
-        return self.rx_out[self.rx_offsets[axis] : self.rx_offsets[axis + 1]]
+    def rx_slice(self, device: int) -> np.ndarray:
+        """View of ``device``'s outputs in :attr:`rx_out`."""
+        return self.rx_out[self.rx_offsets[device] : self.rx_offsets[device + 1]]
 
-    def tx_slice(self, axis: int) -> np.ndarray:
-        """View of ``axis``'s inputs in :attr:`tx_in`."""
-        return self.tx_in[self.tx_offsets[axis] : self.tx_offsets[axis + 1]]
+    def tx_slice(self, device: int) -> np.ndarray:
+        """View of ``device``'s inputs in :attr:`tx_in`."""
+        return self.tx_in[self.tx_offsets[device] : self.tx_offsets[device + 1]]
 
     def set_default(self, axis: int, field: str, value: int) -> None:
         """The value canonical TxPDO ``field`` of ``axis`` reads when its drive does not map

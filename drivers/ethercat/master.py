@@ -4,12 +4,15 @@ Start-up (:meth:`EtherCATTransport.open`, blocking, raises errors that name the 
 the slave and the values involved):
 
 1. open the interface (must exist; raw sockets need root or CAP_NET_RAW);
-2. scan (``config_init``): the slave count must equal the configured drive count, and each
-   slave's SII identity (vendor id, product code, revision) must match ``bus.drives[i]``;
+2. scan (``config_init``): the slave count must equal the configured drive devices (one per
+   drive, or one per multi-axis drive: ``bus.drives[i].device`` / ``device_axis`` put several
+   joints on one slave, axis k's CiA-402 objects at 0x6000 + 0x800·k), and each slave's SII
+   identity (vendor id, product code, revision) must match its ``bus.drives[i]``;
 3. INIT -> PRE-OP; each drive configured as its profile says (``bus.drives[i].profile``,
    :mod:`drivers.cia402.profiles`; no profile: the built-in 0x1600/0x1A00 layout): start-up
-   SDOs of INIT -> PRE-OP and PRE-OP -> SAFE-OP in their order, the configurable PDOs
-   written (count 0, entries, count), the assignment 0x1C12/0x1C13 written when it differs
+   SDOs of INIT -> PRE-OP and PRE-OP -> SAFE-OP in their order (once per slave), the
+   configurable PDOs written (count 0, entries, count), the assignment 0x1C12/0x1C13 written
+   when it differs
    (fixed PDOs are only assigned, never written); then the assignment and every assigned
    mapping are READ BACK and the wire layout is built from what the drive reports
    (:class:`drivers.cia402.wire.WireImage`): a difference from the profile is a one-line
@@ -43,6 +46,7 @@ them back when they answer again, :meth:`drive_faults` reads 0x603F of faulted d
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -99,6 +103,25 @@ def _pysoem() -> Any:
     return pysoem
 
 
+#: what SOEM's dc_sync writes to ESC register 0x0980 (AssignActivate's low byte)
+SOEM_CYCLIC_UNIT_CONTROL = 0x00
+
+
+def assign_activate_warning(who: str, profile: Any) -> str | None:
+    """One line when ``profile``'s AssignActivate low byte (ESC 0x0980, cyclic unit
+    control) is not what SOEM writes (0x00), else None. ``who`` names the slave."""
+    dc = profile.dc
+    if dc is None or dc.assign_activate & 0xFF == SOEM_CYCLIC_UNIT_CONTROL:
+        return None
+    low = dc.assign_activate & 0xFF
+    return (
+        f"{who}: profile {profile.name}: AssignActivate 0x{dc.assign_activate:04X} asks "
+        f"0x{low:02X} in ESC register 0x0980 (sync/latch units to the drive's PDI); SOEM's "
+        f"dc_sync writes 0x{SOEM_CYCLIC_UNIT_CONTROL:02X} and pysoem has no public register "
+        "write, so the drive's latch (touch probe) stays with the master (the loop uses none)"
+    )
+
+
 class EtherCATTransport(Transport):
     """CiA-402 drives on EtherCAT through pysoem (see the module docstring).
 
@@ -139,11 +162,31 @@ class EtherCATTransport(Transport):
         ]
         if len(self.profiles) != len(self.drives):
             raise ValueError(f"{len(self.profiles)} profiles for {len(self.drives)} drives")
+        self.use_fallbacks(self.profiles)
+        from hofto_hw.config.drives import device_map
+
+        #: (slave, CiA-402 axis of that slave) per axis: several axes may share a multi-axis
+        #: drive (``bus.drives[i].device`` / ``device_axis``)
+        self.serve = device_map(self.drives)
+        self.n_devices = max(d for d, _k in self.serve) + 1
+        #: the first axis on each slave (its configuration goes through it)
+        devices = [d for d, _k in self.serve]
+        self._first = [devices.index(d) for d in range(self.n_devices)]
+        #: slaves whose axes are named with their axis number in messages
+        self._multi = [
+            devices.count(d) > 1 or self.profiles[self._first[d]].axes > 1
+            for d in range(self.n_devices)
+        ]
+        #: SDO index shift of each axis's CiA-402 objects (0x800 per device axis)
+        self._shift = [0x800 * k for _d, k in self.serve]
+        self._raw_sdo = False  # device-level access (start-up, PDOs): no index shift
         self.dc_opt = dc_sync
         #: DC runs when asked for or when any drive's profile programs it
         self.dc_sync = dc_sync or any(p.dc is not None for p in self.profiles)
         #: start-up SDOs written at the last open (for commissioning reports)
         self.startup_written = 0
+        #: one-line warnings of the last open (also printed on stderr once)
+        self.warnings: list[str] = []
         self._cycle_ns = max(1, round(cycle_time * 1e9))
         self._dc_prev = -1  # DC system time of the last good exchange [ns]; -1: none
         self.recover = recover
@@ -200,14 +243,16 @@ class EtherCATTransport(Transport):
         if self._direct:
             rs, ts = pdo.RXPDO_SIZE, pdo.TXPDO_SIZE
             tx_bytes = memoryview(self.tx.view(np.uint8))
-            self._tx_rows = [tx_bytes[i * ts : (i + 1) * ts] for i in range(self.n_axes)]
-            self._rx_bounds = [(i * rs, (i + 1) * rs) for i in range(self.n_axes)]
+            n = self.n_axes
+            self._tx_rows = [tx_bytes[i * ts : (i + 1) * ts] for i in range(n)]
+            self._rx_bounds = [(i * rs, (i + 1) * rs) for i in range(n)]
         else:
             tx_bytes = memoryview(wire.tx_in)
             off = wire.tx_offsets
-            self._tx_rows = [tx_bytes[off[i] : off[i + 1]] for i in range(self.n_axes)]
+            n = wire.n_devices
+            self._tx_rows = [tx_bytes[off[i] : off[i + 1]] for i in range(n)]
             ro = wire.rx_offsets
-            self._rx_bounds = [(int(ro[i]), int(ro[i + 1])) for i in range(self.n_axes)]
+            self._rx_bounds = [(int(ro[i]), int(ro[i + 1])) for i in range(n)]
         self._sizes = [
             (b - a, len(t)) for (a, b), t in zip(self._rx_bounds, self._tx_rows, strict=True)
         ]
@@ -215,7 +260,16 @@ class EtherCATTransport(Transport):
     # -------------------------------------------------------------------- start-up
 
     def _who(self, axis: int) -> str:
-        return f"slave {axis + 1} ({self.axis_names[axis]}) on {self.interface}"
+        d, k = self.serve[axis]
+        on = f" axis {k}" if self._multi[d] else ""
+        return f"slave {d + 1}{on} ({self.axis_names[axis]}) on {self.interface}"
+
+    def _who_slave(self, d: int) -> str:
+        """Slave ``d`` (0-based) with the axes it drives."""
+        if not 0 <= d < self.n_devices:
+            return f"slave {d + 1} on {self.interface}"
+        names = [self.axis_names[i] for i, (dev, _k) in enumerate(self.serve) if dev == d]
+        return f"slave {d + 1} ({', '.join(names)}) on {self.interface}"
 
     def open(self) -> None:
         """Bring every slave to OP (steps in the module docstring); raises EtherCATError."""
@@ -236,11 +290,14 @@ class EtherCATTransport(Transport):
                 "CAP_NET_RAW"
             ) from None
         self.master = master
+        self.warnings = []
         try:
             self._start(pysoem)
         except BaseException:
             self._shutdown()
             raise
+        for note in self.warnings:
+            print(f"hofto-hw: warning: {note}", file=sys.stderr)
         self.is_open = True
         self.stopped = False
 
@@ -257,10 +314,12 @@ class EtherCATTransport(Transport):
             found = m.config_init()
         if found <= 0:
             raise EtherCATError(f"no EtherCAT slave answered on {self.interface}")
-        if found != self.n_axes:
+        if found != self.n_devices:
+            has = f"{self.n_devices} drives (bus.drives)"
+            if self.n_devices != self.n_axes:
+                has = f"{self.n_devices} drive devices for {self.n_axes} axes (bus.drives)"
             raise EtherCATError(
-                f"{self.interface}: found {found} EtherCAT slaves, the config has "
-                f"{self.n_axes} drives (bus.drives)"
+                f"{self.interface}: found {found} EtherCAT slaves, the config has {has}"
             )
         self.slaves = list(m.slaves)
         self._check_identities()
@@ -271,10 +330,10 @@ class EtherCATTransport(Transport):
 
         self.startup_written = 0
         layouts = []
-        for i in range(self.n_axes):
+        for i in self._first:  # per slave, through its first axis
             self._startup(i, ("IP", "PS"))
             layouts.append(self._configure_pdos(i))
-        wire = WireImage(layouts, self.axis_names)
+        wire = WireImage(layouts, self.axis_names, self.serve)
         wire.bind_master(self.rx, self.tx)
         from drivers.cia402.profiles import csp_adapter
 
@@ -299,25 +358,28 @@ class EtherCATTransport(Transport):
             if sizes != self._sizes[i]:
                 want = self._sizes[i]
                 raise EtherCATError(
-                    f"{self._who(i)}: process data is {sizes[0]} bytes out / {sizes[1]} in, "
+                    f"{self._who_slave(i)}: process data is {sizes[0]} bytes out / {sizes[1]} in, "
                     f"expected {want[0]} / {want[1]} (PDO mapping not applied)"
                 )
         if self.dc_sync:
             if not m.config_dc():
                 raise EtherCATError(f"{self.interface}: no slave supports distributed clocks")
             for i, s in enumerate(self.slaves):
-                self._program_dc(i, s)
+                self._program_dc(self._first[i], s)
         self._dc_prev = -1
         self.sample_dt = 0.0
+        if self.derived is not None:
+            self.derived.reset()
         self._request(STATE_SAFEOP)
-        for i in range(self.n_axes):
+        for i in self._first:
             self._startup(i, ("SO",))
         self.expected_wkc = m.expected_wkc
         self.rx.fill(0)
         self._request(STATE_OP, cyclic=True)
 
     def _check_identities(self) -> None:
-        for i, (s, d) in enumerate(zip(self.slaves, self.drives, strict=True)):
+        for i, d in enumerate(self.drives):
+            s = self.slaves[self.serve[i][0]]
             ident = d.identity
             checks = [
                 ("vendor id", ident.vendor_id, s.man),
@@ -336,31 +398,53 @@ class EtherCATTransport(Transport):
                         got,
                     )
 
+    def _axis_of_slave(self, d: int) -> int:
+        """The first axis on slave ``d`` (0-based); 0 for a position off the bus."""
+        return self._first[d] if 0 <= d < self.n_devices else 0
+
     def _startup(self, axis: int, transitions: tuple[str, ...]) -> None:
-        """Write the profile's start-up SDOs of ``transitions``, in the profile's order."""
+        """Write the profile's start-up SDOs of ``transitions`` to the slave of ``axis``, in
+        the profile's order (indices as the profile gives them: device level)."""
         from drivers.cia402.profiles import write_startup
 
-        self.startup_written += write_startup(self, axis, self.profiles[axis], transitions)
+        self._raw_sdo = True
+        try:
+            self.startup_written += write_startup(self, axis, self.profiles[axis], transitions)
+        finally:
+            self._raw_sdo = False
 
     def _configure_pdos(self, axis: int) -> Any:
-        """The profile's PDOs written, assigned and read back: the layout the drive reports
-        (:func:`drivers.cia402.profiles.configure_pdos`; a difference: EtherCATError)."""
+        """The profile's PDOs written, assigned and read back on the slave of ``axis``: the
+        layout the drive reports (:func:`drivers.cia402.profiles.configure_pdos`; a
+        difference: EtherCATError)."""
         from drivers.cia402.profiles import configure_pdos
 
-        return configure_pdos(self, axis, self.profiles[axis], EtherCATError)
+        self._raw_sdo = True
+        try:
+            return configure_pdos(self, axis, self.profiles[axis], EtherCATError)
+        finally:
+            self._raw_sdo = False
 
     def _program_dc(self, axis: int, slave: Any) -> None:
         """SYNC0 (and SYNC1) of one slave as its profile says; without a ``dc`` section the
         slave runs free unless ``bus.ethercat.dc_sync`` asks for SYNC0 at the loop period.
 
-        pysoem programs the activation register (0x0981, AssignActivate's high byte: 0x03
-        SYNC0, 0x07 SYNC0 + SYNC1); AssignActivate's low byte (latch/cyclic unit assignment,
-        0x0980) keeps the slave's default: pysoem has no public call for it."""
+        pysoem's ``dc_sync`` (SOEM's ecx_dcsync0 / ecx_dcsync01) writes the activation
+        register 0x0981 (AssignActivate's high byte: 0x03 SYNC0, 0x07 SYNC0 + SYNC1) and
+        always 0x00 to 0x0980 (AssignActivate's low byte: sync and latch units controlled by
+        EtherCAT). pysoem 1.1.13 has no public register write (only the private
+        ``CdefSlave._fpwr``), so a profile asking for another low byte (Nanotec's 0x330: the
+        latch units to the drive's PDI) gets a one-line warning in :attr:`warnings` and on
+        stderr (:func:`assign_activate_warning`): the loop uses no latch (touch probe), so
+        the drive still runs."""
         dc = self.profiles[axis].dc
         if dc is None:
             if self.dc_opt:
                 slave.dc_sync(True, self._cycle_ns)
             return
+        note = assign_activate_warning(self._who_slave(self.serve[axis][0]), self.profiles[axis])
+        if note is not None:
+            self.warnings.append(note)
         cycle = dc.sync0_cycle_ns or self._cycle_ns
         if (dc.assign_activate >> 8) & 0x04 and dc.sync1_cycle_ns is not None:
             slave.dc_sync(True, cycle, dc.sync0_shift_ns, dc.sync1_cycle_ns)
@@ -370,10 +454,10 @@ class EtherCATTransport(Transport):
     def _reconfigure(self, pos: int) -> None:
         """PRE-OP -> SAFE-OP hook of a slave brought back by :meth:`recover_slaves`: its
         start-up SDOs and PDOs again, checked against the layout the bus runs with."""
-        self._startup(pos, ("IP", "PS"))
-        layout = self._configure_pdos(pos)
+        self._startup(self._first[pos], ("IP", "PS"))
+        layout = self._configure_pdos(self._first[pos])
         if self.wire is not None and layout != self.wire.layouts[pos]:
-            raise EtherCATError(f"{self._who(pos)}: came back with another PDO layout")
+            raise EtherCATError(f"{self._who_slave(pos)}: came back with another PDO layout")
         if self.pdo_watchdog is not None:
             self._set_watchdog(pos)
 
@@ -381,7 +465,9 @@ class EtherCATTransport(Transport):
         """PRE-OP -> SAFE-OP hook: the SM watchdog time (``pdo_watchdog``)."""
         s = self.slaves[pos]  # pysoem passes the 0-based position
         ms = self.pdo_watchdog * 1000.0
-        self._retry(lambda: s.set_watchdog("processdata", ms), pos, "SM watchdog write")
+        self._retry(
+            lambda: s.set_watchdog("processdata", ms), self._first[pos], "SM watchdog write"
+        )
 
     def _retry(self, fn: Any, axis: int, what: str) -> Any:
         """Call ``fn`` again when the mailbox/register access got no (valid) answer.
@@ -433,7 +519,7 @@ class EtherCATTransport(Transport):
         target = STATE_NAMES.get(state, hex(state))
         parts = []
         for slave, (st, code) in problems.items():
-            who = self._who(slave - 1)
+            who = self._who_slave(slave - 1)
             if st == 0:
                 parts.append(f"{who} does not answer")
             else:
@@ -499,6 +585,8 @@ class EtherCATTransport(Transport):
             self.wire.decode_tx()
         if self.dc_sync:
             self._sample_interval(self.master.dc_time)
+        if self.derived is not None:
+            self.derived.apply(self.sample_dt)
         return STATUS_OK
 
     def _sample_interval(self, dc_now: int) -> None:
@@ -525,10 +613,10 @@ class EtherCATTransport(Transport):
             if s.state == STATE_OP:
                 continue
             if s.state == 0:
-                out.append(f"{self._who(i)} does not answer (lost)")
+                out.append(f"{self._who_slave(i)} does not answer (lost)")
             else:
                 out.append(
-                    f"{self._who(i)} is in {describe_state(s.state)}, AL status "
+                    f"{self._who_slave(i)} is in {describe_state(s.state)}, AL status "
                     f"{describe_al_status_code(s.al_status)}"
                 )
         return out
@@ -553,15 +641,16 @@ class EtherCATTransport(Transport):
                 continue
             if s.state == 0:
                 if not self._until(lambda s=s: s.recover(20_000) > 0):
-                    done.append(f"{self._who(i)} still does not answer")
+                    done.append(f"{self._who_slave(i)} still does not answer")
                     continue
                 self._until(lambda s=s: s.reconfig(50_000) >= STATE_PREOP)
-                done.append(f"{self._who(i)} answered again and was reconfigured")
+                done.append(f"{self._who_slave(i)} answered again and was reconfigured")
             elif s.state & 0x10:
                 s.state = (s.state & 0x0F) | _STATE_ACK
                 s.write_state()
                 done.append(
-                    f"{self._who(i)}: acknowledged AL status {describe_al_status_code(s.al_status)}"
+                    f"{self._who_slave(i)}: acknowledged AL status "
+                    f"{describe_al_status_code(s.al_status)}"
                 )
             if s.state & 0x0F == STATE_SAFEOP or s.state & 0x10:
                 s.state = pysoem.OP_STATE
@@ -603,7 +692,11 @@ class EtherCATTransport(Transport):
 
     def _on_emergency(self, emcy: Any) -> None:
         self.emergencies.append(
-            (int(emcy.slave_pos) - 1, int(emcy.error_code), int(emcy.error_reg))
+            (
+                self._axis_of_slave(int(emcy.slave_pos) - 1),
+                int(emcy.error_code),
+                int(emcy.error_reg),
+            )
         )
 
     def emergency_messages(self) -> list[str]:
@@ -621,26 +714,36 @@ class EtherCATTransport(Transport):
         if isinstance(exc, pysoem.SdoError):
             return str(self._sdo_error(exc, "access"))
         pos = getattr(exc, "slave_pos", 0)
-        who = self._who(pos - 1) if 1 <= pos <= self.n_axes else f"slave {pos}"
+        who = self._who_slave(pos - 1) if 1 <= pos <= self.n_devices else f"slave {pos}"
         desc = _describe_exc(exc)
         return f"{who}: {desc}"
 
     def _sdo_error(self, exc: Any, action: str) -> SdoAbortError:
         pos = int(getattr(exc, "slave_pos", 1))
-        axis = pos - 1 if 1 <= pos <= self.n_axes else 0
+        axis = self._axis_of_slave(pos - 1)
         return SdoAbortError(
             axis, exc.index, exc.subindex, exc.abort_code, action, self.axis_names[axis]
         )
 
     def sdo_read(self, axis: int, index: int, subindex: int) -> bytes:
         """Upload ``index:subindex`` of drive ``axis``; raises SdoAbortError/EtherCATError."""
+        index = self._object(axis, index)
         return bytes(
             self._sdo(axis, index, subindex, "read", lambda s: s.sdo_read(index, subindex))
         )
 
+    def _object(self, axis: int, index: int) -> int:
+        """The slave's index of ``axis``'s object ``index``: a CiA-402 object (0x6000..0x67FF)
+        of axis k of a multi-axis drive sits at index + 0x800·k (not for the device-level
+        start-up and PDO configuration, which name their objects as the profile does)."""
+        if not self._raw_sdo and 0x6000 <= index < 0x6800 and 0 <= axis < self.n_axes:
+            return index + self._shift[axis]
+        return index
+
     def sdo_write(self, axis: int, index: int, subindex: int, data: bytes) -> None:
         """Download ``data`` to ``index:subindex`` of drive ``axis``; raises SdoAbortError."""
         payload = bytes(data)
+        index = self._object(axis, index)
         self._sdo(axis, index, subindex, "write", lambda s: s.sdo_write(index, subindex, payload))
 
     def _sdo(self, axis: int, index: int, subindex: int, action: str, call: Any) -> Any:
@@ -649,7 +752,7 @@ class EtherCATTransport(Transport):
         pysoem = _pysoem()
         if self.master is None:
             raise EtherCATError(f"EtherCAT master on {self.interface} is not open")
-        slave = self.slaves[axis]
+        slave = self.slaves[self.serve[axis][0]]
         what = f"SDO {action} 0x{index:04X}:{subindex:02X}"
         try:
             return self._retry(lambda: call(slave), axis, what)

@@ -3,8 +3,12 @@
 SOEM scans the line (SII identity and name); each slave goes to PRE-OP and is read by CoE
 SDO: 0x1018, the assignment 0x1C12/0x1C13 and every assigned mapping, 0x6502, which CiA-402
 objects exist, the units objects; the SII's DC category (ETG.2010 type 60) gives the DC op
-mode (AssignActivate, SYNC0 cycle and shift). Nothing is written but the AL state. Two
-slaves with one station alias (SII word 4) are refused.
+mode (AssignActivate, SYNC0 cycle and shift). Fixed and configurable PDOs are told apart by
+writing each assigned mapping's entry count back unchanged in PRE-OP and reading it back (a
+fixed mapping aborts the write; a configurable one takes it as a no-op): that and the AL state
+are all a scan writes. (CoE SDO Information would say the same through the entries' access
+rights, but drives answer it unevenly and the emulator does not implement it.) Two slaves with
+one station alias (SII word 4) are refused.
 """
 
 from __future__ import annotations
@@ -107,8 +111,24 @@ def _read_slave(i: int, s: Any, pysoem: Any) -> ScannedDrive:
             for e in range(1, n + 1):
                 raw = read(index, e, 4) or 0
                 entries.append((raw >> 16, (raw >> 8) & 0xFF, raw & 0xFF))
-            out.append(ScannedPdo(index, entries))
+            out.append(ScannedPdo(index, entries, fixed=not writable(index, n)))
         return out
+
+    def writable(index: int, count: int) -> bool:
+        """Whether mapping object ``index`` is configurable: its entry count written back
+        unchanged in PRE-OP (a no-op for a configurable PDO) and read back. A fixed PDO
+        aborts the write (0x06010002 read-only, or another abort code)."""
+        for _attempt in range(4):
+            try:
+                s.sdo_write(index, 0, bytes([count]))
+                break
+            except pysoem.SdoError:
+                return False
+            except (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError):
+                time.sleep(0.01)
+        else:
+            raise ScanError(f"{address} ('{s.name}'): SDO write 0x{index:04X}:00 got no answer")
+        return read(index, 0, 1) == count
 
     ident = [read(0x1018, k, 4) for k in (1, 2, 3)]
     d = ScannedDrive(

@@ -13,7 +13,7 @@ limit the drive applies next cycle.
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -568,3 +568,74 @@ def impersonate(od: ObjectDictionary, profile: Any, serial: int) -> None:
         for e in subs:
             od.add(e)
         od.assignable[assign] = frozenset(p.index for p in pdos)
+
+
+# ------------------------------------------------------------ multi-axis devices
+
+
+class MultiAxisDictionary:
+    """The dictionary of a k-axis drive device (CiA 402-1) as one device shows it on the bus.
+
+    ``axes[k]``: the dictionary of the emulated drive of axis k (None: no drive emulates
+    that axis). CiA-402 objects of axis k (0x6000 + 0x800·k .. + 0x7FF, k >= 1) go to axis
+    k's dictionary at the axis-0 index; everything else (identity, PDO mapping and
+    assignment, the axis-0 objects) to axis 0's. ``pdo_locked`` applies to every axis.
+    """
+
+    def __init__(self, axes: Sequence[ObjectDictionary | None]) -> None:
+        first = axes[0]
+        if first is None:
+            raise ValueError("axis 0 of a multi-axis device needs a dictionary")
+        self.axes = list(axes)
+        self.first: ObjectDictionary = first
+
+    def _route(self, index: int) -> tuple[ObjectDictionary, int]:
+        if 0x6800 <= index <= 0x9FFF:
+            k, base = divmod(index - 0x6000, 0x800)
+            od = self.axes[k] if k < len(self.axes) else None
+            if od is not None:
+                return od, 0x6000 + base
+        return self.first, index
+
+    @property
+    def pdo_locked(self) -> bool:
+        return self.first.pdo_locked
+
+    @pdo_locked.setter
+    def pdo_locked(self, value: bool) -> None:
+        for od in self.axes:
+            if od is not None:
+                od.pdo_locked = value
+
+    def __contains__(self, key: tuple[int, int]) -> bool:
+        od, index = self._route(key[0])
+        return (index, key[1]) in od
+
+    def entry(self, index: int, subindex: int) -> OdEntry:
+        od, at = self._route(index)
+        return od.entry(at, subindex)
+
+    def get(self, index: int, subindex: int = 0) -> int:
+        od, at = self._route(index)
+        return od.get(at, subindex)
+
+    def read(self, index: int, subindex: int) -> bytes:
+        od, at = self._route(index)
+        try:
+            return od.read(at, subindex)
+        except SdoAbort as a:
+            raise SdoAbort(a.code, index, subindex) from None
+
+    def write(self, index: int, subindex: int, data: bytes) -> None:
+        od, at = self._route(index)
+        try:
+            od.write(at, subindex, data)
+        except SdoAbort as a:
+            raise SdoAbort(a.code, index, subindex) from None
+
+    def read_complete(self, index: int) -> bytes:
+        od, at = self._route(index)
+        return od.read_complete(at)
+
+    def mapping(self, index: int) -> list[PdoEntry]:
+        return self.first.mapping(index)

@@ -61,6 +61,7 @@ class SimBus(Transport):
         )
         #: the profile per drive (None: the built-in layout, the records go as they are)
         self.profiles = list(profiles) if profiles is not None else [None] * self.n_axes
+        self.use_fallbacks(self.profiles)
         #: start-up SDOs written at the last open
         self.startup_written = 0
         self._wired = False
@@ -119,6 +120,9 @@ class SimBus(Transport):
                 self._drv_tx_flat = self.drives.tx.view(np.uint8).reshape(-1)
                 self.wire.drive_tx(self.drives.tx)
                 self.wire.decode_tx()
+                if self.derived is not None:
+                    self.derived.reset()
+                    self.derived.apply(self.sample_dt)
         self.is_open = True
         for od in self.drives.ods:
             od.pdo_locked = True
@@ -142,6 +146,8 @@ class SimBus(Transport):
             np.copyto(self._drv_rx_flat, self.wire.adapt_rx(), where=self._rx_mask)
             self.drives.step(self.drives.rx)
             np.copyto(self._tx_flat, self._drv_tx_flat, where=self._tx_mask)
+            if self.derived is not None:
+                self.derived.apply(self.sample_dt)
             return STATUS_OK
         self.drives.step(self.rx)
         np.copyto(self.tx, self.drives.tx)

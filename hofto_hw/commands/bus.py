@@ -63,9 +63,13 @@ def drafts(drives: list[Any]) -> tuple[list[Any], list[str]]:
     return list(profiles.values()), names
 
 
-def bus_section(args: argparse.Namespace, drives: list[Any], names: list[str]) -> str:
+def bus_section(
+    args: argparse.Namespace, drives: list[Any], names: list[str], axes: list[int] | None = None
+) -> str:
     """The ``bus:`` section of a config for the scanned bus (YAML text, with the values the
-    bus does not tell left for the user)."""
+    bus does not tell left for the user). ``axes``: CiA-402 axes per drive (default 1); a
+    multi-axis drive gets one joint per axis (``device``, ``device_axis``)."""
+    axes = axes if axes is not None else [1] * len(drives)
     transport = "ethercat" if args.iface is not None else "canopen"
     lines = [
         "# written by `hofto-hw bus scan`: review it; values marked TODO are not on the bus",
@@ -82,14 +86,18 @@ def bus_section(args: argparse.Namespace, drives: list[Any], names: list[str]) -
             f"    node_ids: {ids}",
         ]
     lines.append("  drives:")
-    for d, name in zip(drives, names, strict=True):
+    joints = [(dev, k) for dev, n in enumerate(axes) for k in range(n)]
+    for dev, k in joints:
+        d, name = drives[dev], names[dev]
         cpr = d.units.get(0x608F, (None, None))[0]
         gear = d.units.get(0x6091)
         ratio = round(gear[0] / gear[1], 6) if gear and gear[1] else None
+        on = [f"      device: {dev}", f"      device_axis: {k}"] if axes[dev] > 1 else []
         lines += [
-            f"    - # {d.address}: {d.name}",
+            f"    - # {d.address}{f' axis {k}' if axes[dev] > 1 else ''}: {d.name}",
             f"      identity: {{vendor_id: 0x{d.vendor_id:08X}, product_code: "
             f"0x{d.product_code:08X}}}",
+            *on,
             f"      profile: {name}",
             f"      counts_per_rev: {cpr if cpr else 'null  # TODO: encoder counts per motor rev'}",
             f"      gear_ratio: {ratio if ratio else 'null  # TODO: motor revs per joint rev'}",
@@ -112,7 +120,8 @@ def _run_scan(args: argparse.Namespace) -> int:
         raise UserError(f"-o {out}: exists and is not a folder")
     drives = scan_bus(args)
     profiles, names = drafts(drives)
-    section = bus_section(args, drives, names)
+    by_name = {p.name: p for p in profiles}
+    section = bus_section(args, drives, names, [by_name[n].axes for n in names])
     files = {
         f"{p.name}.yaml": profile_yaml(
             p, f"draft profile written by `hofto-hw bus scan` ({p.description})"

@@ -6,7 +6,9 @@ drive configured as the profile says, its layout read back), enables them bumple
 profile's loop mode, moves each joint by a small CSP step and back (``--emulated``: 0.05 rad
 by default; on a real bus only when ``--move RAD`` is given), reads everything back and
 prints what it saw (``--json``: ``bus``, ``axes``, ``operational``, ``enabled``,
-``moved_rad``, ``process_image_bytes``, ``pdos``, ``startup_sdos``, ``faults``, ...).
+``moved_rad``, ``devices`` (slave/node and its axis per joint), ``process_image_bytes`` (of
+the joint's device), ``pdos``, ``startup_sdos``, ``warnings``, ``faults``, ...). A multi-axis
+profile (``axes: k``) serves k joints per device: N joints run on ceil(N / k) devices.
 
 ``--emulated`` runs the emulator itself: EtherCAT on a veth pair with ``hofto-hw
 sim-ethercat`` in its own process (root), CANopen on python-can's virtual bus in a thread
@@ -140,12 +142,14 @@ def _check_config(
         raise UserError(f"{base}: bus.drives has {len(drives)} drives, --axes asks for {n}")
     prof_file = folder / f"{profile.name}.yaml"
     prof_file.write_text(dump_yaml(profile.model_dump(mode="json"), sort_keys=False))
-    for d in drives[:n]:
+    for i, d in enumerate(drives[:n]):
         d["profile"] = str(prof_file)
         d["identity"] = {
             "vendor_id": profile.identity.vendor_id,
             "product_code": profile.identity.product_code,
         }
+        if profile.axes > 1:  # a multi-axis drive serves `axes` joints: fill each device
+            d["device"], d["device_axis"] = divmod(i, profile.axes)
     if not emulated:
         bus["drives"] = drives[:n]
     bus["transport"] = profile.bus
@@ -298,10 +302,12 @@ def check(
         "operational": False,
         "enabled": False,
         "moved_rad": [0.0] * n,
+        "devices": [],
         "process_image_bytes": [],
         "pdos": [],
         "startup_sdos": 0,
         "unavailable": [],
+        "warnings": [],
         "faults": [],
     }
     t = _transport(cfg, profile, bus_kwargs or {})
@@ -310,15 +316,20 @@ def check(
         t.open()
         report["operational"] = True
         w = t.wire
-        report["process_image_bytes"] = [{"rx": w.rx_size(i), "tx": w.tx_size(i)} for i in range(n)]
+        dev = [w.serve[i][0] for i in range(n)]  # the slave/node of each axis
+        report["devices"] = [{"device": w.serve[i][0], "axis": w.serve[i][1]} for i in range(n)]
+        report["process_image_bytes"] = [
+            {"rx": w.rx_size(dev[i]), "tx": w.tx_size(dev[i])} for i in range(n)
+        ]
         report["pdos"] = [
             {
-                "rx": [f"0x{x:04X}" for x in w.layouts[i].rx_pdos],
-                "tx": [f"0x{x:04X}" for x in w.layouts[i].tx_pdos],
+                "rx": [f"0x{x:04X}" for x in w.layouts[dev[i]].rx_pdos],
+                "tx": [f"0x{x:04X}" for x in w.layouts[dev[i]].tx_pdos],
             }
             for i in range(n)
         ]
         report["startup_sdos"] = t.startup_written
+        report["warnings"] = list(getattr(t, "warnings", []))
         g = DriveGroup.from_config(t, cfg.bus)
         report["unavailable"] = [u for u in g.unavailable() if int(u.split()[1]) < n]
         g.cycle()

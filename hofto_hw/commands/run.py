@@ -221,6 +221,8 @@ def run(args: argparse.Namespace) -> int:
     n_ticks = None if duration is None else round(duration * system.rate_hz)
     progress.done()
     print(f"hofto-hw run: {_observer_choice(cfg)}", file=sys.stderr)
+    for note in tick.group.feedforward_notes():  # drives without 0x60B2 (the loop runs CSP)
+        print(f"hofto-hw run: {note}", file=sys.stderr)
     print(
         f"hofto-hw run: running (pid {os.getpid()}; tick: "
         f"{acceleration.describe(system.acceleration)})",

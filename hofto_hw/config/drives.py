@@ -10,7 +10,8 @@ Loading and checking only; nothing here runs in the tick.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from collections.abc import Sequence
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
@@ -104,6 +105,17 @@ class DriveConfig(FileModel):
         "path relative to this config; None = the stack's built-in PDO layout "
         "(drivers/cia402/pdo.py). `hofto-hw config check` loads it and checks it against "
         "loop.rate_hz",
+    )
+    device: Annotated[int, Field(ge=0, le=511)] | None = Field(
+        None,
+        description="the drive device this joint is on (EtherCAT slave), counted from 0 in "
+        "bus order; None = a device of its own (the next one). Joints sharing a device run "
+        "one multi-axis drive: one profile with `axes` > 1, one identity",
+    )
+    device_axis: Annotated[int, Field(ge=0, le=7)] = Field(
+        0,
+        description="the CiA-402 axis of the device that drives this joint (its objects at "
+        "0x6000 + 0x800·device_axis, its PDOs as the profile maps them)",
     )
     homing: HomingConfig | None = Field(
         None, description="homing of an incremental axis; none = absolute encoder"
@@ -208,6 +220,19 @@ class CANopenOptions(FileModel):
         return self
 
 
+def device_map(drives: Sequence[Any]) -> list[tuple[int, int]]:
+    """(device, device axis) per joint: ``device`` as given, or for ``device: None`` (or a
+    drive object without the attribute) the next device of its own."""
+    out: list[tuple[int, int]] = []
+    next_free = 0
+    for d in drives:
+        given = getattr(d, "device", None)
+        dev = given if given is not None else next_free
+        out.append((dev, int(getattr(d, "device_axis", 0))))
+        next_free = max(next_free, dev + 1)
+    return out
+
+
 class BusConfig(FileModel):
     """The drive bus: which transport, where, and one drive per joint.
 
@@ -237,4 +262,42 @@ class BusConfig(FileModel):
         ids = self.canopen.node_ids if self.canopen is not None else None
         if ids is not None and len(ids) != len(self.drives):
             raise ValueError(f"canopen.node_ids has {len(ids)} ids for {len(self.drives)} drives")
+        self._check_devices()
         return self
+
+    def _check_devices(self) -> None:
+        """Devices numbered in bus order, one joint per device axis, one profile and one
+        identity per device; several joints on one device only on EtherCAT."""
+        seen: dict[tuple[int, int], int] = {}
+        first: dict[int, int] = {}
+        for i, ((dev, k), d) in enumerate(zip(device_map(self.drives), self.drives, strict=True)):
+            if dev not in first:
+                if dev != len(first):
+                    raise ValueError(
+                        f"drives[{i}].device: {dev}, but the next device in bus order is "
+                        f"{len(first)} (devices are counted from 0 in the order joints "
+                        "first name them)"
+                    )
+                first[dev] = i
+            if (dev, k) in seen:
+                raise ValueError(
+                    f"drives[{i}]: device {dev} axis {k} already drives joint {seen[dev, k]}"
+                )
+            seen[dev, k] = i
+            j = first[dev]
+            if j != i:
+                if self.transport not in ("ethercat",):
+                    raise ValueError(
+                        f"drives[{i}].device: {dev} is shared with drives[{j}]; multi-axis "
+                        f"drives run on transport ethercat only (got {self.transport!r})"
+                    )
+                other = self.drives[j]
+                if d.profile != other.profile or d.profile is None:
+                    raise ValueError(
+                        f"drives[{i}].profile: {d.profile!r}, but device {dev} runs "
+                        f"{other.profile!r} (drives[{j}]); a multi-axis device has one profile"
+                    )
+                if d.identity != other.identity:
+                    raise ValueError(
+                        f"drives[{i}].identity differs from drives[{j}]'s, on the same device {dev}"
+                    )

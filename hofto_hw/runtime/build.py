@@ -107,10 +107,13 @@ def build_emulated_network(
     :func:`build_emulated_drives`: what ``hofto-hw sim-ethercat`` serves."""
     from drivers.sim.esc.description import slave_descriptions
     from drivers.sim.esc.network import EmulatedNetwork
+    from hofto_hw.config.drives import device_map
 
     drives = build_emulated_drives(cfg, external=external, load=load)
     bus = _bus(cfg, "the network")
-    return EmulatedNetwork(slave_descriptions(bus.drives, drives.profiles), drives)
+    return EmulatedNetwork(
+        slave_descriptions(bus.drives, drives.profiles), drives, device_map(bus.drives)
+    )
 
 
 #: backends that need more than ``Class.from_config(bus, axis_names=, cycle_time=)``

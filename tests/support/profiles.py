@@ -265,6 +265,47 @@ BUILTINLIKE = _base(
 MIXED = [ELMO, INOVANCE, NANOTEC, SPARSE, SOMANET, BUILTINLIKE]
 
 
+def _axis_block(entries: list[dict[str, int]], k: int) -> list[dict[str, int]]:
+    """``entries`` moved to CiA-402 axis k (objects at 0x6000 + 0x800·k; padding kept)."""
+    return [e | {"index": e["index"] + 0x800 * k} if e["index"] else dict(e) for e in entries]
+
+
+#: SYNTHETIC two-axis drive: none of the vendor files in ../shared/data/drives describes a
+#: multi-axis device, so this is BUILTINLIKE with a second axis block (CiA 402-1: axis 1's
+#: objects at 0x6800.., its own PDOs 0x1610 / 0x1A10), DC 0x300. Not a real product.
+TWO_AXIS = _base(
+    "test_two_axis_synthetic",
+    0x00000A5F,
+    0x00402002,
+    description="SYNTHETIC two-axis CiA-402 drive for the multi-axis tests (no vendor file)",
+    axes=2,
+    modes={"supported": ["csp", "csv", "cst"], "loop": "csp", "set_by": "pdo"},
+    rx_pdos=[
+        {"index": 0x1600 + 0x10 * k, "fixed": False,
+         "entries": _axis_block(BUILTINLIKE["rx_pdos"][0]["entries"], k)}
+        for k in range(2)
+    ],
+    tx_pdos=[
+        {"index": 0x1A00 + 0x10 * k, "fixed": False,
+         "entries": _axis_block(BUILTINLIKE["tx_pdos"][0]["entries"], k)}
+        for k in range(2)
+    ],
+    dc={"assign_activate": 0x300},
+)  # fmt: skip
+
+
+def write_two_axis_config(folder: Path, interface: str = "ecm0", **bus: Any) -> Path:
+    """configs/er3a.yaml on three TWO_AXIS drives (joints 2k, 2k+1 on device k, axes 0, 1),
+    ``transport: ethercat`` on ``interface``; returns its path."""
+    path = write_mixed_config(folder, [TWO_AXIS] * 6, transport="ethercat", interface=interface,
+                              **bus)  # fmt: skip
+    data = yaml.safe_load(path.read_text())
+    for i, d in enumerate(data["bus"]["drives"]):
+        d["device"], d["device_axis"] = divmod(i, 2)
+    path.write_text(dump_yaml(data, sort_keys=False))
+    return path
+
+
 def profile(data: dict[str, Any]) -> DriveProfile:
     return DriveProfile.model_validate(data)
 

@@ -115,11 +115,18 @@ class SlaveDescription:
 def slave_descriptions(
     drives: Sequence[DriveConfig], profiles: Sequence[Any] | None = None
 ) -> list[SlaveDescription]:
-    """One slave per drive: identity from ``drives[i].identity`` (``bus.drives``), or, for
-    a drive with a profile (``profiles[i]``, a DriveProfile; None: none), the profile's
-    identity, name and DC requirements."""
+    """One slave per drive device (``bus.drives[i].device``; one per drive unless several
+    share a multi-axis device, described by the first of them): identity from
+    ``drives[i].identity`` (``bus.drives``), or, for a drive with a profile (``profiles[i]``,
+    a DriveProfile; None: none), the profile's identity, name and DC requirements."""
+    from hofto_hw.config.drives import device_map
+
     out = []
-    for i, d in enumerate(drives):
+    described: set[int] = set()
+    for i, (d, (dev, _k)) in enumerate(zip(drives, device_map(drives), strict=True)):
+        if dev in described:
+            continue
+        described.add(dev)
         ident = d.identity
         prof = profiles[i] if profiles is not None else None
         if prof is not None and not prof.name.startswith("builtin-"):

@@ -24,7 +24,7 @@ from __future__ import annotations
 import struct
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -119,9 +119,14 @@ class Esc:
         n_slaves: int = 1,
         clock: Callable[[], int] = time.monotonic_ns,
         dc_clock: Callable[[], int] | None = None,
+        records: Sequence[int | None] | None = None,
     ) -> None:
         self.desc = desc
         self.od = od
+        #: per CiA-402 axis of the device, the index of the drive record it exchanges with
+        #: (:meth:`pull_outputs` / :meth:`push_inputs` then take the whole record array);
+        #: None: one axis, the record itself
+        self.records = list(records) if records is not None else None
         self.position = position
         self.clock = clock
         self.dc_clock = dc_clock if dc_clock is not None else clock
@@ -536,8 +541,11 @@ class Esc:
             return AL_INVALID_OUTPUT_CONFIG
         if pdo_map.check_mapping(ins, "statusword", pdo.TXPDO_DTYPE):
             return AL_INVALID_INPUT_CONFIG
-        out_plan, out_size = pdo_map.copy_plan(outs, pdo.RXPDO_DTYPE)
-        in_plan, in_size = pdo_map.copy_plan(ins, pdo.TXPDO_DTYPE)
+        try:
+            out_plan, out_size = pdo_map.copy_plan(outs, pdo.RXPDO_DTYPE, self.records)
+            in_plan, in_size = pdo_map.copy_plan(ins, pdo.TXPDO_DTYPE, self.records)
+        except ValueError:
+            return AL_INVALID_OUTPUT_CONFIG
         for k, offset, size, direction, code in (
             (2, self.desc.outputs_offset, out_size, r.SM_DIR_WRITE, AL_INVALID_OUTPUT_CONFIG),
             (3, self.desc.inputs_offset, in_size, r.SM_DIR_READ, AL_INVALID_INPUT_CONFIG),
@@ -579,7 +587,8 @@ class Esc:
     # ---------------------------------------------------------- process data (PDI)
 
     def pull_outputs(self, rec: np.ndarray) -> bool:
-        """Copy the SM2 buffer into ``rec`` (uint8 view of one RxPDO record) when in OP.
+        """Copy the SM2 buffer into ``rec`` (uint8 view of one RxPDO record; with
+        ``records``: of the whole record array) when in OP.
 
         Returns True when the slave is in OP (the outputs are valid).
         """
@@ -592,7 +601,8 @@ class Esc:
         return True
 
     def push_inputs(self, rec: np.ndarray) -> None:
-        """Copy ``rec`` (uint8 view of one TxPDO record) into the SM3 buffer."""
+        """Copy ``rec`` (uint8 view of one TxPDO record; with ``records``: of the whole
+        record array) into the SM3 buffer."""
         base = self.desc.inputs_offset
         dst = self.mem_np
         for sm_off, rec_off, size in self.input_plan:

@@ -46,21 +46,47 @@ _FAULT_KINDS = {code: kind for kind, (code, _ramp) in FAULTS.items()}
 
 
 class EmulatedNetwork:
-    """Slaves in line order, one per drive of ``drives`` (or bare slaves when ``None``)."""
+    """Slaves in line order serving the drives of ``drives`` (or bare slaves when ``None``).
+
+    ``serve``: per drive, (slave, CiA-402 axis of that slave); default: drive i is slave i
+    (one axis each). A slave serving several drives is a multi-axis device: its dictionary
+    routes axis k's objects (0x6000 + 0x800·k) to drive k's
+    (:class:`~drivers.sim.object_dictionary.MultiAxisDictionary`) and its process data
+    reaches each drive's record."""
 
     def __init__(
-        self, descriptions: Sequence[SlaveDescription], drives: EmulatedDrives | None
+        self,
+        descriptions: Sequence[SlaveDescription],
+        drives: EmulatedDrives | None,
+        serve: Sequence[tuple[int, int]] | None = None,
     ) -> None:
         n = len(descriptions)
-        if drives is not None and drives.n != n:
-            raise ValueError(f"{n} slave descriptions for {drives.n} drives")
-        ods = drives.ods if drives is not None else [None] * n
+        n_drives = drives.n if drives is not None else n
+        serve = [(i, 0) for i in range(n_drives)] if serve is None else list(serve)
+        if len(serve) != n_drives or sorted({d for d, _k in serve}) != list(range(n)):
+            raise ValueError(f"{n} slave descriptions for {n_drives} drives ({serve})")
+        #: the drives of each slave, per its CiA-402 axis (None: an axis no drive emulates)
+        self.records: list[list[int | None]] = [[] for _ in range(n)]
+        for i, (d, k) in enumerate(serve):
+            row = self.records[d]
+            row.extend([None] * (k + 1 - len(row)))
+            row[k] = i
+        ods: list[Any] = [None] * n
+        if drives is not None:
+            from drivers.sim.object_dictionary import MultiAxisDictionary
+
+            for d, row in enumerate(self.records):
+                if len(row) == 1:
+                    ods[d] = drives.ods[row[0]]  # type: ignore[index]
+                else:
+                    ods[d] = MultiAxisDictionary([drives.ods[j] if j is not None else None
+                                                  for j in row])  # fmt: skip
         #: the DC local time [ns] with drives: a start offset plus one cycle per plant step
         self.dc_ns = time.monotonic_ns()
         self._cycle_ns = round(drives.dt * 1e9) if drives is not None else 0
         self._dc_clock = self._dc_time if drives is not None else None
         self.slaves = [
-            Esc(d, od, i, n, dc_clock=self._dc_clock)
+            Esc(d, od, i, n, dc_clock=self._dc_clock, records=self.records[i])
             for i, (d, od) in enumerate(zip(descriptions, ods, strict=True))
         ]
         self.drives = drives
@@ -85,12 +111,15 @@ class EmulatedNetwork:
         # the slaves' outputs go straight into the drives' own RxPDO records: bytes a drive
         # does not map keep what it has (e.g. a mode written by a start-up SDO)
         self.rx = drives.rx if drives is not None else pdo.new_rx(n)
-        self._rx_u8 = self.rx.view(np.uint8).reshape(n, pdo.RXPDO_SIZE)
+        self._rx_u8 = self.rx.view(np.uint8).reshape(-1)  # every drive's record, end to end
         self._rx_cw = self.rx["controlword"]
         if drives is not None:
-            self._tx_u8 = drives.tx.view(np.uint8).reshape(n, pdo.TXPDO_SIZE)
-        self._last_error = np.zeros(n, dtype=np.uint16)
-        self._changed = np.zeros(n, dtype=bool)
+            self._tx_u8 = drives.tx.view(np.uint8).reshape(-1)
+        #: the slave of each drive
+        self.slave_of = [d for d, _k in serve]
+        self._drives_of = [[j for j in row if j is not None] for row in self.records]
+        self._last_error = np.zeros(n_drives, dtype=np.uint16)
+        self._changed = np.zeros(n_drives, dtype=bool)
 
     # ----------------------------------------------------------------- frames
 
@@ -131,8 +160,9 @@ class EmulatedNetwork:
         self.dc_ns += self._cycle_ns
         rx_u8 = self._rx_u8
         for i, s in enumerate(self.slaves):
-            if not s.pull_outputs(rx_u8[i]):
-                self._rx_cw[i] = 0  # not in OP: the drive sees no enable
+            if not s.pull_outputs(rx_u8):
+                for j in self._drives_of[i]:
+                    self._rx_cw[j] = 0  # not in OP: the drive sees no enable
         self.drives.step(self.rx)
         plant = self.drives.plant
         if plant.t <= self._trace_until:
@@ -143,7 +173,7 @@ class EmulatedNetwork:
         if self._changed.any():
             for i in np.flatnonzero(self._changed):
                 code = int(codes[i])
-                s = self.slaves[i]
+                s = self.slaves[self.slave_of[i]]
                 if code and s.coe is not None:
                     reg = int(self.drives.error_register[i])
                     s.queue_mailbox(s.coe.emergency(code, reg))
@@ -154,8 +184,8 @@ class EmulatedNetwork:
 
     def _push_inputs(self) -> None:
         tx_u8 = self._tx_u8
-        for i, s in enumerate(self.slaves):
-            s.push_inputs(tx_u8[i])
+        for s in self.slaves:
+            s.push_inputs(tx_u8)
 
     def check_watchdogs(self) -> None:
         """Run every slave's SyncManager watchdog."""
@@ -222,12 +252,12 @@ class EmulatedNetwork:
             elif op == "position_jump":
                 if self.drives is None:
                     raise ValueError("no drives on this network")
-                k = self._slave_index(request["slave"])
+                k = self._drive_index(request["slave"])
                 self.drives.jump_position(k, float(request["offset"]))
             elif op == "clear_drive_fault":
                 if self.drives is None:
                     raise ValueError("no drives on this network")
-                self.drives.clear_fault(self._slave_index(request["slave"]))
+                self.drives.clear_fault(self._drive_index(request["slave"]))
             elif op == "sdo_abort":
                 s = self.slaves[self._slave_index(request["slave"])]
                 if s.coe is None:
@@ -252,7 +282,9 @@ class EmulatedNetwork:
             elif op == "restart":
                 k = self._slave_index(request["slave"])
                 old = self.slaves[k]
-                self.slaves[k] = Esc(old.desc, old.od, k, self.n, dc_clock=self._dc_clock)
+                self.slaves[k] = Esc(
+                    old.desc, old.od, k, self.n, dc_clock=self._dc_clock, records=old.records
+                )
             elif op == "stop":
                 self.stopping = True
             else:
@@ -273,6 +305,15 @@ class EmulatedNetwork:
             raise ValueError(f"slave {i} does not exist (0..{self.n - 1})")
         return i
 
+    def _drive_index(self, value: Any) -> int:
+        """A drive (joint) of the drive requests (``slave`` = the drive: one per slave, or
+        one per axis of a multi-axis slave)."""
+        i = int(value)
+        n = self.drives.n if self.drives is not None else self.n
+        if not 0 <= i < n:
+            raise ValueError(f"drive {i} does not exist (0..{n - 1})")
+        return i
+
     def _drive_fault(self, request: dict[str, Any]) -> None:
         if self.drives is None:
             raise ValueError("no drives on this network")
@@ -282,7 +323,7 @@ class EmulatedNetwork:
             known = ", ".join(f"0x{c:04X}" for c in sorted(_FAULT_KINDS))
             raise ValueError(f"no injectable drive fault with code 0x{code:04X} (known: {known})")
         self.drives.inject_fault(
-            self._slave_index(request["slave"]), kind, bool(request.get("persistent", False))
+            self._drive_index(request["slave"]), kind, bool(request.get("persistent", False))
         )
 
     def status(self) -> dict[str, Any]:

@@ -9,6 +9,8 @@ default mapping each plan is one run of the whole record.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from drivers.cia402 import pdo
@@ -32,21 +34,37 @@ def assigned_entries(od: ObjectDictionary, assign_index: int) -> list[pdo.PdoEnt
     return out
 
 
-def copy_plan(entries: list[pdo.PdoEntry], dtype: np.dtype) -> tuple[CopyPlan, int]:
+def copy_plan(
+    entries: list[pdo.PdoEntry], dtype: np.dtype, records: Sequence[int | None] | None = None
+) -> tuple[CopyPlan, int]:
     """Copy plan for ``entries`` against record ``dtype`` and the SM length it needs [byte].
+
+    ``records``: per CiA-402 axis k of the device (objects at 0x6000 + 0x800·k), the index of
+    its record in an array of records (record offsets then count from that array's start);
+    None (an axis no drive emulates): its objects are carried, not decoded. Default: one
+    axis, offsets within its record.
 
     Raises ``ValueError`` naming an object that is not a field of ``dtype``.
     """
+    from drivers.cia402.wire import split_object
+
+    records = [0] if records is None else list(records)
     runs: list[list[int]] = []
     sm_off = 0
     for e in entries:
         size = e.bit_length // 8
-        if not e.field and e.index not in pdo_known_indices():
+        found = split_object(e.index, e.subindex) if e.index else None
+        k = found[1] if found is not None else 0
+        rec = records[k] if k < len(records) else None
+        if found is None or rec is None:
+            if e.field or (e.index in pdo_known_indices() and found is None):
+                raise ValueError(f"object 0x{e.index:04X}:{e.subindex:02X} is not in this PDO")
             sm_off += size  # padding or a vendor object: bytes on the wire, no record field
             continue
-        if not e.field or e.field not in dtype.names:
+        field = pdo.OBJECT_FIELDS[(found[0], e.subindex)]
+        if field not in (dtype.names or ()):
             raise ValueError(f"object 0x{e.index:04X}:{e.subindex:02X} is not in this PDO")
-        rec_off = dtype.fields[e.field][1]
+        rec_off = rec * dtype.itemsize + dtype.fields[field][1]
         last = runs[-1] if runs else None
         if last and last[0] + last[2] == sm_off and last[1] + last[2] == rec_off:
             last[2] += size

@@ -125,6 +125,11 @@ def resolve_profiles(
                 "profile's is used)"
             )
         check_profile_against_loop(profile, cycle_time, where)
+        if drive.device_axis >= profile.axes:
+            raise ConfigError(
+                f"{where}: bus.drives[{i}].device_axis {drive.device_axis}: profile "
+                f"{profile.name} has {profile.axes} axis(es), 0..{profile.axes - 1}"
+            )
         out.append(profile)
     return out
 

@@ -48,7 +48,7 @@ def _transport(master: str, cfg, profiles=None) -> EtherCATTransport:
     )
 
 
-def test_six_profiles_run_on_one_bus_with_the_layouts_the_drives_report(mixed_bus) -> None:
+def test_six_profiles_run_on_one_bus_with_the_layouts_the_drives_report(mixed_bus, capfd) -> None:
     master, cfg, emu = mixed_bus
     t = _transport(master, cfg)
     try:
@@ -66,6 +66,13 @@ def test_six_profiles_run_on_one_bus_with_the_layouts_the_drives_report(mixed_bu
         assert [len(s.output) for s in t.slaves] == [14, 14, 15, 14, 15, 15]
         assert [len(s.input) for s in t.slaves] == [20, 20, 21, 16, 21, 21]
         assert t.startup_written == 3  # Elmo's 0x60C2:1/2, Inovance's mode
+        # the Nanotec's AssignActivate 0x330 asks 0x30 in ESC 0x0980, which SOEM writes 0:
+        # said once, in one line, naming the slave; the 0x300 drives are not mentioned
+        assert len(t.warnings) == 1 and "\n" not in t.warnings[0]
+        assert t.warnings[0].startswith("slave 3 (") and "0x0330" in t.warnings[0]
+        assert "0x0980" in t.warnings[0]
+        err = capfd.readouterr().err
+        assert err.count("hofto-hw: warning: slave 3 (") == 1 and "0x0980" in err
         assert t.read_value(0, 0x60C2, 1, "u8") == 1  # the loop period [ms]
         assert t.read_value(1, 0x6060, 0, "i8") == 8
         g = DriveGroup.from_config(t, cfg.bus)
@@ -87,6 +94,11 @@ def test_six_profiles_run_on_one_bus_with_the_layouts_the_drives_report(mixed_bu
         np.testing.assert_allclose(g.q - q0, step, atol=3e-3)
         plant = np.array(emu.call(op="status")["q"])
         np.testing.assert_allclose(plant - plant0, step, atol=3e-3)
+        # axis 3 (no 0x6077, fallback torque: current): its torque is its current x kt x gear
+        d3 = cfg.bus.drives[3]
+        assert t.torque_from_current.tolist() == [False, False, False, True, False, False]
+        assert g.tau[3] != 0.0
+        assert g.tau[3] == pytest.approx(g.current[3] * d3.torque_constant * d3.gear_ratio)
         g.disable()
     finally:
         t.close()

@@ -17,10 +17,13 @@ from hofto_hw.config.drive_profile import load_profile
 
 
 def _layout(p) -> tuple:
+    """PDOs in order: index, fixed or configurable, entries."""
     return (
-        [(x.index, [(e.index, e.subindex, e.bits) for e in x.entries]) for x in p.rx_pdos],
-        [(x.index, [(e.index, e.subindex, e.bits) for e in x.entries]) for x in p.tx_pdos],
-    )
+        [(x.index, x.fixed, [(e.index, e.subindex, e.bits) for e in x.entries])
+         for x in p.rx_pdos],
+        [(x.index, x.fixed, [(e.index, e.subindex, e.bits) for e in x.entries])
+         for x in p.tx_pdos],
+    )  # fmt: skip
 
 
 def _dc(p) -> tuple | None:
@@ -45,6 +48,8 @@ def test_scan_of_a_mixed_bus_gives_back_the_profiles_of_its_drives(tmp_path: Pat
         again = main(["bus", "scan", "--iface", master, "-o", str(out)])
         err = capsys.readouterr().err.strip()
         assert again == 2 and "exists; not overwritten" in err and "\n" not in err
+    fixed = [x.fixed for d in MIXED for x in profile(d).rx_pdos + profile(d).tx_pdos]
+    assert True in fixed and False in fixed  # the bus mixes fixed and configurable PDOs
     bus = yaml.safe_load((out / "bus.yaml").read_text())["bus"]
     assert bus["transport"] == "ethercat" and bus["interface"] == master
     assert len(bus["drives"]) == 6
@@ -64,3 +69,45 @@ def test_two_drives_claiming_one_alias_are_refused_in_one_line() -> None:
         check_unique([(0, "slave 1"), (7, "slave 2"), (0, "slave 3"), (7, "slave 4")], "alias")
     assert str(err.value).startswith("slave 2 and slave 4 both claim alias 7")
     check_unique([(0, "slave 1"), (0, "slave 2"), (3, "slave 3")], "alias")  # 0: no claim
+
+
+def _set_alias(iface: str, positions: list[int], alias: int) -> None:
+    """Write station alias ``alias`` into the SII (word 4, checksum word 7) of the slaves at
+    ``positions`` (0-based), as ``ethercat alias`` does on a real bus."""
+    import struct
+
+    import pysoem
+
+    from drivers.sim.esc.sii import crc8
+
+    m = pysoem.Master()
+    m.open(iface)
+    try:
+        assert m.config_init() > max(positions)
+        for pos in positions:
+            s = m.slaves[pos]
+            s.eeprom_write(4, struct.pack("<H", alias))
+            header = b"".join(bytes(s.eeprom_read(w))[:4] for w in (0, 2, 4, 6))[:14]
+            s.eeprom_write(7, struct.pack("<H", crc8(header)))
+            assert struct.unpack("<H", bytes(s.eeprom_read(4))[:2])[0] == alias
+    finally:
+        m.close()
+
+
+@pytest.mark.root
+def test_a_bus_where_two_drives_claim_one_station_alias_is_refused_end_to_end(
+    tmp_path: Path, capsys
+) -> None:
+    config = write_mixed_config(tmp_path)
+    out = tmp_path / "scanned"
+    with (
+        veth_pair("am", "as") as (master, slave),
+        emulator(sim_ethercat_args(slave, config), tmp_path, timeout=30.0),
+    ):
+        _set_alias(master, [1, 3], 7)
+        code = main(["bus", "scan", "--iface", master, "-o", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert "\n" not in err and "Traceback" not in err
+    assert "slave 2 (" in err and "slave 4 (" in err and "both claim station alias 7" in err
+    assert not out.exists()  # nothing written

@@ -108,3 +108,18 @@ def test_run_options_that_cannot_apply_are_refused(argv, words, capsys) -> None:
     out, err = capsys.readouterr()
     one_line_error(code, err, words)
     assert out == ""
+
+
+def test_run_names_a_drive_without_torque_offset_at_start_up() -> None:
+    # configs/er3a_mixed.yaml: joint 5 runs maxon_epos4 (no 0x60B2; fallback
+    # target_torque_in_cst), the other five map the torque offset
+    path = ROOT / "configs" / "er3a_mixed.yaml"
+    argv = ["run", "--config", str(path), "--clock", "sim", "--duration", "0.05", "--no-log"]
+    code, _out, err, _ = run_limited([*argv, "--no-collision"], timeout=300)
+    assert code == 0, err
+    notes = [line for line in err.splitlines() if "no torque offset" in line]
+    assert notes == [
+        "hofto-hw run: axis 4 (joint_5): no torque offset 0x60B2 mapped: the gravity "
+        "feed-forward reaches this drive only through the target torque in CST; in CSP this "
+        "joint runs without it"
+    ], err

@@ -108,12 +108,20 @@ class DragRig:
         return self.service.request(line)
 
 
-@pytest.fixture(params=["er3a.yaml", "er3a_mixed.yaml"])
+@pytest.fixture(params=["er3a.yaml", "er3a_mixed.yaml", "two_axis"])
 def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[DragRig]:
-    """configs/er3a.yaml, and configs/er3a_mixed.yaml: six drive models of six vendor
-    profiles on the bus (issue 25), with the same figures."""
+    """configs/er3a.yaml, configs/er3a_mixed.yaml (six drive models of six vendor profiles
+    on the bus, issue 25) and the arm on three two-axis slaves (a synthetic multi-axis
+    profile, tests/support/profiles.py TWO_AXIS), with the same figures."""
     with veth_pair("dm", "ds") as (master, slave):
-        config, data = _config(tmp_path, master, ROOT / "configs" / request.param)
+        if request.param == "two_axis":
+            from support.profiles import write_two_axis_config
+
+            (tmp_path / "two_axis").mkdir()
+            base = write_two_axis_config(tmp_path / "two_axis", master)
+        else:
+            base = ROOT / "configs" / request.param
+        config, data = _config(tmp_path, master, base)
         with emulator(sim_ethercat_args(slave, config), tmp_path) as emu:
             service = ServiceRun(tmp_path, config)
             try:
