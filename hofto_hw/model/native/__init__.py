@@ -173,8 +173,26 @@ def _load() -> str:
     lib.hofto_dyn1_create.argtypes = [i64, p, p, p, p, p, p, p]
     lib.hofto_dyn1_destroy.restype = None
     lib.hofto_dyn1_destroy.argtypes = [p]
+    lib.hofto_dyn1_terms.restype = None
+    lib.hofto_dyn1_terms.argtypes = [p, i64, p, p, p, p]
+    lib.hofto_dyn1_rnea.restype = None
+    lib.hofto_dyn1_rnea.argtypes = [p, p, p, p, p]
     _LIB = lib
     return ""
+
+
+def python_terms(h: int, terms: int, q: int, qd: int, tau: int, out: int) -> None:
+    """hofto_dyn1_terms through ctypes (arguments as the kernels pass them: the handle, the
+    terms, addresses): what :mod:`hofto_hw.model.kernels` calls when NUMBA_DISABLE_JIT runs
+    its kernels as Python (numba's binding by name works in compiled code only)."""
+    assert _LIB is not None, "native.ready() first"
+    _LIB.hofto_dyn1_terms(int(h), int(terms), q, qd, tau, out)
+
+
+def python_rnea(h: int, q: int, qd: int, qdd: int, out: int) -> None:
+    """hofto_dyn1_rnea through ctypes (see :func:`python_terms`)."""
+    assert _LIB is not None, "native.ready() first"
+    _LIB.hofto_dyn1_rnea(int(h), q, qd, qdd, out)
 
 
 def model_numbers(model: RobotModel) -> dict[str, np.ndarray]:
