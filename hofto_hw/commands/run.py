@@ -140,11 +140,11 @@ def _run(args: argparse.Namespace, signals: Any) -> int:
 
         args.socket = check_socket_path(args.socket)
     progress = StartupProgress()  # from here: the imports take seconds on a loaded machine
+    progress.phase("importing numpy, pinocchio, numba")
     recorder = None
     control = None
     system = None
     try:
-        progress.phase("importing numpy, pinocchio, numba")
         from hofto_hw.config import load_config
         from hofto_hw.config.locate import find_config
         from hofto_hw.control.joint_motion import MOVE
@@ -193,6 +193,8 @@ def _run(args: argparse.Namespace, signals: Any) -> int:
         positions = None
         if cfg.bus is not None and str(cfg.bus.transport) != "sim" and not args.no_log:
             positions = state_path(args.log_dir or _log_dir(cfg, args.config))
+        if args.socket is not None or os.environ.get("NOTIFY_SOCKET"):
+            progress.phase("starting the control plane")
         with signals.deferred():  # its process and socket, closed below once they are ours
             control = _start_control_plane(cfg, args, recorder)
         system = build(

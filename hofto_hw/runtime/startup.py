@@ -3,13 +3,15 @@
 The start-up compiles or loads the kernels (numba's cache: ~1 s warm, tens of seconds cold),
 opens the bus, collects garbage and enables the drives. :class:`StartupProgress` is told each
 phase as it begins; a helper thread prints the phase on stderr once the start-up has taken
-``after`` seconds, then every phase that begins later and, at :meth:`done`, the total. The
-thread ends before the loop's first tick. :class:`StartupSignals` makes SIGTERM and SIGINT in any
-of these phases a clean stop.
+``after`` seconds (HOFTO_HW_PROGRESS_AFTER, 1.5 by default), then every phase that begins later
+and, at :meth:`done`, the total. The thread ends before the loop's first tick.
+:class:`StartupSignals` makes SIGTERM and SIGINT in any of these phases a clean stop.
 """
 
 from __future__ import annotations
 
+import math
+import os
 import signal
 import sys
 import threading
@@ -18,15 +20,39 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TextIO
 
+#: HOFTO_HW_PROGRESS_AFTER: seconds before the first progress line (0: every phase, as
+#: tools/bench_startup.py reads them); default 1.5
+PROGRESS_ENV = "HOFTO_HW_PROGRESS_AFTER"
+
+
+def progress_after(default: float = 1.5) -> float:
+    """The seconds of :data:`PROGRESS_ENV` (``default`` when unset); UserError naming it when
+    it is not a number >= 0."""
+    from hofto_hw.errors import UserError
+
+    text = os.environ.get(PROGRESS_ENV, "")
+    if not text:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0.0):
+        raise UserError(f"{PROGRESS_ENV}: must be a number of seconds >= 0, got {text!r}")
+    return value
+
 
 class StartupProgress:
     """``phase(text)`` at each step, ``done()`` before the loop runs (see module docstring)."""
 
     def __init__(
-        self, label: str = "hofto-hw run", after: float = 1.5, stream: TextIO | None = None
+        self,
+        label: str = "hofto-hw run",
+        after: float | None = None,
+        stream: TextIO | None = None,
     ) -> None:
         self.label = label
-        self.after = after
+        self.after = progress_after() if after is None else after
         self.stream = stream if stream is not None else sys.stderr
         self.t0 = time.monotonic()
         self.spoke = False  # a line was printed
