@@ -223,8 +223,11 @@ def _run(args: argparse.Namespace, signals: Any) -> int:
         from hofto_hw.runtime import realtime
 
         realtime.drop_realtime()
-        if system is not None:
-            system.close()
+        if system is not None:  # a stop or failure after the drives were set up
+            try:
+                system.close()
+            except Exception as exc:  # the first error is the one raised; the rest still closes
+                print(f"hofto-hw run: closing the bus: {exc}", file=sys.stderr)
         if control is not None:
             control.close(timeout=2.0)
             if args.socket is not None:
