@@ -3,7 +3,7 @@
 ``hofto_hw/model/native/dynamics.cpp`` (pinocchio's algorithms behind plain C functions, called
 by name from numba kernels) is compiled here against the headers of the ``pin``, ``cmeel-eigen``
 and ``cmeel-boost`` wheels that ``[build-system] requires`` installs into the build environment
-(their cmeel prefix), and ships inside the wheel as ``hofto_hw/model/native/_dynamics*.so``.
+(their cmeel prefix), and ships inside the wheel as ``hofto_hw/model/native/_dynamics.so``.
 The robot PC needs no compiler and builds nothing at run time. ``pip install -e .`` builds it
 in place (next to dynamics.cpp); after editing dynamics.cpp run that again (the loader refuses
 a library whose recorded source hash differs from the file beside it).
@@ -25,6 +25,11 @@ from pathlib import Path
 
 from setuptools import Extension, find_packages, setup
 from setuptools.command.build_ext import build_ext
+
+try:  # setuptools >= 70.1 has it; before, the wheel package's
+    from setuptools.command.bdist_wheel import bdist_wheel
+except ImportError:  # pragma: no cover
+    from wheel.bdist_wheel import bdist_wheel
 
 HERE = Path(__file__).resolve().parent
 SOURCE = "hofto_hw/model/native/dynamics.cpp"
@@ -95,6 +100,26 @@ class BuildNative(build_ext):
         self.compiler.compiler_so = [a for a in self.compiler.compiler_so if a != "-Wall"]
         super().build_extensions()
 
+    def get_ext_filename(self, fullname: str) -> str:
+        """``_dynamics.so``: not a Python extension module (no Python ABI; ctypes and numba
+        load it), so not named for one interpreter (``.cpython-311-x86_64-linux-gnu.so``)."""
+        return str(Path(*fullname.split("."))) + ".so"
+
+
+class PlatformWheel(bdist_wheel):
+    """The wheel's tag: ``py3-none-<platform>``. The native library uses no Python ABI (plain
+    C functions loaded by ctypes/numba, nothing linked to libpython), so one wheel serves every
+    Python 3 the package supports on that platform; it is still a platform wheel (x86-64
+    Linux machine code), never a pure one."""
+
+    def finalize_options(self) -> None:
+        super().finalize_options()
+        self.root_is_pure = False
+
+    def get_tag(self) -> tuple[str, str, str]:
+        _, _, platform = super().get_tag()
+        return "py3", "none", platform
+
 
 #: configs/ and its folders (URDFs, parameters, the unit...) as data-only packages: listed, so
 #: that setuptools does not warn that each folder "would be ignored"
@@ -114,7 +139,7 @@ setup(
         "hofto_hw.robot_configs": ["*.yaml"],
         **{p: ["*"] for p in CONFIG_PACKAGES[1:]},
     },
-    exclude_package_data={"hofto_hw.model.native": ["*.cpp"]},  # compiled into _dynamics*.so
+    exclude_package_data={"hofto_hw.model.native": ["*.cpp"]},  # compiled into _dynamics.so
     package_dir={"hofto_hw.robot_configs": "configs"},
     ext_modules=[
         Extension(
@@ -125,5 +150,5 @@ setup(
             extra_link_args=["-s"],  # stripped: the symbols numba binds are dynamic ones
         )
     ],
-    cmdclass={"build_ext": BuildNative},
+    cmdclass={"build_ext": BuildNative, "bdist_wheel": PlatformWheel},
 )

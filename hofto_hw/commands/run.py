@@ -111,6 +111,23 @@ def _check_interface(cfg: object, interface: str | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hofto_hw.runtime.startup import StartupInterrupted, StartupSignals
+
+    signals = StartupSignals()  # SIGTERM/SIGINT before the loop: a clean stop, not a kill
+    try:
+        return _run(args, signals)
+    except StartupInterrupted as exc:
+        print(
+            f"hofto-hw run: {exc.name} during start-up: stopped (no drive left enabled, "
+            "nothing left running)",
+            file=sys.stderr,
+        )
+        return 0 if exc.signum == signal.SIGTERM else 128 + exc.signum
+    finally:
+        signals.restore()
+
+
+def _run(args: argparse.Namespace, signals: Any) -> int:
     from hofto_hw.outputs import check_output, write_atomic
     from hofto_hw.runtime.startup import StartupProgress
 
@@ -123,10 +140,11 @@ def run(args: argparse.Namespace) -> int:
 
         args.socket = check_socket_path(args.socket)
     progress = StartupProgress()  # from here: the imports take seconds on a loaded machine
+    progress.phase("importing numpy, pinocchio, numba")
     recorder = None
     control = None
+    system = None
     try:
-        progress.phase("importing numpy, pinocchio, numba")
         from hofto_hw.config import load_config
         from hofto_hw.config.locate import find_config
         from hofto_hw.control.joint_motion import MOVE
@@ -168,13 +186,17 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)  # fmt: skip
         if not args.no_log:
             progress.phase("starting the flight recorder")
-            recorder = _start_recorder(cfg, args)
+            with signals.deferred():  # its writer process, closed below once it is ours
+                recorder = _start_recorder(cfg, args)
         # Real buses with logs only: the simulated plant starts at its configured pose on every
         # run, and the state file lives beside the logs (--no-log: neither checked nor written).
         positions = None
         if cfg.bus is not None and str(cfg.bus.transport) != "sim" and not args.no_log:
             positions = state_path(args.log_dir or _log_dir(cfg, args.config))
-        control = _start_control_plane(cfg, args, recorder)
+        if args.socket is not None or os.environ.get("NOTIFY_SOCKET"):
+            progress.phase("starting the control plane")
+        with signals.deferred():  # its process and socket, closed below once they are ours
+            control = _start_control_plane(cfg, args, recorder)
         system = build(
             cfg,
             clock=clock,
@@ -183,18 +205,29 @@ def run(args: argparse.Namespace) -> int:
             positions=positions,
             progress=progress.phase,
         )
+        tick = system.tick
+
+        def _on_signal(signum: int, frame: object) -> None:
+            tick.stop_requested = True
+            tick.exit_requested = True
+
+        signals.hand_over(_on_signal)  # from here the loop stops the arm (category 1)
         system.acceleration = acceleration.report(system)
         if lc.acceleration == "required" and not system.acceleration["compiled"]:
-            system.close()
             raise ConfigError(
                 f"{args.config}: loop.acceleration: required, but the tick runs the Python "
                 f"reference ({system.acceleration['why']})"
             )
     except BaseException:
-        progress.done()
+        progress.done(started=False)
         from hofto_hw.runtime import realtime
 
         realtime.drop_realtime()
+        if system is not None:  # a stop or failure after the drives were set up
+            try:
+                system.close()
+            except Exception as exc:  # the first error is the one raised; the rest still closes
+                print(f"hofto-hw run: closing the bus: {exc}", file=sys.stderr)
         if control is not None:
             control.close(timeout=2.0)
             if args.socket is not None:
@@ -204,13 +237,6 @@ def run(args: argparse.Namespace) -> int:
         raise
     if control is not None:  # it also watches the flight recorder (a safety input)
         control.attach(system, watch_log=recorder is not None)
-    tick = system.tick
-
-    def _on_signal(signum: int, frame: object) -> None:
-        tick.stop_requested = True
-        tick.exit_requested = True
-
-    old = {s: signal.signal(s, _on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     watch = None
     if recorder is not None and control is None:
         from hofto_hw.runtime.log_watch import LogWatch
@@ -233,8 +259,7 @@ def run(args: argparse.Namespace) -> int:
         run_loop(system, n_ticks, lambda: tick.exit_requested and tick.stopped_and_off())
     finally:
         realtime.drop_realtime()
-        for s, h in old.items():
-            signal.signal(s, h)
+        signals.restore()
         if control is not None:
             control.close()  # saves a taught path still being recorded
             if args.socket is not None:

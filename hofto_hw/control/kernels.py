@@ -154,8 +154,11 @@ def path_workspace(
 @jit
 def _libm_sin_cos(x: np.ndarray, s: np.ndarray, c: np.ndarray) -> None:
     for i in range(x.shape[0]):
-        s[i] = math.sin(x[i])
-        c[i] = math.cos(x[i])
+        if math.isfinite(x[i]):
+            s[i] = math.sin(x[i])
+            c[i] = math.cos(x[i])
+        else:  # NaN, as libm and numpy give; Python's math.sin(inf) raises (NUMBA_DISABLE_JIT)
+            s[i] = c[i] = math.nan
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:

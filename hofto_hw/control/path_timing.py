@@ -28,7 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from ruckig import InputParameter, Result, Ruckig, Trajectory
-from scipy.interpolate import make_lsq_spline
 
 from hofto_hw.errors import UserError
 
@@ -100,6 +99,8 @@ def _fit(t: np.ndarray, q: np.ndarray, knot_spacing: float, pad: float):
     k = 5
     inner = np.arange(tp[0] + knot_spacing, tp[-1] - 0.5 * knot_spacing, knot_spacing)
     knots = np.concatenate([[tp[0]] * (k + 1), inner, [tp[-1]] * (k + 1)])
+    from scipy.interpolate import make_lsq_spline  # here: seconds of imports at every start
+
     spline = make_lsq_spline(tp, qp, knots, k=k, axis=0)
     # exact rest at both ends: with clamped knots, q', q'' at an end depend only on the first
     # (last) three coefficients; equal coefficients make them zero (the padding is at rest,

@@ -29,7 +29,6 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field, model_validator
-from scipy import signal
 
 from hofto_hw.config.base import FileModel
 from hofto_hw.config.loader import read_model, require_regular
@@ -660,6 +659,8 @@ def lowpass(
             f"{source or 'recording'}: cutoff {cutoff_hz:g} Hz must be in (0, {0.5 * fs:.4g}) Hz "
             f"(half the median sample rate)"
         )
+    from scipy import signal  # here: seconds of imports the loop's log writer never needs
+
     sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")
     padlen = 3 * (2 * sos.shape[0] + 1)
     if x.shape[0] <= padlen:

@@ -42,6 +42,7 @@ NATIVE_SHIFT = 2
 
 try:  # the native library's C functions, bound by name (hofto_hw/model/native/dynamics.cpp;
     # loaded by hofto_hw.model.native.ready() before any kernel below is compiled or run)
+    from numba import config as _nc
     from numba import types as _nt
 
     _dyn_terms = _nt.ExternalFunction(
@@ -52,6 +53,9 @@ try:  # the native library's C functions, bound by name (hofto_hw/model/native/d
         "hofto_dyn1_rnea",
         _nt.void(_nt.voidptr, _nt.voidptr, _nt.voidptr, _nt.voidptr, _nt.voidptr),
     )
+    if _nc.DISABLE_JIT:  # the kernels run as Python: the same C functions through ctypes
+        from hofto_hw.model.native import python_rnea as _dyn_rnea
+        from hofto_hw.model.native import python_terms as _dyn_terms
 except Exception:  # no numba: the native path is never chosen (hofto_hw.model.native.ready)
     _dyn_terms = _dyn_rnea = None
 

@@ -171,6 +171,13 @@ def _sig_log(x: float, a: float, p: float, log2a: float) -> float:
 
 
 @_jit
+def _log2(a: float) -> float:
+    """math.log2 of a = |x|, -inf at zero as compiled (C's log2); Python's math.log2(0) raises,
+    and NUMBA_DISABLE_JIT runs these kernels as Python."""
+    return math.log2(a) if a != 0.0 else -math.inf
+
+
+@_jit
 def _needs_log(p: float) -> bool:
     """True when :func:`_sig_log` reads log2a for power p."""
     return p != 0.0 and p != 1.0 and p != 0.5 and p != 0.25 and p != 0.75
@@ -306,7 +313,7 @@ def _injection(
             d = z[i, jj] - prev
             p = powers[i]
             a = abs(d)
-            v = _sig_log(d, a, p, math.log2(a) if _needs_log(p) else 0.0) * neg_gains[i, jj]
+            v = _sig_log(d, a, p, _log2(a) if _needs_log(p) else 0.0) * neg_gains[i, jj]
             if i < s - 1:
                 prev = z[i + 1, jj] + v
             if apply:
@@ -322,7 +329,7 @@ def _injection(
         for i in range(s):
             p = powers[i]
             if not have and _needs_log(p):
-                log2a = math.log2(a)
+                log2a = _log2(a)
                 have = True
             v = -(_sig_log(e, a, p, log2a) * neg_gains[i, jj])
             if apply:

@@ -14,6 +14,17 @@ from typing import Any
 from hofto_hw.errors import ConfigError
 
 
+def jit_disabled() -> bool:
+    """True when numba's own switch (NUMBA_DISABLE_JIT=1) runs the compiled path's source as
+    Python: the same kernels, the native dynamics through ctypes; for tests and debugging,
+    ~30-50x slower than compiled."""
+    try:
+        from numba import config
+    except Exception:  # no numba: hofto_hw.observers.kernels says why
+        return False
+    return bool(config.DISABLE_JIT)
+
+
 def missing() -> str:
     """Why the compiled path cannot run in this process ('' when it can). Loads the native
     library (the first call of a process decides)."""
@@ -31,6 +42,8 @@ def require(mode: str, source: str) -> None:
     """``loop.acceleration`` of the config file ``source``: ConfigError when ``required`` and
     the compiled path is missing."""
     why = missing()
+    if not why and jit_disabled():
+        why = "NUMBA_DISABLE_JIT is set (the kernels would run as Python)"
     if why and mode == "required":
         raise ConfigError(
             f"{source}: loop.acceleration: required, but the compiled tick is unavailable: {why}"
@@ -40,8 +53,9 @@ def require(mode: str, source: str) -> None:
 def report(system: Any) -> dict[str, Any]:
     """What the built ``system``'s tick runs: ``compiled`` (numba kernels and native dynamics
     both in use), ``kernels`` (numba | numpy), ``native`` (the snapshot runs the native
-    dynamics), ``fused`` (the tick's fused call, while the tick has one) and ``why`` (what is
-    missing, '' when compiled)."""
+    dynamics), ``fused`` (the tick's fused call, while the tick has one), ``why`` (what is
+    missing, '' when compiled) and ``jit`` (False: NUMBA_DISABLE_JIT runs that same path's
+    source as Python)."""
     tick = system.tick
     kernels = "numba" if getattr(tick, "backend", "numpy") == "numba" else "numpy"
     native = bool(getattr(tick.snapshot, "native", False))
@@ -53,6 +67,7 @@ def report(system: Any) -> dict[str, Any]:
     if hasattr(tick, "_fz"):
         out["fused"] = tick._fz is not None
     out["why"] = "" if out["compiled"] else (missing() or "the tick did not take the compiled path")
+    out["jit"] = not jit_disabled()
     return out
 
 
@@ -60,6 +75,8 @@ def describe(rep: dict[str, Any]) -> str:
     """One line for the summary and the log: ``compiled (numba kernels, native dynamics)`` or
     ``Python reference (why)``."""
     if rep["compiled"]:
-        fused = ", fused call" if rep.get("fused") else ""
-        return f"compiled (numba kernels, native dynamics{fused})"
+        parts = f"numba kernels, native dynamics{', fused call' if rep.get('fused') else ''}"
+        if not rep.get("jit", True):
+            return f"the compiled path as Python (NUMBA_DISABLE_JIT; {parts})"
+        return f"compiled ({parts})"
     return f"Python reference ({rep['why']})"

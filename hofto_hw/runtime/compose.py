@@ -83,14 +83,22 @@ class System:
 
     def close(self) -> None:
         """Stop the drives (category 1 if still powered), disable them, close the bus."""
-        g = self.group
-        try:
-            g.cycle()
-            if (g.states == State.OPERATION_ENABLED).any():
-                g.quick_stop()
-            g.disable()
-        finally:
-            self.bus.close()
+        shut_down(self.group, self.bus)
+
+
+def shut_down(group: DriveGroup, bus: Transport) -> None:
+    """Stop the drives (category 1 if still powered), disable them, close the bus; nothing
+    but the close when the bus is closed already (a failed start-up step closed it)."""
+    if not getattr(bus, "is_open", True):
+        bus.close()
+        return
+    try:
+        group.cycle()
+        if (group.states == State.OPERATION_ENABLED).any():
+            group.quick_stop()
+        group.disable()
+    finally:
+        bus.close()
 
 
 def _sim_config(cfg: SystemConfig) -> SystemConfig:
@@ -180,78 +188,84 @@ def build(
 
     say("opening the bus")
     bus, group = build_bus(cfg, clock)
-    say("loading the safety checks and the tick (compiled code)")
+    try:
+        say("loading the safety checks and the tick (compiled code)")
 
-    s = cfg.safety
-    stop = StopController.from_config(s.categories)
-    limits = LimitMonitor.from_config(s.limits, model.limits, backend=backend)
-    health = BusHealth(
-        model.n,
-        s.bus.lost_cycles,
-        int(State.OPERATION_ENABLED),
-        (int(State.FAULT_REACTION_ACTIVE), int(State.FAULT), int(State.UNKNOWN)),
-        backend=backend,
-    )
-    collision = CollisionLevels(s.collision, names, model, backend=backend) if s.collision else None
-    if collision is not None and s.profiles is not None:  # the active safety profile's scale
-        collision.scale_thresholds(s.profiles.sets[s.profiles.active].collision_scale)
-    accel = np.where(np.isfinite(model.limits.acceleration), model.limits.acceleration, 10.0)
-    p = cfg.run.path
-    path = DemoPath(p.amplitude, p.period, p.phase, p.ramp, backend) if p is not None else None
-    motion = JointMotion(model.n, accel, path, backend=backend)
-    drag, enable, drag_row = _build_drag(cfg, model, names, backend)
-    if drag is not None and s.profiles is not None:  # the active safety profile's drag
-        drag.apply_profile(*s.profiles.sets[s.profiles.active].drag_factors())
-    tick = Tick(
-        group,
-        observers,
-        shared_snapshot(model, observers),
-        stop,
-        limits,
-        health,
-        collision,
-        motion,
-        model.create_data(backend),  # the feed-forward: compiled friction
-        sink,
-        overrun_limit=s.overrun_streak,
-        drag=drag,
-        enable_input=enable,
-        drag_row=drag_row,
-        period=1.0 / rate,
-        backend=backend,
-    )
-    tick.diag_every = max(1, round(rate / 10.0))
-    if s.collision is not None:
-        tick.settle_ticks = round(s.collision.settle_time * rate)
-    if positions is not None:
-        check_start_positions(cfg, bus, group, positions)
-    braked = preload_braked_axes(cfg, model, group)
-    if clock != "sim":
-        say("collecting garbage")
-        collect_before_loop()  # the loop's own collection then fits inside the bus watchdog
-    say("enabling the drives")
-    enable_drives(bus, group)
-    if braked.size:
-        await_brake_release(cfg, bus, group, braked)
-    tick.start()
-    period_ns = round(1e9 / rate)
-    clk: RealClock | SimClock = SimClock(period_ns) if clock == "sim" else RealClock(period_ns)
-    loop = Loop(tick, clk)
-    simulated = isinstance(bus, SimBus)
-    if not clk.sim and simulated:
-        loop.data_dt = 1.0 / rate  # SimBus in real time: one plant cycle per exchange
-    system = System(cfg, model, bus, group, tick, loop, clk, sink, rate)
-    system.observer_names = names
-    if contact and simulated and cfg.run.collision is not None:
-        system.contact = _script_contact(system)
-        if cfg.run.drag is not None and drag is not None:
-            from hofto_hw.runtime.drag_script import DragScript
+        s = cfg.safety
+        stop = StopController.from_config(s.categories)
+        limits = LimitMonitor.from_config(s.limits, model.limits, backend=backend)
+        health = BusHealth(
+            model.n,
+            s.bus.lost_cycles,
+            int(State.OPERATION_ENABLED),
+            (int(State.FAULT_REACTION_ACTIVE), int(State.FAULT), int(State.UNKNOWN)),
+            backend=backend,
+        )
+        collision = None
+        if s.collision is not None:
+            collision = CollisionLevels(s.collision, names, model, backend=backend)
+        if collision is not None and s.profiles is not None:  # the active profile's scale
+            collision.scale_thresholds(s.profiles.sets[s.profiles.active].collision_scale)
+        accel = np.where(np.isfinite(model.limits.acceleration), model.limits.acceleration, 10.0)
+        p = cfg.run.path
+        path = DemoPath(p.amplitude, p.period, p.phase, p.ramp, backend) if p is not None else None
+        motion = JointMotion(model.n, accel, path, backend=backend)
+        drag, enable, drag_row = _build_drag(cfg, model, names, backend)
+        if drag is not None and s.profiles is not None:  # the active safety profile's drag
+            drag.apply_profile(*s.profiles.sets[s.profiles.active].drag_factors())
+        tick = Tick(
+            group,
+            observers,
+            shared_snapshot(model, observers),
+            stop,
+            limits,
+            health,
+            collision,
+            motion,
+            model.create_data(backend),  # the feed-forward: compiled friction
+            sink,
+            overrun_limit=s.overrun_streak,
+            drag=drag,
+            enable_input=enable,
+            drag_row=drag_row,
+            period=1.0 / rate,
+            backend=backend,
+        )
+        tick.diag_every = max(1, round(rate / 10.0))
+        if s.collision is not None:
+            tick.settle_ticks = round(s.collision.settle_time * rate)
+        if positions is not None:
+            check_start_positions(cfg, bus, group, positions)
+        braked = preload_braked_axes(cfg, model, group)
+        if clock != "sim":
+            say("collecting garbage")
+            collect_before_loop()  # the loop's own collection then fits inside the bus watchdog
+        say("enabling the drives")
+        enable_drives(bus, group)
+        if braked.size:
+            await_brake_release(cfg, bus, group, braked)
+        tick.start()
+        period_ns = round(1e9 / rate)
+        clk: RealClock | SimClock = SimClock(period_ns) if clock == "sim" else RealClock(period_ns)
+        loop = Loop(tick, clk)
+        simulated = isinstance(bus, SimBus)
+        if not clk.sim and simulated:
+            loop.data_dt = 1.0 / rate  # SimBus in real time: one plant cycle per exchange
+        system = System(cfg, model, bus, group, tick, loop, clk, sink, rate)
+        system.observer_names = names
+        if contact and simulated and cfg.run.collision is not None:
+            system.contact = _script_contact(system)
+            if cfg.run.drag is not None and drag is not None:
+                from hofto_hw.runtime.drag_script import DragScript
 
-            model_for_replay = model if clk.sim else None  # the replay needs the sim clock
-            tick.script = system.drag_script = DragScript(
-                cfg.run.drag, bus.plant, rate, model=model_for_replay
-            )
-    return system
+                model_for_replay = model if clk.sim else None  # the replay needs the sim clock
+                tick.script = system.drag_script = DragScript(
+                    cfg.run.drag, bus.plant, rate, model=model_for_replay
+                )
+        return system
+    except BaseException:  # a failure or a stop (SIGTERM) at any step: nothing left enabled
+        shut_down(group, bus)
+        raise
 
 
 def _silent(text: str) -> None:
@@ -280,8 +294,8 @@ def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:
             )
         bus = build_transport(cfg)
     group = build_drive_group(cfg, bus)
-    bus.open()
     try:
+        bus.open()
         group.configure(cfg.bus.drives)
         group.set_mode(Mode.CSP)
     except BaseException:

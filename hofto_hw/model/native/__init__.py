@@ -19,7 +19,7 @@ armature, gravity): exactly the same values, so the same algorithms give the sam
 
 Availability: the library is built when the package is built (setup.py, against the headers of
 the build environment's ``pin``, ``cmeel-eigen`` and ``cmeel-boost``) and ships in the wheel as
-``_dynamics*.so`` next to this file; nothing is compiled at run time. It is loaded only when
+``_dynamics.so`` next to this file; nothing is compiled at run time. It is loaded only when
 the pinocchio it was built against has the installed pinocchio's major.minor version (the
 algorithms compiled in must be the ones the Python model is made for) and, in a source checkout
 (``pip install -e .``), only when ``dynamics.cpp`` beside it is the source it was built from.
@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
-import importlib.machinery
 import os
 import sys
 import weakref
@@ -91,14 +90,11 @@ def unavailable_reason() -> str:
 
 
 def library_path() -> Path | None:
-    """The native library shipped next to this module (None when the package was installed
-    without it)."""
-    here = Path(__file__).resolve().parent
-    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        path = here / f"_dynamics{suffix}"
-        if path.is_file():
-            return path
-    return None
+    """The native library shipped next to this module, ``_dynamics.so`` (None when the
+    package was installed without it). Not a Python extension module: one name for every
+    Python version (setup.py)."""
+    path = Path(__file__).resolve().parent / "_dynamics.so"
+    return path if path.is_file() else None
 
 
 def _built_from(lib: ctypes.CDLL) -> tuple[tuple[int, int, int], str]:
@@ -152,7 +148,10 @@ def _load() -> str:
         return kernels.unavailable_reason() or "numba unavailable"
     path = library_path()
     if path is None:
-        return "this install has no native library (hofto_hw/model/native/_dynamics*.so)"
+        return (
+            "this install has no native library (hofto_hw/model/native/_dynamics.so; a source "
+            "checkout: pip install -e . again)"
+        )
     try:
         lib = ctypes.CDLL(str(path))
         built, sha = _built_from(lib)
@@ -175,8 +174,26 @@ def _load() -> str:
     lib.hofto_dyn1_destroy.argtypes = [p]
     lib.hofto_dyn1_set_inertia.restype = i64
     lib.hofto_dyn1_set_inertia.argtypes = [p, i64, p]
+    lib.hofto_dyn1_terms.restype = None
+    lib.hofto_dyn1_terms.argtypes = [p, i64, p, p, p, p]
+    lib.hofto_dyn1_rnea.restype = None
+    lib.hofto_dyn1_rnea.argtypes = [p, p, p, p, p]
     _LIB = lib
     return ""
+
+
+def python_terms(h: int, terms: int, q: int, qd: int, tau: int, out: int) -> None:
+    """hofto_dyn1_terms through ctypes (arguments as the kernels pass them: the handle, the
+    terms, addresses): what :mod:`hofto_hw.model.kernels` calls when NUMBA_DISABLE_JIT runs
+    its kernels as Python (numba's binding by name works in compiled code only)."""
+    assert _LIB is not None, "native.ready() first"
+    _LIB.hofto_dyn1_terms(int(h), int(terms), q, qd, tau, out)
+
+
+def python_rnea(h: int, q: int, qd: int, qdd: int, out: int) -> None:
+    """hofto_dyn1_rnea through ctypes (see :func:`python_terms`)."""
+    assert _LIB is not None, "native.ready() first"
+    _LIB.hofto_dyn1_rnea(int(h), q, qd, qdd, out)
 
 
 def model_numbers(model: RobotModel) -> dict[str, np.ndarray]:

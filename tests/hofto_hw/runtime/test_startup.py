@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import io
 
+import pytest
 from support.rootnet import wait_for
 
-from hofto_hw.runtime.startup import StartupProgress
+from hofto_hw.errors import UserError
+from hofto_hw.runtime.startup import StartupProgress, progress_after
 
 
 def test_a_quick_start_up_prints_nothing() -> None:
@@ -32,3 +34,14 @@ def test_a_slow_start_up_prints_each_phase_and_the_total() -> None:
     assert lines[1].startswith("hofto-hw run: starting: enabling the drives (")
     assert lines[2] == f"hofto-hw run: started in {took:.1f} s"
     assert len(lines) == 3
+
+
+def test_progress_after_comes_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("HOFTO_HW_PROGRESS_AFTER", "0")
+    assert StartupProgress(stream=io.StringIO()).after == 0.0
+    monkeypatch.delenv("HOFTO_HW_PROGRESS_AFTER")
+    assert progress_after() == 1.5
+    for bad in ("soon", "-1", "nan", "inf"):
+        monkeypatch.setenv("HOFTO_HW_PROGRESS_AFTER", bad)
+        with pytest.raises(UserError, match=f"HOFTO_HW_PROGRESS_AFTER: .*got '{bad}'"):
+            progress_after()
