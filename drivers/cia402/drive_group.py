@@ -513,6 +513,9 @@ class DriveGroup(ImageFields):
                 sto = ""
                 if enabling and i in self.sto_axes():
                     sto = f"; safe torque off active ({self._sto_where(i)})"
+                    self._rx_cw.fill(sm.CW_DISABLE_VOLTAGE)  # as when STO is seen at once:
+                    self.hold()  # nothing left half enabled
+                    self._step()
                 elif enabling and self.states[i] == State.SWITCH_ON_DISABLED:
                     sto = "; safe torque off active? (the drive stays in switch on disabled)"
                 raise DriveTimeoutError(

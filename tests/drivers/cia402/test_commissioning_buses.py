@@ -59,7 +59,7 @@ def _config(folder: Path, kind: str, interface: str | None) -> Path:
         bus["canopen"].update(
             can_interface="virtual", tpdo_deadline=0.05, heartbeat_timeout=0.5, sdo_timeout=2.0
         )
-    data["run"].pop("collision", None)
+    (data.get("run") or {}).pop("collision", None)
     path = folder / f"er3a-{kind}-commissioning.yaml"
     path.write_text(dump_yaml(data))
     return path
@@ -126,7 +126,8 @@ def rig(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Rig]:
         channel = unique_channel("comm")
         path = _config(tmp_path, kind, channel)
         can_bus = can.Bus(interface="virtual", channel=channel)
-        emu = CanopenDrives(build_emulated_drives(load_config(path), external=False), can_bus)
+        drives = build_emulated_drives(load_config(path), external=False, load=True)
+        emu = CanopenDrives(drives, can_bus)
         emu.start()
         r = Rig(kind, path, emu.control)
         try:
@@ -159,9 +160,10 @@ def _cycles(bus: Any, group: Any, n: int, until: Callable[[], bool] | None = Non
     return n
 
 
-def _enabled(rig: Rig, preload: bool = True) -> tuple[Any, Any, float]:
-    """Open, preload gravity on the braked axes (or not), enable, hold for the release check;
-    the transport, group and the shoulder's largest motion [rad] while its brake opened."""
+def _enabled(rig: Rig, preload: bool = True) -> tuple[Any, Any, float, float]:
+    """Open, preload gravity on the braked axes (or not), enable, open the shoulder's brake
+    (0x60FE) and hold for the release check: the transport, the group and the shoulder's
+    largest motion [rad] from the enable, and from the cycle its brake opened on."""
     bus, group = rig.open()
     cfg = rig.cfg
     model = compose.build_model(cfg)
@@ -172,13 +174,18 @@ def _enabled(rig: Rig, preload: bool = True) -> tuple[Any, Any, float]:
     assert check is not None
     check.start(group.q)
     bus.write_value(SHOULDER, 0x60FE, 1, "u32", 1)  # the master opens the shoulder's brake
-    q0, worst = float(group.q[SHOULDER]), 0.0
+    q0, total, after, q_open = float(group.q[SHOULDER]), 0.0, 0.0, None
     result = check.RUNNING
-    while result == check.RUNNING:
+    while result == check.RUNNING or q_open is None:
         _cycles(bus, group, 1)
-        worst = max(worst, abs(float(group.q[SHOULDER]) - q0))
+        q = float(group.q[SHOULDER])
+        total = max(total, abs(q - q0))
+        if q_open is None and not rig.status()["brake_engaged"][SHOULDER]:
+            q_open = q
+        if q_open is not None:
+            after = max(after, abs(q - q_open))
         result = check.step(group.q)
-    return bus, group, worst
+    return bus, group, total, after
 
 
 # --------------------------------------------------------------------------- brakes
@@ -197,18 +204,27 @@ def test_brake_delays_are_written_to_the_drive_by_sdo(rig: Rig) -> None:
 
 
 def test_enable_with_preload_holds_the_shoulder_and_without_it_sags(rig: Rig) -> None:
-    _, _, held = _enabled(rig, preload=True)
+    """The shoulder moves less than 0.5 mrad while its brake opens with the gravity preload,
+    more without. From the enable on, the emulated brake's own compliance adds the spring's
+    unloading while it is still closed: its stiffness follows the drive loop's bandwidth
+    (drivers/sim/drive.LoopTuning), ~0.8 mrad at CANopen's 200 Hz, < 0.2 mrad at 1 kHz."""
+    _, _, total, held = _enabled(rig, preload=True)
     rig.close()
-    _, _, sagged = _enabled(rig, preload=False)
-    print(f"{rig.kind}: shoulder motion while its brake opened: {held * 1e3:.3f} mrad with the "
-          f"preload, {sagged * 1e3:.3f} mrad without")  # fmt: skip
+    _, _, total_without, sagged = _enabled(rig, preload=False)
+    print(
+        f"{rig.kind}: shoulder motion while its brake opened: {held * 1e3:.3f} mrad with the "
+        f"preload, {sagged * 1e3:.3f} mrad without; from the enable {total * 1e3:.3f} / "
+        f"{total_without * 1e3:.3f} mrad"
+    )
     assert held < 0.5e-3
     assert sagged > 0.5e-3 and sagged > 3.0 * held
+    if rig.kind != "canopen":  # 1 kHz: the brake's compliance is below the bound as well
+        assert total < 0.5e-3
 
 
 @pytest.mark.parametrize("category", [0, 1, 2])
 def test_stop_categories_end_with_their_brake_states(rig: Rig, category: int) -> None:
-    bus, group, _ = _enabled(rig)
+    bus, group, _, _ = _enabled(rig)
     assert rig.status()["brake_engaged"][ELBOW] is False
     engage = int(np.ceil(BRAKE_DRIVE["engage_delay"] / bus.cycle_time))
     if category == 0:
@@ -231,39 +247,40 @@ def test_stop_categories_end_with_their_brake_states(rig: Rig, category: int) ->
         assert (group.states == SOD).all() and status["brake_engaged"][ELBOW] is True
 
 
-def _brake_test(rig: Rig) -> int:
+def _brake_test(rig: Rig, fraction: float, holding: float) -> int:
+    """``hofto-hw brake test --joint joint_2 --torque fraction`` with the emulated shoulder
+    brake rated ``holding`` [N·m] (the config says 60 N·m)."""
     from hofto_hw.commands import brake
 
-    args = argparse.Namespace(config=str(rig.path), joint="joint_2", torque="0.8")
-    if rig.kind == "sim":  # its own SimBus: give its drives the worn brake there
-        real = compose.build_bus
+    args = argparse.Namespace(config=str(rig.path), joint="joint_2", torque=str(fraction))
+    if rig.kind != "sim":
+        rig.ctl("brake", SHOULDER, release_delay=0.05, engage_delay=0.05,
+                holding_torque=holding, by_output=True)  # fmt: skip
+        return brake.run(args)
+    real = compose.build_bus  # its own SimBus: give its drives that brake there
 
-        def build_bus(cfg: Any, clock: str) -> Any:
-            bus, group = real(cfg, clock)
-            bus.drives.configure_brake(SHOULDER, 0.05, 0.05, rig.worn, by_output=True)
-            return bus, group
+    def build_bus(cfg: Any, clock: str) -> Any:
+        bus, group = real(cfg, clock)
+        bus.drives.configure_brake(SHOULDER, 0.05, 0.05, holding, by_output=True)
+        return bus, group
 
-        compose.build_bus = build_bus  # type: ignore[assignment]
-        try:
-            return brake.run(args)
-        finally:
-            compose.build_bus = real  # type: ignore[assignment]
-    return brake.run(args)
+    compose.build_bus = build_bus  # type: ignore[assignment]
+    try:
+        return brake.run(args)
+    finally:
+        compose.build_bus = real  # type: ignore[assignment]
 
 
 def test_a_slipping_brake_fails_the_brake_test(rig: Rig, capsys: pytest.CaptureFixture) -> None:
-    rig.worn = 60.0  # type: ignore[attr-defined]
-    if rig.kind != "sim":
-        rig.ctl("brake", SHOULDER, release_delay=0.05, engage_delay=0.05, holding_torque=60.0,
-                by_output=True)  # fmt: skip
-    assert _brake_test(rig) == 0
-    assert "joint_2 held 80% of 60 N·m" in capsys.readouterr().out
-    rig.worn = 18.0  # type: ignore[attr-defined]  # worn to 30 %
-    if rig.kind != "sim":
-        rig.ctl("brake", SHOULDER, release_delay=0.05, engage_delay=0.05, holding_torque=18.0,
-                by_output=True)  # fmt: skip
-    with pytest.raises(UserError, match=r"^brake test: joint_2"):
-        _brake_test(rig)
+    """A good brake holds 80 % of its rating, one worn to 30 % slips (the issue's figures).
+    CANopen at 200 Hz: 10 % against a brake worn to 5 %, since the emulated brake's stiffness
+    follows the drive loop's bandwidth (drivers/sim/drive.LoopTuning: ~3.6 kN·m/rad on the
+    shoulder at 200 Hz, so 18 N·m already bend it by the test's 5 mrad bound)."""
+    fraction, worn = (0.1, 3.0) if rig.kind == "canopen" else (0.8, 18.0)
+    assert _brake_test(rig, fraction, 60.0) == 0
+    assert f"joint_2 held {fraction:.0%} of 60 N·m" in capsys.readouterr().out
+    with pytest.raises(UserError, match=r"^brake test: joint_2: the brake slipped"):
+        _brake_test(rig, fraction, worn)
 
 
 def test_a_brake_that_does_not_open_is_a_latched_brake_fault(rig: Rig) -> None:
@@ -310,7 +327,7 @@ def test_sto_at_boot_is_a_clear_state_then_release_enables(rig: Rig) -> None:
 
 
 def test_sto_while_enabled_is_category_0_naming_the_axis(rig: Rig) -> None:
-    bus, group, _ = _enabled(rig)
+    bus, group, _, _ = _enabled(rig)
     stop = StopController.from_config(rig.cfg.safety.categories)
     health = BusHealth(group.n, 3, OE, (int(State.FAULT_REACTION_ACTIVE), int(State.FAULT),
                                         int(State.UNKNOWN)))  # fmt: skip
@@ -345,8 +362,11 @@ def test_sto_toggling_while_enabling_stops_enabling_naming_the_axis(rig: Rig) ->
         return real_cycle()
 
     group.cycle = cycle  # type: ignore[method-assign]
-    with pytest.raises(DriveError, match=r"^axis 3 \(joint_4\): safe torque off (became|is) "
-                                         r"active"):  # fmt: skip
+    # STO in the TxPDO (sim, EtherCAT): enabling stops at once; read by SDO (the built-in
+    # CANopen layout does not map 0x60FD): named when the transition times out
+    with pytest.raises(DriveError, match=r"^axis 3 \(joint_4\): (safe torque off became "
+                       r"active while enabling|no transition .*; safe torque off active "
+                       r"\(0x60FD:00 bit 16\)$)"):  # fmt: skip
         group.enable()
     group.cycle = real_cycle  # type: ignore[method-assign]
     _cycles(bus, group, 50, lambda: not (group.states == OE).any())
@@ -366,7 +386,8 @@ def _home(rig: Rig, bus: Any, group: Any, axis: int, **homing: Any) -> str:
 @pytest.mark.parametrize("method", [35, 33, 1])
 def test_homing_methods(rig: Rig, method: int) -> None:
     axis = 4  # joint_5: no brake, little gravity
-    bus, group, _ = _enabled(rig)
+    bus, group, _, _ = _enabled(rig)
+    _cycles(bus, group, int(1.0 / bus.cycle_time))  # settled after the enable
     q0 = float(np.array(rig.status()["q"])[axis])
     pitch = 2.0 * np.pi / rig.cfg.bus.drives[axis].gear_ratio  # one motor turn
     index = q0 - 0.3 * pitch  # the next index pulse below the start
@@ -374,16 +395,18 @@ def test_homing_methods(rig: Rig, method: int) -> None:
     if method == 1:  # the negative limit switch 20 mrad below, then on up to the index
         rig.ctl("home_switch", axis, position=q0 - 0.02)
         index = q0 - 0.02 + pitch - ((q0 - 0.02 - index) % pitch)  # first pulse above it
-    assert _home(rig, bus, group, axis, method=method, offset=0.1) == ""
+    result = _home(rig, bus, group, axis, method=method, offset=0.1)
     true_q = float(np.array(rig.status()["q"])[axis])
-    home_at = q0 if method == 35 else index
-    # the drive reports the home offset at the home position: q_reported - offset = true - home
-    assert float(group.q[axis]) - 0.1 == pytest.approx(true_q - home_at, abs=2e-4)
+    assert result == ""
+    if method == 35:  # home = where the axis was at the start edge (it may creep in mode 6)
+        assert float(group.q[axis]) == pytest.approx(0.1, abs=5e-3)
+    else:  # the drive latched the pulse: reported - offset = true - the pulse's position
+        assert float(group.q[axis]) - 0.1 == pytest.approx(true_q - index, abs=2e-4)
 
 
 def test_homing_timeout(rig: Rig) -> None:
     axis = 4
-    bus, group, _ = _enabled(rig)
+    bus, group, _, _ = _enabled(rig)
     rig.ctl("index_phase", axis, phase=float(np.array(rig.status()["q"])[axis]) + 0.001)
     msg = _home(rig, bus, group, axis, method=33, speeds=(0.2, 1e-4), timeout=0.1)
     assert msg.startswith("joint_5: homing (method 33) did not end within the configured "
@@ -423,6 +446,7 @@ def test_a_lost_turn_is_refused_at_start_up_and_zero_set_round_trips(
     assert cfg2.bus.drives[3].zero_offset != offsets[3]
     group2 = DriveGroup.from_config(bus, cfg2.bus)  # the new config on the same drives
     group2.cycle()
-    assert float(group2.q[3]) == pytest.approx(0.25, abs=1e-6)
-    assert np.allclose(np.delete(group2.q, 3), np.delete(q, 3), atol=1e-4)
+    group.read()  # the same sample through the old config
+    assert float(group2.q[3] - group.q[3]) == pytest.approx(0.25 - q[3], abs=1e-6)
+    assert np.array_equal(np.delete(group2.q, 3), np.delete(group.q, 3))
     compose.check_start_positions(cfg2, bus, group2, state)  # the stored position follows
