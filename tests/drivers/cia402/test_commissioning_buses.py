@@ -317,11 +317,13 @@ def test_sto_at_boot_is_a_clear_state_then_release_enables(rig: Rig) -> None:
 
     bus, group = rig.open()
     rig.ctl("sto", WRIST, active=True)
+    _cycles(bus, group, 500, lambda: WRIST in group.sto_axes())  # the emulator's next frame
     with pytest.raises(DriveError, match=r"^axis 3 \(joint_4\): safe torque off is active "
                                          r"\(0x60FD:00 bit 16\)"):  # fmt: skip
         group.enable()
     assert not group.any_fault()
     rig.ctl("sto", WRIST, active=False)
+    _cycles(bus, group, 500, lambda: WRIST not in group.sto_axes())
     compose.enable_drives(bus, group)
     assert (group.states == OE).all()
 
@@ -345,6 +347,7 @@ def test_sto_while_enabled_is_category_0_naming_the_axis(rig: Rig) -> None:
     assert stop.events.joint[0] == WRIST
     # released: enabling again works (the loop's explicit reset is tests/hofto_hw/runtime)
     rig.ctl("sto", WRIST, active=False)
+    _cycles(bus, group, 500, lambda: WRIST not in group.sto_axes())
     compose.enable_drives(bus, group)
     assert (group.states == OE).all()
 
