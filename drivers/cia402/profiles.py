@@ -38,8 +38,8 @@ BUILTIN_BRAKE: dict[str, Any] = {
     "engage_delay": {"index": BRAKE_OBJECT, "subindex": 2, "bits": 16, "unit": 0.001},
     "fault_codes": [(BRAKE_FAULT_CODE, BRAKE_FAULT_CODE)],
 }
-#: STO of the emulated drives: 0x60FD bit 16, in the TxPDO on EtherCAT, by SDO on CANopen
-#: (the built-in CANopen layout does not map 0x60FD)
+#: STO of the emulated drives: 0x60FD bit 16, in the TxPDO on EtherCAT (the built-in
+#: ethercat profile's ``sto``), by SDO on CANopen (its layout does not map 0x60FD)
 _STO_CAN: dict[str, Any] = {"source": "object", "index": 0x60FD, "bits": 32, "bit": 16}
 _FALLBACKS_EC: dict[str, str] = {}
 _FALLBACKS_CAN = {"error_code": "emcy", "digital_inputs": "none"}
@@ -67,6 +67,7 @@ def builtin_profile(
                 "rx_pdos": [_pdo(RXPDO_INDEX, RXPDO_MAPPING)],
                 "tx_pdos": [_pdo(TXPDO_INDEX, TXPDO_MAPPING)],
                 "fallbacks": _FALLBACKS_EC,
+                "sto": {"source": "input", "bit": 16},
             }
         )
     from drivers.canopen import layout

@@ -512,8 +512,8 @@ class DriveProfile(FileModel):
     units: UnitsSection = Field(default_factory=UnitsSection)
     sto: StoSource | None = Field(
         None,
-        description="where the axis's safe torque off is read; None = 0x60FD bit 16 when "
-        "0x60FD is mapped, else the drive state",
+        description="where the axis's safe torque off is read; None = the drive state (bits "
+        "16-31 of 0x60FD are the vendor's: a profile names its STO bit when it has one)",
     )
     brake: ProfileBrake | None = Field(
         None, description="brake delay objects and brake fault codes; None = none known"
@@ -694,11 +694,7 @@ class DriveProfile(FileModel):
 
     def sto_source(self) -> StoSource:
         """The STO source as the stack uses it (the default spelled out, see ``sto``)."""
-        if self.sto is not None:
-            return self.sto
-        if "digital_inputs" in self.mapped_fields(0):
-            return StoSource(source="input")
-        return StoSource(source="state")
+        return self.sto if self.sto is not None else StoSource(source="state")
 
     def startup_value(self, index: int, subindex: int = 0) -> int | str | None:
         """The last start-up value written to ``index:subindex``, or None."""
