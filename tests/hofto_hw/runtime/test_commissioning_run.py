@@ -46,9 +46,7 @@ def test_sto_while_running_then_release_and_reset(tmp_path: Path) -> None:
                 assert "safe torque off active: joint_4" in str(reply), reply
                 assert run.latched("sto")
                 assert emu.call(op="sto", slave=WRIST, active=False)["ok"]
-                wait_for(
-                    lambda: not emu.call(op="status")["sto"][WRIST], 30, "STO released"
-                )
+                wait_for(lambda: not emu.call(op="status")["sto"][WRIST], 30, "STO released")
                 assert run.latched("sto")  # released: nothing re-enables by itself
                 reply = run.request("reset")
                 run.wait_state("running")
