@@ -5,7 +5,14 @@ enabled. Decides only: the loop reads the drive states and passes them in.
   fresh (lost frame, working-counter mismatch, missing TPDO, stale data);
 - drive fault: an axis in Fault or Fault reaction active (the 0x603F code from the TxPDO
   goes into the event's value; it is decoded in words on the slow path);
-- drive disabled: an axis that is not Operation enabled while the loop expects it to be.
+- drive disabled: an axis that is not Operation enabled while the loop expects it to be;
+  when the drive layer says that axis's safe torque off is active (``sto_of``, from its
+  profile's STO source) it is the STO fault instead, naming the axis;
+- brake fault: a drive fault whose 0x603F code the drive layer reads as a holding-brake
+  fault (``brake_code``, from the profile) latches BRAKE as well as DRIVE_FAULT.
+
+``sto_of`` and ``brake_code`` are asked only on the tick that found an axis out of
+Operation enabled or faulted (the rare path), never on a quiet tick.
 
 The CiA 402 state codes come from the caller (safety does not import drivers/).
 Allocation-free per tick. ``backend``: ``numpy`` (the reference) or the compiled drive-state
@@ -13,6 +20,8 @@ scan of :mod:`safety.kernels` (``numba``/``auto``, the observers' conventions).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -46,6 +55,11 @@ class BusHealth:
         self._m = np.zeros(n, dtype=bool)
         self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"
+        #: axis -> whether its STO is active (the drive layer's reading of the process
+        #: image); None: an axis out of Operation enabled is always DRIVE_DISABLED
+        self.sto_of: Callable[[int], bool] | None = None
+        #: (axis, 0x603F code) -> whether the code is a holding-brake fault of that drive
+        self.brake_code: Callable[[int, int], bool] | None = None
 
     def _warm(self) -> None:
         # the drive group's state codes are uint8 (drivers/cia402/drive_group.py)
@@ -76,18 +90,28 @@ class BusHealth:
             if j >= 0:
                 n = self.n
                 if j < n:
-                    stop.report(Fault.DRIVE_FAULT, j, float(error_codes[j]))
+                    self._fault(stop, j, error_codes)
                 else:
-                    stop.report(Fault.DRIVE_DISABLED, j - n, float(states[j - n]))
+                    self._disabled(stop, j - n, states)
             return True
         m = self._m
         np.greater_equal(states, self.fault_min, out=m)
         if m.any():
-            j = int(np.argmax(m))
-            stop.report(Fault.DRIVE_FAULT, j, float(error_codes[j]))
+            self._fault(stop, int(np.argmax(m)), error_codes)
         elif expect_enabled:
             np.not_equal(states, self.op_enabled, out=m)
             if m.any():
-                j = int(np.argmax(m))
-                stop.report(Fault.DRIVE_DISABLED, j, float(states[j]))
+                self._disabled(stop, int(np.argmax(m)), states)
         return True
+
+    def _fault(self, stop: StopController, j: int, error_codes: np.ndarray) -> None:
+        code = int(error_codes[j])
+        stop.report(Fault.DRIVE_FAULT, j, float(code))
+        if self.brake_code is not None and self.brake_code(j, code):
+            stop.report(Fault.BRAKE, j, float(code))
+
+    def _disabled(self, stop: StopController, j: int, states: np.ndarray) -> None:
+        if self.sto_of is not None and self.sto_of(j):
+            stop.report(Fault.STO, j, float(states[j]))
+        else:
+            stop.report(Fault.DRIVE_DISABLED, j, float(states[j]))

@@ -36,6 +36,8 @@ class Fault(IntEnum):
     STOP_REQUEST = 11
     LOG_FAILURE = 12
     ENABLING_RELEASED = 13  # hand guiding: the enabling input let go while dragging
+    STO = 14  # safe torque off became active on an axis that was enabled (or enabling)
+    BRAKE = 15  # a holding brake: the drive's brake fault code, or a joint moved as it opened
 
 
 class EventKind(IntEnum):

@@ -11,6 +11,9 @@ contaminated brake slips). This is the integrator's check before putting an arm 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
 
 
 @dataclass(frozen=True)
@@ -99,3 +102,57 @@ class BrakeTest:
             if self._seg == len(self._segments):
                 self.torque = 0.0
                 self.result = ""
+
+
+class ReleaseCheck:
+    """The brake release check of every braked axis, stepped once per cycle: after the
+    drives reached Operation enabled (the gravity preload already in the torque offset),
+    the caller holds the position the check started at for ``cycles`` cycles (the longest
+    release delay plus a few); then an axis that moved more than its ``bounds`` [rad] is a
+    brake that did not release cleanly (the load not held, or the brake drags).
+
+    Used at start-up (``runtime/compose``) and by the loop on every re-enable after a reset.
+    :meth:`step` allocates nothing.
+    """
+
+    RUNNING = -2
+    PASSED = -1
+
+    def __init__(self, axes: np.ndarray, bounds: np.ndarray, cycles: int) -> None:
+        self.axes = np.asarray(axes, dtype=np.intp)
+        self.bounds = np.asarray(bounds, dtype=float)  # per entry of ``axes`` [rad]
+        self.cycles = max(1, int(cycles))
+        self.q0 = np.zeros(0)
+        self.count = 0
+        self.moved = 0.0  # [rad] of the axis that failed, else of the last step's largest
+
+    @classmethod
+    def from_drives(cls, drives: list[Any], cycle_time: float) -> ReleaseCheck | None:
+        """For the ``bus.drives`` entries with a ``brake`` (None when there is none)."""
+        axes = [i for i, d in enumerate(drives) if getattr(d, "brake", None) is not None]
+        if not axes:
+            return None
+        bounds = [drives[i].brake.release_bound for i in axes]
+        wait = max(drives[i].brake.release_delay for i in axes)
+        return cls(np.array(axes), np.array(bounds), int(np.ceil(wait / cycle_time)) + 3)
+
+    def start(self, q: np.ndarray) -> None:
+        """Begin at the measured joint positions ``q`` [rad] (n,): the ones to hold."""
+        if self.q0.shape != q.shape:
+            self.q0 = np.zeros_like(q)
+        np.copyto(self.q0, q)
+        self.count = 0
+
+    def step(self, q: np.ndarray) -> int:
+        """One cycle: RUNNING, then PASSED or the first axis that moved beyond its bound
+        (its motion in :attr:`moved`, signed)."""
+        self.count += 1
+        if self.count < self.cycles:
+            return self.RUNNING
+        for k in range(self.axes.shape[0]):
+            i = self.axes[k]
+            d = float(q[i] - self.q0[i])
+            if abs(d) > self.bounds[k]:
+                self.moved = d
+                return int(i)
+        return self.PASSED

@@ -123,6 +123,7 @@ class DriveGroup(ImageFields):
         self._u16 = np.zeros(n, dtype=np.uint16)
         self._cw = np.zeros(n, dtype=np.uint16)
         self._flags = np.zeros(n, dtype=bool)
+        self._u32 = np.zeros(n, dtype=np.uint32)
         self._fast: Any = None
         self._tx_bytes: Any = None  # the images' raw bytes (uint8 views) of the kernels
         self._rx_bytes: Any = None
@@ -138,6 +139,35 @@ class DriveGroup(ImageFields):
                 self.read = partial(kernels.read_si, self._tx_bytes, self._si, self.states)  # type: ignore[method-assign]
         #: the implementation of read and command: ``numpy`` (reference) or ``numba``
         self.backend = "numpy" if self._fast is None else "numba"
+        self._init_commissioning()
+
+    def _init_commissioning(self) -> None:
+        """Per axis from its profile (issue 28): where STO is read and how the drive runs a
+        brake it controls. An axis without a profile is the built-in emulated drive."""
+        from drivers.cia402.profiles import BUILTIN_BRAKE
+        from hofto_hw.config.drive_profile import ProfileBrake, StoSource
+
+        n = self.n
+        profiles = list(getattr(self.transport, "profiles", None) or [None] * n)
+        din = self.present("digital_inputs")
+        #: per axis: the profile's STO source (:class:`hofto_hw.config.drive_profile.StoSource`)
+        self.sto_sources = [
+            p.sto_source() if p is not None else StoSource(source="input") for p in profiles
+        ]
+        builtin = ProfileBrake.model_validate(BUILTIN_BRAKE)
+        #: per axis: brake delay objects and fault codes of its drive (None: none known)
+        self.brake_objects = [p.brake if p is not None else builtin for p in profiles]
+        # the process image's STO reading: axes with an input source mapped in the TxPDO
+        # (bit mask, active-low flag); the others are judged by their state in the loop
+        self._sto_mask = np.zeros(n, dtype=np.uint32)
+        self._sto_low = np.zeros(n, dtype=bool)
+        for i, src in enumerate(self.sto_sources):
+            if src.source == "input" and din[i]:
+                self._sto_mask[i] = 1 << src.bit
+                self._sto_low[i] = src.active_low
+        self._sto_by_image = self._sto_mask != 0
+        #: what :meth:`write_brake_delays` wrote at :meth:`configure`, one line per axis
+        self.brake_setup: list[str] = []
 
     def _warm(self) -> None:
         """Compile the kernels for this image's exact array types (outputs: scratch)."""
@@ -259,7 +289,8 @@ class DriveGroup(ImageFields):
     # ------------------------------------------------------------------ setup
 
     def configure(self, drives: Sequence[Any]) -> None:
-        """Check identity and ratings by SDO and write limits (DriveConfig list, one per axis).
+        """Check identity and ratings by SDO and write limits (DriveConfig list, one per axis)
+        and the delays of drive-controlled brakes (:meth:`write_brake_delays`).
 
         Raises ConfigError naming the axis and the object when a drive's 0x1018 identity or
         its rated torque/current (which set the scaling) differ from the config.
@@ -297,6 +328,92 @@ class DriveGroup(ImageFields):
             t.write_value(i, 0x6085, 0, "u32", decel)
             t.write_value(i, 0x6065, 0, "u32", sc.angle_to_counts(i, d.following_error_window))
             t.write_value(i, 0x6066, 0, "u16", round(d.following_error_timeout * 1000.0))
+        self.brake_setup = self.write_brake_delays(drives)
+
+    def write_brake_delays(self, drives: Sequence[Any]) -> list[str]:
+        """Write the release and engage delays of every drive-controlled brake
+        (``drives[i].brake.control: drive``) to the objects its profile names, by SDO, and
+        read each back; one line per axis saying what was written or why nothing was (the
+        profile names no object: the drive's own setting stays). Setup only.
+
+        Raises ConfigError naming the axis and object when the drive keeps another value."""
+        t = self.transport
+        out = []
+        for i, d in enumerate(drives):
+            b = getattr(d, "brake", None)
+            if b is None or b.control != "drive":
+                continue
+            who = f"axis {i} ({self.names[i]})"
+            objs = self.brake_objects[i]
+            done = []
+            delays = (("release_delay", b.release_delay), ("engage_delay", b.engage_delay))
+            for what, value in delays:
+                obj = None if objs is None else getattr(objs, what)
+                if obj is None:
+                    done.append(f"{what} not written (the profile names no object)")
+                    continue
+                kind = f"u{obj.bits}"
+                raw = obj.raw(value)
+                t.write_value(i, obj.index, obj.subindex, kind, raw)
+                got = t.read_value(i, obj.index, obj.subindex, kind)
+                if got != raw:
+                    raise ConfigError(
+                        f"bus.drives[{i}].brake.{what}: {who} object "
+                        f"0x{obj.index:04X}:{obj.subindex:02X} reads {got} after writing {raw}"
+                    )
+                done.append(f"{what} {value:g} s -> 0x{obj.index:04X}:{obj.subindex:02X} = {raw}")
+            out.append(f"{who}: brake " + ", ".join(done))
+        return out
+
+    def sto_in_image(self, out: np.ndarray, by_state: bool) -> np.ndarray:
+        """bool (n,) into ``out``: the axes whose STO the process image shows active: an
+        input source mapped in the TxPDO by its bit; with ``by_state``, every other axis
+        that is in Switch on disabled (its drive dropped the power stage without a fault:
+        what STO does where no signal is mapped). No allocation."""
+        np.bitwise_and(self._tx_din, self._sto_mask, out=self._u32)
+        np.not_equal(self._u32, 0, out=out)
+        np.not_equal(out, self._sto_low, out=out)
+        out &= self._sto_by_image
+        if by_state:
+            np.equal(self.states, State.SWITCH_ON_DISABLED, out=self._flags)
+            self._flags &= ~self._sto_by_image
+            out |= self._flags
+        return out
+
+    def sto_of(self, axis: int) -> bool:
+        """Whether ``axis``'s STO shows active in the process image (an input source by its
+        bit, else the drive state: Switch on disabled). For the loop's rare path."""
+        if self._sto_by_image[axis]:
+            bit = bool(int(self._tx_din[axis]) & int(self._sto_mask[axis]))
+            return bit != bool(self._sto_low[axis])
+        return int(self.states[axis]) == State.SWITCH_ON_DISABLED
+
+    def sto_axes(self) -> list[int]:
+        """The axes whose STO is known active now (setup, not the tick): the process image
+        for a mapped input, an SDO read of the source object otherwise (an SDO that fails
+        counts as not known); an axis whose source is the drive state is not known here."""
+        t = self.transport
+        out = []
+        for i, src in enumerate(self.sto_sources):
+            if self._sto_by_image[i]:
+                if self.sto_of(i):
+                    out.append(i)
+                continue
+            if src.source == "state":
+                continue
+            try:
+                value = int(t.read_value(i, src.index, src.subindex, f"u{src.bits}"))
+            except TransportError:
+                continue
+            if bool(value >> src.bit & 1) != src.active_low:
+                out.append(i)
+        return out
+
+    def is_brake_fault(self, axis: int, code: int) -> bool:
+        """Whether 0x603F ``code`` of ``axis``'s drive is a holding-brake fault (its profile's
+        ``brake.fault_codes``)."""
+        objs = self.brake_objects[axis]
+        return objs is not None and objs.is_brake_fault(code)
 
     def _step(self) -> None:
         self.transport.wait_next_cycle()
@@ -456,19 +573,24 @@ class DriveGroup(ImageFields):
     def _drive_to(self, target: State, hold: bool, allow_fault: bool = False) -> None:
         n = self.n
         self.cycle()
-        if target == State.OPERATION_ENABLED:
-            sto = np.flatnonzero(self._tx_din & sm.DIN_STO)
-            if sto.size:
+        enabling = target == State.OPERATION_ENABLED
+        if enabling:
+            sto = self.sto_axes()
+            if sto:
                 names = ", ".join(f"axis {i} ({self.names[i]})" for i in sto)
+                where = ", ".join(sorted({self._sto_where(i) for i in sto}))
                 raise DriveError(
-                    f"{names}: safe torque off is active (0x60FD): the power stage cannot be "
+                    f"{names}: safe torque off is active ({where}): the power stage cannot be "
                     "switched on; release STO, then enable"
                 )
         since = np.zeros(n, dtype=np.int64)
         last = self.states.copy()
+        seen = np.zeros(n, dtype=bool)
         for k in range(1, 100 * self.timeout_cycles):
             if not allow_fault and self.any_fault():
                 self._raise_fault()
+            if enabling and self.sto_in_image(seen, by_state=False).any():
+                self._sto_while_enabling(int(np.flatnonzero(seen)[0]))
             at = self.states == target
             if allow_fault:
                 at |= self.states == State.FAULT
@@ -480,7 +602,14 @@ class DriveGroup(ImageFields):
             late = ~at & (k - since > self.timeout_cycles)
             if late.any():
                 i = int(np.flatnonzero(late)[0])
-                sto = "; safe torque off active" if int(self._tx_din[i]) & sm.DIN_STO else ""
+                sto = ""
+                if enabling and i in self.sto_axes():
+                    sto = f"; safe torque off active ({self._sto_where(i)})"
+                    self._rx_cw.fill(sm.CW_DISABLE_VOLTAGE)  # as when STO is seen at once:
+                    self.hold()  # nothing left half enabled
+                    self._step()
+                elif enabling and self.states[i] == State.SWITCH_ON_DISABLED:
+                    sto = "; safe torque off active? (the drive stays in switch on disabled)"
                 raise DriveTimeoutError(
                     f"axis {i} ({self.names[i]}): no transition toward {STATE_NAMES[target]} "
                     f"within {self.transition_timeout:g} s; {self._describe(i)}{sto}"
@@ -495,6 +624,28 @@ class DriveGroup(ImageFields):
                 self.hold()
             self._step()
         raise DriveTimeoutError(f"drives did not reach {STATE_NAMES[target]}")
+
+    def _sto_where(self, i: int) -> str:
+        src = self.sto_sources[i]
+        if src.source == "state":
+            return "drive state"
+        return f"0x{src.index:04X}:{src.subindex:02X} bit {src.bit}"
+
+    def _sto_while_enabling(self, i: int) -> None:
+        """STO became active on axis ``i`` while the group was being enabled: the defined
+        outcome is every axis commanded to Disable voltage (power off, brakes close) for a
+        cycle and one line naming the axis; nothing is left half enabled."""
+        self._rx_cw.fill(sm.CW_DISABLE_VOLTAGE)
+        self.hold()
+        self._step()
+        raise DriveError(
+            f"axis {i} ({self.names[i]}): safe torque off became active while enabling "
+            f"({self._sto_where(i)}): enabling stopped, every drive commanded to disable "
+            "voltage; release STO, then enable again",
+            i,
+            int(self.states[i]),
+            int(self._tx_sw[i]),
+        )
 
     def quick_stop(self, timeout: float = 5.0) -> None:
         """Quick stop every enabled axis (ramp 0x6085), wait until all are disabled.

@@ -29,6 +29,18 @@ def _pdo(index: int, entries: Sequence[PdoEntry], fixed: bool = False) -> dict[s
     }
 
 
+#: the emulated drives' brake objects (drivers/sim/drive.py): vendor object 0x2110, delays
+#: in ms, and their manufacturer-specific brake fault code 0xFF21 (CiA 402 has none)
+BRAKE_OBJECT = 0x2110
+BRAKE_FAULT_CODE = 0xFF21
+BUILTIN_BRAKE: dict[str, Any] = {
+    "release_delay": {"index": BRAKE_OBJECT, "subindex": 1, "bits": 16, "unit": 0.001},
+    "engage_delay": {"index": BRAKE_OBJECT, "subindex": 2, "bits": 16, "unit": 0.001},
+    "fault_codes": [(BRAKE_FAULT_CODE, BRAKE_FAULT_CODE)],
+}
+#: STO of the emulated drives: 0x60FD bit 16, in the TxPDO on EtherCAT (the built-in
+#: ethercat profile's ``sto``), by SDO on CANopen (its layout does not map 0x60FD)
+_STO_CAN: dict[str, Any] = {"source": "object", "index": 0x60FD, "bits": 32, "bit": 16}
 _FALLBACKS_EC: dict[str, str] = {}
 _FALLBACKS_CAN = {"error_code": "emcy", "digital_inputs": "none"}
 
@@ -46,6 +58,7 @@ def builtin_profile(
         "identity": {"vendor_id": vendor_id, "product_code": product_code},
         "bus": bus,
         "modes": {"supported": ["csp", "csv", "cst"], "loop": "csp", "set_by": "pdo"},
+        "brake": BUILTIN_BRAKE,
     }
     if bus == "ethercat":
         return DriveProfile.model_validate(
@@ -54,6 +67,7 @@ def builtin_profile(
                 "rx_pdos": [_pdo(RXPDO_INDEX, RXPDO_MAPPING)],
                 "tx_pdos": [_pdo(TXPDO_INDEX, TXPDO_MAPPING)],
                 "fallbacks": _FALLBACKS_EC,
+                "sto": {"source": "input", "bit": 16},
             }
         )
     from drivers.canopen import layout
@@ -64,6 +78,7 @@ def builtin_profile(
             "rx_pdos": [_pdo(p.map_index, p.entries) for p in layout.RPDOS],
             "tx_pdos": [_pdo(p.map_index, p.entries) for p in layout.TPDOS],
             "fallbacks": _FALLBACKS_CAN,
+            "sto": _STO_CAN,
             "canopen": {
                 "bitrates": [125_000, 250_000, 500_000, 1_000_000],
                 "max_entries": 8,

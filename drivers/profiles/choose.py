@@ -280,6 +280,7 @@ def choose(desc: DeviceDescription, loop: str | None = None, name: str | None = 
         "process_data": {"rx_bytes": desc.sm_rx_bytes, "tx_bytes": desc.sm_tx_bytes},
         "canopen": _canopen(desc, rx, tx, reasons) if desc.bus == "canopen" else None,
         "units": _units(desc),
+        "brake": _brake(desc, reasons),
     }
     axes = sum(desc.has(0x6040 + 0x800 * k) for k in range(8))
     if axes > 1:
@@ -706,6 +707,34 @@ def _canopen(
         "tpdo": [comm(p) for p in tx],
         "heartbeat_ms": None,
     }
+
+
+#: vendor id -> the objects of the holding-brake delays of a drive that controls its brake
+#: (CiA 402 has no standard one): (release, engage), each (index, sub), SI unit per count; from
+#: the vendors' object names: Inovance H02-10 "Delay from brake output on to command received"
+#: and H02-11 "... off to motor de-energized"; Nanotec 2038h:04 "Start Operation delay time"
+#: and :01 "Close Brake idle time"; Synapticon 0x2004:3 "Pull time" and :5 "Controller
+#: disable delay"; all in ms. Used only when the vendor file has both objects, writable.
+BRAKE_DELAYS: dict[int, tuple[tuple[int, int], tuple[int, int], float]] = {
+    0x00100000: ((0x2002, 10), (0x2002, 11), 0.001),
+    0x0000026C: ((0x2038, 4), (0x2038, 1), 0.001),
+    0x000022D2: ((0x2004, 3), (0x2004, 5), 0.001),
+}
+
+
+def _brake(desc: DeviceDescription, reasons: list[str]) -> dict | None:
+    known = BRAKE_DELAYS.get(desc.vendor_id)
+    if known is None:
+        return None
+    out: dict = {}
+    for what, (index, sub) in (("release_delay", known[0]), ("engage_delay", known[1])):
+        info = desc.objects.get((index, sub))
+        if info is None or info.bits not in (8, 16, 32) or not info.writable:
+            return None
+        out[what] = {"index": index, "subindex": sub, "bits": info.bits, "unit": known[2]}
+        named = f"{info.name!r}, " if info.name and info.name != "Elements" else ""
+        reasons.append(f"brake: {what} written to 0x{index:04X}:{sub:02X} ({named}ms)")
+    return out
 
 
 def _units(desc: DeviceDescription) -> dict:

@@ -499,7 +499,8 @@ class CanopenDrives:
         "late", count of SYNCs, delay [s] for late); ``identity`` (node, vendor_id,
         product_code: 0x1018 reports these; ``restore``: true puts the configured ones
         back); ``bus_off`` (node, on: the node's controller leaves the bus, on recovery it
-        sends EMCY 0x8140); ``stop``.
+        sends EMCY 0x8140); ``sto``, ``brake``, ``home_switch``, ``index_phase`` (node and the
+        fields of :meth:`drivers.sim.drive.EmulatedDrives.commissioning`); ``stop``.
         """
         op = request.get("op")
         try:
@@ -543,6 +544,8 @@ class CanopenDrives:
                         self._emcy(i, CODE_BUS_OFF_RECOVERED, 0x11)
                 elif op == "stop":
                     self.stopping = True
+                elif op in self.drives.COMMISSIONING_OPS:
+                    return {"ok": True, **self.drives.commissioning(self._node(request), request)}
                 else:
                     raise ValueError(f"unknown op {op!r}")
         except (KeyError, TypeError, ValueError, IndexError) as exc:
@@ -576,6 +579,7 @@ class CanopenDrives:
             "tau_applied": plant.tau_applied.tolist(),
             "drive_state": [int(x) for x in self.drives.state],
             "error_code": [int(x) for x in self.drives.tx["error_code"]],
+            **self.drives.commissioning_status(),
         }
 
 

@@ -32,9 +32,16 @@ Per drive (all in joint-side SI internally, raw units only at the process image)
   controlword bit 4 starts, statusword bits 10/12/13): method 35 (37) sets the current
   position as home; method 17 searches the home switch (:meth:`EmulatedDrives.
   set_home_switch`) in the negative direction at the switch speed, returns at the zero speed
-  to its edge and makes that edge the home offset; no switch within ``homing_travel`` or an
-  unsupported method ends in homing error. Homing redefines the drive's position
-  (0x6064 and the targets it takes), never the plant.
+  to its edge and makes that edge the home offset; methods 1 (2) search the negative
+  (positive) limit switch the same way, then go on away from it at the zero speed to the
+  next index pulse of the encoder (one per motor revolution, :meth:`EmulatedDrives.
+  set_index_phase`), which becomes home; 33 (34) go from where the axis is to the next
+  index pulse below (above); no switch or pulse within ``homing_travel`` or an unsupported
+  method ends in homing error. Homing redefines the drive's position (0x6064 and the
+  targets it takes), never the plant;
+- a brake delay object (0x2110:1/2, ms, what a master writes to a drive-controlled brake)
+  and a stuck brake (``brake_stuck``): it does not open and the drive faults with the
+  manufacturer-specific brake code 0xFF21 after the release delay.
 """
 
 from __future__ import annotations
@@ -48,6 +55,7 @@ import numpy as np
 
 from drivers.cia402 import state_machine as sm
 from drivers.cia402.pdo import ImageFields, new_rx, new_tx
+from drivers.cia402.profiles import BRAKE_FAULT_CODE, BRAKE_OBJECT
 from drivers.cia402.state_machine import Command, Mode, State
 from drivers.cia402.units import AxisScaling, Scaling
 from drivers.sim.object_dictionary import (
@@ -72,6 +80,7 @@ FAULTS: dict[str, tuple[int, bool]] = {
     "encoder": (0x7305, False),
     "following_error": (0x8611, True),
     "comm_loss": (0x8130, True),
+    "brake": (BRAKE_FAULT_CODE, False),  # holding brake fault (manufacturer-specific code)
 }
 CODE_FOLLOWING_ERROR = 0x8611
 CODE_COMM_LOSS = 0x8130
@@ -84,9 +93,9 @@ SUPPORTED_MODES = (
     Mode.INTERPOLATED_POSITION,
     Mode.PROFILE_VELOCITY,
 )
-HOMING_METHODS = (17, 35, 37)
+HOMING_METHODS = (1, 2, 17, 33, 34, 35, 37)
 # homing progress per axis
-_H_IDLE, _H_SEARCH, _H_BACK, _H_STOP, _H_DONE, _H_ERROR = range(6)
+_H_IDLE, _H_SEARCH, _H_BACK, _H_STOP, _H_DONE, _H_ERROR, _H_INDEX = range(7)
 
 # Plain ints for the per-cycle code (enum attribute access is slow).
 _NR, _SOD, _RTSO, _SO, _OE, _QSA, _FRA, _FLT = (int(s) for s in list(State)[:8])
@@ -293,6 +302,27 @@ class EmulatedDrives(ImageFields):
                     OdEntry(0x60FE, 2, "bit mask", "u32", "rw", bound=(self.output_mask, i)),
                 ],
             )
+        # vendor object 0x2110 (drivers.cia402.profiles.BRAKE_OBJECT): the brake release
+        # (:1) and engage (:2) delays [ms], what a master writes to a drive-controlled brake
+        self.brake_delay_ms = np.zeros((2, n), dtype=np.uint16)
+        for i, od in enumerate(self.ods):
+            od.add_record(
+                BRAKE_OBJECT,
+                "holding brake timing",
+                [
+                    OdEntry(
+                        BRAKE_OBJECT, 1, "brake release delay [ms]", "u16", "rw",
+                        bound=(self.brake_delay_ms[0], i),
+                    ),
+                    OdEntry(
+                        BRAKE_OBJECT, 2, "brake engage delay [ms]", "u16", "rw",
+                        bound=(self.brake_delay_ms[1], i),
+                    ),
+                ],
+            )  # fmt: skip
+        #: a brake that does not open when released (its drive then faults with
+        #: BRAKE_FAULT_CODE once the release delay is over)
+        self.brake_stuck = np.zeros(n, dtype=bool)
         #: true joint position of each axis's home switch edge [rad] (nan: no switch)
         self.home_switch = np.full(n, np.nan)
         #: travel [rad] a switch search may cover before it ends in homing error
@@ -301,6 +331,14 @@ class EmulatedDrives(ImageFields):
         self._home_shift = np.zeros(n)  # drive position = plant position + shift [rad]
         self._home_v = np.zeros(n)
         self._home_start_q = np.zeros(n)
+        self._home_prev_q = np.zeros(n)
+        self._home_dir = np.full(n, -1.0)
+        #: true joint position above which method 2's positive limit switch is made [rad]
+        self.positive_switch = np.full(n, np.nan)
+        #: the encoder's index pulse: once per motor revolution, at true joint positions
+        #: ``index_phase + k·index_pitch`` [rad] (pitch: one motor turn through the gear)
+        self.index_pitch = np.array([2.0 * math.pi / abs(d.gear_ratio) for d in drives])
+        self.index_phase = np.zeros(n)
         self._hm = np.zeros(n, dtype=bool)
 
         if tuning is None:
@@ -546,19 +584,77 @@ class EmulatedDrives(ImageFields):
         self.brake_by_output[axis] = by_output
         self.brake_release_delay[axis] = release_delay
         self.brake_engage_delay[axis] = engage_delay
+        self.brake_delay_ms[0, axis] = min(65535, round(release_delay * 1000.0))
+        self.brake_delay_ms[1, axis] = min(65535, round(engage_delay * 1000.0))
         self.brake_holding[axis] = holding_torque
         self.brake_engaged[axis] = self._brake_target[axis] = True
         self._brake_q[axis] = self.plant.q_meas[axis]
 
+    #: the commissioning requests both emulators' control sockets take (issue 28)
+    COMMISSIONING_OPS = ("sto", "brake", "home_switch", "index_phase")
+
+    def commissioning(self, axis: int, request: dict[str, Any]) -> dict[str, Any]:
+        """One commissioning request of an emulator's control socket for drive ``axis``:
+        ``sto`` (active: the STO input); ``brake`` (release_delay, engage_delay [s],
+        holding_torque [N·m], by_output, stuck: configure a real brake; or only ``stuck``);
+        ``home_switch`` (position [rad] or None, positive); ``index_phase`` (phase [rad]).
+        Returns the reply's extra fields. ValueError on a bad request."""
+        op = request["op"]
+        if op == "sto":
+            self.set_safe_torque_off(axis, bool(request.get("active", True)))
+        elif op == "brake":
+            if "holding_torque" in request:
+                self.configure_brake(
+                    axis,
+                    float(request["release_delay"]),
+                    float(request["engage_delay"]),
+                    float(request["holding_torque"]),
+                    bool(request.get("by_output", False)),
+                )
+            self.brake_stuck[axis] = bool(request.get("stuck", False))
+        elif op == "home_switch":
+            pos = request.get("position")
+            self.set_home_switch(
+                axis, None if pos is None else float(pos), bool(request.get("positive", False))
+            )
+        elif op == "index_phase":
+            self.set_index_phase(axis, float(request["phase"]))
+        else:
+            raise ValueError(f"unknown op {op!r}")
+        return {}
+
+    def commissioning_status(self) -> dict[str, Any]:
+        """Per drive: STO input, brake engaged, real brake, its delays as written [ms]."""
+        return {
+            "sto": [bool(x) for x in self.sto],
+            "brake_engaged": [bool(x) for x in self.brake_engaged],
+            "real_brake": [bool(x) for x in self.real_brake],
+            "brake_delay_ms": [[int(x) for x in row] for row in self.brake_delay_ms],
+            "home_shift": self._home_shift.tolist(),
+        }
+
     def _command_brake(self, i: int, engaged: bool) -> None:
         self._brake_target[i] = engaged
+        # the delays as the master last wrote them to 0x2110 (configure_brake sets both)
+        self.brake_release_delay[i] = 1e-3 * float(self.brake_delay_ms[0, i])
+        self.brake_engage_delay[i] = 1e-3 * float(self.brake_delay_ms[1, i])
         delay = self.brake_engage_delay[i] if engaged else self.brake_release_delay[i]
         self._brake_timer[i] = delay
 
-    def set_home_switch(self, axis: int, position: float | None) -> None:
-        """Put drive ``axis``'s home switch edge at true joint position ``position`` [rad]
-        (the switch is made below it); None removes the switch."""
-        self.home_switch[axis] = np.nan if position is None else float(position)
+    def set_home_switch(self, axis: int, position: float | None, positive: bool = False) -> None:
+        """Put drive ``axis``'s home (negative limit) switch edge at true joint position
+        ``position`` [rad] (the switch is made below it); ``positive``: the positive limit
+        switch of method 2 instead (made above it). None removes the switch."""
+        value = np.nan if position is None else float(position)
+        if positive:
+            self.positive_switch[axis] = value
+        else:
+            self.home_switch[axis] = value
+
+    def set_index_phase(self, axis: int, phase: float) -> None:
+        """Put drive ``axis``'s index pulses at true joint positions ``phase + k·pitch``
+        [rad] (pitch: one motor revolution at the joint)."""
+        self.index_phase[axis] = float(phase)
 
     def clear_fault(self, axis: int) -> None:
         """Remove the cause of an injected fault (a fault reset can then succeed)."""
@@ -820,8 +916,12 @@ class EmulatedDrives(ImageFields):
             if self.brake_engaged[i] != self._brake_target[i]:
                 self._brake_timer[i] -= self.dt
                 if self._brake_timer[i] <= 0.0:
-                    self.brake_engaged[i] = self._brake_target[i]
-                    self._brake_q[i] = q[i]
+                    if self.brake_stuck[i] and not self._brake_target[i]:
+                        self._brake_target[i] = True  # it did not open: the drive faults
+                        self._pending.append((int(i), BRAKE_FAULT_CODE, False))
+                    else:
+                        self.brake_engaged[i] = self._brake_target[i]
+                        self._brake_q[i] = q[i]
             if not self.brake_engaged[i]:
                 continue
             hold = self.brake_holding[i]
@@ -838,7 +938,7 @@ class EmulatedDrives(ImageFields):
             bit = int(cw[i]) & sm.CW_HOMING_START
             if bit and not int(self.prev_controlword[i]) & sm.CW_HOMING_START:
                 self._start_homing(int(i))
-            elif not bit and self.homing[i] in (_H_SEARCH, _H_BACK):
+            elif not bit and self.homing[i] in (_H_SEARCH, _H_BACK, _H_INDEX):
                 self.homing[i] = _H_STOP  # interrupted: stop, not attained
 
     def _start_homing(self, i: int) -> None:
@@ -847,14 +947,22 @@ class EmulatedDrives(ImageFields):
         method = int(self.homing_method[i])
         q = float(self.plant.q_meas[i])
         offset = self._home_position(i)
+        self._home_start_q[i] = q
+        self._home_prev_q[i] = q
         if method in (35, 37):  # current position is home
             self._home_shift[i] = offset - q
             self._home_v[i] = 0.0
             self.homing[i] = _H_DONE
             self._target_valid[i] = False
-        elif method == 17:
-            self._home_start_q[i] = q
+        elif method in (1, 17):  # negative limit / home switch (then the index for 1)
+            self._home_dir[i] = -1.0
             self.homing[i] = _H_SEARCH
+        elif method == 2:  # positive limit switch, then the index
+            self._home_dir[i] = 1.0
+            self.homing[i] = _H_SEARCH
+        elif method in (33, 34):  # the next index pulse below (33) / above (34)
+            self._home_dir[i] = -1.0 if method == 33 else 1.0
+            self.homing[i] = _H_INDEX
         else:
             self.homing[i] = _H_ERROR
 
@@ -864,6 +972,22 @@ class EmulatedDrives(ImageFields):
         sc = self.scaling
         return float(sc.rad_per_count[i] * (int(self.home_offset[i]) - sc.zero_offset[i]))
 
+    def _switch_made(self, i: int, q: float) -> bool:
+        """The switch the axis's method searches: method 2's positive limit switch is made
+        above :attr:`positive_switch`, the others' below :attr:`home_switch` (nan: none)."""
+        if int(self.homing_method[i]) == 2:
+            return bool(q >= self.positive_switch[i])
+        return bool(q <= self.home_switch[i])
+
+    def _index_between(self, i: int, a: float, b: float) -> float:
+        """The true joint position of an index pulse passed going from ``a`` to ``b`` [rad]
+        (one per motor revolution, at ``index_phase + k·index_pitch``); nan if none."""
+        pitch, phase = float(self.index_pitch[i]), float(self.index_phase[i])
+        ka, kb = math.floor((a - phase) / pitch), math.floor((b - phase) / pitch)
+        if ka == kb:
+            return math.nan
+        return phase + pitch * (max(ka, kb))
+
     def _advance_homing(self) -> None:
         q = self.plant.q_meas
         rpc = self._abs_rpc
@@ -872,21 +996,39 @@ class EmulatedDrives(ImageFields):
             fast = float(self.homing_speeds[0, i]) * rpc[i]
             slow = float(self.homing_speeds[1, i]) * rpc[i]
             acc = max(float(self.homing_accel[i]) * rpc[i], 1e-6)
+            direction = float(self._home_dir[i])
+            method = int(self.homing_method[i])
+            qi, prev = float(q[i]), float(self._home_prev_q[i])
+            self._home_prev_q[i] = qi
             target = 0.0
-            switch = self.home_switch[i]
-            made = bool(q[i] <= switch)  # False for nan: no switch
+            made = self._switch_made(int(i), qi)  # False for nan: no switch
+            travelled = abs(qi - self._home_start_q[i]) > self.homing_travel[i]
             if h == _H_SEARCH:
-                target = -fast
+                target = direction * fast
                 if made:
                     self.homing[i] = h = _H_BACK
-                elif abs(q[i] - self._home_start_q[i]) > self.homing_travel[i] or fast <= 0.0:
+                elif travelled or fast <= 0.0:
                     self.homing[i] = h = _H_ERROR
             if h == _H_BACK:
-                target = slow
-                if not made:  # the edge: this position becomes the home offset
-                    self._home_shift[i] = self._home_position(i) - float(q[i])
+                target = -direction * slow
+                if not made:  # the switch edge
+                    if method == 17:  # that edge is home
+                        self._home_shift[i] = self._home_position(i) - qi
+                        self._target_valid[i] = False
+                        self.homing[i] = h = _H_DONE
+                    else:  # methods 1/2: on, away from the switch, to the next index pulse
+                        self._home_dir[i] = -direction
+                        self.homing[i] = h = _H_INDEX
+                        prev = qi
+            if h == _H_INDEX:
+                target = float(self._home_dir[i]) * slow
+                at = self._index_between(int(i), prev, qi)
+                if not math.isnan(at):  # the drive latches the pulse's own position
+                    self._home_shift[i] = self._home_position(i) - at
                     self._target_valid[i] = False
                     self.homing[i] = h = _H_DONE
+                elif travelled or slow <= 0.0:
+                    self.homing[i] = h = _H_ERROR
             if h in (_H_DONE, _H_ERROR, _H_STOP):
                 target = 0.0
             step = acc * self.dt

@@ -19,6 +19,9 @@ import numpy as np
 from hofto_hw.commands.args import HelpFormatter, add_config
 from hofto_hw.errors import UserError
 
+#: [s] held after enabling, before the first test: the joints settle on their closed brakes
+SETTLE = 0.5
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
@@ -92,6 +95,12 @@ def run(args: argparse.Namespace) -> int:
         gravity = model.create_data().gravity(group.q).copy()
         preload_braked_axes(cfg, model, group)  # 0x60B2 = gravity on the braked axes only
         enable_drives(bus, group)
+        # the drives take the load from the closed brakes (the preload): let the joints
+        # settle on them before any test measures from where they are
+        for _ in range(int(np.ceil(SETTLE / bus.cycle_time))):
+            group.hold()
+            bus.wait_next_cycle()
+            group.cycle()
         rx, sc = bus.rx, group.scaling
         raw = np.zeros(group.n, dtype=rx["target_torque"].dtype)
         for a in axes:
@@ -99,13 +108,16 @@ def run(args: argparse.Namespace) -> int:
             test = BrakeTest(
                 brake_test_plan(a, joints[a], b.holding_torque, fraction, bus.cycle_time)  # type: ignore[union-attr]
             )
+            # gravity stays in the torque offset 0x60B2 (it adds to the CST target too), so
+            # no cycle of the mode change leaves it to the brake; only a drive without the
+            # offset mapped gets it in the target torque
+            with_offset = bool(group.present("torque_offset")[a])
             tau = gravity.copy()
             rx["mode"][a] = Mode.CST
             while not test.done:
-                tau[a] = gravity[a] + test.torque
+                tau[a] = test.torque if with_offset else gravity[a] + test.torque
                 sc.torque_to_raw(tau, raw)
                 rx["target_torque"][a] = raw[a]
-                rx["torque_offset"][a] = 0
                 group.hold()
                 bus.wait_next_cycle()
                 group.cycle()

@@ -37,7 +37,9 @@ class HomingConfig(FileModel):
     """
 
     method: Annotated[int, Field(ge=-128, le=127)] = Field(
-        description="0x6098 homing method (35/37: current position, 17: negative switch)"
+        description="0x6098 homing method (35/37: current position, 17: negative home "
+        "switch, 1/2: negative/positive limit switch then the index pulse, 33/34: the next "
+        "index pulse below/above)"
     )
     speeds: tuple[PositiveFloat, PositiveFloat] = Field(
         description="0x6099 search for switch, search for zero [rad/s]"

@@ -44,6 +44,8 @@ class StopCategories(FileModel):
     stop_request: Category = 1
     log_failure: Category | None = None
     enabling_released: Category = 2  # ISO 10218-1 hand guiding: a release holds
+    sto: Category = 0  # safe torque off: the power is already gone
+    brake: Category = 1  # a brake fault or a brake that did not release: stop, then close
 
 
 class LimitsSafetyConfig(FileModel):

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers.cia402.brake import ReleaseCheck
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import Mode, State
 from drivers.sim.simbus import SimBus
@@ -232,6 +233,11 @@ def build(
             backend=backend,
         )
         tick.diag_every = max(1, round(rate / 10.0))
+        # issue 28: STO and brake faults named by the drive layer (their sources: the profiles);
+        # the brake release check repeated on every re-enable after a reset
+        health.sto_of = group.sto_of
+        health.brake_code = group.is_brake_fault
+        tick.release_check = ReleaseCheck.from_drives(list(cfg.bus.drives), 1.0 / rate)
         if s.collision is not None:
             tick.settle_ticks = round(s.collision.settle_time * rate)
         if positions is not None:
@@ -341,31 +347,32 @@ def await_brake_release(
 ) -> None:
     """After enabling: open the master-controlled brakes (0x60FE:1 bit 0), hold the position
     for the longest release delay, then refuse (one line naming the joint; the bus is closed)
-    a joint that moved more than its ``release_bound`` while its brake opened."""
+    a joint that moved more than its ``release_bound`` while its brake opened
+    (:class:`drivers.cia402.brake.ReleaseCheck`, which the loop repeats on a re-enable)."""
     from hofto_hw.errors import UserError
 
     assert cfg.bus is not None
     drives = cfg.bus.drives
     try:
-        q0 = group.q.copy()
+        check = ReleaseCheck.from_drives(list(drives), bus.cycle_time)
+        assert check is not None
+        check.start(group.q)
         for i in braked:
             if drives[i].brake.control == "output":  # type: ignore[union-attr]
                 bus.write_value(int(i), 0x60FE, 1, "u32", 1)
-        wait = max(drives[i].brake.release_delay for i in braked)  # type: ignore[union-attr]
-        for _ in range(int(np.ceil(wait / bus.cycle_time)) + 3):
+        result = check.RUNNING
+        while result == check.RUNNING:
             group.hold()
             bus.wait_next_cycle()
             group.cycle()
-        names = list(cfg.robot.joints)
-        for i in braked:
-            moved = float(group.q[i] - q0[i])
-            bound = drives[i].brake.release_bound  # type: ignore[union-attr]
-            if abs(moved) > bound:
-                raise UserError(
-                    f"{names[i]}: moved {moved * 1e3:+.2f} mrad while its brake opened (bound "
-                    f"{bound * 1e3:g} mrad): the load is not held (gravity preload) or the "
-                    "brake drags; motion refused"
-                )
+            result = check.step(group.q)
+        if result >= 0:
+            bound = drives[result].brake.release_bound  # type: ignore[union-attr]
+            raise UserError(
+                f"{list(cfg.robot.joints)[result]}: moved {check.moved * 1e3:+.2f} mrad while "
+                f"its brake opened (bound {bound * 1e3:g} mrad): the load is not held (gravity "
+                "preload) or the brake drags; motion refused"
+            )
     except BaseException:
         bus.close()
         raise

@@ -75,6 +75,15 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
             entry["detail"] = "error code (0x603F) " + describe_error_code(int(ev.value[j]))
         elif kind == Fault.BUS_LOSS:
             entry["detail"] = describe_status(int(ev.value[j]))
+        elif kind == Fault.BRAKE:
+            v = float(ev.value[j])
+            entry["detail"] = (
+                f"moved {v * 1e3:+.3f} mrad while its brake opened"
+                if abs(v) < 1.0
+                else "error code (0x603F) " + describe_error_code(int(v))
+            )
+        elif kind == Fault.STO:
+            entry["detail"] = "safe torque off active: the power stage is off"
         if kind < len(Fault) and entry["category"] >= 0 and episode is not None:
             t_stop, d_stop = episode
             if np.isfinite(t_stop):

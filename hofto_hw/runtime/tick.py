@@ -85,7 +85,9 @@ STANDSTILL = 0.01  # rad/s: every joint slower than this counts as stopped
 MAX_STOPS = 256  # stop episodes kept for the summary
 MAX_SUBSTEPS = 250  # observer steps over one stalled gap at most (cost: one step each)
 FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
-_DRIVE_CAUSES = (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED)
+_DRIVE_CAUSES = (
+    (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED) | (1 << Fault.STO) | (1 << Fault.BRAKE)
+)
 _COLLIDED_OR_CONTACT = COLLIDED | CONTACT  # the monitor's flags
 
 
@@ -181,6 +183,13 @@ class Tick:
         self.controlword = group.transport.rx["controlword"]
         self.expect_enabled = False
         self.enabling = False
+        #: the brake release check the loop repeats on every re-enable (set by compose;
+        #: None: no braked axis); its progress; ticks spent enabling; STO scratch
+        self.release_check: Any = None
+        self._released = True
+        self._release_running = 0
+        self._enable_ticks = 0
+        self._sto_seen = np.zeros(n, dtype=bool)
         self.overrun_streak = 0
         self.overruns = 0
         # requests from other threads (one writer each)
@@ -654,9 +663,9 @@ class Tick:
         FAULT_RESET_TICKS ticks (the drive leaves Fault only if its cause is gone); then the
         reset is tried once more and refused if any cause persists."""
         self.reset_requested = False
-        din = self.group.transport.tx["digital_inputs"]
-        if (din & sm.DIN_STO).any():  # STO is a state: no reset enables through it
-            names = [self.group.names[i] for i in np.flatnonzero(din & sm.DIN_STO)]
+        sto = self.group.sto_in_image(self._sto_seen, by_state=False)
+        if sto.any():  # STO is a state: no reset enables through it
+            names = [self.group.names[i] for i in np.flatnonzero(sto)]
             self.reset_result = "reset refused, safe torque off active: " + ", ".join(names)
             return
         done, msg = self.stop.reset()
@@ -685,16 +694,29 @@ class Tick:
         self.motion.start(g.q)
         if not g.all_in(State.OPERATION_ENABLED):
             self.enabling = True
+            self._enable_ticks = 0
+            self._released = False  # the brakes open again: their check again
+            self._release_running = 0
 
     def _enable_step(self) -> None:
         """Walk every axis toward Operation enabled, one controlword per tick (bumpless:
         targets hold the measured position); a faulted axis gets a fault-reset edge."""
         g = self.group
+        self._enable_ticks += 1
+        if g.sto_in_image(self._sto_seen, by_state=False).any():  # STO toggled while enabling
+            self._latch_now(Fault.STO, int(np.argmax(self._sto_seen)), -1.0)
+            return
         if g.all_in(State.OPERATION_ENABLED):
+            if self._release_step():
+                return  # the brakes are opening: hold where the check started
             self.enabling = False
             self.expect_enabled = True
             self._judge_from = self.tick + self.settle_ticks
             self.motion.start(g.q)
+            return
+        if self._enable_ticks > g.timeout_cycles and g.sto_in_image(self._sto_seen, True).any():
+            # an axis that will not leave Switch on disabled: STO where no signal is mapped
+            self._latch_now(Fault.STO, int(np.argmax(self._sto_seen)), -1.0)
             return
         sm.controlwords_toward_no_reset(g.states, State.OPERATION_ENABLED, self._cw)
         if self.tick & 1:
@@ -703,6 +725,39 @@ class Tick:
                     self._cw[i] = sm.CW_FAULT_RESET
         np.copyto(self.controlword, self._cw)
         self.motion.start(g.q)
+
+    def _release_step(self) -> bool:
+        """The brake release check of a re-enable (issue 28; the same check as at start-up,
+        :class:`drivers.cia402.brake.ReleaseCheck`): True while it runs, holding the position
+        it started at; a joint that moved beyond its bound latches BRAKE naming it."""
+        check = self.release_check
+        if check is None or self._released:
+            return False
+        if self._release_running == 0:
+            check.start(self.group.q)
+            self.motion.start(check.q0)
+            self._release_running = 1
+        result = check.step(self.group.q)
+        if result == check.RUNNING:
+            return True
+        self._released = True
+        self._release_running = 0
+        if result >= 0:
+            self._latch_now(Fault.BRAKE, result, check.moved)
+            return True
+        return False
+
+    def _latch_now(self, fault: int, joint: int, value: float) -> None:
+        """A fault found while enabling (section 5, after the stop was acted on this tick):
+        latched, and its category commanded in this same tick."""
+        self.stop.report(fault, joint, value)
+        cat = self.stop.category
+        if cat == 0 or cat == 1:
+            self.enabling = False
+            if cat == 0:
+                self.group.command_disable_voltage()
+            else:
+                self.group.command_quick_stop()
 
     def _fault_reset_edge(self) -> None:
         """Rising edges of controlword bit 7 on faulted axes; then retry the reset."""

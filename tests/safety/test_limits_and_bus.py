@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from hofto_hw.config.safety import StopCategories
 from safety.bus_health import BusHealth
@@ -109,3 +110,31 @@ def test_bus_loss_after_a_streak_and_drive_states() -> None:
     states[1] = 1
     bh.check(s3, 0, True, states, codes, True)
     assert s3.is_latched(Fault.DRIVE_DISABLED) and s3.events.joint[0] == 1
+
+
+@pytest.mark.parametrize("backend", ["numpy", "auto"])
+def test_sto_and_brake_fault_codes_are_their_own_classes(backend) -> None:
+    """The drive layer names STO (``sto_of``) and brake fault codes (``brake_code``): an axis
+    that left Operation enabled with STO active is STO, not drive_disabled; a brake fault
+    code latches BRAKE beside drive_fault; each with its category and the axis named."""
+    cats = [1] * len(Fault)
+    cats[Fault.STO], cats[Fault.BRAKE], cats[Fault.DRIVE_DISABLED] = 0, 1, 2
+    oe, fault = 5, 7
+    for sto in (True, False):
+        stop = StopController(cats)
+        h = BusHealth(3, 3, oe, (6, 7, 8), backend=backend)
+        h.sto_of = lambda j, sto=sto: sto and j == 1
+        stop.begin_tick(1)
+        h.check(stop, 0, True, np.array([oe, 3, oe], dtype=np.uint8), np.zeros(3), True)
+        want = Fault.STO if sto else Fault.DRIVE_DISABLED
+        assert stop.latched == 1 << want and stop.events.joint[0] == 1
+        assert stop.category == (0 if sto else 2)
+    stop = StopController(cats)
+    h = BusHealth(3, 3, oe, (6, 7, 8), backend=backend)
+    h.brake_code = lambda j, code: code == 0xFF21
+    stop.begin_tick(1)
+    h.check(
+        stop, 0, True, np.array([oe, oe, fault], dtype=np.uint8), np.array([0, 0, 0xFF21]), True
+    )
+    assert stop.latched == (1 << Fault.DRIVE_FAULT) | (1 << Fault.BRAKE)
+    assert list(stop.events.joint[:2]) == [2, 2] and stop.events.value[1] == 0xFF21

@@ -212,7 +212,9 @@ class EmulatedNetwork:
         code 0 removes); ``al_error`` (slave, code: the slave drops to SAFE-OP, or stays
         lower, with the error flag and this code);
         ``restart`` (slave: power-cycled, registers reset, INIT, no station address);
-        ``stop``. Slaves are 0-based positions on the line.
+        ``sto``, ``brake``, ``home_switch``, ``index_phase`` (slave and the fields of
+        :meth:`drivers.sim.drive.EmulatedDrives.commissioning`); ``stop``. Slaves are 0-based
+        positions on the line.
         """
         op = request.get("op")
         try:
@@ -287,6 +289,11 @@ class EmulatedNetwork:
                 )
             elif op == "stop":
                 self.stopping = True
+            elif op in EmulatedDrives.COMMISSIONING_OPS:
+                if self.drives is None:
+                    raise ValueError("no drives on this network")
+                k = self._slave_index(request["slave"])
+                return {"ok": True, **self.drives.commissioning(k, request)}
             else:
                 raise ValueError(f"unknown op {op!r}")
         except (KeyError, TypeError, ValueError, IndexError) as exc:
@@ -348,6 +355,7 @@ class EmulatedNetwork:
                 tau_applied=plant.tau_applied.tolist(),
                 drive_state=[int(x) for x in self.drives.state],
                 error_code=[int(x) for x in self.drives.tx["error_code"]],
+                **self.drives.commissioning_status(),
             )
         return out
 

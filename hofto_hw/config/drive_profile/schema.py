@@ -454,6 +454,74 @@ class UnitsSection(FileModel):
     )
 
 
+class StoSource(FileModel):
+    """Where the stack reads an axis's safe torque off (STO) state.
+
+    ``input``: bit ``bit`` of the digital inputs 0x60FD (from the TxPDO when mapped, else
+    by SDO outside the loop); ``object``: bit ``bit`` of a vendor object ``index:subindex``
+    (``bits`` wide), read by SDO outside the loop; ``state``: no signal: an axis that drops
+    to Switch on disabled without a fault, or will not leave it, is taken as STO. Inside the
+    loop only the process image counts: ``object`` (and an unmapped ``input``) is judged
+    there as ``state``.
+    """
+
+    source: Literal["input", "object", "state"] = Field(description="where STO is read")
+    index: U16 = Field(0x60FD, description="object of the STO bit (input: 0x60FD)")
+    subindex: U8 = Field(0, description="its sub-index")
+    bits: Literal[8, 16, 32] = Field(32, description="the object's size [bit]")
+    bit: Annotated[int, Field(ge=0, le=31)] = Field(16, description="bit set while STO is active")
+    active_low: bool = Field(False, description="the bit is CLEAR while STO is active")
+
+    @model_validator(mode="after")
+    def _fits(self) -> StoSource:
+        if self.bit >= self.bits:
+            raise ValueError(f"bit {self.bit} does not fit a {self.bits}-bit object")
+        if self.source == "input" and (self.index, self.subindex) != (0x60FD, 0):
+            raise ValueError("source 'input' is 0x60FD:00; a vendor object is source 'object'")
+        return self
+
+
+class SdoParameter(FileModel):
+    """One drive parameter written by SDO in SI (``unit``: seconds per count, e.g. 0.001)."""
+
+    index: U16 = Field(description="object index")
+    subindex: U8 = Field(0, description="sub-index")
+    bits: Literal[8, 16, 32] = Field(description="object size [bit] (unsigned)")
+    unit: Annotated[float, Field(gt=0.0)] = Field(0.001, description="SI value of one count")
+
+    def raw(self, value: float) -> int:
+        """``value`` in counts, clipped to the object's range."""
+        return max(0, min((1 << self.bits) - 1, round(value / self.unit)))
+
+
+class ProfileBrake(FileModel):
+    """How the drive runs a holding brake it controls (``bus.drives[i].brake.control:
+    drive``): the vendor objects of its release and engage delays (CiA 402 has no standard
+    one; None = the drive has none the stack knows: its own setting stays), and the 0x603F
+    error codes that mean a brake fault (``[low, high]`` ranges, inclusive)."""
+
+    release_delay: SdoParameter | None = Field(
+        None, description="brake release (open) delay: time from enable to motion [s]"
+    )
+    engage_delay: SdoParameter | None = Field(
+        None, description="brake engage (close) delay: time power stays on after close [s]"
+    )
+    fault_codes: list[tuple[U16, U16]] = Field(
+        default_factory=list, description="0x603F ranges [low, high] read as a brake fault"
+    )
+
+    @field_validator("fault_codes")
+    @classmethod
+    def _ranges(cls, ranges: list[tuple[int, int]]) -> list[tuple[int, int]]:
+        for lo, hi in ranges:
+            if lo > hi:
+                raise ValueError(f"fault_codes range [0x{lo:04X}, 0x{hi:04X}] is reversed")
+        return ranges
+
+    def is_brake_fault(self, code: int) -> bool:
+        return any(lo <= code <= hi for lo, hi in self.fault_codes)
+
+
 class DriveProfile(FileModel):
     """One drive model: identity, bus, process data, objects, start-up, DC / CANopen, units."""
 
@@ -481,6 +549,14 @@ class DriveProfile(FileModel):
     process_data: ProcessDataLimits = Field(default_factory=ProcessDataLimits)
     canopen: CANopenSection | None = Field(None, description="CANopen specifics (bus: canopen)")
     units: UnitsSection = Field(default_factory=UnitsSection)
+    sto: StoSource | None = Field(
+        None,
+        description="where the axis's safe torque off is read; None = the drive state (bits "
+        "16-31 of 0x60FD are the vendor's: a profile names its STO bit when it has one)",
+    )
+    brake: ProfileBrake | None = Field(
+        None, description="brake delay objects and brake fault codes; None = none known"
+    )
 
     # ------------------------------------------------------------------ validation
     @model_validator(mode="after")
@@ -678,6 +754,10 @@ class DriveProfile(FileModel):
                     out[e.field] = (at, e.bits)
                 at += e.bits
         return out
+
+    def sto_source(self) -> StoSource:
+        """The STO source as the stack uses it (the default spelled out, see ``sto``)."""
+        return self.sto if self.sto is not None else StoSource(source="state")
 
     def startup_value(self, index: int, subindex: int = 0) -> int | str | None:
         """The last start-up value written to ``index:subindex``, or None."""

@@ -257,12 +257,19 @@ def test_enable_timeout_names_axis_state_and_statusword(group: DriveGroup, bus: 
             bus.drives.set_safe_torque_off(2, True)
         return real_cycle()
 
+    def unseen(out, by_state):  # a drive whose STO signal the master does not see
+        out.fill(False)
+        return out
+
     group.cycle = cycle  # type: ignore[method-assign]
+    group.sto_in_image = unseen  # type: ignore[method-assign]
+    group.sto_axes = list  # type: ignore[method-assign]
     t0 = bus.plant.t
     with pytest.raises(DriveTimeoutError) as e:
         group.enable()
     msg = str(e.value)
     assert "axis 2 (joint_3)" in msg and "Switch on disabled" in msg and "0x0240" in msg
+    assert msg.endswith("safe torque off active? (the drive stays in switch on disabled)")
     assert e.value.axis == 2 and e.value.state == State.SWITCH_ON_DISABLED
     assert 0.5 <= bus.plant.t - t0 < 0.6  # the configured 0.5 s, in bus time
 

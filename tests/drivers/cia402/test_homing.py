@@ -141,3 +141,40 @@ def test_homing_config_none_is_an_absolute_axis() -> None:
     assert DriveConfig(**base, homing="none").homing is None
     with pytest.raises(ValueError, match="method 0 is 'no homing'"):
         DriveConfig(**base, homing=dict(method=0, speeds=[0.1, 0.01], acceleration=1, timeout=1))
+
+
+@pytest.mark.parametrize(("method", "direction"), [(33, -1.0), (34, 1.0)])
+def test_methods_33_34_home_on_the_next_index_pulse(drives, method, direction) -> None:
+    q0 = float(drives.plant.q_meas[AXIS])
+    pitch = float(drives.index_pitch[AXIS])  # one motor turn at the joint
+    drives.set_index_phase(AXIS, q0 + 0.4 * pitch)  # pulses at q0 + 0.4·pitch + k·pitch
+    pulse = q0 + 0.4 * pitch if direction > 0 else q0 - 0.6 * pitch
+    cfg = HomingConfig(method=method, speeds=(0.2, 0.05), acceleration=2.0, offset=0.2,
+                       timeout=5.0)  # fmt: skip
+    result, _ = _home(drives, cfg)
+    assert result == ""
+    true_now = float(drives.plant.q_meas[AXIS])
+    assert (true_now - q0) * direction > 0  # it went the method's way
+    # the pulse's own position is home: reported - offset = true - pulse
+    assert _position(drives, AXIS) - 0.2 == pytest.approx(true_now - pulse, abs=2e-4)
+
+
+def test_method_2_searches_the_positive_limit_then_the_index_below(drives) -> None:
+    q0 = float(drives.plant.q_meas[AXIS])
+    pitch = float(drives.index_pitch[AXIS])
+    drives.set_home_switch(AXIS, q0 + 0.03, positive=True)
+    drives.set_index_phase(AXIS, q0 + 0.03 - 0.25 * pitch)  # the first pulse below the edge
+    cfg = HomingConfig(method=2, speeds=(0.2, 0.05), acceleration=2.0, offset=0.0, timeout=5.0)
+    result, _ = _home(drives, cfg)
+    assert result == ""
+    true_now = float(drives.plant.q_meas[AXIS])
+    pulse = q0 + 0.03 - 0.25 * pitch
+    assert _position(drives, AXIS) == pytest.approx(true_now - pulse, abs=2e-4)
+
+
+def test_no_index_pulse_within_the_travel_ends_in_homing_error(drives) -> None:
+    drives.homing_travel[AXIS] = 0.2 * float(drives.index_pitch[AXIS])
+    drives.set_index_phase(AXIS, float(drives.plant.q_meas[AXIS]) + 0.5 * drives.index_pitch[AXIS])
+    cfg = HomingConfig(method=34, speeds=(0.2, 0.05), acceleration=2.0, timeout=5.0)
+    result, _ = _home(drives, cfg)
+    assert result.startswith("joint_3: the drive reports homing error (method 34)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from drivers.cia402 import state_machine as sm
 from drivers.cia402.drive_group import DriveError, DriveGroup, DriveTimeoutError
 from drivers.cia402.state_machine import Mode, State
 from drivers.sim.simbus import SimBus
@@ -32,8 +33,9 @@ def test_boot_with_sto_active_is_one_line_naming_the_axis(group, bus) -> None:
     assert group.all_in(State.OPERATION_ENABLED)
 
 
-def test_sto_while_enabling_is_named_in_the_timeout(group, bus) -> None:
-    """STO asserted after the check, while the drives are being enabled."""
+def test_sto_while_enabling_stops_enabling_naming_the_axis(group, bus) -> None:
+    """STO asserted after the check, while the drives are being enabled: the defined outcome
+    is every drive commanded to disable voltage and one line naming the axis, at once."""
     real_cycle = group.cycle
     calls = {"n": 0}
 
@@ -44,5 +46,12 @@ def test_sto_while_enabling_is_named_in_the_timeout(group, bus) -> None:
         return real_cycle()
 
     group.cycle = cycle  # type: ignore[method-assign]
-    with pytest.raises(DriveTimeoutError, match=r"axis 1 .*safe torque off active"):
+    with pytest.raises(
+        DriveError,
+        match=r"^axis 1 \(joint_2\): safe torque off became active "
+        r"while enabling \(0x60FD:00 bit 16\)",
+    ) as info:
         group.enable()
+    assert not isinstance(info.value, DriveTimeoutError)
+    assert (group.transport.rx["controlword"] == sm.CW_DISABLE_VOLTAGE).all()
+    assert calls["n"] < 2 + group.timeout_cycles  # at once, not at the timeout

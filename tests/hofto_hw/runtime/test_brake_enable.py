@@ -19,6 +19,9 @@ BRAKE = {
 # preload, 1.01 mrad without
 
 
+BRAKE_BOUND = 5e-4  # the default release_bound [rad]
+
+
 def _with_brake(cfg: SystemConfig) -> SystemConfig:
     from hofto_hw.config.drives import BrakeConfig
 
@@ -57,3 +60,51 @@ def test_brake_config_none_and_bad_values() -> None:
         BrakeConfig(**{**BRAKE, "release_delay": -0.1})
     with pytest.raises(ValidationError, match="holding_torque"):
         BrakeConfig(**{**BRAKE, "holding_torque": 0.0})
+
+
+def _stop_and_reset(system) -> None:
+    from drivers.cia402.state_machine import State
+    from tests.hofto_hw.runtime.conftest import run_until
+
+    tick, stop = system.tick, system.tick.stop
+    tick.stop_requested = True
+    run_until(system, lambda: stop.latched != 0, 200)
+    run_until(system, lambda: not system.group.all_in(State.OPERATION_ENABLED), 3000)
+    tick.stop_requested = False
+    system.loop.run(max_ticks=5)
+    tick.reset_requested = True
+    run_until(system, lambda: tick.enabling, 50)
+
+
+def test_every_re_enable_repeats_the_brake_release_check(cfg: SystemConfig) -> None:
+    """After a reset the loop enables again: it holds where the drives came up for the
+    release delay and checks the braked joint, as at start-up; a joint that moves (here a
+    5 kg load the model does not know, hung on while the arm was stopped) latches BRAKE
+    naming it, with its configured category, in the tick that found it."""
+    from hofto_hw.model.payload import Payload, apply_payload
+    from safety.stop import Fault
+    from tests.hofto_hw.runtime.conftest import run_until
+
+    system = compose.build(_with_brake(cfg), clock="sim", contact=False)
+    try:
+        tick, stop = system.tick, system.tick.stop
+        check = tick.release_check
+        assert check is not None and check.axes.tolist() == [1]
+        system.loop.run(max_ticks=200)
+        _stop_and_reset(system)
+        run_until(system, lambda: tick.expect_enabled, 2000)
+        assert check.count >= check.cycles  # it ran, and passed
+        assert stop.latched == 0
+        system.loop.run(max_ticks=200)
+
+        _stop_and_reset(system)
+        apply_payload(system.bus.plant.true_model, Payload(5.0, (0.0, 0.0, 0.1), (0.0,) * 6))
+        run_until(system, lambda: stop.latched != 0, 2000)
+        assert stop.latched_names() == ["brake"]
+        assert stop.category == cfg.safety.categories.brake == 1
+        assert not tick.expect_enabled
+        ev = system.sink.last_events()
+        mine = ev[ev["kind"] == int(Fault.BRAKE)]
+        assert mine["joint"].tolist() == [1] and abs(mine["value"][0]) > BRAKE_BOUND
+    finally:
+        system.close()
