@@ -43,6 +43,17 @@ class Enabling:
 
 
 @dataclass
+class Axis:
+    """One drive's commissioning state: ``name`` (the joint), ``sto`` (safe torque off
+    active: the power stage cannot be on), ``brake`` ("closed", "open", or None where the
+    stack does not see the brake: a real bus)."""
+
+    name: str
+    sto: bool
+    brake: str | None
+
+
+@dataclass
 class State:
     """A snapshot of the arm (SI): loop time ``t`` [s] and ``tick``; ``mode``; latched
     ``faults`` and stop ``category`` (-1: none); ``q``, ``qd``, ``q_cmd`` (n,) [rad,
@@ -50,7 +61,8 @@ class State:
     external torques; ``wrench`` (6,) [N, N·m] tool wrench (NaN outside drag);
     ``tcp_position`` (3,) [m] and ``tcp_rotation`` (3, 3) of the tool frame in the base
     frame; ``enabling``; ``profile`` (active safety profile, None: the config's);
-    ``overruns``; ``timing_us``."""
+    ``overruns``; ``timing_us``; ``axes`` (n,) :class:`Axis` (safe torque off and holding
+    brake per drive)."""
 
     t: float
     tick: int
@@ -70,6 +82,7 @@ class State:
     profile: str | None
     overruns: int
     timing_us: dict[str, float]
+    axes: list[Axis]
 
 
 def _arr(v: Any, what: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
@@ -84,6 +97,18 @@ def _arr(v: Any, what: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
     if shape is not None and a.shape != shape:
         raise ServiceError(f"malformed answer: state.{what} has shape {a.shape}, not {shape}")
     return a
+
+
+def _axes_of(v: Any, n: int) -> list[Axis]:
+    if not isinstance(v, list) or len(v) != n:
+        raise ServiceError(f"malformed answer: state.axes is not a list of {n} axes")
+    out = []
+    for a in v:
+        brake = a["brake"]
+        if brake not in (None, "open", "closed") or not isinstance(a["sto"], bool):
+            raise ServiceError(f"malformed answer: state.axes: {str(a)[:60]}")
+        out.append(Axis(str(a["name"]), a["sto"], brake))
+    return out
 
 
 def _state_of(r: dict[str, Any], n: int) -> State:
@@ -114,6 +139,7 @@ def _state_of(r: dict[str, Any], n: int) -> State:
             profile=None if r.get("profile") is None else str(r["profile"]["name"]),
             overruns=int(r["overruns"]),
             timing_us={str(k): float(v) for k, v in r["timing_us"].items()},
+            axes=_axes_of(r["axes"], n),
         )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ServiceError(f"malformed answer: state: {type(exc).__name__}: {exc}") from None

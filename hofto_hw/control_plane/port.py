@@ -22,6 +22,7 @@ import numpy as np
 
 from hofto_hw.control.joint_motion import DRAG, HOLD, MODE_NAMES, MOVE, MOVE_TO, REPLAY
 from hofto_hw.control_plane import channel as ch
+from hofto_hw.runtime.axes import AxesState
 from hofto_hw.runtime.teach import RECORDING
 from hofto_hw.runtime.tick import STANDSTILL
 from hofto_hw.runtime.timing import Histogram
@@ -168,6 +169,7 @@ class LoopPort:
         self.extra[ch.X_PROFILE] = -1 if prof is None else prof.names().index(prof.active)
         acc = getattr(system, "acceleration", None)
         self.extra[ch.X_ACCEL] = -1 if acc is None else accel_bits(acc)
+        self.axes = AxesState(system)  # STO and brake per axis into the channel's words
         self._state = _NO_REQ
         self._seq = 0
         self._reset_at = 0
@@ -235,6 +237,7 @@ class LoopPort:
         x[ch.X_WAKE_MAX] = self.loop.wakeup.max
         x[ch.X_COMP_MAX] = self.loop.compute.max
         x[ch.X_MOVING] = 0.0 if motion.mode == HOLD and motion._still else 1.0
+        self.axes.fill(self.chan.sto, self.chan.brake)
         ctl[ch.STATE_SEQ] = seq + 1
         ctl[ch.TICKS] = self.loop.ticks
         tick.wakeup_p99_us = self.fctl[ch.WAKE_P99]

@@ -44,6 +44,7 @@ from hofto_hw.control_plane import channel as ch
 from hofto_hw.control_plane import protocol as pr
 from hofto_hw.errors import UserError
 from hofto_hw.runtime import teach
+from hofto_hw.runtime.axes import axes_of
 from hofto_hw.runtime.timing import percentile_of, summarize
 from safety.stop import EVENT_NAMES, FAULT_NAMES, N_FAULTS
 
@@ -855,7 +856,15 @@ class ControlPlane:
             "holder": None if self.holder is None else self.holder.who(),
             "profile": self._profile_status(x),
             "acceleration": _acceleration(int(x[ch.X_ACCEL])),
+            "axes": self._axes(x),
         }
+
+    def _axes(self, x: np.ndarray) -> list[dict[str, Any]]:
+        """Per axis: name, safe torque off (bool), holding brake (closed/open/None)."""
+        n = self.chan.n
+        return axes_of(
+            list(self.model.joint_names), x[ch.X_WORDS : ch.X_WORDS + n], x[ch.X_WORDS + n :]
+        )
 
     def _profile_status(self, x: np.ndarray) -> dict[str, Any] | None:
         name, content = self.active_profile(x)
@@ -994,6 +1003,7 @@ class ControlPlane:
                 "holder": None if self.holder is None else self.holder.who(),
             },
             "profile": self._profile_status(x),
+            "axes": self._axes(x),
             "overruns": int(x[ch.X_OVERRUNS]),
             "timing_us": {
                 "wakeup_us": float(rec["wakeup_us"]),
