@@ -357,6 +357,27 @@ class Robot:
         if err:
             raise ServiceError(f"drag: the enabling lease was not renewed: {err[0]}")
 
+    def home(self, joints: Any = None, timeout: float | None = None) -> str:
+        """CiA 402 homing of ``joints`` (names or 1-based numbers; None: every joint with
+        ``homing:`` in the config) by the loop, one after the other, each back to the loop's
+        mode; returns the service's line (``homed: ...``). Refused (one line) while a fault
+        is latched, the arm moves or another client holds motion; a homing that fails (time
+        out, homing error, end position off the offset) is Refused naming the joint.
+        ``timeout`` [s]: how long to wait for the answer (default: 300 s)."""
+        req: dict[str, Any] = {"cmd": "home"}
+        if joints is not None:
+            items = [joints] if isinstance(joints, (str, int)) else list(joints)
+            req["joints"] = [j if isinstance(j, int) else str(j) for j in items]
+        return str(self._call(req, 300.0 if timeout is None else timeout)["message"])
+
+    def zero_set(self, joint: str | int, at: float) -> str:
+        """Re-zero ``joint`` (name or 1-based number), which a person has put at a reference
+        angle ``at`` [rad]: the service rewrites its config's ``zero_offset`` (a backup
+        kept, the change logged) and the loop reads the joint with it from the next tick.
+        Refused while the arm moves or a fault is latched. Returns the logged line."""
+        j = joint if isinstance(joint, int) else str(joint)
+        return str(self._call({"cmd": "zero_set", "joint": j, "at": float(at)})["message"])
+
     def set_payload(self, mass: float, com: Any) -> None:
         """Not served by this version (Refused): the payload is ``safety.payload``."""
         raise Refused("set_payload: not served by this version; set safety.payload in the config")

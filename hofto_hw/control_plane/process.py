@@ -252,8 +252,9 @@ def main() -> int:
     if fd is not None:
         listener = socket.socket(fileno=fd)
     server = ControlPlane(
-        listener, chan, cfg, model, observer_names=observers, log_path=log_path, recorder=recorder
-    )
+        listener, chan, cfg, model, observer_names=observers, config_path=config_path,
+        log_path=log_path, recorder=recorder,
+    )  # fmt: skip
     sup = None
     if notify:
         from hofto_hw.runtime.service import Supervisor

@@ -49,11 +49,16 @@ COMMANDS: dict[str, dict[str, tuple[tuple[type, ...], bool]]] = {
     "events": {"since": ((int,), False)},
     "stream_info": {},
     "set_safety_profile": {"name": ((str,), True)},
+    "home": {"joints": ((list,), False)},
+    "zero_set": {"joint": ((str, int), True), "at": (_FLOAT, True)},
 }
 #: commands that move the arm or hold the enabling input: one client at a time
 MOTION = frozenset(
-    {"mode", "replay", "move_joints", "move_linear", "cancel", "enable", "set_safety_profile"}
-)
+    {
+        "mode", "replay", "move_joints", "move_linear", "cancel", "enable", "set_safety_profile",
+        "home", "zero_set",
+    }
+)  # fmt: skip
 
 
 class ProtocolError(ValueError):
