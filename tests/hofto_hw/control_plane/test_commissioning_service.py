@@ -211,3 +211,18 @@ def test_status_and_state_show_sto_and_brake_per_axis(in_process, capsys) -> Non
             lambda: (st := robot.state()).faults == [] and st.axes[2].brake == "open",
             "enabled again, brake open",
         )
+
+
+def test_home_and_zero_set_with_a_socket_nobody_answers_are_one_line(tmp_path, capsys) -> None:
+    config = _config(tmp_path)
+    dead = tmp_path / "nobody.sock"
+    for argv in (
+        ("home", "--config", config, "--socket", dead),
+        ("zero", "set", "--config", config, "--socket", dead, "--joint", "1", "--at", "0"),
+    ):
+        code, out, err = _cli(capsys, *argv)
+        assert code == 2 and out == ""
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and f"--socket {dead}: no service answers there" in lines[0]
+    assert config.read_text() == _config(tmp_path).read_text()  # nothing written
+    assert not list(tmp_path.glob("*.bak-*"))
