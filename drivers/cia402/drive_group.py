@@ -286,6 +286,17 @@ class DriveGroup(ImageFields):
         np.copyto(self._rx_pos, self._tx_pos)
         self._rx_vel.fill(0)
 
+    def set_zero_offset(self, axis: int, counts: float) -> float:
+        """Re-zero ``axis``: encoder count ``counts`` now reads joint angle 0 (between two
+        cycles; the reference and compiled conversions both take it). Returns the shift of
+        the axis's joint angle [rad] (new reading minus old) for the caller's references."""
+        sc = self.scaling
+        shift = float((sc.zero_offset[axis] - counts) * sc.rad_per_count[axis])
+        sc.zero_offset[axis] = counts
+        self._si[4, axis] = counts
+        self.q[axis] += shift
+        return shift
+
     # ------------------------------------------------------------------ setup
 
     def configure(self, drives: Sequence[Any]) -> None:

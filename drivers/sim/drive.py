@@ -366,6 +366,8 @@ class EmulatedDrives(ImageFields):
         self._brake_q = plant.q_meas.copy()
         self._prev_target = np.zeros(n)
         self._target_valid = np.zeros(n, dtype=bool)
+        self._md_prev = np.zeros(n, dtype=np.int8)
+        self._md_changed = np.zeros(n, dtype=bool)
         self._limited = np.zeros(n, dtype=bool)
         self._fe_flag = np.zeros(n, dtype=bool)
         # Precomputed factors and process-image field views.
@@ -760,9 +762,14 @@ class EmulatedDrives(ImageFields):
         self.state[i] = new
 
     def _mode(self) -> None:
+        np.copyto(self._md_prev, self.mode_display)
         np.add(self._mode_base, self._rx_mode_u8, out=self._mode_flat)
         np.take(self._mode_table, self._mode_flat, out=self._b1)
         np.copyto(self.mode_display, self._rx_mode, where=self._b1)
+        # a new mode starts its own interpolation: the first target of a cyclic mode after
+        # another mode (homing: its target was not followed) carries no feed-forward
+        np.not_equal(self._md_prev, self.mode_display, out=self._md_changed)
+        np.copyto(self._target_valid, False, where=self._md_changed)
 
     def _control(self) -> None:
         p, tn, sc = self.plant, self.tuning, self.scaling

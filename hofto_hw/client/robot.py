@@ -52,6 +52,18 @@ class ActivePayload:
 
 
 @dataclass
+class Axis:
+    """One drive's commissioning state: ``name`` (the joint), ``sto`` (safe torque off
+    active: the power stage cannot be on; None where its drive profile's source is not in
+    the process image: an object read by SDO, or the drive state), ``brake`` ("closed",
+    "open", or None where the stack does not see the brake: a real bus)."""
+
+    name: str
+    sto: bool | None
+    brake: str | None
+
+
+@dataclass
 class State:
     """A snapshot of the arm (SI): loop time ``t`` [s] and ``tick``; ``mode``; latched
     ``faults`` and stop ``category`` (-1: none); ``q``, ``qd``, ``q_cmd`` (n,) [rad,
@@ -59,7 +71,8 @@ class State:
     external torques; ``wrench`` (6,) [N, N·m] tool wrench (NaN outside drag);
     ``tcp_position`` (3,) [m] and ``tcp_rotation`` (3, 3) of the tool frame in the base
     frame; ``enabling``; ``profile`` (active safety profile, None: the config's);
-    ``overruns``; ``timing_us``; ``payload`` (:class:`ActivePayload`)."""
+    ``overruns``; ``timing_us``; ``axes`` (n,) :class:`Axis` (safe torque off and holding
+    brake per drive); ``payload`` (:class:`ActivePayload`)."""
 
     t: float
     tick: int
@@ -79,6 +92,7 @@ class State:
     profile: str | None
     overruns: int
     timing_us: dict[str, float]
+    axes: list[Axis]
     payload: ActivePayload | None = None
 
 
@@ -100,6 +114,18 @@ def _arr(v: Any, what: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
     if shape is not None and a.shape != shape:
         raise ServiceError(f"malformed answer: state.{what} has shape {a.shape}, not {shape}")
     return a
+
+
+def _axes_of(v: Any, n: int) -> list[Axis]:
+    if not isinstance(v, list) or len(v) != n:
+        raise ServiceError(f"malformed answer: state.axes is not a list of {n} axes")
+    out = []
+    for a in v:
+        brake = a["brake"]
+        if brake not in (None, "open", "closed") or a["sto"] not in (None, True, False):
+            raise ServiceError(f"malformed answer: state.axes: {str(a)[:60]}")
+        out.append(Axis(str(a["name"]), a["sto"], brake))
+    return out
 
 
 def _state_of(r: dict[str, Any], n: int) -> State:
@@ -130,6 +156,7 @@ def _state_of(r: dict[str, Any], n: int) -> State:
             profile=None if r.get("profile") is None else str(r["profile"]["name"]),
             overruns=int(r["overruns"]),
             timing_us={str(k): float(v) for k, v in r["timing_us"].items()},
+            axes=_axes_of(r["axes"], n),
             payload=_payload_of(r.get("payload")),
         )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -353,6 +380,27 @@ class Robot:
                 self._call({"cmd": "enable", "on": False})
         if err:
             raise ServiceError(f"drag: the enabling lease was not renewed: {err[0]}")
+
+    def home(self, joints: Any = None, timeout: float | None = None) -> str:
+        """CiA 402 homing of ``joints`` (names or 1-based numbers; None: every joint with
+        ``homing:`` in the config) by the loop, one after the other, each back to the loop's
+        mode; returns the service's line (``homed: ...``). Refused (one line) while a fault
+        is latched, the arm moves or another client holds motion; a homing that fails (time
+        out, homing error, end position off the offset) is Refused naming the joint.
+        ``timeout`` [s]: how long to wait for the answer (default: 300 s)."""
+        req: dict[str, Any] = {"cmd": "home"}
+        if joints is not None:
+            items = [joints] if isinstance(joints, (str, int)) else list(joints)
+            req["joints"] = [j if isinstance(j, int) else str(j) for j in items]
+        return str(self._call(req, 300.0 if timeout is None else timeout)["message"])
+
+    def zero_set(self, joint: str | int, at: float) -> str:
+        """Re-zero ``joint`` (name or 1-based number), which a person has put at a reference
+        angle ``at`` [rad]: the service rewrites its config's ``zero_offset`` (a backup
+        kept, the change logged) and the loop reads the joint with it from the next tick.
+        Refused while the arm moves or a fault is latched. Returns the logged line."""
+        j = joint if isinstance(joint, int) else str(joint)
+        return str(self._call({"cmd": "zero_set", "joint": j, "at": float(at)})["message"])
 
     def set_payload(self, mass: float, com: Any) -> ActivePayload:
         """The load on the tool from now on: ``mass`` [kg] at ``com`` (3,) [m] in the tool

@@ -316,7 +316,7 @@ def _last_positions(system: object) -> object:
     return LastPositions(
         list(cfg.robot.joints),
         g.q.copy(),
-        [d.zero_offset for d in cfg.bus.drives],
+        [int(z) for z in g.scaling.zero_offset],  # as the loop ran (zero set may move them)
         at_rest=bool(abs(g.qd).max() < 1e-2),
         latched=list(system.tick.stop.latched_names()),  # type: ignore[attr-defined]
     )
@@ -352,6 +352,9 @@ def _start_control_plane(cfg: object, args: argparse.Namespace, recorder: object
         caps = recorder.caps  # type: ignore[attr-defined]
         info = {"shm": name, "caps": [caps.tick, caps.event, caps.diag]}
         log_path = str(recorder.spec.path)  # type: ignore[attr-defined]
+    if args.log_dir is not None:  # the control plane logs zero set beside the logs
+        run = cfg.run.model_copy(update={"log_dir": args.log_dir.resolve()})  # type: ignore[attr-defined]
+        cfg = cfg.model_copy(update={"run": run})  # type: ignore[attr-defined]
     try:
         control = ControlPlaneProcess(
             cfg,

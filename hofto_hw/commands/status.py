@@ -1,4 +1,5 @@
-"""``hofto-hw status``: state, latched faults, timing and log file of the running service,
+"""``hofto-hw status``: state, latched faults, timing, safe torque off and holding brake per
+axis, and log file of the running service,
 and the taught-path recording and last trajectory played (``mode drag --record``,
 ``mode replay``, ``mode move --joints``)."""
 
@@ -57,6 +58,10 @@ def _print(s: dict) -> None:
         print(f"payload: {load['mass']:g} kg at com [{com}] m (tool frame)")
     if s.get("holder"):
         print(f"motion held by {s['holder']}")
+    if s.get("axes"):
+        from hofto_hw.runtime.axes import axes_text
+
+        print(axes_text(s["axes"]))
     print(f"log: {s['log'] or 'not yet written'}")
     if s.get("acceleration"):
         from hofto_hw.runtime.acceleration import describe

@@ -1,32 +1,38 @@
 """``hofto-hw zero set --joint J --at RAD``: re-zero a joint a person has put at a reference.
 
-Offline, against the config and the positions the service stored at its last clean shutdown
-(``hofto_hw.runtime.positions``; the service must be stopped: the command does not talk to
-it). The drive's ``zero_offset`` [counts] in the config is rewritten so that the stored
-position of J reads RAD:
+The drive's ``zero_offset`` [counts] in the config is rewritten so that the joint's position
+reads RAD (hofto_hw/runtime/zero_offset.py: the formula, the edit, the backup and the log).
 
-    zero_new = zero_old + direction · (q_stored − RAD) · counts_per_rev · gear_ratio / 2π
+- **A service runs** (``--socket``, or the config's ``service.socket`` / the default socket
+  answers): through it (``Robot.zero_set``). The joint's live position is used; refused while
+  the arm moves or a fault is latched; the service's own process rewrites its config and logs
+  the change, and the loop reads the joint with the new offset from the next tick.
+- **No service runs**: offline, against the positions the service stored at its last clean
+  shutdown (``hofto_hw.runtime.positions``). Refused (one line, nothing written) when no
+  positions are stored, the arm was moving or a fault was latched at that shutdown, or the
+  config's offset is not the one the position was read with; the stored position is updated.
 
-Refused (one line, nothing written) when no positions are stored, the arm was moving or a
-fault was latched at that shutdown, the config's offset is not the one the position was read
-with, or the config's text has no ``bus.drives[J]`` to edit. The edit touches only that value
-(comments and layout kept), is checked by loading the new config before it replaces the old
-one (atomically), the old file is kept as ``<config>.bak-<time>``, the change is appended to
-``zero_changes.log`` beside the positions file and the stored position is updated.
+Either way the edit touches only that value (comments and layout kept), is checked by loading
+the new config before it replaces the old one (atomically), the old file is kept as
+``<config>.bak-<time>`` and the change is appended to ``zero_changes.log`` beside the
+positions file (in ``run.log_dir``).
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import math
-import shutil
 from pathlib import Path
-
-import yaml
 
 from hofto_hw.commands.args import HelpFormatter, add_config
 from hofto_hw.errors import UserError
+from hofto_hw.runtime.zero_offset import (  # noqa: F401 (joint_index, _with_zero_offset: users)
+    _with_zero_offset,
+    commit_edit,
+    joint_index,
+    new_zero_offset,
+    parse_angle,
+    prepare_edit,
+)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -42,15 +48,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
     st.add_argument(
         "--positions",
         type=Path,
-        help="positions file (default: last_positions.yaml in run.log_dir)",
+        help="offline only: positions file (default: last_positions.yaml in run.log_dir)",
+    )
+    st.add_argument(
+        "--socket",
+        type=Path,
+        default=None,
+        help="the running service's control socket (default: service.socket or "
+        "/run/hofto-hw/control.sock when a service answers there; none: offline)",
     )
 
 
 def run(args: argparse.Namespace) -> int:
-    from hofto_hw.commands.run import _log_dir
     from hofto_hw.config import load_config
     from hofto_hw.config.locate import find_config
-    from hofto_hw.runtime.positions import load_positions, save_positions, state_path
+    from hofto_hw.runtime.control_client import running_service
 
     config_path = find_config(args.config)
     cfg = load_config(config_path)
@@ -58,12 +70,29 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{config_path}: bus: section missing: no drive zero offset to set")
     joints = list(cfg.robot.joints)
     j = joint_index(args.joint, joints)
-    try:
-        at = float(args.at)
-    except ValueError:
-        raise UserError(f"zero set: --at {args.at!r} is not a number [rad]") from None
-    if not math.isfinite(at):
-        raise UserError(f"zero set: --at must be a finite angle [rad], got {args.at}")
+    at = parse_angle(args.at)
+    sock = running_service(args.socket, cfg)
+    if sock is not None:
+        if args.positions is not None:
+            raise UserError("--positions: only offline; the running service reads the joint")
+        from hofto_hw.client import Refused, Robot, ServiceError
+
+        try:
+            with Robot.connect(socket=sock) as robot:
+                line = robot.zero_set(joints[j], at)
+        except (Refused, ServiceError) as exc:
+            raise UserError(f"zero set: {exc}") from None
+        print(f"zero set: {line}")
+        return 0
+    return _offline(args, config_path, cfg, j, at)
+
+
+def _offline(args: argparse.Namespace, config_path: Path, cfg, j: int, at: float) -> int:
+    """No service runs: against the positions stored at its last clean shutdown."""
+    from hofto_hw.commands.run import _log_dir
+    from hofto_hw.runtime.positions import load_positions, save_positions, state_path
+
+    joints = list(cfg.robot.joints)
     positions = args.positions or state_path(_log_dir(cfg, config_path))
     last = load_positions(positions)
     if last is None:
@@ -87,91 +116,19 @@ def run(args: argparse.Namespace) -> int:
             f"{positions}: {name} was read with zero_offset {last.zero_offsets[k]}, the config "
             f"has {drive.zero_offset}: the config changed since; restart the service first"
         )
-    counts_per_rad = drive.counts_per_rev * drive.gear_ratio / (2.0 * math.pi)
     stored = float(last.positions[k])
-    new = int(round(drive.zero_offset + drive.direction * (stored - at) * counts_per_rad))
-    text = config_path.read_text()
-    new_text = _with_zero_offset(text, j, new, config_path)
-    _check_edit(new_text, config_path, cfg, j, new)
-    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-    backup = config_path.with_name(f"{config_path.name}.bak-{stamp}")
-    shutil.copy2(config_path, backup)
-    from hofto_hw.runtime.positions import write_atomic
-
-    write_atomic(config_path, new_text)
+    new = new_zero_offset(drive, drive.zero_offset, stored, at)
+    new_text = prepare_edit(config_path, cfg, j, new)
+    what = (
+        f"{name} zero_offset {drive.zero_offset} -> {new} counts "
+        f"(stored position {stored:.6f} rad set to {at:.6f} rad)"
+    )
+    try:
+        line = commit_edit(config_path, new_text, positions.parent, what)
+    except OSError as exc:
+        raise UserError(f"zero set: {config_path}: not written ({exc.strerror})") from None
     last.positions[k] = at
     last.zero_offsets[k] = new
     save_positions(positions, last)
-    line = (
-        f"{stamp} {config_path}: {name} zero_offset {drive.zero_offset} -> {new} counts "
-        f"(stored position {stored:.6f} rad set to {at:.6f} rad); backup {backup.name}\n"
-    )
-    with open(positions.parent / "zero_changes.log", "a") as log:
-        log.write(line)
-    print(f"zero set: {line.strip()}")
+    print(f"zero set: {line}")
     return 0
-
-
-def joint_index(text: str, joints: list[str]) -> int:
-    if text in joints:
-        return joints.index(text)
-    if text.isdigit() and 1 <= int(text) <= len(joints):
-        return int(text) - 1
-    raise UserError(
-        f"zero set: --joint {text!r}: not one of {', '.join(joints)} or 1-{len(joints)}"
-    )
-
-
-def _with_zero_offset(text: str, j: int, value: int, source: Path) -> str:
-    """``text`` with ``bus.drives[j].zero_offset`` set to ``value`` (only that span edited)."""
-    try:
-        root = yaml.compose(text)
-    except yaml.YAMLError:
-        raise UserError(f"{source}: not valid YAML") from None
-
-    def child(node, key):
-        if not isinstance(node, yaml.MappingNode):
-            return None
-        for k, v in node.value:
-            if isinstance(k, yaml.ScalarNode) and k.value == key:
-                return k, v
-        return None
-
-    bus = child(root, "bus")
-    drives = child(bus[1], "drives") if bus else None
-    if drives is None or not isinstance(drives[1], yaml.SequenceNode) or j >= len(drives[1].value):
-        raise UserError(f"{source}: no bus.drives[{j}] in this file to rewrite (an included file?)")
-    item = drives[1].value[j]
-    if not isinstance(item, yaml.MappingNode) or not item.value:
-        raise UserError(f"{source}: bus.drives[{j}] is not a mapping")
-    found = child(item, "zero_offset")
-    if found is not None:
-        v = found[1]
-        return text[: v.start_mark.index] + str(value) + text[v.end_mark.index :]
-    if item.flow_style:
-        at = item.start_mark.index + 1
-        return text[:at] + f"zero_offset: {value}, " + text[at:]
-    first = item.value[0][0]
-    at = first.start_mark.index
-    return text[:at] + f"zero_offset: {value}\n" + " " * first.start_mark.column + text[at:]
-
-
-def _check_edit(new_text: str, source: Path, old, j: int, value: int) -> None:
-    """Load the edited text as a config: the one offset changed, nothing else."""
-    import tempfile
-
-    from hofto_hw.config import load_config
-
-    with tempfile.NamedTemporaryFile("w", suffix=".yaml", dir=source.parent, delete=True) as f:
-        f.write(new_text)
-        f.flush()
-        try:
-            cfg = load_config(Path(f.name))
-        except Exception as exc:
-            raise UserError(
-                f"{source}: the edited config does not load ({exc}); unchanged"
-            ) from None
-    want = old.model_dump()
-    want["bus"]["drives"][j]["zero_offset"] = value
-    if cfg.model_dump() != want:
-        raise UserError(f"{source}: editing zero_offset changed more than it; file unchanged")

@@ -20,7 +20,9 @@ Every word, ring counter and slot has exactly one writer, so neither side locks 
   the acceleration limits [rad/s²] it was planned within (a starved plan ramps down at
   them).
 - the state slot (a seqlock: ``STATE_SEQ`` odd while the loop writes it): the tick record of
-  the last tick and ``extra`` (float64 words ``X_*``).
+  the last tick and ``extra`` (float64 words ``X_*``, then the per-axis words: from
+  :data:`X_WORDS` safe torque off per axis (1.0 active), from ``X_WORDS + n`` the holding
+  brake per axis (:data:`BRAKE_CLOSED`, :data:`BRAKE_OPEN`, :data:`BRAKE_UNKNOWN`)).
 - ``wakeup_counts``, ``compute_counts``: the loop's timing histograms (1 µs bins,
   hofto_hw/runtime/timing.py), read by the control plane for ``status``.
 """
@@ -32,6 +34,9 @@ import numpy as np
 from hofto_hw.recording.record import EVENT_DTYPE, tick_dtype
 from hofto_hw.recording.ring import Ring, ring_nbytes
 from hofto_hw.recording.shared import Segment, remove_stale
+from hofto_hw.runtime.axes import BRAKE_CLOSED, BRAKE_OPEN, BRAKE_UNKNOWN
+
+__all__ = ["BRAKE_CLOSED", "BRAKE_OPEN", "BRAKE_UNKNOWN", "Channel"]
 
 CTL_WORDS = 64
 (STOP_SEQ, STOP_ACK, LEASE_NS, PLAN_ID, PLAN_ROWS, PLAN_HEAD, PLAN_TAIL_ID, PLAN_TAIL,
@@ -55,6 +60,9 @@ SOURCES = ("scripted", "digital_input", "socket")
 
 #: request kinds (REQUEST_DTYPE.kind)
 REQ_RESET, REQ_MODE, REQ_PLAY, REQ_PROFILE, REQ_PAYLOAD = 1, 2, 3, 4, 5
+#: homing (arg: bit mask of the axes, homed in order) and a new zero offset (arg: the axis,
+#: value[0]: its new zero offset [counts], value[1]: the one the request was computed with)
+REQ_HOME, REQ_ZERO = 6, 7
 #: REQ_PAYLOAD's ``value``: mass [kg], com (3) [m], then the tool link's new inertia (10
 #: numbers, hofto_hw.model.payload.LINK_NUMBERS) the control plane computed;
 #: REQ_PROFILE's: collision scale, drag mass, damping and speed scales
@@ -103,7 +111,7 @@ class Channel:
             ("plan_start", n * 8),
             ("plan_accel", n * 8),
             ("state_rec", _round8(self.rec_dtype.itemsize)),
-            ("extra", X_WORDS * 8),
+            ("extra", (X_WORDS + 2 * n) * 8),
             ("wakeup_counts", HIST_BINS * 8),
             ("compute_counts", HIST_BINS * 8),
         ]
@@ -139,7 +147,10 @@ class Channel:
         if create:
             self.plan_accel[:] = np.inf  # until a plan says: the robot's limits
         self.state_rec = np.ndarray((), self.rec_dtype, buf, off["state_rec"])
-        self.extra = np.ndarray((X_WORDS,), "<f8", buf, off["extra"])
+        self.extra = np.ndarray((X_WORDS + 2 * n,), "<f8", buf, off["extra"])
+        #: per axis: safe torque off (1.0 active) and the holding brake (BRAKE_*), views
+        self.sto = self.extra[X_WORDS : X_WORDS + n]
+        self.brake = self.extra[X_WORDS + n :]
         self.wakeup_counts = np.ndarray((HIST_BINS,), "<i8", buf, off["wakeup_counts"])
         self.compute_counts = np.ndarray((HIST_BINS,), "<i8", buf, off["compute_counts"])
 

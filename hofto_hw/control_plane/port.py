@@ -4,10 +4,14 @@ ticks (``Loop.run`` calls it after ``Tick.step``), never waits and allocates no 
 Per poll, in this order: the stop word (an operator stop is handled before anything else);
 the enabling lease (``drag.enable_input.source: socket``: the input is pressed while the
 lease the control plane renews has not expired; expiry is a release, category 2); the state
-slot (the tick record and the extra words); new stop-controller events; the answer of the
-request in progress, or the next request record. The tick itself still reads its request
-attributes (``stop_requested``, ``reset_requested``, ``mode_request``, ``record_request``,
-``play_request``, ``enable_input``), each written here only.
+slot (the tick record and the extra words; STO and brake per axis every 8th tick); new
+stop-controller events; the answer of the request in progress, or the next request record.
+Homing (REQ_HOME) is checked here and then run by the tick (``Tick.start_homing``,
+hofto_hw/runtime/homing_run.py); a new zero offset (REQ_ZERO) is checked and taken here,
+between two ticks (``Tick.rezero``); the config file is the control plane's. The tick itself
+still reads its request attributes (``stop_requested``, ``reset_requested``,
+``mode_request``, ``record_request``, ``play_request``, ``enable_input``), each written here
+only.
 
 Plans arrive as rows in the channel's plan ring (:class:`StreamPlayer` reads one per tick);
 a taught path leaves through the taught ring (:class:`StreamRecording`).
@@ -22,13 +26,18 @@ import numpy as np
 
 from hofto_hw.control.joint_motion import DRAG, HOLD, MODE_NAMES, MOVE, MOVE_TO, REPLAY
 from hofto_hw.control_plane import channel as ch
+from hofto_hw.runtime.axes import AxesState
+from hofto_hw.runtime.homing_run import LoopHoming, homing_plans, write_homing_objects
 from hofto_hw.runtime.teach import RECORDING
 from hofto_hw.runtime.tick import STANDSTILL
 from hofto_hw.runtime.timing import Histogram
 from safety.stop import EventKind
 
+#: the per-axis STO and brake words are refreshed every 8th tick (3.7 µs a fill measured on
+#: this machine; what the tick acts on it reads itself, these are for status and state())
+AXES_EVERY_MASK = 7
 STARVED = 2  # StreamPlayer.step: the next row is not there yet (JointMotion ramps down)
-_NO_REQ, _RESET_WAIT, _RESET_ANSWER, _MODE_ANSWER = 0, 1, 2, 3
+_NO_REQ, _RESET_WAIT, _RESET_ANSWER, _MODE_ANSWER, _HOME_ANSWER = 0, 1, 2, 3, 4
 
 
 class StreamPlayer:
@@ -183,6 +192,13 @@ class LoopPort:
         acc = getattr(system, "acceleration", None)
         self.extra[ch.X_ACCEL] = -1 if acc is None else accel_bits(acc)
         self._swap = _link_swap(system.model)
+        self.axes = AxesState(system)  # STO and brake per axis into the channel's words
+        # homing through the service: the objects written now, before the loop runs
+        group = tick.group
+        plans = homing_plans(system.cfg, group, group.transport.cycle_time)
+        write_homing_objects(group.transport, plans)
+        self.homing = LoopHoming(group, plans)
+        self._mode_pdo = group.present("mode") & group.present("mode_display")
         self._state = _NO_REQ
         self._seq = 0
         self._reset_at = 0
@@ -250,6 +266,8 @@ class LoopPort:
         x[ch.X_WAKE_MAX] = self.loop.wakeup.max
         x[ch.X_COMP_MAX] = self.loop.compute.max
         x[ch.X_MOVING] = 0.0 if motion.mode == HOLD and motion._still else 1.0
+        if not tick.tick & AXES_EVERY_MASK:  # slow signals for status: every 8th tick
+            self.axes.fill(self.chan.sto, self.chan.brake)
         ctl[ch.STATE_SEQ] = seq + 1
         ctl[ch.TICKS] = self.loop.ticks
         tick.wakeup_p99_us = self.fctl[ch.WAKE_P99]
@@ -306,7 +324,69 @@ class LoopPort:
         if kind == ch.REQ_MODE or kind == ch.REQ_PLAY:
             self._mode(kind, int(r["mode"]), int(r["arg"]), int(r["flag"]))
             return
+        if kind == ch.REQ_HOME:
+            self._home(int(r["arg"]))
+            return
+        if kind == ch.REQ_ZERO:
+            self._zero(int(r["arg"]), float(r["value"][0]), float(r["value"][1]))
+            return
         self._reply(False, f"unknown request kind {kind}")
+
+    def _at_rest_refusal(self, what: str) -> str:
+        """Why ``what`` may not start now ("" when it may): anything latched or stopping,
+        the drives not enabled, a homing running, the arm not holding at rest."""
+        tick = self.tick
+        stop = tick.stop
+        if stop.latched or stop.category != -1 or tick.stop_requested:
+            names = ", ".join(stop.latched_names()) or "a stop"
+            return f"{what} refused: {names} latched: reset first"
+        if tick.enabling or not tick.expect_enabled:
+            return f"{what} refused: the drives are not enabled"
+        if tick.homing is not None:
+            return f"{what} refused: homing in progress"
+        motion = tick.motion
+        moving = float(np.abs(tick.group.qd).max()) >= STANDSTILL
+        if motion.mode != HOLD or not motion._still or moving:
+            return (
+                f"{what} refused: the arm is moving ({MODE_NAMES.get(motion.mode, '?')}); "
+                "hold at rest first"
+            )
+        return ""
+
+    def _home(self, mask: int) -> None:
+        """Home the axes of bit mask ``mask`` (in axis order) through the tick."""
+        why = self._at_rest_refusal("home")
+        axes = [a for a in range(self.tick.n) if mask >> a & 1]
+        names = self.tick.group.names
+        if not why and not axes:
+            why = "home refused: no axis named"
+        for a in axes:
+            if why:
+                break
+            if a not in self.homing.plans:
+                why = f"home refused: {names[a]} has homing: none (absolute encoder)"
+            elif not self._mode_pdo[a]:
+                why = (
+                    f"home refused: {names[a]}'s drive maps no mode of operation (0x6060/0x6061) "
+                    "in its PDOs: stop the service and run hofto-hw home"
+                )
+        if why:
+            self._reply(False, why)
+            return
+        self.homing.begin(axes)
+        self.tick.start_homing(self.homing)
+        self._state = _HOME_ANSWER
+
+    def _zero(self, axis: int, counts: float, was: float) -> None:
+        """A new zero offset of ``axis`` [counts], taken between two ticks at rest."""
+        why = self._at_rest_refusal("zero set")
+        if not why and float(self.tick.group.scaling.zero_offset[axis]) != was:
+            why = "zero set refused: the axis's zero offset changed since the request was made"
+        if why:
+            self._reply(False, why)
+            return
+        self.tick.rezero(axis, counts)
+        self._reply(True, "zero offset applied")
 
     def _moving(self) -> str:
         """Why the arm is not at standstill for a safety setting ('' when it is: holding,
@@ -430,6 +510,12 @@ class LoopPort:
             r = tick.mode_result
             if r:
                 self._reply(r in ("drag", "playing"), r)
+        elif st == _HOME_ANSWER and tick.homing is None:
+            h = self.homing
+            if h.result:
+                self._reply(False, h.result)
+            else:
+                self._reply(True, "homed: " + ", ".join(h.homed))
 
     def detach(self) -> None:
         """Before the channel is unmapped: the loop stops polling and keeps copies of its

@@ -257,8 +257,9 @@ def main() -> int:
     if fd is not None:
         listener = socket.socket(fileno=fd)
     server = ControlPlane(
-        listener, chan, cfg, model, observer_names=observers, log_path=log_path, recorder=recorder
-    )
+        listener, chan, cfg, model, observer_names=observers, config_path=config_path,
+        log_path=log_path, recorder=recorder,
+    )  # fmt: skip
     # what is built by now (config, model, imports: most of the heap) lives until exit: out
     # of the collector's sight, so a full collection during a flood of requests walks only
     # the objects made since (tens of ms less on a stop's answer)

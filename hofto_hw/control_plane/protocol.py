@@ -50,6 +50,8 @@ COMMANDS: dict[str, dict[str, tuple[tuple[type, ...], bool]]] = {
     "stream_info": {},
     "set_safety_profile": {"name": ((str,), True)},
     "set_payload": {"mass": (_FLOAT, True), "com": ((list,), True)},
+    "home": {"joints": ((list,), False)},
+    "zero_set": {"joint": ((str, int), True), "at": (_FLOAT, True)},
 }
 #: commands that move the arm or hold the enabling input: one client at a time
 MOTION = frozenset(
@@ -62,6 +64,8 @@ MOTION = frozenset(
         "enable",
         "set_safety_profile",
         "set_payload",
+        "home",
+        "zero_set",
     }
 )
 

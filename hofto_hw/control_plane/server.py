@@ -44,7 +44,9 @@ from hofto_hw.control_plane import channel as ch
 from hofto_hw.control_plane import protocol as pr
 from hofto_hw.errors import UserError
 from hofto_hw.runtime import teach
+from hofto_hw.runtime.axes import axes_of
 from hofto_hw.runtime.timing import percentile_of, summarize
+from hofto_hw.runtime.zero_offset import joint_index
 from safety.stop import EVENT_NAMES, FAULT_NAMES, N_FAULTS
 
 LINES_PER_TURN = 8
@@ -91,6 +93,7 @@ class LoopJob:
     seq: int = 0
     sent_at: float = 0.0
     done: Any = None  # callable(ok, text) -> reply dict, or None
+    timeout: float = 5.0  # [s] the loop answers within (LOOP_ANSWER_TIMEOUT; homing: longer)
 
 
 class ControlPlane:
@@ -105,6 +108,7 @@ class ControlPlane:
         model: Any,
         *,
         observer_names: list[str],
+        config_path: Path | str | None = None,
         log_path: str | None = None,
         recorder: dict[str, Any] | None = None,
         max_clients: int = 16,
@@ -116,6 +120,11 @@ class ControlPlane:
         self.cfg = cfg
         self.model = model
         self.observer_names = list(observer_names)
+        #: the service's config file (zero set rewrites it; None: nothing to rewrite)
+        self.config_path = None if config_path is None else Path(config_path)
+        bus = getattr(cfg, "bus", None)
+        #: the zero offsets [counts] the loop runs with (zero set changes them)
+        self.zero = [] if bus is None else [int(d.zero_offset) for d in bus.drives]
         self.rate_hz = float(cfg.loop.rate_hz)
         self.log_path = log_path
         self.recorder_info = recorder
@@ -484,6 +493,10 @@ class ControlPlane:
             self._set_payload(c, req)
         elif cmd in ("replay", "move_joints", "move_linear"):
             self._plan_request(c, req)
+        elif cmd == "home":
+            self._home(c, req)
+        elif cmd == "zero_set":
+            self._zero_set(c, req)
         else:  # pragma: no cover - protocol.COMMANDS and this table agree
             self._send(c, {"ok": False, "message": f"{cmd}: not served"}, req)
 
@@ -636,6 +649,165 @@ class ControlPlane:
 
         self._queue(LoopJob(c, req, ch.REQ_MODE, mode=_MODE_CODE[what], done=after))
 
+    # ------------------------------------------------------------------ commissioning
+
+    def _joint(self, v: str | int, what: str) -> int:
+        """A joint by name or 1-based number -> its index (UserError naming the choices)."""
+        names = list(self.model.joint_names)
+        if isinstance(v, int) and not isinstance(v, bool):
+            v = str(v)
+        return joint_index(str(v), names, what)
+
+    def _at_rest_refusal(self, what: str) -> str:
+        """What the state slot says against ``what`` now ("" when nothing); the loop checks
+        again when it takes the request."""
+        got = self.chan.read_state()
+        if got is None:
+            return f"{what} refused: the loop has not started"
+        rec, x = got
+        if int(rec["faults"]) or x[ch.X_STOPPING]:
+            names = ", ".join(self._faults(int(rec["faults"]))) or "a stop"
+            return f"{what} refused: {names} latched: reset first"
+        if x[ch.X_MOVING] or float(np.abs(rec["qd"]).max()) >= 0.01:
+            return f"{what} refused: the arm is moving; hold at rest first"
+        return ""
+
+    def _home(self, c: Conn, req: dict[str, Any]) -> None:
+        """CiA 402 homing of the named joints (default: every joint with ``homing:``) by
+        the loop, one after the other in axis order, back to the loop's mode."""
+        bus = self.cfg.bus
+        if bus is None:
+            raise UserError("home: the config has no bus: section: no drive to home")
+        names = list(self.model.joint_names)
+        if req.get("joints"):
+            axes = sorted({self._joint(v, "home") for v in req["joints"]})
+            for j in axes:
+                if bus.drives[j].homing is None:
+                    raise UserError(
+                        f"home: bus.drives[{j}].homing: none: {names[j]} has an absolute "
+                        "encoder, nothing to home"
+                    )
+        else:
+            axes = [i for i, d in enumerate(bus.drives) if d.homing is not None]
+        if not axes:
+            msg = "every axis has homing: none (absolute encoders): nothing to home"
+            self._send(c, {"ok": True, "message": msg}, req)
+            return
+        why = self._at_rest_refusal("home")
+        if why:
+            self._send(c, {"ok": False, "message": why}, req)
+            return
+        seconds = sum(bus.drives[j].homing.timeout for j in axes)  # type: ignore[union-attr]
+        self._queue(
+            LoopJob(
+                c, req, ch.REQ_HOME, arg=sum(1 << j for j in axes),
+                timeout=LOOP_ANSWER_TIMEOUT + 2.0 * seconds,
+            )
+        )  # fmt: skip
+
+    def _zero_set(self, c: Conn, req: dict[str, Any]) -> None:
+        """Rewrite a joint's zero offset so its measured position reads ``at`` [rad]: the
+        edit is prepared and checked here, the loop takes the new offset at a tick boundary
+        (refused while moving or latched), then the config is replaced (backup kept) and
+        the change logged, here: no file is touched in the loop's process."""
+        from hofto_hw.config import load_config
+        from hofto_hw.runtime import zero_offset as zo
+
+        bus = self.cfg.bus
+        if bus is None:
+            raise UserError("zero set: the config has no bus: section: no zero offset to set")
+        path = self.config_path
+        if path is None:
+            raise UserError("zero set: this service was started without a config file")
+        j = self._joint(req["joint"], "zero set")
+        at = zo.parse_angle(req["at"])
+        name = self.model.joint_names[j]
+        drive = bus.drives[j]
+        if drive.homing is not None:
+            msg = (
+                f"zero set refused: {name} is homed (homing: method {drive.homing.method}): its "
+                "zero comes from homing; change homing.offset"
+            )
+            self._send(c, {"ok": False, "message": msg}, req)
+            return
+        why = self._at_rest_refusal("zero set")
+        if why:
+            self._send(c, {"ok": False, "message": why}, req)
+            return
+        old = self.zero[j]
+        disk = load_config(path)
+        if disk.bus is None or disk.bus.drives[j].zero_offset != old:
+            have = None if disk.bus is None else disk.bus.drives[j].zero_offset
+            raise UserError(
+                f"{path}: bus.drives[{j}].zero_offset is {have}, the service runs with {old}: "
+                "the file changed since it started; restart the service first"
+            )
+        got = self.chan.read_state()
+        assert got is not None  # _at_rest_refusal read one
+        q = float(got[0]["q"][j])
+        new = zo.new_zero_offset(drive, old, q, at)
+        text = zo.prepare_edit(path, disk, j, new)
+        log_folder = self._log_dir()
+
+        def applied(ok: bool, reason: str) -> dict[str, Any] | None:
+            if not ok:
+                return {"ok": False, "message": reason}
+            what = (
+                f"{name} zero_offset {old} -> {new} counts (position {q:.6f} rad set to "
+                f"{at:.6f} rad, through the service)"
+            )
+            try:
+                line = zo.commit_edit(path, text, log_folder, what)
+            except OSError as exc:  # the loop runs with the new offset: put the old one back
+                err = f"zero set: {path}: not written ({exc.strerror})"
+
+                def back(ok2: bool, reason2: str) -> dict[str, Any]:
+                    tail = (
+                        "; the old offset is back" if ok2 else f"; restoring it failed: {reason2}"
+                    )
+                    return {"ok": False, "message": err + tail}
+
+                self._queue(LoopJob(c, req, ch.REQ_ZERO, arg=j, value=(old, new), done=back))
+                return None
+            self.zero[j] = new
+            self._shift_stored_position(log_folder, name, new, old, drive)
+            print(f"hofto-hw run: zero set: {line}", flush=True)
+            return {"ok": True, "message": line, "zero_offset": new, "previous": old}
+
+        self._queue(LoopJob(c, req, ch.REQ_ZERO, arg=j, value=(new, old), done=applied))
+
+    def _log_dir(self) -> Path:
+        from hofto_hw.commands.run import _log_dir
+
+        assert self.config_path is not None
+        return _log_dir(self.cfg, self.config_path)
+
+    def _shift_stored_position(
+        self, folder: Path, name: str, new: int, old: int, drive: Any
+    ) -> None:
+        """The positions file of the last clean shutdown read with the new offset (so a
+        start-up after a crash compares like with like); absent: nothing to do."""
+        from hofto_hw.runtime.positions import load_positions, save_positions, state_path
+
+        path = state_path(folder)
+        try:
+            last = load_positions(path)
+        except UserError:
+            return
+        if last is None or name not in last.joints:
+            return
+        k = last.joints.index(name)
+        if last.zero_offsets[k] != old:
+            return
+        from hofto_hw.runtime.zero_offset import shift_of
+
+        last.positions[k] += shift_of(drive, old, new)
+        last.zero_offsets[k] = new
+        try:
+            save_positions(path, last)
+        except OSError:
+            pass
+
     # ------------------------------------------------------------------ the loop's ring
 
     def _queue(self, job: LoopJob) -> None:
@@ -681,7 +853,7 @@ class ControlPlane:
             reply = job.done(ok, text) if job.done else {"ok": ok, "message": text}
             self._answer(job, reply)
         job = self.inflight
-        if job is not None and now - job.sent_at > LOOP_ANSWER_TIMEOUT:
+        if job is not None and now - job.sent_at > job.timeout:
             self.inflight = None
             self._answer(job, {"ok": False, "message": "the loop did not answer the request"})
         self._send_next()
@@ -949,7 +1121,15 @@ class ControlPlane:
             "profile": self._profile_status(x),
             "payload": dict(self.payload),
             "acceleration": _acceleration(int(x[ch.X_ACCEL])),
+            "axes": self._axes(x),
         }
+
+    def _axes(self, x: np.ndarray) -> list[dict[str, Any]]:
+        """Per axis: name, safe torque off (bool), holding brake (closed/open/None)."""
+        n = self.chan.n
+        return axes_of(
+            list(self.model.joint_names), x[ch.X_WORDS : ch.X_WORDS + n], x[ch.X_WORDS + n :]
+        )
 
     def _profile_status(self, x: np.ndarray) -> dict[str, Any] | None:
         name, content = self.active_profile(x)
@@ -1089,6 +1269,7 @@ class ControlPlane:
             },
             "profile": self._profile_status(x),
             "payload": dict(self.payload),
+            "axes": self._axes(x),
             "overruns": int(x[ch.X_OVERRUNS]),
             "timing_us": {
                 "wakeup_us": float(rec["wakeup_us"]),

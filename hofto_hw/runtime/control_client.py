@@ -20,6 +20,33 @@ def add_socket_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def running_service(socket: Path | None, cfg: object = None) -> Path | None:
+    """The control socket of a running service for a command that can go through it or
+    work offline (``home``, ``zero set``): ``socket`` when given (UserError, one line, when
+    nothing answers there), else the config's ``service.socket`` or the default socket when a
+    service listens there, else None (no service: the command works offline)."""
+    import socket as _socket
+
+    def live(path: Path) -> bool:
+        with _socket.socket(_socket.AF_UNIX, _socket.SOCK_STREAM) as probe:
+            probe.settimeout(1.0)
+            try:
+                probe.connect(str(path))
+            except OSError:
+                return False
+        return True
+
+    if socket is not None:
+        if not live(socket):
+            raise UserError(f"--socket {socket}: no service answers there")
+        return socket
+    service = getattr(cfg, "service", None)
+    for path in (getattr(service, "socket", None), DEFAULT_SOCKET):
+        if path is not None and Path(path).exists() and live(Path(path)):
+            return Path(path)
+    return None
+
+
 def request_of(line: str) -> dict[str, Any]:
     """A request in words (``status``, ``mode move``, ``enable on``, ``mode drag --record F``,
     ``mode replay F``, ``mode move-to q1,...,qn``; words split at blanks) -> its JSON form."""

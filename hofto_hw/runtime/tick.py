@@ -200,6 +200,9 @@ class Tick:
         self.reset_requested = False
         self.reset_result = ""
         self.mode_request = -1
+        #: homing run by the loop (hofto_hw/runtime/homing_run.py), set by the control plane's
+        #: port through start_homing, None when none runs
+        self.homing: Any = None
         self._fault_resetting = 0
         self._edges_tried = False
         # stop episodes: first tick, time and distance to standstill
@@ -368,6 +371,9 @@ class Tick:
     def _safety(self, status: int, dt: float) -> None:
         """Section 4 up to the collision monitor's decision (and the friction learning)."""
         g, stop, motion, snap = self.group, self.stop, self.motion, self.snapshot
+        if self.homing is not None and self.homing.step(self):  # before the limit checks
+            self.homing = None
+            self.restart_estimates()
         q, qd, tau = g.q, g.qd, g.tau
         st = self.st
         obs_dt = float(st["sample_dt"])
@@ -392,6 +398,7 @@ class Tick:
         # from drives that report no fault (a failed encoder freezes its position); an
         # observer with poles at a few hundred rad/s reads either as a contact
         trusted = ok and good and not stop.active & _DRIVE_CAUSES and not self.enabling
+        trusted = trusted and self.homing is None  # the drive moves a homing axis, not we
         monitored = (
             self.collision is not None and trusted and judged(self.tick, self._judge_from, flags)
         )
@@ -556,6 +563,7 @@ class Tick:
             and stop.latched == 0
             and stop.category == NO_CATEGORY
             and not self.enabling
+            and self.homing is None
             and not self._measuring
             and not self.drag_reason
             and not self._wrench_set
@@ -697,6 +705,38 @@ class Tick:
             self._enable_ticks = 0
             self._released = False  # the brakes open again: their check again
             self._release_running = 0
+
+    def start_homing(self, homing: Any) -> None:
+        """Run ``homing`` (a begun hofto_hw.runtime.homing_run.LoopHoming) from the next tick
+        (between ticks: the control plane's port, after its checks)."""
+        self.homing = homing
+        self._fuse_quiet = False
+
+    def rezero(self, axis: int, counts: float) -> None:
+        """Between ticks: encoder count ``counts`` is joint angle 0 of ``axis`` from now on
+        (``hofto-hw zero set`` through the service, at rest). The reference, the last
+        command and the monitored position move with the reading, so the drive's target in
+        counts is unchanged; the observers start again from the new reading."""
+        shift = self.group.set_zero_offset(axis, counts)
+        self.motion.q[axis] += shift
+        self.motion.version += 1
+        self.q_sent[axis] += shift
+        self._fuse_quiet = False
+        self.restart_estimates()
+
+    def restart_estimates(self) -> None:
+        """After the joint reading moved under the estimators (homing, a new zero; rare:
+        may allocate): the snapshot's memory, the observers, the limit monitor's last
+        position start from the measured state; the collision monitor judges again after
+        the settling time."""
+        g = self.group
+        self.snapshot.reset_memory()
+        for obs in self.observers:
+            obs.reset(g.q, g.qd)
+        self._check_bank()
+        self._keep_sample(g.q, g.qd, g.tau)
+        self.limits.reset(g.q)
+        self._judge_from = self.tick + 1 + self.settle_ticks
 
     def _enable_step(self) -> None:
         """Walk every axis toward Operation enabled, one controlword per tick (bumpless:
