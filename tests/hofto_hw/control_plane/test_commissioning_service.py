@@ -49,6 +49,16 @@ def _at_rest(robot: Robot) -> bool:
     return s.mode == "hold" and not s.moving and float(np.abs(s.qd).max()) < 0.01
 
 
+def _move_if_still(robot: Robot, q: np.ndarray) -> object:
+    """The move's handle, or None while the loop refuses it for not holding still."""
+    try:
+        return robot.move_joints(q, speed=0.2, wait=False)
+    except Refused as exc:
+        if "not holding at standstill" in str(exc):
+            return None
+        raise
+
+
 def _cli(capsys, *argv: object) -> tuple[int, str, str]:
     code = main([str(a) for a in argv])
     out, err = capsys.readouterr()
@@ -99,7 +109,12 @@ def test_home_and_zero_set_refused_while_latched_moving_or_held(service: Service
         wait_for(lambda: robot.state().faults == [] and _at_rest(robot), "reset")
         # moving: a move to a target and back, refused on the way
         s = robot.state()
-        m = robot.move_joints(s.q_cmd + np.array([0.3, 0, 0, 0, 0, 0]), speed=0.2, wait=False)
+        # the re-enable after the reset sways the arm for a few ticks (> 0.01 rad/s): the
+        # move is accepted once the loop sees it holding still
+        m = wait_for(
+            lambda: _move_if_still(robot, s.q_cmd + np.array([0.3, 0, 0, 0, 0, 0])),
+            "a move accepted after the reset",
+        )
         wait_for(lambda: robot.state().moving, "moving")
         with pytest.raises(Refused, match="moving"):
             robot.home()
