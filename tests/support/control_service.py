@@ -29,9 +29,11 @@ def socket_config(tmp: Path, collision_start: float | None = None) -> Path:
     # the shared 2-core machine runs other engineers' SCHED_FIFO 50 loops (up to five at once,
     # 10-37 % CPU each, seen 2026-11-27), which a FIFO 50 loop cannot preempt; with them
     # tools/bench_control.py measured the longest wake-up stall of a quiet phase at 1.9 ms in
-    # one run and 103 ms in the next, so 20 would latch on the machine's own stalls. What the
-    # control plane must never cause (a request parsed or a path planned in the loop's
-    # process: seconds) still latches it
+    # one run and 103 ms in the next (and a quiet service of these tests latched even 100, at
+    # t = 9.6 s, before any client had sent a request; the code before this change did the
+    # same there, its loop's longest wake-up 103 ms), so 20 would latch on the machine's
+    # own stalls. What the control plane must never cause (a request parsed or a path
+    # planned in the loop's process: seconds) still latches it
     data["safety"]["overrun_streak"] = 100
     data["run"].pop("drag", None)
     if collision_start is not None:
