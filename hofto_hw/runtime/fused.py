@@ -78,7 +78,6 @@ def tick_state_dtype(n: int, k: int) -> np.dtype:
     return np.dtype(
         [
             ("t_cmd", f8),  # setpoint (path) time [s]
-            ("cmd_dt", f8),  # this tick's setpoint step [s] (tick_kernels.command_dt)
             ("since_fresh", f8),  # [s] since the last fresh sample
             ("sample_dt", f8),  # the interval the observers integrated this tick [s]
             ("monitored", b1),  # the tick record's ``monitored`` (written when it changes)
@@ -170,7 +169,7 @@ def fused_tick(
     period = ts["period"]
     cmd_dt = _command_dt(dt, period)
     t_cmd = ts["t_cmd"] + cmd_dt
-    ts["t_cmd"], ts["cmd_dt"] = t_cmd, cmd_dt
+    ts["t_cmd"] = t_cmd
     ts["sample_dt"] = obs_dt
     ts["finite"] = finite
     # 4. safety (good data: the caller checked the status; no fault latched or active)
@@ -230,42 +229,60 @@ def fused_tick(
 
 
 def hot_dtype(t: Tick) -> np.dtype:
-    """The tick's one hot record: its state (:func:`tick_state_dtype`) and the parts' hot
-    arrays (:func:`hot_arrays`) as fields of their own dtypes and shapes."""
-    fields: list[tuple[Any, ...]] = []
-    for name, _, _, arr in hot_arrays(t):
-        if arr.dtype.names:  # a record (1,): a nested record field
-            fields.append((name, arr.dtype))
+    """The tick's one hot record: its state (:func:`tick_state_dtype`) and, as fields of
+    their own dtypes and shapes, the hot arrays of its parts (:func:`hot_arrays`). Every
+    field starts on a 16-byte boundary: a part's record dtype is packed (alignment 1), and
+    an array moved to an unaligned address would be another type to numba (a compile in the
+    loop at its first call from Python) and slower to numpy."""
+    names, formats, offsets, at = [], [], [], 0
+    for name, arr in [("tick", t.state), *hot_arrays(t)]:
+        if arr.dtype.names:  # a part's record (1,): a nested record field
+            fmt = arr.dtype
         else:  # numba has no boolean subarray fields: booleans as their bytes
-            fields.append((name, np.uint8 if arr.dtype == np.bool_ else arr.dtype, arr.shape))
-    return np.dtype(fields, align=True)
+            fmt = np.dtype((np.uint8 if arr.dtype == np.bool_ else arr.dtype, arr.shape))
+        at = -(-at // 16) * 16
+        names.append(name)
+        formats.append(fmt)
+        offsets.append(at)
+        at += fmt.itemsize
+    size = -(-at // 16) * 16
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": size})
 
 
-def hot_arrays(t: Tick) -> list[tuple[str, Any, str, np.ndarray]]:
-    """(field, owner, attribute, array) of the tick's state and of each part's array the fused
-    call reads and writes; owner None: a stand-in of the right type for a part the tick does
-    not have (the call reads it only with the state's has_coll / has_learn)."""
-    g, snap, ff, m, c, fr = t.group, t.snapshot, t.feedforward, t.motion, t.collision, _learn(t)
-    own = [("tick", t, "state"), ("si", g, "_si"), ("states", g, "states"), ("snap_w", snap, "_W")]
-    own += [("snap_o", snap, "_O"), ("ff_w", ff, "_W"), ("lim", t.limits, "_w")]
-    own += [("motion", m, "state"), ("path", m.path, "_k") if _path_ok(m.path) else None]
-    own += [("coll", c.state, "record"), ("bbuf", c.state, "bbuf")] if c is not None else []
-    own += [("learn", fr, "record")] if fr is not None else []
-    out = [(f, o, a, getattr(o, a)) for f, o, a in filter(None, own)]
-    n, k, f8 = t.n, max(1, len(t.observers)), np.float64
-    stand = {
-        "path": np.zeros((1, n)),
-        "coll": np.zeros(1, [("fbuf", f8, (1,)), ("first_tick", np.int64, (k,))]),
-        "bbuf": np.zeros(1, dtype=bool),
-        "learn": np.zeros(1, [("S", f8, (n, 3, 3)), ("b", f8, (n, 3)), ("st", f8, (3,))]),
-    }
-    have = {f for f, *_ in out}
-    return out + [(f, None, "", arr) for f, arr in stand.items() if f not in have]
+def hot_arrays(t: Tick) -> list[tuple[str, np.ndarray]]:
+    """The parts' arrays the fused call reads and writes (name: the hot record's field), and
+    the owners that may hold views of them (:func:`relocate`'s ``holders``)."""
+    g, snap, ff, m = t.group, t.snapshot, t.feedforward, t.motion
+    out = [
+        ("si", g._si), ("states", g.states), ("snap_w", snap._W), ("snap_o", snap._O),
+        ("ff_w", ff._W), ("lim", t.limits._w), ("motion", m.state),
+    ]  # fmt: skip
+    c = t.collision
+    # absent parts: small stand-ins of the right types (the call checks has_coll/has_learn)
+    if c is not None:
+        out += [("coll", c.state.record), ("bbuf", c.state.bbuf)]
+    else:
+        k = max(1, len(t.observers))
+        stand = np.dtype([("fbuf", np.float64, (1,)), ("first_tick", np.int64, (k,))])
+        out += [("coll", np.zeros(1, stand)), ("bbuf", np.zeros(1, dtype=bool))]
+    fr = _learning(t)
+    if fr is not None:
+        out.append(("learn", fr.record))
+    else:
+        n = t.n
+        stand = np.dtype([("S", np.float64, (n, 3, 3)), ("b", np.float64, (n, 3)),
+                          ("st", np.float64, (3,))])  # fmt: skip
+        out.append(("learn", np.zeros(1, stand)))
+    p = m.path
+    out.append(("path", p._k if _path_ok(p) else np.zeros((1, t.n))))
+    return out
 
 
-def _learn(t: Tick) -> Any:
+def _learning(t: Tick) -> Any:
     """The drag's friction learning the tick runs outside drag mode, or None."""
-    return t.drag.friction if t._learn is not None and t.drag is not None else None
+    if t._learn is not None and t.drag is not None:
+        return t.drag.friction
+    return None
 
 
 def _path_ok(p: Any) -> bool:
@@ -273,60 +290,78 @@ def _path_ok(p: Any) -> bool:
     return p is not None and p._use_kernel and p._eval is path_eval
 
 
+def _holders(t: Tick) -> list[Any]:
+    """Every object that may hold a view of a hot array (its attributes, tuples, partials)."""
+    snap, ff = t.snapshot, t.feedforward
+    out = [t, t.group, snap, getattr(snap, "data", None), ff, t.limits, t.motion]
+    out += [t.motion.path, t.collision, getattr(t.collision, "state", None)]
+    out += [t.drag, _learning(t)]
+    return [o for o in out if o is not None]
+
+
 def relocate(t: Tick, hot: np.ndarray) -> list[tuple[Any, str, np.ndarray]]:
     """Move the tick's state and its parts' hot arrays into ``hot`` (a zeroed (1,) record of
     :func:`hot_dtype`): each array's numbers are copied into its field, and every attribute of
-    the owners (the parts and the objects around them) that views one of them (an array, in a
-    tuple or a partial's arguments) is replaced by the same view into ``hot`` (one new view
-    per old one: identities between the parts stay). Raises ValueError, before moving
-    anything, when an owner keeps such a view in a list or dict. Returns (owner, attribute,
-    array) of each part's array (:meth:`FusedTick.bound`)."""
-    arrays = hot_arrays(t)
-    buf, base = hot.view(np.uint8), hot.ctypes.data
-    fields = [hot[f] if a.dtype.names else hot[f][0] for f, _, _, a in arrays]
+    the holders (:func:`_holders`) that views one of them (an array, a tuple's or a partial's
+    array) is replaced by the same view into ``hot`` (one new view per old one: identities
+    between the parts stay). Returns (owner, attribute, array) of each part's array, which
+    :meth:`FusedTick.bound` checks later."""
+    buf = hot.view(np.uint8)
+    base = hot.ctypes.data
+    olds = [("tick", t.state)] + hot_arrays(t)
+    fields = [hot[name][0] if old.dtype.names is None else hot[name] for name, old in olds]
     spans = [
-        (a.ctypes.data, a.ctypes.data + a.nbytes, f.ctypes.data - base)
-        for (_, _, _, a), f in zip(arrays, fields, strict=True)
+        (old.ctypes.data, old.ctypes.data + old.nbytes, f.ctypes.data - base)
+        for (_, old), f in zip(olds, fields, strict=True)
     ]
-    snap, c = t.snapshot, t.collision
-    holders = [t, t.group, snap, getattr(snap, "data", None), t.feedforward, t.limits]
-    holders += [t.motion, t.motion.path, c, getattr(c, "state", None), t.drag, _learn(t)]
-    holders = [o for o in holders if o is not None]
-
-    def inside(x: Any) -> bool:
-        return isinstance(x, np.ndarray) and any(lo <= x.ctypes.data < hi for lo, hi, _ in spans)
-
-    for o in holders:
-        for attr, v in getattr(o, "__dict__", {}).items():
-            if isinstance(v, dict | list | set) and any(
-                map(inside, getattr(v, "values", v.__iter__)())
-            ):
-                raise ValueError(f"{type(o).__name__}.{attr} holds a hot array in a container")
-    for (_, _, _, a), f in zip(arrays, fields, strict=True):
-        np.copyto(f.view(a.dtype), a)
+    for owner in _holders(t):  # before anything moves: a view we could not rebind
+        for attr, v in getattr(owner, "__dict__", {}).items():
+            for x in v if isinstance(v, list | set) else v.values() if isinstance(v, dict) else ():
+                if isinstance(x, np.ndarray) and any(
+                    lo <= x.ctypes.data < hi for lo, hi, _ in spans
+                ):
+                    raise ValueError(
+                        f"{type(owner).__name__}.{attr} holds a hot array in a container"
+                    )
+    for (_, old), f in zip(olds, fields, strict=True):
+        np.copyto(f.view(old.dtype) if f.dtype != old.dtype else f, old)
     memo: dict[int, tuple[Any, Any]] = {}
 
     def moved(v: Any) -> Any:
+        if isinstance(v, np.ndarray) and v.nbytes:
+            if id(v) in memo:
+                return memo[id(v)][1]
+            p = v.ctypes.data
+            for lo, hi, at in spans:
+                if lo <= p < hi:
+                    nv = np.ndarray(v.shape, v.dtype, buf, at + p - lo, v.strides)
+                    memo[id(v)] = (v, nv)
+                    return nv
+            return v
         if isinstance(v, tuple):
             new = tuple(moved(x) for x in v)
             return new if any(a is not b for a, b in zip(new, v, strict=True)) else v
         if isinstance(v, partial):
             args = moved(v.args)
             return v if args is v.args else partial(v.func, *args, **v.keywords)
-        if not (inside(v) and v.nbytes):
-            return v
-        if id(v) not in memo:
-            lo, _, at = next(sp for sp in spans if sp[0] <= v.ctypes.data < sp[1])
-            nv = np.ndarray(v.shape, v.dtype, buf, at + v.ctypes.data - lo, v.strides)
-            memo[id(v)] = (v, nv)
-        return memo[id(v)][1]
+        return v
 
-    for o in holders:
-        for attr, v in list(getattr(o, "__dict__", {}).items()):
-            if (nv := moved(v)) is not v:
-                setattr(o, attr, nv)
+    for owner in _holders(t):
+        for attr, v in list(getattr(owner, "__dict__", {}).items()):
+            nv = moved(v)
+            if nv is not v:
+                setattr(owner, attr, nv)
     t.st = t.state[0]
-    return [(o, a, getattr(o, a)) for _, o, a, _ in arrays if o is not None]
+    g, snap, ff, c, fr, m = t.group, t.snapshot, t.feedforward, t.collision, _learning(t), t.motion
+    kept = [(t, "state"), (g, "_si"), (g, "states"), (snap, "_W"), (snap, "_O"), (ff, "_W")]
+    kept += [(t.limits, "_w"), (m, "state")]
+    if c is not None:
+        kept += [(c.state, "record"), (c.state, "bbuf")]
+    if fr is not None:
+        kept.append((fr, "record"))
+    if _path_ok(m.path):
+        kept.append((m.path, "_k"))
+    return [(o, a, getattr(o, a)) for o, a in kept]
 
 
 _SAID: list[str] = []
@@ -392,7 +427,7 @@ class FusedTick:
         c = t.collision
         if c is not None and (not c._use_kernel or c._tool is not None):
             return "the collision monitor runs its numpy path or a tool-force check"
-        fr = _learn(t)
+        fr = _learning(t)
         if fr is not None and not fr._use_kernel:
             return "the friction learning runs its numpy path"
         ff = t.feedforward
@@ -409,16 +444,20 @@ class FusedTick:
         st["snap_h"] = t.snapshot._native.handle  # type: ignore[union-attr]
         st["ff_h"] = t.feedforward._native.handle  # type: ignore[union-attr]
         st["has_coll"] = t.collision is not None
-        fr = _learn(t)
+        fr = _learning(t)
         st["has_learn"] = fr is not None
         if fr is not None:
             st["l_row"], st["l_vs"], st["l_tau"] = t.drag_row, fr.v_s, fr.tau
             st["l_min"], st["l_every"] = fr.min_speed, fr.every
         p = self.path = m.path
-        self.path_ok = any(o is p and arr is p._k for o, _, arr in self.kept)
+        self.path_ok = _path_ok(p) and self.hot_path(p)
         if self.path_ok:
             st["ramp"] = p.ramp
         return (self.hot, t._bank.args, g._tx_bytes, g._rx_bytes, t._rec1)
+
+    def hot_path(self, p: Any) -> bool:
+        """The path's workspace is the one moved into the hot record."""
+        return any(o is p and a == "_k" and arr is p._k for o, a, arr in self.kept)
 
     def _warm(self) -> None:
         """Compile the kernel (all of it) with a lost sample, which returns after the drive
