@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 from hofto_hw.commands.args import output_file
-from hofto_hw.control_plane.process import remove_socket
 from hofto_hw.errors import UserError
 
 DEFAULT_CONFIG = "er3a"  # the README's main job: the simulated arm's scripted scenario
@@ -61,6 +60,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--interface", default=None, help="bus.interface override (NIC for ethercat, CAN channel)"
     )
+
+
+def remove_socket(path: Path) -> None:
+    """The control plane's socket file removed (hofto_hw.control_plane.process imported here:
+    it imports the whole tick, seconds on a loaded machine, which belong to the start-up's
+    "importing" phase, where SIGTERM is already a clean stop)."""
+    from hofto_hw.control_plane.process import remove_socket as remove
+
+    remove(path)
 
 
 def _check_duration(value: float | None) -> None:
