@@ -37,7 +37,6 @@ class AxesState:
         self.n = n
         self.names = list(system.cfg.robot.joints)
         self._group = group
-        self._states = group.states
         known = np.array([src.source == "input" for src in group.sto_sources], dtype=bool)
         self._sto_unknown = ~(known & group.present("digital_inputs"))
         drives = getattr(system.bus, "drives", None)  # the SimBus's emulated drives
@@ -55,7 +54,8 @@ class AxesState:
             brake.fill(BRAKE_UNKNOWN)
             return
         # the modelled brake's state, else the ideal brake: closed unless operation enabled
-        np.not_equal(self._states, int(State.OPERATION_ENABLED), out=self._m)
+        # the group's states read now: the fused tick may move its arrays into its record
+        np.not_equal(self._group.states, int(State.OPERATION_ENABLED), out=self._m)
         np.copyto(self._m, d.brake_engaged, where=d.real_brake)
         np.copyto(brake, self._m)  # True: BRAKE_CLOSED (1.0), False: BRAKE_OPEN (0.0)
 
