@@ -168,6 +168,8 @@ class DriveGroup(ImageFields):
         self._sto_by_image = self._sto_mask != 0
         #: what :meth:`write_brake_delays` wrote at :meth:`configure`, one line per axis
         self.brake_setup: list[str] = []
+        #: the setting objects :meth:`configure` left out, one line per axis that lacks some
+        self.settings_notes: list[str] = []
 
     def _warm(self) -> None:
         """Compile the kernels for this image's exact array types (outputs: scratch)."""
@@ -303,10 +305,17 @@ class DriveGroup(ImageFields):
         """Check identity and ratings by SDO and write limits (DriveConfig list, one per axis)
         and the delays of drive-controlled brakes (:meth:`write_brake_delays`).
 
+        Only the setting objects the axis's drive has are read or written: those its profile
+        lists in ``objects.absent_settings`` are left out (an axis without a profile, the
+        built-in drive, has them all); :attr:`settings_notes` says per axis which ones and what
+        the stack does instead.
+
         Raises ConfigError naming the axis and the object when a drive's 0x1018 identity or
         its rated torque/current (which set the scaling) differ from the config.
         """
         t, sc = self.transport, self.scaling
+        absent = self._absent_settings()
+        self.settings_notes = self._settings_notes(absent)
         for i, d in enumerate(drives):
             who = f"axis {i} ({self.names[i]})"
             ident = d.identity
@@ -324,22 +333,53 @@ class DriveGroup(ImageFields):
                             f"bus.drives[{i}].identity: {who} reports {what} 0x{got:08X}, "
                             f"config expects 0x{want:08X}"
                         )
+            lacks = absent[i].__contains__
             for index, what, want in (
                 (0x6076, "rated_torque", d.rated_torque),
                 (0x6075, "rated_current", d.rated_current),
             ):
+                if lacks(what):
+                    continue
                 got = t.read_value(i, index, 0, "u32")
                 if got != round(want):
                     raise ConfigError(
                         f"bus.drives[{i}].{what}: {who} object 0x{index:04X} says {got}, "
                         f"config says {want:g}"
                     )
-            t.write_value(i, 0x6072, 0, "u16", sc.torque_limit_permille(i, d.torque_limit))
-            decel = max(1, sc.acceleration_to_raw(i, d.quick_stop_deceleration))
-            t.write_value(i, 0x6085, 0, "u32", decel)
-            t.write_value(i, 0x6065, 0, "u32", sc.angle_to_counts(i, d.following_error_window))
-            t.write_value(i, 0x6066, 0, "u16", round(d.following_error_timeout * 1000.0))
+            if not lacks("max_torque"):
+                t.write_value(i, 0x6072, 0, "u16", sc.torque_limit_permille(i, d.torque_limit))
+            if not lacks("quick_stop_deceleration"):
+                decel = max(1, sc.acceleration_to_raw(i, d.quick_stop_deceleration))
+                t.write_value(i, 0x6085, 0, "u32", decel)
+            if not lacks("following_error_window"):
+                window = sc.angle_to_counts(i, d.following_error_window)
+                t.write_value(i, 0x6065, 0, "u32", window)
+            if not lacks("following_error_timeout"):
+                t.write_value(i, 0x6066, 0, "u16", round(d.following_error_timeout * 1000.0))
         self.brake_setup = self.write_brake_delays(drives)
+
+    def _absent_settings(self) -> list[frozenset[str]]:
+        """Per axis: the setting objects its profile says the drive does not have."""
+        profiles = getattr(self.transport, "profiles", None) or [None] * self.n
+        return [frozenset(() if p is None else p.objects.absent_settings) for p in profiles]
+
+    def _settings_notes(self, absent: list[frozenset[str]]) -> list[str]:
+        """One line per axis whose drive lacks setting objects: which, and what the stack
+        does instead (printed once at start-up)."""
+        from hofto_hw.config.drive_profile import SETTING_OBJECTS
+
+        profiles = getattr(self.transport, "profiles", None) or [None] * self.n
+        out = []
+        for i, names in enumerate(absent):
+            if not names:
+                continue
+            parts = [
+                f"no 0x{index:04X} {name}: {how}"
+                for name, (index, how) in SETTING_OBJECTS.items()
+                if name in names
+            ]
+            out.append(f"axis {i} ({self.names[i]}, {profiles[i].name}): " + "; ".join(parts))
+        return out
 
     def write_brake_delays(self, drives: Sequence[Any]) -> list[str]:
         """Write the release and engage delays of every drive-controlled brake

@@ -38,6 +38,7 @@ from hofto_hw.config.drive_profile import (
     LOOP_TARGET_OBJECTS,
     LOOP_TARGETS,
     MODE_NUMBERS,
+    SETTING_OBJECTS,
     SUB_OBJECTS,
     DriveProfile,
     format_profile_error,
@@ -247,6 +248,7 @@ def choose(desc: DeviceDescription, loop: str | None = None, name: str | None = 
                 "loop needs: no PDO of the file carries it"
             )
     fallbacks, objects = _fallbacks(desc, mapped, reasons)
+    objects["absent_settings"] = _absent_settings(desc, reasons)
     set_by = "pdo" if "mode" in mapped else "startup"
     vendor = desc.vendor_name.split()[0] if desc.vendor_name else f"vendor{desc.vendor_id:x}"
     startup = _startup(desc, loop, set_by, reasons)
@@ -532,6 +534,24 @@ def _fallbacks(
             where = "not mapped (the file has no dictionary)"
         reasons.append(f"object 0x{FIELD_OBJECTS[name]:04X} {name}: {where} -> {how}")
     return fallbacks, objects
+
+
+def _absent_settings(desc: DeviceDescription, reasons: list[str]) -> list[str]:
+    """The setting objects (SETTING_OBJECTS) the file's dictionary lacks; a file without a
+    dictionary says nothing about them: all are taken as present (configure writes them)."""
+    if not desc.has_dictionary:
+        reasons.append(
+            "settings: the file has no dictionary; 0x6072, 0x6075, 0x6076, 0x6065, 0x6066, "
+            "0x6085 taken as present (configure writes them; list any the drive lacks in "
+            "objects.absent_settings)"
+        )
+        return []
+    out = []
+    for name, (index, how) in SETTING_OBJECTS.items():
+        if not desc.has(index):
+            out.append(name)
+            reasons.append(f"object 0x{index:04X} {name}: absent -> {how}")
+    return out
 
 
 def _startup(desc: DeviceDescription, loop: str, set_by: str, reasons: list[str]) -> list[dict]:

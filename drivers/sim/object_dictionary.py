@@ -486,11 +486,12 @@ def cia402_dictionary(
 def impersonate(od: ObjectDictionary, profile: Any, serial: int) -> None:
     """Turn a :func:`cia402_dictionary` into the dictionary of the drive ``profile``
     (a :class:`hofto_hw.config.drive_profile.DriveProfile`) describes: its identity, only
-    the CiA-402 objects it has (``objects.absent`` removed), its PDO mapping objects with
-    their default mapping (fixed ones read-only: a write aborts 0x06010002 as a real drive's
-    does; configurable ones writable in PRE-OP only), the assignment accepting only its own
-    PDOs, the vendor objects it maps (plain values), 0x6502 from its modes."""
-    from hofto_hw.config.drive_profile import FIELD_OBJECTS, MODE_BITS
+    the CiA-402 objects it has (``objects.absent`` and ``objects.absent_settings`` removed:
+    an SDO to one aborts 0x06020000), its PDO mapping objects with their default mapping
+    (fixed ones read-only: a write aborts 0x06010002 as a real drive's does; configurable
+    ones writable in PRE-OP only), the assignment accepting only its own PDOs, the vendor
+    objects it maps (plain values), 0x6502 from its modes."""
+    from hofto_hw.config.drive_profile import FIELD_OBJECTS, MODE_BITS, SETTING_OBJECTS
 
     ident = profile.identity
     for sub, value in (
@@ -502,6 +503,8 @@ def impersonate(od: ObjectDictionary, profile: Any, serial: int) -> None:
         od.entry(0x1018, sub).value = value
     for name in profile.objects.absent:
         od.remove(FIELD_OBJECTS[name])
+    for name in profile.objects.absent_settings:  # an SDO to one aborts 0x06020000
+        od.remove(SETTING_OBJECTS[name][0])
     units = profile.units
     for index, obj in ((0x608F, units.position_encoder_resolution), (0x6091, units.gear_ratio)):
         if not obj.present:

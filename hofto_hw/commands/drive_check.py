@@ -7,7 +7,8 @@ profile's loop mode, moves each joint by a small CSP step and back (``--emulated
 by default; on a real bus only when ``--move RAD`` is given), reads everything back and
 prints what it saw (``--json``: ``bus``, ``axes``, ``operational``, ``enabled``,
 ``moved_rad``, ``devices`` (slave/node and its axis per joint), ``process_image_bytes`` (of
-the joint's device), ``pdos``, ``startup_sdos``, ``warnings``, ``faults``, ...). A multi-axis
+the joint's device), ``pdos``, ``startup_sdos``, ``settings`` (the setting objects the drive
+lacks, which configure leaves out), ``warnings``, ``faults``, ...). A multi-axis
 profile (``axes: k``) serves k joints per device: N joints run on ceil(N / k) devices.
 
 ``--emulated`` runs the emulator itself: EtherCAT on a veth pair with ``hofto-hw
@@ -292,6 +293,7 @@ def check(
     from drivers.cia402.state_machine import Mode, State
     from drivers.errors import DriverError
     from hofto_hw.config.drive_profile import MODE_NUMBERS
+    from hofto_hw.errors import ConfigError
 
     report: dict[str, Any] = {
         "profile": profile.name,
@@ -307,6 +309,7 @@ def check(
         "pdos": [],
         "startup_sdos": 0,
         "unavailable": [],
+        "settings": [],
         "warnings": [],
         "faults": [],
     }
@@ -332,6 +335,8 @@ def check(
         report["warnings"] = list(getattr(t, "warnings", []))
         g = DriveGroup.from_config(t, cfg.bus)
         report["unavailable"] = [u for u in g.unavailable() if int(u.split()[1]) < n]
+        g.configure(cfg.bus.drives)  # as `run` does: identity, ratings, limits by SDO
+        report["settings"] = [u for u in g.settings_notes if int(u.split()[1]) < n]
         g.cycle()
         if g.any_fault():
             g.fault_reset()
@@ -352,7 +357,7 @@ def check(
             )
         report["faults"] += g.fault_messages()
         g.disable()
-    except DriverError as exc:
+    except (DriverError, ConfigError) as exc:  # ConfigError: identity/ratings differ
         report["faults"].append(str(exc))
     finally:
         t.close()
@@ -434,6 +439,8 @@ def _print(r: dict[str, Any]) -> None:
         print(f"  axis {i}: rx {b['rx']} B {' '.join(p['rx'])}, tx {b['tx']} B {' '.join(p['tx'])}")
     print("  moved [rad]: " + " ".join(f"{m:+.4f}" for m in r["moved_rad"]))
     for u in r["unavailable"]:
+        print(f"  note: {u}")
+    for u in r["settings"]:
         print(f"  note: {u}")
     for f in r["faults"]:
         print(f"  FAULT: {f}")

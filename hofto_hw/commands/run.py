@@ -257,6 +257,8 @@ def _run(args: argparse.Namespace, signals: Any) -> int:
     print(f"hofto-hw run: {_observer_choice(cfg)}", file=sys.stderr)
     for note in tick.group.feedforward_notes():  # drives without 0x60B2 (the loop runs CSP)
         print(f"hofto-hw run: {note}", file=sys.stderr)
+    for note in tick.group.settings_notes:  # drives without 0x6072, 0x6065, ... (configure)
+        print(f"hofto-hw run: {note}", file=sys.stderr)
     print(
         f"hofto-hw run: running (pid {os.getpid()}; tick: "
         f"{acceleration.describe(system.acceleration)})",

@@ -103,6 +103,33 @@ FALLBACKS: dict[str, tuple[str, ...]] = {
     "error_code": ("sdo", "emcy"),
     "digital_inputs": ("none",),
 }
+#: the setting objects ``DriveGroup.configure`` reads or writes by SDO at start-up (axis 0,
+#: sub-index 0), by name, with what the stack does on a drive that does not have one
+#: (``objects.absent_settings``): configure leaves it out and says so once per axis
+SETTING_OBJECTS: dict[str, tuple[int, str]] = {
+    "max_torque": (
+        0x6072,
+        "the drive's torque limit is not set; the stack's joint torque limit "
+        "(safety.limits) applies",
+    ),
+    "rated_current": (
+        0x6075,
+        "the rated current is not checked against the drive; the config's rated_current "
+        "sets the current scaling",
+    ),
+    "rated_torque": (
+        0x6076,
+        "the rated torque is not checked against the drive; the config's rated_torque sets "
+        "the torque scaling",
+    ),
+    "following_error_window": (
+        0x6065,
+        "the drive does not supervise the following error; the stack's following-error "
+        "limit (safety.limits.following_error) applies",
+    ),
+    "following_error_timeout": (0x6066, "the drive's own following-error timeout stays"),
+    "quick_stop_deceleration": (0x6085, "the drive's own quick-stop ramp stays"),
+}
 #: objects the loop cannot run without whatever the mode (no fallback exists)
 ALWAYS_NEEDED = ("controlword", "statusword", "position")
 
@@ -305,6 +332,11 @@ class ObjectsSection(FileModel):
     mapped: list[str] = Field(default_factory=list, description="objects in the assigned PDOs")
     sdo: list[str] = Field(default_factory=list, description="in the dictionary, not mapped")
     absent: list[str] = Field(default_factory=list, description="not in the drive at all")
+    absent_settings: list[str] = Field(
+        default_factory=list,
+        description="setting objects (SETTING_OBJECTS: 0x6072, 0x6075, 0x6076, 0x6065, 0x6066, "
+        "0x6085) the drive does not have: configure neither reads nor writes them",
+    )
 
     @field_validator("mapped", "sdo", "absent")
     @classmethod
@@ -314,6 +346,19 @@ class ObjectsSection(FileModel):
                 raise ValueError(
                     f"unknown object {name!r}; the loop's objects are {', '.join(LOOP_OBJECTS)}"
                 )
+        return names
+
+    @field_validator("absent_settings")
+    @classmethod
+    def _settings(cls, names: list[str]) -> list[str]:
+        for name in names:
+            if name not in SETTING_OBJECTS:
+                raise ValueError(
+                    f"unknown setting object {name!r}; the settings are "
+                    f"{', '.join(SETTING_OBJECTS)}"
+                )
+        if len(set(names)) != len(names):
+            raise ValueError(f"a setting object is listed twice: {names}")
         return names
 
 

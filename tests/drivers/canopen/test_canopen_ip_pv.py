@@ -140,3 +140,36 @@ def test_emulated_drives_take_only_their_profiles_modes(bus) -> None:
     assert emu.drives.mode_display.tolist() == [7, 0] * 3
     with pytest.raises(DriveTimeoutError):
         g.set_mode(Mode.CSV)  # neither drive has a cyclic synchronous mode
+
+
+def test_configure_leaves_out_the_settings_the_drives_lack(bus) -> None:
+    """Neither drive has 0x6072 max torque nor 0x6075/0x6076 motor ratings; the Faulhaber has
+    no following-error window/timeout either. The emulator impersonating them aborts an SDO to
+    those (0x06020000, as the real drive), so configure writes only what each drive has and
+    says once per axis what it left out."""
+    from drivers.errors import SdoAbortError
+
+    cfg, t, emu = bus
+    t.open()
+    with pytest.raises(SdoAbortError) as err:
+        t.write_value(0, 0x6072, 0, "u16", 1000)
+    assert err.value.code == 0x06020000
+    t.read_value(0, 0x6065, 0, "u32")  # the Technosoft has the following-error window
+    with pytest.raises(SdoAbortError) as err:
+        t.read_value(1, 0x6065, 0, "u32")
+    assert err.value.code == 0x06020000
+    g = DriveGroup.from_config(t, cfg.bus)
+    g.configure(cfg.bus.drives)
+    notes = g.settings_notes
+    assert len(notes) == 6 and all("\n" not in n for n in notes)
+    assert notes[0].startswith("axis 0 (joint_1, technosoft_ipos): no 0x6072 max_torque: ")
+    assert notes[1].startswith("axis 1 (joint_2, faulhaber_mcbl300x): no 0x6072 max_torque: ")
+    assert "the stack's joint torque limit (safety.limits) applies" in notes[1]
+    assert "0x6065" not in notes[0] and "0x6065 following_error_window" in notes[1]
+    assert "0x6066" in notes[1] and "0x6076 rated_torque" in notes[0]
+    # what the drives have was written: the quick-stop ramp everywhere, the window on iPOS
+    decel = [g.scaling.acceleration_to_raw(i, d.quick_stop_deceleration)
+             for i, d in enumerate(cfg.bus.drives)]  # fmt: skip
+    assert [t.read_value(i, 0x6085, 0, "u32") for i in range(6)] == decel
+    window = g.scaling.angle_to_counts(0, cfg.bus.drives[0].following_error_window)
+    assert t.read_value(0, 0x6065, 0, "u32") == window

@@ -79,6 +79,9 @@ def test_ip_and_pv_profiles_checked_over_udp_multicast(capsys, name: str) -> Non
     _assert_passed(code, report)
     prof = yaml.safe_load(path.read_text())
     assert report["startup_sdos"] == 6 * len(prof.get("startup", []))
+    # configure ran and left out what the drive lacks (0x6072 ...), one line per axis
+    assert len(report["settings"]) == 6
+    assert report["settings"][0].startswith(f"axis 0 (joint_1, {name}): no 0x6072 max_torque")
 
 
 def test_canopen_check_on_fewer_axes_reports_those(capsys) -> None:

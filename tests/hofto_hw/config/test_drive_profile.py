@@ -360,3 +360,26 @@ def test_ip_and_pv_profiles_are_checked():
     bad = copy.deepcopy(ip)
     bad["startup"] = [s for s in bad["startup"] if s["index"] != 0x60C2]
     _invalid(bad, "modes.loop ip needs a start-up write of 0x60C2:01")
+
+
+def test_absent_settings_are_named_and_checked():
+    """The shipped ip/pv profiles say which start-up setting objects their drives lack (the
+    vendor files have no 0x6072, 0x6075, 0x6076; the Faulhaber no 0x6065/0x6066 either); an
+    unknown or repeated name is refused."""
+    ip, pv = _shipped("technosoft_ipos"), _shipped("faulhaber_mcbl300x")
+    lacks = DriveProfile.model_validate(ip).objects.absent_settings
+    assert lacks == ["max_torque", "rated_current", "rated_torque"]
+    lacks = DriveProfile.model_validate(pv).objects.absent_settings
+    assert set(lacks) == {
+        "max_torque",
+        "rated_current",
+        "rated_torque",
+        "following_error_window",
+        "following_error_timeout",
+    }
+    assert DriveProfile.model_validate(_profile()).objects.absent_settings == []  # as today
+    bad = copy.deepcopy(pv)
+    bad["objects"]["absent_settings"] = ["max_torque", "max_current"]
+    _invalid(bad, "unknown setting object 'max_current'")
+    bad["objects"]["absent_settings"] = ["max_torque", "max_torque"]
+    _invalid(bad, "listed twice")
