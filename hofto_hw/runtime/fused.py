@@ -78,6 +78,7 @@ def tick_state_dtype(n: int, k: int) -> np.dtype:
     return np.dtype(
         [
             ("t_cmd", f8),  # setpoint (path) time [s]
+            ("cmd_dt", f8),  # this tick's setpoint step [s] (tick_kernels.command_dt)
             ("since_fresh", f8),  # [s] since the last fresh sample
             ("sample_dt", f8),  # the interval the observers integrated this tick [s]
             ("monitored", b1),  # the tick record's ``monitored`` (written when it changes)
@@ -169,7 +170,7 @@ def fused_tick(
     period = ts["period"]
     cmd_dt = _command_dt(dt, period)
     t_cmd = ts["t_cmd"] + cmd_dt
-    ts["t_cmd"] = t_cmd
+    ts["t_cmd"], ts["cmd_dt"] = t_cmd, cmd_dt
     ts["sample_dt"] = obs_dt
     ts["finite"] = finite
     # 4. safety (good data: the caller checked the status; no fault latched or active)

@@ -264,7 +264,6 @@ class Tick:
         self._fz_args: tuple[Any, ...] = ()
         self._fuse_quiet = False
         self._fz_kind = OTHER
-        self._cmd_dt = 0.0
         self.fused_ticks = 0  # ticks the fused call finished
         self._fz_call = fused_tick
         if fuse and os.environ.get("HOFTO_HW_NO_FUSE", "") not in ("", "0"):
@@ -286,7 +285,7 @@ class Tick:
         self.motion.start(g.q)
         np.copyto(self.q_sent, g.q)
         self.snapshot.reset_memory()
-        self._keep_sample(g.q, g.qd, g.tau)
+        np.copyto(self._prev, g.sample)  # the interpolation start of a first stall
         for obs in self.observers:
             obs.reset(g.q, g.qd)
         self._check_bank()
@@ -343,7 +342,7 @@ class Tick:
         """Sections 2-3b: the joint state in SI, the snapshot and the observers, the drag."""
         g = self.group
         g.read()  # the SI views of the drive group's buffers
-        q, qd, tau = g.q, g.qd, g.tau
+        q, qd = g.q, g.qd
 
         # 3. the model terms of this sample, once for every estimator, and 3a. the observers
         # (HOFTO, momentum), each writing its own row; a stall's gap in one-cycle steps
@@ -355,10 +354,10 @@ class Tick:
         obs_dt = 0.0  # held over a lost sample (logged: flight-log replay integrates the same)
         if sample_dt >= 0.0:
             obs_dt = sample_dt if sample_dt > 0.0 else dt
-            self._observe(self.snapshot, q, qd, tau, obs_dt)
+            self._observe(obs_dt)
         st = self.st
         st["sample_dt"] = obs_dt  # into the record with the rest (_record)
-        self._cmd_dt = cmd_dt = command_dt(dt, self.period)
+        st["cmd_dt"] = cmd_dt = command_dt(dt, self.period)
         st["t_cmd"] += cmd_dt
 
         # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
@@ -452,7 +451,7 @@ class Tick:
         """Sections 5 (controller) and 6 (command, acting the stop category)."""
         g, stop, motion = self.group, self.stop, self.motion
         q, qd = g.q, g.qd
-        cmd_dt = self._cmd_dt
+        cmd_dt = float(self.st["cmd_dt"])
         cat = stop.category
         if cat == 0 or cat == 1:
             self.expect_enabled = False
@@ -516,7 +515,6 @@ class Tick:
             self.fused_ticks += 1
             return DONE
         self.snapshot.finite = bool(self.st["finite"])
-        self._cmd_dt = command_dt(dt, self.period)
         return stage
 
     def use_fused(self, on: bool) -> None:
@@ -594,14 +592,15 @@ class Tick:
 
     # ------------------------------------------------------------- tick helpers
 
-    def _observe(
-        self, snap: DynamicsSnapshot, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float
-    ) -> None:
-        """Compute the snapshot of this sample and update every observer from it. After a
+    def _observe(self, dt: float) -> None:
+        """Compute the snapshot of the drive group's sample and update every observer from it
+        (then keep the sample: the next stall's interpolation start). After a
         stall (dt of k > 1 cycles) the gap is integrated in k steps of dt/k with q, qd, tau
         interpolated linearly from the last tick's sample: each observer is tuned (and
         checked stable) for one cycle, and a single step of k cycles is not stable for it
         (forward Euler: gain·dt < 2)."""
+        snap, g = self.snapshot, self.group
+        q, qd, tau = g.q, g.qd, g.tau
         k = 1 if dt <= self._stall_dt else gap_steps(dt, self.period)
         if k == 1:
             snap.compute(q, qd, tau)
@@ -615,7 +614,7 @@ class Tick:
                     lerp(prev[j], now, a, x[j])
                 snap.compute(x[0], x[1], x[2])
                 self._bank.update(h)
-        self._keep_sample(q, qd, tau)
+        np.copyto(self._prev, g.sample)
 
     def _check_bank(self) -> None:
         """After the observers' reset (start-up, a reset: never in a running tick): the bank
@@ -623,15 +622,6 @@ class Tick:
         than a bank that goes on integrating the arrays it dropped."""
         if not self._bank.bound():
             self._bank = ObserverBank(self.observers, self.snapshot, self.tau_ext)
-
-    def _keep_sample(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
-        g = self.group
-        if q is g.q and qd is g.qd and tau is g.tau:
-            np.copyto(self._prev, g.sample)  # the group's rows: one copy
-            return
-        np.copyto(self._prev[0], q)
-        np.copyto(self._prev[1], qd)
-        np.copyto(self._prev[2], tau)
 
     def _ff_model_changed(self) -> bool:
         """True (once) when the model changed since tau_ff was evaluated: its parameters
