@@ -136,6 +136,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, signals: Any) -> int:
+    # The tick's modules first (the control plane imports them all: seconds on a loaded
+    # machine), before the progress clock starts, as when they were imported with this
+    # module: a quick refusal (a bad config, an SDO abort) stays one line. SIGTERM during
+    # them is already a clean stop (run()).
+    import hofto_hw.control_plane.process  # noqa: F401
     from hofto_hw.outputs import check_output, write_atomic
     from hofto_hw.runtime.startup import StartupProgress
 
