@@ -442,7 +442,9 @@ def test_a_lost_turn_is_refused_at_start_up_and_zero_set_round_trips(
     # zero set: joint_4 is at a reference of 0.25 rad; the drive keeps its counts
     bus, group = rig.open()
     save_positions(state, LastPositions(joints, q.copy(), offsets))
-    args = argparse.Namespace(config=str(rig.path), joint="joint_4", at="0.25", positions=state)
+    args = argparse.Namespace(
+        config=str(rig.path), joint="joint_4", at="0.25", positions=state, socket=None
+    )
     assert zero.run(args) == 0
     assert "joint_4 zero_offset" in capsys.readouterr().out
     cfg2 = load_config(rig.path)
