@@ -181,3 +181,27 @@ def test_emulated_drive_can_keep_the_output_bit(cfg: SystemConfig) -> None:
         assert d.digital_outputs[1] & 1 == 1
     finally:
         system.close()
+
+
+def test_output_brake_reset_after_category_2_keeps_the_brake_open(cfg: SystemConfig) -> None:
+    """Category 2 keeps power, the bit and the brake open: its reset needs no re-enable and
+    is not refused."""
+    from tests.hofto_hw.runtime.conftest import run_until
+
+    cfg = _with_output_brake(cfg)
+    cats = cfg.safety.categories.model_copy(update={"stop_request": 2})
+    cfg = cfg.model_copy(update={"safety": cfg.safety.model_copy(update={"categories": cats})})
+    system = compose.build(cfg, clock="sim", contact=False)
+    try:
+        tick, stop, d = system.tick, system.tick.stop, system.bus.drives
+        tick.stop_requested = True
+        run_until(system, lambda: stop.latched != 0, 200)
+        system.loop.run(max_ticks=300)
+        tick.stop_requested = False
+        system.loop.run(max_ticks=5)
+        tick.reset_requested = True
+        run_until(system, lambda: not tick.reset_requested, 50)
+        assert "refused" not in tick.reset_result and stop.latched == 0
+        assert tick.expect_enabled and d.digital_outputs[1] & 1 and not d.brake_engaged[1]
+    finally:
+        system.close()
