@@ -288,7 +288,9 @@ class EmulatedDrives(ImageFields):
             )
             od.add_var(0x609A, "homing acceleration", "u32", "rw", bound=(self.homing_accel, i))
         # 0x60FE digital outputs: bit 0 releases the brake of an axis whose brake the
-        # master drives (configure_brake(by_output=True)); power off closes it regardless
+        # master drives (configure_brake(by_output=True)); power off closes it regardless and
+        # clears the bit (as real drives may: the master must set it again after a re-enable;
+        # ``clears_output`` False keeps it, the emulator of before)
         self.digital_outputs = np.zeros(n, dtype=np.uint32)
         self.output_mask = np.full(n, 0xFFFFFFFF, dtype=np.uint32)
         for i, od in enumerate(self.ods):
@@ -380,6 +382,7 @@ class EmulatedDrives(ImageFields):
         # Real brakes (configure_brake): physical state, delays [s], holding torque [N·m].
         self.real_brake = np.zeros(n, dtype=bool)
         self.brake_by_output = np.zeros(n, dtype=bool)
+        self.brake_clears_output = np.ones(n, dtype=bool)
         self.brake_engaged = np.ones(n, dtype=bool)
         self.brake_release_delay = np.zeros(n)
         self.brake_engage_delay = np.zeros(n)
@@ -575,15 +578,18 @@ class EmulatedDrives(ImageFields):
         engage_delay: float,
         holding_torque: float,
         by_output: bool = False,
+        clears_output: bool = True,
     ) -> None:
         """Give drive ``axis`` a real holding brake (see the module notes): delays [s] >= 0,
         holding torque [N·m] > 0 (below the load's torque: a worn brake that slips).
         ``by_output``: the master releases it with 0x60FE:1 bit 0 while the drive is powered
-        (else the drive releases it on Operation enabled)."""
+        (else the drive releases it on Operation enabled); ``clears_output``: the drive
+        clears that bit when its power stage goes off (False: the bit stays set)."""
         if not (release_delay >= 0.0 and engage_delay >= 0.0 and holding_torque > 0.0):
             raise ValueError("brake delays must be >= 0 s and the holding torque > 0 N·m")
         self.real_brake[axis] = True
         self.brake_by_output[axis] = by_output
+        self.brake_clears_output[axis] = clears_output
         self.brake_release_delay[axis] = release_delay
         self.brake_engage_delay[axis] = engage_delay
         self.brake_delay_ms[0, axis] = min(65535, round(release_delay * 1000.0))
@@ -916,8 +922,11 @@ class EmulatedDrives(ImageFields):
         q, qd, tn = self.plant.q_meas, self.plant.qd_meas, self.tuning
         for i in np.flatnonzero(self.real_brake):
             if self.brake_by_output[i]:
+                powered = int(self.state[i]) in _POWERED
+                if not powered and self.brake_clears_output[i]:
+                    self.digital_outputs[i] &= ~np.uint32(1)
                 release = bool(self.digital_outputs[i] & self.output_mask[i] & 1)
-                want = not (release and int(self.state[i]) in _POWERED)
+                want = not (release and powered)
                 if want != self._brake_target[i]:
                     self._command_brake(i, want)
             if self.brake_engaged[i] != self._brake_target[i]:

@@ -238,6 +238,7 @@ def build(
         health.sto_of = group.sto_of
         health.brake_code = group.is_brake_fault
         tick.release_check = ReleaseCheck.from_drives(list(cfg.bus.drives), 1.0 / rate)
+        tick.reenable_refused = reenable_refusal(cfg)
         if s.collision is not None:
             tick.settle_ticks = round(s.collision.settle_time * rate)
         if positions is not None:
@@ -340,6 +341,30 @@ def preload_braked_axes(cfg: SystemConfig, model: RobotModel, group: DriveGroup)
         offset[braked] = gravity[braked]
         group.command_position(group.q.copy(), tau_offset=offset)
     return braked
+
+
+def reenable_refusal(cfg: SystemConfig) -> str:
+    """The one line refusing a reset that would power up an arm with master-controlled brakes
+    (``brake.control: output``), "" when there is none.
+
+    Such a brake opens by 0x60FE:1 bit 0, which a drive may clear when its power stage goes
+    off. Start-up sets it by SDO (:func:`await_brake_release`); the loop's re-enable after a
+    reset could only set it from the tick through the process image, and no RxPDO the stack
+    builds carries 0x60FE (``drivers.cia402.pdo.RXPDO_MAPPING``), so the loop would enable
+    and move the joint against its closed brake: refused, the service's restart opens it."""
+    assert cfg.bus is not None
+    joints = list(cfg.robot.joints)
+    names = [
+        joints[i]
+        for i, d in enumerate(cfg.bus.drives)
+        if d.brake is not None and d.brake.control == "output"
+    ]
+    if not names:
+        return ""
+    return (
+        f"reset refused: {', '.join(names)}: brake by output needs 0x60FE in the RxPDO for the "
+        "loop to re-enable it (restart the service: start-up opens it by SDO)"
+    )
 
 
 def await_brake_release(

@@ -186,6 +186,9 @@ class Tick:
         #: the brake release check the loop repeats on every re-enable (set by compose;
         #: None: no braked axis); its progress; ticks spent enabling; STO scratch
         self.release_check: Any = None
+        #: the reset refusal of an arm whose brake the master opens by 0x60FE (compose; ""
+        #: none): the tick cannot set that bit again, so no reset powers such an arm up
+        self.reenable_refused = ""
         self._released = True
         self._release_running = 0
         self._enable_ticks = 0
@@ -675,6 +678,9 @@ class Tick:
         if sto.any():  # STO is a state: no reset enables through it
             names = [self.group.names[i] for i in np.flatnonzero(sto)]
             self.reset_result = "reset refused, safe torque off active: " + ", ".join(names)
+            return
+        if self.reenable_refused and not self.group.all_in(State.OPERATION_ENABLED):
+            self.reset_result = self.reenable_refused  # its brake would stay closed
             return
         done, msg = self.stop.reset()
         if not done and not self._edges_tried and self.stop.active & _DRIVE_CAUSES:

@@ -234,17 +234,21 @@ def test_stop_categories_end_with_their_brake_states(rig: Rig, category: int) ->
     for k in range(int(3.0 / bus.cycle_time)):  # the ramp, the engage delay, margin
         bus.wait_next_cycle()
         group.cycle()
-        if category != 2:
-            done = (group.states == SOD).all() and rig.status()["brake_engaged"][ELBOW]
-            if done:
+        if category != 2:  # both brakes: the drive's and the master's (0x60FE)
+            st = rig.status()
+            done = (group.states == SOD).all() and st["brake_engaged"][ELBOW]
+            if done and st["brake_engaged"][SHOULDER]:
                 break
         elif k >= 4 * engage:
             break
     status = rig.status()
+    bit = bus.read_value(SHOULDER, 0x60FE, 1, "u32") & 1
     if category == 2:  # power kept, brake open
         assert (group.states == OE).all() and status["brake_engaged"][ELBOW] is False
-    else:  # power removed, brake engaged
+        assert status["brake_engaged"][SHOULDER] is False and bit == 1
+    else:  # power removed, brakes engaged, the master's brake bit cleared by the drive
         assert (group.states == SOD).all() and status["brake_engaged"][ELBOW] is True
+        assert status["brake_engaged"][SHOULDER] is True and bit == 0
 
 
 def _brake_test(rig: Rig, fraction: float, holding: float) -> int:
