@@ -503,10 +503,11 @@ class UnitsSection(FileModel):
         "counts/s (encoder increments/s), rpm (motor min^-1: counts/s x 60 / 0x608F), or "
         "unknown (the file does not say: a real bus refuses the axis until it is set)",
     )
-    acceleration: Literal["counts/s^2", "rpm/s", "unknown"] = Field(
+    acceleration: Literal["counts/s^2", "rpm/s", "rev/s^2", "unknown"] = Field(
         "counts/s^2",
         description="unit of the accelerations written to 0x6083/0x6084/0x6085: counts/s^2, "
-        "rpm/s (motor min^-1 per s), or unknown",
+        "rpm/s (motor min^-1 per s), rev/s^2 (motor revolutions per s^2, Faulhaber's 1/s^2), "
+        "or unknown",
     )
 
     def counts_per_drive_unit(self, counts_per_rev: float) -> tuple[float, float]:
@@ -514,9 +515,10 @@ class UnitsSection(FileModel):
         per drive acceleration unit (1.0 for counts/s, counts/s^2 and unknown), with
         ``counts_per_rev`` encoder counts per motor revolution (the axis's, = 0x608F)."""
         per_rpm = counts_per_rev / 60.0
+        accel = {"rpm/s": per_rpm, "rev/s^2": float(counts_per_rev)}
         return (
             per_rpm if self.velocity == "rpm" else 1.0,
-            per_rpm if self.acceleration == "rpm/s" else 1.0,
+            accel.get(self.acceleration, 1.0),
         )
 
 

@@ -396,6 +396,8 @@ def test_velocity_units_default_to_counts_and_are_checked(tmp_path):
     data["units"].update(velocity="rpm", acceleration="rpm/s")
     units = DriveProfile.model_validate(data).units
     assert units.counts_per_drive_unit(3000) == (50.0, 50.0)  # counts/s per min^-1
+    data["units"]["acceleration"] = "rev/s^2"  # Faulhaber's 1/s^2: 60 rpm/s
+    assert DriveProfile.model_validate(data).units.counts_per_drive_unit(3000) == (50.0, 3000.0)
     data["units"]["velocity"] = "rad/s"
     msg = _refused(tmp_path, data)
     assert "units.velocity" in msg and "\n" not in msg
