@@ -175,8 +175,8 @@ def refuse_unknown_units(names: Sequence[str], profiles: Sequence[DriveProfile |
         if p.units.acceleration == "unknown":
             raise ConfigError(
                 f"{name} ({p.name}): the drive's acceleration unit is not stated in its file; "
-                "set units.acceleration in the profile (counts/s^2, rpm/s or rev/s^2) after checking "
-                "the drive's manual"
+                "set units.acceleration in the profile (counts/s^2, rpm/s or rev/s^2) after "
+                "checking the drive's manual"
             )
 
 
