@@ -35,10 +35,11 @@ the record directly). Its formula lives here only; the emulated drive's own CSP 
 
 Drive units: a drive whose profile says ``units.velocity: rpm`` takes and reports velocities
 in motor min^-1, not counts/s. The adapter multiplies the streamed velocity by the axis's
-factor (rpm per count/s = 60 / 0x608F) before rounding and, after each decode
+factor (rpm per count/s = 60 / counts per motor revolution, the axis's
+``counts_per_rev`` = the drive's 0x608F) before rounding and, after each decode
 (:meth:`CspAdapter.decode`), turns the reported 0x606C back into counts/s, so the canonical
 image stays in counts above this module; :attr:`CspAdapter.accel_unit` is the unit of
-the acceleration writes 0x6083-0x6085 (``units.acceleration: rpm/s``).
+the acceleration writes 0x6083-0x6085 (``units.acceleration: rpm/s`` or ``rev/s^2``).
 
 No allocation per cycle: every array is preallocated, and an arm without ip/pv axes never
 calls :meth:`CspAdapter.apply`.
