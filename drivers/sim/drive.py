@@ -220,9 +220,11 @@ class EmulatedDrives(ImageFields):
                 self.velocity_unit[i], self.acceleration_unit[i] = prof.units.counts_per_drive_unit(
                     d.counts_per_rev
                 )
+        scaled = self.acceleration_unit != 1.0  # 0x6085 in the drive's unit (rpm/s)
         np.copyto(
             self.quick_stop_decel,
             np.maximum(1.0, np.rint(self.quick_stop_decel / self.acceleration_unit)),
+            where=scaled,
             casting="unsafe",
         )
         self.quick_stop_option = np.full(n, 2, dtype=np.int16)
