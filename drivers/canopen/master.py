@@ -173,6 +173,9 @@ class CANopenTransport(Transport):
             for p in (profiles if profiles is not None else [None] * n)
         ]
         self.startup_written = 0
+        from drivers.cia402.profiles import refuse_unknown_units
+
+        refuse_unknown_units(self.axis_names, self.profiles)
         self.use_fallbacks(self.profiles)
         # the wire image of every node: its PDO payloads end to end (RPDOs / TPDOs), one
         # encode and one decode per cycle; the frames are slices of it
@@ -180,7 +183,9 @@ class CANopenTransport(Transport):
         self.wire.bind_master(self.rx, self.tx)
         from drivers.cia402.profiles import csp_adapter
 
-        self.wire.set_adapter(csp_adapter(self.profiles, cycle_time))  # ip / pv drives
+        self.wire.set_adapter(
+            csp_adapter(self.profiles, cycle_time, [d.counts_per_rev for d in drives])
+        )  # ip / pv drives
         self._rpdos: list[list[_Pdo]] = []
         self._tpdos: list[list[_Pdo]] = []
         for prof, nid in zip(self.profiles, self.node_ids, strict=True):

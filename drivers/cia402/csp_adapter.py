@@ -33,6 +33,14 @@ per second out), and must act on every target whoever wrote it (the compiled tic
 the record directly). Its formula lives here only; the emulated drive's own CSP loop
 (drivers/sim/drive.py) is the emulated firmware's, not the stack's.
 
+Drive units: a drive whose profile says ``units.velocity: rpm`` takes and reports velocities
+in motor min^-1, not counts/s. The adapter multiplies the streamed velocity by the axis's
+factor (rpm per count/s = 60 / counts per motor revolution, the axis's
+``counts_per_rev`` = the drive's 0x608F) before rounding and, after each decode
+(:meth:`CspAdapter.decode`), turns the reported 0x606C back into counts/s, so the canonical
+image stays in counts above this module; :attr:`CspAdapter.accel_unit` is the unit of
+the acceleration writes 0x6083-0x6085 (``units.acceleration: rpm/s`` or ``rev/s^2``).
+
 No allocation per cycle: every array is preallocated, and an arm without ip/pv axes never
 calls :meth:`CspAdapter.apply`.
 """
@@ -69,11 +77,29 @@ class CspAdapter:
     """Per-axis ip / pv handling of n axes (see the module docstring).
 
     ``loops``: each axis's loop mode (``csp``, ``csv``, ``cst``, ``ip``, ``pv``);
-    ``gains``: the pv axes' position-loop gain [1/s] (others ignored); ``cycle_time`` [s].
+    ``gains``: the pv axes' position-loop gain [1/s] (others ignored); ``cycle_time`` [s];
+    ``units``: per axis (counts/s per drive velocity unit, counts/s² per drive acceleration
+    unit); None: counts everywhere.
     """
 
-    def __init__(self, loops: Sequence[str], gains: Sequence[float | None], cycle_time: float):
+    def __init__(
+        self,
+        loops: Sequence[str],
+        gains: Sequence[float | None],
+        cycle_time: float,
+        units: Sequence[tuple[float, float]] | None = None,
+    ):
         n = len(loops)
+        units = list(units) if units is not None else [(1.0, 1.0)] * n
+        #: drive velocity units per count/s, counts/s per drive velocity unit (n,)
+        self.vel_to_drive = np.array([1.0 / u[0] for u in units])
+        self.vel_from_drive = np.array([float(u[0]) for u in units])
+        #: counts/s² per drive acceleration unit (n,): 0x6083/0x6084/0x6085 writes
+        self.accel_unit = np.array([float(u[1]) for u in units])
+        #: bool (n,): axes whose drive velocity unit is not counts/s
+        self.scaled = self.vel_from_drive != 1.0
+        #: bool (n,): csv axes among them (their target velocity is scaled as it is)
+        self._csv_scaled = self.scaled & np.array([m == "csv" for m in loops])
         self.n = n
         self.loops = tuple(loops)
         #: 0x6060 each axis runs when the loop asks for CSP (ip / pv axes: their own mode)
@@ -84,7 +110,7 @@ class CspAdapter:
         #: bool (n,): axes run in interpolated position / streamed profile velocity
         self.ip = np.array([m == "ip" for m in loops])
         self.pv = np.array([m == "pv" for m in loops])
-        self.active = bool(self.ip.any() or self.pv.any())
+        self.active = bool(self.ip.any() or self.pv.any() or self.scaled.any())
         self._gain = np.array(
             [g if m == "pv" and g else 0.0 for m, g in zip(loops, gains, strict=True)]
         )
@@ -97,6 +123,7 @@ class CspAdapter:
         self._t = np.zeros(n)
         self._v = np.zeros(n)
         self._w = np.zeros(n)
+        self._s = np.zeros(n)
 
     def apply(self, rx: np.ndarray, tx: np.ndarray) -> None:
         """Adapt ``rx`` (a copy of the canonical RxPDO about to be encoded, shape (n,)) with
@@ -123,8 +150,25 @@ class CspAdapter:
         w *= self._gain
         v += w
         v *= go
+        v *= self.vel_to_drive  # counts/s -> the drive's unit (rpm) before rounding
         np.clip(v, *_I32, out=v)
         np.rint(v, out=v)
         np.copyto(rx["target_velocity"], v, where=self.pv, casting="unsafe")
         np.copyto(self._prev, t)
         np.copyto(self._valid, go)
+        if self._csv_scaled.any():  # csv: the loop's own target velocity, in the drive's unit
+            s = self._s
+            np.multiply(rx["target_velocity"], self.vel_to_drive, out=s)
+            np.clip(s, *_I32, out=s)
+            np.rint(s, out=s)
+            np.copyto(rx["target_velocity"], s, where=self._csv_scaled, casting="unsafe")
+
+    def decode(self, tx: np.ndarray) -> None:
+        """The velocity the drives reported in ``tx`` (the canonical TxPDO just decoded,
+        shape (n,)) in the drive's unit -> counts/s, in place, on the scaled axes. No
+        allocation."""
+        s = self._s
+        np.multiply(tx["velocity"], self.vel_from_drive, out=s)
+        np.clip(s, *_I32, out=s)
+        np.rint(s, out=s)
+        np.copyto(tx["velocity"], s, where=self.scaled, casting="unsafe")

@@ -313,7 +313,7 @@ class DriveGroup(ImageFields):
         Raises ConfigError naming the axis and the object when a drive's 0x1018 identity or
         its rated torque/current (which set the scaling) differ from the config.
         """
-        t, sc = self.transport, self.scaling
+        t, sc, unit = self.transport, self.scaling, self._accel_unit
         absent = self._absent_settings()
         self.settings_notes = self._settings_notes(absent)
         for i, d in enumerate(drives):
@@ -349,7 +349,7 @@ class DriveGroup(ImageFields):
             if not lacks("max_torque"):
                 t.write_value(i, 0x6072, 0, "u16", sc.torque_limit_permille(i, d.torque_limit))
             if not lacks("quick_stop_deceleration"):
-                decel = max(1, sc.acceleration_to_raw(i, d.quick_stop_deceleration))
+                decel = max(1, sc.acceleration_to_raw(i, d.quick_stop_deceleration, unit(i)))
                 t.write_value(i, 0x6085, 0, "u32", decel)
             if not lacks("following_error_window"):
                 window = sc.angle_to_counts(i, d.following_error_window)
@@ -531,6 +531,12 @@ class DriveGroup(ImageFields):
     def _adapter(self) -> Any:
         return getattr(getattr(self.transport, "wire", None), "adapter", None)
 
+    def _accel_unit(self, axis: int) -> float:
+        """counts/s² per unit of the accelerations ``axis``'s drive takes (0x6083-0x6085;
+        its profile's ``units.acceleration``)."""
+        adapter = self._adapter()
+        return 1.0 if adapter is None else float(adapter.accel_unit[axis])
+
     def set_mode(self, mode: Mode | int) -> None:
         """Select the mode of operation on every axis and wait for 0x6061 to show it.
 
@@ -551,7 +557,7 @@ class DriveGroup(ImageFields):
         if mode == Mode.CSP and adapter is not None and self.profile_acceleration is not None:
             for i in np.flatnonzero(adapter.pv):
                 accel = float(self.profile_acceleration[i])
-                raw = min(0xFFFFFFFF, max(1, self.scaling.acceleration_to_raw(int(i), accel)))
+                raw = max(1, self.scaling.acceleration_to_raw(int(i), accel, adapter.accel_unit[i]))
                 t.write_value(int(i), 0x6083, 0, "u32", raw)
                 t.write_value(int(i), 0x6084, 0, "u32", raw)
         for i in np.flatnonzero(~self.present("mode")):

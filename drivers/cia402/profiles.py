@@ -17,6 +17,7 @@ from typing import Any
 from drivers.cia402.pdo import RXPDO_INDEX, RXPDO_MAPPING, TXPDO_INDEX, TXPDO_MAPPING, PdoEntry
 from drivers.cia402.wire import AxisLayout, WireEntry
 from hofto_hw.config.drive_profile import DriveProfile, find_profile, load_profile
+from hofto_hw.errors import ConfigError
 
 
 def _pdo(index: int, entries: Sequence[PdoEntry], fixed: bool = False) -> dict[str, Any]:
@@ -136,14 +137,67 @@ def layout_of(profile: DriveProfile) -> AxisLayout:
     )
 
 
-def csp_adapter(profiles: Sequence[DriveProfile | None], cycle_time: float) -> Any:
+def csp_adapter(
+    profiles: Sequence[DriveProfile | None],
+    cycle_time: float,
+    counts_per_rev: Sequence[float] | None = None,
+) -> Any:
     """The :class:`~drivers.cia402.csp_adapter.CspAdapter` of axes running ``profiles`` (None:
-    the built-in CSP drive) at ``cycle_time`` [s]: ip and pv axes adapted, others untouched."""
+    the built-in CSP drive) at ``cycle_time`` [s]: ip and pv axes adapted, others untouched;
+    ``counts_per_rev`` per axis (encoder counts per motor revolution) scales the velocities
+    of drives whose profile says rpm (None: every drive takes counts/s)."""
     from drivers.cia402.csp_adapter import CspAdapter
 
     loops = [p.modes.loop if p is not None else "csp" for p in profiles]
     gains = [p.modes.position_gain if p is not None else None for p in profiles]
-    return CspAdapter(loops, gains, cycle_time)
+    cpr = list(counts_per_rev) if counts_per_rev is not None else [60.0] * len(profiles)
+    units = [
+        p.units.counts_per_drive_unit(c) if p is not None and counts_per_rev else (1.0, 1.0)
+        for p, c in zip(profiles, cpr, strict=True)
+    ]
+    return CspAdapter(loops, gains, cycle_time, units)
+
+
+def refuse_unknown_units(names: Sequence[str], profiles: Sequence[DriveProfile | None]) -> None:
+    """Raise :class:`ConfigError` (one line) for the first axis whose profile does not know
+    the drive's velocity or acceleration unit (``units.velocity`` / ``units.acceleration``
+    ``unknown``). A master of a real bus calls it before anything is configured or enabled:
+    a wrong guess would move the drive many times too fast or too slow."""
+    for name, p in zip(names, profiles, strict=True):
+        if p is None:
+            continue
+        if p.units.velocity == "unknown":
+            raise ConfigError(
+                f"{name} ({p.name}): the drive's velocity unit is not stated in its file; set "
+                "units.velocity in the profile (counts/s or rpm) after checking the drive's "
+                "manual"
+            )
+        if p.units.acceleration == "unknown":
+            raise ConfigError(
+                f"{name} ({p.name}): the drive's acceleration unit is not stated in its file; "
+                "set units.acceleration in the profile (counts/s^2, rpm/s or rev/s^2) after "
+                "checking the drive's manual"
+            )
+
+
+def with_counts_units(profile: DriveProfile) -> tuple[DriveProfile, str | None]:
+    """``profile`` with unknown velocity/acceleration units taken as counts/s, counts/s^2,
+    and the one line that says so (None: nothing unknown). For emulated drives only: the
+    emulator and the master then agree on counts, which proves the layout, not the unit."""
+    u = profile.units
+    if "unknown" not in (u.velocity, u.acceleration):
+        return profile, None
+    units = u.model_copy(
+        update={
+            "velocity": "counts/s" if u.velocity == "unknown" else u.velocity,
+            "acceleration": "counts/s^2" if u.acceleration == "unknown" else u.acceleration,
+        }
+    )
+    note = (
+        f"{profile.name}: velocity unit unknown in the profile; the emulated drive runs in "
+        "counts/s and counts/s^2 (a real bus refuses the axis until units.velocity is set)"
+    )
+    return profile.model_copy(update={"units": units}), note
 
 
 def mode_number(profile: DriveProfile) -> int:

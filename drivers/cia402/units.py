@@ -174,9 +174,10 @@ class Scaling:
         """Joint torque limit [N·m] -> 0x6072 max torque [per mille], u16."""
         return int(min(65535, max(0, round(abs(tau_max * self.permille_per_nm[axis])))))
 
-    def acceleration_to_raw(self, axis: int, qdd: float) -> int:
-        """Joint acceleration [rad/s²] -> motor counts/s² (0x6085 quick-stop deceleration)."""
-        return int(min(2**32 - 1, round(abs(qdd * self.count_per_rad[axis]))))
+    def acceleration_to_raw(self, axis: int, qdd: float, unit: float = 1.0) -> int:
+        """Joint acceleration [rad/s²] -> motor counts/s² (0x6085 quick-stop deceleration),
+        or the drive's own unit of ``unit`` counts/s² (e.g. rpm/s: 0x608F / 60), u32."""
+        return int(min(2**32 - 1, round(abs(qdd * self.count_per_rad[axis] / unit))))
 
     def angle_to_counts(self, axis: int, angle: float) -> int:
         """Joint angle DIFFERENCE [rad] -> counts (magnitude), e.g. following-error window."""

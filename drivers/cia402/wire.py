@@ -278,6 +278,7 @@ class WireImage:
         self._rx_src = np.zeros(n * RXPDO_SIZE + 1, dtype=np.uint8)
         self._drive_tx_src = np.zeros(n * TXPDO_SIZE + 1, dtype=np.uint8)
         self._adapter: Any = None
+        self._scaled: Any = None
         #: True when every axis runs the built-in layout (the wire IS the canonical image)
         self.builtin = self.serve == tuple((i, 0) for i in range(len(layouts))) and all(
             lay.rx == BUILTIN_LAYOUT.rx and lay.tx == BUILTIN_LAYOUT.tx for lay in layouts
@@ -327,6 +328,9 @@ class WireImage:
         on the copy of the canonical RxPDO each :meth:`encode_rx` encodes (ip / pv axes);
         None or an adapter without such axes: nothing runs. Call after :meth:`bind_master`."""
         self._adapter = adapter if adapter is not None and adapter.active else None
+        #: the adapter when some drive reports velocities in its own unit (rpm)
+        scaled = self._adapter is not None and bool(self._adapter.scaled.any())
+        self._scaled = self._adapter if scaled else None
 
     @property
     def adapter(self) -> Any:
@@ -355,6 +359,15 @@ class WireImage:
         """:attr:`tx_in` -> canonical TxPDO; fields a drive does not map read its default.
         No allocation."""
         self._tx_ext.take(self._dec, out=self._tx_flat, mode="clip")
+        if self._scaled is not None:
+            self._scaled.decode(self._tx_rec)
+
+    def decode_units(self) -> None:
+        """Velocities reported in a drive's own unit (rpm) -> counts/s in the canonical
+        TxPDO (what :meth:`decode_tx` does last; an in-process bus that copies records
+        calls it itself). No allocation."""
+        if self._scaled is not None:
+            self._scaled.decode(self._tx_rec)
 
     def mapped_bytes(self) -> tuple[np.ndarray, np.ndarray]:
         """bool masks over the n canonical RxPDO / TxPDO records' bytes: True where the

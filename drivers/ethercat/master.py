@@ -162,6 +162,9 @@ class EtherCATTransport(Transport):
         ]
         if len(self.profiles) != len(self.drives):
             raise ValueError(f"{len(self.profiles)} profiles for {len(self.drives)} drives")
+        from drivers.cia402.profiles import refuse_unknown_units
+
+        refuse_unknown_units(self.axis_names, self.profiles)
         self.use_fallbacks(self.profiles)
         from hofto_hw.config.drives import device_map
 
@@ -337,7 +340,9 @@ class EtherCATTransport(Transport):
         wire.bind_master(self.rx, self.tx)
         from drivers.cia402.profiles import csp_adapter
 
-        wire.set_adapter(csp_adapter(self.profiles, self.cycle_time))  # ip / pv drives
+        wire.set_adapter(
+            csp_adapter(self.profiles, self.cycle_time, [d.counts_per_rev for d in self.drives])
+        )  # ip / pv drives
         self._set_rows(wire)
         if self.pdo_watchdog is not None:
             for s in self.slaves:

@@ -281,7 +281,7 @@ def choose(desc: DeviceDescription, loop: str | None = None, name: str | None = 
         "dc": _dc(desc, reasons) if desc.bus == "ethercat" else None,
         "process_data": {"rx_bytes": desc.sm_rx_bytes, "tx_bytes": desc.sm_tx_bytes},
         "canopen": _canopen(desc, rx, tx, reasons) if desc.bus == "canopen" else None,
-        "units": _units(desc),
+        "units": _units(desc, loop, reasons),
         "brake": _brake(desc, reasons),
     }
     axes = sum(desc.has(0x6040 + 0x800 * k) for k in range(8))
@@ -757,7 +757,13 @@ def _brake(desc: DeviceDescription, reasons: list[str]) -> dict | None:
     return out
 
 
-def _units(desc: DeviceDescription) -> dict:
+#: loop modes that send the drive velocities (target velocity 0x60FF, profile ramps)
+VELOCITY_LOOPS = ("pv", "csv")
+#: velocity encoder factor, gear ratio on velocity, velocity factor, acceleration factor
+VELOCITY_FACTOR_OBJECTS = (0x6094, 0x6095, 0x6096, 0x6097)
+
+
+def _units(desc: DeviceDescription, loop: str, reasons: list[str]) -> dict:
     out = {}
     for key, index in (
         ("position_encoder_resolution", 0x608F),
@@ -770,4 +776,17 @@ def _units(desc: DeviceDescription) -> dict:
             "present": present,
             "default": (a, b) if a is not None and b is not None else None,
         }
+    factors = [i for i in VELOCITY_FACTOR_OBJECTS if desc.has(i, 1) or desc.has(i, 0)]
+    if loop in VELOCITY_LOOPS and not factors:
+        out["velocity"] = out["acceleration"] = "unknown"
+        out["scaling"] = (
+            "position in encoder increments; velocity and acceleration units not stated in "
+            "the file; torque and current in per mille of rated"
+        )
+        reasons.append(
+            f"units: velocity and acceleration unknown: the {loop} loop sends velocities "
+            "(0x60FF, 0x6083-0x6085) but the file has no velocity factor objects "
+            "(0x6094-0x6097) to say their unit; set units.velocity and units.acceleration "
+            "after checking the drive's manual (a real bus refuses the axis until then)"
+        )
     return out

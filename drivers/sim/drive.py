@@ -209,6 +209,24 @@ class EmulatedDrives(ImageFields):
         self.following_timeout = np.array(
             [round(d.following_error_timeout * 1000.0) for d in drives], dtype=np.uint16
         )
+        #: counts/s per unit of the velocities the drive takes and reports (0x60FF, 0x606C)
+        #: and counts/s² per unit of its accelerations (0x6083-0x6085): 1 unless the
+        #: profile it impersonates says rpm / rpm/s (``units``)
+        self.velocity_unit, self.acceleration_unit = np.ones(n), np.ones(n)
+        #: encoder counts per motor revolution per axis (the config's)
+        self.counts_per_rev = [d.counts_per_rev for d in drives]
+        for i, (d, prof) in enumerate(zip(drives, profiles or [None] * n, strict=True)):
+            if prof is not None:
+                self.velocity_unit[i], self.acceleration_unit[i] = prof.units.counts_per_drive_unit(
+                    d.counts_per_rev
+                )
+        scaled = self.acceleration_unit != 1.0  # 0x6085 in the drive's unit (rpm/s)
+        np.copyto(
+            self.quick_stop_decel,
+            np.maximum(1.0, np.rint(self.quick_stop_decel / self.acceleration_unit)),
+            where=scaled,
+            casting="unsafe",
+        )
         self.quick_stop_option = np.full(n, 2, dtype=np.int16)
         self.error_register = np.zeros(n, dtype=np.uint8)
         objs = DriveObjects(
@@ -374,6 +392,7 @@ class EmulatedDrives(ImageFields):
         self._fe_flag = np.zeros(n, dtype=bool)
         # Precomputed factors and process-image field views.
         self._abs_rpc = np.abs(sc.rad_per_count)
+        self._acc_rpc = self._abs_rpc * self.acceleration_unit  # rad/s² per accel unit
         self._abs_nm = np.abs(sc.nm_per_permille)
         self._ki_dt = tuning.velocity_integral * self.dt
         self._neg_brake = -tuning.brake_torque
@@ -784,6 +803,7 @@ class EmulatedDrives(ImageFields):
         sc.position_to_si(self._rx_pos, self._qt)
         self._qt -= self._home_shift  # the drive's position reference -> the plant's
         sc.velocity_to_si(self._rx_vel, self._vt)
+        self._vt *= self.velocity_unit
         sc.torque_to_si(self._rx_tau, self._tt)
         sc.torque_to_si(self._rx_off, self._toff)
         np.multiply(self.max_torque, self._abs_nm, out=self._lim)
@@ -906,7 +926,7 @@ class EmulatedDrives(ImageFields):
         np.copyto(self._ff, 1.0, where=~self._ipm)
         # pv: the target velocity through the profile ramp
         if self._pvm.any():
-            rpc = self._abs_rpc
+            rpc = self._acc_rpc
             for i in np.flatnonzero(self._pvm):
                 v, target = float(self._pv_v[i]), float(self._vt[i])
                 speeding = abs(target) > abs(v) and target * v >= 0.0
@@ -1075,7 +1095,7 @@ class EmulatedDrives(ImageFields):
 
     def _advance_ramp(self) -> None:
         step, sign = self._w2, self._w3
-        np.multiply(self.quick_stop_decel, self._abs_rpc, out=step)
+        np.multiply(self.quick_stop_decel, self._acc_rpc, out=step)
         step *= self.dt
         np.abs(self._ramp_v, out=sign)
         np.minimum(step, sign, out=step)
@@ -1128,7 +1148,8 @@ class EmulatedDrives(ImageFields):
         self._q_rep += self._home_shift
         sc.position_to_raw(self._q_rep, self._pos_raw)
         np.copyto(self._tx_pos, self._pos_raw, where=self._encoder_ok)
-        sc.velocity_to_raw(p.qd_meas, self._tx_vel)
+        np.divide(p.qd_meas, self.velocity_unit, out=self._w)
+        sc.velocity_to_raw(self._w, self._tx_vel)
         sc.torque_to_raw(p.tau_meas, self._tx_tau)
         np.divide(p.tau_meas, sc.gear_ratio, out=self._w)
         self._w /= sc.torque_constant

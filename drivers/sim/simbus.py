@@ -107,7 +107,9 @@ class SimBus(Transport):
                 layouts.append(configure_pdos(self, i, prof, TransportError))
             self.wire = WireImage(layouts, self.axis_names)
             self.wire.bind_master(self.rx, self.tx)
-            self.wire.set_adapter(csp_adapter(self.profiles, self.cycle_time))
+            self.wire.set_adapter(
+                csp_adapter(self.profiles, self.cycle_time, self.drives.counts_per_rev)
+            )
             self._wired = not self.wire.builtin
             if self._wired:
                 # in one process the bytes need no wire order: what each drive maps is
@@ -146,6 +148,7 @@ class SimBus(Transport):
             np.copyto(self._drv_rx_flat, self.wire.adapt_rx(), where=self._rx_mask)
             self.drives.step(self.drives.rx)
             np.copyto(self._tx_flat, self._drv_tx_flat, where=self._tx_mask)
+            self.wire.decode_units()
             if self.derived is not None:
                 self.derived.apply(self.sample_dt)
             return STATUS_OK

@@ -497,6 +497,29 @@ class UnitsSection(FileModel):
         "per mille of rated",
         description="what the drive reports in its PDOs, in words",
     )
+    velocity: Literal["counts/s", "rpm", "unknown"] = Field(
+        "counts/s",
+        description="unit of the velocities the drive takes and reports (0x60FF, 0x606C): "
+        "counts/s (encoder increments/s), rpm (motor min^-1: counts/s x 60 / 0x608F), or "
+        "unknown (the file does not say: a real bus refuses the axis until it is set)",
+    )
+    acceleration: Literal["counts/s^2", "rpm/s", "rev/s^2", "unknown"] = Field(
+        "counts/s^2",
+        description="unit of the accelerations written to 0x6083/0x6084/0x6085: counts/s^2, "
+        "rpm/s (motor min^-1 per s), rev/s^2 (motor revolutions per s^2, Faulhaber's 1/s^2), "
+        "or unknown",
+    )
+
+    def counts_per_drive_unit(self, counts_per_rev: float) -> tuple[float, float]:
+        """(velocity, acceleration) factors: counts/s per drive velocity unit, counts/s^2
+        per drive acceleration unit (1.0 for counts/s, counts/s^2 and unknown), with
+        ``counts_per_rev`` encoder counts per motor revolution (the axis's, = 0x608F)."""
+        per_rpm = counts_per_rev / 60.0
+        accel = {"rpm/s": per_rpm, "rev/s^2": float(counts_per_rev)}
+        return (
+            per_rpm if self.velocity == "rpm" else 1.0,
+            accel.get(self.acceleration, 1.0),
+        )
 
 
 class StoSource(FileModel):

@@ -5,6 +5,7 @@ CSP; the wire carries 0x60C1:01 + controlword bit 4, or a velocity every SYNC.""
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -20,13 +21,19 @@ from drivers.transport import STATUS_OK
 
 ROOT = Path(__file__).resolve().parents[3]
 TECHNOSOFT = yaml.safe_load((ROOT / "configs/drives/technosoft_ipos.yaml").read_text())
-FAULHABER = yaml.safe_load((ROOT / "configs/drives/faulhaber_mcbl300x.yaml").read_text())
+SHIPPED_FAULHABER = yaml.safe_load((ROOT / "configs/drives/faulhaber_mcbl300x.yaml").read_text())
+# its EDS does not say the velocity unit (units.velocity unknown: a real bus refuses it); the
+# emulator runs what the profile states, so the tests state it: counts/s, or rpm below
+FAULHABER = copy.deepcopy(SHIPPED_FAULHABER)
+FAULHABER["units"].update(velocity="counts/s", acceleration="counts/s^2")
+FAULHABER_RPM = copy.deepcopy(SHIPPED_FAULHABER)
+FAULHABER_RPM["units"].update(velocity="rpm", acceleration="rpm/s")
 IP = np.array([True, False] * 3)
 PV = ~IP
 
 
 @pytest.fixture()
-def bus(tmp_path: Path):
+def bus(tmp_path: Path, request):
     import can
 
     from drivers.canopen.master import CANopenTransport
@@ -35,7 +42,8 @@ def bus(tmp_path: Path):
     from hofto_hw.config.loader import load_config
     from hofto_hw.runtime.build import build_emulated_drives
 
-    cfg = load_config(write_mixed_config(tmp_path, [TECHNOSOFT, FAULHABER] * 3, base=CONFIG))
+    faulhaber = getattr(request, "param", FAULHABER)
+    cfg = load_config(write_mixed_config(tmp_path, [TECHNOSOFT, faulhaber] * 3, base=CONFIG))
     channel = unique_channel()
     can_bus = can.Bus(interface="virtual", channel=channel)
     emu = CanopenDrives(build_emulated_drives(cfg, external=False), can_bus).start()
@@ -173,3 +181,74 @@ def test_configure_leaves_out_the_settings_the_drives_lack(bus) -> None:
     assert [t.read_value(i, 0x6085, 0, "u32") for i in range(6)] == decel
     window = g.scaling.angle_to_counts(0, cfg.bus.drives[0].following_error_window)
     assert t.read_value(0, 0x6065, 0, "u32") == window
+
+
+def test_a_profile_without_the_velocity_unit_is_refused_before_the_bus_opens(tmp_path) -> None:
+    """The shipped Faulhaber profile says units.velocity unknown (its EDS has no velocity
+    factor objects): the master refuses it in one line naming the joint, before any frame."""
+    from drivers.canopen.master import CANopenTransport
+    from drivers.cia402.profiles import profiles_for
+    from hofto_hw.config.loader import load_config
+    from hofto_hw.errors import ConfigError
+
+    cfg = load_config(
+        write_mixed_config(tmp_path, [TECHNOSOFT, SHIPPED_FAULHABER] * 3, base=CONFIG)
+    )
+    with pytest.raises(ConfigError) as err:
+        CANopenTransport(
+            unique_channel(),
+            cfg.bus.drives,
+            cfg.cycle_time,
+            list(cfg.robot.joints),
+            can_interface="virtual",
+            profiles=profiles_for(cfg.bus.drives, "canopen"),
+        )
+    assert str(err.value) == (
+        "joint_2 (faulhaber_mcbl300x): the drive's velocity unit is not stated in its file; "
+        "set units.velocity in the profile (counts/s or rpm) after checking the drive's manual"
+    )
+
+
+@pytest.mark.parametrize("bus", [FAULHABER_RPM], indirect=True, ids=["rpm"])
+def test_pv_drive_in_rpm_moves_and_takes_its_ramps_in_rpm_per_s(bus) -> None:
+    """A Faulhaber profile stating rpm and rpm/s: the master writes 0x6083/0x6084/0x6085 in
+    rpm/s, streams 0x60FF in rpm and reads 0x606C back into counts/s; the emulated drive runs
+    in the same unit and the arm moves 0.05 rad with no fault."""
+    cfg, t, emu = bus
+    t.open()
+    drives = emu.drives
+    per_rpm = cfg.bus.drives[1].counts_per_rev / 60.0  # counts/s per rpm (counts per motor rev)
+    np.testing.assert_array_equal(drives.velocity_unit[PV], per_rpm)
+    np.testing.assert_array_equal(drives.velocity_unit[IP], 1.0)
+    g = DriveGroup.from_config(t, cfg.bus)
+    g.configure(cfg.bus.drives)
+    g.set_mode(Mode.CSP)
+    counts = np.array([g.scaling.acceleration_to_raw(i, d.quick_stop_deceleration)
+                       for i, d in enumerate(cfg.bus.drives)])  # fmt: skip
+    rpm_s = np.rint(counts / per_rpm)
+    assert (rpm_s[PV] < counts[PV] / 40).all()  # not the counts/s² value
+    assert drives.profile_accel[PV].tolist() == rpm_s[PV].tolist()  # 0x6083 [rpm/s]
+    assert drives.profile_decel[PV].tolist() == rpm_s[PV].tolist()  # 0x6084 [rpm/s]
+    assert [t.read_value(i, 0x6083, 0, "u32") for i in (1, 3, 5)] == rpm_s[PV].tolist()
+    assert [t.read_value(i, 0x6085, 0, "u32") for i in (1, 3, 5)] == rpm_s[PV].tolist()
+    assert [t.read_value(i, 0x6085, 0, "u32") for i in (0, 2, 4)] == counts[IP].tolist()
+    g.enable()
+    assert g.all_in(State.OPERATION_ENABLED)
+    q0 = g.q.copy()
+    ramp = 80
+    streamed, reported, seen, qd = np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(6)
+    for k in range(1, ramp + 1):
+        _cycles(g, 1, q0 + 0.05 * k / ramp)
+        streamed = np.maximum(streamed, np.abs(drives.rx["target_velocity"]))
+        reported = np.maximum(reported, np.abs(drives.tx["velocity"]))
+        seen = np.maximum(seen, np.abs(t.tx["velocity"]))
+        qd = np.maximum(qd, np.abs(g.qd))
+    assert _cycles(g, 400, q0 + 0.05) > 200
+    np.testing.assert_allclose(g.q - q0, 0.05, atol=5e-3)
+    assert not g.any_fault() and (drives.fault_code == 0).all()
+    assert (streamed[PV] > 0).all()
+    # 0x606C in rpm on the wire, counts/s in the master's canonical record
+    np.testing.assert_allclose(seen[PV], reported[PV] * per_rpm, rtol=0.05)
+    # the velocity the loop reads is in rad/s as with a counts/s drive: the ramp is 0.05 rad
+    # in 80 cycles of 5 ms (0.125 rad/s); read as rpm it would be 50 x too small
+    assert ((qd[PV] > 0.05) & (qd[PV] < 0.5)).all(), qd

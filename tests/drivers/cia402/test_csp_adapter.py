@@ -111,3 +111,43 @@ def test_apply_allocates_nothing():
     tracemalloc.stop()
     grown = sum(s.size_diff for s in after.compare_to(before, "filename") if s.size_diff > 0)
     assert grown < 4096, grown
+
+
+def test_pv_velocity_in_rpm_scaled_before_rounding_and_read_back_in_counts():
+    """A drive whose profile says rpm (3000 counts per motor revolution: 50 counts/s per rpm):
+    the streamed 0x60FF is in rpm, the reported 0x606C is turned back into counts/s; a counts
+    axis next to it is untouched."""
+    a = CspAdapter(["pv", "pv"], [10.0, 10.0], DT, [(50.0, 50.0), (1.0, 1.0)])
+    assert a.active and a.scaled.tolist() == [True, False]
+    assert a.accel_unit.tolist() == [50.0, 1.0]
+    rx, tx = _images(2)
+    tx["position"] = [0, 0]
+    rx["target_position"] = [0, 0]
+    a.apply(rx, tx)
+    rx["target_position"] = [60, 60]  # 60 counts in 5 ms: 12000 counts/s + 10/s x 60
+    a.apply(rx, tx)
+    assert rx["target_velocity"].tolist() == [round(12600 / 50.0), 12600]
+    tx["velocity"] = [252, 12600]  # what the drives report: rpm, counts/s
+    a.decode(tx)
+    assert tx["velocity"].tolist() == [12600, 12600]
+
+
+def test_csv_target_velocity_in_rpm():
+    a = CspAdapter(["csv", "csv"], [None, None], DT, [(50.0, 1.0), (1.0, 1.0)])
+    rx, tx = _images(2)
+    rx["target_velocity"] = [5000, 5000]
+    a.apply(rx, tx)
+    assert rx["target_velocity"].tolist() == [100, 5000]
+
+
+def test_wire_decode_turns_rpm_back_into_counts():
+    lay = AxisLayout(rx=BUILTIN_LAYOUT.rx, tx=BUILTIN_LAYOUT.tx)
+    w = WireImage([lay, lay], ["a", "b"])
+    rx, tx = new_rx(2), new_tx(2)
+    w.bind_master(rx, tx)
+    w.set_adapter(CspAdapter(["csp", "csp"], [None, None], DT, [(50.0, 50.0), (1.0, 1.0)]))
+    drive_tx = new_tx(2)
+    drive_tx["velocity"] = [-30, -30]
+    w.drive_tx(drive_tx)
+    w.decode_tx()
+    assert tx["velocity"].tolist() == [-1500, -30]

@@ -19,6 +19,7 @@ from drivers.ethercat.errors import EtherCATError, StateChangeError
 from drivers.ethercat.master import EtherCATTransport
 from drivers.transport import STATUS_OK, SdoAbortError
 from hofto_hw.config.loader import load_config
+from hofto_hw.errors import ConfigError
 
 pytestmark = pytest.mark.root
 
@@ -165,3 +166,19 @@ def test_the_master_programs_the_sync0_cycle_its_profile_names(mixed_bus) -> Non
     msg = str(err.value)
     assert "slave 3" in msg and "0x0030" in msg
     assert "slave 2" not in msg and "slave 1" not in msg
+
+
+def test_a_profile_without_the_velocity_unit_is_refused_before_the_bus_opens(tmp_path) -> None:
+    """A drive profile saying units.velocity unknown: the master refuses it in one line
+    naming the joint and the profile, in its constructor (no socket, no frame)."""
+    cfg = load_config(write_mixed_config(tmp_path))
+    data = copy.deepcopy(NANOTEC)
+    data["units"] = {"velocity": "unknown", "acceleration": "unknown"}
+    profiles = [profile(p) for p in MIXED]
+    profiles[2] = profile(data)
+    with pytest.raises(ConfigError) as err:
+        _transport("no-such-interface", cfg, profiles)
+    assert str(err.value) == (
+        "joint_3 (test_nanotec): the drive's velocity unit is not stated in its file; set "
+        "units.velocity in the profile (counts/s or rpm) after checking the drive's manual"
+    )

@@ -156,6 +156,20 @@ def test_faulhaber_runs_streamed_profile_velocity():
     assert rx == ["controlword", "target_velocity", "mode"]  # 56 bits, 3 of 4 entries
     assert p.fallbacks["torque"] == "current" and "target_position" in p.objects.sdo
     assert any(r.startswith("loop: pv") and "0x60FF" in r for r in c.reasons)
+    # no velocity factor objects (0x6094-0x6097) in the EDS: the unit of 0x60FF/0x6083 is not
+    # known (the limits suggest rpm); the import says so, once, and leaves it unknown
+    assert not any(d.has(i, 1) or d.has(i) for i in range(0x6094, 0x6098))
+    assert (p.units.velocity, p.units.acceleration) == ("unknown", "unknown")
+    why = [r for r in c.reasons if r.startswith("units:")]
+    assert len(why) == 1 and "0x6094-0x6097" in why[0] and "\n" not in why[0]
+
+
+@pytest.mark.parametrize("name", ["technosoft_iPOS.eds", "nanotec_C5-E-2-21.xml"])
+def test_position_loops_keep_velocities_in_counts(name):
+    """ip and csp send positions: their velocity unit stays counts/s, nothing said."""
+    c = _import(name)
+    assert (c.profile.units.velocity, c.profile.units.acceleration) == ("counts/s", "counts/s^2")
+    assert not any(r.startswith("units:") for r in c.reasons)
 
 
 def test_drive_with_neither_ip_nor_pv_refused_naming_what_is_missing():

@@ -108,3 +108,44 @@ def test_bad_input_is_one_line_exit_2(capsys, argv: list[str], message: str) -> 
     err = capsys.readouterr().err.strip()
     assert code == 2
     assert message in err and "\n" not in err and "Traceback" not in err
+
+
+FAULHABER = ROOT / "configs" / "drives" / "faulhaber_mcbl300x.yaml"
+REFUSED = (
+    "joint_1 (faulhaber_mcbl300x): the drive's velocity unit is not stated in its file; set "
+    "units.velocity in the profile (counts/s or rpm) after checking the drive's manual"
+)
+
+
+def test_unknown_velocity_unit_runs_emulated_in_counts_and_says_so(capsys) -> None:
+    """The shipped Faulhaber profile does not know its velocity unit: the emulated check runs
+    the emulator in counts/s and says so in one line (stderr and the report's warnings)."""
+    assert yaml.safe_load(FAULHABER.read_text())["units"]["velocity"] == "unknown"
+    code = main(["drive", "check", str(FAULHABER), "--emulated", "--json"])
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)
+    _assert_passed(code, report)
+    note = [w for w in report["warnings"] if "velocity unit unknown" in w]
+    assert len(note) == 1 and "runs in counts/s" in note[0]
+    assert captured.err.strip() == f"note: {note[0]}"
+
+
+def test_unknown_velocity_unit_refused_on_a_real_bus(capsys) -> None:
+    """Not emulated: the CANopen master refuses the axis in one line before it opens the bus
+    (python-can's virtual interface stands for the real one: nothing answers on it)."""
+    code = main(["drive", "check", str(FAULHABER), "--interface", "virtual", "--channel", "x"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert err.endswith(REFUSED) and "\n" not in err
+
+
+def test_faulhaber_in_rpm_checked_emulated(capsys, tmp_path: Path) -> None:
+    """A copy of the Faulhaber profile stating rpm and rpm/s: master and emulator convert in
+    drivers/, the arm moves 0.05 rad on every axis with no fault and no units note."""
+    prof = yaml.safe_load(FAULHABER.read_text())
+    prof["units"].update(velocity="rpm", acceleration="rpm/s")
+    path = tmp_path / "faulhaber_mcbl300x.yaml"
+    path.write_text(yaml.safe_dump(prof, sort_keys=False))
+    code, report = _check(capsys, str(path), "--emulated")
+    _assert_passed(code, report)
+    assert not any("velocity unit" in w for w in report["warnings"])

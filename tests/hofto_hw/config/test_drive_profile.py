@@ -383,3 +383,21 @@ def test_absent_settings_are_named_and_checked():
     _invalid(bad, "unknown setting object 'max_current'")
     bad["objects"]["absent_settings"] = ["max_torque", "max_torque"]
     _invalid(bad, "listed twice")
+
+
+def test_velocity_units_default_to_counts_and_are_checked(tmp_path):
+    """units.velocity / units.acceleration: counts/s by default (the built-in layout and every
+    profile written before them), rpm or unknown when stated; anything else one line."""
+    data = _shipped("zeroerr_erob")
+    assert "velocity" not in data["units"]  # written before units.velocity existed
+    units = DriveProfile.model_validate(data).units
+    assert (units.velocity, units.acceleration) == ("counts/s", "counts/s^2")
+    assert units.counts_per_drive_unit(131072) == (1.0, 1.0)
+    data["units"].update(velocity="rpm", acceleration="rpm/s")
+    units = DriveProfile.model_validate(data).units
+    assert units.counts_per_drive_unit(3000) == (50.0, 50.0)  # counts/s per min^-1
+    data["units"]["acceleration"] = "rev/s^2"  # Faulhaber's 1/s^2: 60 rpm/s
+    assert DriveProfile.model_validate(data).units.counts_per_drive_unit(3000) == (50.0, 3000.0)
+    data["units"]["velocity"] = "rad/s"
+    msg = _refused(tmp_path, data)
+    assert "units.velocity" in msg and "\n" not in msg
