@@ -44,8 +44,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tune": ("hofto_hw.commands.tune", "tune observer gain and thresholds with injected contacts"),
     "payload": ("hofto_hw.commands.payload", "identify a payload (tool or load) from recordings"),
     "brake": ("hofto_hw.commands.brake", "test the holding brakes (offline)"),
-    "home": ("hofto_hw.commands.home", "home the incremental axes (CiA 402 homing, offline)"),
-    "zero": ("hofto_hw.commands.zero", "re-zero a joint at a reference (offline: config + state)"),
+    "home": (
+        "hofto_hw.commands.home",
+        "home the incremental axes (CiA 402; via the service if one runs)",
+    ),
+    "zero": (
+        "hofto_hw.commands.zero",
+        "re-zero a joint at a reference (via the service if one runs)",
+    ),
     "sim-ethercat": (
         "hofto_hw.commands.sim_ethercat",
         "serve emulated EtherCAT CiA-402 drives on a network interface",

@@ -41,7 +41,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from drivers.cia402.brake import BrakeTest, brake_test_plan
     from drivers.cia402.state_machine import Mode, State
-    from hofto_hw.commands.zero import joint_index
     from hofto_hw.config import load_config
     from hofto_hw.config.locate import find_config
     from hofto_hw.runtime.compose import (
@@ -50,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
         enable_drives,
         preload_braked_axes,
     )
+    from hofto_hw.runtime.zero_offset import joint_index
 
     try:
         fraction = float(args.torque)

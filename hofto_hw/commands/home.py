@@ -21,18 +21,13 @@ from pathlib import Path
 
 from hofto_hw.commands.args import add_config
 from hofto_hw.errors import UserError
+from hofto_hw.runtime.control_client import add_service_socket_argument
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     add_config(parser, default="er3a")
     parser.add_argument("--joint", help="home only this joint (name or 1-based number)")
-    parser.add_argument(
-        "--socket",
-        type=Path,
-        default=None,
-        help="the running service's control socket (default: service.socket or "
-        "/run/hofto-hw/control.sock when a service answers there; none: offline)",
-    )
+    add_service_socket_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -25,8 +25,8 @@ from pathlib import Path
 
 from hofto_hw.commands.args import HelpFormatter, add_config
 from hofto_hw.errors import UserError
-from hofto_hw.runtime.zero_offset import (  # noqa: F401 (joint_index, _with_zero_offset: users)
-    _with_zero_offset,
+from hofto_hw.runtime.control_client import add_service_socket_argument
+from hofto_hw.runtime.zero_offset import (
     commit_edit,
     joint_index,
     new_zero_offset,
@@ -50,13 +50,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         type=Path,
         help="offline only: positions file (default: last_positions.yaml in run.log_dir)",
     )
-    st.add_argument(
-        "--socket",
-        type=Path,
-        default=None,
-        help="the running service's control socket (default: service.socket or "
-        "/run/hofto-hw/control.sock when a service answers there; none: offline)",
-    )
+    add_service_socket_argument(st)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -20,6 +20,18 @@ def add_socket_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_service_socket_argument(parser: argparse.ArgumentParser) -> None:
+    """``--socket`` of a command that goes through a running service when one answers and
+    works offline otherwise (``home``, ``zero set``; :func:`running_service`)."""
+    parser.add_argument(
+        "--socket",
+        type=Path,
+        default=None,
+        help="the running service's control socket (default: service.socket or "
+        f"{DEFAULT_SOCKET} when a service answers there; none: offline)",
+    )
+
+
 def running_service(socket: Path | None, cfg: object = None) -> Path | None:
     """The control socket of a running service for a command that can go through it or
     work offline (``home``, ``zero set``): ``socket`` when given (UserError, one line, when

@@ -148,7 +148,7 @@ def test_zero_set_refusals_write_nothing(config, tmp_path, capsys, kw, argv, nee
 
 
 def test_zero_set_adds_the_key_to_a_flow_mapping(config: Path) -> None:
-    from hofto_hw.commands.zero import _with_zero_offset
+    from hofto_hw.runtime.zero_offset import _with_zero_offset
 
     text = config.read_text()
     new = _with_zero_offset(text, 4, 1234, config)
