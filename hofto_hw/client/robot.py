@@ -297,11 +297,7 @@ class Robot:
             raise Refused("move_joints: q has a non-finite value")
         req = {"cmd": "move_joints", "q": qv, "speed": float(speed),
                "acceleration": float(acceleration)}  # fmt: skip
-        r = self._call(req, timeout=60.0)
-        m = Motion(self, "move", str(r.get("message", "")), float(r.get("duration_s", 0.0)))
-        if wait:
-            m.wait(timeout)
-        return m
+        return self._motion(req, "move", 60.0, wait, timeout)
 
     def move_linear(
         self,
@@ -320,11 +316,7 @@ class Robot:
             raise Refused("move_linear: pose must be 6 finite numbers [x, y, z, rx, ry, rz]")
         req = {"cmd": "move_linear", "pose": p, "speed": float(speed),
                "acceleration": float(acceleration)}  # fmt: skip
-        r = self._call(req, timeout=120.0)
-        m = Motion(self, "linear", str(r.get("message", "")), float(r.get("duration_s", 0.0)))
-        if wait:
-            m.wait(timeout)
-        return m
+        return self._motion(req, "linear", 120.0, wait, timeout)
 
     def replay(
         self, path_file: Path | str, wait: bool = True, timeout: float | None = None
@@ -332,8 +324,21 @@ class Robot:
         """Replay a taught path (``hofto-hw mode drag --record``'s file): a move to its
         start, then the path time-scaled into the limits."""
         path = str(Path(path_file).resolve())
-        r = self._call({"cmd": "replay", "file": path}, timeout=600.0)  # planning: CPU-bound
-        m = Motion(self, "replay", str(r.get("message", "")), float(r.get("duration_s", 0.0)))
+        # the answer waits for the planning, which is CPU-bound: a long call timeout
+        return self._motion({"cmd": "replay", "file": path}, "replay", 600.0, wait, timeout)
+
+    def _motion(
+        self,
+        req: dict[str, Any],
+        kind: str,
+        call_timeout: float,
+        wait: bool,
+        timeout: float | None,
+    ) -> Motion:
+        """Send a motion request (answered once planned, within ``call_timeout`` [s]); its
+        :class:`Motion`, waited for up to ``timeout`` [s] when ``wait``."""
+        r = self._call(req, timeout=call_timeout)
+        m = Motion(self, kind, str(r.get("message", "")), float(r.get("duration_s", 0.0)))
         if wait:
             m.wait(timeout)
         return m
