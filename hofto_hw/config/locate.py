@@ -36,6 +36,16 @@ def config_dirs() -> list[Path]:
     return dirs
 
 
+def named_yaml(name: str, folders: list[Path]) -> tuple[Path | None, list[str]]:
+    """``<name>.yaml`` in the first of ``folders`` that has it (None if none does), and the
+    names every folder offers (sorted; for the message when it is not found)."""
+    for folder in folders:
+        candidate = folder / f"{name}.yaml"
+        if candidate.is_file():
+            return candidate, []
+    return None, sorted({p.stem for d in folders for p in d.glob("*.yaml")})
+
+
 def find_config(
     spec: str | Path | None,
     robot: str | None = None,
@@ -65,11 +75,9 @@ def find_config(
         name = str(spec)
         if "/" in name or path.suffix in (".yaml", ".yml"):
             raise UserError(f"{option}: {path}: config file not found")
-        for folder in config_dirs():
-            candidate = folder / f"{name}.yaml"
-            if candidate.is_file():
-                return candidate
-        known = sorted({p.stem for d in config_dirs() for p in d.glob("*.yaml")})
+        found, known = named_yaml(name, config_dirs())
+        if found is not None:
+            return found
         raise UserError(
             f"{option}: {name!r} is neither a file nor a known robot (have: "
             f"{', '.join(known) or 'none'})"

@@ -10,14 +10,13 @@ from pydantic import ValidationError
 from hofto_hw.config.drive_profile.schema import DriveProfile, check_profile_against_loop
 from hofto_hw.config.drives import BusConfig
 from hofto_hw.config.loader import read_yaml
+from hofto_hw.config.locate import config_dirs, named_yaml
 from hofto_hw.errors import ConfigError
 
 
 def profile_dirs() -> list[Path]:
     """Folders searched for ``<name>.yaml`` by profile name: ./configs/drives, then the
     project's configs/drives."""
-    from hofto_hw.config.locate import config_dirs
-
     return [d / "drives" for d in config_dirs()]
 
 
@@ -36,11 +35,9 @@ def find_profile(spec: str | Path, base_dir: Path | None = None) -> Path:
     name = str(spec)
     if "/" in name or path.suffix in (".yaml", ".yml"):
         raise ConfigError(f"{candidates[0]}: drive profile not found")
-    for folder in profile_dirs():
-        candidate = folder / f"{name}.yaml"
-        if candidate.is_file():
-            return candidate
-    known = sorted({p.stem for d in profile_dirs() for p in d.glob("*.yaml")})
+    found, known = named_yaml(name, profile_dirs())
+    if found is not None:
+        return found
     raise ConfigError(
         f"drive profile {name!r} is neither a file nor a profile in configs/drives/ (have: "
         f"{', '.join(known) or 'none'})"
