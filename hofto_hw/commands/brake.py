@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     drives = cfg.bus.drives
     axes = [i for i, d in enumerate(drives) if d.brake is not None]
     if args.joint is not None:
-        j = joint_index(args.joint, joints)
+        j = joint_index(args.joint, joints, "brake test")
         if drives[j].brake is None:
             raise UserError(f"{config_path}: bus.drives[{j}].brake: none: {joints[j]} has no brake")
         axes = [j]

@@ -45,19 +45,19 @@ def run(args: argparse.Namespace) -> int:
     joints = list(cfg.robot.joints)
     axes = [i for i, d in enumerate(cfg.bus.drives) if d.homing is not None]
     if args.joint is not None:
-        j = joint_index(args.joint, joints)
+        j = joint_index(args.joint, joints, "home")
         if cfg.bus.drives[j].homing is None:
             raise UserError(
                 f"{config_path}: bus.drives[{j}].homing: none: {joints[j]} has an absolute "
                 "encoder, nothing to home"
             )
         axes = [j]
+    from hofto_hw.runtime.control_client import running_service
+
+    sock = running_service(args.socket, cfg)  # a --socket nobody answers: one line, first
     if not axes:
         print("home: every axis has homing: none (absolute encoders): nothing to home")
         return 0
-    from hofto_hw.runtime.control_client import running_service
-
-    sock = running_service(args.socket, cfg)
     if sock is not None:
         return _through_service(sock, [(joints[i], cfg.bus.drives[i].homing) for i in axes])
     clock = "sim" if str(cfg.bus.transport) == "sim" else "real"
