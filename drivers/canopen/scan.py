@@ -5,7 +5,15 @@ are the bus (two boot-ups from one node id are two drives claiming it: refused i
 Each node is then read by SDO through the ``canopen`` library: 0x1018, the RPDO/TPDO
 communication parameters 0x1400../0x1800.. (COB-ID, enabled, transmission type) and
 mappings 0x1600../0x1A00.. up to the first missing one, how many entries a mapping takes,
-0x6502, which CiA-402 objects exist, the units objects. Nothing is written but NMT.
+0x6502, which CiA-402 objects exist, the units objects.
+
+Fixed or configurable, probed the CiA 301 way while the nodes are PRE-OPERATIONAL (after the
+reset): per PDO, the PDO is made invalid (COB-ID bit 31 set), the mapping's entry count
+(sub 0) written back unchanged and read back, then the COB-ID restored exactly as it was. A
+configurable mapping takes the write (a no-op); a fixed one aborts it (0x06010002 read only,
+or another code: 0x06090030, 0x08000020 ...). A node that refuses to make the PDO invalid
+cannot be remapped either: fixed too. Nothing else is written but NMT, and every probe
+leaves the node as it found it (a COB-ID that cannot be restored is refused in one line).
 """
 
 from __future__ import annotations
@@ -85,6 +93,31 @@ def _read_node(node: Any, nid: int, bitrate: int, canopen: Any) -> ScannedDrive:
             raise ScanError(f"{address}: SDO read 0x{index:04X}:{sub:02X} got no answer") from None
         return int.from_bytes(data[:size].ljust(size, b"\0"), "little")
 
+    def write(index: int, sub: int, value: int, size: int) -> bool:
+        """SDO download; False when the node aborts it."""
+        try:
+            node.sdo.download(index, sub, value.to_bytes(size, "little"))
+        except canopen.SdoAbortedError:
+            return False
+        except canopen.SdoCommunicationError:
+            raise ScanError(f"{address}: SDO write 0x{index:04X}:{sub:02X} got no answer") from None
+        return True
+
+    def fixed(comm: int, mapping: int, cob: int, count: int) -> bool:
+        """Whether ``mapping`` refuses a write (see the module docstring)."""
+        if not cob & layout.COB_ID_INVALID and not write(comm, 1, cob | layout.COB_ID_INVALID, 4):
+            return True  # the PDO cannot be made invalid: not remappable
+        try:
+            return not (write(mapping, 0, count, 1) and read(mapping, 0, 1) == count)
+        finally:
+            if not cob & layout.COB_ID_INVALID and not (
+                write(comm, 1, cob, 4) and read(comm, 1, 4) == cob
+            ):
+                raise ScanError(
+                    f"{address}: 0x{comm:04X}:01 (COB-ID) could not be restored to "
+                    f"0x{cob:08X} after probing 0x{mapping:04X}: reset the node"
+                )
+
     def pdos(comm_base: int, map_base: int) -> tuple[list[ScannedPdo], int]:
         out, max_entries = [], 0
         for k in range(512):
@@ -109,6 +142,7 @@ def _read_node(node: Any, nid: int, bitrate: int, canopen: Any) -> ScannedDrive:
                         (cob & 0x7FF) - nid,
                         1 if ttype is None else ttype,
                         not cob & layout.COB_ID_INVALID,
+                        fixed=fixed(comm_base + k, map_base + k, cob, n),
                     )
                 )
         return out, max_entries

@@ -310,12 +310,16 @@ class DriveGroup(ImageFields):
         built-in drive, has them all); :attr:`settings_notes` says per axis which ones and what
         the stack does instead.
 
-        Raises ConfigError naming the axis and the object when a drive's 0x1018 identity or
-        its rated torque/current (which set the scaling) differ from the config.
+        Raises ConfigError naming the axis and the object when a drive's 0x1018 identity,
+        its position encoder resolution 0x608F (increments per motor revolution, where the
+        drive has the object: the config's ``counts_per_rev`` scales every position and,
+        for a drive in rpm, every velocity) or its rated torque/current (which set the
+        scaling) differ from the config.
         """
         t, sc, unit = self.transport, self.scaling, self._accel_unit
         absent = self._absent_settings()
         self.settings_notes = self._settings_notes(absent)
+        resolution = self._has_encoder_resolution()
         for i, d in enumerate(drives):
             who = f"axis {i} ({self.names[i]})"
             ident = d.identity
@@ -333,6 +337,14 @@ class DriveGroup(ImageFields):
                             f"bus.drives[{i}].identity: {who} reports {what} 0x{got:08X}, "
                             f"config expects 0x{want:08X}"
                         )
+            if resolution[i]:
+                inc, revs = t.read_value(i, 0x608F, 1, "u32"), t.read_value(i, 0x608F, 2, "u32")
+                if revs == 0 or inc != d.counts_per_rev * revs:
+                    raise ConfigError(
+                        f"bus.drives[{i}].counts_per_rev: {who} object 0x608F (position "
+                        f"encoder resolution) says {inc} increments per {revs} motor "
+                        f"revolutions, config expects {d.counts_per_rev} per 1"
+                    )
             lacks = absent[i].__contains__
             for index, what, want in (
                 (0x6076, "rated_torque", d.rated_torque),
@@ -357,6 +369,16 @@ class DriveGroup(ImageFields):
             if not lacks("following_error_timeout"):
                 t.write_value(i, 0x6066, 0, "u16", round(d.following_error_timeout * 1000.0))
         self.brake_setup = self.write_brake_delays(drives)
+
+    def _has_encoder_resolution(self) -> list[bool]:
+        """Per axis: its drive has 0x608F (the built-in drive has; a profile says)."""
+        profiles = getattr(self.transport, "profiles", None) or [None] * self.n
+        return [
+            p is None
+            or p.name.startswith("builtin-")
+            or p.units.position_encoder_resolution.present
+            for p in profiles
+        ]
 
     def _absent_settings(self) -> list[frozenset[str]]:
         """Per axis: the setting objects its profile says the drive does not have."""
@@ -530,6 +552,15 @@ class DriveGroup(ImageFields):
 
     def _adapter(self) -> Any:
         return getattr(getattr(self.transport, "wire", None), "adapter", None)
+
+    def drive_units(self, axis: int) -> tuple[float, float]:
+        """(counts/s per unit of the velocities, counts/s² per unit of the accelerations)
+        ``axis``'s drive takes: its profile's ``units`` (rpm, rpm/s, rev/s²), (1, 1) for
+        counts. For the setup writes in those units (homing 0x6099/0x609A)."""
+        adapter = self._adapter()
+        if adapter is None:
+            return 1.0, 1.0
+        return float(adapter.vel_from_drive[axis]), float(adapter.accel_unit[axis])
 
     def _accel_unit(self, axis: int) -> float:
         """counts/s² per unit of the accelerations ``axis``'s drive takes (0x6083-0x6085;

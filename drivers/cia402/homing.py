@@ -1,8 +1,10 @@
 """CiA 402 homing of one axis (mode 6), as a per-cycle sequence the caller steps.
 
 :func:`homing_plan` turns an axis's ``homing:`` config (SI, joint side) into the raw values
-of 0x6098 (method), 0x6099:1/2 (speeds, counts/s), 0x609A (acceleration, counts/s²) and
-0x607C (home offset, counts) for the SDO writes (:meth:`HomingPlan.sdo_writes`). A
+of 0x6098 (method), 0x6099:1/2 (speeds, counts/s), 0x609A (acceleration, counts/s²; both
+in the drive's own units when its profile says rpm, rpm/s or rev/s²:
+:meth:`DriveGroup.drive_units`) and 0x607C (home offset, counts) for the SDO writes
+(:meth:`HomingPlan.sdo_writes`). A
 :class:`HomingSequence` is then stepped once per bus cycle with the axis's statusword,
 mode display and position [rad]; it gives the controlword and mode to send:
 
@@ -42,8 +44,8 @@ class HomingPlan:
     axis: int
     name: str
     method: int
-    speeds: tuple[int, int]  # counts/s
-    acceleration: int  # counts/s²
+    speeds: tuple[int, int]  # counts/s, or the drive's velocity unit (rpm)
+    acceleration: int  # counts/s², or the drive's acceleration unit (rpm/s, rev/s²)
     home_offset: int  # counts
     offset: float  # joint angle at home [rad]
     tolerance: float  # [rad]
@@ -61,17 +63,26 @@ class HomingPlan:
 
 
 def homing_plan(
-    cfg: HomingConfig, scaling: Scaling, axis: int, cycle_time: float, name: str = ""
+    cfg: HomingConfig,
+    scaling: Scaling,
+    axis: int,
+    cycle_time: float,
+    name: str = "",
+    units: tuple[float, float] = (1.0, 1.0),
 ) -> HomingPlan:
-    """The raw plan for axis ``axis`` from its config; ``cycle_time`` [s] of the bus."""
-    count_per_rad = abs(float(scaling.count_per_rad[axis]))
+    """The raw plan for axis ``axis`` from its config; ``cycle_time`` [s] of the bus;
+    ``units``: counts/s per unit of the drive's velocities and counts/s² per unit of its
+    accelerations (:meth:`DriveGroup.drive_units`: rpm, rpm/s, rev/s² when its profile
+    says so), the units 0x6099 and 0x609A are written in (at least 1: a speed that rounds
+    to 0 would never end)."""
     home = round(float(scaling.zero_offset[axis]) + cfg.offset * float(scaling.count_per_rad[axis]))
+    fast, slow = (max(1, scaling.speed_to_raw(axis, v, units[0])) for v in cfg.speeds)
     return HomingPlan(
         axis=axis,
         name=name or f"axis {axis}",
         method=int(cfg.method),
-        speeds=(round(cfg.speeds[0] * count_per_rad), round(cfg.speeds[1] * count_per_rad)),
-        acceleration=round(cfg.acceleration * count_per_rad),
+        speeds=(fast, slow),
+        acceleration=max(1, scaling.acceleration_to_raw(axis, cfg.acceleration, units[1])),
         home_offset=int(home),
         offset=float(cfg.offset),
         tolerance=float(cfg.tolerance),
@@ -151,17 +162,20 @@ class HomingSequence:
             self.result = failure
 
 
-def home_axes(group: DriveGroup, plans: list[HomingPlan], loop_mode: int = int(Mode.CSP)) -> str:
+def home_axes(group: DriveGroup, plans: list[HomingPlan], loop_mode: int | None = None) -> str:
     """Home the axes of ``plans`` one after the other on an enabled ``group`` (every other
     axis holds its measured position); "" when all homed, else the first failure (one line)
-    and the axes after it are left alone. Each plan's objects are written by SDO first."""
+    and the axes after it are left alone. Each plan's objects are written by SDO first.
+    Each axis goes back to ``loop_mode``, by default the mode it ran before (an axis whose
+    drive runs the loop's CSP in profile velocity or ip goes back to that mode, not 8)."""
     t = group.transport
     rx, tx = t.rx, t.tx
     for plan in plans:
         a = plan.axis
+        back = (int(rx["mode"][a]) or int(Mode.CSP)) if loop_mode is None else int(loop_mode)
         for index, sub, kind, value in plan.sdo_writes():
             t.write_value(a, index, sub, kind, value)
-        seq = HomingSequence(plan, loop_mode)
+        seq = HomingSequence(plan, back)
         while not seq.done:
             group.hold()
             rx["controlword"][a] = seq.controlword
@@ -170,7 +184,7 @@ def home_axes(group: DriveGroup, plans: list[HomingPlan], loop_mode: int = int(M
             group.cycle()
             seq.step(int(tx["statusword"][a]), int(tx["mode_display"][a]), float(group.q[a]))
         rx["controlword"][a] = seq.controlword
-        rx["mode"][a] = loop_mode
+        rx["mode"][a] = back
         if seq.result:
             return seq.result
     return ""

@@ -2,7 +2,9 @@
 
 Raw units (never leave drivers/):
 - position 0x6064/0x607A: motor encoder counts (``counts_per_rev`` per motor revolution);
-- velocity 0x606C/0x60FF: motor encoder counts per second;
+- velocity 0x606C/0x60FF: motor encoder counts per second (a drive in rpm: the scalar
+  helpers below take its ``unit``, the cyclic stream is scaled by
+  :mod:`drivers.cia402.csp_adapter`);
 - torque 0x6077/0x6071/0x60B2: per mille of the rated motor torque 0x6076 [mN·m];
 - current 0x6078: per mille of the rated motor current 0x6075 [mA].
 
@@ -173,6 +175,11 @@ class Scaling:
     def torque_limit_permille(self, axis: int, tau_max: float) -> int:
         """Joint torque limit [N·m] -> 0x6072 max torque [per mille], u16."""
         return int(min(65535, max(0, round(abs(tau_max * self.permille_per_nm[axis])))))
+
+    def speed_to_raw(self, axis: int, qd: float, unit: float = 1.0) -> int:
+        """Joint speed [rad/s] -> motor counts/s (e.g. homing speeds 0x6099), or the drive's
+        own unit of ``unit`` counts/s (rpm: 0x608F / 60), magnitude, u32."""
+        return int(min(2**32 - 1, round(abs(qd * self.count_per_rad[axis] / unit))))
 
     def acceleration_to_raw(self, axis: int, qdd: float, unit: float = 1.0) -> int:
         """Joint acceleration [rad/s²] -> motor counts/s² (0x6085 quick-stop deceleration),

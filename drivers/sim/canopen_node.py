@@ -81,6 +81,7 @@ def add_canopen_objects(od: ObjectDictionary, node_id: int, profile: Any = None)
     impersonates ``profile`` (its mapping objects already in ``od``): the communication
     objects of its PDOs, disabled (COB-ID bit 31) where its file says so."""
     od.max_pdo_bits = 64
+    od.mapping_needs_invalid_pdo = True  # CiA 301: remap only a PDO made invalid
     if profile is not None:
         od.add_var(0x1005, "COB-ID SYNC", "u32", "rw", layout.SYNC_COB_ID)
         od.add_var(0x1014, "COB-ID EMCY", "u32", "ro", layout.EMCY_BASE + node_id)

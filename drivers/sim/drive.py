@@ -1029,9 +1029,10 @@ class EmulatedDrives(ImageFields):
         rpc = self._abs_rpc
         for i in np.flatnonzero(self._hm):
             h = int(self.homing[i])
-            fast = float(self.homing_speeds[0, i]) * rpc[i]
-            slow = float(self.homing_speeds[1, i]) * rpc[i]
-            acc = max(float(self.homing_accel[i]) * rpc[i], 1e-6)
+            # 0x6099 / 0x609A in the drive's own units (counts/s, or rpm and rpm/s ...)
+            fast = float(self.homing_speeds[0, i]) * rpc[i] * self.velocity_unit[i]
+            slow = float(self.homing_speeds[1, i]) * rpc[i] * self.velocity_unit[i]
+            acc = max(float(self.homing_accel[i]) * self._acc_rpc[i], 1e-6)
             direction = float(self._home_dir[i])
             method = int(self.homing_method[i])
             qi, prev = float(q[i]), float(self._home_prev_q[i])

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers.canopen.layout import COB_ID_INVALID
 from drivers.cia402 import codes
 from drivers.cia402.codes import describe_sdo_abort
 from drivers.cia402.pdo import (
@@ -50,6 +51,8 @@ KINDS: dict[str, tuple[str, int]] = {
 #: largest PDO the emulated drives accept [bits] (EtherCAT SM size limit in practice).
 MAX_PDO_BITS = 64 * 8
 MAX_PDO_ENTRIES = 16
+#: CiA 301: a PDO's communication object is its mapping object's index minus this
+_COMM_OF_MAPPING = 0x200
 
 
 class SdoAbort(Exception):
@@ -113,6 +116,9 @@ class ObjectDictionary:
 
     ``pdo_locked`` is set by the emulator while PDOs run (EtherCAT SAFE-OP/OP, CANopen
     operational): PDO mapping and assignment objects then abort with 0x08000022.
+    ``mapping_needs_invalid_pdo`` (a CANopen node, CiA 301): a mapping 0x16xx/0x1Axx takes a
+    write only while its PDO is invalid (bit 31 of the COB-ID in 0x14xx/0x18xx:01); else
+    it aborts 0x06090030, as CANopenNode does (its v1 stacks: 0x06010000).
     """
 
     def __init__(self, name: str = "drive") -> None:
@@ -120,6 +126,7 @@ class ObjectDictionary:
         self._entries: dict[tuple[int, int], OdEntry] = {}
         self._names: dict[int, str] = {}
         self.pdo_locked = False
+        self.mapping_needs_invalid_pdo = False
         #: largest PDO accepted [bits]; a CANopen node sets 64 (one classic CAN frame)
         self.max_pdo_bits = MAX_PDO_BITS
         #: assignment object -> the PDO indices it accepts (a profile's drive: its own)
@@ -245,6 +252,10 @@ class ObjectDictionary:
         # CiA 301 sequence: sub 0 := 0, write the entries, sub 0 := count (validated here).
         if self.pdo_locked:
             raise SdoAbort(codes.ABORT_DEVICE_STATE, index, subindex)
+        if self.mapping_needs_invalid_pdo and _is_mapping(index):
+            comm = (index - _COMM_OF_MAPPING, 1)  # 0x1600 -> 0x1400, 0x1A00 -> 0x1800
+            if comm in self._entries and not self._entries[comm].get() & COB_ID_INVALID:
+                raise SdoAbort(codes.ABORT_VALUE_RANGE, index, subindex)
         if index in (RXPDO_ASSIGN_INDEX, TXPDO_ASSIGN_INDEX):
             if subindex > 0 and value not in self.assignable.get(index, ()):
                 raise SdoAbort(codes.ABORT_VALUE_RANGE, index, subindex)

@@ -20,6 +20,11 @@ configs/er3a.yaml for EtherCAT, configs/er3a_canopen.yaml for CANopen): the firs
 get drives of PROFILE, the others the built-in emulated drive. The base config also gives
 the scaling (counts per revolution, gear ratio, rated torque) of the real drives.
 
+On a real bus (``--iface`` / ``--interface``) the check reads only the base config's
+``bus:`` and ``loop:`` sections, its first N drives (and the names of their joints, from
+``robot.joints`` when it has them): checking 1..N drives on a bench needs no arm model, and
+a ``--config`` of a bench may hold nothing but those two sections.
+
 Exit codes: 0 the check passed, 1 it ran and something failed (listed), 2 bad input.
 """
 
@@ -33,6 +38,7 @@ import subprocess
 import sys
 import tempfile
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -169,6 +175,42 @@ def _check_config(
     return out
 
 
+@dataclass(frozen=True)
+class CheckBus:
+    """What the check runs on: the ``bus:`` section (a validated BusConfig), the joint name
+    of each of its drives and the loop period [s]."""
+
+    bus: Any
+    joints: list[str]
+    cycle_time: float
+
+
+def _bus_only(path: Path, n: int) -> CheckBus:
+    """The check config's ``bus:`` and ``loop:`` sections, validated without the robot
+    (a real bus: the check runs n drives, not the arm); ConfigError names file and field."""
+    from pydantic import ValidationError
+
+    from hofto_hw.config.base import FileModel
+    from hofto_hw.config.drives import BusConfig
+    from hofto_hw.config.loader import format_validation_error, read_yaml
+    from hofto_hw.config.models import LoopConfig
+    from hofto_hw.errors import ConfigError
+
+    class _BusAndLoop(FileModel):
+        bus: BusConfig
+        loop: LoopConfig
+
+    data = read_yaml(path, "config")
+    try:
+        got = _BusAndLoop.model_validate({"bus": data.get("bus"), "loop": data.get("loop") or {}})
+    except ValidationError as err:
+        raise ConfigError(format_validation_error(str(path), err)) from None
+    joints = (data.get("robot") or {}).get("joints")
+    if not isinstance(joints, list) or len(joints) < n:
+        joints = [f"joint_{i + 1}" for i in range(n)]
+    return CheckBus(got.bus, [str(j) for j in joints[:n]], 1.0 / got.loop.rate_hz)
+
+
 # ---------------------------------------------------------------- emulators
 
 
@@ -241,8 +283,8 @@ def _emulated_canopen(cfg: Any, bus_kwargs: dict[str, Any]) -> Iterator[None]:
 # ---------------------------------------------------------------- the check
 
 
-def _transport(cfg: Any, profile: Any, bus_kwargs: dict[str, Any]) -> Any:
-    names = list(cfg.robot.joints)[: len(cfg.bus.drives)]
+def _transport(cfg: CheckBus, profile: Any, bus_kwargs: dict[str, Any]) -> Any:
+    names = cfg.joints[: len(cfg.bus.drives)]
     if profile.bus == "ethercat":
         from drivers.ethercat.master import EtherCATTransport
 
@@ -282,7 +324,7 @@ def _move(g: Any, t: Any, step: np.ndarray, joints: np.ndarray) -> np.ndarray:
 
 
 def check(
-    cfg: Any,
+    cfg: CheckBus,
     profile: Any,
     n: int,
     move: float | None,
@@ -414,17 +456,21 @@ def run(args: argparse.Namespace) -> int:
             tag = f"{os.getpid() % 100000}"
             iface = f"dcm{tag}"
         path = _check_config(base, profile, n, folder, args.emulated, iface, options)
-        cfg = load_config(path)
-        check_profile_against_loop(profile, cfg.cycle_time, f"{base}: loop.rate_hz")
+        if args.emulated:  # the emulator runs the whole arm of the base config
+            cfg = load_config(path)
+            on = CheckBus(cfg.bus, list(cfg.robot.joints), cfg.cycle_time)
+        else:
+            on = _bus_only(path, n)
+        check_profile_against_loop(profile, on.cycle_time, f"{base}: loop.rate_hz")
         if args.emulated and profile.bus == "ethercat":
             with _emulated_ethercat(path, folder, iface):
-                report = check(cfg, profile, n, move, True)
+                report = check(on, profile, n, move, True)
         elif args.emulated:
             with _emulated_canopen(cfg, bus_kwargs):
-                report = check(cfg, profile, n, move, True, bus_kwargs)
+                report = check(on, profile, n, move, True, bus_kwargs)
             report["can_interface"] = cfg.bus.canopen.can_interface
         else:
-            report = check(cfg, profile, n, move, False)
+            report = check(on, profile, n, move, False)
     if units_note is not None:
         report["warnings"].append(units_note)
     ok = passed(report, move)

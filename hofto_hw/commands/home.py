@@ -73,7 +73,14 @@ def run(args: argparse.Namespace) -> int:
             )
         enable_drives(bus, group)
         plans = [
-            homing_plan(cfg.bus.drives[i].homing, group.scaling, i, bus.cycle_time, joints[i])  # type: ignore[arg-type]
+            homing_plan(
+                cfg.bus.drives[i].homing,  # type: ignore[arg-type]
+                group.scaling,
+                i,
+                bus.cycle_time,
+                joints[i],
+                group.drive_units(i),
+            )
             for i in axes
         ]
         failure = home_axes(group, plans)

@@ -43,6 +43,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--quiet-arm", action="store_true", help="leave out the config's scripted external torques"
     )
     parser.add_argument("--ready-file", default=None, help="file created once serving")
+    parser.add_argument(
+        "--drives",
+        type=int,
+        default=None,
+        metavar="K",
+        help="serve only the first K drives of the config (a bench of K drives, e.g. for "
+        "`drive check --iface IF --axes K`); the arm's other joints have no drive",
+    )
 
 
 def _master_name(iface: str) -> str:
@@ -68,7 +76,10 @@ def run(args: argparse.Namespace) -> int:
     if not args.create_veth and not veth.exists(args.iface):
         raise UserError(f"network interface {args.iface!r} does not exist (see `ip link`)")
     cfg = load_config(find_config(args.config))
-    net = build_emulated_network(cfg, external=not args.quiet_arm, load=True)
+    n = len(cfg.bus.drives) if cfg.bus is not None else 0
+    if args.drives is not None and not 1 <= args.drives <= n:
+        raise UserError(f"--drives {args.drives}: the config has {n} drives (1 to {n})")
+    net = build_emulated_network(cfg, external=not args.quiet_arm, load=True, first=args.drives)
     if args.create_veth:
         veth.create_pair(master, args.iface)
 

@@ -101,18 +101,22 @@ def _profiles(bus: BusConfig) -> list | None:
 
 
 def build_emulated_network(
-    cfg: SystemConfig, *, external: bool = True, load: bool = False
+    cfg: SystemConfig, *, external: bool = True, load: bool = False, first: int | None = None
 ) -> EmulatedNetwork:
     """Emulated EtherCAT slaves (identity from ``bus.drives[i].identity``) serving
-    :func:`build_emulated_drives`: what ``hofto-hw sim-ethercat`` serves."""
+    :func:`build_emulated_drives`: what ``hofto-hw sim-ethercat`` serves; ``first``: only
+    the slaves of the first that many drives (a bench; the arm's other joints have none)."""
     from drivers.sim.esc.description import slave_descriptions
     from drivers.sim.esc.network import EmulatedNetwork
     from hofto_hw.config.drives import device_map
 
     drives = build_emulated_drives(cfg, external=external, load=load)
     bus = _bus(cfg, "the network")
+    k = len(bus.drives) if first is None else first
     return EmulatedNetwork(
-        slave_descriptions(bus.drives, drives.profiles), drives, device_map(bus.drives)
+        slave_descriptions(bus.drives[:k], drives.profiles[:k]),
+        drives,
+        device_map(bus.drives)[:k],
     )
 
 

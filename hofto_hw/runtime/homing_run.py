@@ -28,7 +28,7 @@ def homing_plans(cfg: Any, group: Any, cycle_time: float) -> dict[int, HomingPla
         return {}
     names = list(cfg.robot.joints)
     return {
-        i: homing_plan(d.homing, group.scaling, i, cycle_time, names[i])
+        i: homing_plan(d.homing, group.scaling, i, cycle_time, names[i], group.drive_units(i))
         for i, d in enumerate(cfg.bus.drives)
         if d.homing is not None
     }

@@ -52,7 +52,8 @@ class EmulatedNetwork:
     (one axis each). A slave serving several drives is a multi-axis device: its dictionary
     routes axis k's objects (0x6000 + 0x800·k) to drive k's
     (:class:`~drivers.sim.object_dictionary.MultiAxisDictionary`) and its process data
-    reaches each drive's record."""
+    reaches each drive's record. ``serve`` may cover only the first drives (a bench of
+    them): the others are on no slave and never enabled."""
 
     def __init__(
         self,
@@ -63,7 +64,7 @@ class EmulatedNetwork:
         n = len(descriptions)
         n_drives = drives.n if drives is not None else n
         serve = [(i, 0) for i in range(n_drives)] if serve is None else list(serve)
-        if len(serve) != n_drives or sorted({d for d, _k in serve}) != list(range(n)):
+        if len(serve) > n_drives or sorted({d for d, _k in serve}) != list(range(n)):
             raise ValueError(f"{n} slave descriptions for {n_drives} drives ({serve})")
         #: the drives of each slave, per its CiA-402 axis (None: an axis no drive emulates)
         self.records: list[list[int | None]] = [[] for _ in range(n)]
@@ -172,6 +173,8 @@ class EmulatedNetwork:
         np.not_equal(codes, self._last_error, out=self._changed)
         if self._changed.any():
             for i in np.flatnonzero(self._changed):
+                if i >= len(self.slave_of):
+                    continue  # a drive on no slave (a bench of the first drives)
                 code = int(codes[i])
                 s = self.slaves[self.slave_of[i]]
                 if code and s.coe is not None:

@@ -32,6 +32,7 @@ def nodes(tmp_path: Path):
         emu = CanopenDrives(build_emulated_drives(cfg, external=False), bus, node_ids).start()
         buses.append(bus)
         emus.append(emu)
+        return emu
 
     try:
         yield channel, start
@@ -43,20 +44,26 @@ def nodes(tmp_path: Path):
 
 
 def _layout(p) -> tuple:
+    """PDOs in order: index, fixed or configurable, entries."""
     return tuple(
-        [(x.index, [(e.index, e.subindex, e.bits) for e in x.entries]) for x in pdos]
+        [(x.index, x.fixed, [(e.index, e.subindex, e.bits) for e in x.entries]) for x in pdos]
         for pdos in (p.rx_pdos, p.tx_pdos)
     )
 
 
 def test_scan_gives_back_the_profiles_of_the_nodes(nodes, tmp_path: Path, capsys) -> None:
     channel, start = nodes
-    start()
+    emus = start()
+    cobs = _cob_ids(emus)
     out = tmp_path / "scan"
     code = main(["bus", "scan", "--interface", "virtual", "--channel", channel, "-o", str(out)])
     assert code == 0, capsys.readouterr().err
     bus = yaml.safe_load((out / "bus.yaml").read_text())["bus"]
     assert bus["transport"] == "canopen" and bus["canopen"]["node_ids"] == [1, 2, 3, 4, 5, 6]
+    fixed = [x.fixed for d in CAN_MIXED for x in profile(d).rx_pdos + profile(d).tx_pdos]
+    assert True in fixed and False in fixed  # the bus mixes fixed and configurable PDOs
+    # the probe made each PDO invalid and restored it: the nodes are as they were
+    assert _cob_ids(emus) == cobs
     names = [d["profile"] for d in bus["drives"]]
     assert len(set(names)) == 3 and names[:3] == names[3:]
     for want_data, name in zip(CAN_MIXED, names, strict=True):
@@ -85,3 +92,44 @@ def test_two_nodes_with_one_node_id_are_refused(nodes, tmp_path: Path, capsys) -
     assert code == 2
     assert "two drives claim node id 3" in err and "\n" not in err
     assert not (tmp_path / "x").exists()
+
+
+def _cob_ids(emu) -> list[list[int]]:
+    """Every node's PDO COB-IDs (0x1400../0x1800.. sub 1), as the nodes hold them."""
+    from drivers.sim.canopen_node import pdo_objects
+
+    with emu.lock:
+        return [
+            [od.get(comm, 1) for _name, comm, *_rest in pdo_objects(prof)]
+            for od, prof in zip(emu.ods, emu.profiles, strict=True)
+        ]
+
+
+def test_mapping_writes_follow_cia_301(nodes) -> None:
+    """A node impersonating a profile: a fixed mapping refuses a write (0x06010002 read
+    only); a configurable one refuses it while its PDO is valid (0x06090030, CANopenNode's
+    code) and takes it once the PDO is made invalid (COB-ID bit 31); operational refuses
+    every mapping write (0x08000022)."""
+    from drivers.sim.object_dictionary import SdoAbort
+
+    _channel, start = nodes
+    emu = start()
+    tech = emu.ods[2]  # test_can_technosoft: TPDO1 0x1A00 fixed, TPDO2 0x1A01 configurable
+    with emu.lock:
+
+        def code(index: int, value: int) -> int | None:
+            try:
+                tech.write(index, 0, bytes([value]))
+            except SdoAbort as a:
+                return a.code
+            return None
+
+        n = tech.get(0x1A01, 0)
+        assert tech.get(0x1801, 1) & 0x80000000 == 0  # enabled by default
+        assert code(0x1A00, tech.get(0x1A00, 0)) == 0x06010002
+        assert code(0x1A01, n) == 0x06090030
+        tech.write(0x1801, 1, (tech.get(0x1801, 1) | 0x80000000).to_bytes(4, "little"))
+        assert code(0x1A01, n) is None and tech.get(0x1A01, 0) == n
+        assert code(0x1A00, tech.get(0x1A00, 0)) == 0x06010002  # fixed stays fixed
+        tech.pdo_locked = True  # NMT operational
+        assert code(0x1A01, n) == 0x08000022

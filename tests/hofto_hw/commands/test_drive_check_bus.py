@@ -1,0 +1,176 @@
+"""``hofto-hw drive check PROFILE --interface I --channel C`` / ``--iface IF`` the way an
+integrator runs it on a bench: the drives are already on the bus (here an emulator the test
+starts itself, as its own bus: CANopen nodes on python-can's virtual bus, or ``hofto-hw
+sim-ethercat`` on a veth pair in its own process as root), the check is told how many
+drives of PROFILE to bring up (``--axes N`` < 6) and moves them with ``--move``."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from support.canopen import unique_channel
+
+from hofto_hw.cli import main
+from hofto_hw.config.drive_profile import load_profile
+from hofto_hw.config.loader import dump_yaml
+
+ROOT = Path(__file__).resolve().parents[3]
+DRIVES = ROOT / "configs" / "drives"
+STEP = 0.05  # [rad]
+
+
+def bench_config(
+    folder: Path, base: Path, profile: Path, n: int, bus: dict[str, Any], options: dict[str, Any]
+) -> Path:
+    """``base`` with its first ``n`` drives running ``profile`` (identity from it), ``bus``
+    keys set in ``bus:`` and ``options`` in its transport's section: the config an integrator
+    hands ``drive check --config`` (and here, the emulator too)."""
+    data = yaml.safe_load(base.read_text())
+    prof = load_profile(profile)
+    for d in data["bus"]["drives"][:n]:
+        d["profile"] = str(profile)
+        d["identity"] = {
+            "vendor_id": prof.identity.vendor_id,
+            "product_code": prof.identity.product_code,
+        }
+    data["bus"].update(bus)
+    data["bus"][prof.bus] = {**(data["bus"].get(prof.bus) or {}), **options}
+    data["robot"]["urdf"] = str((base.parent / data["robot"]["urdf"]).resolve())
+    path = folder / "bench.yaml"
+    path.write_text(dump_yaml(data, sort_keys=False))
+    return path
+
+
+def _check(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, dict]:
+    code = main(["drive", "check", *argv, "--move", str(STEP), "--json"])
+    captured = capsys.readouterr()
+    assert captured.out, captured.err
+    return code, json.loads(captured.out)
+
+
+def _assert_moved(code: int, report: dict, n: int) -> None:
+    assert report["faults"] == [], report["faults"]
+    assert report["operational"] is True and report["enabled"] is True
+    assert report["emulated"] is False and report["axes"] == n
+    assert len(report["moved_rad"]) == n
+    assert all(abs(m - STEP) <= 0.1 * STEP for m in report["moved_rad"]), report["moved_rad"]
+    assert report["passed"] is True and code == 0
+
+
+# ------------------------------------------------------------------------ CANopen
+
+
+@pytest.fixture()
+def can_bench(tmp_path: Path) -> Iterator[Any]:
+    """Start CANopen nodes built from a bench config on a virtual channel of their own;
+    yields a function (profile, n) -> (config path, channel, the nodes)."""
+    import can
+
+    from drivers.sim.canopen_node import CanopenDrives
+    from hofto_hw.config.loader import load_config
+    from hofto_hw.runtime.build import build_emulated_drives
+
+    running: list[tuple[Any, Any]] = []
+
+    def start(profile: Path, n: int, edit: Any = None) -> tuple[Path, str, Any]:
+        channel = unique_channel("bench")
+        # generous deadlines: the nodes run in a thread of this process on a loaded machine
+        opts = {"can_interface": "virtual", "tpdo_deadline": 0.05, "sdo_timeout": 2.0}
+        path = bench_config(tmp_path, ROOT / "configs" / "er3a_canopen.yaml", profile, n,
+                            {"interface": channel}, opts)  # fmt: skip
+        cfg = load_config(path)
+        bus = can.Bus(interface="virtual", channel=channel)
+        nodes = CanopenDrives(build_emulated_drives(cfg, external=False), bus)
+        if edit is not None:
+            edit(nodes)
+        running.append((nodes.start(), bus))
+        return path, channel, nodes
+
+    try:
+        yield start
+    finally:
+        for nodes, bus in running:
+            nodes.stop()
+            bus.shutdown()
+
+
+@pytest.mark.parametrize("name", ["zeroerr_erob", "technosoft_ipos"])
+def test_canopen_check_of_one_drive_on_a_live_bus(can_bench, capsys, name: str) -> None:
+    """``--interface virtual --channel C --axes 1 --move 0.05`` against six live nodes: the
+    check brings node 1 up alone (the others stay pre-operational as far as it cares),
+    enables and moves it, with the scaling of ``--config``."""
+    profile = DRIVES / f"{name}.yaml"
+    config, channel, _nodes = can_bench(profile, 1)
+    code, report = _check(capsys, str(profile), "--interface", "virtual", "--channel", channel,
+                          "--axes", "1", "--config", str(config))  # fmt: skip
+    _assert_moved(code, report, 1)
+    assert report["bus"] == "canopen"
+    assert report["devices"] == [{"device": 0, "axis": 0}]
+    prof = yaml.safe_load(profile.read_text())
+    assert report["pdos"][0]["rx"] == [f"0x{p['index']:04X}" for p in prof["rx_pdos"]]
+
+
+def test_canopen_check_of_two_drives_with_the_default_base_config(can_bench, capsys) -> None:
+    """No ``--config``: the base config is configs/er3a_canopen.yaml (its scaling), the bus
+    the one named on the command line; two nodes of the profile checked."""
+    profile = DRIVES / "zeroerr_erob.yaml"
+    _config, channel, _nodes = can_bench(profile, 2)
+    code, report = _check(capsys, str(profile), "--interface", "virtual", "--channel", channel,
+                          "--axes", "2")  # fmt: skip
+    _assert_moved(code, report, 2)
+
+
+def test_a_bench_config_with_only_bus_and_loop_sections(can_bench, capsys, tmp_path) -> None:
+    """An integrator's ``--config`` for a bench: one drive, no robot section at all."""
+    profile = DRIVES / "zeroerr_erob.yaml"
+    config, channel, _nodes = can_bench(profile, 1)
+    data = yaml.safe_load(config.read_text())
+    data["bus"]["drives"] = data["bus"]["drives"][:1]
+    bench = tmp_path / "one_drive.yaml"
+    bench.write_text(dump_yaml({"loop": data["loop"], "bus": data["bus"]}, sort_keys=False))
+    code, report = _check(capsys, str(profile), "--interface", "virtual", "--channel", channel,
+                          "--axes", "1", "--config", str(bench))  # fmt: skip
+    _assert_moved(code, report, 1)
+
+
+def test_a_bench_config_with_a_bad_bus_field_is_one_line(capsys, tmp_path) -> None:
+    profile = DRIVES / "zeroerr_erob.yaml"
+    data = yaml.safe_load((ROOT / "configs" / "er3a_canopen.yaml").read_text())
+    data["bus"]["drives"][0]["gear_ratio"] = -1
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(dump_yaml({"loop": data["loop"], "bus": data["bus"]}, sort_keys=False))
+    code = main(["drive", "check", str(profile), "--interface", "virtual", "--channel", "x",
+                 "--axes", "1", "--config", str(bad)])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and "Traceback" not in err
+    assert "bus.drives[0].gear_ratio" in err
+
+
+# ----------------------------------------------------------------------- EtherCAT
+
+
+@pytest.mark.root
+def test_ethercat_check_of_two_drives_on_a_bench(tmp_path: Path, capsys) -> None:
+    """``hofto-hw sim-ethercat --drives 2`` (its own process, a bench of the first two drives
+    of the config) on a veth pair; ``drive check --iface IF --axes 2 --move 0.05``."""
+    from support.rootnet import emulator, require_root, sim_ethercat_args, veth_pair
+
+    require_root()
+    profile = DRIVES / "elmo_gold.yaml"
+    config = bench_config(tmp_path, ROOT / "configs" / "er3a.yaml", profile, 2,
+                          {"transport": "ethercat", "interface": "unused"},
+                          {"pdo_watchdog": 2.0, "receive_timeout": 0.02})  # fmt: skip
+    with (
+        veth_pair("bm", "bs") as (master, slave),
+        emulator([*sim_ethercat_args(slave, config), "--drives", "2"], tmp_path, timeout=30.0),
+    ):
+        code, report = _check(capsys, str(profile), "--iface", master, "--axes", "2",
+                              "--config", str(config))  # fmt: skip
+    _assert_moved(code, report, 2)
+    assert report["bus"] == "ethercat"
+    assert [d["device"] for d in report["devices"]] == [0, 1]
