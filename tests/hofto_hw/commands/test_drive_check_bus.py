@@ -174,3 +174,51 @@ def test_ethercat_check_of_two_drives_on_a_bench(tmp_path: Path, capsys) -> None
     _assert_moved(code, report, 2)
     assert report["bus"] == "ethercat"
     assert [d["device"] for d in report["devices"]] == [0, 1]
+
+
+# ---------------------------------------------------------------------- units (0x608F)
+
+
+def _faulhaber_rpm(folder: Path) -> Path:
+    """The shipped Faulhaber profile with its units stated (rpm, rpm/s), as an integrator
+    sets them from the manual: a real bus runs it."""
+    prof = yaml.safe_load((DRIVES / "faulhaber_mcbl300x.yaml").read_text())
+    prof["units"].update(velocity="rpm", acceleration="rpm/s")
+    path = folder / "faulhaber_mcbl300x.yaml"
+    path.write_text(yaml.safe_dump(prof, sort_keys=False))
+    return path
+
+
+def test_a_drive_in_rpm_is_checked_on_a_live_bus(can_bench, capsys, tmp_path) -> None:
+    """0x608F agrees with counts_per_rev (the emulated drive serves the encoder it has):
+    configure passes the units check and the pv stream in rpm moves the joint."""
+    profile = _faulhaber_rpm(tmp_path)
+    config, channel, nodes = can_bench(profile, 1)
+    assert (
+        nodes.ods[0].get(0x608F, 1)
+        == yaml.safe_load(config.read_text())["bus"]["drives"][0]["counts_per_rev"]
+    )
+    code, report = _check(capsys, str(profile), "--interface", "virtual", "--channel", channel,
+                          "--axes", "1", "--config", str(config))  # fmt: skip
+    _assert_moved(code, report, 1)
+
+
+def test_a_drive_reporting_another_encoder_resolution_is_refused(can_bench, capsys, tmp_path):
+    """The drive's 0x608F says 3000 increments per revolution (the Faulhaber's default), the
+    config 13107200: the check refuses at configure, in one line naming the axis, the
+    object, what the config expects and what the drive says; nothing is enabled."""
+    profile = _faulhaber_rpm(tmp_path)
+
+    def encoder_of_3000(nodes: Any) -> None:
+        nodes.ods[0].entry(0x608F, 1).value = 3000
+
+    config, channel, _nodes = can_bench(profile, 1, encoder_of_3000)
+    cpr = yaml.safe_load(config.read_text())["bus"]["drives"][0]["counts_per_rev"]
+    code, report = _check(capsys, str(profile), "--interface", "virtual", "--channel", channel,
+                          "--axes", "1", "--config", str(config))  # fmt: skip
+    assert code == 1 and report["passed"] is False
+    assert report["operational"] is True and report["enabled"] is False
+    assert report["faults"] == [
+        "bus.drives[0].counts_per_rev: axis 0 (joint_1) object 0x608F (position encoder "
+        f"resolution) says 3000 increments per 1 motor revolutions, config expects {cpr} per 1"
+    ]
