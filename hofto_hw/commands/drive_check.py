@@ -158,12 +158,14 @@ def _check_config(
         }
         if profile.axes > 1:  # a multi-axis drive serves `axes` joints: fill each device
             d["device"], d["device_axis"] = divmod(i, profile.axes)
-    if not emulated:
+    section = bus.get(profile.bus) or {}
+    if not emulated:  # the check runs the first n drives of the line: their node ids too
         bus["drives"] = drives[:n]
+        if isinstance(section.get("node_ids"), list):
+            section["node_ids"] = section["node_ids"][:n]
     bus["transport"] = profile.bus
     if interface is not None:
         bus["interface"] = interface
-    section = bus.get(profile.bus) or {}
     section.update(options)
     bus[profile.bus] = section
     robot = data.get("robot") or {}
@@ -185,9 +187,10 @@ class CheckBus:
     cycle_time: float
 
 
-def _bus_only(path: Path, n: int) -> CheckBus:
+def _bus_only(path: Path, n: int, source: Path) -> CheckBus:
     """The check config's ``bus:`` and ``loop:`` sections, validated without the robot
-    (a real bus: the check runs n drives, not the arm); ConfigError names file and field."""
+    (a real bus: the check runs n drives, not the arm); ConfigError names the field and
+    ``source``, the base config they come from (the check config is a temporary file)."""
     from pydantic import ValidationError
 
     from hofto_hw.config.base import FileModel
@@ -204,7 +207,7 @@ def _bus_only(path: Path, n: int) -> CheckBus:
     try:
         got = _BusAndLoop.model_validate({"bus": data.get("bus"), "loop": data.get("loop") or {}})
     except ValidationError as err:
-        raise ConfigError(format_validation_error(str(path), err)) from None
+        raise ConfigError(format_validation_error(str(source), err)) from None
     joints = (data.get("robot") or {}).get("joints")
     if not isinstance(joints, list) or len(joints) < n:
         joints = [f"joint_{i + 1}" for i in range(n)]
@@ -402,6 +405,11 @@ def check(
         g.disable()
     except (DriverError, ConfigError) as exc:  # ConfigError: identity/ratings differ
         report["faults"].append(str(exc))
+        if not emulated and not report["operational"] and "EtherCAT slaves" in str(exc):
+            report["faults"].append(
+                "drive check runs every slave of the EtherCAT line: give --axes the number "
+                "of drives on it (the first N joints of --config)"
+            )
     finally:
         t.close()
     return report
@@ -460,7 +468,7 @@ def run(args: argparse.Namespace) -> int:
             cfg = load_config(path)
             on = CheckBus(cfg.bus, list(cfg.robot.joints), cfg.cycle_time)
         else:
-            on = _bus_only(path, n)
+            on = _bus_only(path, n, base)
         check_profile_against_loop(profile, on.cycle_time, f"{base}: loop.rate_hz")
         if args.emulated and profile.bus == "ethercat":
             with _emulated_ethercat(path, folder, iface):

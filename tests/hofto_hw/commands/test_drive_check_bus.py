@@ -77,15 +77,20 @@ def can_bench(tmp_path: Path) -> Iterator[Any]:
 
     running: list[tuple[Any, Any]] = []
 
-    def start(profile: Path, n: int, edit: Any = None) -> tuple[Path, str, Any]:
+    def start(
+        profile: Path, n: int, edit: Any = None, node_ids: list[int] | None = None
+    ) -> tuple[Path, str, Any]:
         channel = unique_channel("bench")
         # generous deadlines: the nodes run in a thread of this process on a loaded machine
         opts = {"can_interface": "virtual", "tpdo_deadline": 0.05, "sdo_timeout": 2.0}
+        if node_ids is not None:
+            opts["node_ids"] = node_ids
         path = bench_config(tmp_path, ROOT / "configs" / "er3a_canopen.yaml", profile, n,
                             {"interface": channel}, opts)  # fmt: skip
         cfg = load_config(path)
         bus = can.Bus(interface="virtual", channel=channel)
-        nodes = CanopenDrives(build_emulated_drives(cfg, external=False), bus)
+        ids = cfg.bus.canopen.node_ids
+        nodes = CanopenDrives(build_emulated_drives(cfg, external=False), bus, ids)
         if edit is not None:
             edit(nodes)
         running.append((nodes.start(), bus))
@@ -125,6 +130,16 @@ def test_canopen_check_of_two_drives_with_the_default_base_config(can_bench, cap
     _assert_moved(code, report, 2)
 
 
+def test_the_node_ids_of_the_config_are_those_of_the_drives_checked(can_bench, capsys) -> None:
+    """A config naming the node ids of its six drives (11..16): ``--axes 2`` checks the
+    drives on nodes 11 and 12 (the id list is cut with the drive list)."""
+    profile = DRIVES / "zeroerr_erob.yaml"
+    config, channel, _nodes = can_bench(profile, 2, node_ids=[11, 12, 13, 14, 15, 16])
+    code, report = _check(capsys, str(profile), "--interface", "virtual", "--channel", channel,
+                          "--axes", "2", "--config", str(config))  # fmt: skip
+    _assert_moved(code, report, 2)
+
+
 def test_a_bench_config_with_only_bus_and_loop_sections(can_bench, capsys, tmp_path) -> None:
     """An integrator's ``--config`` for a bench: one drive, no robot section at all."""
     profile = DRIVES / "zeroerr_erob.yaml"
@@ -148,7 +163,7 @@ def test_a_bench_config_with_a_bad_bus_field_is_one_line(capsys, tmp_path) -> No
                  "--axes", "1", "--config", str(bad)])  # fmt: skip
     err = capsys.readouterr().err.strip()
     assert code == 2 and "\n" not in err and "Traceback" not in err
-    assert "bus.drives[0].gear_ratio" in err
+    assert err.startswith(f"hofto-hw drive: error: {bad}: bus.drives[0].gear_ratio")
 
 
 # ----------------------------------------------------------------------- EtherCAT
@@ -171,9 +186,18 @@ def test_ethercat_check_of_two_drives_on_a_bench(tmp_path: Path, capsys) -> None
     ):
         code, report = _check(capsys, str(profile), "--iface", master, "--axes", "2",
                               "--config", str(config))  # fmt: skip
+        # one drive asked for on a line of two: one line that says what to give instead
+        code1, short = _check(capsys, str(profile), "--iface", master, "--axes", "1",
+                              "--config", str(config))  # fmt: skip
     _assert_moved(code, report, 2)
     assert report["bus"] == "ethercat"
     assert [d["device"] for d in report["devices"]] == [0, 1]
+    assert code1 == 1 and not short["operational"]
+    assert short["faults"] == [
+        f"{master}: found 2 EtherCAT slaves, the config has 1 drives (bus.drives)",
+        "drive check runs every slave of the EtherCAT line: give --axes the number of drives "
+        "on it (the first N joints of --config)",
+    ]
 
 
 # ---------------------------------------------------------------------- units (0x608F)
