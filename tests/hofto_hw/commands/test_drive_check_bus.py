@@ -246,3 +246,44 @@ def test_a_drive_reporting_another_encoder_resolution_is_refused(can_bench, caps
         "bus.drives[0].counts_per_rev: axis 0 (joint_1) object 0x608F (position encoder "
         f"resolution) says 3000 increments per 1 motor revolutions, config expects {cpr} per 1"
     ]
+
+
+@pytest.mark.root
+def test_canopen_check_against_the_emulator_in_its_own_process(tmp_path: Path) -> None:
+    """Two processes as on a bench: ``hofto-hw sim-canopen`` serving six nodes over UDP
+    multicast, and ``hofto-hw drive check --interface udp_multicast --channel GROUP --axes 1
+    --move 0.05 --json`` (both in a private network namespace with loopback only)."""
+    import subprocess
+
+    from support.rootnet import (
+        child_env,
+        emulator,
+        private_netns,
+        python_argv,
+        require_root,
+        sim_canopen_args,
+    )
+
+    require_root("a network namespace")
+    group = "239.74.163.25"
+    profile = DRIVES / "zeroerr_erob.yaml"
+    opts = {"tpdo_deadline": 0.05, "sdo_timeout": 2.0, "heartbeat_timeout": 0.5}
+    config = bench_config(tmp_path, ROOT / "configs" / "er3a_canopen.yaml", profile, 1,
+                          {"interface": group}, opts)  # fmt: skip
+    with (
+        private_netns("hdc") as netns,
+        emulator(sim_canopen_args("udp_multicast", group, config), tmp_path, netns=netns),
+    ):
+        check = ["drive", "check", str(profile), "--interface", "udp_multicast",
+                 "--channel", group, "--axes", "1", "--config", str(config),
+                 "--move", str(STEP), "--json"]  # fmt: skip
+        run = subprocess.run(
+            [*python_argv(netns), "-m", "hofto_hw.cli", *check],
+            cwd=ROOT,
+            env=child_env(),
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+    assert run.stdout, run.stderr[-3000:]
+    _assert_moved(run.returncode, json.loads(run.stdout), 1)
