@@ -287,3 +287,11 @@ def test_canopen_check_against_the_emulator_in_its_own_process(tmp_path: Path) -
         )
     assert run.stdout, run.stderr[-3000:]
     _assert_moved(run.returncode, json.loads(run.stdout), 1)
+
+
+@pytest.mark.parametrize("k", ["0", "7"])
+def test_sim_ethercat_drives_out_of_range_is_one_line(capsys, k: str) -> None:
+    code = main(["sim-ethercat", "--iface", "lo", "--drives", k])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and "Traceback" not in err
+    assert err.endswith(f"--drives {k}: the config has 6 drives (1 to 6)")
