@@ -453,6 +453,12 @@ class CANopenSection(FileModel):
         description="heartbeat producer time written to 0x1017 [ms]; None = the "
         "master's bus.canopen.heartbeat_time",
     )
+    emcy_axis_byte: Annotated[int, Field(ge=3, le=7)] | None = Field(
+        None,
+        description="multi-axis node: the byte of the EMCY's manufacturer-specific field "
+        "(3..7) that carries the CiA-402 axis (0-based) the emergency is of; None = the "
+        "EMCY does not say (the master reads 0x603F of each axis by SDO)",
+    )
 
     @model_validator(mode="after")
     def _ids(self) -> CANopenSection:
