@@ -290,3 +290,65 @@ def test_a_bad_multi_axis_can_bus_is_refused_in_one_line(
     err = capsys.readouterr().err.strip()
     assert code == 2, err
     assert message in err and "\n" not in err and "Traceback" not in err
+
+
+# ------------------------------------------------------------- drive check, bus scan
+
+
+@pytest.mark.parametrize("can_interface", ["virtual", "udp_multicast"])
+def test_drive_check_runs_a_two_axis_profile_on_three_nodes(
+    tmp_path: Path, capsys, can_interface: str
+) -> None:
+    import json
+
+    prof = tmp_path / "two_axis.yaml"
+    prof.write_text(dump_yaml(CAN_TWO_AXIS, sort_keys=False))
+    args = ["drive", "check", str(prof), "--emulated", "--axes", "6", "--json"]
+    code = main([*args, "--can-interface", can_interface])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    r = json.loads(out)
+    assert r["bus"] == "canopen" and r["can_interface"] == can_interface
+    assert r["operational"] and r["enabled"] and not r["faults"]
+    assert r["devices"] == [{"device": d, "axis": k} for d in range(3) for k in range(2)]
+    assert r["process_image_bytes"] == [{"rx": 30, "tx": 30}] * 6
+    assert r["pdos"][1] == {
+        "rx": ["0x1600", "0x1601", "0x1602", "0x1603"],
+        "tx": ["0x1A00", "0x1A01", "0x1A02", "0x1A03"],
+    }
+    assert all(abs(m - 0.05) <= 0.005 for m in r["moved_rad"]), r["moved_rad"]
+
+
+def _layout(p) -> tuple:
+    return tuple(
+        [(x.index, [(e.index, e.subindex, e.bits) for e in x.entries]) for x in pdos]
+        for pdos in (p.rx_pdos, p.tx_pdos)
+    )
+
+
+def test_scan_of_two_axis_nodes_drafts_the_two_axis_profile(
+    two_axis, tmp_path: Path, capsys
+) -> None:
+    from hofto_hw.config.drive_profile import load_profile
+
+    _cfg, channel, _emu, _masters = two_axis
+    out = tmp_path / "scanned"
+    code = main(["bus", "scan", "--interface", "virtual", "--channel", channel, "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    bus = yaml.safe_load((out / "bus.yaml").read_text())["bus"]
+    assert bus["transport"] == "canopen" and bus["canopen"]["node_ids"] == [1, 2, 3]
+    assert [(d["device"], d["device_axis"]) for d in bus["drives"]] == [
+        (dev, k) for dev in range(3) for k in range(2)
+    ]
+    assert len({d["profile"] for d in bus["drives"]}) == 1
+    want, got = profile(CAN_TWO_AXIS), load_profile(out / f"{bus['drives'][0]['profile']}.yaml")
+    assert got.axes == 2
+    assert _layout(got) == _layout(want)
+    assert got.field_offsets("rx", 1)["controlword"] == (120, 16)  # axis 1 after axis 0's 15 B
+    for side in ("rpdo", "tpdo"):
+        assert [c.model_dump() for c in getattr(got.canopen, side)] == [
+            c.model_dump() for c in getattr(want.canopen, side)
+        ]
+    assert got.canopen.max_entries == want.canopen.max_entries
+    # the EMCY's axis byte is not in the dictionary: a scan cannot know it
+    assert got.canopen.emcy_axis_byte is None
