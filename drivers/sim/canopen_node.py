@@ -237,6 +237,10 @@ class CanopenDrives:
         self._tx_flat = drives.tx.view(np.uint8).reshape(-1)
         self._got_rpdo = False
         self._last_error = np.zeros(drives.n, dtype=np.uint16)
+        from drivers.sim.plant_trace import PlantTrace
+
+        #: the true arm at every plant step for a while (requests ``trace`` / ``push``)
+        self.trace = PlantTrace(drives.plant)
         self._hb_next = np.zeros(n)
         self._sdo: list[dict[str, Any]] = [{} for _ in range(n)]
         self._delayed: list[tuple[float, Any]] = []
@@ -369,6 +373,7 @@ class CanopenDrives:
         if self._got_rpdo:
             np.copyto(self._rx_flat, self._drive_rx_flat, where=self._unmapped)
         self.drives.step(self._rx if self._got_rpdo else None)
+        self.trace.sample()
         self._got_rpdo = False
         err = self.drives.tx["error_code"]
         if (err != self._last_error).any():
@@ -582,7 +587,11 @@ class CanopenDrives:
         "late", count of SYNCs, delay [s] for late); ``identity`` (node, vendor_id,
         product_code: 0x1018 reports these; ``restore``: true puts the configured ones
         back); ``bus_off`` (node, on: the node's controller leaves the bus, on recovery it
-        sends EMCY 0x8140); ``sto``, ``brake``, ``home_switch``, ``index_phase`` (node and the
+        sends EMCY 0x8140); ``push`` (force [N] (3,) world frame at the tool, duration [s],
+        ramp [s]: a hand on the true arm from now; answers its start ``t`` [s] of plant time;
+        with ``trace`` [s] also a trace from then); ``trace`` (seconds: the true arm's t, q,
+        qd at every plant step for that long); ``trace_read`` (the trace so far, ``done``
+        once over); ``sto``, ``brake``, ``home_switch``, ``index_phase`` (node and the
         fields of :meth:`drivers.sim.drive.EmulatedDrives.commissioning`); ``stop``.
         """
         op = request.get("op")
@@ -626,6 +635,20 @@ class CanopenDrives:
                     self.bus_off[i] = on
                     if was and not on:
                         self._emcy(i, CODE_BUS_OFF_RECOVERED, 0x11)
+                elif op == "push":
+                    self.drives.push_tool(
+                        request["force"],
+                        float(request["duration"]),
+                        float(request.get("ramp", 0.02)),
+                    )
+                    if "trace" in request:
+                        self.trace.start(float(request["trace"]))
+                    return {"ok": True, "t": float(self.drives.plant.t)}  # the push's start
+                elif op == "trace":
+                    self.trace.start(float(request["seconds"]))
+                    return {"ok": True, "t": float(self.drives.plant.t)}
+                elif op == "trace_read":
+                    return {"ok": True, **self.trace.read()}
                 elif op == "stop":
                     self.stopping = True
                 elif op in self.drives.COMMISSIONING_OPS:

@@ -19,7 +19,11 @@ no learning (the test's config had no ``run.path``, so ``mode move`` moved nothi
 0.2 s tare left -1.9 N along z at the tool (friction -1.0 N, tare -1.0 N): 7.8-9.3 mm/s
 off-axis; learning (full-amplitude path) with the 0.2 s tare 4.7-5.0 mm/s; learning and the
 1 s tare 0.3-0.6 mm/s (full amplitude), 0.1-0.2 mm/s (0.4 amplitude).
-Needs root (veth, raw sockets): skipped when unprivileged, a failure under CI.
+Over CANopen (issue 25: multi-axis nodes) the same test runs on configs/er3a_canopen.yaml
+(200 Hz, ``hofto-hw sim-canopen`` over udp_multicast in a private network namespace) and on
+three two-axis CANopen nodes (tests/support/profiles.py CAN_TWO_AXIS), with the same figures.
+Needs root (veth, raw sockets, network namespaces): skipped when unprivileged, a failure
+under CI.
 """
 
 from __future__ import annotations
@@ -40,6 +44,9 @@ from support.rootnet import (
     er3a_run,
     ethercat_run_config,
     first_event,
+    private_netns,
+    run_config,
+    sim_canopen_args,
     sim_ethercat_args,
     veth_pair,
     wait_for,
@@ -81,11 +88,38 @@ def _config(folder: Path, master: str, base: Path = CONFIG) -> tuple[Path, dict]
     )
 
 
+def _can_config(folder: Path, base: Path) -> tuple[Path, dict]:
+    run = er3a_run("model_error", "path")
+    run["path"]["amplitude"] = [PATH_SCALE * a for a in run["path"]["amplitude"]]
+    return run_config(
+        folder,
+        "er3a-canopen-drag.yaml",
+        base=base,
+        overrun_streak=100_000,  # host stalls are not under test here
+        # late TPDOs of a loaded machine are not under test either: 20 cycles (100 ms at
+        # 200 Hz), below the TPDO resync (bus.canopen: 3 heartbeats, 30 cycles)
+        lost_cycles=20,
+        run=run,
+        # er3a_canopen.yaml has no drag section: the schema's, as er3a.yaml's, but M_a 6 kg and
+        # 0.3 kg·m² (at 200 Hz the release damping's explicit Euler step needs twice); the steady
+        # speed F/B_a does not depend on it
+        edit=lambda data: data.update(
+            drag={
+                "observer": "hofto",
+                "mass": 6.0,
+                "rotational_mass": 0.3,
+                "enable_input": {"source": "socket"},
+            }
+        ),
+    )
+
+
 @dataclass
 class DragRig:
     data: dict
     emu: Emulator
     service: ServiceRun
+    bus: str = "ethercat"
 
     def push(
         self,
@@ -108,11 +142,18 @@ class DragRig:
         return self.service.request(line)
 
 
-@pytest.fixture(params=["er3a.yaml", "er3a_mixed.yaml", "two_axis"])
+@pytest.fixture(
+    params=["er3a.yaml", "er3a_mixed.yaml", "two_axis", "canopen:er3a_canopen.yaml",
+            "canopen:two_axis"]
+)  # fmt: skip
 def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[DragRig]:
     """configs/er3a.yaml, configs/er3a_mixed.yaml (six drive models of six vendor profiles
     on the bus, issue 25) and the arm on three two-axis slaves (a synthetic multi-axis
-    profile, tests/support/profiles.py TWO_AXIS), with the same figures."""
+    profile, tests/support/profiles.py TWO_AXIS), with the same figures; over CANopen
+    configs/er3a_canopen.yaml and the arm on three two-axis nodes (CAN_TWO_AXIS)."""
+    if request.param.startswith("canopen:"):
+        yield from _can_rig(tmp_path, request.param.split(":", 1)[1])
+        return
     with veth_pair("dm", "ds") as (master, slave):
         if request.param == "two_axis":
             from support.profiles import write_two_axis_config
@@ -126,6 +167,27 @@ def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[DragRig]:
             service = ServiceRun(tmp_path, config)
             try:
                 yield DragRig(data, emu, service)
+            finally:
+                service.close()
+
+
+def _can_rig(tmp_path: Path, which: str) -> Iterator[DragRig]:
+    if which == "two_axis":
+        from support.profiles import write_can_two_axis_config
+
+        (tmp_path / "two_axis").mkdir()
+        base = write_can_two_axis_config(tmp_path / "two_axis")
+    else:
+        base = ROOT / "configs" / which
+    with private_netns("hcd") as ns:
+        config, data = _can_config(tmp_path, base)
+        channel = data["bus"]["interface"]  # a group inside the test's own namespace
+        with emulator(
+            sim_canopen_args("udp_multicast", channel, config), tmp_path, netns=ns
+        ) as emu:
+            service = ServiceRun(tmp_path, config, netns=ns)
+            try:
+                yield DragRig(data, emu, service, "canopen")
             finally:
                 service.close()
 
@@ -192,7 +254,7 @@ def _free_motion(r: DragRig, attempts: int = 3) -> int:
     raise AssertionError(f"the free motion was stopped {attempts} times")
 
 
-def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
+def test_drag_after_collision_and_reset(rig: DragRig) -> None:
     from hofto_hw.config.loader import load_config
     from hofto_hw.experiments.drag_sim import tool_motion
     from hofto_hw.model import RobotModel
@@ -273,7 +335,7 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     fast = max(0.05 * steady, 1e-3)
     rest, gap = _rest_time(t, tool_speed, joint_moving, t_end, fast)
     print(
-        f"FIGURE drag over ethercat steady={steady * 1e3:.1f} mm/s expected="
+        f"FIGURE drag over {rig.bus} steady={steady * 1e3:.1f} mm/s expected="
         f"{expected * 1e3:.1f} mm/s off_axis={off_axis * 1e3:.2f} mm/s rest<={rest * 1e3:.0f} ms"
         f" (sampling gap {gap * 1e3:.0f} ms) samples={int(window.sum())}"
         f" overruns={s['overruns']} false_stops={false_stops}"
