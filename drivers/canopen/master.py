@@ -274,6 +274,10 @@ class CANopenTransport(Transport):
         self._late_nodes = np.zeros(n, dtype=bool)
         self._age = np.zeros(n)
         self._lost = np.zeros(n, dtype=bool)
+        self._not_op = np.zeros(n, dtype=bool)
+        #: per node, latched since open: its heartbeat was lost / it left operational
+        self._lost_seen = np.zeros(n, dtype=bool)
+        self._left_seen = np.zeros(n, dtype=bool)
         self._missing = np.zeros(n, dtype=bool)
         self._tx_err = self.tx["error_code"]
         #: axes whose drive does not map 0x603F: the error code of their node's last EMCY
@@ -523,6 +527,8 @@ class CANopenTransport(Transport):
                 f"NMT start: {'; '.join(bad)}"
             )
         self._hb_time.fill(time.monotonic())
+        self._lost_seen.fill(False)
+        self._left_seen.fill(False)
         self._owed.fill(0)
         self._behind.fill(0)
 
@@ -646,8 +652,11 @@ class CANopenTransport(Transport):
         np.subtract(now, self._hb_time, out=self._age)
         np.greater(self._age, self.heartbeat_timeout, out=self._lost)
         if self._lost.any():
+            np.logical_or(self._lost_seen, self._lost, out=self._lost_seen)
             return STATUS_HEARTBEAT_LOST
-        if (self._hb_state != layout.NMT_OPERATIONAL).any():
+        np.not_equal(self._hb_state, layout.NMT_OPERATIONAL, out=self._not_op)
+        if self._not_op.any():
+            np.logical_or(self._left_seen, self._not_op, out=self._left_seen)
             return STATUS_NOT_OPERATIONAL
         if pending:
             self.partial_cycles += 1
@@ -717,6 +726,18 @@ class CANopenTransport(Transport):
         """Nodes (with their joints) whose TPDOs of the last cycle's SYNC did not all arrive
         in time."""
         return [self._who_node(d) for d in np.flatnonzero(self._missing)]
+
+    def node_fault_history(self) -> list[str]:
+        """Nodes whose heartbeat was lost or that left operational in a cycle since
+        :meth:`open` (latched by :meth:`exchange`), each with every joint it drives; still
+        readable after :meth:`close` (a run's summary)."""
+        out = []
+        for d in range(self.n_devices):
+            if self._lost_seen[d]:
+                out.append(f"{self._who_node(d)}: heartbeat lost")
+            if self._left_seen[d]:
+                out.append(f"{self._who_node(d)}: left operational")
+        return out
 
     def node_fault_axes(self) -> np.ndarray:
         """Per axis, bool (n_axes,): its node's heartbeat is lost or it left operational (a
