@@ -28,7 +28,8 @@ checks a whole bus: every PDO COB-ID against every other, against NMT, SYNC, EMC
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -105,6 +106,40 @@ def cob_id_clashes(nodes: list[tuple[int, str, list[tuple[str, int]]]]) -> list[
             else:
                 users[cob] = name
     return out
+
+
+def profile_pdo_cob_bases(profile: Any) -> list[tuple[str, int]]:
+    """(PDO name, COB-ID base) of every PDO a CANopen ``profile`` runs (COB-ID = base + node
+    id), e.g. ('TPDO3', 0x380)."""
+    out = []
+    for pdos, comms, kind in (
+        (profile.rx_pdos, profile.canopen.rpdo, "RPDO"),
+        (profile.tx_pdos, profile.canopen.tpdo, "TPDO"),
+    ):
+        for p, c in zip(pdos, comms, strict=True):
+            out.append((f"{kind}{(p.index & 0x1FF) + 1}", c.cob_id_base))
+    return out
+
+
+def bus_cob_id_clashes(bus: Any, profiles: Sequence[Any]) -> list[str]:
+    """:func:`cob_id_clashes` of a :class:`hofto_hw.config.drives.BusConfig` (``transport:
+    canopen``) whose drives run ``profiles`` (one per drive; None: the built-in layout):
+    one node per device, node ids ``bus.canopen.node_ids`` or 1..n."""
+    from drivers.cia402.profiles import builtin_profile
+    from hofto_hw.config.drives import device_map
+
+    serve = device_map(bus.drives)
+    n = max(d for d, _k in serve) + 1
+    opts = getattr(bus, "canopen", None)
+    ids = list(opts.node_ids) if opts is not None and opts.node_ids else list(range(1, n + 1))
+    nodes = []
+    for d, nid in enumerate(ids):
+        first = [dev for dev, _k in serve].index(d)
+        prof = profiles[first] if profiles[first] is not None else builtin_profile("canopen")
+        names = ", ".join(f"bus.drives[{i}]" for i, (dev, _k) in enumerate(serve) if dev == d)
+        pdos = [(name, base + nid) for name, base in profile_pdo_cob_bases(prof)]
+        nodes.append((nid, f"node {nid} ({names})", pdos))
+    return cob_id_clashes(nodes)
 
 
 def _entry(index: int) -> PdoEntry:

@@ -256,6 +256,11 @@ def test_the_master_refuses_clashing_cob_ids(tmp_path: Path) -> None:
         ("same_axis", "drives[1]: device 0 axis 0 already drives joint 0"),
         ("other_profile", "drives[1].profile"),
         ("node_ids", "canopen.node_ids has 6 ids for 6 drives on 3 devices (one node id per"),
+        (
+            "cob_clash",
+            "bus.canopen: node 2 (bus.drives[2], bus.drives[3]) TPDO1: COB-ID 0x182 is already "
+            "node 1 (bus.drives[0], bus.drives[1]) TPDO4's",
+        ),
     ],
 )
 def test_a_bad_multi_axis_can_bus_is_refused_in_one_line(
@@ -283,6 +288,13 @@ def test_a_bad_multi_axis_can_bus_is_refused_in_one_line(
         drives[1]["device_axis"] = 0
     elif edit == "other_profile":
         drives[1]["profile"] = "zeroerr_erob"
+    elif edit == "cob_clash":  # TPDO4 of node n on TPDO1 of node n + 1
+        bad = yaml.safe_load(yaml.safe_dump(CAN_TWO_AXIS))
+        bad["canopen"]["tpdo"][3]["cob_id_base"] = 0x181
+        prof = tmp_path / "clash.yaml"
+        prof.write_text(dump_yaml(bad, sort_keys=False))
+        for d in drives:
+            d["profile"] = str(prof)
     else:
         raw["bus"]["canopen"]["node_ids"] = [1, 2, 3, 4, 5, 6]
     path.write_text(dump_yaml(raw, sort_keys=False))
