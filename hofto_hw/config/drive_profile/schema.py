@@ -423,7 +423,9 @@ class CanPdoComm(FileModel):
     """CANopen PDO communication parameter (0x1400.. / 0x1800..) for one PDO."""
 
     cob_id_base: Annotated[int, Field(ge=0x080, le=0x7FF)] = Field(
-        description="COB-ID = cob_id_base + node id (e.g. RPDO1 0x200, TPDO1 0x180)"
+        description="COB-ID = cob_id_base + node id (e.g. RPDO1 0x200, TPDO1 0x180; CiA 301 "
+        "defaults exist for PDOs 1-4 only: PDO n >= 5 takes PDO ((n-1) mod 4)+1's + 0x40, the "
+        "COB-IDs of node id + 64, drivers/canopen/layout.pdo_cob_base)"
     )
     transmission_type: U8 = Field(
         1, description="0: acyclic synchronous; 1..240: every n-th SYNC; 254/255: event"
