@@ -477,7 +477,7 @@ def _can_two_axis(emcy_axis_byte: int | None) -> dict[str, Any]:
         ]
 
     name = "test_can_two_axis_synthetic" + ("" if emcy_axis_byte is not None else "_no_emcy_axis")
-    return _can(
+    out = _can(
         name,
         0x00000A5F,
         0x00402003,
@@ -492,12 +492,9 @@ def _can_two_axis(emcy_axis_byte: int | None) -> dict[str, Any]:
         axes=2,
         modes={"supported": ["csp", "csv", "cst"], "loop": "csp", "set_by": "pdo"},
         fallbacks={"error_code": "emcy", "digital_inputs": "none"},
-    ) | (
-        {"canopen": {"bitrates": [1_000_000], "max_entries": 8,
-                     "rpdo": [_comm(layout.pdo_cob_base("rpdo", n), 1, True) for n in range(1, 5)],
-                     "tpdo": [_comm(layout.pdo_cob_base("tpdo", n), 1, True) for n in range(1, 5)],
-                     "emcy_axis_byte": emcy_axis_byte}}
-    )  # fmt: skip
+    )
+    out["canopen"]["emcy_axis_byte"] = emcy_axis_byte
+    return out
 
 
 #: SYNTHETIC two-axis CANopen drive (no vendor file describes one): one node, two CiA-402
