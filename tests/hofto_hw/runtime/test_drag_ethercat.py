@@ -26,8 +26,9 @@ sample is a SYNC old and a command acts at the next SYNC (10 ms against 1 ms), a
 admittance needs twice the mass for its explicit Euler step (a 30 ms time constant against
 15 ms), so the rest after the release is bounded by 350 ms (issue 9's 100 ms is not met at
 200 Hz) and the off-axis drift by 10 % there; the steady speed keeps the 10 % of F/B_a.
-Measured (loaded 2-core machine, load 8): er3a_canopen 97.1-100.0 mm/s, off-axis 1.7-6.6
-mm/s, rest <= 200-260 ms; three two-axis nodes 98.3 mm/s, 6.3 mm/s, <= 190 ms.
+Measured (loaded 2-core machine, load 8-15, 4-5 runs each): er3a_canopen 96.7-100.0 mm/s,
+off-axis 0.8-8.0 mm/s, rest <= 175-260 ms; three two-axis nodes 95.2-98.7 mm/s, 2.2-6.6
+mm/s, <= 155-215 ms (EtherCAT er3a.yaml in the same session: 100.1 mm/s, 0.16 mm/s, 1 ms).
 Needs root (veth, raw sockets, network namespaces): skipped when unprivileged, a failure
 under CI.
 """
