@@ -13,11 +13,23 @@ TPDO2 0x1A01 (COB-ID 0x280 + node): velocity actual, current actual, mode displa
 Every PDO is synchronous: RPDOs received before a SYNC take effect at that SYNC, TPDOs are
 sent on every SYNC (transmission type 1). Each PDO has a byte-copy plan between its frame
 payload and the process-image record (:func:`copy_plan`).
+
+Multi-axis nodes (CiA 402-1: axis k's objects at 0x6000 + 0x800·k): one node, one NMT state,
+one heartbeat, one SDO server, one EMCY COB-ID; the PDOs of all its axes are numbered
+consecutively (axis 0's first), PDO n in 0x1400/0x1600 + n - 1 (RPDO) and 0x1800/0x1A00 +
+n - 1 (TPDO). CiA 301's predefined connection set gives COB-IDs to PDOs 1-4 only; the rule
+for more (:func:`pdo_cob_base`): PDO n >= 5 takes the default COB-ID of PDO ((n - 1) mod 4)
++ 1 of node id + 64·((n - 1) // 4), i.e. base + 0x40·((n - 1) // 4), so up to 8 RPDOs and
+8 TPDOs per node, and a node with more than 4 must have a node id <= 63 and borrows the
+PDO COB-IDs of node id + 64, which must then not be on the bus. :func:`cob_id_clashes`
+checks a whole bus: every PDO COB-ID against every other, against NMT, SYNC, EMCY
+(0x80 + node), SDO (0x580/0x600 + node) and heartbeat (0x700 + node).
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -50,6 +62,84 @@ NMT_COMMANDS = {
 #: transmission type: synchronous, every SYNC
 SYNC_EVERY = 1
 COB_ID_INVALID = 0x80000000
+
+
+#: CiA 301 default COB-ID bases of PDOs 1-4 (+ node id)
+RPDO_DEFAULT_BASES = (0x200, 0x300, 0x400, 0x500)
+TPDO_DEFAULT_BASES = (0x180, 0x280, 0x380, 0x480)
+#: PDOs per direction and node the borrowing rule gives COB-IDs to (see the module docstring)
+MAX_PDOS_BY_RULE = 8
+
+
+def pdo_cob_base(kind: str, number: int) -> int:
+    """COB-ID base (COB-ID = base + node id) of PDO ``number`` (1-based) of ``kind`` ('rpdo'
+    or 'tpdo'): CiA 301's default for 1-4, for 5-8 that of PDO ((n - 1) mod 4) + 1 + 0x40
+    (the PDO COB-IDs of node id + 64; the node id must then be <= 63). Raises ValueError
+    past 8."""
+    if not 1 <= number <= MAX_PDOS_BY_RULE:
+        raise ValueError(
+            f"{kind.upper()}{number}: the COB-ID rule covers PDOs 1..{MAX_PDOS_BY_RULE} per node"
+        )
+    bases = RPDO_DEFAULT_BASES if kind == "rpdo" else TPDO_DEFAULT_BASES
+    return bases[(number - 1) % 4] + 0x40 * ((number - 1) // 4)
+
+
+def cob_id_clashes(nodes: list[tuple[int, str, list[tuple[str, int]]]]) -> list[str]:
+    """Every COB-ID used twice on a bus, one line each. ``nodes``: per node (node id, who,
+    [(PDO name, COB-ID), ...]). The node's EMCY, SDO and heartbeat COB-IDs and NMT / SYNC
+    are added here."""
+    users: dict[int, str] = {NMT_COB_ID: "NMT", SYNC_COB_ID: "SYNC"}
+    out = []
+    for nid, who, pdos in nodes:
+        own = [
+            ("EMCY", EMCY_BASE + nid),
+            ("SDO answer", SDO_TX_BASE + nid),
+            ("SDO request", SDO_RX_BASE + nid),
+            ("heartbeat", HEARTBEAT_BASE + nid),
+        ]
+        for what, cob in own + list(pdos):
+            name = f"{who} {what}"
+            if not 0 < cob <= 0x7FF:
+                out.append(f"{name}: COB-ID 0x{cob:03X} is not an 11-bit CAN identifier")
+            elif cob in users:
+                out.append(f"{name}: COB-ID 0x{cob:03X} is already {users[cob]}'s")
+            else:
+                users[cob] = name
+    return out
+
+
+def profile_pdo_cob_bases(profile: Any) -> list[tuple[str, int]]:
+    """(PDO name, COB-ID base) of every PDO a CANopen ``profile`` runs (COB-ID = base + node
+    id), e.g. ('TPDO3', 0x380)."""
+    out = []
+    for pdos, comms, kind in (
+        (profile.rx_pdos, profile.canopen.rpdo, "RPDO"),
+        (profile.tx_pdos, profile.canopen.tpdo, "TPDO"),
+    ):
+        for p, c in zip(pdos, comms, strict=True):
+            out.append((f"{kind}{(p.index & 0x1FF) + 1}", c.cob_id_base))
+    return out
+
+
+def bus_cob_id_clashes(bus: Any, profiles: Sequence[Any]) -> list[str]:
+    """:func:`cob_id_clashes` of a :class:`hofto_hw.config.drives.BusConfig` (``transport:
+    canopen``) whose drives run ``profiles`` (one per drive; None: the built-in layout):
+    one node per device, node ids ``bus.canopen.node_ids`` or 1..n."""
+    from drivers.cia402.profiles import builtin_profile
+    from hofto_hw.config.drives import device_map
+
+    serve = device_map(bus.drives)
+    n = max(d for d, _k in serve) + 1
+    opts = getattr(bus, "canopen", None)
+    ids = list(opts.node_ids) if opts is not None and opts.node_ids else list(range(1, n + 1))
+    nodes = []
+    for d, nid in enumerate(ids):
+        first = [dev for dev, _k in serve].index(d)
+        prof = profiles[first] if profiles[first] is not None else builtin_profile("canopen")
+        names = ", ".join(f"bus.drives[{i}]" for i, (dev, _k) in enumerate(serve) if dev == d)
+        pdos = [(name, base + nid) for name, base in profile_pdo_cob_bases(prof)]
+        nodes.append((nid, f"node {nid} ({names})", pdos))
+    return cob_id_clashes(nodes)
 
 
 def _entry(index: int) -> PdoEntry:

@@ -38,6 +38,17 @@ streak of them is a bus loss in safety.bus_health), a heartbeat older than
 :data:`STATUS_NOT_OPERATIONAL`, a send failure (bus-off, buffer full)
 :data:`~drivers.transport.STATUS_BUS_ERROR`. The error code of each node's last EMCY is
 written to ``tx["error_code"]``; :meth:`problems` says in words what is wrong, per node.
+
+Multi-axis nodes (``bus.drives[i].device`` / ``device_axis``, CiA 402-1: axis k's objects at
+0x6000 + 0x800·k): NMT, heartbeat, SDO, EMCY and the TPDO bookkeeping are per node (device),
+the CiA-402 state and the process image per axis (:class:`~drivers.cia402.wire.WireImage`
+with ``serve``). A node fault (heartbeat lost, left operational, TPDOs missing) names the
+node and every joint on it. SDOs of a joint reach its axis's objects (0x6000..0x67FF shifted
+by 0x800·k); start-up SDOs and PDO configuration address the node as the profile names its
+objects. An EMCY carries its axis when the profile says in which byte
+(``canopen.emcy_axis_byte``); otherwise its code goes to every axis of the node and
+:meth:`problems` reads 0x603F of each axis by SDO. PDO COB-IDs: the profile's, checked for
+clashes across the bus at construction (:func:`drivers.canopen.layout.cob_id_clashes`).
 """
 
 from __future__ import annotations
@@ -102,7 +113,8 @@ class CANopenTransport(Transport):
     for TPDOs after its SYNC (default 0.8 cycle); ``tpdo_resync`` [s]: how long a node's TPDOs
     may lag before the backlog is written off (default ``heartbeat_timeout``; see the module
     docstring: it must be longer than the bus-loss streak, or a lag would end unreported).
-    ``bus_kwargs``: extra python-can options.
+    ``bus_kwargs``: extra python-can options. ``node_ids`` has one id per node (device):
+    with multi-axis drives fewer than ``drives``.
     """
 
     def __init__(
@@ -127,13 +139,30 @@ class CANopenTransport(Transport):
         profiles: Sequence[Any] | None = None,
     ) -> None:
         super().__init__(len(drives), cycle_time, axis_names)
-        n = self.n_axes
+        from hofto_hw.config.drives import device_map
+
         self.channel = channel
         self.can_interface = can_interface
         self.drives = list(drives)
+        #: (node position, CiA-402 axis of that node) per axis
+        self.serve = device_map(self.drives)
+        #: number of nodes (devices); one NMT state, heartbeat and SDO server each
+        self.n_devices = n = max(d for d, _k in self.serve) + 1
+        #: the node position of each axis, (n_axes,)
+        self._node_of = np.array([d for d, _k in self.serve], dtype=np.intp)
+        #: the first axis of each node (its profile, identity and who-string)
+        self._first = [[d for d, _k in self.serve].index(j) for j in range(n)]
+        #: the axes of each node, in device-axis order
+        self._axes_of = [
+            sorted(
+                (i for i, (d, _k) in enumerate(self.serve) if d == j),
+                key=lambda i: self.serve[i][1],
+            )
+            for j in range(n)
+        ]
         self.node_ids = list(node_ids) if node_ids is not None else list(range(1, n + 1))
         if len(self.node_ids) != n:
-            raise ValueError(f"{len(self.node_ids)} node ids for {n} drives")
+            raise ValueError(f"{len(self.node_ids)} node ids for {n} nodes ({self.n_axes} drives)")
         self.bitrate = bitrate
         self.data_bitrate = data_bitrate
         self.load_limit = load_limit
@@ -146,7 +175,10 @@ class CANopenTransport(Transport):
         self.boot_timeout = boot_timeout
         self.bus_kwargs = dict(bus_kwargs or {})
         self.network: Any = None
+        #: canopen RemoteNode per node (device)
         self.nodes: list[Any] = []
+        #: SDOs address the node as named (start-up, PDO configuration), not an axis's objects
+        self._raw_sdo = False
         self._cyc: Any = None
         self.is_open = False
         # Counters (read outside the tick).
@@ -157,20 +189,24 @@ class CANopenTransport(Transport):
         self.send_errors = 0
         #: backlogs written off after ``tpdo_resync`` (a lost frame or a lasting lag)
         self.resyncs = 0
-        #: emergencies received, newest last: (axis, error code, error register, time)
+        #: emergencies received, newest last: (axis, error code, error register, time); the
+        #: axis is -1 - node position when the EMCY of a multi-axis node names no axis
         self.emergencies: deque[tuple[int, int, int, float]] = deque(maxlen=64)
         # Per-node state written by the notifier thread (plain numpy stores).
         self._hb_time = np.zeros(n)
         self._hb_state = np.full(n, -1, dtype=np.int16)
         self._booted = np.zeros(n, dtype=bool)
-        self._emcy_code = np.zeros(n, dtype=np.uint16)
+        #: per axis: the error code of its node's last EMCY (for that axis, or naming none)
+        self._emcy_code = np.zeros(self.n_axes, dtype=np.uint16)
+        #: per node: its last EMCY named no axis (multi-axis node, profile without the byte)
+        self._emcy_unplaced = np.zeros(n, dtype=bool)
         from drivers.cia402.profiles import builtin_profile, layout_of
         from drivers.cia402.wire import WireImage
 
         #: one DriveProfile per node (None in the list: the built-in two RPDOs / TPDOs)
         self.profiles = [
             p if p is not None else builtin_profile("canopen")
-            for p in (profiles if profiles is not None else [None] * n)
+            for p in (profiles if profiles is not None else [None] * self.n_axes)
         ]
         self.startup_written = 0
         from drivers.cia402.profiles import refuse_unknown_units
@@ -179,7 +215,9 @@ class CANopenTransport(Transport):
         self.use_fallbacks(self.profiles)
         # the wire image of every node: its PDO payloads end to end (RPDOs / TPDOs), one
         # encode and one decode per cycle; the frames are slices of it
-        self.wire = WireImage([layout_of(p) for p in self.profiles], self.axis_names)
+        self.wire = WireImage(
+            [layout_of(self.profiles[i]) for i in self._first], self.axis_names, self.serve
+        )
         self.wire.bind_master(self.rx, self.tx)
         from drivers.cia402.profiles import csp_adapter
 
@@ -188,7 +226,7 @@ class CANopenTransport(Transport):
         )  # ip / pv drives
         self._rpdos: list[list[_Pdo]] = []
         self._tpdos: list[list[_Pdo]] = []
-        for prof, nid in zip(self.profiles, self.node_ids, strict=True):
+        for prof, nid in zip([self.profiles[i] for i in self._first], self.node_ids, strict=True):
             comm = prof.canopen
             for out, pdos, comms, base, kind in (
                 (self._rpdos, prof.rx_pdos, comm.rpdo, 0x1400, "RPDO"),
@@ -209,6 +247,14 @@ class CANopenTransport(Transport):
                     )
                     off += row[-1].size
                 out.append(row)
+        clashes = layout.cob_id_clashes(
+            [
+                (nid, self._who_node(d), [(p.name, p.cob) for p in self._rpdos[d] + self._tpdos[d]])
+                for d, nid in enumerate(self.node_ids)
+            ]
+        )
+        if clashes:
+            raise CANopenError(f"CAN channel {channel}: {clashes[0]}")
         # Cyclic-path buffers.
         n_t = max(len(row) for row in self._tpdos)
         #: TPDO slots a node does not have: always "got", never owed
@@ -228,14 +274,18 @@ class CANopenTransport(Transport):
         self._late_nodes = np.zeros(n, dtype=bool)
         self._age = np.zeros(n)
         self._lost = np.zeros(n, dtype=bool)
+        self._not_op = np.zeros(n, dtype=bool)
+        #: per node, latched since open: its heartbeat was lost / it left operational
+        self._lost_seen = np.zeros(n, dtype=bool)
+        self._left_seen = np.zeros(n, dtype=bool)
         self._missing = np.zeros(n, dtype=bool)
         self._tx_err = self.tx["error_code"]
-        #: axes whose drive does not map 0x603F: the error code of their last EMCY
+        #: axes whose drive does not map 0x603F: the error code of their node's last EMCY
         self._err_by_emcy = ~self.wire.present["error_code"]
         self._rpdo_msgs: list[Any] = []
         self._rpdo_views: list[np.ndarray] = []
         self._rpdo_src: list[np.ndarray] = []
-        #: TPDO COB-ID -> (slot, axis, the payload's bytes in the wire image, payload size)
+        #: TPDO COB-ID -> (slot, node, the payload's bytes in the wire image, payload size)
         self._tpdo_slots: dict[int, tuple[int, int, np.ndarray, int]] = {}
         for i in range(n):
             base = self.wire.tx_offsets[i]
@@ -276,7 +326,14 @@ class CANopenTransport(Transport):
     # ------------------------------------------------------------------ naming
 
     def _who(self, axis: int) -> str:
-        return f"node {self.node_ids[axis]} ({self.axis_names[axis]})"
+        d, k = self.serve[axis]
+        on = f" axis {k}" if len(self._axes_of[d]) > 1 or self.profiles[axis].axes > 1 else ""
+        return f"node {self.node_ids[d]}{on} ({self.axis_names[axis]})"
+
+    def _who_node(self, d: int) -> str:
+        """Node ``d`` (position) with every joint it drives, e.g. 'node 2 (joint_3, joint_4)'."""
+        names = ", ".join(self.axis_names[i] for i in self._axes_of[d])
+        return f"node {self.node_ids[d]} ({names})"
 
     def load(self) -> Any:
         """Worst-case bus load of this configuration (:class:`BusLoad`)."""
@@ -343,14 +400,14 @@ class CANopenTransport(Transport):
             net.connect()
             self.network = net
             self.nodes = []
-            for i, nid in enumerate(self.node_ids):
+            for d, nid in enumerate(self.node_ids):
                 node = canopen.RemoteNode(nid, canopen.ObjectDictionary())
                 node.sdo.RESPONSE_TIMEOUT = self.sdo_timeout
                 node.sdo.MAX_RETRIES = 2  # udp_multicast drops frames in bursts
                 net.add_node(node)
                 self.nodes.append(node)
-                net.subscribe(layout.HEARTBEAT_BASE + nid, self._heartbeat_cb(i))
-                net.subscribe(layout.EMCY_BASE + nid, self._emcy_cb(i))
+                net.subscribe(layout.HEARTBEAT_BASE + nid, self._heartbeat_cb(d))
+                net.subscribe(layout.EMCY_BASE + nid, self._emcy_cb(d))
             self._prepare_messages(can)
             self._start(net)
             while self._cyc.recv(0.0) is not None:  # what the setup queued: not a TPDO
@@ -362,32 +419,49 @@ class CANopenTransport(Transport):
             self.derived.reset()
         self.is_open = True
 
-    def _heartbeat_cb(self, axis: int) -> Any:
+    def _heartbeat_cb(self, d: int) -> Any:
         def on_heartbeat(_can_id: int, data: bytes, _timestamp: float) -> None:
             if data:
                 state = data[0] & 0x7F
-                self._hb_state[axis] = state
-                self._hb_time[axis] = time.monotonic()
+                self._hb_state[d] = state
+                self._hb_time[d] = time.monotonic()
                 if state == layout.NMT_BOOTUP:
-                    self._booted[axis] = True
+                    self._booted[d] = True
 
         return on_heartbeat
 
-    def _emcy_cb(self, axis: int) -> Any:
+    def _emcy_cb(self, d: int) -> Any:
+        axes = self._axes_of[d]
+        by_device_axis = {self.serve[i][1]: i for i in axes}
+        where = self.profiles[axes[0]].canopen.emcy_axis_byte
+        single = len(axes) == 1 and self.profiles[axes[0]].axes == 1
+
         def on_emcy(_can_id: int, data: bytes, _timestamp: float) -> None:
-            if len(data) >= 3:
-                code = data[0] | (data[1] << 8)
+            if len(data) < 3:
+                return
+            code = data[0] | (data[1] << 8)
+            axis = axes[0] if single else None
+            if axis is None and where is not None and len(data) > where:
+                axis = by_device_axis.get(data[where])
+            now = time.monotonic()
+            if axis is not None:
                 self._emcy_code[axis] = code
-                self.emergencies.append((axis, code, data[2], time.monotonic()))
+                self._emcy_unplaced[d] = False
+                self.emergencies.append((axis, code, data[2], now))
+            else:  # the EMCY names no axis this bus runs: every axis of the node gets it
+                for i in axes:
+                    self._emcy_code[i] = code
+                self._emcy_unplaced[d] = bool(code)
+                self.emergencies.append((-1 - d, code, data[2], now))
 
         return on_emcy
 
     def _prepare_messages(self, can: Any) -> None:
         fd = self.data_bitrate is not None
         self._rpdo_msgs, self._rpdo_views, self._rpdo_src = [], [], []
-        for i in range(self.n_axes):
-            base = self.wire.rx_offsets[i]
-            for p in self._rpdos[i]:
+        for d in range(self.n_devices):
+            base = self.wire.rx_offsets[d]
+            for p in self._rpdos[d]:
                 data = bytearray(p.size)
                 msg = can.Message(arbitration_id=p.cob, data=data, is_extended_id=False, is_fd=fd)
                 self._rpdo_msgs.append(msg)
@@ -409,7 +483,7 @@ class CANopenTransport(Transport):
         self._booted.fill(False)
         net.nmt.send_command(layout.NMT_RESET_COMM)
         if not self._wait(lambda: self._booted.all(), self.boot_timeout):
-            missing = [self._who(i) for i in np.flatnonzero(~self._booted)]
+            missing = [self._who_node(d) for d in np.flatnonzero(~self._booted)]
             raise NodeMissingError(
                 f"CAN channel {self.channel}: no boot-up message from {', '.join(missing)} "
                 f"within {self.boot_timeout:g} s after NMT reset communication"
@@ -417,20 +491,25 @@ class CANopenTransport(Transport):
         from drivers.cia402.profiles import startup_int
 
         self.startup_written = 0
-        for i in range(self.n_axes):
-            self._check_identity(i)
-            prof = self.profiles[i]
-            for w in prof.startup:
-                value = startup_int(prof, w.index, w.subindex, w.value, self.cycle_time)
-                data = (value & ((1 << w.bits) - 1)).to_bytes(w.bits // 8, "little")
-                self.sdo_write(i, w.index, w.subindex, data)
-                self.startup_written += 1
-            for p in self._rpdos[i] + self._tpdos[i]:
-                self._map_pdo(i, p)
-            ms = prof.canopen.heartbeat_ms
-            if ms is None:
-                ms = max(1, round(self.heartbeat_time * 1000))
-            self.write_value(i, 0x1017, 0, "u16", ms)
+        self._raw_sdo = True  # the node's objects as the profile names them
+        try:
+            for d in range(self.n_devices):
+                i = self._first[d]
+                self._check_identity(i)
+                prof = self.profiles[i]
+                for w in prof.startup:
+                    value = startup_int(prof, w.index, w.subindex, w.value, self.cycle_time)
+                    data = (value & ((1 << w.bits) - 1)).to_bytes(w.bits // 8, "little")
+                    self.sdo_write(i, w.index, w.subindex, data)
+                    self.startup_written += 1
+                for p in self._rpdos[d] + self._tpdos[d]:
+                    self._map_pdo(i, p)
+                ms = prof.canopen.heartbeat_ms
+                if ms is None:
+                    ms = max(1, round(self.heartbeat_time * 1000))
+                self.write_value(i, 0x1017, 0, "u16", ms)
+        finally:
+            self._raw_sdo = False
         self.rx.fill(0)
         self._hb_state.fill(-1)
         net.nmt.send_command(layout.NMT_START)
@@ -438,9 +517,9 @@ class CANopenTransport(Transport):
             lambda: bool((self._hb_state == layout.NMT_OPERATIONAL).all()), self.boot_timeout
         ):
             bad = [
-                f"{self._who(i)} reports "
+                f"{self._who_node(d)} reports "
                 + layout.NMT_STATE_NAMES.get(int(s), "no heartbeat" if s < 0 else f"state {s}")
-                for i, s in enumerate(self._hb_state)
+                for d, s in enumerate(self._hb_state)
                 if s != layout.NMT_OPERATIONAL
             ]
             raise NodeMissingError(
@@ -448,6 +527,8 @@ class CANopenTransport(Transport):
                 f"NMT start: {'; '.join(bad)}"
             )
         self._hb_time.fill(time.monotonic())
+        self._lost_seen.fill(False)
+        self._left_seen.fill(False)
         self._owed.fill(0)
         self._behind.fill(0)
 
@@ -461,10 +542,11 @@ class CANopenTransport(Transport):
         for sub, what, want in checks:
             got = self.read_value(i, 0x1018, sub, "u32")
             if got != want:
+                d = self.serve[i][0]
                 raise IdentityMismatchError(
-                    f"bus.drives[{i}].identity: {self._who(i)} reports {what} 0x{got:08X} "
-                    f"(0x1018:{sub}), expected 0x{want:08X}",
-                    self.node_ids[i],
+                    f"bus.drives[{i}].identity: {self._who_node(d)} reports {what} "
+                    f"0x{got:08X} (0x1018:{sub}), expected 0x{want:08X}",
+                    self.node_ids[d],
                     what,
                     want,
                     got,
@@ -489,15 +571,17 @@ class CANopenTransport(Transport):
             for s in range(1, count + 1)
         ]
         if found != p.entries:
+            who = self._who_node(self.serve[i][0])
             raise CANopenError(
-                f"{self._who(i)}: {p.name} mapping 0x{p.map_index:04X} reads back as "
+                f"{who}: {p.name} mapping 0x{p.map_index:04X} reads back as "
                 f"{_fmt_map(found)}, profile {self.profiles[i].name} expects "
                 f"{_fmt_map(p.entries)}"
             )
         cob = self.read_value(i, p.comm_index, 1, "u32")
         if cob != p.cob:
+            who = self._who_node(self.serve[i][0])
             raise CANopenError(
-                f"{self._who(i)}: {p.name} COB-ID 0x{p.comm_index:04X}:01 reads back as "
+                f"{who}: {p.name} COB-ID 0x{p.comm_index:04X}:01 reads back as "
                 f"0x{cob:08X}, expected 0x{p.cob:08X}"
             )
 
@@ -568,8 +652,11 @@ class CANopenTransport(Transport):
         np.subtract(now, self._hb_time, out=self._age)
         np.greater(self._age, self.heartbeat_timeout, out=self._lost)
         if self._lost.any():
+            np.logical_or(self._lost_seen, self._lost, out=self._lost_seen)
             return STATUS_HEARTBEAT_LOST
-        if (self._hb_state != layout.NMT_OPERATIONAL).any():
+        np.not_equal(self._hb_state, layout.NMT_OPERATIONAL, out=self._not_op)
+        if self._not_op.any():
+            np.logical_or(self._left_seen, self._not_op, out=self._left_seen)
             return STATUS_NOT_OPERATIONAL
         if pending:
             self.partial_cycles += 1
@@ -595,7 +682,7 @@ class CANopenTransport(Transport):
             self.resyncs += 1
 
     def _slot(self, m: Any) -> tuple[int, int] | None:
-        """(axis, TPDO number) of a well-formed TPDO frame, else None."""
+        """(node, TPDO number) of a well-formed TPDO frame, else None."""
         hit = self._tpdo_slots.get(m.arbitration_id)
         if hit is None or m.is_error_frame or m.is_remote_frame:
             return None
@@ -615,7 +702,7 @@ class CANopenTransport(Transport):
 
     def nmt(self, command: str, axis: int | None = None) -> None:
         """Send NMT ``command`` (a key of :data:`~drivers.canopen.layout.NMT_COMMANDS`) to
-        one node (``axis``) or to all.
+        one node (the node of ``axis``: every axis of a multi-axis node) or to all.
 
         Outside the tick. A node that leaves operational makes :meth:`exchange` return
         :data:`STATUS_NOT_OPERATIONAL` once its heartbeat says so.
@@ -631,20 +718,43 @@ class CANopenTransport(Transport):
             self.network.nmt.send_command(code)
         else:
             self._check_axis(axis)
-            self.nodes[axis].nmt.send_command(code)
+            self.nodes[self._node_of[axis]].nmt.send_command(code)
 
     # ----------------------------------------------------------- diagnostics
 
     def missing_nodes(self) -> list[str]:
-        """Nodes whose TPDOs of the last cycle's SYNC did not all arrive in time."""
-        return [self._who(i) for i in np.flatnonzero(self._missing)]
+        """Nodes (with their joints) whose TPDOs of the last cycle's SYNC did not all arrive
+        in time."""
+        return [self._who_node(d) for d in np.flatnonzero(self._missing)]
+
+    def node_fault_history(self) -> list[str]:
+        """Nodes whose heartbeat was lost or that left operational in a cycle since
+        :meth:`open` (latched by :meth:`exchange`), each with every joint it drives; still
+        readable after :meth:`close` (a run's summary)."""
+        out = []
+        for d in range(self.n_devices):
+            if self._lost_seen[d]:
+                out.append(f"{self._who_node(d)}: heartbeat lost")
+            if self._left_seen[d]:
+                out.append(f"{self._who_node(d)}: left operational")
+        return out
+
+    def node_fault_axes(self) -> np.ndarray:
+        """Per axis, bool (n_axes,): its node's heartbeat is lost or it left operational (a
+        node fault: every axis of the node). Outside the tick."""
+        now = time.monotonic()
+        bad = (now - self._hb_time > self.heartbeat_timeout) | (
+            self._hb_state != layout.NMT_OPERATIONAL
+        )
+        return bad[self._node_of]
 
     def problems(self) -> list[str]:
-        """What is wrong on the bus, one line per node and cause (outside the tick)."""
+        """What is wrong on the bus, one line per node and cause, naming every joint of the
+        node (outside the tick)."""
         out = []
         now = time.monotonic()
-        for i in range(self.n_axes):
-            who = self._who(i)
+        for i in range(self.n_devices):
+            who = self._who_node(i)
             age = now - self._hb_time[i]
             if age > self.heartbeat_timeout:
                 out.append(
@@ -665,19 +775,42 @@ class CANopenTransport(Transport):
                         else ")"
                     )
                 )
-            if self._emcy_code[i]:
-                out.append(f"{who}: emergency {describe_error_code(int(self._emcy_code[i]))}")
+            out += self._emcy_problems(i)
+        return out
+
+    def _emcy_problems(self, d: int) -> list[str]:
+        """The node's emergencies in words: per axis when the EMCY named it, else per axis
+        from 0x603F read by SDO (the node's code when the read fails)."""
+        axes = self._axes_of[d]
+        if not self._emcy_unplaced[d]:
+            return [
+                f"{self._who(i)}: emergency {describe_error_code(int(self._emcy_code[i]))}"
+                for i in axes
+                if self._emcy_code[i]
+            ]
+        out = []
+        for i in axes:
+            try:
+                code = self.read_value(i, 0x603F, 0, "u16")
+                how = "0x603F"
+            except Exception:  # no SDO answer: the node's EMCY code is what is known
+                code, how = int(self._emcy_code[i]), "node EMCY, axis unknown"
+            if code:
+                out.append(f"{self._who(i)}: emergency {describe_error_code(code)} ({how})")
         return out
 
     def emergency_messages(self) -> list[str]:
         """Every EMCY received (oldest first) in words, e.g. 'node 2 (joint_2): EMCY 0x2310
         continuous over-current, error register 0x03'."""
-        return [
-            f"{self._who(i)}: EMCY {describe_error_code(code)}, error register 0x{reg:02X}"
-            if code
-            else f"{self._who(i)}: EMCY error reset (no error)"
-            for i, code, reg, _t in self.emergencies
-        ]
+        out = []
+        for i, code, reg, _t in self.emergencies:
+            who = self._who(i) if i >= 0 else self._who_node(-1 - i)
+            out.append(
+                f"{who}: EMCY {describe_error_code(code)}, error register 0x{reg:02X}"
+                if code
+                else f"{who}: EMCY error reset (no error)"
+            )
+        return out
 
     # --------------------------------------------------------------------- SDO
 
@@ -687,8 +820,11 @@ class CANopenTransport(Transport):
             raise CANopenError(f"{self._who(axis)}: SDO {action} before the bus was opened")
         import canopen
 
-        node = self.nodes[axis]
-        device = f"{self.axis_names[axis]}, node {self.node_ids[axis]}"
+        d, k = self.serve[axis]
+        if not self._raw_sdo and 0x6000 <= index < 0x6800:
+            index += 0x800 * k  # axis k of a multi-axis node (CiA 402-1)
+        node = self.nodes[d]
+        device = f"{self.axis_names[axis]}, node {self.node_ids[d]}"
         try:
             if action == "read":
                 return bytes(node.sdo.upload(index, subindex))

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field, replace
 
 from pydantic import ValidationError
 
+from drivers.canopen.layout import MAX_PDOS_BY_RULE, pdo_cob_base
 from drivers.profiles.description import DeviceDescription, PdoOption, ProfileImportError
 from hofto_hw.config.drive_profile import (
     CIA402_OBJECTS,
@@ -697,8 +698,17 @@ def _canopen(
 ) -> dict:
     def comm(p: PdoOption) -> dict:
         c = desc.comm.get(p.index)
-        default_base = (0x200 if p.direction == "rx" else 0x180) + 0x100 * (p.index & 0x1FF)
-        base = c.cob_id_base if c is not None else default_base
+        number = (p.index & 0x1FF) + 1
+        if c is not None:
+            base = c.cob_id_base
+        elif number <= MAX_PDOS_BY_RULE:  # CiA 301's default, beyond PDO4 our rule
+            base = pdo_cob_base("rpdo" if p.direction == "rx" else "tpdo", number)
+        else:
+            raise ProfileImportError(
+                f"{desc.path}: {desc.device}: 0x{p.index:04X}: PDO{number} has no COB-ID in "
+                f"the file and the master's rule covers PDOs 1..{MAX_PDOS_BY_RULE} "
+                "(docs/canopen.md)"
+            )
         tt = c.transmission_type if c is not None else None
         enabled = c.enabled if c is not None else False
         reasons.append(

@@ -1,7 +1,13 @@
 """Emulated CANopen CiA-402 drives: :class:`~drivers.sim.drive.EmulatedDrives` as CANopen
 nodes on a python-can bus.
 
-One node per drive (node ids in drive order). Each node serves the drive's own
+One node per drive (node ids in drive order), or per device with multi-axis drives
+(``serve``: per drive, (node, CiA-402 axis of that node)): such a node serves its axes'
+dictionaries through one :class:`~drivers.sim.object_dictionary.MultiAxisDictionary` (axis
+k's objects at 0x6000 + 0x800·k), its PDOs carry every axis's objects into that axis's drive
+record, and it has one NMT state, one heartbeat, one SDO server and one EMCY COB-ID; an
+EMCY of axis k carries k in the byte its profile names (``canopen.emcy_axis_byte``). Each
+node serves the drive's own
 :class:`~drivers.sim.object_dictionary.ObjectDictionary` (the one SimBus and the EtherCAT
 emulator serve) extended with the CiA 301 communication objects (:func:`add_canopen_objects`):
 SYNC/EMCY COB-IDs, heartbeat producer 0x1017, RPDO/TPDO communication 0x1400/0x1401,
@@ -122,43 +128,93 @@ def add_canopen_objects(od: ObjectDictionary, node_id: int, profile: Any = None)
             od.set(p.map_index, 0, len(p.entries))
 
 
-def _indices(entries: Any, dtype: np.dtype, axis: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+def _indices(
+    entries: Any, dtype: np.dtype, records: Sequence[int | None], size: int
+) -> tuple[np.ndarray, np.ndarray]:
     """(payload byte, flat record byte) index arrays of the known objects of a mapping;
-    padding and vendor objects travel as bytes nothing reads (zero when sent)."""
+    ``records``: per CiA-402 axis k of the node (objects at 0x6000 + 0x800·k), the drive
+    whose record it is (None: no drive emulates it). Padding, vendor objects and objects of
+    an axis without a drive travel as bytes nothing reads (zero when sent)."""
+    from drivers.cia402.pdo import OBJECT_FIELDS
+    from drivers.cia402.wire import split_object
+
     payload: list[int] = []
     record: list[int] = []
     off = 0
     for e in entries:
         n = e.bit_length // 8
-        if e.field and e.field in (dtype.names or ()):
-            ro = dtype.fields[e.field][1]
+        found = split_object(e.index, e.subindex) if e.index else None
+        rec = records[found[1]] if found is not None and found[1] < len(records) else None
+        field = OBJECT_FIELDS[(found[0], e.subindex)] if found is not None else None
+        if rec is not None and field in (dtype.names or ()):
+            ro = rec * size + dtype.fields[field][1]
             payload.extend(range(off, off + n))
-            record.extend(range(axis * size + ro, axis * size + ro + n))
+            record.extend(range(ro, ro + n))
         off += n
     return np.array(payload, dtype=np.intp), np.array(record, dtype=np.intp)
 
 
 class CanopenDrives:
-    """n emulated CiA-402 drives as CANopen nodes on ``bus`` (a python-can bus object).
+    """Emulated CiA-402 drives as CANopen nodes on ``bus`` (a python-can bus object).
 
-    Call :meth:`poll` in a loop (or :meth:`start` a thread). ``node_ids`` default 1..n.
+    Call :meth:`poll` in a loop (or :meth:`start` a thread). ``serve``: per drive, (node
+    position, CiA-402 axis of that node); default drive i is node i's only axis. ``node_ids``
+    one per node, default 1..n.
     """
 
     def __init__(
-        self, drives: EmulatedDrives, bus: Any, node_ids: Sequence[int] | None = None
+        self,
+        drives: EmulatedDrives,
+        bus: Any,
+        node_ids: Sequence[int] | None = None,
+        serve: Sequence[tuple[int, int]] | None = None,
     ) -> None:
         import can
+
+        from drivers.sim.object_dictionary import MultiAxisDictionary
 
         self._can = can
         self.drives = drives
         self.bus = bus
-        n = drives.n
+        serve = [(i, 0) for i in range(drives.n)] if serve is None else list(serve)
+        n = max(d for d, _k in serve) + 1
+        if len(serve) != drives.n or sorted({d for d, _k in serve}) != list(range(n)):
+            raise ValueError(f"serve {serve} does not number {drives.n} drives' nodes from 0")
+        #: number of nodes
         self.n = n
+        #: the drives of each node, per its CiA-402 axis (None: an axis no drive emulates)
+        self.records: list[list[int | None]] = [[] for _ in range(n)]
+        for i, (d, k) in enumerate(serve):
+            row = self.records[d]
+            row.extend([None] * (k + 1 - len(row)))
+            row[k] = i
+        #: the node of each drive
+        self.node_of = [d for d, _k in serve]
+        self.axis_of = [k for _d, k in serve]
         self.node_ids = list(node_ids) if node_ids is not None else list(range(1, n + 1))
-        self.ods = drives.ods
-        self.profiles = list(getattr(drives, "profiles", [None] * n))
-        for od, nid, prof in zip(self.ods, self.node_ids, self.profiles, strict=True):
+        if len(self.node_ids) != n:
+            raise ValueError(f"{len(self.node_ids)} node ids for {n} nodes")
+        heads = [row[0] for row in self.records]
+        if any(h is None for h in heads):
+            raise ValueError("axis 0 of every node needs a drive")
+        #: the dictionary of axis 0's drive: the node's communication objects live there
+        self._od0 = [drives.ods[h] for h in heads]  # type: ignore[index]
+        #: what the node serves by SDO (every axis's CiA-402 objects on a multi-axis node)
+        self.ods: list[Any] = [
+            drives.ods[row[0]]  # type: ignore[index]
+            if len(row) == 1
+            else MultiAxisDictionary([drives.ods[j] if j is not None else None for j in row])
+            for row in self.records
+        ]
+        all_profiles = list(getattr(drives, "profiles", [None] * drives.n))
+        self.profiles = [all_profiles[h] for h in heads]  # type: ignore[index]
+        for od, nid, prof in zip(self._od0, self.node_ids, self.profiles, strict=True):
             add_canopen_objects(od, nid, prof)
+        #: per node: the EMCY byte carrying the axis (None: the EMCY does not say)
+        self._emcy_axis_byte = [
+            p.canopen.emcy_axis_byte if p is not None and p.canopen is not None else None
+            for p in self.profiles
+        ]
         self._pdo_objects = [pdo_objects(p) for p in self.profiles]
         self.nmt = np.full(n, layout.NMT_PRE_OPERATIONAL, dtype=np.uint8)
         self.silent = np.zeros(n, dtype=bool)
@@ -181,7 +237,11 @@ class CanopenDrives:
         self._unmapped = np.ones(self._rx_flat.size, dtype=bool)
         self._tx_flat = drives.tx.view(np.uint8).reshape(-1)
         self._got_rpdo = False
-        self._last_error = np.zeros(n, dtype=np.uint16)
+        self._last_error = np.zeros(drives.n, dtype=np.uint16)
+        from drivers.sim.plant_trace import PlantTrace
+
+        #: the true arm at every plant step for a while (requests ``trace`` / ``push``)
+        self.trace = PlantTrace(drives.plant)
         self._hb_next = np.zeros(n)
         self._sdo: list[dict[str, Any]] = [{} for _ in range(n)]
         self._delayed: list[tuple[float, Any]] = []
@@ -189,6 +249,17 @@ class CanopenDrives:
         self._rpdo: dict[int, tuple[int, tuple[np.ndarray, np.ndarray], int]] = {}
         self._tpdo: list[list[tuple[Any, Any, np.ndarray, int]]] = [[] for _ in range(n)]
         self._by_sdo = {layout.SDO_RX_BASE + nid: i for i, nid in enumerate(self.node_ids)}
+
+    @classmethod
+    def for_bus(cls, drives: EmulatedDrives, bus: Any, bus_config: Any) -> CanopenDrives:
+        """The nodes of a :class:`hofto_hw.config.drives.BusConfig`: one per device
+        (``bus.drives[i].device`` / ``device_axis``), node ids ``bus.canopen.node_ids`` or
+        1..n."""
+        from hofto_hw.config.drives import device_map
+
+        opts = getattr(bus_config, "canopen", None)
+        ids = opts.node_ids if opts is not None and opts.node_ids else None
+        return cls(drives, bus, ids, device_map(bus_config.drives))
 
     # ------------------------------------------------------------------ sending
 
@@ -202,19 +273,22 @@ class CanopenDrives:
     def _talks(self, i: int) -> bool:
         return not (self.silent[i] or self.bus_off[i])
 
-    def _emcy(self, i: int, code: int, register: int) -> None:
+    def _emcy(self, i: int, code: int, register: int, axis: int = 0) -> None:
+        """EMCY of node ``i`` (of its CiA-402 ``axis``, in the profile's byte if it names
+        one)."""
         if self._talks(i):
-            self._send(
-                layout.EMCY_BASE + self.node_ids[i],
-                bytes([code & 0xFF, code >> 8, register, 0, 0, 0, 0, 0]),
-            )
+            data = bytearray([code & 0xFF, code >> 8, register, 0, 0, 0, 0, 0])
+            where = self._emcy_axis_byte[i]
+            if where is not None:
+                data[where] = axis
+            self._send(layout.EMCY_BASE + self.node_ids[i], data)
 
     # ---------------------------------------------------------------------- NMT
 
     def _boot(self, i: int) -> None:
         self.nmt[i] = layout.NMT_PRE_OPERATIONAL
         self.ods[i].pdo_locked = False
-        self.ods[i].set(0x1017, 0, 0)
+        self._od0[i].set(0x1017, 0, 0)
         self._sdo[i].clear()
         if self._talks(i):
             self._send(layout.HEARTBEAT_BASE + self.node_ids[i], b"\x00")
@@ -255,11 +329,11 @@ class CanopenDrives:
                 entries = od.mapping(map_index)
                 size = sum(e.bit_length for e in entries) // 8
                 if map_index < 0x1A00:
-                    idx = _indices(entries, RXPDO_DTYPE, i, RXPDO_SIZE)
+                    idx = _indices(entries, RXPDO_DTYPE, self.records[i], RXPDO_SIZE)
                     self._rpdo[cob & 0x7FF] = (i, idx, size)
                     self._unmapped[idx[1]] = False
                 else:
-                    idx = _indices(entries, TXPDO_DTYPE, i, TXPDO_SIZE)
+                    idx = _indices(entries, TXPDO_DTYPE, self.records[i], TXPDO_SIZE)
                     every = max(1, min(240, od.get(comm, 2)))
                     payload = np.zeros(size, dtype=np.uint8)
                     self._tpdo[i].append((cob & 0x7FF, idx, payload, every))
@@ -300,11 +374,13 @@ class CanopenDrives:
         if self._got_rpdo:
             np.copyto(self._rx_flat, self._drive_rx_flat, where=self._unmapped)
         self.drives.step(self._rx if self._got_rpdo else None)
+        self.trace.sample()
         self._got_rpdo = False
         err = self.drives.tx["error_code"]
         if (err != self._last_error).any():
-            for i in np.flatnonzero(err != self._last_error):
-                self._emcy(int(i), int(err[i]), int(self.drives.error_register[i]))
+            for j in np.flatnonzero(err != self._last_error):
+                i = self.node_of[j]
+                self._emcy(i, int(err[j]), int(self.drives.error_register[j]), self.axis_of[j])
             np.copyto(self._last_error, err)
 
     # ---------------------------------------------------------------------- SDO
@@ -419,7 +495,7 @@ class CanopenDrives:
         """Heartbeats and delayed TPDOs that are due; returns seconds to the next one."""
         nxt = 0.05
         for i in range(self.n):
-            period = self.ods[i].get(0x1017, 0) / 1000.0
+            period = self._od0[i].get(0x1017, 0) / 1000.0
             if period <= 0 or not self._talks(i) or self.no_heartbeat[i]:
                 continue
             if now >= self._hb_next[i]:
@@ -485,13 +561,25 @@ class CanopenDrives:
     def _node(self, request: dict[str, Any]) -> int:
         i = int(request["node"])
         if not 0 <= i < self.n:
-            raise ValueError(f"node {i} does not exist (0..{self.n - 1}, drive order)")
+            raise ValueError(f"node {i} does not exist (0..{self.n - 1}, bus order)")
         return i
+
+    def _drive(self, request: dict[str, Any]) -> int:
+        """The drive of ``node`` (position) and ``axis`` (its CiA-402 axis, default 0)."""
+        row = self.records[self._node(request)]
+        k = int(request.get("axis", 0))
+        j = row[k] if 0 <= k < len(row) else None
+        if j is None:
+            raise ValueError(f"node {request['node']} has no axis {k}")
+        return j
 
     def control(self, request: dict[str, Any]) -> dict[str, Any]:
         """Apply one control request; ``{"ok": True, ...}`` or ``{"ok": False, "error": ...}``.
 
-        ``node`` is the 0-based drive position. Requests (``op``): ``status``; ``silence``
+        ``node`` is the 0-based node position (the drive position with one axis per node);
+        requests on a drive (``emcy`` with a fault code, ``clear_drive_fault`` and the
+        commissioning ones) take ``axis``, its CiA-402 axis on the node (default 0).
+        Requests (``op``): ``status``; ``silence``
         (node, on: no frame sent, heartbeat stops); ``heartbeat`` (node, on: false stops
         only the heartbeat producer, PDOs go on); ``emcy`` (node, code: a 0x603F code of
         drivers.sim.drive.FAULTS faults the drive, which then sends the EMCY; any other code
@@ -500,7 +588,11 @@ class CanopenDrives:
         "late", count of SYNCs, delay [s] for late); ``identity`` (node, vendor_id,
         product_code: 0x1018 reports these; ``restore``: true puts the configured ones
         back); ``bus_off`` (node, on: the node's controller leaves the bus, on recovery it
-        sends EMCY 0x8140); ``sto``, ``brake``, ``home_switch``, ``index_phase`` (node and the
+        sends EMCY 0x8140); ``push`` (force [N] (3,) world frame at the tool, duration [s],
+        ramp [s]: a hand on the true arm from now; answers its start ``t`` [s] of plant time;
+        with ``trace`` [s] also a trace from then); ``trace`` (seconds: the true arm's t, q,
+        qd at every plant step for that long); ``trace_read`` (the trace so far, ``done``
+        once over); ``sto``, ``brake``, ``home_switch``, ``index_phase`` (node and the
         fields of :meth:`drivers.sim.drive.EmulatedDrives.commissioning`); ``stop``.
         """
         op = request.get("op")
@@ -513,14 +605,15 @@ class CanopenDrives:
                 elif op == "heartbeat":
                     self.no_heartbeat[self._node(request)] = not bool(request.get("on", True))
                 elif op == "emcy":
-                    i, code = self._node(request), int(request["code"])
+                    j, code = self._drive(request), int(request["code"])
                     kind = _FAULT_KINDS.get(code)
                     if kind is not None:
-                        self.drives.inject_fault(i, kind, bool(request.get("persistent", False)))
+                        self.drives.inject_fault(j, kind, bool(request.get("persistent", False)))
                     else:
-                        self._emcy(i, code, int(request.get("register", 0x01)))
+                        i = self.node_of[j]
+                        self._emcy(i, code, int(request.get("register", 0x01)), self.axis_of[j])
                 elif op == "clear_drive_fault":
-                    self.drives.clear_fault(self._node(request))
+                    self.drives.clear_fault(self._drive(request))
                 elif op == "sdo_abort":
                     key = (self._node(request), int(request["index"]), int(request.get("sub", -1)))
                     code = int(request["code"])
@@ -543,10 +636,24 @@ class CanopenDrives:
                     self.bus_off[i] = on
                     if was and not on:
                         self._emcy(i, CODE_BUS_OFF_RECOVERED, 0x11)
+                elif op == "push":
+                    self.drives.push_tool(
+                        request["force"],
+                        float(request["duration"]),
+                        float(request.get("ramp", 0.02)),
+                    )
+                    if "trace" in request:
+                        self.trace.start(float(request["trace"]))
+                    return {"ok": True, "t": float(self.drives.plant.t)}  # the push's start
+                elif op == "trace":
+                    self.trace.start(float(request["seconds"]))
+                    return {"ok": True, "t": float(self.drives.plant.t)}
+                elif op == "trace_read":
+                    return {"ok": True, **self.trace.read()}
                 elif op == "stop":
                     self.stopping = True
                 elif op in self.drives.COMMISSIONING_OPS:
-                    return {"ok": True, **self.drives.commissioning(self._node(request), request)}
+                    return {"ok": True, **self.drives.commissioning(self._drive(request), request)}
                 else:
                     raise ValueError(f"unknown op {op!r}")
         except (KeyError, TypeError, ValueError, IndexError) as exc:
@@ -558,12 +665,12 @@ class CanopenDrives:
             saved = self._identity_saved.get((i, sub))
             if request.get("restore"):
                 if saved is not None:
-                    self.ods[i].set(0x1018, sub, saved)
+                    self._od0[i].set(0x1018, sub, saved)
                     del self._identity_saved[(i, sub)]
             elif key in request:
                 if saved is None:
-                    self._identity_saved[(i, sub)] = self.ods[i].get(0x1018, sub)
-                self.ods[i].set(0x1018, sub, int(request[key]))
+                    self._identity_saved[(i, sub)] = self._od0[i].get(0x1018, sub)
+                self._od0[i].set(0x1018, sub, int(request[key]))
 
     def status(self) -> dict[str, Any]:
         """Counters, NMT state per node and the true arm state (SI)."""

@@ -68,9 +68,14 @@ def run(args: argparse.Namespace) -> int:
         if cfg.bus is not None:
             from hofto_hw.config.drive_profile import resolve_profiles
 
-            resolve_profiles(cfg.bus, cfg.cycle_time, str(path), Path(path).parent)
+            profiles = resolve_profiles(cfg.bus, cfg.cycle_time, str(path), Path(path).parent)
         if cfg.bus is not None and cfg.bus.transport == "canopen":
             from drivers.canopen.busload import check_bus_load, configured_load
+            from drivers.canopen.layout import bus_cob_id_clashes
+
+            clashes = bus_cob_id_clashes(cfg.bus, profiles)
+            if clashes:
+                raise ConfigError(f"{path}: bus.canopen: {clashes[0]}")
 
             load = configured_load(cfg.bus, cfg.loop.rate_hz)
             check_bus_load(load, f"{path}: loop.rate_hz with bus.canopen")

@@ -273,9 +273,7 @@ def _emulated_canopen(cfg: Any, bus_kwargs: dict[str, Any]) -> Iterator[None]:
     channel = cfg.bus.interface
     bus = can.Bus(interface=cfg.bus.canopen.can_interface, channel=channel, **bus_kwargs)
     widen_receive_buffer(bus)
-    opts = cfg.bus.canopen
-    node_ids = opts.node_ids if opts is not None and opts.node_ids else None
-    emu = CanopenDrives(build_emulated_drives(cfg, external=False), bus, node_ids).start()
+    emu = CanopenDrives.for_bus(build_emulated_drives(cfg, external=False), bus, cfg.bus).start()
     try:
         yield
     finally:

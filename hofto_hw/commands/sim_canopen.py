@@ -2,7 +2,8 @@
 
 Example: ``hofto-hw sim-canopen --interface udp_multicast --channel 239.74.163.2
 --config configs/er3a_canopen.yaml --control /tmp/can.sock``. One node per drive of the
-config (node ids from ``bus.canopen.node_ids``, default 1..n); one plant tick of
+config, one per device with multi-axis drives (node ids from ``bus.canopen.node_ids``,
+default 1..n); one plant tick of
 ``1 / loop.rate_hz`` per SYNC. Fault injection and status through the Unix socket given
 with ``--control`` (one JSON object per line, see
 :meth:`drivers.sim.canopen_node.CanopenDrives.control`).
@@ -42,11 +43,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def node_ids(cfg: Any) -> list[int]:
-    """Node ids of the config's drives (``bus.canopen.node_ids`` or 1..n)."""
+    """Node ids of the config's devices (``bus.canopen.node_ids`` or 1..n; one per
+    multi-axis node)."""
+    from hofto_hw.config.drives import device_map
+
     opts = cfg.bus.canopen
     if opts is not None and opts.node_ids is not None:
         return list(opts.node_ids)
-    return list(range(1, len(cfg.bus.drives) + 1))
+    return list(range(1, len({d for d, _k in device_map(cfg.bus.drives)}) + 1))
 
 
 def _collecting(handler: Any) -> Any:
@@ -85,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     except (can.CanError, OSError, ValueError) as exc:
         raise UserError(f"cannot open CAN channel {channel!r} ({args.interface}): {exc}") from None
     widen_receive_buffer(bus)  # udp_multicast: a SYNC lost to a full socket is an unanswered one
-    net = CanopenDrives(drives, bus, node_ids(cfg))
+    net = CanopenDrives.for_bus(drives, bus, cfg.bus)
     stop_control = threading.Event()
     ctl = None
     if args.control:
@@ -102,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGTERM, _stop)
         signal.signal(signal.SIGINT, _stop)
     print(
-        f"serving {net.n} emulated CANopen drives (nodes {net.node_ids}) on "
+        f"serving {drives.n} emulated CANopen drives (nodes {net.node_ids}) on "
         f"{args.interface}:{channel}",
         flush=True,
     )

@@ -110,7 +110,8 @@ class DriveConfig(FileModel):
     )
     device: Annotated[int, Field(ge=0, le=511)] | None = Field(
         None,
-        description="the drive device this joint is on (EtherCAT slave), counted from 0 in "
+        description="the drive device this joint is on (EtherCAT slave, CANopen node), "
+        "counted from 0 in "
         "bus order; None = a device of its own (the next one). Joints sharing a device run "
         "one multi-axis drive: one profile with `axes` > 1, one identity",
     )
@@ -190,7 +191,9 @@ class CANopenOptions(FileModel):
         None, description="CAN FD data-phase bitrate [bit/s]; None = classic CAN"
     )
     node_ids: list[Annotated[int, Field(ge=1, le=127)]] | None = Field(
-        None, description="CANopen node id per drive, in bus.drives order; None = 1, 2, ..."
+        None,
+        description="CANopen node id per device (per drive unless joints share a multi-axis "
+        "node: bus.drives[i].device), in bus order; None = 1, 2, ...",
     )
     load_limit: Annotated[float, Field(gt=0.0, le=1.0)] = Field(
         0.7, description="highest accepted worst-case bus load (fraction of the bus time)"
@@ -261,15 +264,20 @@ class BusConfig(FileModel):
     def _interface(self) -> BusConfig:
         if self.transport != "sim" and not self.interface:
             raise ValueError(f"interface is required for transport {self.transport!r}")
-        ids = self.canopen.node_ids if self.canopen is not None else None
-        if ids is not None and len(ids) != len(self.drives):
-            raise ValueError(f"canopen.node_ids has {len(ids)} ids for {len(self.drives)} drives")
         self._check_devices()
+        ids = self.canopen.node_ids if self.canopen is not None else None
+        devices = len({dev for dev, _k in device_map(self.drives)})
+        if ids is not None and len(ids) != devices:
+            on = f" on {devices} devices" if devices != len(self.drives) else ""
+            raise ValueError(
+                f"canopen.node_ids has {len(ids)} ids for {len(self.drives)} drives{on} "
+                "(one node id per device)"
+            )
         return self
 
     def _check_devices(self) -> None:
         """Devices numbered in bus order, one joint per device axis, one profile and one
-        identity per device; several joints on one device only on EtherCAT."""
+        identity per device; several joints on one device on EtherCAT and CANopen."""
         seen: dict[tuple[int, int], int] = {}
         first: dict[int, int] = {}
         for i, ((dev, k), d) in enumerate(zip(device_map(self.drives), self.drives, strict=True)):
@@ -288,10 +296,11 @@ class BusConfig(FileModel):
             seen[dev, k] = i
             j = first[dev]
             if j != i:
-                if self.transport not in ("ethercat",):
+                if self.transport not in ("ethercat", "canopen"):
                     raise ValueError(
                         f"drives[{i}].device: {dev} is shared with drives[{j}]; multi-axis "
-                        f"drives run on transport ethercat only (got {self.transport!r})"
+                        f"drives run on transport ethercat or canopen only (got "
+                        f"{self.transport!r})"
                     )
                 other = self.drives[j]
                 if d.profile != other.profile or d.profile is None:

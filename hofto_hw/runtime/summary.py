@@ -75,6 +75,9 @@ def build_summary(system: Any, log: str | None, realtime: str) -> dict[str, Any]
             entry["detail"] = "error code (0x603F) " + describe_error_code(int(ev.value[j]))
         elif kind == Fault.BUS_LOSS:
             entry["detail"] = describe_status(int(ev.value[j]))
+            history = getattr(system.bus, "node_fault_history", None)  # CANopen: which nodes
+            if history is not None and history():
+                entry["detail"] += ": " + "; ".join(history())
         elif kind == Fault.BRAKE:
             v = float(ev.value[j])
             entry["detail"] = (

@@ -457,3 +457,65 @@ CAN_TECHNOSOFT = _can(
     objects={"absent": ["torque_offset", "error_code"]},
 )
 CAN_MIXED = [CAN_ZEROERR, CAN_FAULHABER, CAN_TECHNOSOFT] * 2
+
+
+def _can_two_axis(emcy_axis_byte: int | None) -> dict[str, Any]:
+    from drivers.canopen import layout
+
+    rx = [p.entries for p in layout.RPDOS]
+    tx = [p.entries for p in layout.TPDOS]
+
+    def pdos(base: int, blocks: list) -> list[dict[str, Any]]:
+        return [
+            {
+                "index": base + len(blocks) * k + j,
+                "fixed": False,
+                "entries": _axis_block([_e(e.index, e.bit_length) for e in b], k),
+            }
+            for k in range(2)
+            for j, b in enumerate(blocks)
+        ]
+
+    name = "test_can_two_axis_synthetic" + ("" if emcy_axis_byte is not None else "_no_emcy_axis")
+    out = _can(
+        name,
+        0x00000A5F,
+        0x00402003,
+        pdos(0x1600, rx),
+        pdos(0x1A00, tx),
+        # PDO n of the node: CiA 301's default COB-IDs (drivers/canopen/layout.pdo_cob_base)
+        [_comm(layout.pdo_cob_base("rpdo", n), 1, True) for n in range(1, 5)],
+        [_comm(layout.pdo_cob_base("tpdo", n), 1, True) for n in range(1, 5)],
+        description="SYNTHETIC two-axis CiA-402 CANopen drive for the multi-axis tests (no "
+        "vendor file): the built-in CANopen layout per axis, RPDO1/2 + TPDO1/2 axis 0, "
+        "RPDO3/4 + TPDO3/4 axis 1 (objects at 0x6800..)",
+        axes=2,
+        modes={"supported": ["csp", "csv", "cst"], "loop": "csp", "set_by": "pdo"},
+        fallbacks={"error_code": "emcy", "digital_inputs": "none"},
+    )
+    out["canopen"]["emcy_axis_byte"] = emcy_axis_byte
+    return out
+
+
+#: SYNTHETIC two-axis CANopen drive (no vendor file describes one): one node, two CiA-402
+#: axes, four RPDOs and four TPDOs, its EMCY names the axis in byte 3
+CAN_TWO_AXIS = _can_two_axis(3)
+#: the same drive whose EMCY does not say which axis (the master reads 0x603F by SDO)
+CAN_TWO_AXIS_NO_EMCY_AXIS = _can_two_axis(None)
+
+
+def write_can_two_axis_config(
+    folder: Path, profile: dict[str, Any] | None = None, **bus: Any
+) -> Path:
+    """configs/er3a_canopen.yaml on three two-axis CANopen nodes (joints 2k, 2k+1 on node
+    k + 1, axes 0, 1) of ``profile`` (default CAN_TWO_AXIS), ``bus`` keys merged; returns
+    its path."""
+    prof = CAN_TWO_AXIS if profile is None else profile
+    path = write_mixed_config(
+        folder, [prof] * 6, base=ROOT / "configs" / "er3a_canopen.yaml", **bus
+    )
+    data = yaml.safe_load(path.read_text())
+    for i, d in enumerate(data["bus"]["drives"]):
+        d["device"], d["device_axis"] = divmod(i, 2)
+    path.write_text(dump_yaml(data, sort_keys=False))
+    return path

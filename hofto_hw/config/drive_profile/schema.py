@@ -423,7 +423,9 @@ class CanPdoComm(FileModel):
     """CANopen PDO communication parameter (0x1400.. / 0x1800..) for one PDO."""
 
     cob_id_base: Annotated[int, Field(ge=0x080, le=0x7FF)] = Field(
-        description="COB-ID = cob_id_base + node id (e.g. RPDO1 0x200, TPDO1 0x180)"
+        description="COB-ID = cob_id_base + node id (e.g. RPDO1 0x200, TPDO1 0x180; CiA 301 "
+        "defaults exist for PDOs 1-4 only: PDO n >= 5 takes PDO ((n-1) mod 4)+1's + 0x40, the "
+        "COB-IDs of node id + 64, drivers/canopen/layout.pdo_cob_base)"
     )
     transmission_type: U8 = Field(
         1, description="0: acyclic synchronous; 1..240: every n-th SYNC; 254/255: event"
@@ -452,6 +454,12 @@ class CANopenSection(FileModel):
         None,
         description="heartbeat producer time written to 0x1017 [ms]; None = the "
         "master's bus.canopen.heartbeat_time",
+    )
+    emcy_axis_byte: Annotated[int, Field(ge=3, le=7)] | None = Field(
+        None,
+        description="multi-axis node: the byte of the EMCY's manufacturer-specific field "
+        "(3..7) that carries the CiA-402 axis (0-based) the emergency is of; None = the "
+        "EMCY does not say (the master reads 0x603F of each axis by SDO)",
     )
 
     @model_validator(mode="after")

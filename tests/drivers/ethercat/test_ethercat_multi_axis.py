@@ -84,7 +84,10 @@ def test_six_joints_on_three_two_axis_slaves(two_axis_bus) -> None:
         ("device_gap", "drives[2].device: 2, but the next device in bus order is 1"),
         ("same_axis", "drives[1]: device 0 axis 0 already drives joint 0"),
         ("other_profile", "drives[1].profile"),
-        ("sim_transport", "multi-axis drives run on transport ethercat only (got 'sim')"),
+        (
+            "sim_transport",
+            "multi-axis drives run on transport ethercat or canopen only (got 'sim')",
+        ),
     ],
 )
 def test_a_bad_multi_axis_bus_is_refused_in_one_line(

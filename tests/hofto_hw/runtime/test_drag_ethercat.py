@@ -19,7 +19,18 @@ no learning (the test's config had no ``run.path``, so ``mode move`` moved nothi
 0.2 s tare left -1.9 N along z at the tool (friction -1.0 N, tare -1.0 N): 7.8-9.3 mm/s
 off-axis; learning (full-amplitude path) with the 0.2 s tare 4.7-5.0 mm/s; learning and the
 1 s tare 0.3-0.6 mm/s (full amplitude), 0.1-0.2 mm/s (0.4 amplitude).
-Needs root (veth, raw sockets): skipped when unprivileged, a failure under CI.
+Over CANopen (issue 25: multi-axis nodes) the same test runs on configs/er3a_canopen.yaml
+(200 Hz, ``hofto-hw sim-canopen`` over udp_multicast in a private network namespace) and on
+three two-axis CANopen nodes (tests/support/profiles.py CAN_TWO_AXIS). At 200 Hz a CAN
+sample is a SYNC old and a command acts at the next SYNC (10 ms against 1 ms), and the
+admittance needs twice the mass for its explicit Euler step (a 30 ms time constant against
+15 ms), so the rest after the release is bounded by 350 ms (issue 9's 100 ms is not met at
+200 Hz) and the off-axis drift by 10 % there; the steady speed keeps the 10 % of F/B_a.
+Measured (loaded 2-core machine, load 8-15, 4-5 runs each): er3a_canopen 96.7-100.0 mm/s,
+off-axis 0.8-8.0 mm/s, rest <= 175-260 ms; three two-axis nodes 95.2-98.7 mm/s, 2.2-6.6
+mm/s, <= 155-215 ms (EtherCAT er3a.yaml in the same session: 100.1 mm/s, 0.16 mm/s, 1 ms).
+Needs root (veth, raw sockets, network namespaces): skipped when unprivileged, a failure
+under CI.
 """
 
 from __future__ import annotations
@@ -40,6 +51,9 @@ from support.rootnet import (
     er3a_run,
     ethercat_run_config,
     first_event,
+    private_netns,
+    run_config,
+    sim_canopen_args,
     sim_ethercat_args,
     veth_pair,
     wait_for,
@@ -51,6 +65,9 @@ PUSH_TIME = 1.8  # s
 SETTLE = 0.5  # s from the push's start to the steady window (drag_figures' settle)
 RAMP = 0.2  # s: the hand builds its push up (not a 20 ms step)
 REST_WITHIN = 0.1  # s after the hand lets go (issue 9)
+#: over CANopen at 200 Hz (see the module docstring): rest time and off-axis bound
+CAN_REST_WITHIN = 0.35
+CAN_OFF_AXIS = 0.1
 RESOLUTION = 0.05  # s: the rest time is judged only when the samples around it are this dense
 # the demo path at 0.4 of its amplitude: joint speeds up to 0.5-1.4 rad/s (full: up to 3.4),
 # the drag's 0.15-0.45 inside; off-axis 0.1-0.4 mm/s after it against 0.3-0.6 at full amplitude
@@ -81,11 +98,45 @@ def _config(folder: Path, master: str, base: Path = CONFIG) -> tuple[Path, dict]
     )
 
 
+def _can_options(base: Path) -> dict:
+    import yaml
+
+    return dict(yaml.safe_load(base.read_text())["bus"]["canopen"])
+
+
+def _can_config(folder: Path, base: Path) -> tuple[Path, dict]:
+    run = er3a_run("model_error", "path")
+    run["path"]["amplitude"] = [PATH_SCALE * a for a in run["path"]["amplitude"]]
+    return run_config(
+        folder,
+        "er3a-canopen-drag.yaml",
+        base=base,
+        overrun_streak=100_000,  # host stalls are not under test here
+        # late TPDOs and heartbeats of a loaded machine are not under test either: 100 cycles
+        # (0.5 s at 200 Hz), the TPDO resync and heartbeat timeout above it (1 s)
+        lost_cycles=100,
+        bus={"canopen": {**_can_options(base), "heartbeat_timeout": 1.0, "tpdo_resync": 1.0}},
+        run=run,
+        # er3a_canopen.yaml has no drag section: the schema's, as er3a.yaml's, but M_a 6 kg and
+        # 0.3 kg·m² (at 200 Hz the release damping's explicit Euler step needs twice); the steady
+        # speed F/B_a does not depend on it
+        edit=lambda data: data.update(
+            drag={
+                "observer": "hofto",
+                "mass": 6.0,
+                "rotational_mass": 0.3,
+                "enable_input": {"source": "socket"},
+            }
+        ),
+    )
+
+
 @dataclass
 class DragRig:
     data: dict
     emu: Emulator
     service: ServiceRun
+    bus: str = "ethercat"
 
     def push(
         self,
@@ -108,11 +159,18 @@ class DragRig:
         return self.service.request(line)
 
 
-@pytest.fixture(params=["er3a.yaml", "er3a_mixed.yaml", "two_axis"])
+@pytest.fixture(
+    params=["er3a.yaml", "er3a_mixed.yaml", "two_axis", "canopen:er3a_canopen.yaml",
+            "canopen:two_axis"]
+)  # fmt: skip
 def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[DragRig]:
     """configs/er3a.yaml, configs/er3a_mixed.yaml (six drive models of six vendor profiles
     on the bus, issue 25) and the arm on three two-axis slaves (a synthetic multi-axis
-    profile, tests/support/profiles.py TWO_AXIS), with the same figures."""
+    profile, tests/support/profiles.py TWO_AXIS), with the same figures; over CANopen
+    configs/er3a_canopen.yaml and the arm on three two-axis nodes (CAN_TWO_AXIS)."""
+    if request.param.startswith("canopen:"):
+        yield from _can_rig(tmp_path, request.param.split(":", 1)[1])
+        return
     with veth_pair("dm", "ds") as (master, slave):
         if request.param == "two_axis":
             from support.profiles import write_two_axis_config
@@ -126,6 +184,27 @@ def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[DragRig]:
             service = ServiceRun(tmp_path, config)
             try:
                 yield DragRig(data, emu, service)
+            finally:
+                service.close()
+
+
+def _can_rig(tmp_path: Path, which: str) -> Iterator[DragRig]:
+    if which == "two_axis":
+        from support.profiles import write_can_two_axis_config
+
+        (tmp_path / "two_axis").mkdir()
+        base = write_can_two_axis_config(tmp_path / "two_axis")
+    else:
+        base = ROOT / "configs" / which
+    with private_netns("hcd") as ns:
+        config, data = _can_config(tmp_path, base)
+        channel = data["bus"]["interface"]  # a group inside the test's own namespace
+        with emulator(
+            sim_canopen_args("udp_multicast", channel, config), tmp_path, netns=ns
+        ) as emu:
+            service = ServiceRun(tmp_path, config, netns=ns)
+            try:
+                yield DragRig(data, emu, service, "canopen")
             finally:
                 service.close()
 
@@ -185,14 +264,19 @@ def _free_motion(r: DragRig, attempts: int = 3) -> int:
         st = s.status()
         if not st["faults"]:
             return attempt
-        assert st["faults"] == ["collision"], f"the free motion was stopped: {st}"
+        # a starved 200 Hz CANopen loop (a 136 ms stall) also tripped the following-error
+        # monitor once in the free motion; neither is under test here
+        tolerated = (
+            (["collision"], ["following_error"]) if rig.bus == "canopen" else (["collision"],)
+        )
+        assert st["faults"] in tolerated, f"the free motion was stopped: {st}"
         wait_for(lambda: s.status()["state"] == "stopped", 30, "stopped", s.proc)
         _until_ok(r, "reset")
         s.wait_state("running")
     raise AssertionError(f"the free motion was stopped {attempts} times")
 
 
-def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
+def test_drag_after_collision_and_reset(rig: DragRig) -> None:
     from hofto_hw.config.loader import load_config
     from hofto_hw.experiments.drag_sim import tool_motion
     from hofto_hw.model import RobotModel
@@ -273,12 +357,13 @@ def test_drag_after_collision_and_reset_over_ethercat(rig: DragRig) -> None:
     fast = max(0.05 * steady, 1e-3)
     rest, gap = _rest_time(t, tool_speed, joint_moving, t_end, fast)
     print(
-        f"FIGURE drag over ethercat steady={steady * 1e3:.1f} mm/s expected="
+        f"FIGURE drag over {rig.bus} steady={steady * 1e3:.1f} mm/s expected="
         f"{expected * 1e3:.1f} mm/s off_axis={off_axis * 1e3:.2f} mm/s rest<={rest * 1e3:.0f} ms"
         f" (sampling gap {gap * 1e3:.0f} ms) samples={int(window.sum())}"
         f" overruns={s['overruns']} false_stops={false_stops}"
     )
     assert abs(steady - expected) < 0.1 * expected, (steady, expected)
-    assert off_axis < 0.05 * expected, (off_axis, expected)
+    can = rig.bus == "canopen"
+    assert off_axis < (CAN_OFF_AXIS if can else 0.05) * expected, (off_axis, expected)
     if gap <= RESOLUTION:  # measurable: the samples bracket the rest instant closely enough
-        assert rest <= REST_WITHIN, (rest, gap)
+        assert rest <= (CAN_REST_WITHIN if can else REST_WITHIN), (rest, gap)

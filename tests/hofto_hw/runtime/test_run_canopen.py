@@ -45,13 +45,13 @@ OE = int(State.OPERATION_ENABLED)
 LOST_CYCLES = 10
 
 
-def _config(folder: Path) -> tuple[Path, dict]:
+def _config(folder: Path, base: Path = CAN_CONFIG) -> tuple[Path, dict]:
     # the shipped file's own safety settings (er3a.yaml's, position_jump scaled to 200 Hz:
     # with 1 kHz's 0.02 rad a CAN sample one SYNC late read once as a jump on joint 6)
     return run_config(
         folder,
         "er3a-canopen-run.yaml",
-        base=CAN_CONFIG,
+        base=base,
         overrun_streak=100,
         lost_cycles=LOST_CYCLES,
         run=er3a_run("model_error", "path"),
@@ -73,10 +73,18 @@ class CanRun:
         return self.data["safety"]["categories"][kind]
 
 
-@pytest.fixture()
-def canrun(tmp_path: Path) -> Iterator[CanRun]:
+@pytest.fixture(params=["er3a_canopen"])
+def canrun(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[CanRun]:
+    """The run on configs/er3a_canopen.yaml, or (``two_axis``) on three two-axis nodes (a
+    synthetic profile, tests/support/profiles.py CAN_TWO_AXIS)."""
+    base = CAN_CONFIG
+    if request.param == "two_axis":
+        from support.profiles import write_can_two_axis_config
+
+        (tmp_path / "two_axis").mkdir()
+        base = write_can_two_axis_config(tmp_path / "two_axis")
     with private_netns("hcr") as ns:
-        config, data = _config(tmp_path)
+        config, data = _config(tmp_path, base)
         args = sim_canopen_args("udp_multicast", CHANNEL, config)
         with emulator(args, tmp_path, netns=ns) as emu:
             service = ServiceRun(tmp_path, config, netns=ns)
@@ -172,6 +180,18 @@ def test_heartbeat_loss_is_bus_loss(canrun: CanRun) -> None:
     canrun.inject(op="heartbeat", node=2, on=False)  # TPDOs go on, heartbeats stop
     e = _check_fault(canrun, "bus_loss", before)
     assert "heartbeat" in e["detail"], e
+    assert "node 3 (joint_3): heartbeat lost" in e["detail"], e
+
+
+@pytest.mark.parametrize("canrun", ["two_axis"], indirect=True)
+def test_a_two_axis_node_losing_its_heartbeat_latches_naming_both_joints(
+    canrun: CanRun,
+) -> None:
+    before = _start_moving(canrun)["ticks"]
+    canrun.inject(op="heartbeat", node=1, on=False)  # node 2: joints 3 and 4
+    e = _check_fault(canrun, "bus_loss", before)
+    assert "node 2 (joint_3, joint_4): heartbeat lost" in e["detail"], e
+    assert "node 1" not in e["detail"] and "node 3" not in e["detail"], e
 
 
 def test_emcy_drive_fault_names_its_code(canrun: CanRun) -> None:
