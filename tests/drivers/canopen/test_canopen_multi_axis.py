@@ -332,8 +332,9 @@ def test_drive_check_runs_a_two_axis_profile_on_three_nodes(
 
 
 def _layout(p) -> tuple:
+    """PDOs in order: index, fixed or configurable (the scan's CiA 301 probe), entries."""
     return tuple(
-        [(x.index, [(e.index, e.subindex, e.bits) for e in x.entries]) for x in pdos]
+        [(x.index, x.fixed, [(e.index, e.subindex, e.bits) for e in x.entries]) for x in pdos]
         for pdos in (p.rx_pdos, p.tx_pdos)
     )
 
