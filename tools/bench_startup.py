@@ -52,6 +52,8 @@ SHORT = {
     "loading the safety checks": "safety and tick",
     "collecting garbage": "gc",
     "enabling the drives": "enable",
+    "waiting for the flight recorder": "awaiting the writer",
+    "waiting for the control plane": "awaiting the control plane",
 }
 
 

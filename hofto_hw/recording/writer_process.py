@@ -245,8 +245,10 @@ def writer_main(
     caps: sh.Capacities,
     spec: LogSpec,
     cpus: list[int] | None = None,
+    term: list[float] | None = None,
 ) -> None:
-    """Entry point of the writer process (multiprocessing target)."""
+    """The writer process's work, once it has its arguments. ``term[0]``: the monotonic time
+    of a SIGTERM to this process (0: none yet), kept by its handler."""
     _drop_realtime()
     if cpus:
         try:
@@ -255,8 +257,9 @@ def writer_main(
             pass
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the owner decides when to stop
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # RLIMIT_FSIZE: get EFBIG, not death
-    term = [0.0]
-    signal.signal(signal.SIGTERM, lambda *_: term.__setitem__(0, time.monotonic()))
+    if term is None:
+        term = [0.0]
+        signal.signal(signal.SIGTERM, lambda *_: term.__setitem__(0, time.monotonic()))
     parent = os.getppid()
     block = sh.SharedBlock(tick_dtype(n_joints, n_observers), caps, name=shm_name)
     ctl = block.control
@@ -297,17 +300,23 @@ def _run(w: _Writer, ctl: np.ndarray, parent: int, term: list[float]) -> None:
     w.finish()
 
 
-def main() -> int:
-    """``python -m hofto_hw.recording.writer_process SHM_NAME`` with the pickled arguments
-    (n_joints, n_observers, caps, spec, cpus) on stdin: how FlightRecorder starts it."""
-    import pickle
-    import sys
+def preload() -> None:
+    """What the writer imports beyond this module, before its arguments arrive (it starts
+    while the loop's process imports): the /safety/thresholds track's modules."""
+    from importlib import import_module
 
-    args = pickle.load(sys.stdin.buffer)
-    sys.stdin.close()
-    writer_main(sys.argv[1], *args)
+    for name in (
+        "hofto_hw.recording.attachments",
+        "hofto_hw.replay.levels_track",
+        "hofto_hw.replay.reproduce",
+    ):
+        import_module(name)
+
+
+def child_main(args: tuple, fds: list[int], term: list[float]) -> int:
+    """Entry point of the writer process (``python -m hofto_hw.runtime.prestart`` with this
+    module, as FlightRecorder starts it): ``args`` = (shm name, n_joints, n_observers, caps,
+    spec, cpus)."""
+    shm_name, *rest = args
+    writer_main(shm_name, *rest, term=term)
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
