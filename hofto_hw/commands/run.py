@@ -121,13 +121,8 @@ def run(args: argparse.Namespace) -> int:
     from hofto_hw.runtime.startup import Helpers, StartupInterrupted, StartupSignals
 
     signals = StartupSignals()  # SIGTERM/SIGINT before the loop: a clean stop, not a kill
-    helpers = None
+    helpers = Helpers()  # the writer and control plane, started in _run
     try:
-        with signals.deferred():  # a helper started is one we know (and end)
-            helpers = Helpers.start(
-                log=not args.no_log,
-                control=args.socket is not None or bool(os.environ.get("NOTIFY_SOCKET")),
-            )
         return _run(args, signals, helpers)
     except StartupInterrupted as exc:
         print(
@@ -137,17 +132,23 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0 if exc.signum == signal.SIGTERM else 128 + exc.signum
     finally:
-        if helpers is not None:
-            helpers.abandon()
+        helpers.abandon()
         signals.restore()
 
 
 def _run(args: argparse.Namespace, signals: Any, helpers: Any) -> int:
     # The tick's modules first (the control plane imports them all: seconds on a loaded
-    # machine; the helper processes import theirs meanwhile), before the progress clock
-    # starts, as when they were imported with this module: a quick refusal (a bad config,
-    # an SDO abort) stays one line. SIGTERM during them is already a clean stop (run()).
+    # machine), before the progress clock starts, as when they were imported with this
+    # module: a quick refusal (a bad config, an SDO abort) stays one line. SIGTERM during
+    # them is already a clean stop (run()). Then the helper processes, forked with these
+    # imports (none of their own to do), before the progress thread and the real-time set-up.
     import hofto_hw.control_plane.process  # noqa: F401
+
+    with signals.deferred():  # a helper started is one we know (and end)
+        helpers.start(
+            log=not args.no_log,
+            control=args.socket is not None or bool(os.environ.get("NOTIFY_SOCKET")),
+        )
     from hofto_hw.outputs import check_output, write_atomic
     from hofto_hw.runtime.startup import StartupProgress
 
@@ -419,7 +420,7 @@ def _start_recorder(cfg: object, args: argparse.Namespace, writer: object = None
     from hofto_hw.errors import UserError
     from hofto_hw.observers import kernels
     from hofto_hw.recording.attachments import run_attachments, run_metadata
-    from hofto_hw.recording.flight_file import LogSpec
+    from hofto_hw.recording.log_spec import LogSpec
     from hofto_hw.recording.recorder import FlightRecorder
     from hofto_hw.runtime import acceleration
     from hofto_hw.runtime.compose import loop_observer_names

@@ -24,7 +24,7 @@ import numpy as np
 
 from hofto_hw.errors import UserError
 from hofto_hw.recording import shared as sh
-from hofto_hw.recording.flight_file import LogSpec, rotated_path
+from hofto_hw.recording.log_spec import LogSpec, rotated_path
 from hofto_hw.recording.record import tick_dtype
 from hofto_hw.runtime.prestart import Prestarted
 from hofto_hw.runtime.startup import WRITER_MODULE

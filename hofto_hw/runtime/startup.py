@@ -171,9 +171,10 @@ class StartupSignals:
 
 
 class Helpers:
-    """The run's helper processes, started first thing (hofto_hw.runtime.prestart): the flight
+    """The run's helper processes, started early (hofto_hw.runtime.prestart): the flight
     recorder's writer (unless ``--no-log``) and the control plane (with ``--socket`` or under
-    systemd, NOTIFY_SOCKET). They import while this process imports and reads the config;
+    systemd, NOTIFY_SOCKET). They set up while this process reads the config and loads the
+    kernels;
     hofto_hw.commands.run's ``_start_recorder`` and ``_start_control_plane`` send them their
     arguments, and :meth:`await_ready` waits for them once the kernels are loaded, before the
     bus opens. A further helper (e.g. one started with the control plane) is one more
@@ -187,22 +188,21 @@ class Helpers:
         self.recorder: Any = None  # the FlightRecorder sending the writer its arguments
         self.plane: Any = None  # the ControlPlaneProcess sending the control plane its own
 
-    @classmethod
-    def start(cls, log: bool, control: bool) -> Helpers:
-        """The helpers this run needs (``log``: the writer, ``control``: the control plane),
-        started; their arguments come later."""
+    def start(self, log: bool, control: bool) -> None:
+        """Start the helpers this run needs (``log``: the writer, ``control``: the control
+        plane); their arguments come later. Forked from this process (hofto_hw.runtime.
+        prestart): called once the loop's modules are imported, before the progress thread
+        and the real-time set-up, so the children get the imports without importing."""
         from hofto_hw.runtime.prestart import Prestarted
 
-        helpers = cls()
         try:
             if log:
-                helpers.writer = Prestarted(WRITER_MODULE)
+                self.writer = Prestarted(WRITER_MODULE, fork=True)
             if control:
-                helpers.control = Prestarted(CONTROL_MODULE, fds=True)
+                self.control = Prestarted(CONTROL_MODULE, fds=True, fork=True)
         except BaseException:
-            helpers.abandon()
+            self.abandon()
             raise
-        return helpers
 
     def await_ready(self, progress: Callable[[str], None]) -> None:
         """Wait until the writer has opened its file and the control plane is up (before the
