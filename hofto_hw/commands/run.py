@@ -137,20 +137,23 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, signals: Any, helpers: Any) -> int:
-    # The tick's modules first (the control plane imports them all: seconds on a loaded
-    # machine), before the progress clock starts, as when they were imported with this
-    # module: a quick refusal (a bad config, an SDO abort) stays one line. SIGTERM during
-    # them is already a clean stop (run()). Then the helper processes, forked with these
-    # imports (none of their own to do), before the progress thread and the real-time set-up.
+    # Every module the start-up uses first (the control plane imports the tick: seconds on a
+    # loaded machine), before the progress clock starts: a quick refusal (a bad option or
+    # config, an SDO abort) stays one line. SIGTERM during them is already a clean stop
+    # (run()). Then the helper processes, forked with these imports (none of their own to
+    # do), before the progress thread and the real-time set-up (runtime.prestart).
     import hofto_hw.control_plane.process  # noqa: F401
-
-    with signals.deferred():  # a helper started is one we know (and end)
-        helpers.start(
-            log=not args.no_log,
-            control=args.socket is not None or bool(os.environ.get("NOTIFY_SOCKET")),
-        )
+    from hofto_hw.config import load_config
+    from hofto_hw.config.locate import find_config
+    from hofto_hw.control.joint_motion import MOVE
+    from hofto_hw.errors import ConfigError
     from hofto_hw.outputs import check_output, write_atomic
+    from hofto_hw.runtime import acceleration, realtime
+    from hofto_hw.runtime.compose import build
+    from hofto_hw.runtime.drag_script import run_loop
+    from hofto_hw.runtime.positions import state_path
     from hofto_hw.runtime.startup import StartupProgress
+    from hofto_hw.runtime.summary import build_summary, format_summary
 
     _check_duration(args.duration)
     if args.summary_json is not None:
@@ -160,22 +163,16 @@ def _run(args: argparse.Namespace, signals: Any, helpers: Any) -> int:
         from hofto_hw.control_plane.process import check_socket_path
 
         args.socket = check_socket_path(args.socket)
-    progress = StartupProgress()  # from here: the imports take seconds on a loaded machine
-    progress.phase("importing numpy, pinocchio, numba")
+    with signals.deferred():  # a helper started is one we know (and end)
+        helpers.start(
+            log=not args.no_log,
+            control=args.socket is not None or bool(os.environ.get("NOTIFY_SOCKET")),
+        )
+    progress = StartupProgress()  # from here: seconds on a loaded machine
     recorder = None
     control = None
     system = None
     try:
-        from hofto_hw.config import load_config
-        from hofto_hw.config.locate import find_config
-        from hofto_hw.control.joint_motion import MOVE
-        from hofto_hw.errors import ConfigError
-        from hofto_hw.runtime import acceleration, realtime
-        from hofto_hw.runtime.compose import build
-        from hofto_hw.runtime.drag_script import run_loop
-        from hofto_hw.runtime.positions import state_path
-        from hofto_hw.runtime.summary import build_summary, format_summary
-
         progress.phase("reading the config")
         args.config = find_config(args.config)
         cfg = load_config(args.config)

@@ -140,10 +140,10 @@ def test_sigterm_during_start_up_is_a_clean_stop(
 
 
 def test_sigterm_before_the_helpers_got_their_arguments(tmp_path: Path) -> None:
-    """The helper processes started first thing and still import (or wait for arguments)
-    while the loop's process reads the config: they are ended, and no log is begun."""
+    """The helper processes are forked before the config is read and wait for their
+    arguments meanwhile: a stop then ends them, and no log is begun."""
     code, err, _ = _run_with_signal_at(
-        tmp_path, "hofto_hw.commands.run", "_check_duration", "before"
+        tmp_path, "hofto_hw.commands.run", "_check_interface", "before"
     )
     assert code == 0, err[-3000:]
     assert "SIGTERM during start-up: stopped" in err and "Traceback" not in err, err[-3000:]
