@@ -74,7 +74,7 @@ class Prestarted:
             self._ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
             if fork:
-                self.proc: Any = _Forked(module, theirs)
+                self.proc: Any = _Forked(module, theirs, self._ours)
                 self._stdin = self.proc.stdin
             else:
                 argv = [sys.executable, "-m", "hofto_hw.runtime.prestart", module]
@@ -160,7 +160,9 @@ class _Forked:
     copied), before any real-time set-up: the child gets the imports for free; the
     parent's later mlockall breaks the copy-on-write sharing at once, not in the loop."""
 
-    def __init__(self, module: str, theirs: socket.socket | None) -> None:
+    def __init__(
+        self, module: str, theirs: socket.socket | None, ours: socket.socket | None
+    ) -> None:
         import gc
         import multiprocessing
 
@@ -173,7 +175,9 @@ class _Forked:
         r, w = os.pipe()
         self.stdin = os.fdopen(w, "wb")
         channel = None if theirs is None else theirs.fileno()
-        close = sorted(_PARENT_ENDS | {w})  # other helpers' ends: their EOF is ours to give
+        # our ends (this child's and the other helpers'): a child holding one would wait for
+        # ever after its parent died, its EOF never coming
+        close = sorted(_PARENT_ENDS | {w} | (set() if ours is None else {ours.fileno()}))
         self._p = multiprocessing.get_context("fork").Process(
             target=_forked_main,
             args=(module, r, channel, close),
