@@ -6,13 +6,13 @@ configs/er3a_service.yaml with the simulated bus, waits for READY, stops it with
 0 expected), and repeats: the first start compiles every kernel into the empty cache (cold),
 the later ones load it (warm). Each start's phases come from its progress lines
 (HOFTO_HW_PROGRESS_AFTER=0: each phase's line is printed as it begins; timed by arrival):
-the interpreter, the CLI and imports (the socket check imports the control plane and with it
-the tick, before the first line), the rest of the imports, config, native library, flight
-recorder (its writer process up), control plane (its process up), kernels (numba's cache),
-bus, safety and tick, enabling, then the first tick and READY. ``--imports`` adds ``python -X
-importtime`` of the run command's imports, summed by top-level package (self time). Prints
-medians of the warm starts, the 1-minute load average before and after; ``--json`` prints
-everything as JSON.
+the interpreter, the CLI, every import and the forking of the helper processes (before the
+first line), config, native library, flight recorder and control plane (their shared memory
+and arguments sent), kernels (numba's cache), awaiting the writer's first file and the control
+plane's start, bus, safety and tick, enabling, then the first tick and READY. ``--imports``
+adds ``python -X importtime`` of the run command's imports, summed by top-level package (self
+time). Prints medians of the warm starts, the 1-minute load average before and after;
+``--json`` prints everything as JSON.
 
     python tools/bench_startup.py                 # 1 cold + 5 warm starts
     python tools/bench_startup.py --warm 3 --no-cold --imports --json
@@ -52,6 +52,8 @@ SHORT = {
     "loading the safety checks": "safety and tick",
     "collecting garbage": "gc",
     "enabling the drives": "enable",
+    "waiting for the flight recorder": "awaiting the writer",
+    "waiting for the control plane": "awaiting the control plane",
 }
 
 
@@ -145,8 +147,8 @@ def start_once(folder: Path, config: Path, cache: Path, n: int, timeout: float) 
             started = at
     if started is None or not phases:
         raise SystemExit("bench_startup: no progress lines (HOFTO_HW_PROGRESS_AFTER ignored?)")
-    # before the first line: the interpreter, the CLI and, with --socket, the socket check's
-    # import of the control plane (which imports the tick: most of the imports)
+    # before the first line: the interpreter, the CLI, every import of the start-up and the
+    # forking of the helper processes (hofto_hw.commands.run)
     out: dict[str, float] = {"interpreter, CLI, imports": round(phases[0][1], 3)}
     ends = [t for _, t in phases[1:]] + [started]
     for (name, t), end in zip(phases, ends, strict=True):

@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 from hofto_hw.commands.args import output_file
-from hofto_hw.errors import UserError
 
 DEFAULT_CONFIG = "er3a"  # the README's main job: the simulated arm's scripted scenario
 
@@ -119,11 +118,12 @@ def _check_interface(cfg: object, interface: str | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hofto_hw.runtime.startup import StartupInterrupted, StartupSignals
+    from hofto_hw.runtime.startup import Helpers, StartupInterrupted, StartupSignals
 
     signals = StartupSignals()  # SIGTERM/SIGINT before the loop: a clean stop, not a kill
+    helpers = Helpers()  # the writer and control plane, started in _run
     try:
-        return _run(args, signals)
+        return _run(args, signals, helpers)
     except StartupInterrupted as exc:
         print(
             f"hofto-hw run: {exc.name} during start-up: stopped (no drive left enabled, "
@@ -132,17 +132,28 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0 if exc.signum == signal.SIGTERM else 128 + exc.signum
     finally:
+        helpers.abandon()
         signals.restore()
 
 
-def _run(args: argparse.Namespace, signals: Any) -> int:
-    # The tick's modules first (the control plane imports them all: seconds on a loaded
-    # machine), before the progress clock starts, as when they were imported with this
-    # module: a quick refusal (a bad config, an SDO abort) stays one line. SIGTERM during
-    # them is already a clean stop (run()).
+def _run(args: argparse.Namespace, signals: Any, helpers: Any) -> int:
+    # Every module the start-up uses first (the control plane imports the tick: seconds on a
+    # loaded machine), before the progress clock starts: a quick refusal (a bad option or
+    # config, an SDO abort) stays one line. SIGTERM during them is already a clean stop
+    # (run()). Then the helper processes, forked with these imports (none of their own to
+    # do), before the progress thread and the real-time set-up (runtime.prestart).
     import hofto_hw.control_plane.process  # noqa: F401
+    from hofto_hw.config import load_config
+    from hofto_hw.config.locate import find_config
+    from hofto_hw.control.joint_motion import MOVE
+    from hofto_hw.errors import ConfigError
     from hofto_hw.outputs import check_output, write_atomic
+    from hofto_hw.runtime import acceleration, realtime
+    from hofto_hw.runtime.compose import build
+    from hofto_hw.runtime.drag_script import run_loop
+    from hofto_hw.runtime.positions import state_path
     from hofto_hw.runtime.startup import StartupProgress
+    from hofto_hw.runtime.summary import build_summary, format_summary
 
     _check_duration(args.duration)
     if args.summary_json is not None:
@@ -152,22 +163,16 @@ def _run(args: argparse.Namespace, signals: Any) -> int:
         from hofto_hw.control_plane.process import check_socket_path
 
         args.socket = check_socket_path(args.socket)
-    progress = StartupProgress()  # from here: the imports take seconds on a loaded machine
-    progress.phase("importing numpy, pinocchio, numba")
+    with signals.deferred():  # a helper started is one we know (and end)
+        helpers.start(
+            log=not args.no_log,
+            control=args.socket is not None or bool(os.environ.get("NOTIFY_SOCKET")),
+        )
+    progress = StartupProgress()  # from here: seconds on a loaded machine
     recorder = None
     control = None
     system = None
     try:
-        from hofto_hw.config import load_config
-        from hofto_hw.config.locate import find_config
-        from hofto_hw.control.joint_motion import MOVE
-        from hofto_hw.errors import ConfigError
-        from hofto_hw.runtime import acceleration, realtime
-        from hofto_hw.runtime.compose import build
-        from hofto_hw.runtime.drag_script import run_loop
-        from hofto_hw.runtime.positions import state_path
-        from hofto_hw.runtime.summary import build_summary, format_summary
-
         progress.phase("reading the config")
         args.config = find_config(args.config)
         cfg = load_config(args.config)
@@ -200,7 +205,7 @@ def _run(args: argparse.Namespace, signals: Any) -> int:
         if not args.no_log:
             progress.phase("starting the flight recorder")
             with signals.deferred():  # its writer process, closed below once it is ours
-                recorder = _start_recorder(cfg, args)
+                recorder = helpers.recorder = _start_recorder(cfg, args, helpers.writer)
         # Real buses with logs only: the simulated plant starts at its configured pose on every
         # run, and the state file lives beside the logs (--no-log: neither checked nor written).
         positions = None
@@ -209,7 +214,7 @@ def _run(args: argparse.Namespace, signals: Any) -> int:
         if args.socket is not None or os.environ.get("NOTIFY_SOCKET"):
             progress.phase("starting the control plane")
         with signals.deferred():  # its process and socket, closed below once they are ours
-            control = _start_control_plane(cfg, args, recorder)
+            control = helpers.plane = _start_control_plane(cfg, args, recorder, helpers.control)
         system = build(
             cfg,
             clock=clock,
@@ -217,6 +222,7 @@ def _run(args: argparse.Namespace, signals: Any) -> int:
             contact=not args.no_collision,
             positions=positions,
             progress=progress.phase,
+            before_bus=lambda: helpers.await_ready(progress.phase),
         )
         tick = system.tick
 
@@ -348,9 +354,12 @@ def _save_positions(path: Path, last: object) -> None:
         print(f"hofto-hw run: {path}: positions not saved: {exc.strerror}", file=sys.stderr)
 
 
-def _start_control_plane(cfg: object, args: argparse.Namespace, recorder: object):
+def _start_control_plane(
+    cfg: object, args: argparse.Namespace, recorder: object, process: object = None
+):
     """The control plane's process (control socket, planning, sd_notify) when the run serves
-    a socket or runs under systemd; None otherwise."""
+    a socket or runs under systemd, sent its arguments (``process``: started already,
+    runtime.startup.Helpers); None otherwise. Not awaited: ``Helpers.await_ready``."""
     notify = bool(os.environ.get("NOTIFY_SOCKET"))
     if args.socket is None and not notify:
         return None
@@ -379,14 +388,12 @@ def _start_control_plane(cfg: object, args: argparse.Namespace, recorder: object
             log_path=log_path,
             recorder=info,
             notify=notify,
+            process=process,  # type: ignore[arg-type]
         )
     except BaseException:
         if args.socket is not None:
             remove_socket(args.socket)
         raise
-    if not control.wait_ready():
-        control.close(timeout=1.0)
-        raise UserError("the control plane process did not start (see the lines above)")
     return control
 
 
@@ -402,13 +409,15 @@ def _compile_first(cfg: Any) -> None:
     build(sim, clock="sim", contact=False).close()
 
 
-def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
-    """The MCAP flight recorder (its writer process started) for this run's log file."""
+def _start_recorder(cfg: object, args: argparse.Namespace, writer: object = None) -> object:
+    """The MCAP flight recorder for this run's log file, its writer process (``writer``:
+    started already, runtime.startup.Helpers) sent its arguments; not awaited
+    (``Helpers.await_ready``)."""
     from hofto_hw.commands.backend import observer_backend
     from hofto_hw.errors import UserError
     from hofto_hw.observers import kernels
     from hofto_hw.recording.attachments import run_attachments, run_metadata
-    from hofto_hw.recording.flight_file import LogSpec
+    from hofto_hw.recording.log_spec import LogSpec
     from hofto_hw.recording.recorder import FlightRecorder
     from hofto_hw.runtime import acceleration
     from hofto_hw.runtime.compose import loop_observer_names
@@ -434,7 +443,7 @@ def _start_recorder(cfg: object, args: argparse.Namespace) -> object:
         tool_frame=cfg.robot.tool_frame,  # type: ignore[attr-defined]
         live_view=_live_spec(cfg.run.live_view),  # type: ignore[attr-defined]
     )
-    recorder = FlightRecorder(spec).start()
+    recorder = FlightRecorder(spec, writer=writer).start(wait=False)  # type: ignore[arg-type]
     for name, size, pid in recorder.removed_stale:
         print(
             f"hofto-hw run: removed stale shared memory /dev/shm/{name} ({size / 1e6:.1f} MB, "

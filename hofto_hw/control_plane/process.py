@@ -6,8 +6,9 @@ not exist or is not writable, under /proc or /sys, or taken by anything but a st
 is one line naming ``--socket``. :func:`listen` binds it (mode from ``service.socket_mode``,
 never world-accessible between bind and chmod).
 
-:class:`ControlPlaneProcess` starts ``python -m hofto_hw.control_plane.process`` with the
-listening socket's descriptor and the pickled arguments on stdin (as the flight recorder's
+:class:`ControlPlaneProcess` hands the control plane's process (started by
+:class:`~hofto_hw.runtime.prestart.Prestarted`, importing while the loop starts up, or by
+itself) the listening socket's descriptor and the pickled arguments (as the flight recorder's
 writer), at normal priority. It serves until the loop sets LOOP_DONE or its parent dies; a
 SIGTERM to the whole service only starts a grace period (the loop still stops the arm and
 says so), SIGINT is the loop's. :class:`InProcessControl` runs the same server in a thread
@@ -18,12 +19,10 @@ from __future__ import annotations
 
 import gc
 import os
-import pickle
 import signal
 import socket
 import stat
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -33,6 +32,8 @@ from drivers.sim.control_socket import check_control_path, claim_control_path
 from hofto_hw.control_plane.channel import LOOP_DONE, Channel
 from hofto_hw.control_plane.port import LoopPort
 from hofto_hw.errors import UserError
+from hofto_hw.runtime.prestart import Prestarted
+from hofto_hw.runtime.startup import CONTROL_MODULE
 
 AF_UNIX_PATH_MAX = 107  # bytes of a socket path (sun_path is 108 with the NUL)
 TERM_GRACE = 10.0
@@ -103,6 +104,7 @@ class ControlPlaneProcess:
         log_path: str | None = None,
         recorder: dict[str, Any] | None = None,
         notify: bool = False,
+        process: Prestarted | None = None,
     ) -> None:
         self.system: Any = None
         self.port: LoopPort | None = None
@@ -115,21 +117,20 @@ class ControlPlaneProcess:
             cfg,
             str(config_path),
             list(observers),
-            None if listener is None else listener.fileno(),
+            listener is not None,
             log_path,
             recorder,
             notify,
         )
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "hofto_hw.control_plane.process"],
-            stdin=subprocess.PIPE,
-            pass_fds=fds,
-        )
-        assert self.proc.stdin is not None
-        self.proc.stdin.write(pickle.dumps(args))
-        self.proc.stdin.close()
-        if listener is not None:
-            listener.close()  # the child serves it
+        try:
+            self.proc = process if process is not None else Prestarted(CONTROL_MODULE, fds=True)
+            self.proc.send(args, fds)
+        except BaseException:
+            self.chan.close()
+            raise
+        finally:
+            if listener is not None:
+                listener.close()  # the child serves it
 
     def attach(self, system: Any, watch_log: bool = False) -> None:
         """The loop polls the channel after every tick from now on (``watch_log``: the
@@ -238,15 +239,26 @@ class _NotifyView:
         self.tick = _Tick()
 
 
-def main() -> int:
-    """The control-plane process (see the module docstring)."""
+def preload() -> None:
+    """What the process imports before its arguments arrive (it starts while the loop's
+    process imports): the server and the model's composition."""
+    from importlib import import_module
+
+    for name in (
+        "hofto_hw.control_plane.server",
+        "hofto_hw.runtime.compose",
+        "hofto_hw.runtime.service",
+    ):
+        import_module(name)
+
+
+def child_main(args: tuple, fds: list[int], term: list[float]) -> int:
+    """The control-plane process (see the module docstring), once it has its arguments;
+    ``fds``: the listening socket when it serves one. ``term[0]``: the monotonic time of a
+    SIGTERM to it (0: none yet), kept by the handler prestart installed."""
     _drop_realtime()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    term = [0.0]
-    signal.signal(signal.SIGTERM, lambda *_: term.__setitem__(0, time.monotonic()))
-    args = pickle.load(sys.stdin.buffer)
-    sys.stdin.close()
-    (name, n, k, cfg, config_path, observers, fd, log_path, recorder, notify) = args
+    (name, n, k, cfg, config_path, observers, serves, log_path, recorder, notify) = args
     from hofto_hw.control_plane.channel import CP_PID
     from hofto_hw.control_plane.server import ControlPlane
     from hofto_hw.runtime.compose import build_model
@@ -254,7 +266,8 @@ def main() -> int:
     chan = Channel(n, k, name=name)
     model = build_model(cfg)
     listener = None
-    if fd is not None:
+    if serves:
+        (fd,) = fds
         listener = socket.socket(fileno=fd)
     server = ControlPlane(
         listener, chan, cfg, model, observer_names=observers, config_path=config_path,
@@ -292,7 +305,3 @@ def main() -> int:
         ended = bool(chan.ctl[LOOP_DONE])
         chan.close()
     return 0 if ended else 1
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -30,7 +30,6 @@ from __future__ import annotations
 import errno
 import json
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -41,8 +40,10 @@ from mcap_ros2._dynamic import serialize_dynamic
 from hofto_hw.recording import cdr
 from hofto_hw.recording import schemas as s
 from hofto_hw.recording.frames import ArmFrames, aligned_frame
+from hofto_hw.recording.log_spec import CHUNK_BYTES as CHUNK_BYTES  # re-exported
+from hofto_hw.recording.log_spec import LogSpec
+from hofto_hw.recording.log_spec import rotated_path as rotated_path  # re-exported
 
-CHUNK_BYTES = 64 * 1024
 _AUTO = object()  # FlightFile(frames=...) not given: built from the URDF attachment
 #: tick-record fields copied into /loop/status
 _STATUS_FIELDS = (
@@ -56,40 +57,6 @@ _STATUS_FIELDS = (
     "qdd_cmd",
     "sample_dt",
 )
-
-
-@dataclass
-class LogSpec:
-    """What the writer process needs to know (picklable; sent once at start).
-
-    ``joint_names`` (n,), ``observers`` the tau_ext rows' names in order, ``attachments``
-    (name, media type, bytes) e.g. the config, parameters and thresholds files,
-    ``metadata`` extra strings, ``event_kinds`` event code -> name (the safety fault classes).
-    Rotation starts a new file after ``rotate_bytes`` or ``rotate_seconds`` (0 = never).
-    ``flush_seconds`` bounds what a SIGKILL can lose (a chunk is closed at least that often).
-    ``fail_after_bytes`` is a fault hook for tests: writes raise ENOSPC past that total.
-    ``tool_frame`` (URDF frame of the tool): the wrench's frame is its aligned frame (tool
-    origin, root axes) unless ``wrench_frame`` names one; ``tf_rate_hz`` bounds ``/tf``.
-    ``live_view``: serve the topics live over Foxglove's WebSocket protocol (None: off).
-    """
-
-    path: Path
-    joint_names: list[str]
-    observers: list[str]
-    attachments: list[tuple[str, str, bytes]] = field(default_factory=list)
-    metadata: dict[str, str] = field(default_factory=dict)
-    event_kinds: dict[int, str] = field(default_factory=dict)
-    wrench_frame: str = ""
-    tool_frame: str = ""
-    tf_rate_hz: float = 50.0
-    live_view: Any = None  # hofto_hw.recording.live.LiveSpec
-    compression: str = "zstd"
-    chunk_bytes: int = CHUNK_BYTES
-    rotate_bytes: int = 0
-    rotate_seconds: float = 0.0
-    flush_seconds: float = 0.25
-    retry_seconds: float = 2.0
-    fail_after_bytes: int | None = None
 
 
 class CountingFile:
@@ -124,11 +91,6 @@ class CountingFile:
 
     def close(self) -> None:
         self._f.close()
-
-
-def rotated_path(path: Path, index: int) -> Path:
-    """File ``index`` of a rotated log: the path itself, then ``<stem>.1<suffix>``, ..."""
-    return path if index == 0 else path.with_name(f"{path.stem}.{index}{path.suffix}")
 
 
 class FlightFile:

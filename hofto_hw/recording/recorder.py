@@ -15,9 +15,7 @@ the loop — whether that is a fault is the caller's policy.
 from __future__ import annotations
 
 import os
-import pickle
 import subprocess
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,8 +24,10 @@ import numpy as np
 
 from hofto_hw.errors import UserError
 from hofto_hw.recording import shared as sh
-from hofto_hw.recording.flight_file import LogSpec, rotated_path
+from hofto_hw.recording.log_spec import LogSpec, rotated_path
 from hofto_hw.recording.record import tick_dtype
+from hofto_hw.runtime.prestart import Prestarted
+from hofto_hw.runtime.startup import WRITER_MODULE
 
 
 @dataclass
@@ -64,7 +64,10 @@ class FlightRecorder:
     ``n_joints`` comes from the spec's joint names, the tick layout from ``tick_dtype(n,
     len(spec.observers))``. ``cpus``: CPUs for the writer; by default the CPUs outside the
     caller's affinity if it is pinned (a writer sharing the loop's CPU costs wake-up latency:
-    p99 34 µs pinned apart vs up to 300 µs sharing, tools/bench_recorder.py).
+    p99 34 µs pinned apart vs up to 300 µs sharing, tools/bench_recorder.py). ``writer``: its
+    process started already (a :class:`~hofto_hw.runtime.prestart.Prestarted` of
+    ``runtime.startup.WRITER_MODULE``, importing while the caller starts up); :meth:`start`
+    sends it its arguments.
     """
 
     def __init__(
@@ -73,6 +76,7 @@ class FlightRecorder:
         caps: sh.Capacities | None = None,
         *,
         cpus: list[int] | None = None,
+        writer: Prestarted | None = None,
     ) -> None:
         self.spec = spec
         self.caps = caps or sh.Capacities()
@@ -81,17 +85,18 @@ class FlightRecorder:
         self.tick_dtype = tick_dtype(self.n_joints, self.n_observers)
         self._cpus = cpus
         self._block: sh.SharedBlock | None = None
-        self._proc: subprocess.Popen[bytes] | None = None
+        self._proc: Prestarted | None = writer
         self._final: RecorderHealth | None = None
         #: (name, bytes, owner pid) of the stale segments :meth:`start` removed
         self.removed_stale: list[tuple[str, int, int]] = []
 
     # ---------------------------------------------------------------- lifecycle
-    def start(self, timeout: float = 60.0) -> FlightRecorder:
+    def start(self, timeout: float = 60.0, *, wait: bool = True) -> FlightRecorder:
         """Remove stale segments of dead runs (:attr:`removed_stale`), create the rings
-        (UserError when /dev/shm has not the room), start the writer process and wait until
-        it has opened the first file (or failed, or died), at most ``timeout`` [s]. Returns
-        self; check :meth:`health` for failures."""
+        (UserError when /dev/shm has not the room), start the writer process (or hand the
+        one given as ``writer`` its arguments) and, with ``wait``, wait until it has opened
+        the first file (or failed, or died), at most ``timeout`` [s] (:meth:`wait_started`).
+        Returns self; check :meth:`health` for failures."""
         if self._block is not None:
             raise RuntimeError("flight recorder already started")
         if Path(self.spec.path).exists():
@@ -111,42 +116,42 @@ class FlightRecorder:
         # __main__ was started, inherits no threads or locks, and owns no resource tracker
         # of ours. It notices our death by its parent pid changing.
         try:
-            self._proc = subprocess.Popen(
-                [sys.executable, "-m", "hofto_hw.recording.writer_process", b.name],
-                stdin=subprocess.PIPE,
-                close_fds=True,
-                env=_child_env(),
-            )
+            if self._proc is None:
+                self._proc = Prestarted(WRITER_MODULE)
         except BaseException:  # no writer: the segment must not outlive us in /dev/shm
             b.close()
             self._block = None
             raise
-        assert self._proc.stdin is not None
         cpus = self._cpus if self._cpus is not None else _other_cpus()
-        args = (self.n_joints, self.n_observers, self.caps, self.spec, cpus)
-        try:
-            self._proc.stdin.write(pickle.dumps(args))
-            self._proc.stdin.close()
-        except BrokenPipeError:  # died at once: reported by health()
-            pass
-        deadline = time.monotonic() + timeout
-        while (
-            int(b.control[sh.STATE]) == sh.STARTING
-            and self._proc.poll() is None
-            and time.monotonic() < deadline
-        ):
-            time.sleep(0.01)
+        self._proc.send((b.name, self.n_joints, self.n_observers, self.caps, self.spec, cpus))
+        if wait:
+            self.wait_started(timeout)
         return self
+
+    def wait_started(self, timeout: float = 60.0) -> bool:
+        """Wait until the writer has opened the first file (or failed, or died), at most
+        ``timeout`` [s]; whether it left the starting state."""
+        b, proc = self._block, self._proc
+        if b is None or proc is None:
+            raise RuntimeError("flight recorder not started")
+        deadline = time.monotonic() + timeout
+        while int(b.control[sh.STATE]) == sh.STARTING and proc.poll() is None:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.01)
+        return int(b.control[sh.STATE]) != sh.STARTING
 
     def close(self, timeout: float = 10.0) -> RecorderHealth:
         """Ask the writer to drain and finish the file, wait up to ``timeout`` [s] (then
-        kill it), free the shared memory. Returns the final health. Idempotent."""
+        kill it; a writer still starting is given its start first, :meth:`wait_started`),
+        free the shared memory. Returns the final health. Idempotent."""
         if self._final is not None:
             return self._final
         if self._block is None:
             raise RuntimeError("flight recorder not started")
         self._block.control[sh.STOP] = 1
         assert self._proc is not None
+        self.wait_started()  # a writer still importing opens its file, then sees STOP
         try:
             self._proc.wait(timeout)
         except subprocess.TimeoutExpired:
@@ -229,17 +234,6 @@ def _other_cpus() -> list[int] | None:
     mine = os.sched_getaffinity(0)
     rest = set(range(os.cpu_count() or 1)) - mine
     return sorted(rest) if rest else None
-
-
-def _child_env() -> dict[str, str]:
-    """Our environment with this hofto_hw's folder first on PYTHONPATH, so the writer runs
-    the same code even when the loop found it through sys.path rather than an install."""
-    import hofto_hw
-
-    root = str(Path(hofto_hw.__file__).resolve().parent.parent)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
-    return env
 
 
 def _discard(rec: np.ndarray) -> bool:

@@ -1,9 +1,10 @@
 """The writer process: drains the shared-memory rings into MCAP files.
 
-It runs at normal priority (it drops the SCHED_FIFO policy it may inherit from the loop) and
-never blocks the loop: the loop only touches the rings. It finishes the file when the owner
-sets STOP or dies; a SIGTERM sent to the whole service (systemd's control group) only starts
-a grace period, so the owner can still stop the arm while its records are written.
+It runs at normal priority (it drops the SCHED_FIFO policy it may inherit from the loop), nice
+5 once its first file is open, and never blocks the loop: the loop only touches the rings. It
+finishes the file when the owner sets STOP or dies; a SIGTERM sent to the whole service
+(systemd's control group) only starts a grace period, so the owner can still stop the arm while
+its records are written.
 
 A write error (disk full) abandons the current file, counts the error, discards the records
 drained meanwhile (counted in LOST, so the rings never fill because of it) and retries a new
@@ -34,6 +35,13 @@ def _drop_realtime() -> None:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except (AttributeError, OSError):
         pass
+
+
+def _step_back() -> None:
+    """Nice 5 once the first file is open: behind the loop's other helpers while it drains,
+    not while it starts, which the run waits for (its set-up, the /safety/thresholds track's
+    imports and model, ~1 s of CPU, made its start 18.7 s at nice 5 on the shared 2-core
+    machine at load 10)."""
     try:
         os.nice(5)
     except OSError:
@@ -245,8 +253,10 @@ def writer_main(
     caps: sh.Capacities,
     spec: LogSpec,
     cpus: list[int] | None = None,
+    term: list[float] | None = None,
 ) -> None:
-    """Entry point of the writer process (multiprocessing target)."""
+    """The writer process's work, once it has its arguments. ``term[0]``: the monotonic time
+    of a SIGTERM to this process (0: none yet), kept by its handler."""
     _drop_realtime()
     if cpus:
         try:
@@ -255,8 +265,9 @@ def writer_main(
             pass
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the owner decides when to stop
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # RLIMIT_FSIZE: get EFBIG, not death
-    term = [0.0]
-    signal.signal(signal.SIGTERM, lambda *_: term.__setitem__(0, time.monotonic()))
+    if term is None:
+        term = [0.0]
+        signal.signal(signal.SIGTERM, lambda *_: term.__setitem__(0, time.monotonic()))
     parent = os.getppid()
     block = sh.SharedBlock(tick_dtype(n_joints, n_observers), caps, name=shm_name)
     ctl = block.control
@@ -282,12 +293,16 @@ def writer_main(
 
 def _run(w: _Writer, ctl: np.ndarray, parent: int, term: list[float]) -> None:
     """Drain until stopped (STOP word, owner gone, or SIGTERM grace over), then finish."""
+    stepped_back = False
     while True:
         now = time.monotonic()
         stop = bool(ctl[sh.STOP]) or os.getppid() != parent
         stop = stop or (term[0] > 0.0 and now - term[0] > TERM_GRACE)
         n = w.step(now)
         ctl[sh.HEARTBEAT] += 1
+        if not stepped_back:
+            _step_back()
+            stepped_back = True
         if stop:
             while w.step(time.monotonic()):  # whatever the owner pushed before stopping
                 pass
@@ -297,17 +312,23 @@ def _run(w: _Writer, ctl: np.ndarray, parent: int, term: list[float]) -> None:
     w.finish()
 
 
-def main() -> int:
-    """``python -m hofto_hw.recording.writer_process SHM_NAME`` with the pickled arguments
-    (n_joints, n_observers, caps, spec, cpus) on stdin: how FlightRecorder starts it."""
-    import pickle
-    import sys
+def preload() -> None:
+    """What the writer imports beyond this module, before its arguments arrive (it starts
+    while the loop's process imports): the /safety/thresholds track's modules."""
+    from importlib import import_module
 
-    args = pickle.load(sys.stdin.buffer)
-    sys.stdin.close()
-    writer_main(sys.argv[1], *args)
+    for name in (
+        "hofto_hw.recording.attachments",
+        "hofto_hw.replay.levels_track",
+        "hofto_hw.replay.reproduce",
+    ):
+        import_module(name)
+
+
+def child_main(args: tuple, fds: list[int], term: list[float]) -> int:
+    """Entry point of the writer process (``python -m hofto_hw.runtime.prestart`` with this
+    module, as FlightRecorder starts it): ``args`` = (shm name, n_joints, n_observers, caps,
+    spec, cpus)."""
+    shm_name, *rest = args
+    writer_main(shm_name, *rest, term=term)
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

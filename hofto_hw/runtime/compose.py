@@ -163,6 +163,7 @@ def build(
     contact: bool = True,
     positions: Path | None = None,
     progress: Callable[[str], None] | None = None,
+    before_bus: Callable[[], None] | None = None,
 ) -> System:
     """Build and start everything: drives enabled in CSP, holding; the loop not yet run.
 
@@ -173,7 +174,10 @@ def build(
     cache is cold): an enabled drive on a bus whose process data stops for longer than its
     watchdog (EtherCAT SM watchdog, 100 ms by default) leaves Operation enabled, and the
     loop's first tick would latch a disabled drive. ``progress(text)`` is told each phase as
-    it begins (hofto_hw.runtime.startup)."""
+    it begins (hofto_hw.runtime.startup). ``before_bus()`` runs once the kernels are loaded,
+    before the bus opens: the run awaits its helper processes there (they started before this
+    and loaded meanwhile); a wait between opening a real bus and enabling would hold back the
+    process data as a compile would."""
     say = progress if progress is not None else _silent
     rate = float(cfg.loop.rate_hz)
     model = build_model(cfg)
@@ -186,6 +190,8 @@ def build(
     backend = observer_backend()  # compiled kernels when numba is there, warmed here
     observers = [make_observer(table[name], model, backend=backend) for name in names]
     sink = sink if sink is not None else MemorySink(tick_dtype(model.n, len(names)))
+    if before_bus is not None:
+        before_bus()
 
     say("opening the bus")
     bus, group = build_bus(cfg, clock)

@@ -6,6 +6,8 @@ phase as it begins; a helper thread prints the phase on stderr once the start-up
 ``after`` seconds (HOFTO_HW_PROGRESS_AFTER, 1.5 by default), then every phase that begins later
 and, at :meth:`done`, the total. The thread ends before the loop's first tick.
 :class:`StartupSignals` makes SIGTERM and SIGINT in any of these phases a clean stop.
+:class:`Helpers` starts the flight recorder's writer and the control plane first, so that they
+import while the loop's process does, and awaits them once the kernels are loaded.
 """
 
 from __future__ import annotations
@@ -18,7 +20,11 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import TextIO
+from typing import Any, TextIO
+
+#: the modules of the helper processes (their ``child_main``; hofto_hw.runtime.prestart)
+WRITER_MODULE = "hofto_hw.recording.writer_process"
+CONTROL_MODULE = "hofto_hw.control_plane.process"
 
 #: HOFTO_HW_PROGRESS_AFTER: seconds before the first progress line (0: every phase, as
 #: tools/bench_startup.py reads them); default 1.5
@@ -162,3 +168,60 @@ class StartupSignals:
         """The handlers found at the start."""
         for s, h in self._old.items():
             signal.signal(s, h)
+
+
+class Helpers:
+    """The run's helper processes, started early (hofto_hw.runtime.prestart): the flight
+    recorder's writer (unless ``--no-log``) and the control plane (with ``--socket`` or under
+    systemd, NOTIFY_SOCKET). They set up while this process reads the config and loads the
+    kernels;
+    hofto_hw.commands.run's ``_start_recorder`` and ``_start_control_plane`` send them their
+    arguments, and :meth:`await_ready` waits for them once the kernels are loaded, before the
+    bus opens. A further helper (e.g. one started with the control plane) is one more
+    attribute here, started in
+    :meth:`start`, handed its arguments where its owner is built, awaited in
+    :meth:`await_ready` and ended in :meth:`abandon`."""
+
+    def __init__(self) -> None:
+        self.writer: Any = None  # Prestarted of the flight recorder's writer
+        self.control: Any = None  # Prestarted of the control plane
+        self.recorder: Any = None  # the FlightRecorder sending the writer its arguments
+        self.plane: Any = None  # the ControlPlaneProcess sending the control plane its own
+
+    def start(self, log: bool, control: bool) -> None:
+        """Start the helpers this run needs (``log``: the writer, ``control``: the control
+        plane); their arguments come later. Forked from this process (hofto_hw.runtime.
+        prestart): called once the loop's modules are imported, before the progress thread
+        and the real-time set-up, so the children get the imports without importing."""
+        from hofto_hw.runtime.prestart import Prestarted
+
+        try:
+            if log:
+                self.writer = Prestarted(WRITER_MODULE, fork=True)
+            if control:
+                self.control = Prestarted(CONTROL_MODULE, fds=True, fork=True)
+        except BaseException:
+            self.abandon()
+            raise
+
+    def await_ready(self, progress: Callable[[str], None]) -> None:
+        """Wait until the writer has opened its file and the control plane is up (before the
+        bus opens: the loop pushes records from its first tick, the control plane sends READY,
+        and a wait between opening a real bus and enabling would hold back its process data);
+        UserError (one line) when the control plane did not start (a writer that did not is
+        the recorder's health, reported as before)."""
+        if self.recorder is not None:
+            progress("waiting for the flight recorder")
+            self.recorder.wait_started()
+        if self.plane is not None:
+            progress("waiting for the control plane")
+            if not self.plane.wait_ready():
+                from hofto_hw.errors import UserError
+
+                raise UserError("the control plane process did not start (see the lines above)")
+
+    def abandon(self) -> None:
+        """End the helpers never sent their arguments (a refusal or a stop before)."""
+        for child in (self.writer, self.control):
+            if child is not None:
+                child.abandon()

@@ -196,13 +196,16 @@ def test_safety_profile_switch_refused_while_moving_accepted_at_standstill(tmp_p
 
 
 def _children(pid: int) -> list[tuple[int, str]]:
+    """(pid, kernel name and command line) of ``pid``'s children (a helper forked by the run
+    has its parent's command line and its own name: hofto-hw-writer, hofto-hw-control)."""
     out = []
     for d in Path("/proc").iterdir():
         if not d.name.isdigit():
             continue
         try:
             stat = (d / "stat").read_text()
-            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+            cmd = (d / "comm").read_text().strip() + " "
+            cmd += (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
         except OSError:
             continue
         if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
@@ -215,7 +218,7 @@ def test_the_control_plane_watches_the_flight_recorder(tmp_path: Path) -> None:
     dead writer process still reaches the loop as log_failure."""
     svc = Service(tmp_path, "--hold", "--no-collision")
     try:
-        (writer,) = [p for p, cmd in _children(svc.proc.pid) if "writer_process" in cmd]
+        (writer,) = [p for p, cmd in _children(svc.proc.pid) if "hofto-hw-writer" in cmd]
         with Robot.connect(socket=svc.sock) as robot:
             assert "log_failure" not in robot.state().faults
             os.kill(writer, signal.SIGKILL)

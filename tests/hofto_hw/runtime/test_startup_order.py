@@ -54,3 +54,32 @@ def test_drives_are_enabled_after_the_warm_up_and_the_collection(
         assert not late, f"after the drives were enabled: {late}"
     finally:
         system.close()
+
+
+def test_the_helpers_are_awaited_after_the_kernels_before_the_bus_opens(
+    cfg: SystemConfig, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``before_bus`` (where ``hofto-hw run`` awaits its writer and control plane) runs once
+    the observers' kernels are loaded and before the bus opens: a wait between opening a real
+    bus and enabling would hold back its process data past the drives' watchdog."""
+    seen: list[str] = []
+    build_bus = compose.build_bus
+    make_observer = compose.make_observer
+
+    def watch_bus(*args, **kw):
+        seen.append("bus")
+        return build_bus(*args, **kw)
+
+    def watch_observer(*args, **kw):
+        seen.append("observer")
+        return make_observer(*args, **kw)
+
+    monkeypatch.setattr(compose, "build_bus", watch_bus)
+    monkeypatch.setattr(compose, "make_observer", watch_observer)
+    system = compose.build(cfg, contact=False, before_bus=lambda: seen.append("helpers"))
+    try:
+        assert seen.count("helpers") == 1, seen
+        at = seen.index("helpers")
+        assert "observer" in seen[:at] and seen[at + 1 :] == ["bus"], seen
+    finally:
+        system.close()

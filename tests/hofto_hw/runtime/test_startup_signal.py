@@ -5,7 +5,9 @@ writer gone, its log closed and readable; exit 0 for SIGTERM (128 + 2 for SIGINT
 The phases are hit exactly: the run is ``cli.main`` in a subprocess in which one start-up step
 is wrapped so that it sends the signal to its own process at that step (before or after the
 real step); the one test with an outside sender waits for the start-up's progress line of a
-cold compile (an empty numba cache), not for a time.
+cold compile (an empty numba cache), not for a time. The helper processes (writer, control
+plane) start first and get their arguments later (runtime.startup.Helpers): a stop before
+they got them, while they start, or while the run waits for them leaves none of them behind.
 """
 
 from __future__ import annotations
@@ -30,8 +32,11 @@ SCRIPT = textwrap.dedent(
     from pathlib import Path
 
     module_name, attr, when, signum, argv = json.loads(sys.argv[1])
-    module = importlib.import_module(module_name)
-    real = getattr(module, attr)
+    owner = importlib.import_module(module_name)
+    *path, name = attr.split(".")  # a function, or Class.method
+    for part in path:
+        owner = getattr(owner, part)
+    real = getattr(owner, name)
     seen = {}
 
     def wrapped(*args, **kwargs):
@@ -46,7 +51,7 @@ SCRIPT = textwrap.dedent(
             return out
         return real(*args, **kwargs)
 
-    setattr(module, attr, wrapped)
+    setattr(owner, name, wrapped)
     from hofto_hw.cli import main
 
     code = main(argv)
@@ -116,6 +121,9 @@ def _readable_log(tmp_path: Path) -> None:
         ("hofto_hw.commands.run", "_start_control_plane", "before", "control plane"),
         # the drives were just enabled: they are disabled again and the bus closed
         ("hofto_hw.runtime.compose", "enable_drives", "after", "enabled"),
+        # the helpers were sent their arguments and are still starting, or are awaited
+        ("hofto_hw.runtime.startup", "Helpers.await_ready", "before", "helpers starting"),
+        ("hofto_hw.runtime.startup", "Helpers.await_ready", "after", "helpers up"),
     ],
 )
 def test_sigterm_during_start_up_is_a_clean_stop(
@@ -129,6 +137,17 @@ def test_sigterm_during_start_up_is_a_clean_stop(
     _readable_log(tmp_path)
     if phase == "enabled":
         assert left["enabled"] is False and left["bus_open"] is False, left
+
+
+def test_sigterm_before_the_helpers_got_their_arguments(tmp_path: Path) -> None:
+    """The helper processes are forked before the config is read and wait for their
+    arguments meanwhile: a stop then ends them, and no log is begun."""
+    code, err, _ = _run_with_signal_at(
+        tmp_path, "hofto_hw.commands.run", "_check_interface", "before"
+    )
+    assert code == 0, err[-3000:]
+    assert "SIGTERM during start-up: stopped" in err and "Traceback" not in err, err[-3000:]
+    assert not list((tmp_path / "logs").glob("*.mcap"))  # no log begun (none to close)
 
 
 def test_sigint_during_start_up_exits_130(tmp_path: Path) -> None:
