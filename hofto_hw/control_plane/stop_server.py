@@ -228,6 +228,8 @@ class StopServer:
             rep["id"] = c.rid
         try:
             c.sock.send(pr.dumps(rep))  # < 300 bytes into an empty socket buffer
+            for _ in range(4):  # unread bytes at close would reset the connection before
+                c.sock.recv(65536)  # the client reads its answer (a long line's rest)
         except OSError:
             pass
         self._close(c)

@@ -171,7 +171,7 @@ def test_a_malformed_line_on_the_stop_socket_is_refused_in_one_line_and_stops_no
         assert needle in rep["message"] and "\n" not in rep["message"] and rest == b""
         seen = robot.state().tick
         wait_for(lambda: robot.state().tick > seen + 50, "50 more ticks")
-        assert _faults(robot) == [] and not robot.status()["stop_requested"]
+        assert _faults(robot) == [] and not robot._call({"cmd": "state"})["stop_requested"]
 
 
 def test_the_bare_word_stop_stops(service: Service) -> None:
