@@ -59,11 +59,11 @@ from hofto_hw.control.taught_path import TaughtPathRecorder, save_taught_path  #
 from hofto_hw.control_plane import protocol as pr  # noqa: E402
 from hofto_hw.control_plane.protocol import stop_path  # noqa: E402
 from hofto_hw.model.robot import RobotModel  # noqa: E402
-from safety.stop import FAULT_NAMES  # noqa: E402
+from safety.stop import Fault  # noqa: E402
 
 CONFIG = ROOT / "configs" / "er3a.yaml"
 PHASES = ("quiet", "flood", "line_10mb", "trickle", "idle", "replay", "quiet_end")
-STOP_BIT = 1 << FAULT_NAMES.index("stop_request")
+STOP_BIT = 1 << int(Fault.STOP_REQUEST)
 
 
 def _config(tmp: Path) -> Path:
@@ -340,9 +340,11 @@ def _replay_phases(robot: Robot, sock: Path, reader: RingReader, tmp: Path, args
         o0, t0 = robot.status()["overruns"], time.monotonic()
         t = threading.Thread(target=plan, daemon=True)
         t.start()
+        first = t0 + 1.0  # the request taken and the planner running (else refused at once)
         while t.is_alive():
             ticks.take(reader)
-            if name == "replay_planning" and len(stops) < 2 * args.stops:
+            timed = name == "replay_planning" and time.monotonic() > first
+            if timed and len(stops) < 2 * args.stops:
                 via = ("stop", "control")[len(stops) % 2]
                 stops.append(_stop_latency(robot, sock, reader, via))
             time.sleep(0.05 if name == "replay_playing" else 0.25)
