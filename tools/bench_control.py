@@ -243,6 +243,9 @@ def _stops_summary(stops: list[dict], ticks: Ticks) -> dict:
     return {
         "stop_socket_ms": _stats([s["ms"] for s in stops if s["via"] == "stop"]),
         "control_socket_ms": _stats([s["ms"] for s in stops if s["via"] == "control"]),
+        # the stop server's part (line read to the loop's acknowledgement); the rest of a
+        # stop socket's time is the client's connect, send and wake-up (this process's)
+        "stop_server_ms": _stats([s["server_ms"] for s in stops if "server_ms" in s]),
         "slow_stops": [ticks.explain(s) for s in stops if s["ms"] > SLOW_MS],
     }
 
