@@ -155,14 +155,13 @@ def _stop_latency(robot: Robot, sock: Path, reader: RingReader, via: str) -> dic
     """One timed stop through ``via`` ("stop": the stop socket, "control": the control
     socket), then its reset; the loop's tick (newest record) when it was sent and answered."""
     tick0 = reader.latest_tick()
-    t0 = time.perf_counter()
-    if via == "stop":
-        with Connection(stop_path(sock)) as c:
-            r = c.call({"cmd": "stop"})
-    else:
-        with Connection(sock) as c:
-            r = c.call({"cmd": "stop"})
-    dt = (time.perf_counter() - t0) * 1e3
+    mono = time.monotonic_ns
+    t0 = mono()
+    with Connection(stop_path(sock) if via == "stop" else sock) as c:
+        tc = mono()  # connected: the line goes out now
+        r = c.call({"cmd": "stop"})
+        t1 = mono()
+    dt = (t1 - t0) * 1e-6
     tick1 = reader.latest_tick()
     assert r["ok"], r
     while "stop_request" not in robot.state().faults:
@@ -178,6 +177,13 @@ def _stop_latency(robot: Robot, sock: Path, reader: RingReader, via: str) -> dic
     if "server_ms" in r:
         out["server_ms"] = float(r["server_ms"])
         out["ack_tick"] = int(r["tick"])
+        if "read_ns" in r:  # where the time went (one clock, CLOCK_MONOTONIC)
+            out["parts_ms"] = {
+                "connect": round((tc - t0) * 1e-6, 2),
+                "to_server": round((int(r["read_ns"]) - tc) * 1e-6, 2),
+                "server": round((int(r["ack_ns"]) - int(r["read_ns"])) * 1e-6, 2),
+                "back_to_client": round((t1 - int(r["ack_ns"])) * 1e-6, 2),
+            }
     return out
 
 
@@ -236,6 +242,8 @@ class Ticks:
         }
         if "server_ms" in s:
             out["server_ms"] = s["server_ms"]
+        if "parts_ms" in s:
+            out["parts_ms"] = s["parts_ms"]
         return out
 
 
@@ -487,6 +495,8 @@ def main() -> int:
             for s in p["slow_stops"]:
                 who = "the loop was not running (machine)" if s["loop_stalled"] else "the loop ran"
                 srv = f", stop server {s['server_ms']} ms" if "server_ms" in s else ""
+                if "parts_ms" in s:
+                    srv += " (" + ", ".join(f"{k} {v}" for k, v in s["parts_ms"].items()) + ")"
                 print(
                     f"{'':16s} slow stop via {s['via']}: {s['ms']} ms, loop made "
                     f"{s['loop_ticks_meanwhile']} ticks, max lateness {s['loop_max_late_ms']} ms"

@@ -8,7 +8,8 @@ accept, read one line of at most :data:`MAX_STOP_LINE` bytes per connection, wri
 channel's ``STOP_FAST_SEQ`` word (the loop polls it first thing after every tick and sets
 its stop request), wait for the loop's acknowledgement (``STOP_FAST_ACK``) and answer:
 ``{"ok": true, "message": "stop requested", "acknowledged": true, "tick": <the loop's tick
-count when it saw it>, "server_ms": <from the line read to the acknowledgement>}``. No
+count when it saw it>, "server_ms": <from the line read to the acknowledgement>, "read_ns",
+"ack_ns": <CLOCK_MONOTONIC of both>}``. No
 request of the control socket, no planning, no status and no client of the control socket
 can delay it: they live in another process with its own GIL.
 
@@ -147,6 +148,10 @@ class StopServer:
                     "acknowledged": True,
                     "tick": int(self.ctl[ch.TICKS]),
                     "server_ms": round((now - c.read_at) * 1e3, 3),
+                    # CLOCK_MONOTONIC [ns] of the line read and of the acknowledgement seen:
+                    # a client (tools/bench_control.py) tells its own delays from ours
+                    "read_ns": int(c.read_at * 1e9),
+                    "ack_ns": int(now * 1e9),
                 }
                 self._answer(c, rep)
             for c in [c for c in self.waiting if now - c.read_at > ACK_TIMEOUT]:

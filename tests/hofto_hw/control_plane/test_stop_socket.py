@@ -135,6 +135,7 @@ def test_a_stop_on_the_stop_socket_is_acknowledged_and_latched_while_others_floo
                 assert rep["ok"] is True and rep["message"] == "stop requested", rep
                 assert rep["acknowledged"] is True and rep["id"] == 7 + i and rest == b""
                 assert rep["tick"] >= before  # the loop's tick count when it saw the stop
+                assert rep["ack_ns"] >= rep["read_ns"] > 0 and rep["server_ms"] >= 0.0
                 wait_for(lambda: _faults(robot) == ["stop_request"], "the stop latched")
                 _reset(robot)  # through the flooded control socket
             assert robot.stop() == "stop requested" and robot.stop_note == ""  # the client's
