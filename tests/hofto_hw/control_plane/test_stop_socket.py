@@ -221,7 +221,9 @@ def test_cli_stop_uses_the_stop_socket_falls_back_without_it_and_both_sockets_go
 
 
 def _segments() -> set[str]:
-    return {p.name for p in Path("/dev/shm").glob("hofto-hw-*")}
+    """This process's shared-memory segments (the run below is ``main`` in it; other
+    processes on the machine make and remove their own meanwhile)."""
+    return {p.name for p in Path("/dev/shm").glob(f"hofto-hw-{os.getpid()}-*")}
 
 
 def test_a_stop_socket_path_breaking_the_rules_is_one_line_and_leaves_nothing(
