@@ -254,6 +254,11 @@ def _stops_summary(stops: list[dict], ticks: Ticks) -> dict:
         # the stop server's part (line read to the loop's acknowledgement); the rest of a
         # stop socket's time is the client's connect, send and wake-up (this process's)
         "stop_server_ms": _stats([s["server_ms"] for s in stops if "server_ms" in s]),
+        # where a stop socket's time goes, each part's median and max [ms]
+        "stop_parts_ms": {
+            k: _stats([s["parts_ms"][k] for s in stops if "parts_ms" in s])
+            for k in ("connect", "to_server", "server", "back_to_client")
+        },
         "slow_stops": [ticks.explain(s) for s in stops if s["ms"] > SLOW_MS],
     }
 
