@@ -120,3 +120,21 @@ class Connection:
                     f"{self.path}: the service closed the connection without an answer"
                 )
             buf += data
+
+
+def send_stop(control: Path | str, timeout: float = 10.0) -> tuple[dict[str, Any], str]:
+    """Stop the arm of the service whose control socket is ``control``: through the stop
+    socket beside it (``<control>.stop``, served by a process that does nothing else, so no
+    request of any client queues ahead of it). Returns (the checked reply, a note): the note
+    is "" when the stop socket answered, else one line saying that the stop went through the
+    control socket's ``stop`` (no stop socket there, e.g. an older service, or it did not
+    answer: an operator's stop errs on the side of being sent twice)."""
+    sp = pr.stop_path(control)
+    try:
+        with Connection(sp, timeout) as c:
+            return c.call({"cmd": "stop"}), ""
+    except ServiceError as exc:
+        why = "no stop socket" if not os.path.lexists(sp) else f"the stop socket failed ({exc})"
+    with Connection(control, timeout) as c:
+        rep = c.call({"cmd": "stop"})
+    return rep, f"{sp}: {why}: the stop went through the control socket (an older service?)"

@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from hofto_hw.client.connection import Connection, Refused, ServiceError
+from hofto_hw.client.connection import Connection, Refused, ServiceError, send_stop
 from hofto_hw.client.stream import RingReader, TickRecord
 from hofto_hw.runtime.control_client import DEFAULT_SOCKET
 
@@ -225,6 +226,8 @@ class Robot:
         self.lease_s = float(self.info["lease_s"])
         self._watchers: list[threading.Thread] = []
         self._closed = threading.Event()
+        #: "" when the last stop() went through the stop socket, else why it did not
+        self.stop_note = ""
 
     @classmethod
     def connect(cls, socket: Path | str = DEFAULT_SOCKET, timeout: float = 10.0) -> Robot:
@@ -263,10 +266,14 @@ class Robot:
         return _state_of(self._call({"cmd": "state"}), self.n)
 
     def stop(self) -> str:
-        """Stop the arm (the configured category of stop_request); answered first, on a
-        connection of its own so that nothing queued on this one delays it."""
-        with Connection(self.socket, self.timeout) as c:
-            r = c.call({"cmd": "stop"})
+        """Stop the arm (the configured category of stop_request) through the stop socket
+        beside the control socket (``<socket>.stop``: a process that serves stops only,
+        answering once the loop has acknowledged it), on a connection of its own. Without
+        a stop socket (an older service) through the control socket's ``stop``, answered
+        first there, with a RuntimeWarning saying so (``stop_note`` keeps the line)."""
+        r, self.stop_note = send_stop(self.socket, self.timeout)
+        if self.stop_note:
+            warnings.warn(self.stop_note, RuntimeWarning, stacklevel=2)
         if not r["ok"]:
             raise Refused(str(r.get("message")), r)
         return str(r.get("message", ""))

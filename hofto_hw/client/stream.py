@@ -87,6 +87,11 @@ class RingReader:
             self.skipped += skipped
             yield rec, skipped
 
+    def latest_tick(self) -> int:
+        """The loop tick of the newest record published (-1: none yet), without reading."""
+        head = self.head()
+        return -1 if head == 0 else int(self._slots[(head - 1) % self.capacity]["tick"])
+
     def record(self, rec: np.ndarray, skipped: int) -> TickRecord:
         return TickRecord(
             t=float(rec["t"]),

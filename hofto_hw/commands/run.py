@@ -62,12 +62,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def remove_socket(path: Path) -> None:
-    """The control plane's socket file removed (hofto_hw.control_plane.process imported here:
-    it imports the whole tick, seconds on a loaded machine, which belong to the start-up's
-    "importing" phase, where SIGTERM is already a clean stop)."""
+    """The control plane's socket file and the stop socket beside it removed
+    (hofto_hw.control_plane.process imported here: it imports the whole tick, seconds on a
+    loaded machine, which belong to the start-up's "importing" phase, where SIGTERM is
+    already a clean stop)."""
     from hofto_hw.control_plane.process import remove_socket as remove
+    from hofto_hw.control_plane.protocol import stop_path
 
     remove(path)
+    remove(stop_path(path))
 
 
 def _check_duration(value: float | None) -> None:
@@ -161,8 +164,10 @@ def _run(args: argparse.Namespace, signals: Any, helpers: Any) -> int:
     _check_plot(args)
     if args.socket is not None:  # before anything is created (log, shared memory, socket)
         from hofto_hw.control_plane.process import check_socket_path
+        from hofto_hw.control_plane.stop_server import check_stop_path
 
         args.socket = check_socket_path(args.socket)
+        check_stop_path(args.socket)  # <socket>.stop, the stop socket, by the same rules
     with signals.deferred():  # a helper started is one we know (and end)
         helpers.start(
             log=not args.no_log,
@@ -364,11 +369,20 @@ def _start_control_plane(
     if args.socket is None and not notify:
         return None
     from hofto_hw.control_plane.process import ControlPlaneProcess, listen
+    from hofto_hw.control_plane.process import remove_socket as remove_one
+    from hofto_hw.control_plane.protocol import stop_path
     from hofto_hw.runtime.compose import loop_observer_names
 
-    listener = None
+    listener = stop_listener = None
     if args.socket is not None:
-        listener = listen(args.socket, cfg.service.socket_mode)  # type: ignore[attr-defined]
+        mode = cfg.service.socket_mode  # type: ignore[attr-defined]
+        listener = listen(args.socket, mode)
+        try:  # the stop socket: served by a process of its own (stop_server.py)
+            stop_listener = listen(stop_path(args.socket), mode)
+        except BaseException:  # not ours there: only the control socket goes
+            listener.close()
+            remove_one(args.socket)
+            raise
     info = None
     log_path = None
     if recorder is not None:
@@ -389,6 +403,7 @@ def _start_control_plane(
             recorder=info,
             notify=notify,
             process=process,  # type: ignore[arg-type]
+            stop_listener=stop_listener,
         )
     except BaseException:
         if args.socket is not None:

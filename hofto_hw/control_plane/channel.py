@@ -8,6 +8,10 @@ Every word, ring counter and slot has exactly one writer, so neither side locks 
   input; 0: released), the plan words ``PLAN_ID``, ``PLAN_ROWS``, ``PLAN_HEAD``, ``CP_PID``,
   ``CP_BEAT``; the loop writes ``STOP_ACK``, ``TICKS``, ``EXIT``, ``LOOP_DONE``,
   ``PLAN_TAIL_ID``, ``PLAN_TAIL``, ``TEACH_STATE``, ``STATE_SEQ``.
+- the stop server (:mod:`~hofto_hw.control_plane.stop_server`, a process of its own) writes
+  ``STOP_FAST_SEQ`` (one more per stop on the stop socket) and ``STOP_PID``; the loop
+  acknowledges it in ``STOP_FAST_ACK`` in the poll that sets its stop request. A word of its
+  own, not ``STOP_SEQ``: two processes incrementing one word could lose a stop.
 - ``fctl`` (float64 words): the control plane writes the timing percentiles the diagnostics
   records carry (``WAKE_P99``, ``COMP_P99``).
 - ``requests`` (control plane -> loop) and ``replies`` (loop -> control plane): rings of
@@ -41,7 +45,8 @@ __all__ = ["BRAKE_CLOSED", "BRAKE_OPEN", "BRAKE_UNKNOWN", "Channel"]
 CTL_WORDS = 64
 (STOP_SEQ, STOP_ACK, LEASE_NS, PLAN_ID, PLAN_ROWS, PLAN_HEAD, PLAN_TAIL_ID, PLAN_TAIL,
  TICKS, EXIT, LOOP_DONE, TEACH_STATE, STATE_SEQ, CP_PID, CP_BEAT,
- EVENTS_LOST, LOG_FAILING, LOG_LOST) = range(18)  # fmt: skip
+ EVENTS_LOST, LOG_FAILING, LOG_LOST, STOP_FAST_SEQ, STOP_FAST_ACK,
+ STOP_PID) = range(21)  # fmt: skip
 F_WORDS = 8
 WAKE_P99, COMP_P99 = range(2)
 

@@ -1,9 +1,10 @@
 """The loop's side of the control channel: :meth:`LoopPort.poll`, once per tick, between
 ticks (``Loop.run`` calls it after ``Tick.step``), never waits and allocates no array.
 
-Per poll, in this order: the stop word (an operator stop is handled before anything else);
-the enabling lease (``drag.enable_input.source: socket``: the input is pressed while the
-lease the control plane renews has not expired; expiry is a release, category 2); the state
+Per poll, in this order: the stop words (the control socket's and the stop socket's, an
+operator stop is handled before anything else); the enabling lease
+(``drag.enable_input.source: socket``: the input is pressed while the lease the control
+plane renews has not expired; expiry is a release, category 2); the state
 slot (the tick record and the extra words; STO and brake per axis every 8th tick); new
 stop-controller events; the answer of the request in progress, or the next request record.
 Homing (REQ_HOME) is checked here and then run by the tick (``Tick.start_homing``,
@@ -181,6 +182,7 @@ class LoopPort:
         self.playback = StreamedPlayback(chan)
         self.recording = StreamRecording(chan)
         self._stop_seen = int(self.ctl[ch.STOP_SEQ])
+        self._fast_seen = 0  # a stop on the stop socket before the first poll counts
         self._watch_log = False
         src = tick.enable_input.source
         self._lease = src == "socket"
@@ -220,10 +222,13 @@ class LoopPort:
     def poll(self) -> None:
         tick, ctl = self.tick, self.ctl
         s = int(ctl[ch.STOP_SEQ])
-        if s != self._stop_seen:  # first, always
+        f = int(ctl[ch.STOP_FAST_SEQ])  # the stop socket's (stop_server.py)
+        if s != self._stop_seen or f != self._fast_seen:  # first, always
             self._stop_seen = s
+            self._fast_seen = f
             tick.stop_requested = True
             ctl[ch.STOP_ACK] = s
+            ctl[ch.STOP_FAST_ACK] = f
         if self._lease:
             tick.enable_input.pressed = int(ctl[ch.LEASE_NS]) > self._mono()
         if self._watch_log:

@@ -9,9 +9,11 @@ never world-accessible between bind and chmod).
 :class:`ControlPlaneProcess` hands the control plane's process (started by
 :class:`~hofto_hw.runtime.prestart.Prestarted`, importing while the loop starts up, or by
 itself) the listening socket's descriptor and the pickled arguments (as the flight recorder's
-writer), at normal priority. It serves until the loop sets LOOP_DONE or its parent dies; a
-SIGTERM to the whole service only starts a grace period (the loop still stops the arm and
-says so), SIGINT is the loop's. :class:`InProcessControl` runs the same server in a thread
+writer), at normal priority, and starts the stop socket's process
+(:mod:`~hofto_hw.control_plane.stop_server`) with the stop socket's. Both serve until the
+loop sets LOOP_DONE or their parent dies; a SIGTERM to the whole service only starts a grace
+period for the control plane (the loop still stops the arm and says so) and is ignored by
+the stop server, SIGINT is the loop's. :class:`InProcessControl` runs the same server in a thread
 of the loop's process: for tests and tools that drive a sim-clock loop themselves.
 """
 
@@ -105,6 +107,7 @@ class ControlPlaneProcess:
         recorder: dict[str, Any] | None = None,
         notify: bool = False,
         process: Prestarted | None = None,
+        stop_listener: socket.socket | None = None,
     ) -> None:
         self.system: Any = None
         self.port: LoopPort | None = None
@@ -131,6 +134,12 @@ class ControlPlaneProcess:
         finally:
             if listener is not None:
                 listener.close()  # the child serves it
+        self.stop_proc = None  # the stop socket's own process (stop_server.py)
+        if stop_listener is not None:
+            from hofto_hw.control_plane.stop_server import start
+
+            lc = cfg.loop
+            self.stop_proc = start(self.chan, stop_listener, lc.realtime, lc.priority)
 
     def attach(self, system: Any, watch_log: bool = False) -> None:
         """The loop polls the channel after every tick from now on (``watch_log``: the
@@ -140,13 +149,14 @@ class ControlPlaneProcess:
 
     def wait_ready(self, timeout: float = 60.0) -> bool:
         """Whether the process is up (it writes its pid into the channel)."""
-        from hofto_hw.control_plane.channel import CP_PID
+        from hofto_hw.control_plane.channel import CP_PID, STOP_PID
 
         end = time.monotonic() + timeout
+        stop = self.stop_proc
         while time.monotonic() < end:
-            if int(self.chan.ctl[CP_PID]):
+            if int(self.chan.ctl[CP_PID]) and (stop is None or int(self.chan.ctl[STOP_PID])):
                 return True
-            if self.proc.poll() is not None:
+            if self.proc.poll() is not None or (stop is not None and stop.poll() is not None):
                 return False
             time.sleep(0.01)
         return False
@@ -160,11 +170,14 @@ class ControlPlaneProcess:
         else:
             self.chan.ctl[EXIT] = 1
             self.chan.ctl[LOOP_DONE] = 1
-        try:
-            self.proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+        for proc in (self.proc, self.stop_proc):
+            if proc is None:
+                continue
+            try:
+                proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
         if self.port is not None:
             self.port.detach()
         self.chan.close()

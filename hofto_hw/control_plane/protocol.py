@@ -23,6 +23,19 @@ MAX_DEPTH = 32  # nesting of arrays and objects
 
 MODES = ("hold", "move", "drag")
 
+#: the stop socket beside the control socket ``S``: ``S.stop`` (control_plane/stop_server.py)
+STOP_SUFFIX = ".stop"
+
+
+def stop_path(control: Any) -> Any:
+    """The stop socket's path (a ``pathlib.Path``) beside the control socket ``control``."""
+    import os
+    from pathlib import Path
+
+    p = Path(os.path.abspath(control))
+    return p.with_name(p.name + STOP_SUFFIX)
+
+
 #: command -> {field: (types, required)}; types are Python types a JSON value may have
 _FLOAT = (int, float)
 COMMANDS: dict[str, dict[str, tuple[tuple[type, ...], bool]]] = {

@@ -64,6 +64,17 @@ def test_the_stop_word_latches_a_stop_request_in_the_next_tick(wired) -> None:
     assert int(chan.ctl[ch.STOP_ACK]) == int(chan.ctl[ch.STOP_SEQ])
 
 
+def test_the_stop_sockets_word_latches_a_stop_request_and_is_acknowledged(wired) -> None:
+    system, chan, _ = wired
+    tick = system.tick
+    _request(chan, 1, ch.REQ_MODE, mode=HOLD)
+    chan.ctl[ch.STOP_FAST_SEQ] = 1  # the stop server's word (stop_server.py), STOP_SEQ untouched
+    system.loop.run(max_ticks=2)
+    assert tick.stop.latched_names() == ["stop_request"]
+    assert int(chan.ctl[ch.STOP_FAST_ACK]) == 1
+    assert int(chan.ctl[ch.STOP_ACK]) == int(chan.ctl[ch.STOP_SEQ])  # the other one as it was
+
+
 def _starve(system, chan, plan_accel: np.ndarray) -> tuple[list[int], np.ndarray]:
     """Play a fast move of which only the rows up to its fastest are written (the control
     plane "falls behind" there), with ``plan_accel`` as the plan's limits in the channel;
