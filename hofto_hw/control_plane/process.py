@@ -8,10 +8,14 @@ never world-accessible between bind and chmod).
 
 :class:`ControlPlaneProcess` starts ``python -m hofto_hw.control_plane.process`` with the
 listening socket's descriptor and the pickled arguments on stdin (as the flight recorder's
-writer), at normal priority. It serves until the loop sets LOOP_DONE or its parent dies; a
-SIGTERM to the whole service only starts a grace period (the loop still stops the arm and
-says so), SIGINT is the loop's. :class:`InProcessControl` runs the same server in a thread
-of the loop's process: for tests and tools that drive a sim-clock loop themselves.
+writer), at normal priority (SCHED_OTHER, the nice value the service started with; its
+planner at nice 5), on the CPUs outside the loop's when the loop is pinned (``loop.cpus``,
+hofto_hw.runtime.realtime.cpus_beside_loop; the writer's rule too): on a machine of two or
+more CPUs the planner's CPU time is not taken on the loop's CPU. It serves until the loop
+sets LOOP_DONE or its parent dies; a SIGTERM to the whole service only starts a grace
+period (the loop still stops the arm and says so), SIGINT is the loop's.
+:class:`InProcessControl` runs the same server in a thread of the loop's process: for tests
+and tools that drive a sim-clock loop themselves.
 """
 
 from __future__ import annotations
@@ -107,6 +111,8 @@ class ControlPlaneProcess:
         self.system: Any = None
         self.port: LoopPort | None = None
         self.chan = Channel(len(cfg.robot.joints), max(1, len(observers)), create=True)
+        from hofto_hw.runtime.realtime import cpus_beside_loop
+
         fds = [] if listener is None else [listener.fileno()]
         args = (
             self.chan.name,
@@ -119,6 +125,7 @@ class ControlPlaneProcess:
             log_path,
             recorder,
             notify,
+            cpus_beside_loop(),
         )
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "hofto_hw.control_plane.process"],
@@ -246,13 +253,21 @@ def main() -> int:
     signal.signal(signal.SIGTERM, lambda *_: term.__setitem__(0, time.monotonic()))
     args = pickle.load(sys.stdin.buffer)
     sys.stdin.close()
-    (name, n, k, cfg, config_path, observers, fd, log_path, recorder, notify) = args
+    (name, n, k, cfg, config_path, observers, fd, log_path, recorder, notify, cpus) = args
+    if cpus:  # off the loop's CPU (the planner, forked from here, inherits it)
+        try:
+            os.sched_setaffinity(0, cpus)
+        except OSError:  # CPUs outside our cpuset: keep the inherited affinity
+            pass
     from hofto_hw.control_plane.channel import CP_PID
     from hofto_hw.control_plane.server import ControlPlane
     from hofto_hw.runtime.compose import build_model
 
     chan = Channel(n, k, name=name)
     model = build_model(cfg)
+    import scipy.interpolate  # noqa: F401  (the planner's fit: imported once here, ~2 s a
+    # plan otherwise, before the forked planner's first chunk)
+
     listener = None
     if fd is not None:
         listener = socket.socket(fileno=fd)

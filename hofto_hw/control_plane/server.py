@@ -15,11 +15,15 @@ behind anything; other lines are taken at most ``LINES_PER_TURN`` per connection
 
 Requests for the loop (reset, mode, play) go one at a time through the request ring and
 are answered when the loop's reply record arrives; planning (ruckig moves, the taught
-path's timing) runs in a forked planner process (:class:`Planner`), and the plan is
-streamed into the plan ring ahead of the loop while it plays. One client at a time holds
-motion and the enabling input (the first that asks; until it disconnects or sends
-``release``); another one's motion request is refused naming the holder. The remote
-enabling input is a lease: ``enable on`` holds it for ``lease`` seconds
+path's timing) runs in a forked planner process (:class:`Planner`, nice ``PLANNER_NICE``,
+on the control plane's CPUs: off the loop's when it is pinned), which sends the plan in
+chunks of ``PLAN_CHUNK`` rows as it samples them; the loop is told to play once the first
+chunk is in the plan ring, and the rest is streamed ahead of it while it plays (a chunk is
+read from the planner only when the ring has room for it: the planner waits, not the
+loop; a row not there in time is the loop's "not yet", a ramp down at the plan's limits).
+One client at a time holds motion and the enabling input (the first that asks; until it
+disconnects or sends ``release``); another one's motion request is refused naming the
+holder. The remote enabling input is a lease: ``enable on`` holds it for ``lease`` seconds
 (``drag.enable_input.lease``) from now; it expires unless renewed, and the holder's
 disconnect releases it at once.
 """
@@ -53,7 +57,9 @@ LINES_PER_TURN = 8
 READ_CHUNK = 8192  # [bytes] read per connection per turn: a flood's turn stays short
 TURN_BUDGET = 32  # request lines handled per turn over all connections
 STATUS_CACHE_S = 0.02  # a status is built at most every 20 ms (a flood asks it back to back)
-PLAN_CHUNK = 4096  # rows per message from the planner process
+PLAN_CHUNK = 256  # rows per message from the planner (37 KB for 6 joints: within a pipe's
+# 64 KB, so a message the server reads is whole in the pipe and never waits on the planner)
+CHUNKS_PER_TURN = 16  # the plan ring (4096 rows) filled in one turn at the start
 PLANNER_NICE = 5  # the planner's nice value: behind the control plane and its clients
 MAX_PENDING_OUT = 1 << 20
 LOOP_ANSWER_TIMEOUT = 5.0  # [s] the loop answers a request within a few ticks
@@ -150,9 +156,7 @@ class ControlPlane:
         self._planner: Planner | None = None
         self._planner_for: tuple[Conn, dict[str, Any]] | None = None
         self._plan_accel: Any = None
-        self._planning = False
         self.plan_id = 0
-        self.plan_traj: Any = None
         self.plan_written = 0
         self.playback_info: dict[str, Any] | None = None
         # taught path being recorded
@@ -187,7 +191,7 @@ class ControlPlane:
             # sockets wake the select at once; the loop's replies, a plan to stream, a taught
             # path to drain are polled: every tick_s while one is in progress, else 4x slower
             busy = self.inflight is not None or self._planner is not None
-            busy = busy or self.plan_traj is not None or self.recording is not None
+            busy = busy or self.recording is not None
             self.turn(tick_s if busy else 4.0 * tick_s)
         self.finish()
 
@@ -214,7 +218,6 @@ class ControlPlane:
         self._lines(now)
         self._loop_replies(now)
         self._planned()
-        self._stream_plan()
         self._teach(now)
         self._drain_events()
         self._timeouts(now)
@@ -875,9 +878,12 @@ class ControlPlane:
             msg = f"refused: the arm is in mode {name}: mode hold first"
             self._send(c, {"ok": False, "message": msg}, req)
             return
-        if self._planning:
-            self._send(c, {"ok": False, "message": "refused: another plan is being made"}, req)
-            return
+        if self._planner is not None:
+            if not self._planner.playing:
+                msg = "refused: another plan is being made"
+                self._send(c, {"ok": False, "message": msg}, req)
+                return
+            self._end_planner()  # its plan was played (the arm holds again): the rest unused
         q_now = np.array(rec["q_cmd"], dtype=float)
         limits = teach.motion_limits(self.cfg, self.model)
         speed = float(req.get("speed", 1.0))
@@ -897,7 +903,6 @@ class ControlPlane:
         elif cmd == "move_linear":
             q = np.array(pr.numbers(req["pose"], "move_linear.pose", 6))  # the target pose
         c.busy = True
-        self._planning = True
         dt = 1.0 / self.rate_hz
         target = q if cmd in ("move_joints", "move_linear") else None
         self._planner = Planner(cmd, req.get("file"), target, q_now, self.model, limits, dt)
@@ -920,8 +925,109 @@ class ControlPlane:
         return out
 
     def _planned(self) -> None:
+        """The planner's messages: its head (or its one-line refusal), then its chunks while
+        the plan ring has room for them; the loop is told to play after the first."""
         pl = self._planner
-        if pl is None or not pl.step():
+        if pl is None:
+            return
+        if pl.head is None:
+            if not pl.step():
+                return
+            if pl.head is None:  # refused or died before planning anything
+                self._end_planner()
+                c, req = self._planner_for  # type: ignore[misc]
+                c.busy = False
+                self._send(c, {"ok": False, "input_error": True, "message": pl.error}, req)
+                return
+            self._begin_plan(pl.head)
+        ctl = self.chan.ctl
+        for _ in range(CHUNKS_PER_TURN):
+            tail = int(ctl[ch.PLAN_TAIL]) if int(ctl[ch.PLAN_TAIL_ID]) == self.plan_id else 0
+            if self.plan_written + PLAN_CHUNK > tail + ch.PLAN_CAP or not pl.step():
+                break
+            if pl.chunk is not None:
+                self._write_rows(*pl.chunk)
+                pl.chunk = None
+                if not pl.play_queued:
+                    pl.play_queued = True
+                    self._queue_play(pl)
+            if pl.ended:
+                break
+        if pl.ended or pl.error:
+            if pl.error and pl.play_queued:  # the loop ramps down where the rows end
+                print(f"hofto-hw run: {pl.error}; the plan ends early", flush=True)
+            elif pl.error:
+                c, req = self._planner_for  # type: ignore[misc]
+                c.busy = False
+                self._send(c, {"ok": False, "message": pl.error}, req)
+            self._end_planner()
+
+    def _begin_plan(self, head: dict[str, Any]) -> None:
+        """A new plan in the ring: no row yet (PLAN_HEAD 0), its first row, limits, length."""
+        ctl = self.chan.ctl
+        self.plan_id += 1
+        ctl[ch.PLAN_HEAD] = 0
+        self.chan.plan_start[:] = head["q0"]
+        self.chan.plan_accel[:] = self._plan_accel
+        ctl[ch.PLAN_ROWS] = head["rows"]
+        self.plan_written = 0
+        ctl[ch.PLAN_ID] = self.plan_id
+
+    def _write_rows(self, i0: int, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+        """Rows i0 .. i0 + len(q) - 1 into the ring, then published (PLAN_HEAD)."""
+        mask = ch.PLAN_CAP - 1
+        w, end, o = i0, i0 + q.shape[0], 0
+        while w < end:
+            s = w & mask
+            m = min(end - w, ch.PLAN_CAP - s)
+            self.chan.plan_q[s : s + m] = q[o : o + m]
+            self.chan.plan_qd[s : s + m] = qd[o : o + m]
+            self.chan.plan_qdd[s : s + m] = qdd[o : o + m]
+            w += m
+            o += m
+        self.plan_written = end
+        self.chan.ctl[ch.PLAN_HEAD] = end  # published after the rows
+
+    def _queue_play(self, pl: Planner) -> None:
+        c, req = self._planner_for  # type: ignore[misc]
+        h = pl.head
+        assert h is not None
+        arg = req.get("file", "")
+        plan_id = self.plan_id
+
+        def done(ok: bool, text: str) -> dict[str, Any]:
+            if not ok:
+                if self._planner is pl:
+                    self._end_planner()
+                return {"ok": False, "message": text}
+            pl.playing = True
+            duration = h["rows"] * h["dt"]
+            self.playback_info = {
+                "kind": h["kind"],
+                "file": None if h["file"] is None else str(h["file"]),
+                "rows": int(h["rows"]),
+                "duration_s": round(duration, 3),
+                "plan_id": plan_id,
+            }
+            if h["kind"] == "replay":
+                to_start = h["segments"][1] * h["dt"]
+                text = (
+                    f"replaying {arg}: {to_start:.2f} s to its start, then "
+                    f"{duration - to_start:.2f} s along it (time scale {h['scale']:.2f})"
+                )
+            elif h["kind"] == "linear":
+                text = f"moving the tool along a line in {duration:.2f} s"
+            else:
+                text = f"moving to the joint target in {duration:.2f} s"
+            return {"ok": True, "message": text, "duration_s": round(duration, 3)}
+
+        c.busy = False
+        self._queue(LoopJob(c, req, ch.REQ_PLAY, mode=h["mode"], arg=plan_id, done=done))
+
+    def _end_planner(self) -> None:
+        """Stop reading the planner (done, refused, or its plan no longer played)."""
+        pl = self._planner
+        if pl is None:
             return
         self._planner = None
         try:
@@ -929,75 +1035,6 @@ class ControlPlane:
         except (KeyError, ValueError):
             pass
         pl.close()
-        c, req = self._planner_for
-        for pb, err in ((pl.result, pl.error),):
-            self._planning = False
-            if pb is None:
-                c.busy = False
-                self._send(c, {"ok": False, "input_error": True, "message": err}, req)
-                continue
-            ctl = self.chan.ctl
-            self.plan_id += 1
-            traj = pb.traj
-            ctl[ch.PLAN_HEAD] = 0
-            self.chan.plan_start[:] = traj.q[0]
-            self.chan.plan_accel[:] = self._plan_accel
-            ctl[ch.PLAN_ROWS] = traj.q.shape[0]
-            self.plan_traj = traj
-            self.plan_written = 0
-            ctl[ch.PLAN_ID] = self.plan_id
-            self._stream_plan()
-            arg = req.get("file", "")
-
-            def done(ok: bool, text: str, pb=pb, arg=arg) -> dict[str, Any]:
-                if not ok:
-                    self.plan_traj = None
-                    return {"ok": False, "message": text}
-                tr = pb.traj
-                self.playback_info = {
-                    "kind": pb.kind,
-                    "file": None if pb.file is None else str(pb.file),
-                    "rows": int(tr.q.shape[0]),
-                    "duration_s": round(tr.duration, 3),
-                    "plan_id": self.plan_id,
-                }
-                if pb.kind == "replay":
-                    to_start = tr.segments[1] * tr.dt
-                    text = (
-                        f"replaying {arg}: {to_start:.2f} s to its start, then "
-                        f"{tr.duration - to_start:.2f} s along it (time scale {tr.scale:.2f})"
-                    )
-                elif pb.kind == "linear":
-                    text = f"moving the tool along a line in {tr.duration:.2f} s"
-                else:
-                    text = f"moving to the joint target in {tr.duration:.2f} s"
-                return {"ok": True, "message": text, "duration_s": round(tr.duration, 3)}
-
-            c.busy = False
-            self._queue(LoopJob(c, req, ch.REQ_PLAY, mode=pb.mode, arg=self.plan_id, done=done))
-
-    def _stream_plan(self) -> None:
-        tr = self.plan_traj
-        if tr is None:
-            return
-        ctl = self.chan.ctl
-        rows = tr.q.shape[0]
-        w = self.plan_written
-        if w >= rows:
-            self.plan_traj = None  # every row is in the ring
-            return
-        tail = int(ctl[ch.PLAN_TAIL]) if int(ctl[ch.PLAN_TAIL_ID]) == self.plan_id else 0
-        end = min(rows, tail + ch.PLAN_CAP)
-        mask = ch.PLAN_CAP - 1
-        while w < end:
-            s = w & mask
-            m = min(end - w, ch.PLAN_CAP - s)
-            self.chan.plan_q[s : s + m] = tr.q[w : w + m]
-            self.chan.plan_qd[s : s + m] = tr.qd[w : w + m]
-            self.chan.plan_qdd[s : s + m] = tr.qdd[w : w + m]
-            w += m
-        self.plan_written = w
-        ctl[ch.PLAN_HEAD] = w  # published after the rows
 
     # ------------------------------------------------------------------ teach
 
@@ -1308,10 +1345,10 @@ class ControlPlane:
 
 
 class Planner:
-    """Planning in a forked child process (ruckig and the taught path's timing hold the GIL
-    for seconds on a 300 s path: in a thread they would hold the socket up). The child sends
-    the trajectory back in chunks of PLAN_CHUNK rows, one message per turn of the server
-    (:meth:`step`), so a stop is never behind more than one chunk."""
+    """Planning in a forked child process (ruckig and the taught path's fit hold the GIL:
+    in a thread they would hold the socket up). The child sends a head (what the plan is,
+    its length and first row), then the rows in chunks of PLAN_CHUNK as it samples them,
+    then "end"; :meth:`step` reads one message."""
 
     def __init__(self, cmd, file, target, q_now, model, limits, dt) -> None:
         import multiprocessing as mp
@@ -1326,13 +1363,16 @@ class Planner:
         )
         self.proc.start()
         child.close()
-        self.result: Any = None
         self.error = ""
-        self._head: dict[str, Any] | None = None
-        self._parts: dict[str, list[np.ndarray]] = {"q": [], "qd": [], "qdd": []}
+        self.head: dict[str, Any] | None = None
+        #: the chunk read by the last step: (first row, q, qd, qdd), taken by the caller
+        self.chunk: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.ended = False
+        self.play_queued = False  # the loop was asked to play it
+        self.playing = False  # the loop took it
 
     def step(self) -> bool:
-        """Read one message if there is one; True when the plan (or its error) is complete."""
+        """Read one message if there is one (True: one was read, or the planner is gone)."""
         if not self.conn.poll():
             if not self.proc.is_alive() and not self.conn.poll():
                 self.error = self.error or "planning failed: the planner process died"
@@ -1345,48 +1385,30 @@ class Planner:
             return True
         if kind == "error":
             self.error = payload
-            return True
-        if kind == "head":
-            self._head = payload
-            return False
-        if kind in self._parts:
-            self._parts[kind].append(payload)
-            return False
-        h = self._head
-        assert h is not None
-        from hofto_hw.control.path_timing import Sampled
-
-        traj = Sampled(
-            h["dt"],
-            np.concatenate(self._parts["q"]),
-            np.concatenate(self._parts["qd"]),
-            np.concatenate(self._parts["qdd"]),
-            h["segments"],
-            h["scale"],
-        )
-        self.result = _Planned(h["kind"], h["mode"], h["file"], traj)
+        elif kind == "head":
+            self.head = payload
+        elif kind == "rows":
+            self.chunk = payload
+        else:
+            self.ended = True
         return True
 
     def close(self) -> None:
         self.conn.close()
+        if not self.ended:
+            self.proc.kill()  # nobody reads the rest of it
         self.proc.join(timeout=1.0)
         if self.proc.is_alive():
             self.proc.kill()
             self.proc.join()
 
 
-@dataclass
-class _Planned:
-    kind: str
-    mode: int
-    file: Path | None
-    traj: Any
-
-
 def _plan_child(conn, parent_end, cmd, file, target, q_now, model, limits, dt) -> None:
-    """The planner process: plan, send the head, the rows in chunks, then "end". It dies
-    with the control plane (PR_SET_PDEATHSIG) and on SIGTERM (not the server's handler), and
-    holds no read end of its pipe (a write to a gone reader fails instead of blocking)."""
+    """The planner process: plan, send the head, the rows in chunks (sampled one chunk at a
+    time: a send waits while the pipe is full, so only what the server takes is sampled),
+    then "end". It dies with the control plane (PR_SET_PDEATHSIG) and on SIGTERM (not the
+    server's handler), and holds no read end of its pipe (a write to a gone reader fails
+    instead of blocking)."""
     import signal
 
     parent_end.close()
@@ -1410,11 +1432,13 @@ def _plan_child(conn, parent_end, cmd, file, target, q_now, model, limits, dt) -
         pass
     try:
         if cmd == "replay":
-            pb = teach.plan_replay(Path(file), q_now, model, limits, dt)
-        elif cmd == "move_linear":
-            pb = teach.plan_linear(target, q_now, model, limits, dt)
+            plan, kind, mode, path = teach.stream_replay(Path(file), q_now, model, limits, dt)
         else:
-            pb = teach.plan_move(target, q_now, model, limits, dt)
+            if cmd == "move_linear":
+                pb = teach.plan_linear(target, q_now, model, limits, dt)
+            else:
+                pb = teach.plan_move(target, q_now, model, limits, dt)
+            plan, kind, mode, path = pb.traj, pb.kind, pb.mode, pb.file
     except UserError as exc:
         conn.send(("error", str(exc)))
         conn.close()
@@ -1423,15 +1447,18 @@ def _plan_child(conn, parent_end, cmd, file, target, q_now, model, limits, dt) -
         conn.send(("error", f"planning failed: {type(exc).__name__}: {exc}"))
         conn.close()
         return
-    tr = pb.traj
-    head = {"kind": pb.kind, "mode": pb.mode, "file": pb.file, "dt": tr.dt,
-            "segments": list(tr.segments), "scale": float(tr.scale)}  # fmt: skip
-    conn.send(("head", head))
-    for name in ("q", "qd", "qdd"):
-        a = getattr(tr, name)
-        for i in range(0, a.shape[0], PLAN_CHUNK):
-            conn.send((name, np.ascontiguousarray(a[i : i + PLAN_CHUNK])))
-    conn.send(("end", None))
+    rows = plan.n_rows
+    head = {"kind": kind, "mode": mode, "file": path, "dt": plan.dt, "rows": rows,
+            "segments": list(plan.segments), "scale": float(plan.scale),
+            "q0": np.array(plan.rows(0, 1)[0][0])}  # fmt: skip
+    try:
+        conn.send(("head", head))
+        for i in range(0, rows, PLAN_CHUNK):
+            q, qd, qdd = plan.rows(i, min(rows, i + PLAN_CHUNK))
+            conn.send(("rows", (i, q, qd, qdd)))
+        conn.send(("end", None))
+    except (BrokenPipeError, OSError):  # the server stopped reading: the plan is not played
+        pass
     conn.close()
 
 

@@ -182,3 +182,40 @@ def test_300_s_replay_is_planned_off_the_loop_and_stop_answered_while_it_plays(
         wait_for(lambda: (robot.status()["playback"] or {}).get("progress", 0) > 0.02, "playing")
         _stop_and_reset(robot)  # while it plays: answered, the arm stops
         _no_overrun(robot)
+
+
+def test_a_long_taught_path_streamed_in_chunks_is_followed_to_its_end(tmp_path: Path) -> None:
+    """A 20 s taught path (20,000 rows: five times the plan ring, 79 planner chunks) through a
+    real service: played to its end with nothing latched, the arm along it (it rises 0.1 rad
+    on every joint and comes back), and `hofto-hw replay` of the run's log MATCHes."""
+    from hofto_hw.replay.flight_log import read_flight_log
+    from hofto_hw.replay.reproduce import reproduce
+
+    svc = Service(tmp_path, "--hold", "--no-collision")
+    try:
+        with Robot.connect(socket=svc.sock) as robot:
+            wait_for(lambda: robot.state().mode == "hold", "hold")
+            wait_for(lambda: float(np.abs(robot.state().qd).max()) < 0.01, "rest")
+            if robot.state().faults:  # a stall of this shared machine before the test: not its
+                robot.reset()  # subject (log_failure, overrun at load 14 seen); cleared first
+                wait_for(lambda: robot.state().faults == [], "reset")
+            home = robot.state().q_cmd
+            file = _long_path(6, home, 20.0, tmp_path)
+            m = robot.replay(file, wait=False)
+            assert "replaying" in m.message
+            assert m.wait(timeout=600) == "completed"
+            s = robot.state()
+            assert s.faults == [] and s.mode == "hold", (s.faults, s.mode)
+            np.testing.assert_allclose(s.q, home, atol=2e-3)
+        svc.stop()
+    finally:
+        svc.kill()
+    (path,) = sorted(svc.logs.glob("run-*.mcap"))
+    log = read_flight_log(path)
+    rise = log.q - home
+    np.testing.assert_allclose(rise.max(axis=0), 0.1, atol=2e-3)  # the path's top, each joint
+    top = np.flatnonzero(rise[:, 1] > 0.099)
+    assert top.size and top[-1] - top[0] < 2000  # once, mid-path
+    # nothing but the service's own stop at its end (svc.stop)
+    assert {e.kind_name for e in log.events} <= {"stop_request", "standstill"}, log.events
+    assert reproduce(log).match
