@@ -61,6 +61,7 @@ PLAN_CHUNK = 256  # rows per message from the planner (37 KB for 6 joints: withi
 # 64 KB, so a message the server reads is whole in the pipe and never waits on the planner)
 CHUNKS_PER_TURN = 16  # the plan ring (4096 rows) filled in one turn at the start
 PLANNER_NICE = 5  # the planner's nice value: behind the control plane and its clients
+RAMP_STEP_S = 0.02  # [s] between two intermediate payloads of a payload ramp
 MAX_PENDING_OUT = 1 << 20
 LOOP_ANSWER_TIMEOUT = 5.0  # [s] the loop answers a request within a few ticks
 _MODE_CODE = {"hold": HOLD, "move": MOVE, "drag": DRAG}
@@ -85,6 +86,26 @@ class Conn:
     def who(self) -> str:
         name = f"{self.name!r} " if self.name else ""
         return f"client {name}(pid {self.pid}, connection {self.ident})"
+
+
+@dataclass
+class _Ramp:
+    """A payload being ramped in: ``steps`` intermediate payloads from ``start`` to
+    ``target`` over ``duration`` [s] from ``t0`` (monotonic); ``k`` sent so far."""
+
+    conn: Any
+    req: dict[str, Any]
+    start: Any
+    target: Any
+    t0: float
+    duration: float
+    steps: int
+    k: int = 0
+    inflight: bool = False
+    previous: Any = None  # the last step the loop took (None: start)
+
+    def __post_init__(self) -> None:
+        self.previous = self.start
 
 
 @dataclass
@@ -173,15 +194,22 @@ class ControlPlane:
         self.stop_answered = 0
         # the payload: the configured one until a client sets another (set_payload)
         from hofto_hw.errors import ModelError
-        from hofto_hw.model.payload import LinkSwap, bare_link
+        from hofto_hw.model.payload import LinkSwap, bare_link, payload_from_config
 
         held = cfg.safety.payload
         self.payload = {"mass": float(held.mass), "com": [float(v) for v in held.com]}
+        self._held = payload_from_config(held)  # the last one sent to the loop
+        self._ramp: _Ramp | None = None
+        self._holding: Any = None
         try:
             self._bare_link = bare_link(model)
             self._payload_swap: LinkSwap | None = LinkSwap(model)
         except ModelError:  # the tool is not on a moving link: set_payload is refused
             self._payload_swap = None
+        if self._payload_swap is not None and cfg.robot.rated_payload is not None:
+            from hofto_hw.model.holding import HoldingTorque
+
+            self._holding = HoldingTorque(model)  # ~0.1 s, once
 
     # ------------------------------------------------------------------ main loop
 
@@ -191,7 +219,7 @@ class ControlPlane:
             # sockets wake the select at once; the loop's replies, a plan to stream, a taught
             # path to drain are polled: every tick_s while one is in progress, else 4x slower
             busy = self.inflight is not None or self._planner is not None
-            busy = busy or self.recording is not None
+            busy = busy or self.recording is not None or self._ramp is not None
             self.turn(tick_s if busy else 4.0 * tick_s)
         self.finish()
 
@@ -217,6 +245,7 @@ class ControlPlane:
         now = time.monotonic()
         self._lines(now)
         self._loop_replies(now)
+        self._ramp_step(now)
         self._planned()
         self._teach(now)
         self._drain_events()
@@ -549,9 +578,12 @@ class ControlPlane:
     # ------------------------------------------------------------------ payload
 
     def _set_payload(self, c: Conn, req: dict[str, Any]) -> None:
-        """Checked here (finite, within ``robot.rated_payload``), the tool link's inertia
-        with it computed here (hofto_hw.model.payload), swapped in by the loop at standstill."""
-        from hofto_hw.model.payload import Payload, link_numbers
+        """Checked here (finite, within ``robot.rated_payload``, its holding torque within
+        the joints' torque limits), then ramped in (:meth:`_ramp_step`): the tool link's
+        inertia with each intermediate payload computed here (hofto_hw.model.payload),
+        swapped in by the loop at standstill. A new one supersedes a ramp in progress (its
+        client is answered so), from the payload the loop was last sent."""
+        from hofto_hw.model.payload import Payload
 
         rated = self.cfg.robot.rated_payload
         if rated is None:
@@ -578,23 +610,78 @@ class ControlPlane:
         if self._payload_swap is None:
             raise UserError(f"set_payload: {self.model.name}'s tool frame is not on a moving link")
         new = Payload(float(mass), (com[0], com[1], com[2]))
-        link = link_numbers(self.model, self._bare_link, new)
+        got = self.chan.read_state()
+        if got is None:
+            self._send(c, {"ok": False, "message": "the loop has not started"}, req)
+            return
+        self._check_holding(np.array(got[0]["q"], dtype=float), new, rated.holding_fraction)
+        old = self._ramp
+        if old is not None:  # superseded: its client hears so; this one starts where it is
+            self._ramp = None
+            msg = f"set_payload: superseded by a new one ({new.mass:g} kg) before it was active"
+            self._send(old.conn, {"ok": False, "message": msg}, old.req)
+        steps = max(1, int(np.ceil(rated.ramp_s / RAMP_STEP_S)))
+        self._ramp = _Ramp(c, req, self._held, new, time.monotonic(), rated.ramp_s, steps)
+        self._ramp_step(time.monotonic())
 
-        def done(ok: bool, text: str) -> dict[str, Any]:
+    def _check_holding(self, q: np.ndarray, new: Any, fraction: float) -> None:
+        """Refuse (one line naming the joint, the torque and the limit) a payload whose
+        holding torque exceeds ``fraction`` of a joint's torque limit at the current pose
+        ``q`` or at the worst pose the joint limits allow (hofto_hw.model.holding)."""
+        if self._holding is None:
+            return
+        why = self._holding.refusal(q, new, fraction)
+        if why:
+            raise UserError(f"set_payload: {new.mass:g} kg at com {list(new.com)} m: {why}")
+
+    def _ramp_step(self, now: float) -> None:
+        """Send the ramp's next intermediate payload when it is due (step k of N at k/N of
+        ``ramp_s``, the first at once) and the previous one was answered."""
+        from hofto_hw.model.payload import blend, link_numbers
+
+        r = self._ramp
+        if r is None or r.inflight or now < r.t0 + r.duration * r.k / r.steps:
+            return
+        r.k += 1
+        p = blend(r.start, r.target, r.k / r.steps)
+        link = link_numbers(self.model, self._bare_link, p)
+        r.inflight = True
+        self._held = p
+
+        def done(ok: bool, text: str, r=r, p=p, link=link) -> dict[str, Any] | None:
+            r.inflight = False
+            if ok:
+                self._applied(p, link)
+            elif self._held is p:  # refused (the arm moved): the loop holds the one before
+                self._held = r.previous
+            if self._ramp is not r:
+                return None  # superseded: its client was answered then
+            r.previous = p if ok else r.previous
             if not ok:
-                return {"ok": False, "message": text}
-            swap = self._payload_swap
-            assert swap is not None
-            if swap.model.payload != new:  # (the loop's own model in InProcessControl)
-                np.copyto(swap.values, link)
-                swap.apply(new)  # the plans' model (torque checks) carries it too
-            self.payload = {"mass": new.mass, "com": list(new.com)}
-            msg = f"payload {new.mass:g} kg at com {list(new.com)} m (tool frame) active"
+                self._ramp = None
+                held = self.payload["mass"]
+                return {"ok": False, "message": f"{text} (the payload held is {held:g} kg)"}
+            if r.k < r.steps:
+                return None  # the client is answered at the ramp's end
+            self._ramp = None
+            msg = (
+                f"payload {p.mass:g} kg at com {list(r.target.com)} m (tool frame) active"
+                f" (ramped in over {r.duration:g} s)"
+            )
             print(f"hofto-hw run: {msg}", flush=True)
             return {"ok": True, "message": msg, "payload": dict(self.payload)}
 
-        value = [new.mass, *new.com, *link]
-        self._queue(LoopJob(c, req, ch.REQ_PAYLOAD, value=value, done=done))
+        value = [p.mass, *p.com, *link]
+        self._queue(LoopJob(r.conn, r.req, ch.REQ_PAYLOAD, value=value, done=done))
+
+    def _applied(self, p: Any, link: np.ndarray) -> None:
+        """The loop took payload ``p``: the plans' model (torque checks) carries it too."""
+        swap = self._payload_swap
+        assert swap is not None
+        if swap.model.payload != p:  # (the loop's own model in InProcessControl)
+            np.copyto(swap.values, link)
+            swap.apply(p)
+        self.payload = {"mass": p.mass, "com": list(p.com)}
 
     def _enable(self, c: Conn, req: dict[str, Any]) -> None:
         got = self.chan.read_state()
@@ -620,6 +707,10 @@ class ControlPlane:
         got = self.chan.read_state()
         if got is not None and got[1][ch.X_STOPPING]:
             self._send(c, {"ok": False, "message": "a stop is latched: reset first"}, req)
+            return
+        if self._ramp is not None and what != "hold":
+            msg = "refused: a payload is being ramped in (robot.rated_payload.ramp_s)"
+            self._send(c, {"ok": False, "message": msg}, req)
             return
         if what == "drag":
             rec = None
@@ -822,7 +913,8 @@ class ControlPlane:
         if self.inflight is not None or not self.jobs:
             return
         job = self.jobs.popleft()
-        if job.conn.closing and job.kind != ch.REQ_PLAY:
+        if job.conn.closing and job.kind not in (ch.REQ_PLAY, ch.REQ_PAYLOAD):  # a payload
+            # ramp's steps go on without their client: the loop holds a payload it was sent
             self._send_next()
             return
         self._seq += 1
@@ -871,6 +963,10 @@ class ControlPlane:
         rec, x = got
         if x[ch.X_STOPPING]:
             self._send(c, {"ok": False, "message": "a stop is latched: reset first"}, req)
+            return
+        if self._ramp is not None:
+            msg = "refused: a payload is being ramped in (robot.rated_payload.ramp_s)"
+            self._send(c, {"ok": False, "message": msg}, req)
             return
         mode = int(rec["mode"])
         if mode != HOLD:
