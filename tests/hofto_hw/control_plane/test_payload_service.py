@@ -1,8 +1,10 @@
 """``Robot.set_payload`` and ``hofto-hw payload set`` against a real ``hofto-hw run --clock
 real --socket S`` on the simulated bus whose arm holds 2 kg the config does not know: the
 estimates at rest show the load's weight until the payload is set, go to ~0 with the right
-one, show the missing part with a wrong one; refused while moving and outside the rating;
-shown by state() and status(); flight-log events with its values."""
+one, show the missing part with a wrong one; refused while moving, outside the rating and
+when its holding torque does not fit the joints' torque limits; ramped in over
+``robot.rated_payload.ramp_s`` (the model's holding torque moves step by step, not at once);
+shown by state() and status(); flight-log events with its values, which replay takes."""
 
 from __future__ import annotations
 
@@ -22,6 +24,8 @@ from hofto_hw.model.payload import Payload, apply_payload
 from hofto_hw.runtime.compose import build_model
 
 COM = [0.01, -0.02, 0.06]
+RAMP_S = 0.5
+STEPS = 25  # ceil(RAMP_S / control_plane.server.RAMP_STEP_S)
 
 
 def _config(tmp: Path) -> Path:
@@ -31,6 +35,10 @@ def _config(tmp: Path) -> Path:
     data["run"]["simulated_payload"] = {"mass": 2.0, "com": COM}
     data["run"]["model_error"] = 0.0  # the load is what differs
     data["safety"].pop("collision")  # an unmodelled load is measured here, not stopped
+    data["robot"]["rated_payload"]["ramp_s"] = RAMP_S
+    # the shoulder's torque limit below its worst holding torque with 3 kg (48 N·m with the
+    # arm stretched out), above it with 2 kg (42 N·m)
+    data["robot"].setdefault("limits", {})["torque"] = [120.0, 45.0, 60.0, 15.0, 15.0, 10.0]
     path.write_text(yaml.safe_dump(data))
     return path
 
@@ -74,6 +82,12 @@ def test_set_payload_through_the_client_and_the_cli(tmp_path: Path) -> None:
                 robot.set_payload(5.0, COM)
             with pytest.raises(Refused, match=r"com_max = 0\.15 m"):
                 robot.set_payload(1.0, [0.0, 0.0, 0.5])
+            with pytest.raises(Refused) as refused:
+                robot.set_payload(3.0, [0.0, 0.0, 0.05])
+            assert str(refused.value).startswith(
+                "set_payload: 3 kg at com [0.0, 0.0, 0.05] m: joint_2 would hold 48."
+            )
+            assert str(refused.value).endswith("rad), more than its torque limit 45 N·m")
             assert robot.state().payload.mass == 0.0  # nothing taken
 
             q = robot.state().q
@@ -101,8 +115,28 @@ def test_set_payload_through_the_client_and_the_cli(tmp_path: Path) -> None:
         svc.stop()
     finally:
         svc.kill()
-    (log,) = sorted(svc.logs.glob("run-*.mcap"))
-    ev = [(e.joint, e.value) for e in read_flight_log(log).events if e.kind_name == "payload"]
-    assert ev == [(-1, 2.0), (0, 0.01), (1, -0.02), (2, 0.06)] + [
-        (-1, 0.5), (0, 0.01), (1, -0.02), (2, 0.06)
-    ]  # fmt: skip
+    (path,) = sorted(svc.logs.glob("run-*.mcap"))
+    log = read_flight_log(path)
+    from hofto_hw.replay.reproduce import payload_changes
+
+    steps = payload_changes(log)  # (tick, Payload) of each intermediate payload the loop took
+    assert len(steps) == 2 * STEPS
+    up, down = steps[:STEPS], steps[STEPS:]
+    for ramp, start, end in ((up, 0.0, 2.0), (down, 2.0, 0.5)):
+        masses = [p.mass for _, p in ramp]
+        assert masses[-1] == pytest.approx(end) and all(np.allclose(p.com, COM) for _, p in ramp)
+        step = (end - start) / STEPS
+        np.testing.assert_allclose(np.diff([start, *masses]), step, rtol=1e-9)
+        assert ramp[-1][0] - ramp[0][0] >= 1000 * RAMP_S * (STEPS - 1) / STEPS  # [ticks]
+        # the feed-forward's holding torque (the model's gravity with each step's payload
+        # at the pose of its tick) moves in STEPS equal steps: monotonic, none a jump
+        k = {int(t): i for i, t in enumerate(log.ticks)}
+        g = np.array([-_weight(cfg, log.q[k[t]], p.mass)[1] for t, p in ramp])
+        g0 = -_weight(cfg, log.q[k[ramp[0][0]]], start)[1]
+        d = np.diff([g0, *g])
+        assert (np.sign(d) == np.sign(d[0])).all() and d[0] != 0.0, d  # monotonic
+        assert (abs(g[-1]) > abs(g0)) == (end > start)  # more load: more holding torque
+        assert np.abs(d).max() < 1.5 * abs(g[-1] - g0) / STEPS  # no jump
+
+    # (replay takes every step at its tick and MATCHes: test_replay_switches.py, whose
+    # set_payload is ramped in by the default robot.rated_payload.ramp_s)
