@@ -9,6 +9,7 @@ shown by state() and status(); flight-log events with its values, which replay t
 from __future__ import annotations
 
 import os
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -20,6 +21,7 @@ from support.control_service import ROOT, Service, socket_config, wait_for
 
 from hofto_hw.client import Refused, Robot
 from hofto_hw.config.loader import load_config
+from hofto_hw.control_plane import protocol as pr
 from hofto_hw.model.payload import Payload, apply_payload
 from hofto_hw.runtime.compose import build_model
 
@@ -112,6 +114,17 @@ def test_set_payload_through_the_client_and_the_cli(tmp_path: Path) -> None:
             missing = load - _weight(cfg, q, 0.5)
             wait_for(lambda: _shows(robot, missing, tol), "the estimates show the missing 1.5 kg")
             assert robot.state().payload.mass == 0.5
+
+            # a new payload during a ramp supersedes it: two requests on one connection,
+            # the second read while the first ramps (each step answered in turn)
+            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as raw:
+                raw.connect(str(svc.sock))
+                for i, mass in ((1, 1.0), (2, 1.5)):
+                    raw.sendall(pr.dumps({"cmd": "set_payload", "mass": mass, "com": COM, "id": i}))
+                replies = _replies(raw, 2)
+            assert replies[1]["ok"] is False and "superseded" in replies[1]["message"]
+            assert replies[2]["ok"] is True and replies[2]["payload"]["mass"] == 1.5
+            assert robot.state().payload.mass == 1.5
         svc.stop()
     finally:
         svc.kill()
@@ -120,19 +133,25 @@ def test_set_payload_through_the_client_and_the_cli(tmp_path: Path) -> None:
     from hofto_hw.replay.reproduce import payload_changes
 
     steps = payload_changes(log)  # (tick, Payload) of each intermediate payload the loop took
-    assert len(steps) == 2 * STEPS
-    up, down = steps[:STEPS], steps[STEPS:]
+    up, down, last = steps[:STEPS], steps[STEPS : 2 * STEPS], steps[2 * STEPS :]
+    # the superseded ramp: some steps from 0.5 toward 1.0, then 1.5 from the last one taken
+    masses = [p.mass for _, p in last]
+    assert masses[-1] == pytest.approx(1.5) and 0.5 < masses[0] < 1.0
+    assert len(masses) <= 2 * STEPS and all(np.diff(masses) > 0.0), masses
     for ramp, start, end in ((up, 0.0, 2.0), (down, 2.0, 0.5)):
         masses = [p.mass for _, p in ramp]
         assert masses[-1] == pytest.approx(end) and all(np.allclose(p.com, COM) for _, p in ramp)
         step = (end - start) / STEPS
         np.testing.assert_allclose(np.diff([start, *masses]), step, rtol=1e-9)
         assert ramp[-1][0] - ramp[0][0] >= 1000 * RAMP_S * (STEPS - 1) / STEPS  # [ticks]
+
         # the feed-forward's holding torque (the model's gravity with each step's payload
         # at the pose of its tick) moves in STEPS equal steps: monotonic, none a jump
-        k = {int(t): i for i, t in enumerate(log.ticks)}
-        g = np.array([-_weight(cfg, log.q[k[t]], p.mass)[1] for t, p in ramp])
-        g0 = -_weight(cfg, log.q[k[ramp[0][0]]], start)[1]
+        def k(tick: int) -> int:  # its record, or the next one (a loaded machine's writer
+            return min(int(np.searchsorted(log.ticks, tick)), len(log.ticks) - 1)  # drops some
+
+        g = np.array([-_weight(cfg, log.q[k(t)], p.mass)[1] for t, p in ramp])
+        g0 = -_weight(cfg, log.q[k(ramp[0][0])], start)[1]
         d = np.diff([g0, *g])
         assert (np.sign(d) == np.sign(d[0])).all() and d[0] != 0.0, d  # monotonic
         assert (abs(g[-1]) > abs(g0)) == (end > start)  # more load: more holding torque
@@ -140,3 +159,19 @@ def test_set_payload_through_the_client_and_the_cli(tmp_path: Path) -> None:
 
     # (replay takes every step at its tick and MATCHes: test_replay_switches.py, whose
     # set_payload is ramped in by the default robot.rated_payload.ramp_s)
+
+
+def _replies(s: socket.socket, n: int, timeout: float = 60.0) -> dict[int, dict]:
+    """The next ``n`` reply lines on ``s``, by their id."""
+    s.settimeout(timeout)
+    buf = b""
+    while buf.count(b"\n") < n:
+        chunk = s.recv(65536)
+        if not chunk:
+            break
+        buf += chunk
+    out = {}
+    for line in buf.split(b"\n")[:n]:
+        rep = pr.parse_reply(line)
+        out[int(rep["id"])] = rep
+    return out
