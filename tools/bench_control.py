@@ -1,7 +1,7 @@
 """The loop's timing while clients abuse the control socket, and how fast ``stop`` is answered.
 
     .venv/bin/python tools/bench_control.py [--seconds 10] [--stops 20] [--replay-seconds 300]
-                                            [--phases quiet,flood,...] [--json]
+                                            [--phases quiet,flood,...] [--loop-cpus 1] [--json]
 
 Starts ``hofto-hw run --clock real --socket S`` (simulated bus, hold, no scripted collision,
 ``safety.overrun_streak`` raised to 100000 so that nothing latches and every phase runs) and
@@ -11,9 +11,11 @@ client sending 10 MB lines without a newline, again and again), ``trickle`` (eig
 sending one byte every 0.2 s), ``idle`` (20 idle connections, more than allowed), each
 abuser a process of its own (in a thread of this one it would hold up the stop being timed
 on this one's GIL), ``replay`` (a ``--replay-seconds`` taught path planned, then played for
-``--seconds``: missed deadlines while planning and while playing apart; no stop is timed
-while planning, one at the end), ``quiet_end`` (quiet again: on a shared machine the two
-quiet phases show what the machine's own noise is). Per phase:
+``--seconds``: missed deadlines and wake-up p99 while planning (until the loop plays the
+first chunk) and while playing apart; no stop is timed while planning, one at the end),
+``quiet_end`` (quiet again: on a shared machine the two quiet phases show what the
+machine's own noise is); ``--loop-cpus`` pins the loop (and so the control plane and its
+planner to the other CPUs). Per phase:
 the loop's missed deadlines (the status' ``overruns`` difference), the wake-up latency
 median / p99 / max [µs] of every tick of the phase (read from the flight recorder's ring,
 read-only), and the time [ms] from sending a stop on a new connection to its answer
@@ -66,8 +68,10 @@ PHASES = ("quiet", "flood", "line_10mb", "trickle", "idle", "replay", "quiet_end
 STOP_BIT = 1 << int(Fault.STOP_REQUEST)
 
 
-def _config(tmp: Path) -> Path:
+def _config(tmp: Path, loop_cpus: list[int] | None = None) -> Path:
     data = yaml.safe_load(CONFIG.read_text())
+    if loop_cpus is not None:
+        data["loop"]["cpus"] = loop_cpus
     data["robot"]["urdf"] = str((CONFIG.parent / data["robot"]["urdf"]).resolve())
     data["drag"]["enable_input"] = {"source": "socket"}
     data["run"].pop("drag", None)
@@ -77,9 +81,9 @@ def _config(tmp: Path) -> Path:
     return out
 
 
-def _start(tmp: Path) -> tuple[subprocess.Popen, Path]:
+def _start(tmp: Path, loop_cpus: list[int] | None = None) -> tuple[subprocess.Popen, Path]:
     sock = tmp / "c.sock"
-    cmd = [sys.executable, "-m", "hofto_hw.cli", "run", "--config", str(_config(tmp))]
+    cmd = [sys.executable, "-m", "hofto_hw.cli", "run", "--config", str(_config(tmp, loop_cpus))]
     cmd += ["--clock", "real", "--duration", "100000", "--socket", str(sock), "--hold"]
     cmd += ["--no-collision", "--log-dir", str(tmp / "logs")]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -347,11 +351,20 @@ def _replay_phases(robot: Robot, sock: Path, reader: RingReader, tmp: Path, args
         got: dict = {}
 
         def plan(file: Path = file, got: dict = got) -> None:
-            try:
-                with Robot.connect(socket=sock) as r2:
-                    got["message"] = r2.replay(file, wait=False).message
-            except Refused as exc:
-                got["refused"] = str(exc)
+            with Robot.connect(socket=sock) as r2:
+                for attempt in range(20):  # a fault latched meanwhile (log_failure on a
+                    try:  # loaded machine): reset, ask again (in the figures: "attempts")
+                        got["message"] = r2.replay(file, wait=False).message
+                        got["attempts"] = attempt + 1
+                        return
+                    except Refused as exc:
+                        got["refused"] = str(exc)
+                        if "latched" not in str(exc):
+                            return
+                        try:
+                            r2.reset()
+                        except Refused:
+                            time.sleep(0.1)
 
         o0, t0 = robot.status()["overruns"], time.monotonic()
         t = threading.Thread(target=plan, daemon=True)
@@ -388,6 +401,7 @@ def _replay_phases(robot: Robot, sock: Path, reader: RingReader, tmp: Path, args
                 **_stops_summary(stops, ticks),
                 "load": [round(load0, 2), round(os.getloadavg()[0], 2)],
                 "skipped_by_reader": reader.skipped,
+                "attempts": got.get("attempts", 1),
             }
         )
     return out
@@ -441,14 +455,24 @@ def main() -> int:
     ap.add_argument(
         "--phases", default=",".join(PHASES), help="comma-separated, of " + ",".join(PHASES)
     )
+    ap.add_argument(
+        "--loop-cpus",
+        default=None,
+        help="comma-separated CPUs to pin the loop to (loop.cpus; the control plane and its "
+        "planner then run on the others); default: the config's (not pinned)",
+    )
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     phases = args.phases.split(",")
     if not set(phases) <= set(PHASES):
         ap.error(f"--phases: {args.phases!r}: each one of {','.join(PHASES)}")
+    try:
+        loop_cpus = None if args.loop_cpus is None else [int(c) for c in args.loop_cpus.split(",")]
+    except ValueError:
+        ap.error(f"--loop-cpus: {args.loop_cpus!r}: expected comma-separated CPU numbers")
     poll = poll_cost()
     tmp = Path(tempfile.mkdtemp(prefix="bench-control-"))
-    proc, sock = _start(tmp)
+    proc, sock = _start(tmp, loop_cpus)
     out = []
     try:
         with Robot.connect(socket=sock) as robot:
@@ -474,8 +498,15 @@ def main() -> int:
         proc.terminate()
         proc.wait(timeout=120)
     if args.json:
-        print(json.dumps({"poll": poll, "phases": out, "machine": os.uname().nodename,
-                          "cpus": os.cpu_count()}, indent=2))  # fmt: skip
+        load = os.getloadavg()
+        print(
+            json.dumps(
+                {"poll": poll, "phases": out, "machine": os.uname().nodename,
+                 "cpus": os.cpu_count(), "loop_cpus": loop_cpus,
+                 "load_after": [round(v, 2) for v in load]},
+                indent=2,
+            )
+        )  # fmt: skip
     else:
         print(f"LoopPort.poll (sim clock, nothing pending): median {poll['median_us']} µs, "
               f"p99 {poll['p99_us']} µs")  # fmt: skip
@@ -494,8 +525,9 @@ def main() -> int:
             )
             if "planning_s" in p:
                 print(
-                    f"{'':16s} planned in {p['planning_s']} s: {p['overruns_planning']} missed "
-                    f"while planning, {p['overruns_playing']} while playing"
+                    f"{'':16s} first chunk after {p['planning_s']} s: "
+                    f"{p['overruns_planning']} missed while planning, "
+                    f"{p['overruns_playing']} while playing"
                 )
             for s in p["slow_stops"]:
                 who = "the loop was not running (machine)" if s["loop_stalled"] else "the loop ran"

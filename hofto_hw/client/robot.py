@@ -417,10 +417,14 @@ class Robot:
     def set_payload(self, mass: float, com: Any) -> ActivePayload:
         """The load on the tool from now on: ``mass`` [kg] at ``com`` (3,) [m] in the tool
         frame (as ur_rtde's setPayload). The service checks it against
-        ``robot.rated_payload`` (0 <= mass <= the rated mass, com within its ``com_max``)
-        and the loop takes it at standstill only (Refused while the arm moves or the
-        enabling input is pressed); from the next tick its observers' and feed-forward's
-        model carry it. Returns the active payload."""
+        ``robot.rated_payload`` (0 <= mass <= the rated mass, com within its ``com_max``,
+        its holding torque within ``holding_fraction`` of every joint's torque limit here
+        and at the worst pose the joint limits allow) and the loop takes it at standstill
+        only (Refused while the arm moves or the enabling input is pressed), ramped in over
+        ``ramp_s`` (intermediate payloads: the feed-forward does not step); this returns
+        when the whole payload is active, and its observers' and feed-forward's model carry
+        it. A new call from another thread or client during the ramp supersedes it (this
+        one is then Refused). Returns the active payload."""
         c = np.asarray(com, dtype=float).ravel()
         if c.shape != (3,) or not np.all(np.isfinite(c)) or not np.isfinite(float(mass)):
             raise Refused("set_payload: mass must be a finite number and com 3 finite numbers")

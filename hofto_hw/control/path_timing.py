@@ -11,7 +11,8 @@
   bounded and the recorded encoder noise is not differentiated three times. The replayed
   geometry is the taught one (the spline's fit residual, ~0.1 mm, is the only path error it adds).
 - :func:`replay_trajectory`: the move to the path's start followed by the scaled path,
-  sampled at the loop period; :class:`TrajectoryPlayer` plays samples per tick.
+  sampled at the loop period (:func:`replay_plan`: the same rows, evaluated a piece at a
+  time, for a planner that streams them); :class:`TrajectoryPlayer` plays samples per tick.
 
 Why not ruckig segment by segment or toppra for the path: ruckig's community version plans
 one segment between two states; chained through waypoints it leaves the taught geometry
@@ -57,6 +58,14 @@ class Sampled:
     def duration(self) -> float:
         return self.q.shape[0] * self.dt
 
+    @property
+    def n_rows(self) -> int:
+        return self.q.shape[0]
+
+    def rows(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, qd, qdd of rows i0 .. i1 - 1 (views; :class:`ReplayPlan`'s interface)."""
+        return self.q[i0:i1], self.qd[i0:i1], self.qdd[i0:i1]
+
 
 def jerk_limited_move(q0: np.ndarray, q1: np.ndarray, limits: Limits, dt: float) -> Sampled:
     """Rest-to-rest move from ``q0`` to ``q1`` (n,) [rad] within ``limits``, sampled at
@@ -101,7 +110,11 @@ def _fit(t: np.ndarray, q: np.ndarray, knot_spacing: float, pad: float):
     knots = np.concatenate([[tp[0]] * (k + 1), inner, [tp[-1]] * (k + 1)])
     from scipy.interpolate import make_lsq_spline  # here: seconds of imports at every start
 
-    spline = make_lsq_spline(tp, qp, knots, k=k, axis=0)
+    try:  # the banded normal equations: a 300 s path in ~1 s; scipy >= 1.13's default QR
+        # takes ~40 s of CPU for the same coefficients (8e-14 apart on a 300 s path)
+        spline = make_lsq_spline(tp, qp, knots, k=k, axis=0, method="norm-eq")
+    except TypeError:  # scipy < 1.13: the normal equations are its only method
+        spline = make_lsq_spline(tp, qp, knots, k=k, axis=0)
     # exact rest at both ends: with clamped knots, q', q'' at an end depend only on the first
     # (last) three coefficients; equal coefficients make them zero (the padding is at rest,
     # so this moves the fit by far less than the noise)
@@ -112,15 +125,35 @@ def _fit(t: np.ndarray, q: np.ndarray, knot_spacing: float, pad: float):
     return spline, tp[0], tp[-1]
 
 
-def time_scale_path(
+class ScaledPath:
+    """A path p(s) (a scipy BSpline of s [s], values (n,)) on [s0, s1] played uniformly
+    slower by ``scale`` c >= 1, sampled every ``dt``: row i is t = i·dt, s = min(s0 + t/c,
+    s1); q = p(s), qd = p'(s)/c, qdd = p''(s)/c². Rows are evaluated on demand
+    (:meth:`rows`), a piece at a time, so a long path streams without being sampled whole."""
+
+    def __init__(self, spline, s0: float, s1: float, scale: float, dt: float) -> None:
+        self.spline, self.s0, self.s1, self.scale, self.dt = spline, s0, s1, scale, dt
+        # as np.arange(0, (s1 - s0)·c + dt/2, dt) would: ceil((stop - start) / step)
+        self.n_rows = max(1, int(np.ceil(((s1 - s0) * scale + 0.5 * dt) / dt)))
+
+    def rows(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, qd, qdd (i1 - i0, n) of rows i0 .. i1 - 1."""
+        c = self.scale
+        s = np.minimum(self.s0 + np.arange(i0, i1) * self.dt / c, self.s1)
+        sp = self.spline
+        return sp(s), sp(s, 1) / c, sp(s, 2) / (c * c)
+
+
+def scaled_path(
     t: np.ndarray,
     q: np.ndarray,
     limits: Limits,
     dt: float,
     knot_spacing: float = 0.05,
     pad: float = 0.3,
-) -> Sampled:
-    """The taught path (t (N,) [s], q (N, n) [rad]) slowed uniformly into ``limits``."""
+) -> ScaledPath:
+    """The taught path (t (N,) [s], q (N, n) [rad]) slowed uniformly into ``limits``: the
+    fit and its scale (the whole path: the scale is uniform), the rows left to be sampled."""
     if t.shape[0] < 10:
         raise UserError(f"replay: the taught path has {t.shape[0]} samples, too short to replay")
     spline, t0, t1 = _fit(t, q, knot_spacing, pad)
@@ -132,26 +165,66 @@ def time_scale_path(
         float(np.sqrt((peaks[1] / limits.acceleration).max())),
         float(np.cbrt((peaks[2] / limits.jerk).max())),
     )
-    tr = np.arange(0.0, (t1 - t0) * c + 0.5 * dt, dt)
-    s = t0 + tr / c
-    s = np.minimum(s, t1)
-    return Sampled(dt, spline(s), spline(s, 1) / c, spline(s, 2) / (c * c), [0], scale=c)
+    return ScaledPath(spline, t0, t1, c, dt)
+
+
+def time_scale_path(
+    t: np.ndarray,
+    q: np.ndarray,
+    limits: Limits,
+    dt: float,
+    knot_spacing: float = 0.05,
+    pad: float = 0.3,
+) -> Sampled:
+    """The taught path (t (N,) [s], q (N, n) [rad]) slowed uniformly into ``limits``."""
+    path = scaled_path(t, q, limits, dt, knot_spacing, pad)
+    qs, qd, qdd = path.rows(0, path.n_rows)
+    return Sampled(dt, qs, qd, qdd, [0], scale=path.scale)
+
+
+class ReplayPlan:
+    """The move to the path's start (sampled: a few seconds at most) followed by the scaled
+    path (sampled on demand): ``n_rows`` rows, :meth:`rows` any piece of them."""
+
+    def __init__(self, move: Sampled, path: ScaledPath) -> None:
+        self.move, self.path = move, path
+        self.dt = path.dt
+        self.scale = path.scale
+        self.segments = [0, move.q.shape[0]]
+        self.n_rows = move.q.shape[0] + path.n_rows
+
+    def rows(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, qd, qdd (i1 - i0, n) of rows i0 .. i1 - 1 (0 <= i0 <= i1 <= n_rows)."""
+        m = self.move.q.shape[0]
+        parts = []
+        if i0 < m:
+            e = min(i1, m)
+            parts.append((self.move.q[i0:e], self.move.qd[i0:e], self.move.qdd[i0:e]))
+        if i1 > m:
+            parts.append(self.path.rows(max(i0, m) - m, i1 - m))
+        if len(parts) == 1:
+            return parts[0]
+        return tuple(np.vstack([a, b]) for a, b in zip(*parts, strict=True))  # type: ignore[return-value]
+
+    def sampled(self) -> Sampled:
+        q, qd, qdd = self.rows(0, self.n_rows)
+        return Sampled(self.dt, q, qd, qdd, list(self.segments), scale=self.scale)
+
+
+def replay_plan(
+    q_now: np.ndarray, t: np.ndarray, q: np.ndarray, limits: Limits, dt: float
+) -> ReplayPlan:
+    """Move to the path's start (ruckig), then the time-scaled path, rows on demand."""
+    path = scaled_path(t, q, limits, dt)
+    start = path.rows(0, 1)[0][0]
+    return ReplayPlan(jerk_limited_move(q_now, start, limits, dt), path)
 
 
 def replay_trajectory(
     q_now: np.ndarray, t: np.ndarray, q: np.ndarray, limits: Limits, dt: float
 ) -> Sampled:
     """Move to the path's start (ruckig), then the time-scaled path; sampled at ``dt``."""
-    path = time_scale_path(t, q, limits, dt)
-    move = jerk_limited_move(q_now, path.q[0], limits, dt)
-    return Sampled(
-        dt,
-        np.vstack([move.q, path.q]),
-        np.vstack([move.qd, path.qd]),
-        np.vstack([move.qdd, path.qdd]),
-        [0, move.q.shape[0]],
-        scale=path.scale,
-    )
+    return replay_plan(q_now, t, q, limits, dt).sampled()
 
 
 class TrajectoryPlayer:

@@ -9,12 +9,16 @@ never world-accessible between bind and chmod).
 :class:`ControlPlaneProcess` hands the control plane's process (started by
 :class:`~hofto_hw.runtime.prestart.Prestarted`, importing while the loop starts up, or by
 itself) the listening socket's descriptor and the pickled arguments (as the flight recorder's
-writer), at normal priority, and starts the stop socket's process
-(:mod:`~hofto_hw.control_plane.stop_server`) with the stop socket's. Both serve until the
-loop sets LOOP_DONE or their parent dies; a SIGTERM to the whole service only starts a grace
-period for the control plane (the loop still stops the arm and says so) and is ignored by
-the stop server, SIGINT is the loop's. :class:`InProcessControl` runs the same server in a thread
-of the loop's process: for tests and tools that drive a sim-clock loop themselves.
+writer), at normal priority (SCHED_OTHER, the nice value the service started with; its
+planner at nice 5), on the CPUs outside the loop's when the loop is pinned (``loop.cpus``,
+hofto_hw.runtime.realtime.cpus_beside_loop; the writer's rule too): on a machine of two or
+more CPUs the planner's CPU time is not taken on the loop's CPU. It also starts the stop
+socket's process (:mod:`~hofto_hw.control_plane.stop_server`) with the stop socket's. Both
+serve until the loop sets LOOP_DONE or their parent dies; a SIGTERM to the whole service only
+starts a grace period for the control plane (the loop still stops the arm and says so) and is
+ignored by the stop server, SIGINT is the loop's. :class:`InProcessControl` runs the same
+server in a thread of the loop's process: for tests and tools that drive a sim-clock loop
+themselves.
 """
 
 from __future__ import annotations
@@ -112,6 +116,8 @@ class ControlPlaneProcess:
         self.system: Any = None
         self.port: LoopPort | None = None
         self.chan = Channel(len(cfg.robot.joints), max(1, len(observers)), create=True)
+        from hofto_hw.runtime.realtime import cpus_beside_loop
+
         fds = [] if listener is None else [listener.fileno()]
         args = (
             self.chan.name,
@@ -124,6 +130,7 @@ class ControlPlaneProcess:
             log_path,
             recorder,
             notify,
+            cpus_beside_loop(),
         )
         try:
             self.proc = process if process is not None else Prestarted(CONTROL_MODULE, fds=True)
@@ -271,9 +278,14 @@ def child_main(args: tuple, fds: list[int], term: list[float]) -> int:
     SIGTERM to it (0: none yet), kept by the handler prestart installed."""
     _drop_realtime()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    (name, n, k, cfg, config_path, observers, serves, log_path, recorder, notify) = args
+    (name, n, k, cfg, config_path, observers, serves, log_path, recorder, notify, cpus) = args
+    if cpus:  # off the loop's CPU (the planner, forked from here, inherits it)
+        try:
+            os.sched_setaffinity(0, cpus)
+        except OSError:  # CPUs outside our cpuset: keep the inherited affinity
+            pass
     from hofto_hw.control_plane.channel import CP_PID
-    from hofto_hw.control_plane.server import ControlPlane
+    from hofto_hw.control_plane.server import ControlPlane, preload_planner
     from hofto_hw.runtime.compose import build_model
 
     chan = Channel(n, k, name=name)
@@ -303,6 +315,7 @@ def child_main(args: tuple, fds: list[int], term: list[float]) -> int:
         )
         sup.start()
     chan.ctl[CP_PID] = os.getpid()
+    preload_planner()  # after READY: not on the service's start-up path
     parent = os.getppid()
 
     def done() -> bool:

@@ -15,11 +15,15 @@ behind anything; other lines are taken at most ``LINES_PER_TURN`` per connection
 
 Requests for the loop (reset, mode, play) go one at a time through the request ring and
 are answered when the loop's reply record arrives; planning (ruckig moves, the taught
-path's timing) runs in a forked planner process (:class:`Planner`), and the plan is
-streamed into the plan ring ahead of the loop while it plays. One client at a time holds
-motion and the enabling input (the first that asks; until it disconnects or sends
-``release``); another one's motion request is refused naming the holder. The remote
-enabling input is a lease: ``enable on`` holds it for ``lease`` seconds
+path's timing) runs in a forked planner process (:class:`Planner`, nice ``PLANNER_NICE``,
+on the control plane's CPUs: off the loop's when it is pinned), which sends the plan in
+chunks of ``PLAN_CHUNK`` rows as it samples them; the loop is told to play once the first
+chunk is in the plan ring, and the rest is streamed ahead of it while it plays (a chunk is
+read from the planner only when the ring has room for it: the planner waits, not the
+loop; a row not there in time is the loop's "not yet", a ramp down at the plan's limits).
+One client at a time holds motion and the enabling input (the first that asks; until it
+disconnects or sends ``release``); another one's motion request is refused naming the
+holder. The remote enabling input is a lease: ``enable on`` holds it for ``lease`` seconds
 (``drag.enable_input.lease``) from now; it expires unless renewed, and the holder's
 disconnect releases it at once.
 """
@@ -31,6 +35,7 @@ import os
 import selectors
 import socket
 import struct
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,8 +58,11 @@ LINES_PER_TURN = 8
 READ_CHUNK = 8192  # [bytes] read per connection per turn: a flood's turn stays short
 TURN_BUDGET = 32  # request lines handled per turn over all connections
 STATUS_CACHE_S = 0.02  # a status is built at most every 20 ms (a flood asks it back to back)
-PLAN_CHUNK = 4096  # rows per message from the planner process
+PLAN_CHUNK = 256  # rows per message from the planner (37 KB for 6 joints: within a pipe's
+# 64 KB, so a message the server reads is whole in the pipe and never waits on the planner)
+CHUNKS_PER_TURN = 16  # the plan ring (4096 rows) filled in one turn at the start
 PLANNER_NICE = 5  # the planner's nice value: behind the control plane and its clients
+RAMP_STEP_S = 0.02  # [s] between two intermediate payloads of a payload ramp
 MAX_PENDING_OUT = 1 << 20
 LOOP_ANSWER_TIMEOUT = 5.0  # [s] the loop answers a request within a few ticks
 _MODE_CODE = {"hold": HOLD, "move": MOVE, "drag": DRAG}
@@ -79,6 +87,26 @@ class Conn:
     def who(self) -> str:
         name = f"{self.name!r} " if self.name else ""
         return f"client {name}(pid {self.pid}, connection {self.ident})"
+
+
+@dataclass
+class _Ramp:
+    """A payload being ramped in: ``steps`` intermediate payloads from ``start`` to
+    ``target`` over ``duration`` [s] from ``t0`` (monotonic); ``k`` sent so far."""
+
+    conn: Any
+    req: dict[str, Any]
+    start: Any
+    target: Any
+    t0: float
+    duration: float
+    steps: int
+    k: int = 0
+    inflight: bool = False
+    previous: Any = None  # the last step the loop took (None: start)
+
+    def __post_init__(self) -> None:
+        self.previous = self.start
 
 
 @dataclass
@@ -150,9 +178,7 @@ class ControlPlane:
         self._planner: Planner | None = None
         self._planner_for: tuple[Conn, dict[str, Any]] | None = None
         self._plan_accel: Any = None
-        self._planning = False
         self.plan_id = 0
-        self.plan_traj: Any = None
         self.plan_written = 0
         self.playback_info: dict[str, Any] | None = None
         # taught path being recorded
@@ -169,15 +195,22 @@ class ControlPlane:
         self.stop_answered = 0
         # the payload: the configured one until a client sets another (set_payload)
         from hofto_hw.errors import ModelError
-        from hofto_hw.model.payload import LinkSwap, bare_link
+        from hofto_hw.model.payload import LinkSwap, bare_link, payload_from_config
 
         held = cfg.safety.payload
         self.payload = {"mass": float(held.mass), "com": [float(v) for v in held.com]}
+        self._held = payload_from_config(held)  # the last one sent to the loop
+        self._ramp: _Ramp | None = None
+        self._holding: Any = None
         try:
             self._bare_link = bare_link(model)
             self._payload_swap: LinkSwap | None = LinkSwap(model)
         except ModelError:  # the tool is not on a moving link: set_payload is refused
             self._payload_swap = None
+        if self._payload_swap is not None and cfg.robot.rated_payload is not None:
+            from hofto_hw.model.holding import HoldingTorque
+
+            self._holding = HoldingTorque(model)  # ~0.1 s, once
 
     # ------------------------------------------------------------------ main loop
 
@@ -187,7 +220,7 @@ class ControlPlane:
             # sockets wake the select at once; the loop's replies, a plan to stream, a taught
             # path to drain are polled: every tick_s while one is in progress, else 4x slower
             busy = self.inflight is not None or self._planner is not None
-            busy = busy or self.plan_traj is not None or self.recording is not None
+            busy = busy or self.recording is not None or self._ramp is not None
             self.turn(tick_s if busy else 4.0 * tick_s)
         self.finish()
 
@@ -213,8 +246,8 @@ class ControlPlane:
         now = time.monotonic()
         self._lines(now)
         self._loop_replies(now)
+        self._ramp_step(now)
         self._planned()
-        self._stream_plan()
         self._teach(now)
         self._drain_events()
         self._timeouts(now)
@@ -546,9 +579,12 @@ class ControlPlane:
     # ------------------------------------------------------------------ payload
 
     def _set_payload(self, c: Conn, req: dict[str, Any]) -> None:
-        """Checked here (finite, within ``robot.rated_payload``), the tool link's inertia
-        with it computed here (hofto_hw.model.payload), swapped in by the loop at standstill."""
-        from hofto_hw.model.payload import Payload, link_numbers
+        """Checked here (finite, within ``robot.rated_payload``, its holding torque within
+        the joints' torque limits), then ramped in (:meth:`_ramp_step`): the tool link's
+        inertia with each intermediate payload computed here (hofto_hw.model.payload),
+        swapped in by the loop at standstill. A new one supersedes a ramp in progress (its
+        client is answered so), from the payload the loop was last sent."""
+        from hofto_hw.model.payload import Payload
 
         rated = self.cfg.robot.rated_payload
         if rated is None:
@@ -575,23 +611,78 @@ class ControlPlane:
         if self._payload_swap is None:
             raise UserError(f"set_payload: {self.model.name}'s tool frame is not on a moving link")
         new = Payload(float(mass), (com[0], com[1], com[2]))
-        link = link_numbers(self.model, self._bare_link, new)
+        got = self.chan.read_state()
+        if got is None:
+            self._send(c, {"ok": False, "message": "the loop has not started"}, req)
+            return
+        self._check_holding(np.array(got[0]["q"], dtype=float), new, rated.holding_fraction)
+        old = self._ramp
+        if old is not None:  # superseded: its client hears so; this one starts where it is
+            self._ramp = None
+            msg = f"set_payload: superseded by a new one ({new.mass:g} kg) before it was active"
+            self._send(old.conn, {"ok": False, "message": msg}, old.req)
+        steps = max(1, int(np.ceil(rated.ramp_s / RAMP_STEP_S)))
+        self._ramp = _Ramp(c, req, self._held, new, time.monotonic(), rated.ramp_s, steps)
+        self._ramp_step(time.monotonic())
 
-        def done(ok: bool, text: str) -> dict[str, Any]:
+    def _check_holding(self, q: np.ndarray, new: Any, fraction: float) -> None:
+        """Refuse (one line naming the joint, the torque and the limit) a payload whose
+        holding torque exceeds ``fraction`` of a joint's torque limit at the current pose
+        ``q`` or at the worst pose the joint limits allow (hofto_hw.model.holding)."""
+        if self._holding is None:
+            return
+        why = self._holding.refusal(q, new, fraction)
+        if why:
+            raise UserError(f"set_payload: {new.mass:g} kg at com {list(new.com)} m: {why}")
+
+    def _ramp_step(self, now: float) -> None:
+        """Send the ramp's next intermediate payload when it is due (step k of N at k/N of
+        ``ramp_s``, the first at once) and the previous one was answered."""
+        from hofto_hw.model.payload import blend, link_numbers
+
+        r = self._ramp
+        if r is None or r.inflight or now < r.t0 + r.duration * r.k / r.steps:
+            return
+        r.k += 1
+        p = blend(r.start, r.target, r.k / r.steps)
+        link = link_numbers(self.model, self._bare_link, p)
+        r.inflight = True
+        self._held = p
+
+        def done(ok: bool, text: str, r=r, p=p, link=link) -> dict[str, Any] | None:
+            r.inflight = False
+            if ok:
+                self._applied(p, link)
+            elif self._held is p:  # refused (the arm moved): the loop holds the one before
+                self._held = r.previous
+            if self._ramp is not r:
+                return None  # superseded: its client was answered then
+            r.previous = p if ok else r.previous
             if not ok:
-                return {"ok": False, "message": text}
-            swap = self._payload_swap
-            assert swap is not None
-            if swap.model.payload != new:  # (the loop's own model in InProcessControl)
-                np.copyto(swap.values, link)
-                swap.apply(new)  # the plans' model (torque checks) carries it too
-            self.payload = {"mass": new.mass, "com": list(new.com)}
-            msg = f"payload {new.mass:g} kg at com {list(new.com)} m (tool frame) active"
+                self._ramp = None
+                held = self.payload["mass"]
+                return {"ok": False, "message": f"{text} (the payload held is {held:g} kg)"}
+            if r.k < r.steps:
+                return None  # the client is answered at the ramp's end
+            self._ramp = None
+            msg = (
+                f"payload {p.mass:g} kg at com {list(r.target.com)} m (tool frame) active"
+                f" (ramped in over {r.duration:g} s)"
+            )
             print(f"hofto-hw run: {msg}", flush=True)
             return {"ok": True, "message": msg, "payload": dict(self.payload)}
 
-        value = [new.mass, *new.com, *link]
-        self._queue(LoopJob(c, req, ch.REQ_PAYLOAD, value=value, done=done))
+        value = [p.mass, *p.com, *link]
+        self._queue(LoopJob(r.conn, r.req, ch.REQ_PAYLOAD, value=value, done=done))
+
+    def _applied(self, p: Any, link: np.ndarray) -> None:
+        """The loop took payload ``p``: the plans' model (torque checks) carries it too."""
+        swap = self._payload_swap
+        assert swap is not None
+        if swap.model.payload != p:  # (the loop's own model in InProcessControl)
+            np.copyto(swap.values, link)
+            swap.apply(p)
+        self.payload = {"mass": p.mass, "com": list(p.com)}
 
     def _enable(self, c: Conn, req: dict[str, Any]) -> None:
         got = self.chan.read_state()
@@ -617,6 +708,10 @@ class ControlPlane:
         got = self.chan.read_state()
         if got is not None and got[1][ch.X_STOPPING]:
             self._send(c, {"ok": False, "message": "a stop is latched: reset first"}, req)
+            return
+        if self._ramp is not None and what != "hold":
+            msg = "refused: a payload is being ramped in (robot.rated_payload.ramp_s)"
+            self._send(c, {"ok": False, "message": msg}, req)
             return
         if what == "drag":
             rec = None
@@ -819,7 +914,8 @@ class ControlPlane:
         if self.inflight is not None or not self.jobs:
             return
         job = self.jobs.popleft()
-        if job.conn.closing and job.kind != ch.REQ_PLAY:
+        if job.conn.closing and job.kind not in (ch.REQ_PLAY, ch.REQ_PAYLOAD):  # a payload
+            # ramp's steps go on without their client: the loop holds a payload it was sent
             self._send_next()
             return
         self._seq += 1
@@ -869,15 +965,22 @@ class ControlPlane:
         if x[ch.X_STOPPING]:
             self._send(c, {"ok": False, "message": "a stop is latched: reset first"}, req)
             return
+        if self._ramp is not None:
+            msg = "refused: a payload is being ramped in (robot.rated_payload.ramp_s)"
+            self._send(c, {"ok": False, "message": msg}, req)
+            return
         mode = int(rec["mode"])
         if mode != HOLD:
             name = MODE_NAMES.get(mode, "?")
             msg = f"refused: the arm is in mode {name}: mode hold first"
             self._send(c, {"ok": False, "message": msg}, req)
             return
-        if self._planning:
-            self._send(c, {"ok": False, "message": "refused: another plan is being made"}, req)
-            return
+        if self._planner is not None:
+            if not self._planner.playing:
+                msg = "refused: another plan is being made"
+                self._send(c, {"ok": False, "message": msg}, req)
+                return
+            self._end_planner()  # its plan was played (the arm holds again): the rest unused
         q_now = np.array(rec["q_cmd"], dtype=float)
         limits = teach.motion_limits(self.cfg, self.model)
         speed = float(req.get("speed", 1.0))
@@ -897,7 +1000,6 @@ class ControlPlane:
         elif cmd == "move_linear":
             q = np.array(pr.numbers(req["pose"], "move_linear.pose", 6))  # the target pose
         c.busy = True
-        self._planning = True
         dt = 1.0 / self.rate_hz
         target = q if cmd in ("move_joints", "move_linear") else None
         self._planner = Planner(cmd, req.get("file"), target, q_now, self.model, limits, dt)
@@ -920,8 +1022,109 @@ class ControlPlane:
         return out
 
     def _planned(self) -> None:
+        """The planner's messages: its head (or its one-line refusal), then its chunks while
+        the plan ring has room for them; the loop is told to play after the first."""
         pl = self._planner
-        if pl is None or not pl.step():
+        if pl is None:
+            return
+        if pl.head is None:
+            if not pl.step():
+                return
+            if pl.head is None:  # refused or died before planning anything
+                self._end_planner()
+                c, req = self._planner_for  # type: ignore[misc]
+                c.busy = False
+                self._send(c, {"ok": False, "input_error": True, "message": pl.error}, req)
+                return
+            self._begin_plan(pl.head)
+        ctl = self.chan.ctl
+        for _ in range(CHUNKS_PER_TURN):
+            tail = int(ctl[ch.PLAN_TAIL]) if int(ctl[ch.PLAN_TAIL_ID]) == self.plan_id else 0
+            if self.plan_written + PLAN_CHUNK > tail + ch.PLAN_CAP or not pl.step():
+                break
+            if pl.chunk is not None:
+                self._write_rows(*pl.chunk)
+                pl.chunk = None
+                if not pl.play_queued:
+                    pl.play_queued = True
+                    self._queue_play(pl)
+            if pl.ended:
+                break
+        if pl.ended or pl.error:
+            if pl.error and pl.play_queued:  # the loop ramps down where the rows end
+                print(f"hofto-hw run: {pl.error}; the plan ends early", flush=True)
+            elif pl.error:
+                c, req = self._planner_for  # type: ignore[misc]
+                c.busy = False
+                self._send(c, {"ok": False, "message": pl.error}, req)
+            self._end_planner()
+
+    def _begin_plan(self, head: dict[str, Any]) -> None:
+        """A new plan in the ring: no row yet (PLAN_HEAD 0), its first row, limits, length."""
+        ctl = self.chan.ctl
+        self.plan_id += 1
+        ctl[ch.PLAN_HEAD] = 0
+        self.chan.plan_start[:] = head["q0"]
+        self.chan.plan_accel[:] = self._plan_accel
+        ctl[ch.PLAN_ROWS] = head["rows"]
+        self.plan_written = 0
+        ctl[ch.PLAN_ID] = self.plan_id
+
+    def _write_rows(self, i0: int, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+        """Rows i0 .. i0 + len(q) - 1 into the ring, then published (PLAN_HEAD)."""
+        mask = ch.PLAN_CAP - 1
+        w, end, o = i0, i0 + q.shape[0], 0
+        while w < end:
+            s = w & mask
+            m = min(end - w, ch.PLAN_CAP - s)
+            self.chan.plan_q[s : s + m] = q[o : o + m]
+            self.chan.plan_qd[s : s + m] = qd[o : o + m]
+            self.chan.plan_qdd[s : s + m] = qdd[o : o + m]
+            w += m
+            o += m
+        self.plan_written = end
+        self.chan.ctl[ch.PLAN_HEAD] = end  # published after the rows
+
+    def _queue_play(self, pl: Planner) -> None:
+        c, req = self._planner_for  # type: ignore[misc]
+        h = pl.head
+        assert h is not None
+        arg = req.get("file", "")
+        plan_id = self.plan_id
+
+        def done(ok: bool, text: str) -> dict[str, Any]:
+            if not ok:
+                if self._planner is pl:
+                    self._end_planner()
+                return {"ok": False, "message": text}
+            pl.playing = True
+            duration = h["rows"] * h["dt"]
+            self.playback_info = {
+                "kind": h["kind"],
+                "file": None if h["file"] is None else str(h["file"]),
+                "rows": int(h["rows"]),
+                "duration_s": round(duration, 3),
+                "plan_id": plan_id,
+            }
+            if h["kind"] == "replay":
+                to_start = h["segments"][1] * h["dt"]
+                text = (
+                    f"replaying {arg}: {to_start:.2f} s to its start, then "
+                    f"{duration - to_start:.2f} s along it (time scale {h['scale']:.2f})"
+                )
+            elif h["kind"] == "linear":
+                text = f"moving the tool along a line in {duration:.2f} s"
+            else:
+                text = f"moving to the joint target in {duration:.2f} s"
+            return {"ok": True, "message": text, "duration_s": round(duration, 3)}
+
+        c.busy = False
+        self._queue(LoopJob(c, req, ch.REQ_PLAY, mode=h["mode"], arg=plan_id, done=done))
+
+    def _end_planner(self) -> None:
+        """Stop reading the planner (done, refused, or its plan no longer played)."""
+        pl = self._planner
+        if pl is None:
             return
         self._planner = None
         try:
@@ -929,75 +1132,6 @@ class ControlPlane:
         except (KeyError, ValueError):
             pass
         pl.close()
-        c, req = self._planner_for
-        for pb, err in ((pl.result, pl.error),):
-            self._planning = False
-            if pb is None:
-                c.busy = False
-                self._send(c, {"ok": False, "input_error": True, "message": err}, req)
-                continue
-            ctl = self.chan.ctl
-            self.plan_id += 1
-            traj = pb.traj
-            ctl[ch.PLAN_HEAD] = 0
-            self.chan.plan_start[:] = traj.q[0]
-            self.chan.plan_accel[:] = self._plan_accel
-            ctl[ch.PLAN_ROWS] = traj.q.shape[0]
-            self.plan_traj = traj
-            self.plan_written = 0
-            ctl[ch.PLAN_ID] = self.plan_id
-            self._stream_plan()
-            arg = req.get("file", "")
-
-            def done(ok: bool, text: str, pb=pb, arg=arg) -> dict[str, Any]:
-                if not ok:
-                    self.plan_traj = None
-                    return {"ok": False, "message": text}
-                tr = pb.traj
-                self.playback_info = {
-                    "kind": pb.kind,
-                    "file": None if pb.file is None else str(pb.file),
-                    "rows": int(tr.q.shape[0]),
-                    "duration_s": round(tr.duration, 3),
-                    "plan_id": self.plan_id,
-                }
-                if pb.kind == "replay":
-                    to_start = tr.segments[1] * tr.dt
-                    text = (
-                        f"replaying {arg}: {to_start:.2f} s to its start, then "
-                        f"{tr.duration - to_start:.2f} s along it (time scale {tr.scale:.2f})"
-                    )
-                elif pb.kind == "linear":
-                    text = f"moving the tool along a line in {tr.duration:.2f} s"
-                else:
-                    text = f"moving to the joint target in {tr.duration:.2f} s"
-                return {"ok": True, "message": text, "duration_s": round(tr.duration, 3)}
-
-            c.busy = False
-            self._queue(LoopJob(c, req, ch.REQ_PLAY, mode=pb.mode, arg=self.plan_id, done=done))
-
-    def _stream_plan(self) -> None:
-        tr = self.plan_traj
-        if tr is None:
-            return
-        ctl = self.chan.ctl
-        rows = tr.q.shape[0]
-        w = self.plan_written
-        if w >= rows:
-            self.plan_traj = None  # every row is in the ring
-            return
-        tail = int(ctl[ch.PLAN_TAIL]) if int(ctl[ch.PLAN_TAIL_ID]) == self.plan_id else 0
-        end = min(rows, tail + ch.PLAN_CAP)
-        mask = ch.PLAN_CAP - 1
-        while w < end:
-            s = w & mask
-            m = min(end - w, ch.PLAN_CAP - s)
-            self.chan.plan_q[s : s + m] = tr.q[w : w + m]
-            self.chan.plan_qd[s : s + m] = tr.qd[w : w + m]
-            self.chan.plan_qdd[s : s + m] = tr.qdd[w : w + m]
-            w += m
-        self.plan_written = w
-        ctl[ch.PLAN_HEAD] = w  # published after the rows
 
     # ------------------------------------------------------------------ teach
 
@@ -1307,15 +1441,36 @@ class ControlPlane:
             self._rec_block = None
 
 
+_PRELOAD: threading.Thread | None = None
+
+
+def preload_planner() -> None:
+    """Import the taught path's fit (scipy.interpolate, ~2 s of CPU on a loaded machine) in a
+    thread of the control-plane process, once, after it is up: every forked planner inherits
+    it instead of importing it before its first chunk. :class:`Planner` joins the thread
+    before it forks (a fork while another thread holds the import lock would deadlock the
+    child)."""
+    global _PRELOAD
+    if _PRELOAD is None:
+        from importlib import import_module
+
+        _PRELOAD = threading.Thread(
+            target=import_module, args=("scipy.interpolate",), name="hofto-preload", daemon=True
+        )
+        _PRELOAD.start()
+
+
 class Planner:
-    """Planning in a forked child process (ruckig and the taught path's timing hold the GIL
-    for seconds on a 300 s path: in a thread they would hold the socket up). The child sends
-    the trajectory back in chunks of PLAN_CHUNK rows, one message per turn of the server
-    (:meth:`step`), so a stop is never behind more than one chunk."""
+    """Planning in a forked child process (ruckig and the taught path's fit hold the GIL:
+    in a thread they would hold the socket up). The child sends a head (what the plan is,
+    its length and first row), then the rows in chunks of PLAN_CHUNK as it samples them,
+    then "end"; :meth:`step` reads one message."""
 
     def __init__(self, cmd, file, target, q_now, model, limits, dt) -> None:
         import multiprocessing as mp
 
+        if _PRELOAD is not None:
+            _PRELOAD.join()  # no fork while the preload's thread holds the import lock
         ctx = mp.get_context("fork")
         self.conn, child = ctx.Pipe(duplex=False)
         self.proc = ctx.Process(
@@ -1326,13 +1481,16 @@ class Planner:
         )
         self.proc.start()
         child.close()
-        self.result: Any = None
         self.error = ""
-        self._head: dict[str, Any] | None = None
-        self._parts: dict[str, list[np.ndarray]] = {"q": [], "qd": [], "qdd": []}
+        self.head: dict[str, Any] | None = None
+        #: the chunk read by the last step: (first row, q, qd, qdd), taken by the caller
+        self.chunk: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.ended = False
+        self.play_queued = False  # the loop was asked to play it
+        self.playing = False  # the loop took it
 
     def step(self) -> bool:
-        """Read one message if there is one; True when the plan (or its error) is complete."""
+        """Read one message if there is one (True: one was read, or the planner is gone)."""
         if not self.conn.poll():
             if not self.proc.is_alive() and not self.conn.poll():
                 self.error = self.error or "planning failed: the planner process died"
@@ -1345,48 +1503,30 @@ class Planner:
             return True
         if kind == "error":
             self.error = payload
-            return True
-        if kind == "head":
-            self._head = payload
-            return False
-        if kind in self._parts:
-            self._parts[kind].append(payload)
-            return False
-        h = self._head
-        assert h is not None
-        from hofto_hw.control.path_timing import Sampled
-
-        traj = Sampled(
-            h["dt"],
-            np.concatenate(self._parts["q"]),
-            np.concatenate(self._parts["qd"]),
-            np.concatenate(self._parts["qdd"]),
-            h["segments"],
-            h["scale"],
-        )
-        self.result = _Planned(h["kind"], h["mode"], h["file"], traj)
+        elif kind == "head":
+            self.head = payload
+        elif kind == "rows":
+            self.chunk = payload
+        else:
+            self.ended = True
         return True
 
     def close(self) -> None:
         self.conn.close()
+        if not self.ended:
+            self.proc.kill()  # nobody reads the rest of it
         self.proc.join(timeout=1.0)
         if self.proc.is_alive():
             self.proc.kill()
             self.proc.join()
 
 
-@dataclass
-class _Planned:
-    kind: str
-    mode: int
-    file: Path | None
-    traj: Any
-
-
 def _plan_child(conn, parent_end, cmd, file, target, q_now, model, limits, dt) -> None:
-    """The planner process: plan, send the head, the rows in chunks, then "end". It dies
-    with the control plane (PR_SET_PDEATHSIG) and on SIGTERM (not the server's handler), and
-    holds no read end of its pipe (a write to a gone reader fails instead of blocking)."""
+    """The planner process: plan, send the head, the rows in chunks (sampled one chunk at a
+    time: a send waits while the pipe is full, so only what the server takes is sampled),
+    then "end". It dies with the control plane (PR_SET_PDEATHSIG) and on SIGTERM (not the
+    server's handler), and holds no read end of its pipe (a write to a gone reader fails
+    instead of blocking)."""
     import signal
 
     parent_end.close()
@@ -1410,11 +1550,13 @@ def _plan_child(conn, parent_end, cmd, file, target, q_now, model, limits, dt) -
         pass
     try:
         if cmd == "replay":
-            pb = teach.plan_replay(Path(file), q_now, model, limits, dt)
-        elif cmd == "move_linear":
-            pb = teach.plan_linear(target, q_now, model, limits, dt)
+            plan, kind, mode, path = teach.stream_replay(Path(file), q_now, model, limits, dt)
         else:
-            pb = teach.plan_move(target, q_now, model, limits, dt)
+            if cmd == "move_linear":
+                pb = teach.plan_linear(target, q_now, model, limits, dt)
+            else:
+                pb = teach.plan_move(target, q_now, model, limits, dt)
+            plan, kind, mode, path = pb.traj, pb.kind, pb.mode, pb.file
     except UserError as exc:
         conn.send(("error", str(exc)))
         conn.close()
@@ -1423,15 +1565,18 @@ def _plan_child(conn, parent_end, cmd, file, target, q_now, model, limits, dt) -
         conn.send(("error", f"planning failed: {type(exc).__name__}: {exc}"))
         conn.close()
         return
-    tr = pb.traj
-    head = {"kind": pb.kind, "mode": pb.mode, "file": pb.file, "dt": tr.dt,
-            "segments": list(tr.segments), "scale": float(tr.scale)}  # fmt: skip
-    conn.send(("head", head))
-    for name in ("q", "qd", "qdd"):
-        a = getattr(tr, name)
-        for i in range(0, a.shape[0], PLAN_CHUNK):
-            conn.send((name, np.ascontiguousarray(a[i : i + PLAN_CHUNK])))
-    conn.send(("end", None))
+    rows = plan.n_rows
+    head = {"kind": kind, "mode": mode, "file": path, "dt": plan.dt, "rows": rows,
+            "segments": list(plan.segments), "scale": float(plan.scale),
+            "q0": np.array(plan.rows(0, 1)[0][0])}  # fmt: skip
+    try:
+        conn.send(("head", head))
+        for i in range(0, rows, PLAN_CHUNK):
+            q, qd, qdd = plan.rows(i, min(rows, i + PLAN_CHUNK))
+            conn.send(("rows", (i, q, qd, qdd)))
+        conn.send(("end", None))
+    except (BrokenPipeError, OSError):  # the server stopped reading: the plan is not played
+        pass
     conn.close()
 
 

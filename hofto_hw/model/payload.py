@@ -67,6 +67,19 @@ def payload_from_config(cfg: object) -> Payload:
     return Payload(float(cfg.mass), tuple(cfg.com), inertia)  # type: ignore[attr-defined,arg-type]
 
 
+def blend(a: Payload, b: Payload, s: float) -> Payload:
+    """The point-mass payload a fraction ``s`` in [0, 1] of the way from ``a`` to ``b``: mass
+    and first moment (mass x com) interpolated linearly, so the holding torque, linear in
+    them, moves linearly from a's to b's (a payload ramp's intermediate steps)."""
+    m = (1.0 - s) * a.mass + s * b.mass
+    h = (1.0 - s) * a.mass * np.asarray(a.com) + s * b.mass * np.asarray(b.com)
+    if m > 0.0:
+        c = h / m
+    else:  # nothing held on either side yet: where it will be
+        c = (1.0 - s) * np.asarray(a.com) + s * np.asarray(b.com)
+    return Payload(float(m), (float(c[0]), float(c[1]), float(c[2])))
+
+
 #: numbers of one link inertia in the native layout (hofto_hw.model.native.model_numbers):
 #: mass [kg], centre of mass (3) [m], rotational inertia about it Ixx, Ixy, Iyy, Ixz, Iyz,
 #: Izz [kg·m²], all in the frame of the link's joint

@@ -157,6 +157,8 @@ class _Writer:
         counted = False
         if not self.file.messages:
             self.file.origin_ns = self.origin_ns or 0
+        if self.track is not None and len(events):  # a profile switch: before its ticks
+            self.track.note_events(events)
         try:
             if len(ticks):
                 self.file.write_ticks(ticks)

@@ -67,8 +67,10 @@ def level_names(mon: Any) -> tuple[str, ...]:
 
 class ThresholdTrack:
     """The writer process's streaming version: built from what a LogSpec carries (attachments,
-    metadata, joint names, observers); :meth:`update` takes drained tick records in order.
-    LookupError when the run's detector is not the two-level monitor."""
+    metadata, joint names, observers); :meth:`update` takes drained tick records in order,
+    :meth:`note_events` the drained safety events (a safety profile switch scales the
+    thresholds from the tick after its own, as in the loop). LookupError when the run's
+    detector is not the two-level monitor."""
 
     def __init__(
         self,
@@ -101,6 +103,18 @@ class ThresholdTrack:
         rate = float(metadata.get("rate_hz", "1000") or 1000.0)
         self._period = float(np.int64(round(1e9 / rate))) * 1e-9
         self._t_last: float | None = None
+        #: profile switches not yet taken: (tick, collision scale), in tick order
+        self.switches: list[tuple[int, float]] = []
+
+    def note_events(self, events: np.ndarray) -> None:
+        """Drained safety events (EVENT_DTYPE records): keep the profile switches. The writer
+        drains the tick ring before the event ring, so a switch after tick k is here before
+        (or with) the batch holding tick k + 1."""
+        from safety.stop import EventKind
+
+        for ev in events[events["kind"] == int(EventKind.PROFILE)]:
+            self.switches.append((int(ev["tick"]), float(ev["value"])))
+        self.switches.sort()
 
     def update(self, ticks: np.ndarray) -> np.ndarray:
         """Thresholds (N, L, n) [N·m] for tick records (N,) (see track_thresholds)."""
@@ -112,5 +126,5 @@ class ThresholdTrack:
         self._t_last = float(t[-1])
         return track_thresholds(
             self.mon, self.row, ticks["tau_ext"], ticks["qd"], ticks["qdd_cmd"], h,
-            ticks["tick"], ticks["monitored"],
+            ticks["tick"], ticks["monitored"], self.switches,
         )  # fmt: skip

@@ -192,6 +192,19 @@ def drop_realtime() -> None:
         pass
 
 
+def cpus_beside_loop() -> list[int] | None:
+    """The CPUs a helper process of the loop (the control plane, its planner) should run on:
+    those outside the calling loop's affinity when :func:`setup` pinned it to some of them
+    (``loop.cpus``) and others are left. None (keep the inherited affinity) when the loop is
+    not pinned (it may run anywhere: nothing to keep off), or is pinned to every CPU (one
+    CPU: the loop's SCHED_FIFO preempts the helper there, which runs at a nice value)."""
+    mine = os.sched_getaffinity(0)
+    rest = set(range(os.cpu_count() or 1)) - mine
+    if not rest or mine == set(range(os.cpu_count() or 1)):
+        return None
+    return sorted(rest)
+
+
 def collect_before_loop() -> None:
     """Collect once and freeze what is left (start-up objects), so the collection that
     :class:`quiet_gc` makes when the loop starts has almost nothing to scan (measured:

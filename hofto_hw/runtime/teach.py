@@ -25,9 +25,11 @@ import numpy as np
 from hofto_hw.control.joint_motion import MOVE_TO, REPLAY
 from hofto_hw.control.path_timing import (
     Limits,
+    ReplayPlan,
     Sampled,
     TrajectoryPlayer,
     jerk_limited_move,
+    replay_plan,
     replay_trajectory,
 )
 from hofto_hw.control.taught_path import (
@@ -225,6 +227,15 @@ def plan_replay(
     another robot, out of limits), plan the move to its start and the time-scaled path."""
     path = load_taught_path(file, model)
     return plan_path(path, q_now, limits, dt, file=Path(file))
+
+
+def stream_replay(
+    file: Path | str, q_now: np.ndarray, model: RobotModel, limits: Limits, dt: float
+) -> tuple[ReplayPlan, str, int, Path]:
+    """:func:`plan_replay` for a planner that streams the rows: the plan (the fit and its
+    scale done, the rows sampled on demand), its kind, mode and file."""
+    path = load_taught_path(file, model)
+    return replay_plan(q_now, path.t, path.q, limits, dt), "replay", REPLAY, Path(file)
 
 
 def plan_path(

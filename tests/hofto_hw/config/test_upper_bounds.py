@@ -133,3 +133,24 @@ def test_command_numbers_with_a_bound_by_design(argv, words, tmp_path: Path) -> 
     assert code is not None, f"{argv[:3]} ran on"
     one_line_error(code, err, words)
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "bound"),
+    [
+        ("ramp_s", 60.0, "less than or equal to 5"),
+        ("ramp_s", -0.1, "greater than or equal to 0"),
+        ("holding_fraction", 1.5, "less than or equal to 1"),
+        ("holding_fraction", 0.0, "greater than 0"),
+    ],
+)
+def test_the_payload_ramp_and_holding_fraction_are_bounded(
+    tmp_path: Path, field: str, value: float, bound: str
+) -> None:
+    path = _variant(tmp_path, lambda d: d["robot"]["rated_payload"].update({field: value}))
+    with pytest.raises(ConfigError) as exc:
+        load_config(path)
+    msg = str(exc.value)
+    assert f"robot.rated_payload.{field}" in msg and bound in msg and "\n" not in msg, msg
+    ok = _variant(tmp_path, lambda d: d["robot"]["rated_payload"].update(ramp_s=0.0))
+    assert load_config(ok).robot.rated_payload.ramp_s == 0.0  # 0: one step

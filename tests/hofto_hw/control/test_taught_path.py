@@ -126,3 +126,39 @@ def test_replay_joins_move_and_path_without_jerk_jump(er3a_model) -> None:
     tr = replay_trajectory(er3a_model.home - 0.2, path.t, path.q, lim, DT)
     assert tr.segments[1] > 0
     assert np.all(np.abs(np.diff(tr.qdd, axis=0)) / DT <= lim.jerk * 1.01)
+
+
+def test_a_bad_line_is_named_by_the_checked_read(er3a_model, tmp_path) -> None:
+    """The fast reader takes a whole good file; any bad line falls back to the line-by-line
+    read, which names it (a word, a non-finite number, a blank line is skipped)."""
+    good = save_taught_path(_recorded(er3a_model, 0.1).path(er3a_model), tmp_path / "p.csv")
+    lines = good.read_text().splitlines()
+    blank = tmp_path / "blank.csv"
+    blank.write_text("\n".join([*lines[:6], "", *lines[6:]]) + "\n")
+    np.testing.assert_array_equal(
+        load_taught_path(blank, er3a_model).q, load_taught_path(good, er3a_model).q
+    )
+    for bad, message in (("abc", "line 6: not a number"), ("nan", "line 6: non-finite value")):
+        f = tmp_path / f"{bad}.csv"
+        f.write_text("\n".join([*lines[:5], lines[5].replace(lines[5].split(",")[2], bad, 1),
+                                *lines[6:]]))  # fmt: skip
+        with pytest.raises(UserError, match=message):
+            load_taught_path(f, er3a_model)
+
+
+def test_a_replay_plan_sampled_in_pieces_is_the_whole_trajectory(er3a_model) -> None:
+    """replay_plan's rows, taken in chunks of any size (as the planner streams them), are
+    bit for bit replay_trajectory's: the move to the start, then the scaled path."""
+    from hofto_hw.control.path_timing import replay_plan
+
+    path = _recorded(er3a_model).path(er3a_model)
+    q_now = er3a_model.home + 0.1
+    whole = replay_trajectory(q_now, path.t, path.q, _limits(), DT)
+    plan = replay_plan(q_now, path.t, path.q, _limits(), DT)
+    assert plan.n_rows == whole.q.shape[0] and plan.segments == whole.segments
+    assert plan.segments[1] > 0 and plan.scale == whole.scale
+    for size in (1, 256, 777, plan.n_rows):
+        parts = [plan.rows(i, min(plan.n_rows, i + size)) for i in range(0, plan.n_rows, size)]
+        for k, name in enumerate(("q", "qd", "qdd")):
+            got = np.vstack([p[k] for p in parts])
+            np.testing.assert_array_equal(got, getattr(whole, name))

@@ -99,3 +99,40 @@ def test_the_runs_figure_scales_its_thresholds_at_the_switch(run_log) -> None:
     assert after.sum() > 1000  # (the switch may come before the monitor's first tick)
     np.testing.assert_array_equal(tracks[0][before], tracks[1][before])
     np.testing.assert_allclose(tracks[0][after], 0.8 * tracks[1][after], rtol=1e-12)
+
+
+def test_the_live_thresholds_topic_follows_the_profile_switch(run_log) -> None:
+    """/safety/thresholds, written by the recorder's writer process while the service ran,
+    carries the switched profile's thresholds from the tick after the switch on: equal to the
+    whole log's re-computation with the switch, and 0.8 of the unswitched one after it."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from hofto_hw.recording import schemas as s
+    from hofto_hw.replay.levels_track import detector_levels, track_thresholds
+    from hofto_hw.replay.reproduce import loop_dt, profile_switches
+
+    log = read_flight_log(run_log)
+    ((tick, _scale),) = profile_switches(log)
+    with run_log.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        msgs = {
+            m.sequence: (msg.contact, msg.collision)
+            for _s, _c, m, msg in reader.iter_decoded_messages(topics=[s.THRESHOLDS_TOPIC])
+        }
+    est = np.stack([log.tau_ext[o] for o in log.observers], axis=1)
+    h = loop_dt(log, 1000.0)
+    h = np.where(log.sample_dt > 0.0, log.sample_dt, h) if log.sample_dt is not None else h
+    tracks = []
+    for switches in (profile_switches(log), []):
+        _, row, mon = detector_levels(log)
+        mon.reset()
+        args = (est, log.qd, log.qdd_cmd, h, log.ticks, log.monitored)
+        tracks.append(track_thresholds(mon, row, *args, switches))
+    judged = np.flatnonzero(log.monitored)
+    assert sorted(msgs) == [int(t) & 0xFFFFFFFF for t in log.ticks[judged]]
+    live = np.array([msgs[int(t) & 0xFFFFFFFF] for t in log.ticks[judged]])
+    after = log.ticks[judged] > tick
+    assert after.sum() > 1000
+    np.testing.assert_array_equal(live, tracks[0][judged])
+    np.testing.assert_allclose(live[after], 0.8 * tracks[1][judged][after], rtol=1e-12)
