@@ -25,7 +25,7 @@ In the child, from its first line: SIGINT is ignored (the loop's, e.g. Ctrl-C to
 group) and SIGTERM only noted (``term[0]``, the monotonic time; each child's own grace period
 counts from it): the loop's process decides when its helpers end. An empty pipe (the parent
 gave up or died before sending) ends the child silently with exit 0. Its kernel name
-(/proc/PID/comm, ``ps -o comm``) is ``hofto-hw-writer`` or ``hofto-hw-control``.
+(/proc/PID/comm, ``ps -o comm``) is ``hofto-hw-writer`` or ``hofto-hw-ctrl``.
 
 A further helper is one more ``Prestarted("package.module", fork=True)`` in
 :class:`hofto_hw.runtime.startup.Helpers` and a ``child_main(args, fds, term)`` in its module.
@@ -239,15 +239,16 @@ def _receive(fd_channel: int | None, stdin: Any) -> tuple[Any, list[int]] | None
 
 def process_name(module: str) -> str:
     """The helper's name in /proc/PID/comm (ps -o comm, top): ``hofto-hw-writer`` for
-    hofto_hw.recording.writer_process, ``hofto-hw-control`` for the control plane; a forked
+    hofto_hw.recording.writer_process, ``hofto-hw-ctrl`` for the control plane; a forked
     child's command line is its parent's."""
-    return {"writer_process": "hofto-hw-writer", "process": "hofto-hw-control"}.get(
+    return {"writer_process": "hofto-hw-writer", "process": "hofto-hw-ctrl"}.get(
         module.rsplit(".", 1)[-1], "hofto-hw-helper"
     )
 
 
 def _set_name(name: str) -> None:
-    """prctl(PR_SET_NAME): the kernel's name of this process (15 bytes); best effort."""
+    """prctl(PR_SET_NAME): the kernel's name of this process (15 bytes: the names above
+    fit); best effort."""
     try:
         import ctypes
 

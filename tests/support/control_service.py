@@ -116,3 +116,21 @@ class LeaseHolder:
         r = self.conn.call({"cmd": "enable", "on": False})
         self.conn.close()
         return r
+
+
+def children(pid: int) -> list[tuple[int, str]]:
+    """(pid, kernel name and command line) of ``pid``'s children (a helper forked by the run
+    has its parent's command line and its own name: hofto-hw-writer, hofto-hw-ctrl)."""
+    out = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            stat = (d / "stat").read_text()
+            cmd = (d / "comm").read_text().strip() + " "
+            cmd += (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            out.append((int(d.name), cmd))
+    return out

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from support.control_service import Service, socket_config, wait_for
+from support.control_service import Service, children, socket_config, wait_for
 
 from hofto_hw.client import Robot
 from hofto_hw.runtime.realtime import cpus_beside_loop
@@ -43,21 +43,6 @@ def test_cpus_beside_a_pinned_loop_are_the_others() -> None:
     assert _in_child(ALL) is None  # pinned to every CPU: nothing left beside it
 
 
-def _children(pid: int) -> list[tuple[int, str]]:
-    out = []
-    for d in Path("/proc").iterdir():
-        if not d.name.isdigit():
-            continue
-        try:
-            stat = (d / "stat").read_text()
-            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
-        except OSError:
-            continue
-        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-            out.append((int(d.name), cmd))
-    return out
-
-
 @pytest.mark.skipif(len(ALL) < 2 or len(ALL) != os.cpu_count(), reason="needs 2+ CPUs, all ours")
 def test_a_pinned_loop_s_control_plane_and_planner_run_on_the_other_cpus(tmp_path: Path) -> None:
     path = socket_config(tmp_path)
@@ -68,13 +53,13 @@ def test_a_pinned_loop_s_control_plane_and_planner_run_on_the_other_cpus(tmp_pat
     svc = Service(tmp_path, "--hold", "--no-collision", config=path, log=False)
     try:
         assert os.sched_getaffinity(svc.proc.pid) == {loop_cpu}  # the loop's process
-        (cp,) = [pid for pid, cmd in _children(svc.proc.pid) if "control_plane.process" in cmd]
+        (cp,) = [pid for pid, cmd in children(svc.proc.pid) if "hofto-hw-ctrl" in cmd]
         assert os.sched_getaffinity(cp) == set(ALL) - {loop_cpu}
         with Robot.connect(socket=svc.sock) as robot:
             wait_for(lambda: robot.state().mode == "hold", "hold")
             q0 = robot.state().q_cmd
             m = robot.move_joints(q0 + 0.1, speed=0.1, acceleration=0.1, wait=False)
-            planners = [pid for pid, _ in _children(cp)]  # forked per plan, gone when sent
+            planners = [pid for pid, _ in children(cp)]  # forked per plan, gone when sent
             for pid in planners:
                 try:
                     assert os.sched_getaffinity(pid) == set(ALL) - {loop_cpu}

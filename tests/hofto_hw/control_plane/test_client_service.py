@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support.control_service import ROOT, Service, socket_config, wait_for
+from support.control_service import ROOT, Service, children, socket_config, wait_for
 
 from hofto_hw.client import Refused, Robot
 
@@ -195,30 +195,12 @@ def test_safety_profile_switch_refused_while_moving_accepted_at_standstill(tmp_p
     assert ev[0].joint == ["contact-task", "normal", "reduced"].index("reduced")
 
 
-def _children(pid: int) -> list[tuple[int, str]]:
-    """(pid, kernel name and command line) of ``pid``'s children (a helper forked by the run
-    has its parent's command line and its own name: hofto-hw-writer, hofto-hw-control)."""
-    out = []
-    for d in Path("/proc").iterdir():
-        if not d.name.isdigit():
-            continue
-        try:
-            stat = (d / "stat").read_text()
-            cmd = (d / "comm").read_text().strip() + " "
-            cmd += (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
-        except OSError:
-            continue
-        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-            out.append((int(d.name), cmd))
-    return out
-
-
 def test_the_control_plane_watches_the_flight_recorder(tmp_path: Path) -> None:
     """The log watch runs in the control plane, not in a thread of the loop's process: a
     dead writer process still reaches the loop as log_failure."""
     svc = Service(tmp_path, "--hold", "--no-collision")
     try:
-        (writer,) = [p for p, cmd in _children(svc.proc.pid) if "hofto-hw-writer" in cmd]
+        (writer,) = [p for p, cmd in children(svc.proc.pid) if "hofto-hw-writer" in cmd]
         with Robot.connect(socket=svc.sock) as robot:
             assert "log_failure" not in robot.state().faults
             os.kill(writer, signal.SIGKILL)
