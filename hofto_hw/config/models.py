@@ -11,7 +11,7 @@ These models are for loading and checking files only; nothing here runs inside t
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
@@ -355,8 +355,12 @@ class LoopConfig(FileModel):
         "preferred runs the Python reference instead and says so once",
     )
     priority: int = Field(50, ge=1, le=99, description="SCHED_FIFO priority")
-    cpus: list[Annotated[int, Field(ge=0)]] | None = Field(
-        None, description="CPU affinity of the loop; None = leave as is"
+    cpus: list[int] | str | None = Field(
+        None,
+        description="CPU affinity of the loop: a list of CPUs, 'last' (the highest-numbered "
+        "CPU the service may use, when it may use two or more: the control plane, its "
+        "planner and the flight recorder's writer then run on the others; on one CPU the "
+        "affinity is left as is and the run says so), or None = leave as is",
     )
     cpu_latency_us: int | None = Field(
         0,
@@ -373,6 +377,16 @@ class LoopConfig(FileModel):
         "top-level observers section (e.g. gains for a faster detection); None = those "
         "(`hofto-hw run` prints which it runs); empty is refused",
     )
+
+    @field_validator("cpus", mode="before")
+    @classmethod
+    def _cpus_word(cls, v: Any) -> Any:
+        """One message for any bad value (not one per member of the union)."""
+        if v is None or v == "last":
+            return v
+        if isinstance(v, list) and v and all(type(c) is int and c >= 0 for c in v):
+            return v
+        raise ValueError("expected a list of CPU numbers (integers >= 0), 'last' or null")
 
     @field_validator("observers")
     @classmethod

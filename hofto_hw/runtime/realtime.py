@@ -76,6 +76,7 @@ class RealtimeReport:
     cpus: list[int] | None = None
     cpu_latency_us: int | None = None  # the wake-up latency limit held [µs]; None = none
     missing: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)  # said in describe(), not missing
 
     def describe(self) -> str:
         parts = [
@@ -86,7 +87,7 @@ class RealtimeReport:
             parts.append(f"CPUs {self.cpus}")
         if self.cpu_latency_us is not None:
             parts.append(f"CPU wake-up latency <= {self.cpu_latency_us} µs")
-        return ", ".join(parts)
+        return ", ".join(parts + self.notes)
 
 
 def _try_fifo(priority: int) -> str | None:
@@ -140,14 +141,28 @@ def release_cpu_latency() -> None:
         os.close(fd)
 
 
+def loop_cpus(cpus: list[int] | str | None) -> list[int] | None:
+    """``loop.cpus`` as CPUs: ``"last"`` is the highest-numbered CPU this process may run on
+    when it may run on two or more (the helpers keep the others), else None (one CPU: the
+    loop's SCHED_FIFO preempts them there)."""
+    if cpus != "last":
+        return cpus  # type: ignore[return-value]
+    mine = sorted(os.sched_getaffinity(0))
+    return [mine[-1]] if len(mine) >= 2 else None
+
+
 def setup(
-    mode: str, priority: int, cpus: list[int] | None, cpu_latency_us: int | None = None
+    mode: str, priority: int, cpus: list[int] | str | None, cpu_latency_us: int | None = None
 ) -> RealtimeReport:
     """Apply ``loop.realtime`` to the calling thread (see module docstring);
-    ``cpu_latency_us`` None requests no latency limit."""
+    ``cpus``: ``loop.cpus`` (:func:`loop_cpus`); ``cpu_latency_us`` None requests no latency
+    limit."""
     rep = RealtimeReport()
     if mode == "off":
         return rep
+    if cpus == "last" and loop_cpus(cpus) is None:
+        rep.notes.append("loop.cpus: last, but this process may run on one CPU only: not pinned")
+    cpus = loop_cpus(cpus)
     for problem in (_try_fifo(priority), _try_mlockall()):
         if problem is not None:
             rep.missing.append(problem)

@@ -113,3 +113,29 @@ def test_sleep_until_a_passed_deadline_makes_no_system_call(monkeypatch) -> None
     realtime.sleep_until(deadline)
     assert calls == [(realtime.CLOCK_MONOTONIC, realtime.TIMER_ABSTIME)]
     assert time.monotonic_ns() >= deadline  # absolute: never early
+
+
+def test_loop_cpus_last_is_the_highest_cpu_of_two_or_more_else_left_alone(monkeypatch) -> None:
+    monkeypatch.setattr(realtime.os, "sched_getaffinity", lambda pid: {0, 1, 3})
+    assert realtime.loop_cpus("last") == [3]
+    assert realtime.loop_cpus([0]) == [0] and realtime.loop_cpus(None) is None
+    monkeypatch.setattr(realtime.os, "sched_getaffinity", lambda pid: {2})
+    assert realtime.loop_cpus("last") is None  # one CPU: the helpers share it, said by setup
+
+
+def test_loop_cpus_last_is_accepted_by_the_config_and_a_word_else_is_refused(tmp_path) -> None:
+    import yaml
+
+    from hofto_hw.config.loader import load_config
+
+    src = Path(__file__).resolve().parents[3] / "configs" / "er3a_service.yaml"
+    cfg = load_config(src)
+    assert cfg.loop.cpus == "last"
+    data = yaml.safe_load(src.read_text())
+    data["robot"]["urdf"] = str((src.parent / data["robot"]["urdf"]).resolve())
+    data["loop"]["cpus"] = "first"
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError) as err:
+        load_config(bad)
+    assert "loop.cpus" in str(err.value) and "\n" not in str(err.value)
