@@ -1,9 +1,9 @@
-"""The fused tick (hofto_hw/runtime/fused.py) against the reference Tick.step, tick by tick:
-two identical systems, one taking the fused call on quiet ticks and one forced onto the
-reference, through moves, holds, a collision and its stop, a reset, drag, lost frames,
-stalls, a drive fault, a NaN measurement and mode changes. Every tick record, every estimate
-and the state every part keeps must be the same bit for bit, and the fused call must have
-run on most ticks."""
+"""The compiled tick (hofto_hw/runtime/fused.py) against the reference Tick.step, tick by
+tick: two identical systems, one taking the compiled call (sections 2-3 on every tick, the
+rest on quiet ticks) and one forced onto the reference, through moves, holds, a collision and
+its stop, a reset, drag, lost frames, stalls, a drive fault, a NaN measurement and mode
+changes. Every tick record, every estimate and the state every part keeps must be the same
+bit for bit, the compiled call must have run on (nearly) every tick and finished most."""
 
 from __future__ import annotations
 
@@ -83,15 +83,25 @@ def _compare(fused: Any, reference: Any, k: int) -> None:
         assert x == y, f"tick {k}: state item {i} differs"
 
 
-def _lockstep(fused: Any, reference: Any, ticks: int, event: Any) -> None:
+def _lockstep(fused: Any, reference: Any, ticks: int, event: Any) -> int:
+    """Both systems through ``ticks`` ticks; the compiled calls the fused system made."""
     period = 1.0 / fused.rate_hz
     now = 0.0
+    calls = [0]
+    call = fused.tick._fz_call
+
+    def counted(*args: Any) -> int:
+        calls[0] += 1
+        return call(*args)
+
+    fused.tick._fz_call = counted
     for k in range(1, ticks + 1):
         dt = event(k, period)
         now += dt
         for s in (fused, reference):
             s.tick.step(now, dt, 1.5, 0, 2.5)
         _compare(fused, reference, k)
+    return calls[0]
 
 
 def test_the_run_scenario_is_the_reference_tick_by_tick() -> None:
@@ -109,8 +119,11 @@ def test_the_run_scenario_is_the_reference_tick_by_tick() -> None:
                     s.bus.drop_cycles(1 + k % 2)  # lost frames: stale samples, then a gap
             return period * 2 if k in (30, 2700, 6300) else period  # stalls
 
-        _lockstep(fused, reference, 6500, event)
+        calls = _lockstep(fused, reference, 6500, event)
         t = fused.tick
+        # sections 2-3 compiled on every tick (the stop, the drag, the stalls and lost frames)
+        # but the first, whose reference binds the snapshot to the drive group's sample
+        assert calls == 6499, calls
         assert t.n_stops >= 1, "the collision did not stop the arm"
         assert t.drag is not None and t.drag.friction is not None
         assert t.drag.friction.seconds > 0.0  # the friction learning ran (fused)
@@ -162,8 +175,10 @@ def test_faults_resets_and_mode_changes_are_the_reference_tick_by_tick() -> None
         return period * 3 if k in (900, 1700) else period
 
     try:
-        _lockstep(fused, reference, 4500, event)
+        calls = _lockstep(fused, reference, 4500, event)
         t = fused.tick
+        # every tick but those whose model changed under the call (the reference takes them)
+        assert calls > 4490, calls
         assert t.n_stops >= 3, t.n_stops  # the drive fault, the NaN, the stop request
         assert t.stop.latched == 0, t.stop.latched_names()
         # the stops, the resets' settling, the ramps to standstill and a move whose model
