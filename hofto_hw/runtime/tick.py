@@ -308,12 +308,17 @@ class Tick:
         status = g.exchange()
         stage = READ
         if self._front_ok:
+            # missed deadlines keep a tick quiet while the overrun streak stays short of its
+            # fault (counted below, after the call: nothing the call does depends on it)
             quiet = self._fuse_quiet and not (
-                status or missed or stop.active or self.stop_requested or self.log_failure
+                status or stop.active or self.stop_requested or self.log_failure
                 or self.reset_requested or self.mode_request >= 0
+                or self.overrun_streak + missed >= self.overrun_limit
             )  # fmt: skip
             stage = self._fused_step(dt, wakeup_us, compute_us, quiet)
             if stage == DONE:
+                if missed or self.overrun_streak:
+                    self._overrun(missed)  # counted only: the streak stays short of its fault
                 self._push()  # 7. the record (filled by the fused call) into the sink
                 return
         if stage == READ:
@@ -571,7 +576,6 @@ class Tick:
             and self.recording is None
             and self.playback is None
             and self._fault_resetting == 0
-            and self.overrun_streak == 0
             and m.mode != DRAG
             and snap.finite
             and m.version == self._ff_version
