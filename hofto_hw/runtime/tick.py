@@ -309,16 +309,17 @@ class Tick:
         stage = READ
         if self._front_ok:
             # missed deadlines keep a tick quiet while the overrun streak stays short of its
-            # fault (counted below, after the call: nothing the call does depends on it)
+            # fault (counted after the call, as _requests would: nothing the call does
+            # depends on it; _requests is skipped from CONTROL on)
             quiet = self._fuse_quiet and not (
                 status or stop.active or self.stop_requested or self.log_failure
                 or self.reset_requested or self.mode_request >= 0
                 or self.overrun_streak + missed >= self.overrun_limit
             )  # fmt: skip
             stage = self._fused_step(dt, wakeup_us, compute_us, quiet)
+            if stage >= CONTROL and (missed or self.overrun_streak):
+                self._overrun(missed)  # counted only: the streak stays short of its fault
             if stage == DONE:
-                if missed or self.overrun_streak:
-                    self._overrun(missed)  # counted only: the streak stays short of its fault
                 self._push()  # 7. the record (filled by the fused call) into the sink
                 return
         if stage == READ:
