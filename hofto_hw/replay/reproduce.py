@@ -40,7 +40,7 @@ from hofto_hw.replay.flight_log import FlightLog, RecordedEvent
 from hofto_hw.replay.runner import run_observer
 from hofto_hw.replay.thresholds import ThresholdsFile, read_thresholds
 from hofto_hw.runtime.compose import build_model, loop_observer_table
-from hofto_hw.runtime.tick import gap_steps, lerp
+from hofto_hw.runtime.tick_kernels import gap_steps, lerp
 
 #: event kind name of a collision stop (the safety fault class's name in event_kinds)
 COLLISION_KIND = "collision"
@@ -387,7 +387,7 @@ def _run_with_dt(
         elif steps == 1:
             est[k] = obs.update(log.q[k], log.qd[k], log.tau[k], hk)
             last = k
-        else:  # a stall: the loop integrated the gap in one-cycle steps (Tick._observe)
+        else:  # a stall: the loop integrated the gap in one-cycle steps (tick_kernels.gap_steps)
             h = hk / steps
             for s in range(1, steps + 1):
                 a = s / steps

@@ -1,9 +1,11 @@
-"""The tick's common path as one compiled call (numba), calling the parts' own kernels.
+"""The tick after the exchange as one compiled call (numba), calling the parts' own kernels.
 
-:func:`fused_tick` does, for a tick where nothing unusual can happen, what
-:meth:`hofto_hw.runtime.tick.Tick.step` does after the exchange, in the same order and through
-the same kernels (not copies of them): the drive read (``read_si``), the dynamics snapshot
-(``snapshot_native``), the observers (``bank_update``), the tick's flags (``tick_flags``), the
+:func:`fused_tick` runs on every tick (once built): the drive read (``read_si``) and the
+dynamics snapshot and observers (``snapshot_native``, ``bank_update``) over the sample
+interval, a lost sample held and a stall integrated in one-cycle sub-steps. On a tick where
+nothing unusual can happen (the caller's ``quiet``) it goes on, in the order of
+:meth:`hofto_hw.runtime.tick.Tick.step` and through the same kernels (not copies of them):
+the tick's flags (``tick_flags``), the
 drive scan (``drive_scan``), the limit checks (``limits_quiet``), the collision monitor
 (``monitor_tick``), the friction learning (``friction_learn``), the demo path (``path_eval``),
 the feed-forward (``inverse_dynamics_native``), the command (``command_raw``) and the record
@@ -45,8 +47,10 @@ from hofto_hw.runtime.tick_kernels import (
     ESTIMATES_FINITE,
     POWERED,
     command_dt,
+    gap_steps,
     judged,
     jump_gap,
+    lerp,
     tick_flags,
 )
 from safety.collision.kernel import monitor_tick
@@ -60,10 +64,12 @@ _fade_in = K.jit(fade_in)
 _command_dt = K.jit(command_dt)
 _jump_gap = K.jit(jump_gap)
 _judged = K.jit(judged)
+_gap_steps = K.jit(gap_steps)
+_lerp = K.jit(lerp)
 
 #: stage codes (fused_tick's answer): where the Python reference goes on with this tick
-READ = 0  # only the drive read was done: the reference from the snapshot on (section 3)
-SAFETY = 1  # sections 1-3b done: the reference from the safety checks on (section 4)
+READ = 0  # the call did not run (the model changed under it): the reference from the read on
+SAFETY = 1  # sections 1-3 done: the reference from the drag and the safety checks on (3b, 4)
 MONITOR = 2  # the monitor ran and flagged: its report, then the reference from there on
 CONTROL = 3  # section 4 done, nothing reported: the reference from the controller on (5)
 DONE = 4  # everything but the sink's push (and the diagnostics record)
@@ -113,6 +119,7 @@ def tick_state_dtype(n: int, k: int) -> np.dtype:
             ("mflags", i8),  # the monitor's flags
             ("tau_ext", f8, (k, n)),  # the observers' estimates [N·m]
             ("prev", f8, (3, n)),  # last tick's q, qd, tau (a stall's interpolation start)
+            ("interp", f8, (3, n)),  # one stall sub-step's q, qd, tau
             ("q_sent", f8, (n,)),  # position target of the last command [rad]
             ("tau_ff", f8, (n,)),  # the feed-forward torque [N·m]
         ],
@@ -123,6 +130,21 @@ def tick_state_dtype(n: int, k: int) -> np.dtype:
 #: ``kind``: the motion's update this tick (HOLD_STILL: nothing to write; MOVE_PATH: the
 #: compiled demo path; OTHER: the reference runs the controller)
 HOLD_STILL, MOVE_PATH, OTHER = 0, 1, 2
+
+
+@K.jit
+def _observe(
+    obs: Any, sw: np.ndarray, so: np.ndarray, h: int, tau_ext: np.ndarray, x: np.ndarray, dt: float
+) -> bool:
+    """The dynamics snapshot of the sample ``x`` (3, n: q, qd, tau) in the snapshot's
+    workspace ``sw``/``so`` (native model ``h``), then every observer of the bank's tuple
+    ``obs`` by ``dt`` [s], each estimate into its row of ``tau_ext``. Returns ``finite``."""
+    q, qd, tau = x[0], x[1], x[2]
+    finite = snapshot_native(q, qd, tau, sw, so, h)
+    n = q.shape[0]
+    terms = (so[:n], so[n + 2], sw[MK.F], so[n], so[n + 3], so[n + 1])
+    bank_update(obs, terms, tau_ext, q, qd, tau, finite, dt)
+    return finite
 
 
 @K.jit
@@ -138,12 +160,14 @@ def fused_tick(
     tick: int,
     wake: float,
     comp: float,
+    quiet: bool,
 ) -> int:
-    """One tick's common path (module docstring) on the tick's hot record ``hot`` (1,)
+    """One tick after the exchange (module docstring) on the tick's hot record ``hot`` (1,)
     (:func:`hot_dtype`), the observer bank's tuple ``obs``, the process images' bytes ``tx``,
     ``rx`` and the tick record ``rec`` (1,), for loop time ``t_loop`` [s], ``dt`` [s] since the
     last tick, the bus's sample interval ``sdt`` [s] (0: unknown, -1: no sample), tick number
-    ``tick`` and the loop's wake-up and compute times [µs]. Returns the stage code where the
+    ``tick`` and the loop's wake-up and compute times [µs]. Sections 1-3 run on every call;
+    the rest only when the caller found the tick ``quiet``. Returns the stage code where the
     reference goes on."""
     h = hot[0]
     ts = h["tick"]
@@ -152,27 +176,37 @@ def fused_tick(
     # 1-2. the drive read (the exchange is the caller's)
     read_si(tx, si, states)
     sample = si[:3]
-    q, qd, tau = si[0], si[1], si[2]
-    if sdt < 0.0:
-        return READ  # a lost sample: the reference holds the observers
-    obs_dt = sdt if sdt > 0.0 else dt
-    if not obs_dt <= ts["stall"]:
-        return READ  # a stall: the reference integrates the gap in sub-steps
-    # 3. snapshot and observers
-    sw, so = h["snap_w"], h["snap_o"]
-    finite = snapshot_native(q, qd, tau, sw, so, ts["snap_h"])
-    n = q.shape[0]
-    terms = (so[:n], so[n + 2], sw[MK.F], so[n], so[n + 3], so[n + 1])
-    bank_update(obs, terms, tau_ext, q, qd, tau, finite, obs_dt)
-    for i in range(3):
-        for j in range(n):
-            prev[i, j] = sample[i, j]
+    q, qd = si[0], si[1]
+    # 3. snapshot and observers over the sample interval: the bus's when it knows it (DC: the
+    # drives sample at their own clock), else dt; held over a lost sample (sdt < 0: a repeated
+    # sample integrated as new reads as a contact); after a stall the gap in one-cycle steps
+    # from the last sample (each observer is tuned, and stable, for one cycle)
     period = ts["period"]
+    obs_dt = 0.0
+    if sdt >= 0.0:
+        obs_dt = sdt if sdt > 0.0 else dt
+        sw, so, sh = h["snap_w"], h["snap_o"], ts["snap_h"]
+        k = 1 if obs_dt <= ts["stall"] else _gap_steps(obs_dt, period)
+        if k == 1:
+            finite = _observe(obs, sw, so, sh, tau_ext, sample, obs_dt)
+        else:
+            x = ts["interp"]
+            for s in range(1, k + 1):
+                a = s / k
+                for i in range(3):
+                    _lerp(prev[i], sample[i], a, x[i])
+                finite = _observe(obs, sw, so, sh, tau_ext, x, obs_dt / k)
+        for i in range(3):
+            for j in range(q.shape[0]):
+                prev[i, j] = sample[i, j]
+        ts["finite"] = finite
     cmd_dt = _command_dt(dt, period)
     t_cmd = ts["t_cmd"] + cmd_dt
     ts["t_cmd"], ts["cmd_dt"] = t_cmd, cmd_dt
     ts["sample_dt"] = obs_dt
-    ts["finite"] = finite
+    if not quiet or sdt < 0.0:
+        return SAFETY
+    finite = ts["finite"]
     # 4. safety (good data: the caller checked the status; no fault latched or active)
     expect = ts["expect"]
     if drive_scan(states, ts["fault_min"], ts["op_enabled"] if expect else -1) >= 0:
@@ -464,6 +498,6 @@ class FusedTick:
         """Compile the kernel (all of it) with a lost sample, which returns after the drive
         read, here on a copy of the hot record: no state of the tick is touched."""
         hot, obs, tx, rx, rec = self.args()
-        # a lost sample (sdt -1): the read into the copy's rows, then READ; the argument
-        # types the tick passes (Tick._fused_step)
-        fused_tick(hot.copy(), obs, tx, rx, rec, 0.0, 0.0, -1.0, 0, 0.0, 0.0)
+        # a lost sample (sdt -1) on a tick that is not quiet: the read into the copy's rows,
+        # then SAFETY; the argument types the tick passes (Tick._fused_step)
+        fused_tick(hot.copy(), obs, tx, rx, rec, 0.0, 0.0, -1.0, 0, 0.0, 0.0, False)

@@ -9,12 +9,13 @@ observers read it through one :class:`~hofto_hw.observers.bank.ObserverBank` (on
 call for every observer it can fuse, each estimate written into its row of ``tau_ext``; the
 same numbers as each observer's own ``update``, which replay and the demo use).
 
-The common tick (nothing unusual can happen: no request, no fault, no drag, no teach, good
-data) runs sections 2-7 as ONE compiled call (:mod:`hofto_hw.runtime.fused`: the same kernels
-in the same order); when a part finds something that is not quiet the call answers a stage
-and this reference code finishes the same tick from there (the stage methods below serve
-both). ``HOFTO_HW_NO_FUSE=1`` or ``Tick(fuse=False)`` runs the reference on every tick;
-tests/hofto_hw/runtime/test_fused.py checks both tick by tick, bit for bit.
+Sections 2-3 (the read, the snapshot and the observers, a lost sample or a stall included)
+run as ONE compiled call on every tick (:mod:`hofto_hw.runtime.fused`); on the common tick
+(nothing unusual can happen: no request, no fault, no drag, no teach, good data) the same
+call goes on through sections 4-7 in the same order and through the same kernels. When it
+stops early it answers a stage and the stage methods below finish the same tick from there.
+``HOFTO_HW_NO_FUSE=1`` or ``Tick(fuse=False)`` runs these methods on every tick (the
+reference); tests/hofto_hw/runtime/test_fused.py checks both tick by tick, bit for bit.
 
 The :class:`Tick` owns every buffer it writes; the loop (hofto_hw/runtime/loop.py) calls
 :meth:`Tick.step` once per cycle with the real dt. Requests from other threads (stop, reset,
@@ -58,6 +59,7 @@ from hofto_hw.runtime.fused import (
     MOVE_PATH,
     OTHER,
     READ,
+    SAFETY,
     FusedTick,
     fused_tick,
     tick_state_dtype,
@@ -68,8 +70,10 @@ from hofto_hw.runtime.tick_kernels import (
     ESTIMATES_FINITE,
     POWERED,
     command_dt,
+    gap_steps,
     judged,
     jump_gap,
+    lerp,
     tick_flags,
 )
 from safety.bus_health import BusHealth
@@ -83,28 +87,11 @@ _FRA = int(State.FAULT_REACTION_ACTIVE)
 _FAULT = int(State.FAULT)
 STANDSTILL = 0.01  # rad/s: every joint slower than this counts as stopped
 MAX_STOPS = 256  # stop episodes kept for the summary
-MAX_SUBSTEPS = 250  # observer steps over one stalled gap at most (cost: one step each)
 FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
 _DRIVE_CAUSES = (
     (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED) | (1 << Fault.STO) | (1 << Fault.BRAKE)
 )
 _COLLIDED_OR_CONTACT = COLLIDED | CONTACT  # the monitor's flags
-
-
-def gap_steps(dt: float, period: float) -> int:
-    """Observer steps for a tick ``dt`` [s] after the last one: 1, or after a stall (more than
-    1.5 periods) one per period, at most MAX_SUBSTEPS (flight-log replay uses the same)."""
-    if period > 0.0 and dt > 1.5 * period:
-        return min(MAX_SUBSTEPS, round(dt / period))
-    return 1
-
-
-def lerp(prev: np.ndarray, now: np.ndarray, a: float, out: np.ndarray) -> None:
-    """``out = prev + a·(now - prev)`` in place: a stall's sub-step sample (flight-log replay
-    interpolates with the same operations, so its estimates are the loop's bit for bit)."""
-    np.subtract(now, prev, out=out)
-    out *= a
-    out += prev
 
 
 class Tick:
@@ -168,7 +155,7 @@ class Tick:
         self.st["stall"], self.st["two"] = self._stall_dt, 2.0
         self.st["period"] = self.period
         self._prev = self.state["prev"][0]  # last tick's q, qd, tau (interpolation start)
-        self._interp = np.zeros((3, n))  # one substep's q, qd, tau
+        self._interp = self.state["interp"][0]  # one substep's q, qd, tau
         self.tau_ext = self.state["tau_ext"][0]
         self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
         self.tau_ff = self.state["tau_ff"][0]
@@ -265,7 +252,8 @@ class Tick:
         # only on ticks where nothing unusual can happen (_fuse_refresh keeps _fuse_quiet)
         self._fz: FusedTick | None = None
         self._fz_args: tuple[Any, ...] = ()
-        self._fuse_quiet = False
+        self._front_ok = False  # the call may run sections 2-3 (the parts in sync with it)
+        self._fuse_quiet = False  # and the rest of the tick
         self._fz_kind = OTHER
         self.fused_ticks = 0  # ticks the fused call finished
         self._fz_call = fused_tick
@@ -305,9 +293,9 @@ class Tick:
         """One cycle at loop time ``t`` [s], ``dt`` [s] since the last tick (the real one after a
         stall), ``missed`` deadlines before this tick, timings of the loop [µs].
 
-        When nothing unusual can happen this tick, sections 2-7 run as one compiled call
-        (:mod:`hofto_hw.runtime.fused`, the same kernels in the same order); it answers the
-        stage where this reference code takes over for the rest of the tick."""
+        Sections 2-3 run as one compiled call (:mod:`hofto_hw.runtime.fused`), and when
+        nothing unusual can happen this tick sections 4-7 too (the same kernels in the same
+        order); it answers the stage where these methods take over for the rest of the tick."""
         g, stop = self.group, self.stop
         self.tick += 1
         self.t = t
@@ -319,16 +307,25 @@ class Tick:
         # 1. exchange
         status = g.exchange()
         stage = READ
-        if self._fuse_quiet and not (
-            status or missed or stop.active or self.stop_requested or self.log_failure
-            or self.reset_requested or self.mode_request >= 0
-        ):  # fmt: skip
-            stage = self._fused_step(dt, wakeup_us, compute_us)
+        if self._front_ok:
+            # missed deadlines keep a tick quiet while the overrun streak stays short of its
+            # fault (counted after the call, as _requests would: nothing the call does
+            # depends on it; _requests is skipped from CONTROL on)
+            quiet = self._fuse_quiet and not (
+                status or stop.active or self.stop_requested or self.log_failure
+                or self.reset_requested or self.mode_request >= 0
+                or self.overrun_streak + missed >= self.overrun_limit
+            )  # fmt: skip
+            stage = self._fused_step(dt, wakeup_us, compute_us, quiet)
+            if stage >= CONTROL and (missed or self.overrun_streak):
+                self._overrun(missed)  # counted only: the streak stays short of its fault
             if stage == DONE:
                 self._push()  # 7. the record (filled by the fused call) into the sink
                 return
         if stage == READ:
-            self._front(dt)  # 2. joint state, 3. snapshot and observers, 3b. drag
+            self._front(dt)  # 2. joint state, 3. snapshot and observers
+        if stage <= SAFETY:
+            self._drag_front()  # 3b. drag
         if stage < MONITOR:
             self._safety(status, dt)  # 4. safety: decides, latches, picks the stop category
         elif stage == MONITOR:
@@ -342,10 +339,9 @@ class Tick:
     # ------------------------------------------------------------ the tick's stages
 
     def _front(self, dt: float) -> None:
-        """Sections 2-3b: the joint state in SI, the snapshot and the observers, the drag."""
-        g = self.group
-        g.read()  # the SI views of the drive group's buffers
-        q, qd = g.q, g.qd
+        """Sections 2-3: the joint state in SI, the snapshot and the observers (the reference
+        of the compiled call's sections 2-3)."""
+        self.group.read()  # the SI views of the drive group's buffers
 
         # 3. the model terms of this sample, once for every estimator, and 3a. the observers
         # (HOFTO, momentum), each writing its own row; a stall's gap in one-cycle steps
@@ -359,14 +355,18 @@ class Tick:
             obs_dt = sample_dt if sample_dt > 0.0 else dt
             self._observe(obs_dt)
         st = self.st
+        st["finite"] = self.snapshot.finite
         st["sample_dt"] = obs_dt  # into the record with the rest (_record)
         st["cmd_dt"] = cmd_dt = command_dt(dt, self.period)
         st["t_cmd"] += cmd_dt
 
-        # 3b. drag: wrench estimate, enabling input, off-tool check (its stop requests are
-        # safety's to latch below); the reference it integrates is used in step 5
+    def _drag_front(self) -> None:
+        """Section 3b, drag: wrench estimate, enabling input, off-tool check (its stop
+        requests are safety's to latch below); the reference it integrates is used in
+        section 5."""
         if self.motion.mode == DRAG:
-            self._drag_observe(q, qd, cmd_dt)
+            g = self.group
+            self._drag_observe(g.q, g.qd, float(self.st["cmd_dt"]))
         elif self._wrench_set:
             self._wrench.fill(np.nan)
             self._wrench_set = False
@@ -485,7 +485,7 @@ class Tick:
         if self.recording is not None or self.playback is not None:
             self._teach_record(q)
         # the feed-forward is a function of the reference (and the model): a hold reuses it
-        if motion.version != self._ff_version or self._ff_model_changed():
+        if self._ff_model_changed() or motion.version != self._ff_version:
             self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
             self._ff_version = motion.version
         if motion.mode == DRAG:
@@ -495,19 +495,19 @@ class Tick:
 
     # ----------------------------------------------------------- the fused call
 
-    def _fused_step(self, dt: float, wakeup_us: float, compute_us: float) -> int:
-        """The fused call (hofto_hw/runtime/fused.py) on this tick's scalars; its stage code.
-        It keeps t_cmd, sample_dt and since_fresh in the tick's state; the state's other
-        scalars are kept by :meth:`_fuse_refresh`."""
+    def _fused_step(self, dt: float, wakeup_us: float, compute_us: float, quiet: bool) -> int:
+        """The fused call (hofto_hw/runtime/fused.py) on this tick's scalars (``quiet``: it may
+        go on past section 3); its stage code. It keeps t_cmd, sample_dt, since_fresh and
+        the sample's finiteness in the tick's state; the state's other scalars are kept by
+        :meth:`_fuse_refresh`."""
         m = self.feedforward.model
         rev, fr, pl = self._ff_model  # what _fuse_refresh found in sync
         if m.revision != rev or m.friction is not fr or m.payload is not pl:
             return READ  # a model change: the reference takes it (and refreshes)
         stage = self._fz_call(
-            *self._fz_args, self.t, dt, self._transport.sample_dt, self.tick, wakeup_us, compute_us
-        )
-        if stage == READ:
-            return READ
+            *self._fz_args, self.t, dt, self._transport.sample_dt, self.tick, wakeup_us,
+            compute_us, quiet,
+        )  # fmt: skip
         if stage >= MONITOR:  # good data, judged by the call (what bus.check does on it)
             self.bus.streak = 0
         if stage == DONE:
@@ -525,7 +525,7 @@ class Tick:
         reference (a test that injects through the parts' Python methods, a comparison)."""
         if not on:
             self._fz = None
-            self._fuse_quiet = False
+            self._front_ok = self._fuse_quiet = False
         elif self._fz is None:
             fz = FusedTick(self)
             if fz.ok:
@@ -545,7 +545,7 @@ class Tick:
             self._fz = fz = FusedTick(self)
             if not fz.ok:
                 fused_say_once("the tick runs without its fused call: " + fz.why)
-                self._fz, self._fuse_quiet = None, False
+                self._fz, self._front_ok, self._fuse_quiet = None, False, False
                 return
             rebuild = True
         if rebuild or not self._fz_args:
@@ -560,7 +560,11 @@ class Tick:
             and ff._fr_src is model.friction
             and ff._native.revision == model.revision  # type: ignore[union-attr]
             and self._ff_model == (model.revision, model.friction, model.payload)
+            and snap.q is g.q
+            and snap.qd is g.qd
+            and snap.tau is g.tau
         )
+        self._front_ok = bool(synced)
         self._fuse_quiet = bool(
             synced
             and stop.latched == 0
@@ -573,12 +577,8 @@ class Tick:
             and self.recording is None
             and self.playback is None
             and self._fault_resetting == 0
-            and self.overrun_streak == 0
             and m.mode != DRAG
             and snap.finite
-            and snap.q is g.q
-            and snap.qd is g.qd
-            and snap.tau is g.tau
             and m.version == self._ff_version
         )
         if m.mode == HOLD and m._still:
@@ -629,7 +629,7 @@ class Tick:
     def _ff_model_changed(self) -> bool:
         """True (once) when the model changed since tau_ff was evaluated: its parameters
         (``RobotModel.revision``: identified parameters, rotor inertia, payload) or its friction
-        or payload object replaced. Checked only on ticks whose reference did not change."""
+        or payload object replaced (then taken as the one tau_ff is evaluated with)."""
         m = self.feedforward.model
         rev, fr, pl = self._ff_model
         if m.revision == rev and m.friction is fr and m.payload is pl:
@@ -716,7 +716,7 @@ class Tick:
         """Run ``homing`` (a begun hofto_hw.runtime.homing_run.LoopHoming) from the next tick
         (between ticks: the control plane's port, after its checks)."""
         self.homing = homing
-        self._fuse_quiet = False
+        self._front_ok = self._fuse_quiet = False
 
     def rezero(self, axis: int, counts: float) -> None:
         """Between ticks: encoder count ``counts`` is joint angle 0 of ``axis`` from now on
@@ -727,7 +727,7 @@ class Tick:
         self.motion.q[axis] += shift
         self.motion.version += 1
         self.q_sent[axis] += shift
-        self._fuse_quiet = False
+        self._front_ok = self._fuse_quiet = False
         self.restart_estimates()
 
     def restart_estimates(self) -> None:

@@ -42,6 +42,25 @@ def jump_gap(since_fresh: float, period: float) -> float:
     return gap if gap > 1e-9 else 0.0
 
 
+#: observer steps over one stalled gap at most (cost: one step each)
+MAX_SUBSTEPS = 250
+
+
+def gap_steps(dt: float, period: float) -> int:
+    """Observer steps for a tick ``dt`` [s] after the last one: 1, or after a stall (more than
+    1.5 periods) one per period, at most MAX_SUBSTEPS (flight-log replay uses the same)."""
+    if period > 0.0 and dt > 1.5 * period:
+        return min(MAX_SUBSTEPS, round(dt / period))
+    return 1
+
+
+def lerp(prev: np.ndarray, now: np.ndarray, a: float, out: np.ndarray) -> None:
+    """``out = prev + a·(now - prev)`` (n,): a stall's sub-step sample (flight-log replay
+    interpolates with the same operations, so its estimates are the loop's bit for bit)."""
+    for j in range(out.shape[0]):
+        out[j] = (now[j] - prev[j]) * a + prev[j]
+
+
 def judged(tick: int, judge_from: int, flags: int) -> bool:
     """The collision monitor judges this ``tick`` (its data otherwise trusted): it has settled
     since the last (re)start (``judge_from``) and the power stage is on (``flags`` of

@@ -1,9 +1,9 @@
-"""The fused tick (hofto_hw/runtime/fused.py) against the reference Tick.step, tick by tick:
-two identical systems, one taking the fused call on quiet ticks and one forced onto the
-reference, through moves, holds, a collision and its stop, a reset, drag, lost frames,
-stalls, a drive fault, a NaN measurement and mode changes. Every tick record, every estimate
-and the state every part keeps must be the same bit for bit, and the fused call must have
-run on most ticks."""
+"""The compiled tick (hofto_hw/runtime/fused.py) against the reference Tick.step, tick by
+tick: two identical systems, one taking the compiled call (sections 2-3 on every tick, the
+rest on quiet ticks) and one forced onto the reference, through moves, holds, a collision and
+its stop, a reset, drag, lost frames, stalls, a drive fault, a NaN measurement and mode
+changes. Every tick record, every estimate and the state every part keeps must be the same
+bit for bit, the compiled call must have run on (nearly) every tick and finished most."""
 
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ def _state(system: Any) -> list[Any]:
         (t.bus.streak, t.bus.lost_total),
         (t.motion.version, t._ff_version, t.motion.mode, t.expect_enabled, t.enabling),
         (t.stop.latched, t.stop.category, t.stop.events.count, t.snapshot.finite),
-        (t.n_stops, t.reset_result, t.mode_result),
+        (t.n_stops, t.reset_result, t.mode_result, t.overruns, t.overrun_streak),
     ]
     for obs in t.observers:
         out += _arrays(obs)
@@ -83,15 +83,29 @@ def _compare(fused: Any, reference: Any, k: int) -> None:
         assert x == y, f"tick {k}: state item {i} differs"
 
 
-def _lockstep(fused: Any, reference: Any, ticks: int, event: Any) -> None:
+def _lockstep(
+    fused: Any, reference: Any, ticks: int, event: Any, late: frozenset[int] = frozenset()
+) -> dict[int, int]:
+    """Both systems through ``ticks`` ticks (``late``: ticks that report a missed deadline at
+    a regular dt); the stage each compiled call of the fused system answered, by tick."""
     period = 1.0 / fused.rate_hz
     now = 0.0
+    stages: dict[int, int] = {}
+    call = fused.tick._fz_call
+
+    def counted(*args: Any) -> int:
+        stages[fused.tick.tick] = stage = call(*args)
+        return stage
+
+    fused.tick._fz_call = counted
     for k in range(1, ticks + 1):
         dt = event(k, period)
         now += dt
+        missed = round(dt / period) - 1 + (k in late)  # a stall's missed deadlines
         for s in (fused, reference):
-            s.tick.step(now, dt, 1.5, 0, 2.5)
+            s.tick.step(now, dt, 1.5, missed, 2.5)
         _compare(fused, reference, k)
+    return stages
 
 
 def test_the_run_scenario_is_the_reference_tick_by_tick() -> None:
@@ -109,8 +123,11 @@ def test_the_run_scenario_is_the_reference_tick_by_tick() -> None:
                     s.bus.drop_cycles(1 + k % 2)  # lost frames: stale samples, then a gap
             return period * 2 if k in (30, 2700, 6300) else period  # stalls
 
-        _lockstep(fused, reference, 6500, event)
+        stages = _lockstep(fused, reference, 6500, event)
         t = fused.tick
+        # sections 2-3 compiled on every tick (the stop, the drag, the stalls and lost frames)
+        # but the first, whose reference binds the snapshot to the drive group's sample
+        assert len(stages) == 6499 and 1 not in stages, len(stages)
         assert t.n_stops >= 1, "the collision did not stop the arm"
         assert t.drag is not None and t.drag.friction is not None
         assert t.drag.friction.seconds > 0.0  # the friction learning ran (fused)
@@ -162,14 +179,40 @@ def test_faults_resets_and_mode_changes_are_the_reference_tick_by_tick() -> None
         return period * 3 if k in (900, 1700) else period
 
     try:
-        _lockstep(fused, reference, 4500, event)
+        # late ticks, stopped (the reference counts them) and moving (DONE: counted after the
+        # call): the overruns and the streak are in the compared state
+        late = frozenset(range(1201, 1221)) | frozenset(range(2301, 2311)) | {600, 601}
+        stages = _lockstep(fused, reference, 4500, event, late)
         t = fused.tick
+        assert DONE in {stages[k] for k in late} and t.overruns >= 34, t.overruns
+        # every tick but those whose model changed under the call (the reference takes them)
+        assert len(stages) > 4490, len(stages)
         assert t.n_stops >= 3, t.n_stops  # the drive fault, the NaN, the stop request
         assert t.stop.latched == 0, t.stop.latched_names()
         # the stops, the resets' settling, the ramps to standstill and a move whose model
         # changed run the reference; the rest the fused call
         assert t.fused_ticks > 2800, t.fused_ticks
         assert reference.tick.fused_ticks == 0
+    finally:
+        fused.close()
+        reference.close()
+
+
+def test_a_stall_while_holding_is_compiled_to_the_end() -> None:
+    """Stalls of two and three cycles (missed deadlines, the overrun streak short of its
+    fault) while holding: the compiled call integrates the gap in sub-steps and finishes the
+    tick, bit for bit the reference's; the missed deadlines are counted. (Not while moving
+    here: the simulated arm moves one cycle per exchange, so a stall's gap reads as a
+    contact.)"""
+    fused, reference = _pair(contact=False)
+
+    def event(k: int, period: float) -> float:
+        return {400: 2 * period, 600: 3 * period}.get(k, period)
+
+    try:
+        stages = _lockstep(fused, reference, 700, event)
+        assert stages[400] == DONE and stages[600] == DONE, (stages[400], stages[600])
+        assert fused.tick.overruns == 3 and fused.tick.stop.latched == 0
     finally:
         fused.close()
         reference.close()
