@@ -134,3 +134,16 @@ def children(pid: int) -> list[tuple[int, str]]:
         if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
             out.append((int(d.name), cmd))
     return out
+
+
+def move_if_still(robot: Any, q: Any, **kw: Any) -> Any:
+    """The move's handle, or None while the loop refuses it for not holding still (the arm
+    sways for a moment after an enable): for ``wait_for``."""
+    from hofto_hw.client import Refused
+
+    try:
+        return robot.move_joints(q, wait=False, **kw)
+    except Refused as exc:
+        if "not holding at standstill" in str(exc):
+            return None
+        raise

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from support.control_service import Service, children, socket_config, wait_for
+from support.control_service import Service, children, move_if_still, socket_config, wait_for
 
 from hofto_hw.client import Robot
 from hofto_hw.runtime.realtime import cpus_beside_loop
@@ -52,13 +52,17 @@ def test_a_pinned_loop_s_control_plane_and_planner_run_on_the_other_cpus(tmp_pat
     path.write_text(yaml.safe_dump(data))
     svc = Service(tmp_path, "--hold", "--no-collision", config=path, log=False)
     try:
-        assert os.sched_getaffinity(svc.proc.pid) == {loop_cpu}  # the loop's process
-        (cp,) = [pid for pid, cmd in children(svc.proc.pid) if "hofto-hw-ctrl" in cmd]
-        assert os.sched_getaffinity(cp) == set(ALL) - {loop_cpu}
         with Robot.connect(socket=svc.sock) as robot:
+            # answering: the control plane has its arguments and has set its affinity
             wait_for(lambda: robot.state().mode == "hold", "hold")
+            assert os.sched_getaffinity(svc.proc.pid) == {loop_cpu}  # the loop's process
+            (cp,) = [pid for pid, cmd in children(svc.proc.pid) if "hofto-hw-ctrl" in cmd]
+            assert os.sched_getaffinity(cp) == set(ALL) - {loop_cpu}
             q0 = robot.state().q_cmd
-            m = robot.move_joints(q0 + 0.1, speed=0.1, acceleration=0.1, wait=False)
+            m = wait_for(
+                lambda: move_if_still(robot, q0 + 0.1, speed=0.1, acceleration=0.1),
+                "the move accepted",
+            )
             planners = [pid for pid, _ in children(cp)]  # forked per plan, gone when sent
             for pid in planners:
                 try:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from support.control_service import Service, socket_config, wait_for
+from support.control_service import Service, move_if_still, socket_config, wait_for
 
 from hofto_hw.cli import main
 from hofto_hw.client import Refused, Robot, ServiceError
@@ -47,16 +47,6 @@ def service(tmp_path_factory: pytest.TempPathFactory):
 def _at_rest(robot: Robot) -> bool:
     s = robot.state()
     return s.mode == "hold" and not s.moving and float(np.abs(s.qd).max()) < 0.01
-
-
-def _move_if_still(robot: Robot, q: np.ndarray) -> object:
-    """The move's handle, or None while the loop refuses it for not holding still."""
-    try:
-        return robot.move_joints(q, speed=0.2, wait=False)
-    except Refused as exc:
-        if "not holding at standstill" in str(exc):
-            return None
-        raise
 
 
 def _cli(capsys, *argv: object) -> tuple[int, str, str]:
@@ -112,7 +102,7 @@ def test_home_and_zero_set_refused_while_latched_moving_or_held(service: Service
         # the re-enable after the reset sways the arm for a few ticks (> 0.01 rad/s): the
         # move is accepted once the loop sees it holding still
         m = wait_for(
-            lambda: _move_if_still(robot, s.q_cmd + np.array([0.3, 0, 0, 0, 0, 0])),
+            lambda: move_if_still(robot, s.q_cmd + np.array([0.3, 0, 0, 0, 0, 0]), speed=0.2),
             "a move accepted after the reset",
         )
         wait_for(lambda: robot.state().moving, "moving")
