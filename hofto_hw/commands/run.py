@@ -128,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         return _run(args, signals, helpers)
     except StartupInterrupted as exc:
+        quiet_interrupted_compile()
         print(
             f"hofto-hw run: {exc.name} during start-up: stopped (no drive left enabled, "
             "nothing left running)",
@@ -137,6 +138,21 @@ def run(args: argparse.Namespace) -> int:
     finally:
         helpers.abandon()
         signals.restore()
+
+
+def quiet_interrupted_compile() -> None:
+    """After a start-up stop: a signal that came while numba compiled may have left llvmlite
+    objects half built, and their ``__del__`` fails when the interpreter collects them at exit
+    (``AttributeError: ... '_as_parameter_'``, printed as a traceback after the clean stop's
+    line). They own nothing yet, so those messages are dropped; any other is printed."""
+    default = sys.unraisablehook
+
+    def hook(u: Any) -> None:
+        if (getattr(u.object, "__module__", "") or "").startswith("llvmlite."):
+            return
+        default(u)
+
+    sys.unraisablehook = hook
 
 
 def _run(args: argparse.Namespace, signals: Any, helpers: Any) -> int:
