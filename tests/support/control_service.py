@@ -147,3 +147,12 @@ def move_if_still(robot: Any, q: Any, **kw: Any) -> Any:
         if "not holding at standstill" in str(exc):
             return None
         raise
+
+
+def connect_raw(path: Path) -> Any:
+    """A plain connected Unix stream socket to ``path`` (no client: what an abuser sends)."""
+    import socket
+
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    s.connect(str(path))
+    return s

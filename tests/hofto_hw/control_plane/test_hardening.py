@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support.control_service import Service, wait_for
+from support.control_service import Service, connect_raw, wait_for
 
 from hofto_hw.client import Robot
 from hofto_hw.client.connection import Connection
@@ -27,12 +27,6 @@ def service(tmp_path_factory: pytest.TempPathFactory):
         yield svc
     finally:
         svc.stop()
-
-
-def _raw(path: Path) -> socket.socket:
-    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    s.connect(str(path))
-    return s
 
 
 def _reply(s: socket.socket, timeout: float = 30.0) -> dict:
@@ -59,7 +53,7 @@ def _no_overrun(robot: Robot) -> None:
 
 
 def test_bad_lines_are_answered_in_one_line_and_the_connection_goes_on(service: Service) -> None:
-    s = _raw(service.sock)
+    s = connect_raw(service.sock)
     try:
         cases = [
             (b'{"cmd": "st\xffatus"}\n', "not UTF-8"),
@@ -96,7 +90,7 @@ def test_flood_10mb_trickle_and_idle_clients_never_delay_stop(service: Service) 
             line = pr.dumps({"cmd": "status"})
             while not done.is_set():
                 try:
-                    with _raw(service.sock) as s:
+                    with connect_raw(service.sock) as s:
                         for _ in range(2000):  # never reads a reply
                             s.sendall(line)
                 except OSError:
@@ -105,14 +99,14 @@ def test_flood_10mb_trickle_and_idle_clients_never_delay_stop(service: Service) 
         def big() -> None:
             while not done.is_set():
                 try:
-                    with _raw(service.sock) as s:
+                    with connect_raw(service.sock) as s:
                         s.sendall(b"a" * (10 << 20))  # 10 MB, no newline
                 except OSError:
                     pass
 
         def trickle() -> None:
             try:
-                with _raw(service.sock) as s:
+                with connect_raw(service.sock) as s:
                     for b in b'{"cmd": "status"}':
                         if done.is_set():
                             return
@@ -122,7 +116,7 @@ def test_flood_10mb_trickle_and_idle_clients_never_delay_stop(service: Service) 
             except OSError:
                 pass
 
-        idle = [_raw(service.sock) for _ in range(20)]  # more than the 16 allowed
+        idle = [connect_raw(service.sock) for _ in range(20)]  # more than the 16 allowed
         threads = [threading.Thread(target=f) for f in (flood, big, trickle)]
         for t in threads:
             t.start()

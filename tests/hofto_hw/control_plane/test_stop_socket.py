@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 from support.cli import one_line_error
-from support.control_service import Service, wait_for
+from support.control_service import Service, connect_raw, wait_for
 
 from hofto_hw.cli import main
 from hofto_hw.client import Robot
@@ -35,16 +35,10 @@ def service(tmp_path_factory: pytest.TempPathFactory):
         svc.stop()
 
 
-def _raw(path: Path) -> socket.socket:
-    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    s.connect(str(path))
-    return s
-
-
 def _ask(path: Path, data: bytes, close_write: bool = False) -> tuple[dict, bytes]:
     """Send ``data`` on a new connection; (the one reply line parsed, what followed it
     before the service closed the connection)."""
-    with _raw(path) as s:
+    with connect_raw(path) as s:
         s.sendall(data)
         if close_write:
             s.shutdown(socket.SHUT_WR)
@@ -64,7 +58,7 @@ def _flood(sock: Path, done) -> None:
     line = pr.dumps({"cmd": "status"}) * 100
     while not done.is_set():
         try:
-            with _raw(sock) as s:
+            with connect_raw(sock) as s:
                 while not done.is_set():
                     s.sendall(line)  # never reads a reply
         except OSError:
@@ -75,7 +69,7 @@ def _big(sock: Path, done) -> None:
     blob = b"a" * (10 << 20)  # 10 MB, no newline
     while not done.is_set():
         try:
-            with _raw(sock) as s:
+            with connect_raw(sock) as s:
                 s.sendall(blob)
         except OSError:
             pass
@@ -84,7 +78,7 @@ def _big(sock: Path, done) -> None:
 def _trickle(sock: Path, done) -> None:
     while not done.is_set():
         try:
-            with _raw(sock) as s:
+            with connect_raw(sock) as s:
                 while not done.is_set():
                     s.sendall(b"{")
                     time.sleep(0.2)
@@ -96,7 +90,7 @@ def _idle(sock: Path, done) -> None:
     conns = []
     try:
         for _ in range(20):  # more than the control socket allows
-            conns.append(_raw(sock))
+            conns.append(connect_raw(sock))
         done.wait()
     except OSError:
         done.wait()
