@@ -14,7 +14,6 @@ the loop — whether that is a fault is the caller's policy.
 
 from __future__ import annotations
 
-import os
 import subprocess
 import time
 from dataclasses import dataclass
@@ -27,6 +26,7 @@ from hofto_hw.recording import shared as sh
 from hofto_hw.recording.log_spec import LogSpec, rotated_path
 from hofto_hw.recording.record import tick_dtype
 from hofto_hw.runtime.prestart import Prestarted
+from hofto_hw.runtime.realtime import cpus_beside_loop
 from hofto_hw.runtime.startup import WRITER_MODULE
 
 
@@ -122,7 +122,7 @@ class FlightRecorder:
             b.close()
             self._block = None
             raise
-        cpus = self._cpus if self._cpus is not None else _other_cpus()
+        cpus = self._cpus if self._cpus is not None else cpus_beside_loop()
         self._proc.send((b.name, self.n_joints, self.n_observers, self.caps, self.spec, cpus))
         if wait:
             self.wait_started(timeout)
@@ -226,14 +226,6 @@ class FlightRecorder:
     @property
     def writer_pid(self) -> int | None:
         return self._proc.pid if self._proc is not None else None
-
-
-def _other_cpus() -> list[int] | None:
-    """CPUs outside the caller's affinity when the caller (the loop) is pinned to some of
-    them: the writer would otherwise inherit the loop's CPU. None when not pinned."""
-    mine = os.sched_getaffinity(0)
-    rest = set(range(os.cpu_count() or 1)) - mine
-    return sorted(rest) if rest else None
 
 
 def _discard(rec: np.ndarray) -> bool:
