@@ -109,7 +109,10 @@ def _raw(path: Path) -> socket.socket:
     return s
 
 
-def _flood(sock: Path, done: threading.Event) -> None:
+# abusers of the control socket (each run as a process of its own until ``done`` is set);
+# tests/hofto_hw/control_plane/test_stop_socket.py runs the same ones
+def flood(sock: Path, done: threading.Event) -> None:
+    """Status requests, 100 per write, never reading a reply."""
     line = pr.dumps({"cmd": "status"}) * 100
     while not done.is_set():
         try:
@@ -120,7 +123,8 @@ def _flood(sock: Path, done: threading.Event) -> None:
             pass
 
 
-def _big(sock: Path, done: threading.Event) -> None:
+def big_line(sock: Path, done: threading.Event) -> None:
+    """10 MB without a newline, again and again."""
     blob = b"a" * (10 << 20)
     while not done.is_set():
         try:
@@ -130,7 +134,8 @@ def _big(sock: Path, done: threading.Event) -> None:
             pass
 
 
-def _trickle(sock: Path, done: threading.Event) -> None:
+def trickle(sock: Path, done: threading.Event) -> None:
+    """One byte of a line every 0.2 s."""
     while not done.is_set():
         try:
             with _raw(sock) as s:
@@ -141,11 +146,14 @@ def _trickle(sock: Path, done: threading.Event) -> None:
             pass
 
 
-def _idle(sock: Path, done: threading.Event) -> None:
+def idle(sock: Path, done: threading.Event) -> None:
+    """20 connections (more than the control socket allows) that send nothing."""
     conns = []
     try:
         for _ in range(20):
             conns.append(_raw(sock))
+        done.wait()
+    except OSError:
         done.wait()
     finally:
         for c in conns:
@@ -482,10 +490,10 @@ def main() -> int:
             reader = RingReader(info["shm"], info["caps"][0], robot.n, robot.info["observers"])
             for name, work in (
                 ("quiet", None),
-                ("flood", _flood),
-                ("line_10mb", _big),
-                ("trickle", [_trickle] * 8),
-                ("idle", _idle),
+                ("flood", flood),
+                ("line_10mb", big_line),
+                ("trickle", [trickle] * 8),
+                ("idle", idle),
             ):
                 if name in phases:
                     out.append(_phase(robot, sock, reader, name, args, work))

@@ -7,11 +7,11 @@ stop-socket path that breaks the socket rules is one line. Timings: tools/bench_
 
 from __future__ import annotations
 
+import importlib.util
 import multiprocessing as mp
 import os
 import socket
 import stat
-import time
 from pathlib import Path
 
 import pytest
@@ -23,7 +23,8 @@ from hofto_hw.client import Robot
 from hofto_hw.control_plane import protocol as pr
 from hofto_hw.control_plane.protocol import stop_path
 
-CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
+ROOT = Path(__file__).resolve().parents[3]
+CONFIG = ROOT / "configs" / "er3a.yaml"
 
 
 @pytest.fixture(scope="module")
@@ -53,50 +54,10 @@ def _ask(path: Path, data: bytes, close_write: bool = False) -> tuple[dict, byte
     return pr.parse_reply(line), rest
 
 
-# abusers of the control socket, each a process of its own (until ``done`` is set)
-def _flood(sock: Path, done) -> None:
-    line = pr.dumps({"cmd": "status"}) * 100
-    while not done.is_set():
-        try:
-            with connect_raw(sock) as s:
-                while not done.is_set():
-                    s.sendall(line)  # never reads a reply
-        except OSError:
-            pass
-
-
-def _big(sock: Path, done) -> None:
-    blob = b"a" * (10 << 20)  # 10 MB, no newline
-    while not done.is_set():
-        try:
-            with connect_raw(sock) as s:
-                s.sendall(blob)
-        except OSError:
-            pass
-
-
-def _trickle(sock: Path, done) -> None:
-    while not done.is_set():
-        try:
-            with connect_raw(sock) as s:
-                while not done.is_set():
-                    s.sendall(b"{")
-                    time.sleep(0.2)
-        except OSError:
-            pass
-
-
-def _idle(sock: Path, done) -> None:
-    conns = []
-    try:
-        for _ in range(20):  # more than the control socket allows
-            conns.append(connect_raw(sock))
-        done.wait()
-    except OSError:
-        done.wait()
-    finally:
-        for c in conns:
-            c.close()
+# the benchmark's abusers of the control socket, each run as a process of its own
+_spec = importlib.util.spec_from_file_location("bench_control", ROOT / "tools" / "bench_control.py")
+_bench = importlib.util.module_from_spec(_spec)  # type: ignore[arg-type]
+_spec.loader.exec_module(_bench)  # type: ignore[union-attr]
 
 
 def _faults(robot: Robot) -> list[str]:
@@ -118,7 +79,7 @@ def test_a_stop_on_the_stop_socket_is_acknowledged_and_latched_while_others_floo
         done = ctx.Event()
         procs = [
             ctx.Process(target=f, args=(service.sock, done), daemon=True)
-            for f in (_flood, _big, _trickle, _trickle, _trickle, _trickle, _idle)
+            for f in (_bench.flood, _bench.big_line, *[_bench.trickle] * 4, _bench.idle)
         ]
         for p in procs:
             p.start()
