@@ -25,7 +25,8 @@ Scheduling: the process sleeps in ``select`` and computes for microseconds per s
 runs at SCHED_FIFO one below the loop's ``loop.priority`` when the loop runs real time
 (``loop.realtime`` not ``off``) and the process may: ahead of every normal process
 (the control plane, the recorder's writer, any client or abuser), never ahead of the loop.
-Without the privilege it takes the lowest nice value it may (else it stays as started).
+Without the privilege it takes the lowest nice value it may (else it stays as started). When
+the loop is pinned (``loop.cpus``) it runs on the other CPUs, as the control plane does.
 """
 
 from __future__ import annotations
@@ -281,14 +282,17 @@ def start(chan: ch.Channel, listener: socket.socket, realtime: str, priority: in
     """The stop server's process on ``listener`` (closed here: the child serves it)."""
     import subprocess
 
+    from hofto_hw.runtime.realtime import cpus_beside_loop
+
     proc = subprocess.Popen(
         [sys.executable, "-m", "hofto_hw.control_plane.stop_server"],
         stdin=subprocess.PIPE,
         pass_fds=[listener.fileno()],
     )
     assert proc.stdin is not None
+    cpus = cpus_beside_loop()  # the loop's own CPU stays the loop's
     proc.stdin.write(pickle.dumps((chan.name, chan.n, chan.k, listener.fileno(), realtime,
-                                   int(priority))))  # fmt: skip
+                                   int(priority), cpus)))  # fmt: skip
     proc.stdin.close()
     listener.close()
     return proc
@@ -300,8 +304,10 @@ def main() -> int:
     through the loop, and stops sent meanwhile are still served)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    name, n, k, fd, realtime, priority = pickle.load(sys.stdin.buffer)
+    name, n, k, fd, realtime, priority, cpus = pickle.load(sys.stdin.buffer)
     sys.stdin.close()
+    if cpus is not None:  # started from the pinned loop: off its CPU before anything else
+        os.sched_setaffinity(0, cpus)
     chan = ch.Channel(n, k, name=name)
     server = StopServer(socket.socket(fileno=fd), chan)
     parse_stop(b'{"cmd": "stop", "id": 1}')  # the paths a stop takes, loaded before one comes

@@ -1,7 +1,8 @@
-"""The control plane and its planner off the loop's CPU: with ``loop.cpus`` pinning the loop of
-a real service to one CPU of a machine with more, the control-plane process and the planner it
-forks for a move run on the others (hofto_hw.runtime.realtime.cpus_beside_loop); unpinned (or
-pinned to every CPU) they keep the inherited affinity."""
+"""The control plane, its planner and the stop server off the loop's CPU: with ``loop.cpus``
+pinning the loop of a real service to one CPU of a machine with more, the control-plane
+process, the planner it forks for a move and the stop socket's process run on the others
+(hofto_hw.runtime.realtime.cpus_beside_loop); unpinned (or pinned to every CPU) they keep the
+inherited affinity."""
 
 from __future__ import annotations
 
@@ -58,6 +59,8 @@ def test_a_pinned_loop_s_control_plane_and_planner_run_on_the_other_cpus(tmp_pat
             assert os.sched_getaffinity(svc.proc.pid) == {loop_cpu}  # the loop's process
             (cp,) = [pid for pid, cmd in children(svc.proc.pid) if "hofto-hw-ctrl" in cmd]
             assert os.sched_getaffinity(cp) == set(ALL) - {loop_cpu}
+            (stop,) = [pid for pid, cmd in children(svc.proc.pid) if "stop_server" in cmd]
+            assert os.sched_getaffinity(stop) == set(ALL) - {loop_cpu}  # the stop socket's
             q0 = robot.state().q_cmd
             m = wait_for(
                 lambda: move_if_still(robot, q0 + 0.1, speed=0.1, acceleration=0.1),
