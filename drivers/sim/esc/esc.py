@@ -146,6 +146,8 @@ class Esc:
         self.output_plan: pdo_map.CopyPlan = ()
         self.input_plan: pdo_map.CopyPlan = ()
         self.sync0_active = False
+        #: the highest AL state the slave has been in (tests: a slave left alone stays low)
+        self.highest_state = r.STATE_INIT
         self._latched_ns = 0
         self._sms: list[tuple[int, int, int, int]] = []  # (k, start, end, control) enabled
         self._fmmus: list[tuple[int, int, int, int]] = []  # (log_start, log_end, phys, type)
@@ -190,6 +192,8 @@ class Esc:
         return self.mem[r.AL_STATUS_CODE] | (self.mem[r.AL_STATUS_CODE + 1] << 8)
 
     def _set_al(self, state: int, code: int, error: bool) -> None:
+        if state != r.STATE_BOOT:
+            self.highest_state = max(getattr(self, "highest_state", r.STATE_INIT), state)
         self.mem[r.AL_STATUS] = state | (r.AL_ERROR_FLAG if error else 0)
         self.mem[r.AL_STATUS + 1] = 0
         struct.pack_into("<H", self.mem, r.AL_STATUS_CODE, code)

@@ -346,6 +346,7 @@ class EmulatedNetwork:
             "malformed": self.malformed,
             "al_state": [s.al_state for s in self.slaves],
             "al_status_code": [s.al_status_code for s in self.slaves],
+            "highest_al_state": [s.highest_state for s in self.slaves],
             "station_address": [s.station_address for s in self.slaves],
             "silent": [s.silent for s in self.slaves],
         }
