@@ -23,7 +23,8 @@ the slave and the values involved):
    ``config_map`` builds the process image and its sizes are checked against the layout;
 4. DC: ``config_dc`` and, per slave, SYNC0 (and SYNC1) as its profile's ``dc`` says (cycle:
    the profile's, else the loop period; shift), or at the loop period for every slave with
-   ``bus.ethercat.dc_sync``;
+   ``bus.ethercat.dc_sync``; AssignActivate's low byte into ESC register 0x0980 where the
+   profile asks for one (SOEM writes 0x00 there), read back (:mod:`drivers.ethercat.registers`);
 5. SAFE-OP (then the SAFE-OP -> OP start-up SDOs), then OP while exchanging process data,
    checking states on the way; a slave that refuses is reported with its AL status code in
    words.
@@ -70,6 +71,7 @@ from drivers.ethercat.al_status import (
 from drivers.ethercat.errors import (
     EtherCATError,
     IdentityMismatchError,
+    RegisterMismatchError,
     SlaveLostError,
     SlavePositionError,
     StateChangeError,
@@ -109,21 +111,6 @@ def _pysoem() -> Any:
 
 #: what SOEM's dc_sync writes to ESC register 0x0980 (AssignActivate's low byte)
 SOEM_CYCLIC_UNIT_CONTROL = 0x00
-
-
-def assign_activate_warning(who: str, profile: Any) -> str | None:
-    """One line when ``profile``'s AssignActivate low byte (ESC 0x0980, cyclic unit
-    control) is not what SOEM writes (0x00), else None. ``who`` names the slave."""
-    dc = profile.dc
-    if dc is None or dc.assign_activate & 0xFF == SOEM_CYCLIC_UNIT_CONTROL:
-        return None
-    low = dc.assign_activate & 0xFF
-    return (
-        f"{who}: profile {profile.name}: AssignActivate 0x{dc.assign_activate:04X} asks "
-        f"0x{low:02X} in ESC register 0x0980 (sync/latch units to the drive's PDI); SOEM's "
-        f"dc_sync writes 0x{SOEM_CYCLIC_UNIT_CONTROL:02X} and pysoem has no public register "
-        "write, so the drive's latch (touch probe) stays with the master (the loop uses none)"
-    )
 
 
 class EtherCATTransport(Transport):
@@ -448,6 +435,7 @@ class EtherCATTransport(Transport):
                 raise EtherCATError(f"{self.interface}: no slave supports distributed clocks")
             for i, s in enumerate(self.slaves):
                 self._program_dc(self._first[i], s)
+            self._program_cyclic_units()
         self._dc_prev = -1
         self.sample_dt = 0.0
         if self.derived is not None:
@@ -512,25 +500,51 @@ class EtherCATTransport(Transport):
 
         pysoem's ``dc_sync`` (SOEM's ecx_dcsync0 / ecx_dcsync01) writes the activation
         register 0x0981 (AssignActivate's high byte: 0x03 SYNC0, 0x07 SYNC0 + SYNC1) and
-        always 0x00 to 0x0980 (AssignActivate's low byte: sync and latch units controlled by
-        EtherCAT). pysoem 1.1.13 has no public register write (only the private
-        ``CdefSlave._fpwr``), so a profile asking for another low byte (Nanotec's 0x330: the
-        latch units to the drive's PDI) gets a one-line warning in :attr:`warnings` and on
-        stderr (:func:`assign_activate_warning`): the loop uses no latch (touch probe), so
-        the drive still runs."""
+        always 0x00 to 0x0980 (AssignActivate's low byte); :meth:`_program_cyclic_units`
+        then writes the low byte the profile asks for."""
         dc = self.profiles[axis].dc
         if dc is None:
             if self.dc_opt:
                 slave.dc_sync(True, self._cycle_ns)
             return
-        note = assign_activate_warning(self._who_slave(self.serve[axis][0]), self.profiles[axis])
-        if note is not None:
-            self.warnings.append(note)
         cycle = dc.sync0_cycle_ns or self._cycle_ns
         if (dc.assign_activate >> 8) & 0x04 and dc.sync1_cycle_ns is not None:
             slave.dc_sync(True, cycle, dc.sync0_shift_ns, dc.sync1_cycle_ns)
         else:
             slave.dc_sync(True, cycle, dc.sync0_shift_ns)
+
+    def _program_cyclic_units(self) -> None:
+        """AssignActivate's low byte into ESC register 0x0980 (cyclic unit control: SYNC
+        out and latch units to the drive's PDI, e.g. Nanotec's 0x0330 -> 0x30) for every
+        device whose profile asks for another value than the 0x00 SOEM's ``dc_sync``
+        writes, then read back: a difference is refused in one line naming the slave, the
+        register, the expected and the found value (a drive needing it refuses SAFE-OP
+        with AL status 0x0030 otherwise). pysoem has no public register write, so the
+        datagrams go out on a socket of our own (:mod:`drivers.ethercat.registers`), here,
+        after dc_sync and before the SAFE-OP request, when SOEM has no frame in flight."""
+        todo = []
+        for d in range(self.n_devices):
+            dc = self.profiles[self._first[d]].dc
+            if dc is not None and dc.assign_activate & 0xFF != SOEM_CYCLIC_UNIT_CONTROL:
+                todo.append((d, dc.assign_activate))
+        if not todo:
+            return
+        from drivers.ethercat.registers import CYCLIC_UNIT_CONTROL, RegisterPort
+
+        attempts = self.mailbox_retries + 1
+        with RegisterPort(self.interface, timeout=0.1, attempts=attempts) as port:
+            for d, assign in todo:
+                who = self._who_slave(d)
+                want = assign & 0xFF
+                station = port.station_address(self._position(d), who)
+                port.write(station, CYCLIC_UNIT_CONTROL, bytes([want]), who)
+                found = port.read(station, CYCLIC_UNIT_CONTROL, 1, who)[0]
+                if found != want:
+                    raise RegisterMismatchError(
+                        f"{who}: ESC register 0x0980 (cyclic unit control, AssignActivate "
+                        f"0x{assign:04X} of profile {self.profiles[self._first[d]].name}) "
+                        f"reads back 0x{found:02X}, expected 0x{want:02X}"
+                    )
 
     def _reconfigure(self, pos: int) -> None:
         """PRE-OP -> SAFE-OP hook of a slave brought back by :meth:`recover_slaves`: its

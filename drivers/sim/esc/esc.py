@@ -297,6 +297,8 @@ class Esc:
                 self._repeat_mailbox()
         if touched(r.DC_RECEIVE_TIME_PORT0, 4):
             self._latch_receive_times()
+        if touched(r.DC_CYCLIC_UNIT_CONTROL, 1):  # bits 1-3 and 6-7 are reserved: read 0
+            mem[r.DC_CYCLIC_UNIT_CONTROL] &= r.DC_CYCLIC_UNIT_CONTROL_BITS
         if touched(r.DC_ACTIVATION, 1):
             self.sync0_active = mem[r.DC_ACTIVATION] & 0x03 == 0x03
         if touched(r.AL_CONTROL, 1):
@@ -567,6 +569,11 @@ class Esc:
             cycle = struct.unpack_from("<I", self.mem, r.DC_SYNC0_CYCLE)[0]
             if cycle < 125_000:
                 return AL_INVALID_SYNC_CYCLE
+        # the drive's application checks the sync/latch unit assignment its ESI states
+        # (AssignActivate's low byte in 0x0980) before SAFE-OP, as SSC-based drives do
+        want = self.desc.assign_activate & 0xFF
+        if self.desc.dc_required and self.mem[r.DC_CYCLIC_UNIT_CONTROL] != want:
+            return AL_INVALID_DC_SYNC
         self.output_plan = out_plan
         self.input_plan = in_plan
         return AL_NO_ERROR
