@@ -203,16 +203,20 @@ _OP = 0x08
 
 
 @pytest.mark.root
-def test_ethercat_check_of_part_of_a_longer_line(tmp_path: Path, capsys) -> None:
+@pytest.mark.parametrize("name", ["elmo_gold", "nanotec_c5_e_2_21"])
+def test_ethercat_check_of_part_of_a_longer_line(tmp_path: Path, capsys, name: str) -> None:
     """An installed line of three drives (``sim-ethercat --drives 3``): ``--axes 1`` checks
     slave 1 and ``--slaves 1,3`` slaves 1 and 3, each moved 0.05 rad; the slaves not
     checked are brought to PRE-OP with the line and never go higher (the emulator records
     each slave's highest AL state), so no process data reaches them and their drives are
-    never enabled. A position beyond the line is one line, exit 2, and brings nothing up."""
+    never enabled. A position beyond the line is one line, exit 2, and brings nothing up.
+    The Nanotec (AssignActivate 0x0330) gets 0x30 in ESC 0x0980 at the slaves checked only,
+    found by their line position with a slave in PRE-OP between them."""
     from support.rootnet import emulator, require_root, sim_ethercat_args, veth_pair
 
     require_root()
-    profile = DRIVES / "elmo_gold.yaml"
+    profile = DRIVES / f"{name}.yaml"
+    unit = 0x30 if name.startswith("nanotec") else 0x00
     config = bench_config(tmp_path, ROOT / "configs" / "er3a.yaml", profile, 3,
                           {"transport": "ethercat", "interface": "unused"},
                           {"pdo_watchdog": 2.0, "receive_timeout": 0.02})  # fmt: skip
@@ -237,6 +241,7 @@ def test_ethercat_check_of_part_of_a_longer_line(tmp_path: Path, capsys) -> None
     assert one["devices"] == [{"device": 0, "axis": 0}]
     assert after_one["highest_al_state"] == [_OP, _PREOP, _PREOP]
     assert after_one["al_state"][1:] == [_PREOP, _PREOP]  # left where the check put them
+    assert after_one["cyclic_unit_control"] == [unit, 0, 0]
 
     _assert_moved(code2, two, 2)
     assert two["line"] == {
@@ -246,6 +251,7 @@ def test_ethercat_check_of_part_of_a_longer_line(tmp_path: Path, capsys) -> None
         "left_in_preop": [2],
     }
     assert after_two["highest_al_state"] == [_OP, _PREOP, _OP]
+    assert after_two["cyclic_unit_control"] == [unit, 0, unit]
     # the drives left alone were never enabled (CiA-402 state of the emulated drive)
     assert after_one["drive_state"][1] != State.OPERATION_ENABLED
     assert after_one["drive_state"][2] != State.OPERATION_ENABLED
