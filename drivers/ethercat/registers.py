@@ -6,9 +6,12 @@ AssignActivate's low byte). :class:`RegisterPort` writes and reads such a regist
 an Ethernet frame (Ethertype 0x88A4) carrying one datagram, sent and received on an
 AF_PACKET socket of its own bound to the master's interface.
 
-Why this does not confuse SOEM (OpenEtherCATsociety/SOEM, oshw/linux/nicdrv.c):
-- it is used only between SOEM calls (the master is single-threaded and every SOEM
-  register/mailbox call waits for its own frame), so SOEM has no frame in flight;
+Why this does not confuse SOEM (OpenEtherCATsociety/SOEM oshw/linux/nicdrv.c, and the
+copy pysoem builds, bnjmnp/pysoem oshw/linux/nicdrv.c, the same receive logic):
+- it is used only between SOEM calls, on the master's own thread (every SOEM register or
+  mailbox call waits for its own frame before it returns; pysoem releases the GIL while it
+  waits, so the port must never be used from another thread while SOEM runs), so SOEM has
+  no frame in flight;
 - SOEM's socket receives our returning frame (both sockets are bound to the EtherCAT
   Ethertype on the interface). ``ecx_inframe`` files a frame under its datagram index only
   when the index is below EC_MAXBUF (16) and a frame of that index is in flight; anything

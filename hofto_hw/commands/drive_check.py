@@ -75,8 +75,8 @@ def configure(p: argparse.ArgumentParser) -> None:
         type=int,
         default=None,
         metavar="N",
-        help="drives of this profile on the bus (default: 6 emulated, else the "
-        "base config's drive count)",
+        help="drives of this profile to check (default 6); on a longer EtherCAT line "
+        "the first N slaves, the others left in PRE-OP",
     )
     p.add_argument(
         "--slaves",
