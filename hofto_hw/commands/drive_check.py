@@ -569,9 +569,8 @@ def _print(r: dict[str, Any]) -> None:
     line = r.get("line")
     if line is not None:
         alone = ", ".join(str(p) for p in line["left_in_preop"]) or "none"
-        print(
-            f"  line: {line['slaves']} slaves, checked {line['checked']}, left in PRE-OP: {alone}"
-        )
+        checked = ", ".join(str(p) for p in line["checked"])
+        print(f"  line: {line['slaves']} slaves, checked {checked}, left in PRE-OP: {alone}")
     print(f"  operational: {'yes' if r['operational'] else 'NO'}")
     print(f"  enabled:     {'yes' if r['enabled'] else 'NO'}")
     print(f"  start-up SDOs written: {r['startup_sdos']}")
