@@ -7,7 +7,14 @@ from __future__ import annotations
 
 from drivers.errors import EtherCATError
 
-__all__ = ["EtherCATError", "IdentityMismatchError", "SlaveLostError", "StateChangeError"]
+__all__ = [
+    "EtherCATError",
+    "IdentityMismatchError",
+    "RegisterMismatchError",
+    "SlaveLostError",
+    "SlavePositionError",
+    "StateChangeError",
+]
 
 
 class IdentityMismatchError(EtherCATError):
@@ -32,3 +39,11 @@ class StateChangeError(EtherCATError):
 
 class SlaveLostError(EtherCATError):
     """Slaves stopped answering during cyclic operation (and were not recovered)."""
+
+
+class SlavePositionError(EtherCATError):
+    """A line position asked for is beyond the slaves found on the line (bad input)."""
+
+
+class RegisterMismatchError(EtherCATError):
+    """An ESC register read back after the master wrote it holds another value."""

@@ -7,7 +7,10 @@ the slave and the values involved):
 2. scan (``config_init``): the slave count must equal the configured drive devices (one per
    drive, or one per multi-axis drive: ``bus.drives[i].device`` / ``device_axis`` put several
    joints on one slave, axis k's CiA-402 objects at 0x6000 + 0x800·k), and each slave's SII
-   identity (vendor id, product code, revision) must match its ``bus.drives[i]``;
+   identity (vendor id, product code, revision) must match its ``bus.drives[i]``. With
+   ``positions`` (a commissioning check of part of a longer line) the devices are the
+   slaves at those line positions, and the other slaves go to PRE-OP with the line and
+   stay there (no process data: never SAFE-OP or OP, never enabled);
 3. INIT -> PRE-OP; each drive configured as its profile says (``bus.drives[i].profile``,
    :mod:`drivers.cia402.profiles`; no profile: the built-in 0x1600/0x1A00 layout): start-up
    SDOs of INIT -> PRE-OP and PRE-OP -> SAFE-OP in their order (once per slave), the
@@ -20,7 +23,8 @@ the slave and the values involved):
    ``config_map`` builds the process image and its sizes are checked against the layout;
 4. DC: ``config_dc`` and, per slave, SYNC0 (and SYNC1) as its profile's ``dc`` says (cycle:
    the profile's, else the loop period; shift), or at the loop period for every slave with
-   ``bus.ethercat.dc_sync``;
+   ``bus.ethercat.dc_sync``; AssignActivate's low byte into ESC register 0x0980 where the
+   profile asks for one (SOEM writes 0x00 there), read back (:mod:`drivers.ethercat.registers`);
 5. SAFE-OP (then the SAFE-OP -> OP start-up SDOs), then OP while exchanging process data,
    checking states on the way; a slave that refuses is reported with its AL status code in
    words.
@@ -67,7 +71,9 @@ from drivers.ethercat.al_status import (
 from drivers.ethercat.errors import (
     EtherCATError,
     IdentityMismatchError,
+    RegisterMismatchError,
     SlaveLostError,
+    SlavePositionError,
     StateChangeError,
 )
 from drivers.transport import (
@@ -107,21 +113,6 @@ def _pysoem() -> Any:
 SOEM_CYCLIC_UNIT_CONTROL = 0x00
 
 
-def assign_activate_warning(who: str, profile: Any) -> str | None:
-    """One line when ``profile``'s AssignActivate low byte (ESC 0x0980, cyclic unit
-    control) is not what SOEM writes (0x00), else None. ``who`` names the slave."""
-    dc = profile.dc
-    if dc is None or dc.assign_activate & 0xFF == SOEM_CYCLIC_UNIT_CONTROL:
-        return None
-    low = dc.assign_activate & 0xFF
-    return (
-        f"{who}: profile {profile.name}: AssignActivate 0x{dc.assign_activate:04X} asks "
-        f"0x{low:02X} in ESC register 0x0980 (sync/latch units to the drive's PDI); SOEM's "
-        f"dc_sync writes 0x{SOEM_CYCLIC_UNIT_CONTROL:02X} and pysoem has no public register "
-        "write, so the drive's latch (touch probe) stays with the master (the loop uses none)"
-    )
-
-
 class EtherCATTransport(Transport):
     """CiA-402 drives on EtherCAT through pysoem (see the module docstring).
 
@@ -132,7 +123,12 @@ class EtherCATTransport(Transport):
     for its frame (default: one cycle). ``state_timeout`` [s]: per AL state change.
     ``mailbox_retries``: extra attempts of an SDO or register access that got no answer.
     ``pdo_watchdog`` [s]: SM (process-data) watchdog written to every slave before SAFE-OP
-    (None keeps the slave's default, typically 100 ms).
+    (None keeps the slave's default, typically 100 ms). ``positions``: the 1-based line
+    position of each drive device, in device order, when the transport runs only part of a
+    longer line (a commissioning check of some drives); the other slaves are brought to
+    PRE-OP with the line (SOEM's mapping reads their PDOs by CoE) and left there: no process
+    data, never SAFE-OP or OP, never enabled. None: the line has exactly the configured
+    devices.
     """
 
     def __init__(
@@ -149,6 +145,7 @@ class EtherCATTransport(Transport):
         state_timeout: float = 3.0,
         mailbox_retries: int = 3,
         pdo_watchdog: float | None = None,
+        positions: Sequence[int] | None = None,
     ) -> None:
         super().__init__(len(drives), cycle_time, axis_names)
         self.interface = interface
@@ -182,6 +179,24 @@ class EtherCATTransport(Transport):
         ]
         #: SDO index shift of each axis's CiA-402 objects (0x800 per device axis)
         self._shift = [0x800 * k for _d, k in self.serve]
+        if positions is not None:
+            positions = [int(p) for p in positions]
+            if len(positions) != self.n_devices or len(set(positions)) != len(positions):
+                raise ValueError(
+                    f"positions {positions}: one distinct line position per drive device "
+                    f"({self.n_devices})"
+                )
+            if min(positions) < 1:
+                raise ValueError(f"positions {positions}: line positions start at 1")
+        #: 1-based line position of each device (None: device d is slave d + 1, whole line)
+        self.positions = positions
+        #: the slave at each 0-based line position -> its device (the devices run here)
+        self._device_at = {
+            (p - 1 if positions is not None else d): d
+            for d, p in enumerate(positions if positions is not None else range(self.n_devices))
+        }
+        self._line: list[Any] = []  # every slave of the line (self.slaves: the devices')
+        self._partial = False  # the line has slaves this transport leaves in PRE-OP
         self._raw_sdo = False  # device-level access (start-up, PDOs): no index shift
         self.dc_opt = dc_sync
         #: DC runs when asked for or when any drive's profile programs it
@@ -217,10 +232,16 @@ class EtherCATTransport(Transport):
 
     @classmethod
     def from_config(
-        cls, bus: Any, axis_names: list[str] | None = None, *, cycle_time: float
+        cls,
+        bus: Any,
+        axis_names: list[str] | None = None,
+        *,
+        cycle_time: float,
+        positions: Sequence[int] | None = None,
     ) -> EtherCATTransport:
         """From a :class:`hofto_hw.config.drives.BusConfig` with ``transport: ethercat``;
-        ``cycle_time`` [s] is the system config's ``cycle_time`` (1 / loop.rate_hz)."""
+        ``cycle_time`` [s] is the system config's ``cycle_time`` (1 / loop.rate_hz);
+        ``positions``: the line positions of the drives (a part of a longer line)."""
         opts = getattr(bus, "ethercat", None)
         kw: dict[str, Any] = {}
         if opts is not None:
@@ -236,7 +257,17 @@ class EtherCATTransport(Transport):
         from drivers.cia402.profiles import profiles_for
 
         kw["profiles"] = profiles_for(bus.drives, "ethercat")
-        return cls(bus.interface, bus.drives, cycle_time, axis_names, **kw)
+        return cls(bus.interface, bus.drives, cycle_time, axis_names, positions=positions, **kw)
+
+    @property
+    def line_slaves(self) -> int:
+        """Slaves found on the line at the last open (0 before)."""
+        return len(self._line)
+
+    @property
+    def left_alone(self) -> list[int]:
+        """1-based line positions of the slaves this transport leaves in PRE-OP."""
+        return [p + 1 for p in range(len(self._line)) if self._device_of(p) < 0]
 
     def _set_rows(self, wire: Any) -> None:
         """Byte views the cycle copies through: the canonical records themselves when every
@@ -268,11 +299,27 @@ class EtherCATTransport(Transport):
         return f"slave {d + 1}{on} ({self.axis_names[axis]}) on {self.interface}"
 
     def _who_slave(self, d: int) -> str:
-        """Slave ``d`` (0-based) with the axes it drives."""
+        """Device ``d`` (0-based) by its line position, with the axes it drives."""
         if not 0 <= d < self.n_devices:
             return f"slave {d + 1} on {self.interface}"
         names = [self.axis_names[i] for i, (dev, _k) in enumerate(self.serve) if dev == d]
-        return f"slave {d + 1} ({', '.join(names)}) on {self.interface}"
+        return f"slave {self._position(d)} ({', '.join(names)}) on {self.interface}"
+
+    def _position(self, d: int) -> int:
+        """1-based line position of device ``d``."""
+        return self.positions[d] if self.positions is not None else d + 1
+
+    def _device_of(self, line_pos: int) -> int:
+        """The device at 0-based line position ``line_pos`` (pysoem's numbering in
+        callbacks, minus one); -1 for a slave this transport leaves alone."""
+        return self._device_at.get(line_pos, -1)
+
+    def _who_at(self, line_pos: int) -> str:
+        """The slave at 0-based line position ``line_pos``, in words."""
+        d = self._device_of(line_pos)
+        if d >= 0:
+            return self._who_slave(d)
+        return f"slave {line_pos + 1} on {self.interface} (not run here)"
 
     def open(self) -> None:
         """Bring every slave to OP (steps in the module docstring); raises EtherCATError."""
@@ -317,18 +364,30 @@ class EtherCATTransport(Transport):
             found = m.config_init()
         if found <= 0:
             raise EtherCATError(f"no EtherCAT slave answered on {self.interface}")
-        if found != self.n_devices:
+        self._line = list(m.slaves)
+        if self.positions is not None:
+            beyond = [p for p in self.positions if p > found]
+            if beyond:
+                raise SlavePositionError(
+                    f"{self.interface}: slave position {beyond[0]} is beyond the EtherCAT line "
+                    f"(found {found} slaves: positions 1 to {found})"
+                )
+            self.slaves = [self._line[p - 1] for p in self.positions]
+            self._partial = found > self.n_devices
+        elif found != self.n_devices:
             has = f"{self.n_devices} drives (bus.drives)"
             if self.n_devices != self.n_axes:
                 has = f"{self.n_devices} drive devices for {self.n_axes} axes (bus.drives)"
             raise EtherCATError(
                 f"{self.interface}: found {found} EtherCAT slaves, the config has {has}"
             )
-        self.slaves = list(m.slaves)
+        else:
+            self.slaves = list(self._line)
         self._check_identities()
         for s in self.slaves:
             s.add_emergency_callback(self._on_emergency)
-        self._request(STATE_PREOP)
+        # the whole line: SOEM's config_map reads every slave's PDO assignment by CoE
+        self._request(STATE_PREOP, line=True)
         from drivers.cia402.wire import WireImage
 
         self.startup_written = 0
@@ -356,8 +415,13 @@ class EtherCATTransport(Transport):
             ) from None
         except pysoem.SdoError as exc:
             raise self._sdo_error(exc, "write") from None
-        for s in self.slaves:  # a lost slave that comes back (reconfig) is configured again
+        for s in self.slaves:  # a lost device that comes back (reconfig) is configured again
             s.config_func = self._reconfigure
+        self.expected_wkc = m.expected_wkc - sum(
+            2 * (len(s.output) > 0) + (len(s.input) > 0)  # an LRW: 2 per write, 1 per read
+            for s in self._line
+            if all(s is not t for t in self.slaves)
+        )  # slaves left in PRE-OP have their SMs off: the LRW does not count them
         for i, s in enumerate(self.slaves):
             sizes = (len(s.output), len(s.input))
             if sizes != self._sizes[i]:
@@ -371,6 +435,7 @@ class EtherCATTransport(Transport):
                 raise EtherCATError(f"{self.interface}: no slave supports distributed clocks")
             for i, s in enumerate(self.slaves):
                 self._program_dc(self._first[i], s)
+            self._program_cyclic_units()
         self._dc_prev = -1
         self.sample_dt = 0.0
         if self.derived is not None:
@@ -378,7 +443,6 @@ class EtherCATTransport(Transport):
         self._request(STATE_SAFEOP)
         for i in self._first:
             self._startup(i, ("SO",))
-        self.expected_wkc = m.expected_wkc
         self.rx.fill(0)
         self._request(STATE_OP, cyclic=True)
 
@@ -436,43 +500,69 @@ class EtherCATTransport(Transport):
 
         pysoem's ``dc_sync`` (SOEM's ecx_dcsync0 / ecx_dcsync01) writes the activation
         register 0x0981 (AssignActivate's high byte: 0x03 SYNC0, 0x07 SYNC0 + SYNC1) and
-        always 0x00 to 0x0980 (AssignActivate's low byte: sync and latch units controlled by
-        EtherCAT). pysoem 1.1.13 has no public register write (only the private
-        ``CdefSlave._fpwr``), so a profile asking for another low byte (Nanotec's 0x330: the
-        latch units to the drive's PDI) gets a one-line warning in :attr:`warnings` and on
-        stderr (:func:`assign_activate_warning`): the loop uses no latch (touch probe), so
-        the drive still runs."""
+        always 0x00 to 0x0980 (AssignActivate's low byte); :meth:`_program_cyclic_units`
+        then writes the low byte the profile asks for."""
         dc = self.profiles[axis].dc
         if dc is None:
             if self.dc_opt:
                 slave.dc_sync(True, self._cycle_ns)
             return
-        note = assign_activate_warning(self._who_slave(self.serve[axis][0]), self.profiles[axis])
-        if note is not None:
-            self.warnings.append(note)
         cycle = dc.sync0_cycle_ns or self._cycle_ns
         if (dc.assign_activate >> 8) & 0x04 and dc.sync1_cycle_ns is not None:
             slave.dc_sync(True, cycle, dc.sync0_shift_ns, dc.sync1_cycle_ns)
         else:
             slave.dc_sync(True, cycle, dc.sync0_shift_ns)
 
+    def _program_cyclic_units(self) -> None:
+        """AssignActivate's low byte into ESC register 0x0980 (cyclic unit control: SYNC
+        out and latch units to the drive's PDI, e.g. Nanotec's 0x0330 -> 0x30) for every
+        device whose profile asks for another value than the 0x00 SOEM's ``dc_sync``
+        writes, then read back: a difference is refused in one line naming the slave, the
+        register, the expected and the found value (a drive needing it refuses SAFE-OP
+        with AL status 0x0030 otherwise). pysoem has no public register write, so the
+        datagrams go out on a socket of our own (:mod:`drivers.ethercat.registers`), here,
+        after dc_sync and before the SAFE-OP request, when SOEM has no frame in flight."""
+        todo = []
+        for d in range(self.n_devices):
+            dc = self.profiles[self._first[d]].dc
+            if dc is not None and dc.assign_activate & 0xFF != SOEM_CYCLIC_UNIT_CONTROL:
+                todo.append((d, dc.assign_activate))
+        if not todo:
+            return
+        from drivers.ethercat.registers import CYCLIC_UNIT_CONTROL, RegisterPort
+
+        attempts = self.mailbox_retries + 1
+        with RegisterPort(self.interface, timeout=0.1, attempts=attempts) as port:
+            for d, assign in todo:
+                who = self._who_slave(d)
+                want = assign & 0xFF
+                station = port.station_address(self._position(d), who)
+                port.write(station, CYCLIC_UNIT_CONTROL, bytes([want]), who)
+                found = port.read(station, CYCLIC_UNIT_CONTROL, 1, who)[0]
+                if found != want:
+                    raise RegisterMismatchError(
+                        f"{who}: ESC register 0x0980 (cyclic unit control, AssignActivate "
+                        f"0x{assign:04X} of profile {self.profiles[self._first[d]].name}) "
+                        f"reads back 0x{found:02X}, expected 0x{want:02X}"
+                    )
+
     def _reconfigure(self, pos: int) -> None:
         """PRE-OP -> SAFE-OP hook of a slave brought back by :meth:`recover_slaves`: its
         start-up SDOs and PDOs again, checked against the layout the bus runs with."""
-        self._startup(self._first[pos], ("IP", "PS"))
-        layout = self._configure_pdos(self._first[pos])
-        if self.wire is not None and layout != self.wire.layouts[pos]:
-            raise EtherCATError(f"{self._who_slave(pos)}: came back with another PDO layout")
+        d = self._device_of(pos)  # pysoem passes the 0-based line position
+        self._startup(self._first[d], ("IP", "PS"))
+        layout = self._configure_pdos(self._first[d])
+        if self.wire is not None and layout != self.wire.layouts[d]:
+            raise EtherCATError(f"{self._who_slave(d)}: came back with another PDO layout")
         if self.pdo_watchdog is not None:
             self._set_watchdog(pos)
 
     def _set_watchdog(self, pos: int) -> None:
         """PRE-OP -> SAFE-OP hook: the SM watchdog time (``pdo_watchdog``)."""
-        s = self.slaves[pos]  # pysoem passes the 0-based position
+        d = self._device_of(pos)  # pysoem passes the 0-based line position
+        s = self.slaves[d]
         ms = self.pdo_watchdog * 1000.0
-        self._retry(
-            lambda: s.set_watchdog("processdata", ms), self._first[pos], "SM watchdog write"
-        )
+        self._retry(lambda: s.set_watchdog("processdata", ms), self._first[d], "SM watchdog write")
 
     def _retry(self, fn: Any, axis: int, what: str) -> Any:
         """Call ``fn`` again when the mailbox/register access got no (valid) answer.
@@ -497,34 +587,48 @@ class EtherCATTransport(Transport):
                 time.sleep(_RETRY_PAUSE)
         raise AssertionError("unreachable")
 
-    def _request(self, state: int, cyclic: bool = False) -> None:
-        """Request ``state`` on all slaves and wait; raises StateChangeError in words."""
+    def _request(self, state: int, cyclic: bool = False, line: bool = False) -> None:
+        """Request ``state`` on the drive devices (``line``: on every slave of the line) and
+        wait; raises StateChangeError in words. With slaves left alone on the line, each
+        device is requested and checked on its own (SOEM's master-wide request and check
+        would take the others along)."""
         m = self.master
-        m.state = state
-        m.write_state()
+        partial = self._partial and not line
+        slaves = self.slaves if partial else self._line
+        if partial:
+            for s in slaves:
+                s.state = state
+                s.write_state()
+        else:
+            m.state = state
+            m.write_state()
         deadline = time.monotonic() + self.state_timeout
-        reached = 0
+        timeout_us = 1000 if cyclic else 50_000
         while time.monotonic() < deadline:
             if cyclic:
                 self._raw_exchange()
-            reached = m.state_check(state, 1000 if cyclic else 50_000)
-            if reached == state:
+            if partial:
+                if all(s.state_check(state, timeout_us) == state for s in slaves):
+                    return
+            elif m.state_check(state, timeout_us) == state:
                 return
             m.read_state()
             if cyclic and self._ack_watchdog_errors(state):
                 continue  # the master was late, not the slave wrong: ask again
-            if any(s.state & 0x10 for s in self.slaves):
+            if any(s.state & 0x10 for s in slaves):
                 break  # a slave refused with an error: no point waiting
             if cyclic:
                 time.sleep(self.cycle_time)
         m.read_state()
         problems = {
-            i + 1: (s.state, s.al_status) for i, s in enumerate(self.slaves) if s.state != state
+            i + 1: (s.state, s.al_status)
+            for i, s in enumerate(self._line)
+            if s.state != state and any(s is t for t in slaves)
         }
         target = STATE_NAMES.get(state, hex(state))
         parts = []
         for slave, (st, code) in problems.items():
-            who = self._who_slave(slave - 1)
+            who = self._who_at(slave - 1)
             if st == 0:
                 parts.append(f"{who} does not answer")
             else:
@@ -663,7 +767,7 @@ class EtherCATTransport(Transport):
         deadline = time.monotonic() + self.state_timeout
         while time.monotonic() < deadline:
             self._raw_exchange()
-            if self.master.state_check(STATE_OP, 1000) == STATE_OP:
+            if all(s.state_check(STATE_OP, 1000) == STATE_OP for s in self.slaves):
                 break
             self.master.read_state()
             self._ack_watchdog_errors(STATE_OP)
@@ -698,7 +802,7 @@ class EtherCATTransport(Transport):
     def _on_emergency(self, emcy: Any) -> None:
         self.emergencies.append(
             (
-                self._axis_of_slave(int(emcy.slave_pos) - 1),
+                self._axis_of_slave(self._device_of(int(emcy.slave_pos) - 1)),
                 int(emcy.error_code),
                 int(emcy.error_reg),
             )
@@ -718,14 +822,14 @@ class EtherCATTransport(Transport):
         pysoem = _pysoem()
         if isinstance(exc, pysoem.SdoError):
             return str(self._sdo_error(exc, "access"))
-        pos = getattr(exc, "slave_pos", 0)
-        who = self._who_slave(pos - 1) if 1 <= pos <= self.n_devices else f"slave {pos}"
+        pos = int(getattr(exc, "slave_pos", 0))
+        who = self._who_at(pos - 1) if pos >= 1 else f"slave {pos}"
         desc = _describe_exc(exc)
         return f"{who}: {desc}"
 
     def _sdo_error(self, exc: Any, action: str) -> SdoAbortError:
         pos = int(getattr(exc, "slave_pos", 1))
-        axis = self._axis_of_slave(pos - 1)
+        axis = self._axis_of_slave(self._device_of(pos - 1))
         return SdoAbortError(
             axis, exc.index, exc.subindex, exc.abort_code, action, self.axis_names[axis]
         )
@@ -773,7 +877,11 @@ class EtherCATTransport(Transport):
         if m is None:
             return
         try:
-            if self.slaves:
+            if self._partial:  # the slaves left alone stay in PRE-OP
+                for s in self.slaves:
+                    s.state = 1  # INIT
+                    s.write_state()
+            elif self.slaves:
                 m.state = 1  # INIT
                 m.write_state()
         except Exception:  # closing a broken bus: nothing more to do

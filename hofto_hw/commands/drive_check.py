@@ -25,6 +25,17 @@ On a real bus (``--iface`` / ``--interface``) the check reads only the base conf
 ``robot.joints`` when it has them): checking 1..N drives on a bench needs no arm model, and
 a ``--config`` of a bench may hold nothing but those two sections.
 
+Part of a longer EtherCAT line (``--iface``): an integrator commissions one drive of an
+installed line without unplugging the others. ``--axes N`` checks the first N slaves;
+``--slaves 1,3`` the slaves at those line positions (1-based, as the master's messages and
+SOEM number them; the drive of position p is ``bus.drives[p - 1]`` of ``--config``, the
+config listing the line's drives in line order). The other slaves are brought to PRE-OP
+with the line (SOEM reads every slave's PDO assignment by CoE there) and left in PRE-OP:
+below SAFE-OP a slave exchanges no process data, so nothing the check writes reaches it and
+its drive cannot be enabled from the bus, while its mailbox still answers (emergencies,
+diagnosis), as IgH's master leaves slaves it has no configuration for. The report says
+which (``line``). A position beyond the line is refused in one line (exit 2).
+
 Exit codes: 0 the check passed, 1 it ran and something failed (listed), 2 bad input.
 """
 
@@ -64,8 +75,15 @@ def configure(p: argparse.ArgumentParser) -> None:
         type=int,
         default=None,
         metavar="N",
-        help="drives of this profile on the bus (default: 6 emulated, else the "
-        "base config's drive count)",
+        help="drives of this profile to check (default 6); on a longer EtherCAT line "
+        "the first N slaves, the others left in PRE-OP",
+    )
+    p.add_argument(
+        "--slaves",
+        default=None,
+        metavar="P,P",
+        help="--iface only: line positions (1-based) of the drives to check on a longer "
+        "line; the others stay in PRE-OP (default: the first N)",
     )
     p.add_argument(
         "--move",
@@ -123,10 +141,33 @@ def _check_args(args: argparse.Namespace, profile: Any) -> int:
         raise UserError("--can-interface goes with --emulated and a CANopen profile")
     if args.move is not None and not (np.isfinite(args.move) and 0 < abs(args.move) <= 0.5):
         raise UserError(f"--move {args.move}: a step of at most 0.5 rad, not 0")
+    if args.slaves is not None:
+        if args.iface is None:
+            raise UserError("--slaves goes with --iface (positions on an EtherCAT line)")
+        k = profile.axes
+        fits = args.axes is None or -(-args.axes // k) == len(_positions(args.slaves))
+        if not fits:
+            raise UserError(
+                f"--axes {args.axes} does not fit --slaves {args.slaves} "
+                f"({len(_positions(args.slaves))} slaves of {k} axes)"
+            )
+        if args.axes is None:
+            args.axes = len(_positions(args.slaves)) * k
     n = 6 if args.axes is None else args.axes
     if not 1 <= n <= 6:
         raise UserError(f"--axes {args.axes}: 1 to 6 drives")
     return n
+
+
+def _positions(text: str) -> list[int]:
+    """``--slaves 1,3`` as [1, 3]; UserError for what is not distinct positions from 1."""
+    try:
+        got = [int(x) for x in text.split(",")]
+    except ValueError:
+        raise UserError(f"--slaves {text}: line positions from 1, comma-separated") from None
+    if not got or min(got) < 1 or len(set(got)) != len(got):
+        raise UserError(f"--slaves {text}: distinct line positions from 1, comma-separated")
+    return got
 
 
 def _check_config(
@@ -137,20 +178,28 @@ def _check_config(
     emulated: bool,
     interface: str | None,
     options: dict[str, Any],
+    picks: list[int] | None = None,
 ) -> Path:
-    """A config for the check: the base config with its first ``n`` drives running
-    ``profile`` (identity from the profile), the bus on ``interface``, ``options`` merged
-    into ``bus.ethercat`` / ``bus.canopen``."""
+    """A config for the check: the base config with the drives ``picks`` (indices into its
+    ``bus.drives``; default its first ``n``) running ``profile`` (identity from the
+    profile), the bus on ``interface``, ``options`` merged into ``bus.ethercat`` /
+    ``bus.canopen``. On a real bus the config keeps only the drives checked."""
     from hofto_hw.config.loader import dump_yaml, read_yaml
 
+    picks = list(range(n)) if picks is None else picks
     data = read_yaml(base, "config")
     bus = data.get("bus") or {}
     drives = bus.get("drives") or []
     if len(drives) < n:
         raise UserError(f"{base}: bus.drives has {len(drives)} drives, --axes asks for {n}")
+    if max(picks) >= len(drives):
+        raise UserError(
+            f"--slaves: {base} has {len(drives)} drives (bus.drives, in line order); "
+            f"slave {max(picks) // profile.axes + 1} has none"
+        )
     prof_file = folder / f"{profile.name}.yaml"
     prof_file.write_text(dump_yaml(profile.model_dump(mode="json"), sort_keys=False))
-    for i, d in enumerate(drives[:n]):
+    for i, d in enumerate(drives[j] for j in picks):
         d["profile"] = str(prof_file)
         d["identity"] = {
             "vendor_id": profile.identity.vendor_id,
@@ -159,10 +208,11 @@ def _check_config(
         if profile.axes > 1:  # a multi-axis drive serves `axes` joints: fill each device
             d["device"], d["device_axis"] = divmod(i, profile.axes)
     section = bus.get(profile.bus) or {}
-    if not emulated:  # the check runs the first n drives of the line: their node ids too
-        bus["drives"] = drives[:n]
+    if not emulated:  # the check runs the drives picked: their node ids too
+        bus["drives"] = [drives[j] for j in picks]
         if isinstance(section.get("node_ids"), list):
-            section["node_ids"] = section["node_ids"][:n]
+            ids = section["node_ids"]
+            section["node_ids"] = [ids[j] for j in picks if j < len(ids)]
     bus["transport"] = profile.bus
     if interface is not None:
         bus["interface"] = interface
@@ -187,7 +237,7 @@ class CheckBus:
     cycle_time: float
 
 
-def _bus_only(path: Path, n: int, source: Path) -> CheckBus:
+def _bus_only(path: Path, n: int, source: Path, picks: list[int] | None = None) -> CheckBus:
     """The check config's ``bus:`` and ``loop:`` sections, validated without the robot
     (a real bus: the check runs n drives, not the arm); ConfigError names the field and
     ``source``, the base config they come from (the check config is a temporary file)."""
@@ -208,10 +258,11 @@ def _bus_only(path: Path, n: int, source: Path) -> CheckBus:
         got = _BusAndLoop.model_validate({"bus": data.get("bus"), "loop": data.get("loop") or {}})
     except ValidationError as err:
         raise ConfigError(format_validation_error(str(source), err)) from None
+    picks = list(range(n)) if picks is None else picks
     joints = (data.get("robot") or {}).get("joints")
-    if not isinstance(joints, list) or len(joints) < n:
-        joints = [f"joint_{i + 1}" for i in range(n)]
-    return CheckBus(got.bus, [str(j) for j in joints[:n]], 1.0 / got.loop.rate_hz)
+    if not isinstance(joints, list) or len(joints) <= max(picks):
+        joints = [f"joint_{i + 1}" for i in range(max(picks) + 1)]
+    return CheckBus(got.bus, [str(joints[j]) for j in picks], 1.0 / got.loop.rate_hz)
 
 
 # ---------------------------------------------------------------- emulators
@@ -284,12 +335,16 @@ def _emulated_canopen(cfg: Any, bus_kwargs: dict[str, Any]) -> Iterator[None]:
 # ---------------------------------------------------------------- the check
 
 
-def _transport(cfg: CheckBus, profile: Any, bus_kwargs: dict[str, Any]) -> Any:
+def _transport(
+    cfg: CheckBus, profile: Any, bus_kwargs: dict[str, Any], positions: list[int] | None
+) -> Any:
     names = cfg.joints[: len(cfg.bus.drives)]
     if profile.bus == "ethercat":
         from drivers.ethercat.master import EtherCATTransport
 
-        return EtherCATTransport.from_config(cfg.bus, names, cycle_time=cfg.cycle_time)
+        return EtherCATTransport.from_config(
+            cfg.bus, names, cycle_time=cfg.cycle_time, positions=positions
+        )
     from drivers.canopen.master import CANopenTransport
 
     t = CANopenTransport.from_config(cfg.bus, names, cycle_time=cfg.cycle_time)
@@ -331,8 +386,11 @@ def check(
     move: float | None,
     emulated: bool,
     bus_kwargs: dict[str, Any] | None = None,
+    positions: list[int] | None = None,
 ) -> dict[str, Any]:
-    """Run the check on the bus ``cfg`` describes; returns the report (see module)."""
+    """Run the check on the bus ``cfg`` describes (EtherCAT ``positions``: the line
+    positions of its devices, the other slaves left in PRE-OP); returns the report (see
+    module). A position beyond the line is a UserError."""
     from drivers.cia402.drive_group import DriveGroup
     from drivers.cia402.state_machine import Mode, State
     from drivers.errors import DriverError
@@ -357,7 +415,9 @@ def check(
         "warnings": [],
         "faults": [],
     }
-    t = _transport(cfg, profile, bus_kwargs or {})
+    from drivers.ethercat.errors import SlavePositionError
+
+    t = _transport(cfg, profile, bus_kwargs or {}, positions)
     joints = np.arange(n)
     try:
         t.open()
@@ -365,6 +425,14 @@ def check(
         w = t.wire
         dev = [w.serve[i][0] for i in range(n)]  # the slave/node of each axis
         report["devices"] = [{"device": w.serve[i][0], "axis": w.serve[i][1]} for i in range(n)]
+        if profile.bus == "ethercat":  # where on the line each joint's slave sits
+            at = [t.positions[d] if t.positions is not None else d + 1 for d in dev]
+            report["line"] = {
+                "slaves": t.line_slaves,
+                "checked": sorted(set(at)),
+                "positions": at,
+                "left_in_preop": t.left_alone,
+            }
         report["process_image_bytes"] = [
             {"rx": w.rx_size(dev[i]), "tx": w.tx_size(dev[i])} for i in range(n)
         ]
@@ -401,13 +469,10 @@ def check(
             )
         report["faults"] += g.fault_messages()
         g.disable()
+    except SlavePositionError as exc:  # bad input: a position the line does not have
+        raise UserError(str(exc)) from None
     except (DriverError, ConfigError) as exc:  # ConfigError: identity/ratings differ
         report["faults"].append(str(exc))
-        if not emulated and not report["operational"] and "EtherCAT slaves" in str(exc):
-            report["faults"].append(
-                "drive check runs every slave of the EtherCAT line: give --axes the number "
-                "of drives on it (the first N joints of --config)"
-            )
     finally:
         t.close()
     return report
@@ -438,6 +503,13 @@ def run(args: argparse.Namespace) -> int:
     if move is None and args.emulated:
         move = DEFAULT_EMULATED_MOVE
     base = _base_config(args, profile.bus)
+    positions = picks = None
+    if args.iface is not None:  # the devices checked on the line, and their config drives
+        k = profile.axes
+        positions = (
+            _positions(args.slaves) if args.slaves is not None else list(range(1, -(-n // k) + 1))
+        )
+        picks = [(p - 1) * k + j for p in positions for j in range(k)][:n]
     # the check pauses between its steps (SDOs while cycling); a loop never does: generous
     # watchdogs and deadlines on the emulated bus, a shared machine's frame timeout
     if profile.bus == "ethercat":
@@ -461,12 +533,12 @@ def run(args: argparse.Namespace) -> int:
         if args.emulated and profile.bus == "ethercat":
             tag = f"{os.getpid() % 100000}"
             iface = f"dcm{tag}"
-        path = _check_config(base, profile, n, folder, args.emulated, iface, options)
+        path = _check_config(base, profile, n, folder, args.emulated, iface, options, picks)
         if args.emulated:  # the emulator runs the whole arm of the base config
             cfg = load_config(path)
             on = CheckBus(cfg.bus, list(cfg.robot.joints), cfg.cycle_time)
         else:
-            on = _bus_only(path, n, base)
+            on = _bus_only(path, n, base, picks)
         check_profile_against_loop(profile, on.cycle_time, f"{base}: loop.rate_hz")
         if args.emulated and profile.bus == "ethercat":
             with _emulated_ethercat(path, folder, iface):
@@ -476,7 +548,7 @@ def run(args: argparse.Namespace) -> int:
                 report = check(on, profile, n, move, True, bus_kwargs)
             report["can_interface"] = cfg.bus.canopen.can_interface
         else:
-            report = check(on, profile, n, move, False)
+            report = check(on, profile, n, move, False, positions=positions)
     if units_note is not None:
         report["warnings"].append(units_note)
     ok = passed(report, move)
@@ -494,6 +566,11 @@ def _print(r: dict[str, Any]) -> None:
         f"drive check: profile {r['profile']}, {r['bus']} ({where}), {r['axes']} axes, "
         f"loop {r['loop']}"
     )
+    line = r.get("line")
+    if line is not None:
+        alone = ", ".join(str(p) for p in line["left_in_preop"]) or "none"
+        checked = ", ".join(str(p) for p in line["checked"])
+        print(f"  line: {line['slaves']} slaves, checked {checked}, left in PRE-OP: {alone}")
     print(f"  operational: {'yes' if r['operational'] else 'NO'}")
     print(f"  enabled:     {'yes' if r['enabled'] else 'NO'}")
     print(f"  start-up SDOs written: {r['startup_sdos']}")

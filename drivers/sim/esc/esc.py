@@ -146,6 +146,8 @@ class Esc:
         self.output_plan: pdo_map.CopyPlan = ()
         self.input_plan: pdo_map.CopyPlan = ()
         self.sync0_active = False
+        #: the highest AL state the slave has been in (tests: a slave left alone stays low)
+        self.highest_state = r.STATE_INIT
         self._latched_ns = 0
         self._sms: list[tuple[int, int, int, int]] = []  # (k, start, end, control) enabled
         self._fmmus: list[tuple[int, int, int, int]] = []  # (log_start, log_end, phys, type)
@@ -190,6 +192,8 @@ class Esc:
         return self.mem[r.AL_STATUS_CODE] | (self.mem[r.AL_STATUS_CODE + 1] << 8)
 
     def _set_al(self, state: int, code: int, error: bool) -> None:
+        if state != r.STATE_BOOT:
+            self.highest_state = max(getattr(self, "highest_state", r.STATE_INIT), state)
         self.mem[r.AL_STATUS] = state | (r.AL_ERROR_FLAG if error else 0)
         self.mem[r.AL_STATUS + 1] = 0
         struct.pack_into("<H", self.mem, r.AL_STATUS_CODE, code)
@@ -293,6 +297,8 @@ class Esc:
                 self._repeat_mailbox()
         if touched(r.DC_RECEIVE_TIME_PORT0, 4):
             self._latch_receive_times()
+        if touched(r.DC_CYCLIC_UNIT_CONTROL, 1):  # bits 1-3 and 6-7 are reserved: read 0
+            mem[r.DC_CYCLIC_UNIT_CONTROL] &= r.DC_CYCLIC_UNIT_CONTROL_BITS
         if touched(r.DC_ACTIVATION, 1):
             self.sync0_active = mem[r.DC_ACTIVATION] & 0x03 == 0x03
         if touched(r.AL_CONTROL, 1):
@@ -563,6 +569,11 @@ class Esc:
             cycle = struct.unpack_from("<I", self.mem, r.DC_SYNC0_CYCLE)[0]
             if cycle < 125_000:
                 return AL_INVALID_SYNC_CYCLE
+        # the drive's application checks the sync/latch unit assignment its ESI states
+        # (AssignActivate's low byte in 0x0980) before SAFE-OP, as SSC-based drives do
+        want = self.desc.assign_activate & 0xFF
+        if self.desc.dc_required and self.mem[r.DC_CYCLIC_UNIT_CONTROL] != want:
+            return AL_INVALID_DC_SYNC
         self.output_plan = out_plan
         self.input_plan = in_plan
         return AL_NO_ERROR

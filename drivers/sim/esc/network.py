@@ -36,6 +36,7 @@ from drivers.cia402 import pdo
 from drivers.sim.control_socket import answer, open_control_socket, remove_own_socket
 from drivers.sim.drive import FAULTS, EmulatedDrives
 from drivers.sim.esc import datagram
+from drivers.sim.esc import registers as r
 from drivers.sim.esc.description import SlaveDescription
 from drivers.sim.esc.esc import Esc
 from drivers.sim.pacing import answer_first
@@ -346,6 +347,8 @@ class EmulatedNetwork:
             "malformed": self.malformed,
             "al_state": [s.al_state for s in self.slaves],
             "al_status_code": [s.al_status_code for s in self.slaves],
+            "highest_al_state": [s.highest_state for s in self.slaves],
+            "cyclic_unit_control": [s.mem[r.DC_CYCLIC_UNIT_CONTROL] for s in self.slaves],
             "station_address": [s.station_address for s in self.slaves],
             "silent": [s.silent for s in self.slaves],
         }

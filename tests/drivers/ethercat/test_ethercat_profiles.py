@@ -15,7 +15,7 @@ from support.rootnet import emulator, sim_ethercat_args, veth_pair
 
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import Mode, State
-from drivers.ethercat.errors import EtherCATError, StateChangeError
+from drivers.ethercat.errors import EtherCATError, RegisterMismatchError, StateChangeError
 from drivers.ethercat.master import EtherCATTransport
 from drivers.transport import STATUS_OK, SdoAbortError
 from hofto_hw.config.loader import load_config
@@ -67,13 +67,10 @@ def test_six_profiles_run_on_one_bus_with_the_layouts_the_drives_report(mixed_bu
         assert [len(s.output) for s in t.slaves] == [14, 14, 15, 14, 15, 15]
         assert [len(s.input) for s in t.slaves] == [20, 20, 21, 16, 21, 21]
         assert t.startup_written == 3  # Elmo's 0x60C2:1/2, Inovance's mode
-        # the Nanotec's AssignActivate 0x330 asks 0x30 in ESC 0x0980, which SOEM writes 0:
-        # said once, in one line, naming the slave; the 0x300 drives are not mentioned
-        assert len(t.warnings) == 1 and "\n" not in t.warnings[0]
-        assert t.warnings[0].startswith("slave 3 (") and "0x0330" in t.warnings[0]
-        assert "0x0980" in t.warnings[0]
-        err = capfd.readouterr().err
-        assert err.count("hofto-hw: warning: slave 3 (") == 1 and "0x0980" in err
+        # the Nanotec's AssignActivate 0x330 asks 0x30 in ESC 0x0980 (SOEM writes 0x00):
+        # written by the master's own datagram, the 0x300 drives left at 0x00, no warning
+        assert emu.call(op="status")["cyclic_unit_control"] == [0, 0, 0x30, 0, 0, 0]
+        assert t.warnings == [] and "warning" not in capfd.readouterr().err
         assert t.read_value(0, 0x60C2, 1, "u8") == 1  # the loop period [ms]
         assert t.read_value(1, 0x6060, 0, "i8") == 8
         g = DriveGroup.from_config(t, cfg.bus)
@@ -152,6 +149,43 @@ def test_op_without_the_dc_the_drive_requires_is_refused_with_its_al_code(mixed_
     msg = str(err.value)
     assert "slave 2" in msg and "0x0030" in msg and "DC" in msg
     assert "slave 3" not in msg  # the Nanotec got its 1 ms SYNC0 with the shift
+
+
+def test_safe_op_is_refused_when_0x0980_is_not_programmed_as_the_drive_says(mixed_bus) -> None:
+    """The master's profile of the Nanotec says AssignActivate 0x0300 (low byte 0x00, what
+    SOEM's dc_sync writes), the emulated drive's ESI 0x0330: nothing writes 0x30 to 0x0980
+    and the drive refuses SAFE-OP with AL status 0x0030, as an SSC-based drive does."""
+    master, cfg, emu = mixed_bus
+    profiles = [profile(p) for p in MIXED]
+    other = copy.deepcopy(NANOTEC)
+    other["dc"]["assign_activate"] = 0x0300
+    profiles[2] = profile(other)
+    t = _transport(master, cfg, profiles)
+    with pytest.raises(StateChangeError) as err:
+        t.open()
+    msg = str(err.value)
+    assert msg.startswith("EtherCAT slaves did not reach SAFE-OP: slave 3 (")
+    assert "0x0030" in msg and "slave 2" not in msg and "\n" not in msg
+    assert emu.call(op="status")["cyclic_unit_control"][2] == 0
+
+
+def test_a_0x0980_that_reads_back_different_is_refused_in_one_line(mixed_bus) -> None:
+    """A profile asking a reserved bit of 0x0980 (0x80: an ESC keeps reserved bits 0): the
+    write is read back, and the difference is one line naming the slave and its joint, the
+    register, the expected and the found value, before SAFE-OP is asked for."""
+    master, cfg, emu = mixed_bus
+    profiles = [profile(p) for p in MIXED]
+    other = copy.deepcopy(NANOTEC)
+    other["dc"]["assign_activate"] = 0x0380
+    profiles[2] = profile(other)
+    t = _transport(master, cfg, profiles)
+    with pytest.raises(RegisterMismatchError) as err:
+        t.open()
+    assert str(err.value) == (
+        f"slave 3 (joint_3) on {master}: ESC register 0x0980 (cyclic unit control, "
+        "AssignActivate 0x0380 of profile test_nanotec) reads back 0x00, expected 0x80"
+    )
+    assert max(emu.call(op="status")["highest_al_state"]) == 0x02  # PRE-OP: never further
 
 
 def test_the_master_programs_the_sync0_cycle_its_profile_names(mixed_bus) -> None:

@@ -101,6 +101,38 @@ def test_canopen_check_on_fewer_axes_reports_those(capsys) -> None:
             [str(ETHERCAT[0]) if ETHERCAT else "x", "--emulated", "--can-interface", "virtual"],
             "--can-interface goes with --emulated and a CANopen profile",
         ),
+        (
+            [str(ETHERCAT[0]) if ETHERCAT else "x", "--emulated", "--slaves", "1"],
+            "--slaves goes with --iface",
+        ),
+        (
+            [str(ETHERCAT[0]) if ETHERCAT else "x", "--iface", "eth0", "--slaves", "0,2"],
+            "--slaves 0,2: distinct line positions from 1",
+        ),
+        (
+            [str(ETHERCAT[0]) if ETHERCAT else "x", "--iface", "eth0", "--slaves", "1,1"],
+            "--slaves 1,1: distinct line positions from 1",
+        ),
+        (
+            [str(ETHERCAT[0]) if ETHERCAT else "x", "--iface", "eth0", "--slaves", "one"],
+            "--slaves one: line positions from 1",
+        ),
+        (
+            [
+                str(ETHERCAT[0]) if ETHERCAT else "x",
+                "--iface",
+                "eth0",
+                "--slaves",
+                "1,3",
+                "--axes",
+                "1",
+            ],
+            "--axes 1 does not fit --slaves 1,3",
+        ),
+        (
+            [str(ETHERCAT[0]) if ETHERCAT else "x", "--iface", "eth0", "--slaves", "7"],
+            "has 6 drives (bus.drives, in line order); slave 7 has none",
+        ),
     ],
 )
 def test_bad_input_is_one_line_exit_2(capsys, argv: list[str], message: str) -> None:

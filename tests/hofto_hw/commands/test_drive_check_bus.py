@@ -15,6 +15,7 @@ import pytest
 import yaml
 from support.canopen import unique_channel
 
+from drivers.cia402.state_machine import State
 from hofto_hw.cli import main
 from hofto_hw.config.drive_profile import load_profile
 from hofto_hw.config.loader import dump_yaml
@@ -186,18 +187,84 @@ def test_ethercat_check_of_two_drives_on_a_bench(tmp_path: Path, capsys) -> None
     ):
         code, report = _check(capsys, str(profile), "--iface", master, "--axes", "2",
                               "--config", str(config))  # fmt: skip
-        # one drive asked for on a line of two: one line that says what to give instead
-        code1, short = _check(capsys, str(profile), "--iface", master, "--axes", "1",
-                              "--config", str(config))  # fmt: skip
     _assert_moved(code, report, 2)
     assert report["bus"] == "ethercat"
     assert [d["device"] for d in report["devices"]] == [0, 1]
-    assert code1 == 1 and not short["operational"]
-    assert short["faults"] == [
-        f"{master}: found 2 EtherCAT slaves, the config has 1 drives (bus.drives)",
-        "drive check runs every slave of the EtherCAT line: give --axes the number of drives "
-        "on it (the first N joints of --config)",
-    ]
+    assert report["line"] == {
+        "slaves": 2,
+        "checked": [1, 2],
+        "positions": [1, 2],
+        "left_in_preop": [],
+    }
+
+
+_PREOP = 0x02
+_OP = 0x08
+
+
+@pytest.mark.root
+@pytest.mark.parametrize("name", ["elmo_gold", "nanotec_c5_e_2_21"])
+def test_ethercat_check_of_part_of_a_longer_line(tmp_path: Path, capsys, name: str) -> None:
+    """An installed line of three drives (``sim-ethercat --drives 3``): ``--axes 1`` checks
+    slave 1 and ``--slaves 1,3`` slaves 1 and 3, each moved 0.05 rad; the slaves not
+    checked are brought to PRE-OP with the line and never go higher (the emulator records
+    each slave's highest AL state), so no process data reaches them and their drives are
+    never enabled. A position beyond the line is one line, exit 2, and brings nothing up.
+    The Nanotec (AssignActivate 0x0330) gets 0x30 in ESC 0x0980 at the slaves checked only,
+    found by their line position with a slave in PRE-OP between them."""
+    from support.rootnet import emulator, require_root, sim_ethercat_args, veth_pair
+
+    require_root()
+    profile = DRIVES / f"{name}.yaml"
+    unit = 0x30 if name.startswith("nanotec") else 0x00
+    config = bench_config(tmp_path, ROOT / "configs" / "er3a.yaml", profile, 3,
+                          {"transport": "ethercat", "interface": "unused"},
+                          {"pdo_watchdog": 2.0, "receive_timeout": 0.02})  # fmt: skip
+    with (
+        veth_pair("lm", "ls") as (master, slave),
+        emulator(
+            [*sim_ethercat_args(slave, config), "--drives", "3"], tmp_path, timeout=30.0
+        ) as emu,  # fmt: skip
+    ):
+        code1, one = _check(capsys, str(profile), "--iface", master, "--axes", "1",
+                            "--config", str(config))  # fmt: skip
+        after_one = emu.call(op="status")
+        code2, two = _check(capsys, str(profile), "--iface", master, "--slaves", "1,3",
+                            "--config", str(config))  # fmt: skip
+        after_two = emu.call(op="status")
+        beyond = main(["drive", "check", str(profile), "--iface", master, "--slaves", "4",
+                       "--config", str(config), "--move", str(STEP), "--json"])  # fmt: skip
+        captured = capsys.readouterr()
+        after_beyond = emu.call(op="status")
+    _assert_moved(code1, one, 1)
+    assert one["line"] == {"slaves": 3, "checked": [1], "positions": [1], "left_in_preop": [2, 3]}
+    assert one["devices"] == [{"device": 0, "axis": 0}]
+    assert after_one["highest_al_state"] == [_OP, _PREOP, _PREOP]
+    assert after_one["al_state"][1:] == [_PREOP, _PREOP]  # left where the check put them
+    assert after_one["cyclic_unit_control"] == [unit, 0, 0]
+
+    _assert_moved(code2, two, 2)
+    assert two["line"] == {
+        "slaves": 3,
+        "checked": [1, 3],
+        "positions": [1, 3],
+        "left_in_preop": [2],
+    }
+    assert after_two["highest_al_state"] == [_OP, _PREOP, _OP]
+    assert after_two["cyclic_unit_control"] == [unit, 0, unit]
+    # the drives left alone were never enabled (CiA-402 state of the emulated drive)
+    assert after_one["drive_state"][1] != State.OPERATION_ENABLED
+    assert after_one["drive_state"][2] != State.OPERATION_ENABLED
+    assert after_two["drive_state"][1] != State.OPERATION_ENABLED
+
+    assert beyond == 2 and captured.out == ""
+    err = captured.err.strip()
+    assert "\n" not in err and "Traceback" not in err
+    assert err == (
+        f"hofto-hw drive: error: {master}: slave position 4 is beyond the EtherCAT line "
+        "(found 3 slaves: positions 1 to 3)"
+    )
+    assert after_beyond["highest_al_state"][1] == _PREOP
 
 
 # ---------------------------------------------------------------------- units (0x608F)
