@@ -55,9 +55,7 @@ def cartesian_loop(
     knots = np.linspace(0.0, period, pts.shape[0])
     loop = CubicSpline(knots, pts, bc_type="periodic", axis=0)
     t_ik = np.arange(0.0, duration + 1.0 / ik_rate, 1.0 / ik_rate)
-    s = np.clip(t_ik / ramp, 0.0, 1.0)
-    blend = s**3 * (10 - 15 * s + 6 * s**2)
-    targets = p0 + blend[:, None] * loop(t_ik % period)
+    targets = p0 + _fade_in(t_ik, ramp)[:, None] * loop(t_ik % period)
     q = np.array(q_start, dtype=float)
     qs = np.zeros((t_ik.size, model.n))
     for k, target in enumerate(targets):
@@ -76,6 +74,12 @@ def cartesian_loop(
         qs[k] = q
     spline = CubicSpline(t_ik, qs, axis=0)
     t = np.arange(0.0, duration, 1.0 / rate)
-    st = np.clip(t / ramp, 0.0, 1.0)
-    tool = p0 + (st**3 * (10 - 15 * st + 6 * st**2))[:, None] * loop(t % period)
+    tool = p0 + _fade_in(t, ramp)[:, None] * loop(t % period)
     return JointTrajectory(t, spline(t), spline(t, 1), spline(t, 2), tool)
+
+
+def _fade_in(t: np.ndarray, ramp: float) -> np.ndarray:
+    """The quintic blend s³·(10 - 15·s + 6·s²), s = t/ramp clipped to [0, 1], at times ``t``
+    (N,) [s]: the IK targets and the tool path fade in alike."""
+    s = np.clip(t / ramp, 0.0, 1.0)
+    return s**3 * (10 - 15 * s + 6 * s**2)
