@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from hofto_hw.control.joint_motion import fade_in
 from hofto_hw.errors import ModelError
 from hofto_hw.model.robot import RobotModel
 
@@ -45,7 +46,8 @@ def cartesian_loop(
 ) -> JointTrajectory:
     """Tool loop through ``start + offsets`` (K, 3) [m] every ``period`` s, for ``duration`` s.
 
-    The path fades in over ``ramp`` s (quintic blend) so the arm starts at rest at q_start.
+    The path fades in over ``ramp`` s (the demo path's quintic fade-in) so the arm starts at
+    rest at q_start.
     Joints listed in ``frozen`` (0-based) take no part in the IK and stay at q_start.
     Raises ModelError when IK leaves the workspace (residual > 1 mm).
     """
@@ -79,7 +81,6 @@ def cartesian_loop(
 
 
 def _fade_in(t: np.ndarray, ramp: float) -> np.ndarray:
-    """The quintic blend s³·(10 - 15·s + 6·s²), s = t/ramp clipped to [0, 1], at times ``t``
-    (N,) [s]: the IK targets and the tool path fade in alike."""
-    s = np.clip(t / ramp, 0.0, 1.0)
-    return s**3 * (10 - 15 * s + 6 * s**2)
+    """The demo path's quintic fade-in (:func:`hofto_hw.control.joint_motion.fade_in`) at
+    times ``t`` (N,) [s]: the IK targets and the tool path fade in alike."""
+    return np.array([fade_in(float(x), ramp)[0] for x in t])
