@@ -21,12 +21,10 @@ m, rad, s, N, N·m; twists/wrenches (6,) world-aligned at the tool. Allocation-f
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from hofto_hw.config.drag import DragConfig
-from hofto_hw.control.wrench import ToolJacobian
+from hofto_hw.control.wrench import ToolJacobian, norm3
 from hofto_hw.model.robot import RobotModel
 
 
@@ -67,10 +65,8 @@ class JointShaping:
         """Cap the linear part of ``twist`` (6,) toward each face of the box (in place)."""
         if not self.box:
             return
-        p = self.jac.position
         for i in range(3):
-            hi = max(self.box_hi[i] - p[i], 0.0) * self.inv_wall
-            lo = -max(p[i] - self.box_lo[i], 0.0) * self.inv_wall
+            lo, hi = self._box_walls(i)
             v = twist[i]
             if v > hi:
                 twist[i] = hi
@@ -84,11 +80,9 @@ class JointShaping:
         keeps the tool inside the box's walls."""
         if not self.box:
             return 1.0
-        p = self.jac.position
         s = 1.0
         for i in range(3):
-            hi = max(self.box_hi[i] - p[i], 0.0) * self.inv_wall
-            lo = -max(p[i] - self.box_lo[i], 0.0) * self.inv_wall
+            lo, hi = self._box_walls(i)
             v = twist[i]
             if v > hi:
                 s = min(s, hi / v)
@@ -97,6 +91,14 @@ class JointShaping:
         if s < 1.0:
             self.limited |= 4
         return s
+
+    def _box_walls(self, i: int) -> tuple[float, float]:
+        """The slowest and fastest tool speed [m/s] along world axis ``i`` the box's walls
+        allow at the tool's position: (distance to the wall) / wall_time, toward each face."""
+        p = self.jac.position[i]
+        hi = max(self.box_hi[i] - p, 0.0) * self.inv_wall
+        lo = -max(p - self.box_lo[i], 0.0) * self.inv_wall
+        return lo, hi
 
     def joints(self, q_cmd: np.ndarray, qd: np.ndarray) -> None:
         """Walls of the soft joint limits and the joint speed limits on ``qd`` (n,), in place.
@@ -126,8 +128,8 @@ class JointShaping:
         ``arm_speed`` [m/s]: the measured tool speed (:func:`lead_capped_speed`)."""
         tv = self._tv
         np.matmul(self.jac.J, qd, out=tv)
-        v = math.sqrt(tv[0] * tv[0] + tv[1] * tv[1] + tv[2] * tv[2])
-        w = math.sqrt(tv[3] * tv[3] + tv[4] * tv[4] + tv[5] * tv[5])
+        v = norm3(tv, 0)
+        w = norm3(tv, 3)
         v_tool = lead_capped_speed(self.v_tool, v, arm_speed)
         s = min(1.0, v_tool / v if v > 0.0 else 1.0, self.w_tool / w if w > 0.0 else 1.0)
         if s < 1.0:
@@ -199,7 +201,7 @@ class CartesianAdmittance:
         _limit_norm(a, 3, self.alpha_max * dt)
         v += a
         v *= self.mask
-        _limit_norm(v, 0, lead_capped_speed(self.v_max, _norm3(v, 0), arm_speed))
+        _limit_norm(v, 0, lead_capped_speed(self.v_max, norm3(v, 0), arm_speed))
         _limit_norm(v, 3, self.w_max)
         sh = self.shaping
         sh.limited = 0
@@ -292,11 +294,6 @@ def lead_capped_speed(limit: float, command: float, arm: float) -> float:
     return max(limit - lead, 0.0)
 
 
-def _norm3(x: np.ndarray, i: int) -> float:
-    """Norm of x[i:i+3]."""
-    return math.sqrt(x[i] * x[i] + x[i + 1] * x[i + 1] + x[i + 2] * x[i + 2])
-
-
 def _band_gain(norm: float, band: float) -> float:
     """Gain of the deadband at magnitude ``norm``: 0 below ``band``, rising linearly to 1 at
     2·band (magnitude 2·(norm - band)), 1 above: continuous (no click at the band edge) and
@@ -311,8 +308,7 @@ def _band_gain(norm: float, band: float) -> float:
 def _deadband(x: np.ndarray, i: int, band: float) -> bool:
     """Deadband on the norm of x[i:i+3] (see :func:`_band_gain`), keeping the direction;
     True when something is left."""
-    norm = math.sqrt(x[i] * x[i] + x[i + 1] * x[i + 1] + x[i + 2] * x[i + 2])
-    s = _band_gain(norm, band)
+    s = _band_gain(norm3(x, i), band)
     x[i] *= s
     x[i + 1] *= s
     x[i + 2] *= s
@@ -321,7 +317,7 @@ def _deadband(x: np.ndarray, i: int, band: float) -> bool:
 
 def _limit_norm(x: np.ndarray, i: int, limit: float) -> None:
     """Scale x[i:i+3] down to norm ``limit`` if above it."""
-    norm = math.sqrt(x[i] * x[i] + x[i + 1] * x[i + 1] + x[i + 2] * x[i + 2])
+    norm = norm3(x, i)
     if norm > limit:
         s = limit / norm
         x[i] *= s

@@ -45,7 +45,7 @@ from hofto_hw.control.admittance import CartesianAdmittance, JointAdmittance
 from hofto_hw.control.enabling import EnableEvent, Enabling
 from hofto_hw.control.friction_residual import FrictionResidual
 from hofto_hw.control.isolation import ContactIsolation
-from hofto_hw.control.wrench import ToolJacobian, WrenchEstimator
+from hofto_hw.control.wrench import ToolJacobian, WrenchEstimator, norm3
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers.kernels import Backend
 
@@ -181,7 +181,7 @@ class DragController:
         self.contact_link = 0
         self._mismatch_time = 0.0
 
-    def _lag_release(self, qd: np.ndarray, fast: float) -> None:
+    def _lag_release(self, fast: float) -> None:
         """The release seen in the arm's motion (``release_lag_ratio``): with the hand
         feed-forward on, the drives cancel the estimated hand, so the arm keeps up with a
         steady command while the hand pushes as estimated; when the hand lets go, the
@@ -191,11 +191,11 @@ class DragController:
         the drag's force until the fast estimate rises 2 % above its lowest value since (a
         hand pushing again). The command's own acceleration is excluded, since the arm lags
         an accelerating command by the drives' tracking lag (0.19-0.85 of it at a push's
-        onset). ``fast``: squared norm of ``tau_iso``."""
+        onset). ``fast``: squared norm of ``tau_iso``; the measured tool velocity in ``_tv``
+        (this tick's)."""
         vc3, tv = self._vc, self._tv
         np.matmul(self.jac.J[:3], self.qd_cmd, out=vc3)
-        vc = math.sqrt(vc3[0] * vc3[0] + vc3[1] * vc3[1] + vc3[2] * vc3[2])
-        np.matmul(self.jac.J[:3], qd, out=tv)
+        vc = norm3(vc3)
         hist = self._vc_hist
         prev = hist[self._vc_i]  # the command's speed 20 ms ago
         hist[self._vc_i] = vc
@@ -212,6 +212,12 @@ class DragController:
         if along < self._lag_ratio * vc:
             self._released = True
             self._fast_at = fast
+
+    def _follow(self, state: np.ndarray, x: np.ndarray, gain: float) -> None:
+        """One step of a first-order filter: state += (x - state)·gain, in place (n,)."""
+        np.subtract(x, state, out=self._raw)
+        self._raw *= gain
+        state += self._raw
 
     def learn(self, qd: np.ndarray, tau_ext: np.ndarray, dt: float) -> None:
         """One tick of contact-free motion outside drag mode (the caller knows: no contact
@@ -256,26 +262,17 @@ class DragController:
             np.subtract(tau_ext, self.friction_correction, out=self._tau_in)
             tau_ext = self._tau_in
         # the estimate low-passed (first order; alpha = 1: off), then the tare off
-        hz, tt, on = self._filter_hz, self._tare_time, self._filtering
-        alpha = 1.0 - math.exp(-2.0 * math.pi * hz * dt) if on and hz > 0.0 else 1.0
+        on = self._filtering
         self._filtering = True
-        np.subtract(tau_ext, self._filt, out=self._raw)
-        self._raw *= alpha
-        self._filt += self._raw
-        hz = self._iso_hz
-        alpha = 1.0 - math.exp(-2.0 * math.pi * hz * dt) if on and hz > 0.0 else 1.0
-        np.subtract(tau_ext, self._fiso, out=self._raw)
-        self._raw *= alpha
-        self._fiso += self._raw
+        self._follow(self._filt, tau_ext, _low_pass_gain(self._filter_hz, dt) if on else 1.0)
+        self._follow(self._fiso, tau_ext, _low_pass_gain(self._iso_hz, dt) if on else 1.0)
         if self.enabling.state != 1:  # the tare filter runs until the press
             # the mean of the raw estimate since the mode began, then an exponential mean
             # over tare_time (a short wait before the press still averages every sample)
             self._tare_n += 1
+            tt = self._tare_time
             beta = 1.0 - math.exp(-dt / tt) if tt > 0.0 else 1.0
-            beta = max(beta, 1.0 / self._tare_n)
-            np.subtract(tau_ext, self._slow, out=self._raw)
-            self._raw *= beta
-            self._slow += self._raw
+            self._follow(self._slow, tau_ext, max(beta, 1.0 / self._tare_n))
         ev = self.enabling.update(pressed, standstill, fault_latched)
         self.event = ev
         self.reason = 0
@@ -302,12 +299,16 @@ class DragController:
         self.release_scale = 1.0
         jac = self.jac
         jac.update(self.q_cmd)
+        # the arm's measured tool velocity: the lag release and the admittance's speed cap
+        tv = self._tv
+        np.matmul(jac.J[:3], qd, out=tv)
+        arm = norm3(tv)
         slow = float(np.dot(self.tau, self.tau))
         fast = float(np.dot(self.tau_iso, self.tau_iso))
         if self._release > 0.0 and slow > 0.0 and fast < self._release * self._release * slow:
             self.release_scale = math.sqrt(fast / slow) / self._release
         if self._lag_ratio > 0.0 and self.enabling.state == 1:
-            self._lag_release(qd, fast)
+            self._lag_release(fast)
             if self._released:
                 self.release_scale = 0.0
         if self.release_scale < 1.0:
@@ -329,10 +330,8 @@ class DragController:
         # no force into the admittance unless dragging: its state then decays
         adm = self.admittance
         np.copyto(self._qd_prev, self.qd_cmd)
-        # the arm's measured tool speed: the limit holds on the arm, not only on the command
-        tv = self._tv
-        np.matmul(jac.J[:3], qd, out=tv)
-        arm = math.sqrt(tv[0] * tv[0] + tv[1] * tv[1] + tv[2] * tv[2])
+        # the arm's measured tool speed (arm): the limit holds on the arm, not only on the
+        # command
         if self.cartesian:
             qd_new = adm.update(self.wrench if active else self._zero6, self.q_cmd, dt, arm)
         else:
@@ -349,3 +348,9 @@ class DragController:
         self._abs *= dt
         self.q_cmd += self._abs
         return self.reason
+
+
+def _low_pass_gain(hz: float, dt: float) -> float:
+    """The gain of a first-order low-pass at ``hz`` [Hz] over ``dt`` [s], 1 - exp(-2π·hz·dt)
+    (1: no filter, for hz <= 0)."""
+    return 1.0 - math.exp(-2.0 * math.pi * hz * dt) if hz > 0.0 else 1.0

@@ -15,6 +15,10 @@ x = (1, s(qd), qd), s = tanh(qd / v_s), as exponentially weighted sums (time con
 least-squares coefficients; :meth:`correction` is c_s·s(qd) + c_v·qd (the constant is the
 tare's job), bounded by ``limit`` times the model's own friction at qd. With no motion seen
 the correction is zero. Units: rad/s, N·m. Allocation-free per tick (solve included).
+
+:meth:`FrictionResidual.learn` is the kernel :func:`hofto_hw.control.kernels.friction_learn`
+(its one place; the tick's fused call compiles the same function): compiled for backend
+``numba`` (``auto`` where numba works), its own source run by the interpreter for ``numpy``.
 """
 
 from __future__ import annotations
@@ -67,23 +71,14 @@ class FrictionResidual:
         self.b = self.record["b"][0]  # weighted mean of x·r per joint
         self.coef = np.zeros((n, 3))
         self.every = max(1, int(every))
-        self._count = 0
-        self._pending = 0.0  # [s] of motion since the last sample learned from
-        self._x = np.zeros((n, 3))
-        self._x[:, 0] = 1.0
-        self._xa = self._x[:, :, None]  # views made once: none per tick
-        self._xb = self._x[:, None, :]
-        self._xx = np.zeros((n, 3, 3))
-        self._xr = np.zeros((n, 3))
-        self._t = np.zeros(n)
-        self._tcol = self._t[:, None]
         self._s = np.zeros(n)
         self._f = np.zeros(n)
         self._scratch = np.zeros((3, n))
-        self._abs = np.zeros(n)
-        self._st = self.record["st"][0]  # count, pending time (compiled path), seconds learned
+        self._st = self.record["st"][0]  # count, pending time [s], seconds learned [s]
         self.backend = kernels.ready(backend, self._warm)
+        #: True exactly when the compiled kernel runs (the tick's fused call reads it)
         self._use_kernel = self.backend == "numba"
+        self._learn = kernels.compiled_or_python(friction_learn, self.backend)
 
     @property
     def seconds(self) -> float:
@@ -100,46 +95,24 @@ class FrictionResidual:
         self.S.fill(0.0)
         self.b.fill(0.0)
         self.coef.fill(0.0)
-        self._count = 0
-        self._pending = 0.0
         self._st.fill(0.0)
 
     def learn(self, qd: np.ndarray, tau_ext: np.ndarray, dt: float) -> bool:
         """One sample of contact-free motion: ``qd`` (n,) [rad/s], the estimate ``tau_ext``
         (n,) [N·m], ``dt`` [s]. Returns whether it counts (some joint above min_speed; one
         in ``every`` such samples is learned from, weighted by the time since the last)."""
-        if self._use_kernel:
-            st = self._st
-            moved = friction_learn(
-                qd, tau_ext, dt, self.v_s, self.tau, self.min_speed, self.every, self.S, self.b, st
-            )
-            return moved
-        np.abs(qd, out=self._abs)
-        if self._abs.max() < self.min_speed:
-            return False
-        self._pending += dt
-        self._count += 1
-        if self._count < self.every:
-            return True
-        self._count = 0
-        dt = self._pending
-        self._pending = 0.0
-        x = self._x
-        np.divide(qd, self.v_s, out=self._s)
-        np.tanh(self._s, out=x[:, 1])
-        x[:, 2] = qd
-        beta = 1.0 - math.exp(-dt / self.tau)
-        np.multiply(self._xa, self._xb, out=self._xx)
-        self._xx -= self.S
-        self._xx *= beta
-        self.S += self._xx
-        np.copyto(self._t, tau_ext)
-        np.multiply(x, self._tcol, out=self._xr)
-        self._xr -= self.b
-        self._xr *= beta
-        self.b += self._xr
-        self._st[2] += dt
-        return True
+        return self._learn(
+            qd,
+            tau_ext,
+            dt,
+            self.v_s,
+            self.tau,
+            self.min_speed,
+            self.every,
+            self.S,
+            self.b,
+            self._st,
+        )
 
     def solve(self) -> np.ndarray:
         """The per-joint coefficients (n, 3) from what was learned: (S + ridge·D)·c = b with

@@ -39,7 +39,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg.lapack import dposv
 
-from hofto_hw.control.wrench import ToolJacobian
+from hofto_hw.control.wrench import ToolJacobian, norm3
 from hofto_hw.model.robot import RobotModel
 
 
@@ -99,22 +99,14 @@ class ContactIsolation:
     def check(self, tau_ext: np.ndarray, dt: float = 0.001) -> bool:
         """True when tau_ext (n,) does not match a hand at the tool (``jac`` at this q);
         ``dt`` [s] since the last check (the force peak's decay)."""
-        Jh, A, b = self._Jh, self._A, self._b
-        np.matmul(Jh, Jh.T, out=A)
-        for i in range(self.k):
-            A[i, i] += 1e-9
-        np.matmul(Jh, tau_ext, out=b)
-        _, _, info = dposv(A.T, b, lower=0, overwrite_a=1, overwrite_b=1)
-        if info != 0:
-            b.fill(0.0)
+        Jh, b = self._Jh, self._fit_tool(tau_ext, self._A, self._b)
         np.copyto(self.tool_force, b[:3])
         np.copyto(self._fit_b, b)
         np.matmul(Jh.T, b, out=self._fit)
         np.subtract(tau_ext, self._fit, out=self.residual)
         np.abs(self.residual, out=self._fit)
         self.mismatch = float(self._fit.max())
-        f = self.tool_force
-        norm = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        norm = norm3(self.tool_force)
         peak = self.force_peak * math.exp(-dt / self.hold_time) if self.hold_time > 0.0 else 0.0
         self.force_peak = max(norm, peak)
         # raised by the force the hand has let go of: a contact adds to the fitted force
@@ -133,7 +125,14 @@ class ContactIsolation:
         """The part of ``tau`` (n,) [N·m] a hand at the tool explains, Jhᵀ·f with f the
         least-squares tool force (and moment if rotation) of ``tau``, into ``out`` (n,);
         ``jac`` at this q. Allocation-free; leaves :meth:`check`'s results alone."""
-        Jh, A, b = self._Jh, self._A2, self._b2
+        np.matmul(self._Jh.T, self._fit_tool(tau, self._A2, self._b2), out=out)
+        return out
+
+    def _fit_tool(self, tau: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """The least-squares tool force (and moment if rotation) f of ``tau`` (n,), from
+        (Jh·Jhᵀ + 1e-9·I)·f = Jh·tau in the workspaces ``A`` (k, k) and ``b`` (k,); zeros when
+        that does not factor. Returns ``b``."""
+        Jh = self._Jh
         np.matmul(Jh, Jh.T, out=A)
         for i in range(self.k):
             A[i, i] += 1e-9
@@ -141,8 +140,7 @@ class ContactIsolation:
         _, _, info = dposv(A.T, b, lower=0, overwrite_a=1, overwrite_b=1)
         if info != 0:
             b.fill(0.0)
-        np.matmul(Jh.T, b, out=out)
-        return out
+        return b
 
     def isolate(self, q: np.ndarray, tau_ext: np.ndarray) -> int:
         """The most likely contact link (1-based; n = last link). Allocates."""

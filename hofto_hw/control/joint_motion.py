@@ -10,9 +10,10 @@ mode changes to hold and for stop category 2), or at a starved streamed plan's o
 
 Units rad, rad/s, rad/s², s; arrays (n,). Allocation-free per tick. ``JointMotion.version``
 changes whenever the reference (q, qd, qdd) may have changed: the tick's feed-forward, a
-function of the reference alone, is reused while it stays the same (a hold). ``backend``: numpy (the
-reference) or the compiled kernels of :mod:`hofto_hw.control.kernels` (numba/auto, the
-observers' conventions), bit-identical to it.
+function of the reference alone, is reused while it stays the same (a hold). The path and
+the ramp are the kernels of :mod:`hofto_hw.control.kernels` (their one place), called with
+the observers' ``backend`` conventions: ``numba`` (``auto`` where numba works) runs them
+compiled, ``numpy`` runs the kernels' own source in the interpreter (same bits).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hofto_hw.control.kernels import path_evaluator, path_workspace, ramp_step
+from hofto_hw.control.kernels import path_eval, path_workspace, ramp_step
 from hofto_hw.observers import kernels
 from hofto_hw.observers.kernels import Backend
 
@@ -77,56 +78,23 @@ class DemoPath:
         self.phi = np.zeros_like(self.a) if phase is None else np.asarray(phase, float).copy()
         self.offset = self.a * np.sin(self.phi)
         self.ramp = float(ramp)
-        n = self.a.shape[0]
-        self._s = np.zeros(n)
-        self._c = np.zeros(n)
-        self._arg = np.zeros(n)
-        self._k = path_workspace(self.a, self.w, self.phi, self.offset)  # the compiled call's
+        self._k = path_workspace(self.a, self.w, self.phi, self.offset)  # the kernel's rows
         self.backend = kernels.ready(backend, self._warm)
+        #: True exactly when the compiled kernel runs (the tick's fused call reads it)
         self._use_kernel = self.backend == "numba"
+        #: the kernel this path calls: path_eval compiled, or its source (backend numpy)
+        self._eval = kernels.compiled_or_python(path_eval, self.backend)
 
     def _warm(self) -> None:
         z = np.zeros(self.a.shape[0])
-        self._eval = path_evaluator()  # one call, or four where libm's sines are not numpy's
-        self._eval(self._k.copy(), 0.5, 0.5, 0.5, 0.5, z, self._s, self._c, self._arg)
-        self._arg.fill(0.0)
-        self._s.fill(0.0)
-        self._c.fill(0.0)
+        path_eval(self._k.copy(), 0.5, 0.5, 0.5, 0.5, z, z.copy(), z.copy(), z.copy())
 
     def evaluate(
         self, t: float, q0: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     ) -> None:
         """Reference at time ``t`` [s] since the start into q, qd, qdd (n,)."""
-        ramp = self.ramp  # after the ramp its constants without the call (every tick of a run)
-        b, bd, bdd = fade_in(t, ramp)
-        s, c, arg = self._s, self._c, self._arg
-        if self._use_kernel:
-            self._eval(self._k, t, b, bd, bdd, q0, q, qd, qdd)
-            return
-        np.multiply(self.w, t, out=arg)
-        arg += self.phi
-        np.sin(arg, out=s)
-        np.cos(arg, out=c)
-        # f = a·sin - offset; f' = a·w·cos; f'' = -a·w²·sin
-        np.multiply(self.a, s, out=q)
-        q -= self.offset  # q = f
-        np.multiply(self.a, self.w, out=qd)
-        qd *= c  # qd = f'
-        # qdd = f''·b + 2·f'·bd + f·bdd
-        np.multiply(self.a, self.w, out=qdd)
-        qdd *= self.w
-        qdd *= s
-        qdd *= -b
-        np.multiply(qd, 2.0 * bd, out=arg)
-        qdd += arg
-        np.multiply(q, bdd, out=arg)
-        qdd += arg
-        # qd = f'·b + f·bd
-        qd *= b
-        np.multiply(q, bd, out=arg)
-        qd += arg
-        q *= b
-        q += q0
+        b, bd, bdd = fade_in(t, self.ramp)
+        self._eval(self._k, t, b, bd, bdd, q0, q, qd, qdd)
 
 
 class JointMotion:
@@ -156,8 +124,6 @@ class JointMotion:
         self.mode = HOLD
         self.t0 = 0.0
         self.player: TrajectoryPlayer | None = None
-        self._step = np.zeros(n)
-        self._sign = np.zeros(n)
         #: the deceleration [rad/s²] (n,) of the ramp to standstill (see ramp_down)
         self.ramp_accel = self.accel.copy()
         self._play_accel = self.accel.copy()  # the playing plan's limits (see play)
@@ -165,7 +131,8 @@ class JointMotion:
         self.version = 0
         self._still = True  # qd and qdd hold +0.0: a hold's update has nothing to write
         self.backend = kernels.ready(backend, self._warm)
-        self._use_kernel = self.backend == "numba"
+        self._use_kernel = self.backend == "numba"  # True exactly when ramp_step is compiled
+        self._ramp_step = kernels.compiled_or_python(ramp_step, self.backend)
 
     def _warm(self) -> None:
         z = np.zeros(self.n)
@@ -251,20 +218,5 @@ class JointMotion:
 
     def _ramp(self, dt: float) -> None:
         """One tick of the ramp to standstill at ``ramp_accel``; then hold."""
-        if self._use_kernel:
-            if ramp_step(self.ramp_accel, dt, self.q, self.qd, self.qdd):
-                self.mode = HOLD
-            return
-        step, sign = self._step, self._sign
-        np.multiply(self.ramp_accel, dt, out=step)
-        np.abs(self.qd, out=sign)
-        np.minimum(step, sign, out=step)
-        np.sign(self.qd, out=sign)
-        step *= sign
-        self.qd -= step
-        np.multiply(step, -1.0 / dt, out=self.qdd)
-        np.multiply(self.qd, dt, out=step)
-        self.q += step
-        if not self.qd.any():
+        if self._ramp_step(self.ramp_accel, dt, self.q, self.qd, self.qdd):
             self.mode = HOLD
-            self.qdd.fill(0.0)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from hofto_hw.control.joint_motion import fade_in
 from hofto_hw.errors import ModelError
 from hofto_hw.model.robot import RobotModel
 
@@ -45,7 +46,8 @@ def cartesian_loop(
 ) -> JointTrajectory:
     """Tool loop through ``start + offsets`` (K, 3) [m] every ``period`` s, for ``duration`` s.
 
-    The path fades in over ``ramp`` s (quintic blend) so the arm starts at rest at q_start.
+    The path fades in over ``ramp`` s (the demo path's quintic fade-in) so the arm starts at
+    rest at q_start.
     Joints listed in ``frozen`` (0-based) take no part in the IK and stay at q_start.
     Raises ModelError when IK leaves the workspace (residual > 1 mm).
     """
@@ -55,9 +57,7 @@ def cartesian_loop(
     knots = np.linspace(0.0, period, pts.shape[0])
     loop = CubicSpline(knots, pts, bc_type="periodic", axis=0)
     t_ik = np.arange(0.0, duration + 1.0 / ik_rate, 1.0 / ik_rate)
-    s = np.clip(t_ik / ramp, 0.0, 1.0)
-    blend = s**3 * (10 - 15 * s + 6 * s**2)
-    targets = p0 + blend[:, None] * loop(t_ik % period)
+    targets = p0 + _fade_in(t_ik, ramp)[:, None] * loop(t_ik % period)
     q = np.array(q_start, dtype=float)
     qs = np.zeros((t_ik.size, model.n))
     for k, target in enumerate(targets):
@@ -76,6 +76,11 @@ def cartesian_loop(
         qs[k] = q
     spline = CubicSpline(t_ik, qs, axis=0)
     t = np.arange(0.0, duration, 1.0 / rate)
-    st = np.clip(t / ramp, 0.0, 1.0)
-    tool = p0 + (st**3 * (10 - 15 * st + 6 * st**2))[:, None] * loop(t % period)
+    tool = p0 + _fade_in(t, ramp)[:, None] * loop(t % period)
     return JointTrajectory(t, spline(t), spline(t, 1), spline(t, 2), tool)
+
+
+def _fade_in(t: np.ndarray, ramp: float) -> np.ndarray:
+    """The demo path's quintic fade-in (:func:`hofto_hw.control.joint_motion.fade_in`) at
+    times ``t`` (N,) [s]: the IK targets and the tool path fade in alike."""
+    return np.array([fade_in(float(x), ramp)[0] for x in t])

@@ -60,17 +60,23 @@ def test_no_motion_learns_nothing_and_the_correction_is_bounded() -> None:
     np.testing.assert_allclose(out, 0.25 * np.abs(f))
 
 
-def test_compiled_learning_agrees_with_the_numpy_path() -> None:
-    """The compiled learn (one call per tick) against the numpy reference over 6000 ticks of
+def test_compiled_learning_agrees_with_its_source_and_the_numpy_reference() -> None:
+    """The kernel compiled (one call per tick) and run as Python source (backend numpy), bit
+    for bit, and the numpy reference of tests/hofto_hw/control/reference.py over 6000 ticks of
     random speeds (some below min_speed, signed zeros, NaN in the estimate): same counts,
-    sums to 1e-12, same coefficients and correction; no allocation per tick."""
+    sums to 1e-12 (numpy's tanh may differ from libm's by an ulp), same coefficients and
+    correction; no allocation per tick."""
     from support.compiled import require_compiled_kernels
+
+    from . import reference
 
     require_compiled_kernels()
     model = _model()
-    ref = FrictionResidual(model.friction, time_constant=0.5, backend="numpy")
+    slow = FrictionResidual(model.friction, time_constant=0.5, backend="numpy")
     fast = FrictionResidual(model.friction, time_constant=0.5, backend="numba")
-    assert fast.backend == "numba"
+    assert fast.backend == "numba" and fast._use_kernel
+    assert slow.backend == "numpy" and not slow._use_kernel
+    ref = reference.FrictionLearning(6, fast.v_s, 0.5, fast.min_speed, fast.every)
     rng = np.random.default_rng(7)
     for k in range(6000):
         qd = rng.normal(0.0, 0.3, 6) * (k % 7 != 0)  # every 7th tick: an arm at rest
@@ -78,14 +84,21 @@ def test_compiled_learning_agrees_with_the_numpy_path() -> None:
             qd[rng.integers(6)] = -0.0
         est = rng.normal(0.0, 1.0, 6)
         if k == 4321:
-            est[2] = np.nan  # reaches the sums in both paths alike
+            est[2] = np.nan  # reaches the sums in all paths alike
         dt = 1e-3 * (1.0 + (k % 5 == 0))
-        assert ref.learn(qd, est, dt) == fast.learn(qd, est, dt)
+        moved = ref.learn(qd, est, dt)
+        assert fast.learn(qd, est, dt) == moved
+        assert slow.learn(qd, est, dt) == moved
         if k == 4320:
             np.testing.assert_allclose(fast.S, ref.S, rtol=0, atol=1e-12)
             np.testing.assert_allclose(fast.b, ref.b, rtol=0, atol=1e-12)
-            np.testing.assert_allclose(fast.solve(), ref.solve(), rtol=0, atol=1e-9)
-    assert fast.seconds == ref.seconds > 1.0
+            coef = fast.solve().copy()
+            np.testing.assert_array_equal(slow.solve(), coef)
+            fit = FrictionResidual(model.friction)
+            fit.S[:], fit.b[:] = ref.S, ref.b
+            np.testing.assert_allclose(coef, fit.solve(), rtol=0, atol=1e-9)
+        assert fast.record.tobytes() == slow.record.tobytes(), k  # to the bit, NaN included
+    assert fast.seconds == slow.seconds == ref.seconds > 1.0
     np.testing.assert_array_equal(np.isnan(fast.b), np.isnan(ref.b))
     fast.reset()
     assert fast.seconds == 0.0 and not fast.S.any()

@@ -1,21 +1,35 @@
-"""The compiled joint-motion kernels (hofto_hw.control.kernels) are bit-identical to the numpy
-reference: the demo path and the ramp to standstill, over random mode changes and step sizes,
-non-finite velocities included. numba is optional: these tests skip without it, except under
-CI (a missing numba is then a failure).
+"""The joint-motion kernels (hofto_hw.control.kernels), compiled and run as Python source,
+against the numpy reference of tests/hofto_hw/control/reference.py: the demo path and the ramp
+to standstill, over random mode changes and step sizes, non-finite values included. Compiled
+and Python source agree bit for bit (both take libm's sines); the numpy reference to the last
+bit where numpy's sines are libm's on this machine, else within 1e-12 (numpy's SIMD sines,
+e.g. AVX-512). numba is a dependency: these tests skip without it, except under CI (a missing
+numba is then a failure).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
 from support.compiled import require_compiled_kernels
 
-from hofto_hw.control.joint_motion import MOVE, RAMP_DOWN, DemoPath, JointMotion
-from hofto_hw.control.kernels import _path_eval_numpy_trig, libm_trig_is_numpys, path_eval
+from hofto_hw.control.joint_motion import MOVE, RAMP_DOWN, DemoPath, JointMotion, fade_in
+from hofto_hw.control.kernels import path_eval, ramp_step
+from hofto_hw.observers.kernels import compiled_or_python
+
+from . import reference
 
 require_compiled_kernels()
 
 N = 6
+A, PERIOD, PHASE, RAMP = (
+    np.linspace(0.1, 0.6, N),
+    np.linspace(1.5, 4.0, N),
+    np.linspace(-1.0, 2.0, N),
+    0.7,
+)
 
 
 def _identical(a: np.ndarray, b: np.ndarray) -> bool:
@@ -28,68 +42,87 @@ def _identical(a: np.ndarray, b: np.ndarray) -> bool:
     )
 
 
-def _motion(backend: str) -> JointMotion:
-    path = DemoPath(
-        np.linspace(0.1, 0.6, N),
-        np.linspace(1.5, 4.0, N),
-        np.linspace(-1.0, 2.0, N),
-        ramp=0.7,
-        backend=backend,  # type: ignore[arg-type]
+def _source(kernel):  # the kernel's Python source (numba's py_func)
+    return compiled_or_python(kernel, "numpy")
+
+
+def _numpy_sines_are_libms() -> bool:
+    """np.sin / np.cos give math.sin / math.cos's bits on the demo path's arguments."""
+    x = np.concatenate([np.linspace(-10.0, 10.0, 20_001), np.geomspace(1e-8, 1e6, 20_001)])
+    x = np.concatenate([x, -x])
+    libm = np.array([(math.sin(v), math.cos(v)) for v in x])
+    return _identical(libm[:, 0], np.sin(x)) and _identical(libm[:, 1], np.cos(x))
+
+
+def _close(ref: np.ndarray, got: np.ndarray, exact: bool) -> bool:
+    if exact:
+        return _identical(ref, got)
+    nan = np.isnan(ref)
+    return bool(
+        np.array_equal(nan, np.isnan(got))
+        and np.allclose(got[~nan], ref[~nan], rtol=1e-12, atol=1e-12)
     )
+
+
+def _motion(backend: str) -> JointMotion:
+    path = DemoPath(A, PERIOD, PHASE, ramp=RAMP, backend=backend)  # type: ignore[arg-type]
     return JointMotion(N, np.linspace(2.0, 7.0, N), path, backend=backend)  # type: ignore[arg-type]
 
 
-def test_demo_path_is_bit_identical() -> None:
+def test_the_backends_call_the_one_kernel() -> None:
+    """numba: the compiled kernel (what the tick's fused call checks); numpy: its source."""
+    fast, slow = _motion("numba"), _motion("numpy")
+    assert fast.path is not None and slow.path is not None
+    assert fast.path._use_kernel and fast.path._eval is path_eval
+    assert not slow.path._use_kernel and slow.path._eval is _source(path_eval)
+    assert fast._ramp_step is ramp_step and slow._ramp_step is _source(ramp_step)
+
+
+def test_demo_path_agrees_with_the_numpy_reference() -> None:
     rng = np.random.default_rng(3)
-    ref, fast = _motion("numpy").path, _motion("numba").path
-    assert ref is not None and fast is not None
-    assert ref.backend == "numpy" and fast.backend == "numba"
-    q0 = rng.normal(0.0, 1.0, N)
-    out_ref = [np.zeros(N) for _ in range(3)]
-    out_fast = [np.zeros(N) for _ in range(3)]
-    times = np.concatenate([np.linspace(-0.1, 1.0, 1101), rng.uniform(0.0, 100.0, 2000)])
-    for t in times:
-        ref.evaluate(float(t), q0, *out_ref)
-        fast.evaluate(float(t), q0, *out_fast)
-        for a, b in zip(out_ref, out_fast, strict=True):
-            assert _identical(a, b), t
-
-
-@pytest.mark.parametrize("trig", ["libm", "numpy"])
-def test_both_compiled_path_calls_give_the_reference(trig: str) -> None:
-    """The one-call path (libm's sines) and the four-call one (numpy's): the latter bit for
-    bit everywhere, the former bit for bit where libm_trig_is_numpys() says so (it is what
-    DemoPath picks then), else within 1e-12 (numpy's own SIMD sines, e.g. AVX-512)."""
-    rng = np.random.default_rng(4)
-    ref, fast = _motion("numpy").path, _motion("numba").path
-    assert ref is not None and fast is not None
-    fast._eval = path_eval if trig == "libm" else _path_eval_numpy_trig
-    exact = trig == "numpy" or libm_trig_is_numpys()
-    q0 = rng.normal(0.0, 1.0, N)
-    out_ref = [np.zeros(N) for _ in range(3)]
-    out_fast = [np.zeros(N) for _ in range(3)]
+    fast, slow = _motion("numba").path, _motion("numpy").path
+    assert fast is not None and slow is not None
+    exact = _numpy_sines_are_libms()
+    w, q0 = 2.0 * np.pi / PERIOD, rng.normal(0.0, 1.0, N)
+    out = {k: [np.zeros(N) for _ in range(3)] for k in ("ref", "fast", "slow")}
     times = np.concatenate([np.linspace(-0.1, 1.0, 1101), rng.uniform(0.0, 1e5, 3000)])
     for t in times:
-        ref.evaluate(float(t), q0, *out_ref)
-        fast.evaluate(float(t), q0, *out_fast)
-        for a, b in zip(out_ref, out_fast, strict=True):
-            if exact:
-                assert _identical(a, b), t
-            else:
-                np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12)
-    q0[2] = np.nan  # a non-finite start pose goes through both alike
-    ref.evaluate(2.0, q0, *out_ref)
-    fast.evaluate(2.0, q0, *out_fast)
-    assert _identical(out_ref[0], out_fast[0])
+        reference.demo_path(A, w, PHASE, RAMP, float(t), q0, *out["ref"])
+        fast.evaluate(float(t), q0, *out["fast"])
+        slow.evaluate(float(t), q0, *out["slow"])
+        for r, f, s in zip(out["ref"], out["fast"], out["slow"], strict=True):
+            assert _identical(f, s), t  # compiled == its source, to the bit
+            assert _close(r, f, exact), t
+    q0[2] = np.nan  # a non-finite start pose goes through all alike
+    reference.demo_path(A, w, PHASE, RAMP, 2.0, q0, *out["ref"])
+    fast.evaluate(2.0, q0, *out["fast"])
+    slow.evaluate(2.0, q0, *out["slow"])
+    assert _identical(out["fast"][0], out["slow"][0])
+    assert np.array_equal(np.isnan(out["ref"][0]), np.isnan(out["fast"][0]))
 
 
-def test_motion_update_is_bit_identical_through_mode_changes() -> None:
+@pytest.mark.parametrize("t", [np.inf, -np.inf, np.nan])
+def test_a_non_finite_time_gives_nan_compiled_and_as_python(t: float) -> None:
+    """sin(±inf) is NaN in numpy and compiled; the interpreter's math.sin raises: the kernel
+    says NaN in both."""
+    k = DemoPath(A, PERIOD, PHASE, ramp=RAMP)._k
+    b, bd, bdd = fade_in(1e9, RAMP)
+    for fn in (path_eval, _source(path_eval)):
+        q, qd, qdd = np.zeros(N), np.zeros(N), np.zeros(N)
+        fn(k, t, b, bd, bdd, np.zeros(N), q, qd, qdd)
+        assert np.isnan(q).all() and np.isnan(qd).all() and np.isnan(qdd).all()
+
+
+def test_motion_update_agrees_through_mode_changes() -> None:
+    """JointMotion compiled and as Python source, bit for bit; its ramp to standstill against
+    the numpy reference (no sines: bit for bit), signed zeros and NaN velocities included."""
     rng = np.random.default_rng(5)
-    ref, fast = _motion("numpy"), _motion("numba")
-    assert ref.backend == "numpy" and fast.backend == "numba"
+    fast, slow = _motion("numba"), _motion("numpy")
+    assert fast.backend == "numba" and slow.backend == "numpy"
     start = rng.normal(0.0, 0.5, N)
-    ref.start(start)
     fast.start(start)
+    slow.start(start)
+    rq, rqd, rqdd = np.zeros(N), np.zeros(N), np.zeros(N)
     t = 0.0
     ramps = moves = 0
     for k in range(6000):
@@ -97,31 +130,67 @@ def test_motion_update_is_bit_identical_through_mode_changes() -> None:
         t += dt
         r = rng.random()
         if r < 0.01:
-            assert ref.move(t) == fast.move(t)
+            assert fast.move(t) == slow.move(t)
         elif r < 0.02:
-            ref.ramp_down()
             fast.ramp_down()
-        elif r < 0.022 and ref.mode == RAMP_DOWN:
+            slow.ramp_down()
+        elif r < 0.022 and fast.mode == RAMP_DOWN:
             bad = rng.choice([np.nan, 0.0, -0.0])  # a non-finite or signed-zero velocity
             j = int(rng.integers(0, N))
-            ref.qd[j] = bad
             fast.qd[j] = bad
-        ramps += ref.mode == RAMP_DOWN
-        moves += ref.mode == MOVE
-        ref.update(t, dt)
+            slow.qd[j] = bad
+        ramping = fast.mode == RAMP_DOWN
+        ramps += ramping
+        moves += fast.mode == MOVE
+        if ramping:  # the reference ramp from the same state
+            np.copyto(rq, fast.q)
+            np.copyto(rqd, fast.qd)
+            np.copyto(rqdd, fast.qdd)
+            done = reference.ramp_step(fast.ramp_accel, dt, rq, rqd, rqdd)
         fast.update(t, dt)
-        assert ref.mode == fast.mode, k
-        for a, b in zip((ref.q, ref.qd, ref.qdd), (fast.q, fast.qd, fast.qdd), strict=True):
+        slow.update(t, dt)
+        assert fast.mode == slow.mode, k
+        for a, b in zip((fast.q, fast.qd, fast.qdd), (slow.q, slow.qd, slow.qdd), strict=True):
             assert _identical(a, b), k
-        if not np.all(np.isfinite(ref.qd)):  # seen once: start again from rest
-            ref.start(start)
+        if ramping:
+            assert (fast.mode != RAMP_DOWN) == done, k
+            for a, b in zip((rq, rqd, rqdd), (fast.q, fast.qd, fast.qdd), strict=True):
+                assert _identical(a, b), k
+        if not np.all(np.isfinite(fast.qd)):  # seen once: start again from rest
             fast.start(start)
+            slow.start(start)
     assert ramps > 100 and moves > 100
+
+
+def test_ramp_step_agrees_with_the_numpy_reference() -> None:
+    """ramp_step compiled, as Python and the numpy reference, bit for bit, from random states
+    with signed zeros, NaN and infinite velocities and accelerations."""
+    rng = np.random.default_rng(6)
+    specials = np.array([0.0, -0.0, np.nan, np.inf, -np.inf, 1e-300, -1e-300])
+    for k in range(3000):
+        q, qd = rng.normal(0.0, 1.0, N), rng.normal(0.0, 0.5, N)
+        acc = rng.uniform(0.5, 8.0, N)
+        if k % 3 == 0:
+            qd[rng.integers(N)] = rng.choice(specials)
+        if k % 7 == 0:
+            acc[rng.integers(N)] = rng.choice([np.nan, np.inf, 0.0])
+        if k % 5 == 0:
+            qd[rng.random(N) < 0.5] = 0.0
+        dt = float(rng.choice([1e-3, 2e-3, rng.uniform(1e-5, 1e-2)]))
+        outs = []
+        for fn in (reference.ramp_step, ramp_step, _source(ramp_step)):
+            s = [q.copy(), qd.copy(), np.full(N, 7.0)]
+            with np.errstate(invalid="ignore"):
+                done = fn(acc, dt, *s)
+            outs.append((bool(done), s))
+        for done, s in outs[1:]:
+            assert done == outs[0][0], k
+            for a, b in zip(outs[0][1], s, strict=True):
+                assert _identical(a, b), k
 
 
 def test_fade_in_constants_after_the_ramp_are_the_formula_s() -> None:
     """fade_in skips the arithmetic at and after the ramp: the same bits (signed zeros too)."""
-    from hofto_hw.control.joint_motion import fade_in
 
     def formula(t: float, ramp: float) -> tuple[float, float, float]:
         x = min(max(t / ramp, 0.0), 1.0)
