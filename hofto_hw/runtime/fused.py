@@ -67,13 +67,12 @@ _judged = K.jit(judged)
 _gap_steps = K.jit(gap_steps)
 _lerp = K.jit(lerp)
 
-#: stage codes (fused_tick's answer): where the Python reference goes on with this tick
-READ = 0  # the call did not run (the model changed under it): the reference from the read on
-SAFETY = 1  # sections 1-3 done: the reference from the drag and the safety checks on (3b, 4)
-MONITOR = 2  # the monitor ran and flagged: its report, then the reference from there on
-CONTROL = 3  # section 4 done, nothing reported: the reference from the controller on (5)
+#: stage codes (fused_tick's answer): where the tick's Python stages go on with this tick
+SAFETY = 1  # sections 1-3 done: the stages from the drag and the safety checks on (3b, 4)
+MONITOR = 2  # the monitor ran and flagged: its report, then the stages from there on
+CONTROL = 3  # section 4 done, nothing reported: the stages from the controller on (5)
 DONE = 4  # everything but the sink's push (and the diagnostics record)
-STAGES = ("read", "safety", "monitor", "control", "done")
+STAGES = {SAFETY: "safety", MONITOR: "monitor", CONTROL: "control", DONE: "done"}
 
 
 def tick_state_dtype(n: int, k: int) -> np.dtype:
@@ -460,8 +459,8 @@ class FusedTick:
         if not t.bus._use_kernel or not t.limits._use_kernel:
             return "the drive scan or the limit checks run their numpy path"
         c = t.collision
-        if c is not None and (not c._use_kernel or c._tool is not None):
-            return "the collision monitor runs its numpy path or a tool-force check"
+        if c is not None and not c._use_kernel:
+            return "the collision monitor runs its numpy path"
         fr = _learning(t)
         if fr is not None and not fr._use_kernel:
             return "the friction learning runs its numpy path"

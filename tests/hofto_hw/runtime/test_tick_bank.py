@@ -13,6 +13,7 @@ from hofto_hw.control.joint_motion import MOVE
 from hofto_hw.observers import kernels
 from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.runtime.compose import build
+from tests.support.reference_tick import use_reference
 
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
@@ -22,6 +23,7 @@ def test_the_banked_tick_equals_the_per_observer_tick_over_stalls() -> None:
     cfg = load_config(CONFIG)
     fused, alone = build(cfg, clock="sim", contact=False), build(cfg, clock="sim", contact=False)
     try:
+        use_reference(alone)  # the stages on every tick: the bank's own update
         t = alone.tick
         t._bank = ObserverBank(t.observers, t.snapshot, t.tau_ext, fuse=False)
         assert fused.tick._bank.fused == ("hofto", "momentum") and t._bank.fused == ()
