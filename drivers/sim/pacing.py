@@ -9,7 +9,7 @@ a streak of lost frames; the CANopen master's SYNC leaves late within its cycle 
 cycle under load (12 RPDOs are sent first; that is not a missed deadline), so a gap of two
 cycles between SYNCs stepped the arm two cycles while the loop's dt said one: a false
 position jump at 200 Hz. The loop instead takes a stall's gap in one-cycle observer steps
-(hofto_hw/runtime/tick.py, Tick._observe), consistent with either view in hold.
+(hofto_hw/runtime/fused.py, fused_tick), consistent with either view in hold.
 
 :func:`answer_first`: the emulator process answers frames before other work (SCHED_FIFO
 below the kernel's threaded IRQs when allowed, else a better nice value; no cyclic garbage

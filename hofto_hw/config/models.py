@@ -351,8 +351,9 @@ class LoopConfig(FileModel):
     acceleration: Literal["required", "preferred"] = Field(
         "preferred",
         description="the compiled tick (numba kernels and the native dynamics shipped in the "
-        "wheel): required refuses to start without it, naming why in one line (a service); "
-        "preferred runs the Python reference instead and says so once",
+        "wheel; the tick has no other path, so either refuses to start without it, naming "
+        "why in one line): preferred accepts NUMBA_DISABLE_JIT (the same source as Python), "
+        "required (a service) refuses that too",
     )
     priority: int = Field(50, ge=1, le=99, description="SCHED_FIFO priority")
     cpus: list[int] | str | None = Field(

@@ -1,10 +1,11 @@
-"""Which tick runs: the compiled path or the Python reference (``loop.acceleration``).
+"""Whether the tick's compiled path can run (``loop.acceleration``).
 
 The compiled path is the numba kernels (a dependency of the package) and the native dynamics
-library shipped in the wheel (hofto_hw/model/native). Without either the tick runs the same
-arithmetic in Python, 10-20x slower: fine for tests and a laptop, not what the benchmarks
-measure. ``loop.acceleration: required`` (the service's configs) refuses to start then, in one
-line naming why; ``preferred`` runs the reference and says so once on stderr.
+library shipped in the wheel (hofto_hw/model/native); the tick has no other (its Python
+reference lives in tests/). Without either, ``hofto-hw run`` refuses to start in one line
+naming why, whatever ``loop.acceleration`` says. ``preferred`` accepts numba's own switch
+(NUMBA_DISABLE_JIT=1: the same source as Python, for tests and debugging); ``required`` (the
+service's configs) refuses that too.
 """
 
 from __future__ import annotations
@@ -39,14 +40,18 @@ def missing() -> str:
 
 
 def require(mode: str, source: str) -> None:
-    """``loop.acceleration`` of the config file ``source``: ConfigError when ``required`` and
-    the compiled path is missing."""
+    """``loop.acceleration`` of the config file ``source``: ConfigError when the compiled
+    path is missing, or when ``required`` and numba's JIT is switched off."""
     why = missing()
-    if not why and jit_disabled():
-        why = "NUMBA_DISABLE_JIT is set (the kernels would run as Python)"
-    if why and mode == "required":
+    if why:
         raise ConfigError(
-            f"{source}: loop.acceleration: required, but the compiled tick is unavailable: {why}"
+            f"{source}: loop.acceleration: {mode}, but the compiled tick is unavailable: {why} "
+            "(the tick has no other path)"
+        )
+    if jit_disabled() and mode == "required":
+        raise ConfigError(
+            f"{source}: loop.acceleration: required, but the compiled tick is unavailable: "
+            "NUMBA_DISABLE_JIT is set (the kernels would run as Python)"
         )
 
 

@@ -1,20 +1,21 @@
 """The tick after the exchange as one compiled call (numba), calling the parts' own kernels.
 
-:func:`fused_tick` runs on every tick (once built): the drive read (``read_si``) and the
-dynamics snapshot and observers (``snapshot_native``, ``bank_update``) over the sample
-interval, a lost sample held and a stall integrated in one-cycle sub-steps. On a tick where
-nothing unusual can happen (the caller's ``quiet``) it goes on, in the order of
-:meth:`hofto_hw.runtime.tick.Tick.step` and through the same kernels (not copies of them):
-the tick's flags (``tick_flags``), the
-drive scan (``drive_scan``), the limit checks (``limits_quiet``), the collision monitor
+:func:`fused_tick` runs on every tick, the only place sections 1-3 run: the drive read
+(``read_si``) and the dynamics snapshot and observers (``snapshot_native``,
+``bank_update``) over the sample interval, a lost sample held and a stall integrated in
+one-cycle sub-steps. On a tick where nothing unusual can happen (the caller's ``quiet``) it
+goes on, in the order of :meth:`hofto_hw.runtime.tick.Tick.step` and through the same
+kernels (not copies of them): the tick's flags (``tick_flags``), the drive scan
+(``drive_scan``), the limit checks (``limits_quiet``), the collision monitor
 (``monitor_tick``), the friction learning (``friction_learn``), the demo path (``path_eval``),
 the feed-forward (``inverse_dynamics_native``), the command (``command_raw``) and the record
 fill (``fill_tick``). The flight recorder's push stays in Python (the tick's sink).
 
-When a part finds something that is not quiet, the kernel returns the stage where the Python
-reference takes over for the rest of the SAME tick (the :data:`STAGES` codes); it has not
-written anything the reference redoes from there (every earlier stage is done as the reference
-would have done it, every later one untouched).
+When a part finds something that is not quiet, the kernel returns the stage where the tick's
+Python stages take over for the rest of the SAME tick (the :data:`STAGES` codes); it has not
+written anything they redo from there (every earlier stage is done as they would have done
+it, every later one untouched). tests/support/reference_tick.py runs those stages on every
+tick, sections 1-3 through the parts' own methods: the reference the tests compare with.
 
 Arguments: few, so that numba's dispatch unboxes little on every call (each array argument
 costs ~0.1-0.3 µs, more with the caches cold after the exchange): the tick's one hot record
@@ -59,7 +60,7 @@ from safety.kernels import drive_scan, limits_quiet
 if TYPE_CHECKING:
     from hofto_hw.runtime.tick import Tick
 
-# the glue the reference computes in Python, compiled from the same functions: one definition
+# the glue the Python stages compute, compiled from the same functions: one definition
 _fade_in = K.jit(fade_in)
 _command_dt = K.jit(command_dt)
 _jump_gap = K.jit(jump_gap)
@@ -67,13 +68,12 @@ _judged = K.jit(judged)
 _gap_steps = K.jit(gap_steps)
 _lerp = K.jit(lerp)
 
-#: stage codes (fused_tick's answer): where the Python reference goes on with this tick
-READ = 0  # the call did not run (the model changed under it): the reference from the read on
-SAFETY = 1  # sections 1-3 done: the reference from the drag and the safety checks on (3b, 4)
-MONITOR = 2  # the monitor ran and flagged: its report, then the reference from there on
-CONTROL = 3  # section 4 done, nothing reported: the reference from the controller on (5)
+#: stage codes (fused_tick's answer): where the tick's Python stages go on with this tick
+SAFETY = 1  # sections 1-3 done: the stages from the drag and the safety checks on (3b, 4)
+MONITOR = 2  # the monitor ran and flagged: its report, then the stages from there on
+CONTROL = 3  # section 4 done, nothing reported: the stages from the controller on (5)
 DONE = 4  # everything but the sink's push (and the diagnostics record)
-STAGES = ("read", "safety", "monitor", "control", "done")
+STAGES = {SAFETY: "safety", MONITOR: "monitor", CONTROL: "control", DONE: "done"}
 
 
 def tick_state_dtype(n: int, k: int) -> np.dtype:
@@ -128,7 +128,7 @@ def tick_state_dtype(n: int, k: int) -> np.dtype:
 
 
 #: ``kind``: the motion's update this tick (HOLD_STILL: nothing to write; MOVE_PATH: the
-#: compiled demo path; OTHER: the reference runs the controller)
+#: compiled demo path; OTHER: the Python stages run the controller)
 HOLD_STILL, MOVE_PATH, OTHER = 0, 1, 2
 
 
@@ -168,7 +168,7 @@ def fused_tick(
     last tick, the bus's sample interval ``sdt`` [s] (0: unknown, -1: no sample), tick number
     ``tick`` and the loop's wake-up and compute times [µs]. Sections 1-3 run on every call;
     the rest only when the caller found the tick ``quiet``. Returns the stage code where the
-    reference goes on."""
+    Python stages go on."""
     h = hot[0]
     ts = h["tick"]
     tau_ext, prev, q_sent, tau_ff = ts["tau_ext"], ts["prev"], ts["q_sent"], ts["tau_ff"]
@@ -460,8 +460,8 @@ class FusedTick:
         if not t.bus._use_kernel or not t.limits._use_kernel:
             return "the drive scan or the limit checks run their numpy path"
         c = t.collision
-        if c is not None and (not c._use_kernel or c._tool is not None):
-            return "the collision monitor runs its numpy path or a tool-force check"
+        if c is not None and not c._use_kernel:
+            return "the collision monitor runs its numpy path"
         fr = _learning(t)
         if fr is not None and not fr._use_kernel:
             return "the friction learning runs its numpy path"

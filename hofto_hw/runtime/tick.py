@@ -9,13 +9,16 @@ observers read it through one :class:`~hofto_hw.observers.bank.ObserverBank` (on
 call for every observer it can fuse, each estimate written into its row of ``tau_ext``; the
 same numbers as each observer's own ``update``, which replay and the demo use).
 
-Sections 2-3 (the read, the snapshot and the observers, a lost sample or a stall included)
-run as ONE compiled call on every tick (:mod:`hofto_hw.runtime.fused`); on the common tick
-(nothing unusual can happen: no request, no fault, no drag, no teach, good data) the same
-call goes on through sections 4-7 in the same order and through the same kernels. When it
-stops early it answers a stage and the stage methods below finish the same tick from there.
-``HOFTO_HW_NO_FUSE=1`` or ``Tick(fuse=False)`` runs these methods on every tick (the
-reference); tests/hofto_hw/runtime/test_fused.py checks both tick by tick, bit for bit.
+Sections 1-3 (the read, the snapshot and the observers, a lost sample or a stall included)
+run as ONE compiled call on every tick (:mod:`hofto_hw.runtime.fused`: the one place their
+arithmetic lives); on a quiet tick (nothing rare can happen: :attr:`Tick.busy` is 0 and no
+request, fault or bad status came in) the same call goes on through sections 4-7. When it
+stops early it answers a stage and the stage methods below finish the same tick from there:
+they handle what is rare (events, stop decisions, requests, reset, mode changes, enabling,
+brake release, drag, homing, teach). A configuration the compiled call cannot run is refused
+when the tick is built, in one line. The Python reference that runs the stages on every tick
+is tests/support/reference_tick.py; tests/hofto_hw/runtime/test_fused.py checks both tick by
+tick, bit for bit.
 
 The :class:`Tick` owns every buffer it writes; the loop (hofto_hw/runtime/loop.py) calls
 :meth:`Tick.step` once per cycle with the real dt. Requests from other threads (stop, reset,
@@ -25,18 +28,17 @@ mode) are plain attributes the tick reads: one writer each, no locks.
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from drivers.cia402 import state_machine as sm
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import State
-from hofto_hw.control.drag import DragController, DragReason
+from hofto_hw.control.drag import DragController
 from hofto_hw.control.enabling import EnableInput
-from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, PLAYING, JointMotion
+from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, JointMotion
+from hofto_hw.errors import ConfigError
 from hofto_hw.model.data import ModelData
 from hofto_hw.model.snapshot import DynamicsSnapshot
 from hofto_hw.observers import kernels
@@ -58,43 +60,39 @@ from hofto_hw.runtime.fused import (
     MONITOR,
     MOVE_PATH,
     OTHER,
-    READ,
     SAFETY,
     FusedTick,
     fused_tick,
     tick_state_dtype,
 )
-from hofto_hw.runtime.fused import say_once as fused_say_once
-from hofto_hw.runtime.teach import FINISHED, RECORDING
-from hofto_hw.runtime.tick_kernels import (
-    ESTIMATES_FINITE,
-    POWERED,
-    command_dt,
-    gap_steps,
-    judged,
-    jump_gap,
-    lerp,
-    tick_flags,
-)
+from hofto_hw.runtime.tick_events import DRIVE_CAUSES, MAX_STOPS, STANDSTILL, TickEvents
+from hofto_hw.runtime.tick_kernels import ESTIMATES_FINITE, POWERED, judged, jump_gap, tick_flags
 from safety.bus_health import BusHealth
 from safety.collision import COLLIDED, CONTACT, CollisionLevels
 from safety.limits import LimitMonitor
-from safety.stop import NO_CATEGORY, EventKind, Fault, StopController
+from safety.stop import NO_CATEGORY, Fault, StopController
+
+__all__ = ["STANDSTILL", "Tick"]
 
 _OE = int(State.OPERATION_ENABLED)
 _QSA = int(State.QUICK_STOP_ACTIVE)
 _FRA = int(State.FAULT_REACTION_ACTIVE)
-_FAULT = int(State.FAULT)
-STANDSTILL = 0.01  # rad/s: every joint slower than this counts as stopped
-MAX_STOPS = 256  # stop episodes kept for the summary
-FAULT_RESET_TICKS = 20  # ticks of fault-reset edges before a reset is retried
-_DRIVE_CAUSES = (
-    (1 << Fault.DRIVE_FAULT) | (1 << Fault.DRIVE_DISABLED) | (1 << Fault.STO) | (1 << Fault.BRAKE)
-)
 _COLLIDED_OR_CONTACT = COLLIDED | CONTACT  # the monitor's flags
 
+#: :attr:`Tick.busy` bits: a rare state that keeps the next tick off the quiet path (the
+#: compiled call stops after section 3 and the stages finish the tick). Computed in one place
+#: (:meth:`Tick._busy`) whenever the stages ran or something changed between ticks
+BUSY_STOP = 1  # a fault latched, a stop category commanded, or the stop being measured
+BUSY_ENABLING = 2  # enabling (the brake release check included) or fault-reset edges
+BUSY_HOMING = 4  # a homing run by the loop
+BUSY_DRAG = 8  # drag mode, its stop reason to report or its wrench to clear
+BUSY_TEACH = 16  # a recording or a playback
+BUSY_NONFINITE = 32  # the last sample was not finite
+BUSY_REFERENCE = 64  # the feed-forward to evaluate again (a new reference or a new model)
+BUSY_TOOL_FORCE = 128  # the collision monitor's tool-force check (no compiled form)
 
-class Tick:
+
+class Tick(TickEvents):
     """See the module docstring. ``observers`` are evaluated in order; their estimates are
     rows of ``tau_ext`` (k, n) and of the tick record. ``snapshot`` is computed for at least
     every observer's ``needs`` (:func:`hofto_hw.runtime.compose.shared_snapshot`)."""
@@ -116,8 +114,7 @@ class Tick:
         enable_input: EnableInput | None = None,
         drag_row: int = 0,
         period: float = 0.0,
-        backend: Backend = "numpy",
-        fuse: bool = True,
+        backend: Backend = "auto",
     ) -> None:
         n = group.n
         self.n = n
@@ -248,24 +245,17 @@ class Tick:
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
-        # the common tick as one compiled call (fused.py): built on the arrays above, taken
-        # only on ticks where nothing unusual can happen (_fuse_refresh keeps _fuse_quiet)
-        self._fz: FusedTick | None = None
-        self._fz_args: tuple[Any, ...] = ()
-        self._front_ok = False  # the call may run sections 2-3 (the parts in sync with it)
-        self._fuse_quiet = False  # and the rest of the tick
+        # sections 1-3 of every tick, and the rest of a quiet one, as one compiled call
+        # (fused.py) on the parts' hot arrays (moved into its record here); a configuration
+        # it cannot run is refused here, in one line
+        self.busy = 0  # BUSY_* bits: the rare states now (0: the next tick may be quiet)
         self._fz_kind = OTHER
         self.fused_ticks = 0  # ticks the fused call finished
         self._fz_call = fused_tick
-        if fuse and os.environ.get("HOFTO_HW_NO_FUSE", "") not in ("", "0"):
-            fuse = False
-            fused_say_once("the tick runs without its fused call: HOFTO_HW_NO_FUSE is set")
-        if fuse and self.backend == "numba":
-            fz = FusedTick(self)
-            if fz.ok:
-                self._fz = fz
-            else:
-                fused_say_once("the tick runs without its fused call: " + fz.why)
+        self._fz = FusedTick(self)
+        if not self._fz.ok:
+            raise ConfigError(f"the tick cannot run compiled: {self._fz.why}")
+        self._fz_args: tuple[Any, ...] = self._fz.args()
 
     # --------------------------------------------------------------- start-up
 
@@ -285,7 +275,7 @@ class Tick:
             self.collision.reset()
         self.expect_enabled = g.all_in(State.OPERATION_ENABLED)
         self._judge_from = self.tick + 1 + self.settle_ticks
-        self._fuse_refresh()
+        self._refresh()
 
     # ------------------------------------------------------------------ the tick
 
@@ -293,40 +283,39 @@ class Tick:
         """One cycle at loop time ``t`` [s], ``dt`` [s] since the last tick (the real one after a
         stall), ``missed`` deadlines before this tick, timings of the loop [µs].
 
-        Sections 2-3 run as one compiled call (:mod:`hofto_hw.runtime.fused`), and when
-        nothing unusual can happen this tick sections 4-7 too (the same kernels in the same
-        order); it answers the stage where these methods take over for the rest of the tick."""
+        Sections 1-3 run as one compiled call (:mod:`hofto_hw.runtime.fused`), and on a quiet
+        tick sections 4-7 too (the same kernels in the same order); it answers the stage where
+        these methods take over for the rest of the tick (what is rare)."""
         g, stop = self.group, self.stop
         self.tick += 1
         self.t = t
         stop.begin_tick(self.tick)
         if self.script is not None:
-            self.script.step(self)  # may change anything: the fused call's checks again
-            self._fuse_refresh(rebuild=False)
+            self.script.step(self)  # may change anything: the rare states again
+            self._refresh(rebuild=False)
+        m = self.feedforward.model
+        rev, fr, pl = self._ff_model  # what tau_ff was evaluated with
+        if m.revision != rev or m.friction is not fr or m.payload is not pl:
+            self._follow_model()  # rare: the native models and the call's arguments first
 
         # 1. exchange
         status = g.exchange()
-        stage = READ
-        if self._front_ok:
-            # missed deadlines keep a tick quiet while the overrun streak stays short of its
-            # fault (counted after the call, as _requests would: nothing the call does
-            # depends on it; _requests is skipped from CONTROL on)
-            quiet = self._fuse_quiet and not (
-                status or stop.active or self.stop_requested or self.log_failure
-                or self.reset_requested or self.mode_request >= 0
-                or self.overrun_streak + missed >= self.overrun_limit
-            )  # fmt: skip
-            stage = self._fused_step(dt, wakeup_us, compute_us, quiet)
-            if stage >= CONTROL and (missed or self.overrun_streak):
-                self._overrun(missed)  # counted only: the streak stays short of its fault
-            if stage == DONE:
-                self._push()  # 7. the record (filled by the fused call) into the sink
-                return
-        if stage == READ:
-            self._front(dt)  # 2. joint state, 3. snapshot and observers
-        if stage <= SAFETY:
+        # missed deadlines keep a tick quiet while the overrun streak stays short of its fault
+        # (counted after the call, as _requests would; _requests is skipped from CONTROL on)
+        quiet = self.busy == 0 and not (
+            status or stop.active or self.stop_requested or self.log_failure
+            or self.reset_requested or self.mode_request >= 0
+            or self.overrun_streak + missed >= self.overrun_limit
+        )  # fmt: skip
+        # 2. joint state, 3. snapshot and observers; on a quiet tick 4-7 (fused.py)
+        stage = self._fused_step(dt, wakeup_us, compute_us, quiet)
+        if stage >= CONTROL and (missed or self.overrun_streak):
+            self._overrun(missed)  # counted only: the streak stays short of its fault
+        if stage == DONE:
+            self._push()  # 7. the record (filled by the fused call) into the sink
+            return
+        if stage == SAFETY:
             self._drag_front()  # 3b. drag
-        if stage < MONITOR:
             self._safety(status, dt)  # 4. safety: decides, latches, picks the stop category
         elif stage == MONITOR:
             self._monitor_flagged(dt)  # the fused monitor flagged: its report, then on
@@ -334,31 +323,9 @@ class Tick:
             self._requests(missed)  # 4 (end): overruns, requests, reset, stop measurement
         self._control()  # 5. controller and 6. command (acting the stop category)
         self._record(status, wakeup_us, compute_us)  # 7. the record into the sink
-        self._fuse_refresh()
+        self._refresh()
 
     # ------------------------------------------------------------ the tick's stages
-
-    def _front(self, dt: float) -> None:
-        """Sections 2-3: the joint state in SI, the snapshot and the observers (the reference
-        of the compiled call's sections 2-3)."""
-        self.group.read()  # the SI views of the drive group's buffers
-
-        # 3. the model terms of this sample, once for every estimator, and 3a. the observers
-        # (HOFTO, momentum), each writing its own row; a stall's gap in one-cycle steps
-        # over the sample interval: the bus's when it knows it (DC: the drives sample at their
-        # own clock, and an emulated arm moves one cycle per exchange however late the master
-        # wakes; a lost frame brings no sample, the next one spans the gap), else the master's
-        # dt. A repeated sample integrated as new reads as a contact to HOFTO
-        sample_dt = self._transport.sample_dt
-        obs_dt = 0.0  # held over a lost sample (logged: flight-log replay integrates the same)
-        if sample_dt >= 0.0:
-            obs_dt = sample_dt if sample_dt > 0.0 else dt
-            self._observe(obs_dt)
-        st = self.st
-        st["finite"] = self.snapshot.finite
-        st["sample_dt"] = obs_dt  # into the record with the rest (_record)
-        st["cmd_dt"] = cmd_dt = command_dt(dt, self.period)
-        st["t_cmd"] += cmd_dt
 
     def _drag_front(self) -> None:
         """Section 3b, drag: wrench estimate, enabling input, off-tool check (its stop
@@ -400,7 +367,7 @@ class Tick:
         # judged on trustworthy data only: fresh (a lost frame repeats the last sample) and
         # from drives that report no fault (a failed encoder freezes its position); an
         # observer with poles at a few hundred rad/s reads either as a contact
-        trusted = ok and good and not stop.active & _DRIVE_CAUSES and not self.enabling
+        trusted = ok and good and not stop.active & DRIVE_CAUSES and not self.enabling
         trusted = trusted and self.homing is None  # the drive moves a homing axis, not we
         monitored = (
             self.collision is not None and trusted and judged(self.tick, self._judge_from, flags)
@@ -499,11 +466,7 @@ class Tick:
         """The fused call (hofto_hw/runtime/fused.py) on this tick's scalars (``quiet``: it may
         go on past section 3); its stage code. It keeps t_cmd, sample_dt, since_fresh and
         the sample's finiteness in the tick's state; the state's other scalars are kept by
-        :meth:`_fuse_refresh`."""
-        m = self.feedforward.model
-        rev, fr, pl = self._ff_model  # what _fuse_refresh found in sync
-        if m.revision != rev or m.friction is not fr or m.payload is not pl:
-            return READ  # a model change: the reference takes it (and refreshes)
+        :meth:`_refresh`."""
         stage = self._fz_call(
             *self._fz_args, self.t, dt, self._transport.sample_dt, self.tick, wakeup_us,
             compute_us, quiet,
@@ -520,67 +483,38 @@ class Tick:
         self.snapshot.finite = bool(self.st["finite"])
         return stage
 
-    def use_fused(self, on: bool) -> None:
-        """Take the fused call on quiet ticks (``on``, when it was built) or always run the
-        reference (a test that injects through the parts' Python methods, a comparison)."""
-        if not on:
-            self._fz = None
-            self._front_ok = self._fuse_quiet = False
-        elif self._fz is None:
-            fz = FusedTick(self)
-            if fz.ok:
-                self._fz = fz
-                self._fuse_refresh()
+    def _follow_model(self) -> None:
+        """The model changed since tau_ff was evaluated (new parameters, rotor inertia,
+        payload or friction; rare): the snapshot's and the feed-forward's native models and
+        packed friction follow it now, before the compiled call reads them (what their own
+        ``compute``/``inverse_dynamics`` do on a change), and the call gets the handles
+        they hold now. The tick is not quiet (BUSY_REFERENCE): its stages evaluate tau_ff."""
+        m = self.feedforward.model
+        for part in (self.snapshot, self.feedforward):
+            nm = part._native
+            if m.friction is not part._fr_src or m.revision != nm.revision:
+                part._fr_src = m.friction
+                part._pack(m.friction, part._W)
+                if nm.stale:
+                    nm.sync()
+        self._refresh()
 
-    def _fuse_refresh(self, rebuild: bool = True) -> None:
-        """After a tick the fused call did not finish, at start and after a script's step:
-        whether the next one may take it, its arguments (the parts' arrays as they hold them
-        now; not after a script's step, ``rebuild`` False) and the state's slow scalars (off
-        the common path)."""
+    def _refresh(self, rebuild: bool = True) -> None:
+        """After a tick the stages finished, at start, after a model change and a script's
+        step: the rare states (:attr:`busy`), the call's arguments (the parts' arrays as they
+        hold them now; not after a script's step, ``rebuild`` False) and the state's slow
+        scalars (off the common path)."""
         fz = self._fz
-        if fz is None:
-            return
-        if (self._fz_args and self._fz_args[1] is not self._bank.args) or not fz.bound():
+        if self._fz_args[1] is not self._bank.args or not fz.bound():
             # a new bank (a reset) or a part that replaced a hot array: moved and checked again
             self._fz = fz = FusedTick(self)
             if not fz.ok:
-                fused_say_once("the tick runs without its fused call: " + fz.why)
-                self._fz, self._front_ok, self._fuse_quiet = None, False, False
-                return
+                raise RuntimeError(f"the tick's compiled call cannot take its parts: {fz.why}")
             rebuild = True
-        if rebuild or not self._fz_args:
+        if rebuild:
             self._fz_args = fz.args()
-        stop, m, g, snap = self.stop, self.motion, self.group, self.snapshot
-        model = self.feedforward.model
-        ff = self.feedforward
-        synced = (
-            snap.model is model
-            and snap._fr_src is model.friction
-            and snap._native.revision == model.revision  # type: ignore[union-attr]
-            and ff._fr_src is model.friction
-            and ff._native.revision == model.revision  # type: ignore[union-attr]
-            and self._ff_model == (model.revision, model.friction, model.payload)
-            and snap.q is g.q
-            and snap.qd is g.qd
-            and snap.tau is g.tau
-        )
-        self._front_ok = bool(synced)
-        self._fuse_quiet = bool(
-            synced
-            and stop.latched == 0
-            and stop.category == NO_CATEGORY
-            and not self.enabling
-            and self.homing is None
-            and not self._measuring
-            and not self.drag_reason
-            and not self._wrench_set
-            and self.recording is None
-            and self.playback is None
-            and self._fault_resetting == 0
-            and m.mode != DRAG
-            and snap.finite
-            and m.version == self._ff_version
-        )
+        self.busy = self._busy()
+        m = self.motion
         if m.mode == HOLD and m._still:
             kind = HOLD_STILL
         elif m.mode == MOVE and fz.path_ok and m.path is fz.path:
@@ -593,31 +527,33 @@ class Tick:
         st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
         st["was_contact"] = c is not None and c._was_contact
 
-    # ------------------------------------------------------------- tick helpers
+    def _busy(self) -> int:
+        """The rare states now, as BUSY_* bits (0: nothing keeps the next tick off the quiet
+        path; requests from other threads and this tick's status are checked per tick)."""
+        stop, m, model = self.stop, self.motion, self.feedforward.model
+        b = 0
+        if stop.latched or stop.category != NO_CATEGORY or self._measuring:
+            b |= BUSY_STOP
+        if self.enabling or self._fault_resetting:
+            b |= BUSY_ENABLING
+        if self.homing is not None:
+            b |= BUSY_HOMING
+        if m.mode == DRAG or self.drag_reason or self._wrench_set:
+            b |= BUSY_DRAG
+        if self.recording is not None or self.playback is not None:
+            b |= BUSY_TEACH
+        if not self.snapshot.finite:
+            b |= BUSY_NONFINITE
+        rev, fr, pl = self._ff_model
+        if m.version != self._ff_version or not (
+            model.revision == rev and model.friction is fr and model.payload is pl
+        ):
+            b |= BUSY_REFERENCE
+        if self.collision is not None and self.collision._tool is not None:
+            b |= BUSY_TOOL_FORCE
+        return b
 
-    def _observe(self, dt: float) -> None:
-        """Compute the snapshot of the drive group's sample and update every observer from it
-        (then keep the sample: the next stall's interpolation start). After a
-        stall (dt of k > 1 cycles) the gap is integrated in k steps of dt/k with q, qd, tau
-        interpolated linearly from the last tick's sample: each observer is tuned (and
-        checked stable) for one cycle, and a single step of k cycles is not stable for it
-        (forward Euler: gain·dt < 2)."""
-        snap, g = self.snapshot, self.group
-        q, qd, tau = g.q, g.qd, g.tau
-        k = 1 if dt <= self._stall_dt else gap_steps(dt, self.period)
-        if k == 1:
-            snap.compute(q, qd, tau)
-            self._bank.update(dt)  # every estimate into its row of tau_ext
-        else:
-            h = dt / k
-            prev, x = self._prev, self._interp
-            for s in range(1, k + 1):
-                a = s / k
-                for j, now in enumerate((q, qd, tau)):
-                    lerp(prev[j], now, a, x[j])
-                snap.compute(x[0], x[1], x[2])
-                self._bank.update(h)
-        np.copyto(self._prev, g.sample)
+    # ------------------------------------------------------------- tick helpers
 
     def _check_bank(self) -> None:
         """After the observers' reset (start-up, a reset: never in a running tick): the bank
@@ -645,293 +581,6 @@ class Tick:
             self.overrun_streak = 0
         if self.overrun_streak >= self.overrun_limit:
             self.stop.report(Fault.OVERRUN, -1, float(self.overrun_streak))
-
-    def _measure_stop(self, q: np.ndarray, qd: np.ndarray) -> None:
-        """Stopping time [s] and distance [rad, max over joints] from the latch to rest."""
-        stop = self.stop
-        if stop.first_tick == self.tick and self.n_stops < MAX_STOPS:
-            self._measuring = True
-            self._t_detect = self.t
-            np.copyto(self._q_detect, q)
-            self.stop_tick[self.n_stops] = self.tick
-            self.n_stops += 1
-        if not self._measuring:
-            return
-        np.abs(qd, out=self._d)
-        if self._d.max() < STANDSTILL:
-            i = self.n_stops - 1
-            self.stop_time[i] = self.t - self._t_detect
-            np.subtract(q, self._q_detect, out=self._d)
-            np.abs(self._d, out=self._d)
-            self.stop_distance[i] = self._d.max()
-            stop.note(EventKind.STANDSTILL, -1, self.stop_time[i])
-            self._measuring = False
-
-    def _reset(self) -> None:
-        """Process a reset request (rare: may allocate the result message).
-
-        A latched drive fault whose drive still shows Fault first gets fault-reset edges for
-        FAULT_RESET_TICKS ticks (the drive leaves Fault only if its cause is gone); then the
-        reset is tried once more and refused if any cause persists."""
-        self.reset_requested = False
-        sto = self.group.sto_in_image(self._sto_seen, by_state=False)
-        if sto.any():  # STO is a state: no reset enables through it
-            names = [self.group.names[i] for i in np.flatnonzero(sto)]
-            self.reset_result = "reset refused, safe torque off active: " + ", ".join(names)
-            return
-        if self.reenable_refused and not self.group.all_in(State.OPERATION_ENABLED):
-            self.reset_result = self.reenable_refused  # its brake would stay closed
-            return
-        done, msg = self.stop.reset()
-        if not done and not self._edges_tried and self.stop.active & _DRIVE_CAUSES:
-            if not self.stop.active & self.stop.latched & ~_DRIVE_CAUSES:
-                self._fault_resetting = FAULT_RESET_TICKS
-                self.reset_result = "resetting drive faults"
-                return
-        self._edges_tried = False
-        self.reset_result = msg
-        if not done:
-            return
-        g = self.group
-        self.snapshot.reset_memory()
-        for obs in self.observers:
-            obs.reset(g.q, g.qd)
-        self._check_bank()
-        self._judge_from = self.tick + 1 + self.settle_ticks
-        self.limits.reset(g.q)
-        if self.collision is not None:
-            first = self.collision.first_tick
-            for r in range(self.first_detect.shape[0]):
-                if self.first_detect[r] < 0:
-                    self.first_detect[r] = first[r]
-            self.collision.reset()
-        self.motion.start(g.q)
-        if not g.all_in(State.OPERATION_ENABLED):
-            self.enabling = True
-            self._enable_ticks = 0
-            self._released = False  # the brakes open again: their check again
-            self._release_running = 0
-
-    def start_homing(self, homing: Any) -> None:
-        """Run ``homing`` (a begun hofto_hw.runtime.homing_run.LoopHoming) from the next tick
-        (between ticks: the control plane's port, after its checks)."""
-        self.homing = homing
-        self._front_ok = self._fuse_quiet = False
-
-    def rezero(self, axis: int, counts: float) -> None:
-        """Between ticks: encoder count ``counts`` is joint angle 0 of ``axis`` from now on
-        (``hofto-hw zero set`` through the service, at rest). The reference, the last
-        command and the monitored position move with the reading, so the drive's target in
-        counts is unchanged; the observers start again from the new reading."""
-        shift = self.group.set_zero_offset(axis, counts)
-        self.motion.q[axis] += shift
-        self.motion.version += 1
-        self.q_sent[axis] += shift
-        self._front_ok = self._fuse_quiet = False
-        self.restart_estimates()
-
-    def restart_estimates(self) -> None:
-        """After the joint reading moved under the estimators (homing, a new zero; rare:
-        may allocate): the snapshot's memory, the observers, the limit monitor's last
-        position start from the measured state; the collision monitor judges again after
-        the settling time."""
-        g = self.group
-        self.snapshot.reset_memory()
-        for obs in self.observers:
-            obs.reset(g.q, g.qd)
-        self._check_bank()
-        np.copyto(self._prev, g.sample)
-        self.limits.reset(g.q)
-        self._judge_from = self.tick + 1 + self.settle_ticks
-
-    def _enable_step(self) -> None:
-        """Walk every axis toward Operation enabled, one controlword per tick (bumpless:
-        targets hold the measured position); a faulted axis gets a fault-reset edge."""
-        g = self.group
-        self._enable_ticks += 1
-        if g.sto_in_image(self._sto_seen, by_state=False).any():  # STO toggled while enabling
-            self._latch_now(Fault.STO, int(np.argmax(self._sto_seen)), -1.0)
-            return
-        if g.all_in(State.OPERATION_ENABLED):
-            if self._release_step():
-                return  # the brakes are opening: hold where the check started
-            self.enabling = False
-            self.expect_enabled = True
-            self._judge_from = self.tick + self.settle_ticks
-            self.motion.start(g.q)
-            return
-        if self._enable_ticks > g.timeout_cycles and g.sto_in_image(self._sto_seen, True).any():
-            # an axis that will not leave Switch on disabled: STO where no signal is mapped
-            self._latch_now(Fault.STO, int(np.argmax(self._sto_seen)), -1.0)
-            return
-        sm.controlwords_toward_no_reset(g.states, State.OPERATION_ENABLED, self._cw)
-        if self.tick & 1:
-            for i in range(self.n):
-                if g.states[i] == _FAULT:
-                    self._cw[i] = sm.CW_FAULT_RESET
-        np.copyto(self.controlword, self._cw)
-        self.motion.start(g.q)
-
-    def _release_step(self) -> bool:
-        """The brake release check of a re-enable (issue 28; the same check as at start-up,
-        :class:`drivers.cia402.brake.ReleaseCheck`): True while it runs, holding the position
-        it started at; a joint that moved beyond its bound latches BRAKE naming it."""
-        check = self.release_check
-        if check is None or self._released:
-            return False
-        if self._release_running == 0:
-            check.start(self.group.q)
-            self.motion.start(check.q0)
-            self._release_running = 1
-        result = check.step(self.group.q)
-        if result == check.RUNNING:
-            return True
-        self._released = True
-        self._release_running = 0
-        if result >= 0:
-            self._latch_now(Fault.BRAKE, result, check.moved)
-            return True
-        return False
-
-    def _latch_now(self, fault: int, joint: int, value: float) -> None:
-        """A fault found while enabling (section 5, after the stop was acted on this tick):
-        latched, and its category commanded in this same tick."""
-        self.stop.report(fault, joint, value)
-        cat = self.stop.category
-        if cat == 0 or cat == 1:
-            self.enabling = False
-            if cat == 0:
-                self.group.command_disable_voltage()
-            else:
-                self.group.command_quick_stop()
-
-    def _fault_reset_edge(self) -> None:
-        """Rising edges of controlword bit 7 on faulted axes; then retry the reset."""
-        self._fault_resetting -= 1
-        if self._fault_resetting == 0:
-            self._edges_tried = True
-            self.reset_requested = True
-            return
-        if self.tick & 1:
-            g = self.group
-            for i in range(self.n):
-                if g.states[i] == _FAULT:
-                    self.controlword[i] = sm.CW_FAULT_RESET
-
-    def _change_mode(self, qd: np.ndarray) -> None:
-        want = self.mode_request
-        self.mode_request = -1
-        motion = self.motion
-        if want == DRAG:
-            self.mode_result = self._enter_drag(qd)
-            self.record_request = None
-        elif want in PLAYING:
-            self.mode_result = self._enter_play(want, qd)
-            self.play_request = None
-        elif want == MOVE and motion.mode != DRAG:
-            if self.expect_enabled and not self.enabling:
-                motion.move(float(self.st["t_cmd"]))
-        else:  # hold, or move while dragging: ramp the drag's velocity down first
-            motion.ramp_down()
-
-    def _refuse_mode(self) -> None:
-        """A mode request during a stop is answered, not kept for after the reset."""
-        self.mode_request = -1
-        self.record_request = None
-        self.play_request = None
-        self.mode_result = "refused: a fault is latched, reset first"
-
-    def _refuse_entry(self, qd: np.ndarray, not_still: str) -> str:
-        """Why a mode that moves the arm may not start now ('' when it may): it starts only
-        from HOLD at standstill, powered, with no latched fault; ``not_still`` is the answer
-        when the arm is not holding still."""
-        if self.stop.latched:
-            return "refused: a fault is latched, reset first"
-        if not self.expect_enabled or self.enabling:
-            return "refused: drives not enabled"
-        np.abs(qd, out=self._d)
-        if self.motion.mode != HOLD or self._d.max() >= STANDSTILL:
-            return not_still
-        return ""
-
-    def _enter_drag(self, qd: np.ndarray) -> str:
-        """Drag mode only from standstill, powered, with no latched fault."""
-        motion = self.motion
-        if self.drag is None:
-            return "refused: no drag section in the config"
-        refused = self._refuse_entry(qd, "refused: the arm is not at standstill")
-        if refused:
-            return refused
-        self.drag.start(motion.q)
-        motion.mode = DRAG
-        self.recording = self.record_request
-        return "drag"
-
-    def _enter_play(self, want: int, qd: np.ndarray) -> str:
-        """Play the planned trajectory of ``play_request``: from HOLD at standstill, powered,
-        nothing latched, and only if it starts where the hold is (planned from it)."""
-        pb, motion = self.play_request, self.motion
-        if pb is None or pb.mode != want:
-            return "refused: no trajectory planned"
-        refused = self._refuse_entry(qd, "refused: the arm is not holding at standstill")
-        if refused:
-            return refused
-        np.subtract(motion.q, pb.start, out=self._d)
-        np.abs(self._d, out=self._d)
-        if self._d.max() > 1e-9:
-            return "refused: the hold moved while the trajectory was planned; try again"
-        motion.play(pb.player, want)
-        self.playback = pb
-        return "playing"
-
-    def _teach_record(self, q: np.ndarray) -> None:
-        """Taught path while the hand drags (its drag ends: FINISHED, saved off the tick);
-        the measured q of every played tick (the replay figures)."""
-        rec, mode = self.recording, self.motion.mode
-        if rec is not None and rec.state <= RECORDING:
-            if mode == DRAG and self.drag.active:
-                rec.recorder.push(self.t, q)
-                rec.state = RECORDING
-            elif rec.state == RECORDING or mode != DRAG:
-                rec.state = FINISHED
-        pb = self.playback
-        if pb is not None and (mode == pb.mode and self.motion.player is pb.player):
-            pb.executed.push(self.t, q)
-
-    def _drag_observe(self, q: np.ndarray, qd: np.ndarray, dt: float) -> None:
-        """The drag controller's tick: reads the enabling input, estimates the tool wrench
-        from the configured observer row, checks the force limit and the off-tool contact."""
-        inp = self.enable_input
-        if inp.source == "digital_input":
-            inp.from_word(int(self._din[inp.axis]))
-        d = self.drag
-        self.drag_reason = d.update(
-            q, qd, self.tau_ext[self.drag_row], dt, inp.pressed, self.stop.latched != 0
-        )
-        if d.category == 2:
-            self.drag_reason = DragReason.ENABLE_RELEASED
-        np.copyto(self._wrench, d.wrench)
-        self._wrench_set = True
-
-    def _monitored(self, dragging: bool) -> np.ndarray:
-        """The collision monitor's input: the estimates, minus (while the hand drags) each
-        row's own tool-force fit, so the monitor stays armed for contacts off the tool
-        while the hand's own push is the drag force limit's to judge."""
-        if not (dragging and self.drag.active):
-            return self.tau_ext
-        return self.drag.monitor_input(self.tau_ext, self._tau_mon)
-
-    def _drag_report(self) -> None:
-        """Map the drag's stop request to a fault class (safety latches, the loop acts)."""
-        reason, d, stop = self.drag_reason, self.drag, self.stop
-        self.drag_reason = 0
-        if reason == DragReason.ENABLE_RELEASED:
-            stop.report(Fault.ENABLING_RELEASED)
-        elif reason == DragReason.FORCE_LIMIT:
-            stop.report(Fault.COLLISION, -1, d.estimator.force_norm)
-        elif reason == DragReason.CONTACT_OFF_TOOL:
-            # joint = link index (the link after joint j is link j + 1, 1-based)
-            stop.report(Fault.COLLISION, d.contact_link - 1, d.mismatch)
 
     def _warm(self) -> None:
         """Compile the record fill (into a scratch record) and the flags call (on the tick's

@@ -17,6 +17,7 @@ from hofto_hw.recording.record import MemorySink, tick_dtype
 from hofto_hw.runtime.compose import build
 from safety.stop import Fault
 from tests.hofto_hw.runtime.conftest import run_until
+from tests.support.reference_tick import use_reference
 
 CONTROLWORD = {0: sm.CW_DISABLE_VOLTAGE, 1: sm.CW_QUICK_STOP}
 
@@ -34,7 +35,7 @@ def _moving(cfg: SystemConfig) -> Any:
 def _corrupt_once(system: Any, change: Callable[[Any], None]) -> None:
     """Make the next decoded sample wrong once (the group decodes in read())."""
     g = system.group
-    system.tick.use_fused(False)  # the fused call reads the images itself, not through g.read
+    use_reference(system)  # the compiled call reads the images itself, not through g.read
     original = g.read
 
     def read() -> None:
@@ -95,7 +96,7 @@ def test_nan_in_measurement(cfg: SystemConfig) -> None:
 
 def test_nan_from_the_model(cfg: SystemConfig) -> None:
     system = _moving(cfg)
-    system.tick.use_fused(False)  # the fused call runs the bank's kernel, not bank.update
+    use_reference(system)  # the compiled call runs the bank's kernel, not bank.update
     bank = system.tick._bank  # the tick's observers write their rows of tau_ext through it
     original = bank.update
 

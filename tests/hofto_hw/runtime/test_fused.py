@@ -1,9 +1,10 @@
-"""The compiled tick (hofto_hw/runtime/fused.py) against the reference Tick.step, tick by
-tick: two identical systems, one taking the compiled call (sections 2-3 on every tick, the
-rest on quiet ticks) and one forced onto the reference, through moves, holds, a collision and
-its stop, a reset, drag, lost frames, stalls, a drive fault, a NaN measurement and mode
-changes. Every tick record, every estimate and the state every part keeps must be the same
-bit for bit, the compiled call must have run on (nearly) every tick and finished most."""
+"""The tick as built (the compiled call, hofto_hw/runtime/fused.py: sections 1-3 on every
+tick, the rest on quiet ticks) against the Python reference (tests/support/reference_tick.py:
+every stage on every tick), tick by tick: two identical systems through moves, holds, a
+collision and its stop, a reset, drag, lost frames, stalls, a drive fault, a NaN measurement,
+mode changes and model changes. Every tick record, every estimate and the state every part
+keeps must be the same bit for bit, the compiled call must have run on every tick and
+finished most, and no rare-event handler may have had work on a tick it finished."""
 
 from __future__ import annotations
 
@@ -16,10 +17,14 @@ import pytest
 from drivers.cia402 import kernels as drive_kernels
 from hofto_hw.config.loader import load_config
 from hofto_hw.control.joint_motion import HOLD, MOVE
+from hofto_hw.errors import ConfigError
 from hofto_hw.model.payload import Payload, apply_payload
 from hofto_hw.observers import kernels
+from hofto_hw.runtime import tick_events
 from hofto_hw.runtime.compose import build
 from hofto_hw.runtime.fused import DONE, FusedTick, fused_tick
+from hofto_hw.runtime.tick import Tick
+from tests.support.reference_tick import ReferenceTick, use_reference
 
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
@@ -72,9 +77,32 @@ def _pair(contact: bool) -> tuple[Any, Any]:
         build(cfg, clock="sim", contact=contact),
         build(cfg, clock="sim", contact=contact),
     )
-    reference.tick.use_fused(False)
-    assert fused.tick._fz is not None, "the fused call was not built"
+    use_reference(reference)
+    assert isinstance(fused.tick._fz, FusedTick) and type(fused.tick) is Tick
     return fused, reference
+
+
+#: what happens on a tick, besides the stages: a stop's report and note (safety latches)
+_EVENTS = ("report", "note")
+
+
+def _rare_handlers(reference: Any, busy: set[int]) -> None:
+    """Every rare-event handler of the reference's tick (the methods of
+    hofto_hw.runtime.tick_events.TickEvents, whichever a maintainer adds there) and its stop
+    controller's report/note, wrapped to add the tick number to ``busy`` when called."""
+    t = reference.tick
+    names = [n for n, v in vars(tick_events.TickEvents).items() if callable(v)]
+    names = [n for n in names if not n.startswith("__") and n != "_refresh"]
+    assert "_reset" in names and "_change_mode" in names and "_measure_stop" in names
+    for owner, attrs in ((t, names), (t.stop, _EVENTS)):
+        for name in attrs:
+            original = getattr(owner, name)
+
+            def wrapped(*args: Any, _f: Any = original, **kw: Any) -> Any:
+                busy.add(t.tick)
+                return _f(*args, **kw)
+
+            setattr(owner, name, wrapped)
 
 
 def _compare(fused: Any, reference: Any, k: int) -> None:
@@ -84,13 +112,24 @@ def _compare(fused: Any, reference: Any, k: int) -> None:
 
 
 def _lockstep(
-    fused: Any, reference: Any, ticks: int, event: Any, late: frozenset[int] = frozenset()
+    fused: Any,
+    reference: Any,
+    ticks: int,
+    event: Any,
+    late: frozenset[int] = frozenset(),
+    rare: bool = True,
 ) -> dict[int, int]:
     """Both systems through ``ticks`` ticks (``late``: ticks that report a missed deadline at
-    a regular dt); the stage each compiled call of the fused system answered, by tick."""
+    a regular dt); the stage each compiled call of the fused system answered, by tick. A tick
+    the compiled call finished (DONE) on which the reference called a rare-event handler
+    fails: a rare state the quiet decision (Tick.busy) missed (``rare``: the scenario has
+    some)."""
     period = 1.0 / fused.rate_hz
     now = 0.0
     stages: dict[int, int] = {}
+    busy: set[int] = set()
+    _rare_handlers(reference, busy)
+    assert type(reference.tick) is ReferenceTick
     call = fused.tick._fz_call
 
     def counted(*args: Any) -> int:
@@ -105,6 +144,8 @@ def _lockstep(
         for s in (fused, reference):
             s.tick.step(now, dt, 1.5, missed, 2.5)
         _compare(fused, reference, k)
+        assert not (k in busy and stages.get(k) == DONE), f"tick {k}: taken as quiet"
+    assert bool(busy) == rare, sorted(busy)[:10]
     return stages
 
 
@@ -125,9 +166,8 @@ def test_the_run_scenario_is_the_reference_tick_by_tick() -> None:
 
         stages = _lockstep(fused, reference, 6500, event)
         t = fused.tick
-        # sections 2-3 compiled on every tick (the stop, the drag, the stalls and lost frames)
-        # but the first, whose reference binds the snapshot to the drive group's sample
-        assert len(stages) == 6499 and 1 not in stages, len(stages)
+        # sections 1-3 compiled on every tick (the stop, the drag, the stalls and lost frames)
+        assert len(stages) == 6500, len(stages)
         assert t.n_stops >= 1, "the collision did not stop the arm"
         assert t.drag is not None and t.drag.friction is not None
         assert t.drag.friction.seconds > 0.0  # the friction learning ran (fused)
@@ -185,8 +225,8 @@ def test_faults_resets_and_mode_changes_are_the_reference_tick_by_tick() -> None
         stages = _lockstep(fused, reference, 4500, event, late)
         t = fused.tick
         assert DONE in {stages[k] for k in late} and t.overruns >= 34, t.overruns
-        # every tick but those whose model changed under the call (the reference takes them)
-        assert len(stages) > 4490, len(stages)
+        # every tick, those whose model changed included (its arguments refreshed first)
+        assert len(stages) == 4500, len(stages)
         assert t.n_stops >= 3, t.n_stops  # the drive fault, the NaN, the stop request
         assert t.stop.latched == 0, t.stop.latched_names()
         # the stops, the resets' settling, the ramps to standstill and a move whose model
@@ -210,7 +250,7 @@ def test_a_stall_while_holding_is_compiled_to_the_end() -> None:
         return {400: 2 * period, 600: 3 * period}.get(k, period)
 
     try:
-        stages = _lockstep(fused, reference, 700, event)
+        stages = _lockstep(fused, reference, 700, event, rare=False)
         assert stages[400] == DONE and stages[600] == DONE, (stages[400], stages[600])
         assert fused.tick.overruns == 3 and fused.tick.stop.latched == 0
     finally:
@@ -218,17 +258,15 @@ def test_a_stall_while_holding_is_compiled_to_the_end() -> None:
         reference.close()
 
 
-def test_a_quiet_tick_is_one_fused_call_and_the_switch_turns_it_off(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """Holding and moving, every tick after the settling is finished by the fused call;
-    HOFTO_HW_NO_FUSE=1 builds a tick without it."""
+def test_a_quiet_tick_is_one_fused_call() -> None:
+    """Holding and moving, every tick after the settling is finished by the fused call, with
+    nothing compiled while running."""
     cfg = load_config(CONFIG)
     system = build(cfg, clock="sim", contact=False)
     try:
         t = system.tick
         # the compiled call on the parts' own arrays, compiled when the tick was built
-        assert t._fz is not None and t._fz_call is fused_tick
+        assert isinstance(t._fz, FusedTick) and t._fz_call is fused_tick
         compiled = len(fused_tick.signatures)
         stages: list[int] = []
         call = t._fz_call
@@ -240,18 +278,25 @@ def test_a_quiet_tick_is_one_fused_call_and_the_switch_turns_it_off(
         t._fz_call = counted
         t.mode_request = MOVE
         system.loop.run(max_ticks=1500)
-        assert len(stages) > 1400 and stages[-300:] == [DONE] * 300
+        assert len(stages) == 1500 and stages[-300:] == [DONE] * 300
         assert t.fused_ticks == stages.count(DONE)
-        assert isinstance(t._fz, FusedTick)
         assert len(fused_tick.signatures) == compiled  # nothing compiled while running
     finally:
         system.close()
-    monkeypatch.setenv("HOFTO_HW_NO_FUSE", "1")
-    off = build(cfg, clock="sim", contact=False)
+
+
+def test_a_part_the_compiled_call_cannot_run_is_refused_in_one_line() -> None:
+    """No silent Python path: a tick whose parts the compiled call cannot take (here the
+    drive group on its numpy path) is refused when built, naming why."""
+    cfg = load_config(CONFIG)
+    system = build(cfg, clock="sim", contact=False)
     try:
-        assert off.tick._fz is None
-        off.tick.mode_request = MOVE
-        off.loop.run(max_ticks=200)
-        assert off.tick.fused_ticks == 0
+        t = system.tick
+        t.group._fast = None
+        with pytest.raises(ConfigError, match=r"^the tick cannot run compiled: the drive group"):
+            Tick(
+                t.group, t.observers, t.snapshot, t.stop, t.limits, t.bus, t.collision,
+                t.motion, t.feedforward, t.sink, backend="numba",
+            )  # fmt: skip
     finally:
-        off.close()
+        system.close()

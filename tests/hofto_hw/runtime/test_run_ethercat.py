@@ -39,7 +39,7 @@ LOST_CYCLES = 20  # late frames on a loaded 2-core machine are not the fault und
 def _config(folder: Path, master: str) -> tuple[Path, dict]:
     # the collision monitor stays armed: a host stall of ~100 ms used to read as a contact
     # (the observers took the whole gap in one step: the momentum observer's gain·dt was
-    # 3 > 2, unstable); now they integrate a gap in one-cycle steps (Tick._observe), and the
+    # 3 > 2, unstable); now they integrate a gap in one-cycle steps (fused.fused_tick), and the
     # arm holds still here (--hold), so a stall must not stop it by itself
     return ethercat_run_config(
         folder,

@@ -1,7 +1,7 @@
 """The deployment config (configs/er3a_service.yaml) as `hofto-hw run` runs it: nothing
 scripted, until stopped (SIGTERM: category 1, exit 0), the compiled tick required
-(``loop.acceleration``: a missing compiled path refuses in one line; ``preferred`` runs the
-Python reference and the summary says so); `run --help` states its defaults."""
+(``loop.acceleration``: a missing compiled path refuses in one line, ``preferred`` too: the
+tick has no other path); `run --help` states its defaults."""
 
 from __future__ import annotations
 
@@ -91,8 +91,8 @@ def test_required_acceleration_refuses_without_the_native_library(tmp_path: Path
     assert "robot.yaml" in lines[0] and "Traceback" not in stderr
 
 
-def test_preferred_acceleration_runs_the_reference_and_says_so(tmp_path: Path) -> None:
-    summary = tmp_path / "summary.json"
+def test_preferred_acceleration_refuses_without_the_native_library_too(tmp_path: Path) -> None:
+    """The tick has one path, the compiled one: no Python reference to fall back on."""
     proc = _run(
         "--config",
         "er3a",
@@ -102,15 +102,13 @@ def test_preferred_acceleration_runs_the_reference_and_says_so(tmp_path: Path) -
         "0.3",
         "--no-log",
         "--no-collision",
-        "--summary-json",
-        str(summary),
         HOFTO_HW_NO_NATIVE="1",
     )
-    stdout, stderr = proc.communicate(timeout=300)
-    assert proc.returncode == 0, stderr
-    acc = json.loads(summary.read_text())["acceleration"]
-    assert acc["compiled"] is False and "HOFTO_HW_NO_NATIVE" in acc["why"]
-    assert "tick: Python reference (disabled by HOFTO_HW_NO_NATIVE)" in stdout
+    _, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 2, stderr
+    lines = [ln for ln in stderr.splitlines() if "loop.acceleration: preferred" in ln]
+    assert len(lines) == 1 and "HOFTO_HW_NO_NATIVE" in lines[0], stderr
+    assert "Traceback" not in stderr
 
 
 def test_run_help_states_the_defaults() -> None:

@@ -13,6 +13,7 @@ from hofto_hw.control.joint_motion import MOVE
 from hofto_hw.observers import kernels
 from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.runtime.compose import build
+from tests.support.reference_tick import use_reference
 
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
@@ -22,6 +23,7 @@ def test_the_banked_tick_equals_the_per_observer_tick_over_stalls() -> None:
     cfg = load_config(CONFIG)
     fused, alone = build(cfg, clock="sim", contact=False), build(cfg, clock="sim", contact=False)
     try:
+        use_reference(alone)  # the stages on every tick: the bank's own update
         t = alone.tick
         t._bank = ObserverBank(t.observers, t.snapshot, t.tau_ext, fuse=False)
         assert fused.tick._bank.fused == ("hofto", "momentum") and t._bank.fused == ()
@@ -48,7 +50,9 @@ def test_the_banked_tick_equals_the_per_observer_tick_over_stalls() -> None:
 @pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
 def test_an_observer_that_rebinds_its_state_on_reset_gets_a_new_bank() -> None:
     """The bank passes its owners' records: when a reset hands an observer new arrays, the
-    tick builds a new bank instead of integrating the dropped ones."""
+    tick builds a new bank instead of integrating the dropped ones; the compiled call cannot
+    run an observer outside its record, so the tick refuses to go on (one error naming it),
+    and the reference integrates the new array."""
     cfg = load_config(CONFIG)
     system = build(cfg, clock="sim", contact=False)
     try:
@@ -66,10 +70,13 @@ def test_an_observer_that_rebinds_its_state_on_reset_gets_a_new_bank() -> None:
         for k in range(1, 301):
             tick.step(k * period, period, 0.0, 0, 0.0)
         old_bank = tick._bank
-        tick.start()  # resets every observer: momentum rebinds r
+        # resets every observer: momentum rebinds r. Its state no longer in its record, the
+        # compiled call cannot run it: refused, naming it (no silent Python path)
+        with pytest.raises(RuntimeError, match="not fused in the bank: momentum"):
+            tick.start()
         assert tick._bank is not old_bank and tick._bank.bound()
-        # its state no longer in its record: the observer runs through its own update
         assert tick._bank.fused == ("hofto",) and tick._bank.rest == ("momentum",)
+        use_reference(system)  # the reference: the observer through its own update
         for k in range(301, 401):
             tick.step(k * period, period, 0.0, 0, 0.0)
         row = tick.tau_ext[tick.names.index("momentum")]

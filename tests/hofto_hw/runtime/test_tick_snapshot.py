@@ -1,5 +1,7 @@
 """The tick computes one dynamics snapshot per tick and hands it to every observer: the same
-estimates as each observer updating through its own snapshot, and no allocation."""
+estimates as each observer updating through its own snapshot, and no allocation. The tick
+runs its compiled path only (a numpy-path part is refused when it is built); the snapshot's
+own ``compute`` is what the test reference (tests/support/reference_tick.py) calls."""
 
 from __future__ import annotations
 
@@ -13,14 +15,10 @@ from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import kernels, make_observer
 from hofto_hw.runtime import compose
 from hofto_hw.runtime.compose import build, loop_observer_table, shared_snapshot
+from tests.support.reference_tick import use_reference
 
-BACKENDS = [
-    "numpy",
-    pytest.param(
-        "auto",
-        marks=pytest.mark.skipif(not kernels.available(), reason="numba kernels unavailable"),
-    ),
-]
+pytestmark = pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
+BACKENDS = ["auto"]
 
 
 def _system(cfg: SystemConfig, backend: str, monkeypatch: pytest.MonkeyPatch):
@@ -61,7 +59,8 @@ def test_shared_snapshot_gives_each_observers_own_estimates(
 def test_one_snapshot_per_tick_for_the_union_of_needs(
     cfg: SystemConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    system = _system(cfg, "numpy", monkeypatch)
+    system = _system(cfg, "auto", monkeypatch)
+    use_reference(system)  # the snapshot's own compute (the tick as built: its kernel)
     tick = system.tick
     union = Needs.NONE
     for obs in tick.observers:
@@ -83,23 +82,25 @@ def test_one_snapshot_per_tick_for_the_union_of_needs(
 def test_shared_snapshot_takes_the_observers_implementation(
     cfg: SystemConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    system = _system(cfg, "numpy", monkeypatch)
-    snap = shared_snapshot(system.model, system.tick.observers)
-    assert snap.backend == "numpy"
-    if kernels.available():
-        compiled = [
-            make_observer(loop_observer_table(cfg)[name], system.model, backend="numba")
-            for name in system.tick.names
-        ]
-        assert shared_snapshot(system.model, compiled).backend == "numba"
-        mixed = [compiled[0], *system.tick.observers[1:]]
-        assert shared_snapshot(system.model, mixed).backend == "numpy"
+    system = _system(cfg, "auto", monkeypatch)
+    table = loop_observer_table(cfg)
+    plain = [
+        make_observer(table[name], system.model, backend="numpy") for name in system.tick.names
+    ]
+    assert shared_snapshot(system.model, plain).backend == "numpy"
+    compiled = [
+        make_observer(table[name], system.model, backend="numba") for name in system.tick.names
+    ]
+    assert shared_snapshot(system.model, compiled).backend == "numba"
+    assert system.tick.snapshot.backend == "numba"
+    mixed = [compiled[0], *plain[1:]]
+    assert shared_snapshot(system.model, mixed).backend == "numpy"
 
 
 def test_a_snapshot_missing_a_term_is_refused(
     cfg: SystemConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    system = _system(cfg, "numpy", monkeypatch)
+    system = _system(cfg, "auto", monkeypatch)
     tick = system.tick
     with pytest.raises(ValueError, match="lacks terms"):
         type(tick)(
@@ -134,7 +135,7 @@ def test_tick_record_and_sink_share_one_dtype_object(
 ) -> None:
     """numpy copies between arrays of one dtype object byte-wise; between equal but distinct
     dtype objects it builds a field-by-field cast on every copy (tens of µs in the tick)."""
-    system = _system(cfg, "numpy", monkeypatch)
+    system = _system(cfg, "auto", monkeypatch)
     assert system.sink.ticks.dtype is system.tick.tick_rec.dtype
     system.loop.run(max_ticks=5)
     kept = system.sink.last_ticks()
