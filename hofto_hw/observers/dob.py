@@ -39,7 +39,7 @@ class DobObserver(SnapshotUpdate):
         model: RobotModel,
         cutoff: np.ndarray,
         nominal_inertia: np.ndarray | None = None,
-        backend: kernels.Backend = "numpy",
+        backend: kernels.Backend = "auto",
     ) -> None:
         n = model.n
         self.model = model

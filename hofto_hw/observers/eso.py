@@ -89,7 +89,7 @@ class EsoObserver(SnapshotUpdate):
         k2: np.ndarray,
         k3: np.ndarray,
         substeps: int = 1,
-        backend: kernels.Backend = "numpy",
+        backend: kernels.Backend = "auto",
     ) -> None:
         n = model.n
         self.model = model

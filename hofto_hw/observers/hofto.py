@@ -72,7 +72,7 @@ class HoftoCore:
       ~5·dt·s for n = 2, and it grows with time on a parabola.
 
     ``backend`` (``auto``, ``numba``, ``numpy``: see :mod:`hofto_hw.observers.kernels`) is
-    the one :meth:`step` runs (``kernels.hofto_core_step``, compiled at its first call); the
+    the one :meth:`step` runs (``kernels.hofto_advance``, compiled at its first call); the
     observer updates the same record through its own kernel call.
     """
 
@@ -137,8 +137,10 @@ class HoftoCore:
         )
         self._neg_gains = rec["neg_gains"]
         np.negative(self.gains, out=self._neg_gains)
+        self._work = work
+        self._ints = int(rec["substeps"]), int(rec["flags"])
         self.backend = kernels.resolve(backend)
-        self._step = kernels.compiled_or_python(kernels.hofto_core_step, self.backend)
+        self._step = kernels.compiled_or_python(kernels.hofto_advance, self.backend)
 
     def reset(self, y: np.ndarray, yd: np.ndarray | None = None) -> None:
         """z1 = y, z2 = yd (or 0), higher states 0."""
@@ -150,7 +152,8 @@ class HoftoCore:
 
     def step(self, y: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
         """Advance ``dt`` [s]; returns z3 (a view), the x3 estimate."""
-        self._step(self.record, y, a, dt)
+        sub, flags = self._ints
+        self._step(self.z, self._neg_gains, self.powers, self.prev, self._work, sub, flags, y, a, dt)
         return self.z[2]
 
 
@@ -169,7 +172,7 @@ class HoftoObserver(SnapshotUpdate):
         form: Form = "recursive",
         substeps: int = 1,
         discretisation: Literal["taylor", "euler"] = "taylor",
-        backend: kernels.Backend = "numpy",
+        backend: kernels.Backend = "auto",
     ) -> None:
         gains = np.asarray(gains, dtype=float)
         if gains.ndim != 2 or gains.shape[1] != model.n:

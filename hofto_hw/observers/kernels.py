@@ -453,41 +453,49 @@ def _taylor_progression(
 
 
 @_jit_inline
-def _hofto_advance(c: Any, y: np.ndarray, a: np.ndarray, dt: float) -> None:
-    """One sample period dt [s] of a HOFTO record ``c`` (``HoftoCore.record[0]``): the step
-    terms of h = dt/substeps (T, [h, a_h2] in its ``work``) when h changed, :func:`hofto_step`
-    with the sample y and the model acceleration a (joints,), then prev = y."""
-    z, work, sub, flags = c["z"], c["work"], c["substeps"], c["flags"]
+def hofto_advance(
+    z: np.ndarray,
+    neg_gains: np.ndarray,
+    powers: np.ndarray,
+    prev: np.ndarray,
+    work: np.ndarray,
+    substeps: int,
+    flags: int,
+    y: np.ndarray,
+    a: np.ndarray,
+    dt: float,
+) -> None:
+    """One sample period dt [s] of a HOFTO (the fields of ``HoftoCore.record``): the step
+    terms of h = dt/substeps (T, [h, a_h2] in ``work``) when h changed, :func:`hofto_step`
+    with the sample y and the model acceleration a (joints,), then prev = y.
+
+    Arrays, not the record, so that one compilation serves every order and joint count."""
     s = z.shape[0]
     T, hs = work[:s], work[s]
     taylor = (flags & BANK_TAYLOR) != 0
-    h = dt / sub
+    h = dt / substeps
     if h != hs[0]:
         _hofto_transition(T, hs, h, taylor)
-    prev = c["prev"]
     recursive = (flags & BANK_RECURSIVE) != 0
     hofto_step(
-        z, c["neg_gains"], c["powers"], T, y, prev, a, h, hs[1], recursive, taylor, sub,
-        work[s + 1 :],
-    )  # fmt: skip
+        z, neg_gains, powers, T, y, prev, a, h, hs[1], recursive, taylor, substeps, work[s + 1 :]
+    )
     for jj in range(y.shape[0]):
         prev[jj] = y[jj]
-
-
-@_jit
-def hofto_core_step(record: np.ndarray, y: np.ndarray, a: np.ndarray, dt: float) -> None:
-    """:func:`_hofto_advance` of ``record`` (a HoftoCore's, shape (1,)): ``HoftoCore.step``."""
-    _hofto_advance(record[0], y, a, dt)
 
 
 @_jit
 def hofto_update(
     record: np.ndarray, y: np.ndarray, a: np.ndarray, dt: float, M: np.ndarray, out: np.ndarray
 ) -> None:
-    """:func:`hofto_core_step`, then out = M·z3 [N·m]: the HOFTO observer's update."""
+    """:func:`hofto_advance` of a ``HoftoCore.record`` (shape (1,)), then out = M·z3 [N·m]:
+    the HOFTO observer's update."""
     c = record[0]
-    _hofto_advance(c, y, a, dt)
-    _mat_vec(M, c["z"][2], out)
+    z = c["z"]
+    hofto_advance(
+        z, c["neg_gains"], c["powers"], c["prev"], c["work"], c["substeps"], c["flags"], y, a, dt
+    )
+    _mat_vec(M, z[2], out)
 
 
 # ----------------------------------------------------------------- ESO and STA (Euler)
@@ -698,8 +706,12 @@ def _bank_hofto(
         for entry in _literal_unroll(group):  # HOFTOs of different orders: records' types
             row, rec = entry
             c = rec[0]
-            _hofto_advance(c, y, a, dt)
-            _mat_vec(M, c["z"][2], out[row])
+            z = c["z"]
+            hofto_advance(
+                z, c["neg_gains"], c["powers"], c["prev"], c["work"], c["substeps"], c["flags"],
+                y, a, dt,
+            )  # fmt: skip
+            _mat_vec(M, z[2], out[row])
 
 
 @_jit

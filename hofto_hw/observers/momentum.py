@@ -31,7 +31,7 @@ class MomentumObserver(SnapshotUpdate):
     needs = Needs.MASS | Needs.GRAVITY | Needs.CORIOLIS_T | Needs.FRICTION
 
     def __init__(
-        self, model: RobotModel, gain: np.ndarray, backend: kernels.Backend = "numpy"
+        self, model: RobotModel, gain: np.ndarray, backend: kernels.Backend = "auto"
     ) -> None:
         n = model.n
         self.model = model

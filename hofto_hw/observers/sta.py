@@ -40,7 +40,7 @@ class StaObserver(SnapshotUpdate):
         l2: np.ndarray,
         l3: np.ndarray,
         substeps: int = 1,
-        backend: kernels.Backend = "numpy",
+        backend: kernels.Backend = "auto",
     ) -> None:
         n = model.n
         self.model = model
