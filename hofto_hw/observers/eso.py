@@ -119,5 +119,7 @@ class EsoObserver(SnapshotUpdate):
         if not self._guard.usable(snap, dt):
             return self._guard.nan()
         c = self.core
-        self._kernel(c.z, c.k, snap.q, c.prev, snap.accel, dt / c.substeps, c.substeps, snap.M, self._out)
+        self._kernel(
+            c.z, c.k, snap.q, c.prev, snap.accel, dt / c.substeps, c.substeps, snap.M, self._out
+        )
         return self._out

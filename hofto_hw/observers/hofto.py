@@ -153,7 +153,9 @@ class HoftoCore:
     def step(self, y: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
         """Advance ``dt`` [s]; returns z3 (a view), the x3 estimate."""
         sub, flags = self._ints
-        self._step(self.z, self._neg_gains, self.powers, self.prev, self._work, sub, flags, y, a, dt)
+        self._step(
+            self.z, self._neg_gains, self.powers, self.prev, self._work, sub, flags, y, a, dt
+        )
         return self.z[2]
 
 

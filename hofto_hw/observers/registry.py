@@ -114,9 +114,7 @@ OBSERVERS: dict[str, ObserverEntry] = {
 OBSERVER_TYPES = tuple(OBSERVERS)
 
 
-def make_observer(
-    cfg: ObserverConfig, model: RobotModel, *, backend: Backend = "auto"
-) -> Observer:
+def make_observer(cfg: ObserverConfig, model: RobotModel, *, backend: Backend = "auto") -> Observer:
     """The observer a validated config section describes, on ``model``.
 
     ``backend``: ``auto`` (compiled when available, as the loop runs), ``numba`` (compiled
