@@ -62,27 +62,6 @@ class Observer(Protocol):
         ...
 
 
-class ModelTerms:
-    """Model quantities of eq. (3)-(4), evaluated once per tick into preallocated buffers.
-
-    - :meth:`acceleration`: M(q)⁻¹·tau + F(q, qd) = M⁻¹·(tau - C·qd - g - f), the joint
-      acceleration the model predicts without contact [rad/s²] (pinocchio ABA, one call);
-    - :meth:`torque`: M(q)·x [N·m] for an acceleration-like x (eq. (5)/(17): tau_hat = M·z3).
-    """
-
-    def __init__(self, model: RobotModel) -> None:
-        self.model = model
-        self.data = model.create_data()  # this observer's own workspace
-        self.accel = np.zeros(model.n)
-        self.out = np.zeros(model.n)
-
-    def acceleration(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        return self.data.forward_dynamics(q, qd, tau, out=self.accel)
-
-    def torque(self, q: np.ndarray, x: np.ndarray) -> np.ndarray:
-        return np.dot(self.data.mass_matrix(q), x, out=self.out)
-
-
 class SnapshotUpdate:
     """``update(q, qd, tau, dt)`` through the observer's own snapshot, for observers that
     define ``needs`` and ``update_snapshot``; call :meth:`_own_snapshot` in ``__init__``."""

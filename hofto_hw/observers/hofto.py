@@ -47,13 +47,6 @@ from hofto_hw.observers.base import SampleGuard, SnapshotUpdate
 Form = Literal["eq17", "recursive"]
 
 
-def sigma_powers(order: int, sigma: float) -> np.ndarray:
-    """Stage powers m_2..m_{n+3} = 1 + i·sigma (i = 1..n+2) of eq. (17), shape (n+2,)."""
-    if not -1.0 / (order + 2) < sigma < 0.0:
-        raise ValueError(f"sigma must be in (-1/(n+2), 0) = ({-1.0 / (order + 2):.4f}, 0)")
-    return 1.0 + sigma * np.arange(1, order + 3, dtype=float)
-
-
 class HoftoCore:
     """The observer dynamics without the robot model, for ``joints`` independent channels.
 

@@ -20,6 +20,13 @@ from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers.base import SampleGuard, SnapshotUpdate, per_joint
 
 
+def sigma_powers(order: int, sigma: float) -> np.ndarray:
+    """Stage powers 1 + i·sigma (i = 1..n+2) of eq. (17), shape (n+2,) (the package's are
+    ``HoftoConfig.stage_powers()``)."""
+    assert -1.0 / (order + 2) < sigma < 0.0
+    return 1.0 + sigma * np.arange(1, order + 3, dtype=float)
+
+
 class LinearHold:
     """First-order hold between two samples: over ``substeps`` substeps, :meth:`next` walks
     linearly from the previous sample to the new one (the k-th call returns

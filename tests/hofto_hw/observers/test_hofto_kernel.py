@@ -1,7 +1,7 @@
 """The HOFTO kernel's own arithmetic.
 
 Output injection: sig^p(x) = |x|^p·sign(x) on the compiled path against numpy's
-np.power (the reference path's arithmetic) on the values where a formulation other than
+np.power (the numpy reference's arithmetic) on the values where a formulation other than
 libm's pow could go wrong: zeros of both signs, subnormals, the extremes of the float range,
 infinities and NaN, for every kind of power the kernel treats apart (0, 1, the roots 1/4,
 1/2, 3/4, and the rest through one log2 shared by the stages of eq. (17)).
@@ -16,7 +16,8 @@ import pytest
 from support.compiled import require_compiled_kernels
 
 from hofto_hw.observers import kernels
-from hofto_hw.observers.hofto import sigma_powers
+
+from .reference import sigma_powers
 
 require_compiled_kernels()
 
@@ -39,7 +40,7 @@ FINITE = [
 
 
 def _reference(e: np.ndarray, p: float) -> np.ndarray:
-    """sig^p as HoftoCore._injection computes it (eq17 form, numpy)."""
+    """sig^p as reference.HoftoCore._injection computes it (eq17 form, numpy)."""
     if p == 0.0:
         return np.sign(e)
     return np.copysign(np.power(np.abs(e), p), e)
