@@ -42,7 +42,7 @@ class EsoCore:
     """ESO dynamics for independent channels (arrays of shape (joints,)).
 
     States z (3, joints) (``z1``, ``z2``, ``z3`` are row views), gains k (3, joints), the
-    previous sample ``prev`` (joints,). :meth:`step` runs ``kernels.eso_core_step`` on
+    previous sample ``prev`` (joints,). :meth:`step` runs ``kernels.eso_step`` on
     ``backend`` (see :mod:`hofto_hw.observers.kernels`; compiled at its first call)."""
 
     def __init__(
@@ -61,7 +61,7 @@ class EsoCore:
         self.z1, self.z2, self.z3 = self.z
         self.prev = np.zeros(j)
         self.backend = kernels.resolve(backend)
-        self._step = kernels.compiled_or_python(kernels.eso_core_step, self.backend)
+        self._step = kernels.compiled_or_python(kernels.eso_step, self.backend)
 
     def reset(self, y: np.ndarray, yd: np.ndarray | None = None) -> None:
         self.z1[:] = y

@@ -548,20 +548,6 @@ def eso_update(
 
 
 @_jit
-def eso_core_step(
-    z: np.ndarray,
-    k: np.ndarray,
-    y: np.ndarray,
-    y_prev: np.ndarray,
-    a: np.ndarray,
-    h: float,
-    substeps: int,
-) -> None:
-    """:func:`eso_step` as a call of its own (``EsoCore.step``)."""
-    eso_step(z, k, y, y_prev, a, h, substeps)
-
-
-@_jit
 def sta_update(
     z: np.ndarray,
     l: np.ndarray,
