@@ -298,25 +298,6 @@ def hofto_step(
 
 
 @_jit_inline
-def _inject(
-    z: np.ndarray,
-    jj: int,
-    y: float,
-    neg_gains: np.ndarray,
-    powers: np.ndarray,
-    recursive: bool,
-    inj: np.ndarray,
-) -> None:
-    """Output-injection terms of joint jj into inj (s,), powers in progression included (the
-    arithmetic of every path of :func:`hofto_step`, one joint and instant at a time)."""
-    ratio = _progression(powers) if not recursive else np.nan
-    if ratio == ratio:
-        _injection_progression(z, jj, y, neg_gains, powers, ratio, inj, 0.0, False)
-    else:
-        _injection(z, jj, y, neg_gains, powers, recursive, inj, 0.0, False)
-
-
-@_jit_inline
 def _injection(
     z: np.ndarray,
     jj: int,

@@ -46,6 +46,16 @@ def _reference(e: np.ndarray, p: float) -> np.ndarray:
     return np.copysign(np.power(np.abs(e), p), e)
 
 
+def _inject(z, y, neg_gains, powers, recursive, inj):
+    """Injection terms of joint 0 into inj (s,) as hofto_step computes them: powers in
+    progression through their own path, the others stage by stage (compiled calls)."""
+    ratio = kernels._progression(powers) if not recursive else np.nan
+    if ratio == ratio:
+        kernels._injection_progression(z, 0, y, neg_gains, powers, ratio, inj, 0.0, False)
+    else:
+        kernels._injection(z, 0, y, neg_gains, powers, recursive, inj, 0.0, False)
+
+
 def _compiled(e: np.ndarray, powers: list[float], recursive: bool) -> np.ndarray:
     """sig^p_i(e) per stage through the kernel's injection (eq17, gains -L = -1: inj = sig(e);
     recursive, one stage per call, -L = 1: inj = sig(z - y))."""
@@ -58,11 +68,11 @@ def _compiled(e: np.ndarray, powers: list[float], recursive: bool) -> np.ndarray
             for i in range(s):  # one stage at a time: z_0 - y = x
                 z = np.zeros((1, 1))
                 z[0, 0] = x
-                kernels._inject(z, 0, 0.0, np.ones((1, 1)), p[i : i + 1], True, inj)
+                _inject(z, 0.0, np.ones((1, 1)), p[i : i + 1], True, inj)
                 out[i, jj] = inj[0]
         else:
             z = np.zeros((s, 1))
-            kernels._inject(z, 0, x, -np.ones((s, 1)), p, False, inj)  # e = x - 0
+            _inject(z, x, -np.ones((s, 1)), p, False, inj)  # e = x - 0
             out[:, jj] = inj
     return out
 
