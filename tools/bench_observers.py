@@ -56,7 +56,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ticks", type=int, default=100_000)
     parser.add_argument("--json", action="store_true")
     parser.add_argument(
-        "--backend", choices=("numpy", "numba", "auto"), default="numpy", help="observer path"
+        "--backend",
+        choices=("numpy", "numba", "auto"),
+        default="auto",
+        help="observer path (numpy: the kernels run as Python)",
     )
     args = parser.parse_args(argv)
 

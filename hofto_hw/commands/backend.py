@@ -1,5 +1,5 @@
 """Which observer backend the commands use: the compiled kernels when they are available,
-else the numpy path, said once per process on stderr."""
+else the same kernels run as Python, said once per process on stderr."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ def observer_backend() -> kernels.Backend:
     if not kernels.available() and not _said:
         _said = True
         print(
-            f"hofto-hw: running the numpy observers ({kernels.unavailable_reason()})",
+            "hofto-hw: the observers run their kernels as Python, not compiled "
+            f"({kernels.unavailable_reason()})",
             file=sys.stderr,
         )
     return "auto"

@@ -167,7 +167,7 @@ def matched_observers(
     model: RobotModel,
     samples: Samples,
     hofto_name: str = "hofto",
-    backend: Backend = "numpy",
+    backend: Backend = "auto",
 ) -> tuple[dict[str, object], np.ndarray, np.ndarray]:
     """ESO and DOB tuned to HOFTO's bandwidth at the scenario's amplitudes (observers on
     ``backend``, see :func:`~hofto_hw.observers.make_observer`).

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from hofto_hw.observers import kernels
 from hofto_hw.observers.bank import ObserverBank
-from hofto_hw.observers.base import ModelTerms, Observer
+from hofto_hw.observers.base import Observer
 from hofto_hw.observers.direct import DirectObserver
 from hofto_hw.observers.dob import DobObserver
 from hofto_hw.observers.eso import EsoCore, EsoObserver
@@ -28,7 +28,6 @@ __all__ = [
     "EsoObserver",
     "HoftoCore",
     "HoftoObserver",
-    "ModelTerms",
     "MomentumObserver",
     "Observer",
     "ObserverBank",

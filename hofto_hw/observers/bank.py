@@ -11,15 +11,15 @@ observer's own kernel arithmetic, so the estimates are the per-observer ones bit
 
 What the bank fuses: HOFTO (any order, form, discretisation, substeps), momentum, ESO, STA
 and DOB observers that run their compiled kernels (``backend == "numba"``). Any other
-observer (direct, a numpy-path observer, a subclass) is updated after the fused ones through
-its own ``update_snapshot`` and copied into its row; without numba (``HOFTO_HW_NO_NUMBA=1``)
-that is every observer, exactly as before.
+observer (direct, one whose kernel runs as Python, a subclass) is updated after the fused
+ones through its own ``update_snapshot`` and copied into its row; without the compiled path
+(``HOFTO_HW_NO_NUMBA=1``) that is every observer.
 
 Ownership: the observers keep their state arrays (``reset``, replay and standalone
 ``update`` keep working on them); the bank passes those arrays themselves (``args``: a tuple
 per kind of each observer's arrays, taken at construction) to the compiled call, which
-updates them in place. Its own are the per-observer step-size terms (HOFTO's transition
-matrix for the current step, DOB's discrete pole), recomputed when dt changes. Contract: the
+updates them in place, step-size terms included (HOFTO's transition matrix for the current
+step, DOB's discrete pole: the observers' own, recomputed when dt changes). Contract: the
 observers' state and parameter arrays and the snapshot's term arrays (``M``, ``accel``,
 ``f``, ``g``, ``ct_qd``, ``nle``) are allocated once and updated in place; an owner that
 rebinds one to a new array must build a new bank (:meth:`ObserverBank.bound` says whether
@@ -173,7 +173,7 @@ class ObserverBank:
             core = obs.core  # type: ignore[attr-defined]
             s = core.stages
             pairs = [(core, "z", (s, n)), (core, "_neg_gains", (s, n)), (core, "powers", (s,))]
-            arrs = self._arrays([*pairs, (core._hold, "prev", (n,))])
+            arrs = self._arrays([*pairs, (core, "prev", (n,))])
             if arrs is None or not _fields_of(arrs, core.record):
                 return None
             return K.BANK_HOFTO, (i, core.record)
@@ -185,21 +185,18 @@ class ObserverBank:
         if kind is EsoObserver or kind is StaObserver:
             if kind is EsoObserver:
                 core = obs.core  # type: ignore[attr-defined]
-                pairs = [(core, "z", (3, n)), (core, "k", (3, n)), (core._hold, "prev", (n,))]
+                pairs = [(core, "z", (3, n)), (core, "k", (3, n)), (core, "prev", (n,))]
                 code = K.BANK_ESO
             else:
                 core = obs
-                pairs = [(obs, "z", (3, n)), (obs, "gains", (3, n)), (obs._hold, "prev", (n,))]  # type: ignore[attr-defined]
+                pairs = [(obs, "z", (3, n)), (obs, "gains", (3, n)), (obs, "prev", (n,))]
                 code = K.BANK_STA
             arrs = self._arrays(pairs)
             return None if arrs is None else (code, (i, *arrs, int(core.substeps)))  # type: ignore[attr-defined]
         if kind is DobObserver:
-            arrs = self._arrays([(obs, a, (n,)) for a in ("_gj", "cutoff", "w")])
-            if arrs is None:
-                return None
-            work = np.zeros((2, n))  # [dt of alpha] (< 0: none yet), alpha (n,)
-            work[0, 0] = -1.0
-            return K.BANK_DOB, (i, *arrs, work)
+            pairs = [(obs, a, (n,)) for a in ("_gj", "cutoff", "w")]
+            arrs = self._arrays([*pairs, (obs, "work", (2, n))])
+            return None if arrs is None else (K.BANK_DOB, (i, *arrs))
         return None
 
     def _warm(self) -> None:

@@ -14,8 +14,12 @@ fills the observer's own snapshot and does the same; both give identical results
 does it for all its observers at once through :class:`~hofto_hw.observers.bank.ObserverBank`
 (one compiled call, the same numbers).
 
-Backends: ``backend="numpy"`` (the reference), ``"numba"`` (compiled per-joint kernels,
-:mod:`hofto_hw.observers.kernels`) or ``"auto"`` (numba when available). Both agree to 1e-12.
+Backends: every observer but ``direct`` runs its kernel of :mod:`hofto_hw.observers.kernels`,
+the only implementation of its formula: ``backend="numba"`` runs it compiled, ``"numpy"``
+runs the same source as Python (no compilation; ~10-100x slower, for tests and debugging;
+the name is kept for the callers), ``"auto"`` numba when available (what the loop runs).
+The numpy formulation of each observer is the reference in
+tests/hofto_hw/observers/reference.py; both backends agree with it to 1e-12.
 
 Non-finite samples: an update whose q, qd, tau or dt holds a NaN or inf returns NaN on every
 joint (so the fault stays visible to safety/, which reports it) and leaves the observer's
@@ -26,7 +30,8 @@ clears every state.
 from __future__ import annotations
 
 import math
-from typing import Protocol
+from collections.abc import Callable
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -57,27 +62,6 @@ class Observer(Protocol):
         ...
 
 
-class ModelTerms:
-    """Model quantities of eq. (3)-(4), evaluated once per tick into preallocated buffers.
-
-    - :meth:`acceleration`: M(q)⁻¹·tau + F(q, qd) = M⁻¹·(tau - C·qd - g - f), the joint
-      acceleration the model predicts without contact [rad/s²] (pinocchio ABA, one call);
-    - :meth:`torque`: M(q)·x [N·m] for an acceleration-like x (eq. (5)/(17): tau_hat = M·z3).
-    """
-
-    def __init__(self, model: RobotModel) -> None:
-        self.model = model
-        self.data = model.create_data()  # this observer's own workspace
-        self.accel = np.zeros(model.n)
-        self.out = np.zeros(model.n)
-
-    def acceleration(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        return self.data.forward_dynamics(q, qd, tau, out=self.accel)
-
-    def torque(self, q: np.ndarray, x: np.ndarray) -> np.ndarray:
-        return np.dot(self.data.mass_matrix(q), x, out=self.out)
-
-
 class SnapshotUpdate:
     """``update(q, qd, tau, dt)`` through the observer's own snapshot, for observers that
     define ``needs`` and ``update_snapshot``; call :meth:`_own_snapshot` in ``__init__``."""
@@ -88,16 +72,18 @@ class SnapshotUpdate:
     def _own_snapshot(self, model: RobotModel, backend: str = "numpy") -> None:
         self.snapshot = DynamicsSnapshot(model, self.needs, backend)
 
-    def _own_backend(self, model: RobotModel, backend: str) -> None:
-        """Resolve ``backend`` (``auto`` -> numba when available), build the own snapshot and
-        compile + warm the kernel through ``self._warm``; a failed compilation falls back to
-        the numpy path (``self.backend`` says which runs)."""
+    def _own_backend(self, model: RobotModel, backend: str, kernel: Callable[..., Any]) -> None:
+        """Resolve ``backend`` (``auto`` -> numba when available), build the own snapshot,
+        compile + warm ``kernel`` through ``self._warm`` (a failed compilation runs the
+        kernel's source as Python: ``self.backend`` says which runs) and keep the kernel to
+        call as ``self._kernel``."""
         from hofto_hw.observers import kernels
 
         self.backend = kernels.resolve(backend)  # type: ignore[arg-type]
         self._own_snapshot(model, self.backend)
         if self.backend == "numba" and not kernels.warm(self._warm):  # type: ignore[attr-defined]
             self.backend = "numpy"
+        self._kernel = kernels.compiled_or_python(kernel, self.backend)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
         """Advance by dt [s] with the newest samples; return tau_ext_hat [N·m], shape (n,)."""
@@ -129,39 +115,6 @@ class SampleGuard:
 
 
 _sum = np.add.reduce
-
-
-class LinearHold:
-    """Measured positions between two samples, for observers that take substeps.
-
-    First-order hold: over ``substeps`` substeps, :meth:`next` walks linearly from the previous
-    sample to the new one (the k-th call returns y_prev + k·(y - y_prev)/substeps).
-    Allocation-free; shape (joints,).
-    """
-
-    def __init__(self, joints: int, prev: np.ndarray | None = None) -> None:
-        #: the previous sample (``prev``: the owner's array to keep it in, else its own)
-        self.prev = np.zeros(joints) if prev is None else prev
-        self._cur = np.zeros(joints)
-        self._step = np.zeros(joints)
-
-    def reset(self, y: np.ndarray) -> None:
-        np.copyto(self.prev, y)
-
-    def begin(self, y: np.ndarray, substeps: int) -> None:
-        """Start walking towards the new sample ``y``."""
-        np.subtract(y, self.prev, out=self._step)
-        np.divide(self._step, substeps, out=self._step)
-        np.copyto(self._cur, self.prev)
-
-    def next(self) -> np.ndarray:
-        """The next substep's position (a view of an internal buffer)."""
-        np.add(self._cur, self._step, out=self._cur)
-        return self._cur
-
-    def end(self, y: np.ndarray) -> None:
-        """The new sample becomes the previous one."""
-        np.copyto(self.prev, y)
 
 
 def per_joint(values: list[float] | np.ndarray, n: int, what: str) -> np.ndarray:

@@ -12,7 +12,9 @@ and qdd is never formed: G(s)·Jn·s·qd = g·Jn·qd - G(s)·g·Jn·qd. So, exac
 
 The inertia mismatch (M(q) - Jn)·qdd and the filter lag are the DOB's error sources; the
 paper's comparison uses such a DOB. Jn defaults to diag M(home). The filter is discretised
-exactly for a held input: w += (1 - exp(-g·dt))·(u - w).
+exactly for a held input: w += (1 - exp(-g·dt))·(u - w). The arithmetic is
+:mod:`hofto_hw.observers.kernels`' (``dob_update``; the numpy reference is in
+tests/hofto_hw/observers/reference.py).
 """
 
 from __future__ import annotations
@@ -26,6 +28,9 @@ from hofto_hw.observers.base import SampleGuard, SnapshotUpdate, per_joint
 
 
 class DobObserver(SnapshotUpdate):
+    """tau_ext_hat = g·Jn·qd - w; one ``kernels.dob_update`` call per update (``backend``:
+    see :mod:`hofto_hw.observers.base`)."""
+
     name = "dob"
     needs = Needs.NLE | Needs.FRICTION
 
@@ -34,7 +39,7 @@ class DobObserver(SnapshotUpdate):
         model: RobotModel,
         cutoff: np.ndarray,
         nominal_inertia: np.ndarray | None = None,
-        backend: kernels.Backend = "numpy",
+        backend: kernels.Backend = "auto",
     ) -> None:
         n = model.n
         self.model = model
@@ -45,16 +50,19 @@ class DobObserver(SnapshotUpdate):
         self.jn = per_joint(nominal_inertia, n, "dob.nominal_inertia")
         self._gj = self.cutoff * self.jn  # g·Jn
         self.w = np.zeros(n)
-        self._u = np.zeros(n)
-        self._alpha = np.zeros(n)
-        self._dt = -1.0
+        #: [dt [s] the pole was computed for (< 0: none yet)], alpha = 1 - exp(-g·dt) (n,)
+        self.work = np.zeros((2, n))
+        self.work[0, 0] = -1.0
         self._out = np.zeros(n)
         self._guard = SampleGuard(self.n)
-        self._own_backend(model, backend)
+        self._own_backend(model, backend, kernels.dob_update)
 
     def _warm(self) -> None:
         s, n = self.snapshot, self.n
-        kernels.dob_update(self._gj, self._alpha, s.qd, s.tau, s.nle, s.f, np.zeros(n), np.zeros(n))
+        kernels.dob_update(
+            self._gj, self.cutoff, np.zeros(n), self.work.copy(), s.qd, s.tau, s.nle, s.f, 1e-3,
+            np.zeros(n),
+        )  # fmt: skip
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.snapshot.reset_memory()  # held friction: a new run has no memory
@@ -63,23 +71,8 @@ class DobObserver(SnapshotUpdate):
     def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
         if not self._guard.usable(snap, dt):
             return self._guard.nan()
-        if dt != self._dt:  # recompute the discrete pole only when the period changes
-            np.multiply(self.cutoff, -dt, out=self._alpha)
-            np.expm1(self._alpha, out=self._alpha)
-            np.negative(self._alpha, out=self._alpha)
-            self._dt = dt
-        u, out = self._u, self._out
-        if self.backend == "numba":
-            kernels.dob_update(
-                self._gj, self._alpha, snap.qd, snap.tau, snap.nle, snap.f, self.w, out
-            )
-            return out
-        np.multiply(self._gj, snap.qd, out=out)  # g·Jn·qd
-        np.add(out, snap.tau, out=u)
-        np.subtract(u, snap.nle, out=u)
-        np.subtract(u, snap.f, out=u)
-        np.subtract(u, self.w, out=u)
-        np.multiply(u, self._alpha, out=u)
-        np.add(self.w, u, out=self.w)
-        np.subtract(out, self.w, out=out)
-        return out
+        self._kernel(
+            self._gj, self.cutoff, self.w, self.work, snap.qd, snap.tau, snap.nle, snap.f, dt,
+            self._out,
+        )  # fmt: skip
+        return self._out

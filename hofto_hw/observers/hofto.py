@@ -27,6 +27,10 @@ order with Taylor terms, exact on polynomial signals (see :class:`HoftoCore` and
 docs/observers.md for the measured comparison with forward Euler and substeps). With
 ``substeps`` > 1 the measured q is interpolated linearly between samples (first-order hold)
 and the model acceleration a is held. No allocation in a step.
+
+The arithmetic is :mod:`hofto_hw.observers.kernels`' (``hofto_step``), compiled (backend
+``numba``) or its source run as Python (``numpy``); the numpy formulation of the equations
+above is the reference in tests/hofto_hw/observers/reference.py.
 """
 
 from __future__ import annotations
@@ -38,16 +42,9 @@ import numpy as np
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import kernels
-from hofto_hw.observers.base import LinearHold, SampleGuard, SnapshotUpdate
+from hofto_hw.observers.base import SampleGuard, SnapshotUpdate
 
 Form = Literal["eq17", "recursive"]
-
-
-def sigma_powers(order: int, sigma: float) -> np.ndarray:
-    """Stage powers m_2..m_{n+3} = 1 + i·sigma (i = 1..n+2) of eq. (17), shape (n+2,)."""
-    if not -1.0 / (order + 2) < sigma < 0.0:
-        raise ValueError(f"sigma must be in (-1/(n+2), 0) = ({-1.0 / (order + 2):.4f}, 0)")
-    return 1.0 + sigma * np.arange(1, order + 3, dtype=float)
 
 
 class HoftoCore:
@@ -66,6 +63,10 @@ class HoftoCore:
       and the STA are discretised here, so Remark 7's equivalence holds sample by sample).
       It lags: on a unit double integrator with a ramp x3 of slope s its error settles at
       ~5·dt·s for n = 2, and it grows with time on a parabola.
+
+    ``backend`` (``auto``, ``numba``, ``numpy``: see :mod:`hofto_hw.observers.kernels`) is
+    the one :meth:`step` runs (``kernels.hofto_advance``, compiled at its first call); the
+    observer updates the same record through its own kernel call.
     """
 
     def __init__(
@@ -75,6 +76,7 @@ class HoftoCore:
         form: Form = "recursive",
         substeps: int = 1,
         discretisation: Literal["taylor", "euler"] = "taylor",
+        backend: kernels.Backend = "auto",
     ) -> None:
         gains = np.asarray(gains, dtype=float)
         powers = np.asarray(powers, dtype=float).reshape(-1)
@@ -99,10 +101,10 @@ class HoftoCore:
         self.discretisation = discretisation
         self.substeps = int(substeps)
         s, j = self.stages, self.joints
-        #: the state and parameters the compiled update reads and writes, as one record
-        #: (observers.bank passes it as one argument): z, -L, powers, the previous sample,
-        #: the step terms of the compiled update (T, [h, a_h2], scratch: ``work``), substeps
-        #: and flags (kernels.BANK_RECURSIVE | BANK_TAYLOR); the attributes are its fields
+        #: the state and parameters the kernels read and write, as one record (the observer
+        #: and observers.bank pass it as one argument): z, -L, powers, the previous sample,
+        #: the step terms (T, [h, a_h2], scratch: ``work``), substeps and flags
+        #: (kernels.BANK_RECURSIVE | BANK_TAYLOR); the attributes are its fields
         f8 = np.float64
         self.record = np.zeros(
             1,
@@ -117,6 +119,8 @@ class HoftoCore:
         self.z = rec["z"]
         self.powers = rec["powers"]
         self.powers[:] = powers
+        #: the previous sample y (joints,)
+        self.prev = rec["prev"]
         work = rec["work"]
         work[:s] = np.eye(s)
         work[s, 0] = -1.0  # h < 0: no step yet
@@ -124,154 +128,33 @@ class HoftoCore:
         rec["flags"] = (kernels.BANK_RECURSIVE if form == "recursive" else 0) | (
             kernels.BANK_TAYLOR if discretisation == "taylor" else 0
         )
-        self._inj = np.zeros((s, j))
-        self._tz = np.zeros((s, j))
-        self._pow_col = self.powers.reshape(s, 1).copy()
-        self._e = np.zeros(j)
-        self._abs = np.zeros(j)
-        self._d = np.zeros(j)
-        self._t = np.zeros(j)
-        self._prev = np.zeros(j)
-        self._hold = LinearHold(j, rec["prev"])
-        self._T = np.eye(s)
         self._neg_gains = rec["neg_gains"]
         np.negative(self.gains, out=self._neg_gains)
-        # row views made once: (z_i, z_{i+1} or None, inj_i, -L_i, p_i) per stage
-        self._stages = [
-            (
-                self.z[i],
-                self.z[i + 1] if i + 1 < s else None,
-                self._inj[i],
-                self._neg_gains[i],
-                float(self.powers[i]),
-            )
-            for i in range(s)
-        ]
-        self._sign_rows = [self._inj[i] for i in range(s) if self.powers[i] == 0.0]
-        self._z1, self._tz0, self._tz1 = self.z[1], self._tz[0], self._tz[1]
-        self._col = np.zeros((2, s))
-        self._h = -1.0
-        self._a_h2 = 0.0  # coefficient of a in z1's update (h²/2 with Taylor terms, else 0)
+        self._work = work
+        self._ints = int(rec["substeps"]), int(rec["flags"])
+        self.backend = kernels.resolve(backend)
+        self._step = kernels.compiled_or_python(kernels.hofto_advance, self.backend)
 
     def reset(self, y: np.ndarray, yd: np.ndarray | None = None) -> None:
         """z1 = y, z2 = yd (or 0), higher states 0."""
         self.z.fill(0.0)
         self.z[0] = y
-        self._hold.reset(y)
+        self.prev[:] = y
         if yd is not None:
             self.z[1] = yd
 
     def step(self, y: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
         """Advance ``dt`` [s]; returns z3 (a view), the x3 estimate."""
-        h = dt / self.substeps
-        if h != self._h:
-            self._set_step(h)
-        if self.substeps == 1:
-            self._substep(y, a, h)
-        else:
-            self._hold.begin(y, self.substeps)
-            for _ in range(self.substeps):
-                self._substep(self._hold.next(), a, h)
-        self._hold.end(y)
-        return self.z[2]
-
-    def _set_step(self, h: float) -> None:
-        """Transition matrix of the chain z_i' = z_{i+1}: T[i, i+j] = h^j/j! (Taylor) or
-        I + h·shift (Euler)."""
-        s = self.stages
-        T = np.eye(s)
-        terms = s if self.discretisation == "taylor" else 2
-        coef = 1.0
-        for j in range(1, terms):
-            coef *= h / j
-            T += coef * np.eye(s, k=j)
-        self._T = T
-        self._a_h2 = 0.5 * h * h if self.discretisation == "taylor" else 0.0
-        self._h = h
-
-    def _injection(self, y: np.ndarray) -> None:
-        """Output-injection terms of each stage into self._inj (shape (s, j))."""
-        inj = self._inj
-        if self.form == "eq17":
-            e = self._e
-            np.subtract(y, self.z[0], out=e)
-            np.abs(e, out=self._abs)
-            np.power(self._abs, self._pow_col, out=inj)  # |e1|^p_i per stage
-            np.copysign(inj, e, out=inj)  # sig^p_i(e1) ...
-            for row in self._sign_rows:  # ... but sig^0 = sign, with sig^0(0) = 0
-                np.sign(e, out=row)
-            np.multiply(inj, self.gains, out=inj)  # + L_i·sig^p_i(e1)
-            return
-        # recursive: stage i is driven by z_i minus the previous stage's output v_{i-1};
-        # v_i = z_{i+1} + inj_i, and v_{-1} = y.
-        d, t, prev = self._d, self._t, self._prev
-        np.copyto(prev, y)
-        for z_i, z_next, inj_i, ngain, p in self._stages:
-            np.subtract(z_i, prev, out=d)
-            if p == 0.0:
-                np.sign(d, out=t)  # sig^0 = sign, with sig^0(0) = 0
-                np.multiply(t, ngain, out=inj_i)
-            elif p == 1.0:
-                np.multiply(d, ngain, out=inj_i)
-            else:
-                np.abs(d, out=t)
-                np.power(t, p, out=t)
-                np.copysign(t, d, out=t)  # sig^p(d)
-                np.multiply(t, ngain, out=inj_i)  # - L_i·sig^p_i(z_i - v_{i-1})
-            if z_next is not None:
-                np.add(z_next, inj_i, out=prev)
-
-    def _substep(self, y: np.ndarray, a: np.ndarray, h: float) -> None:
-        z, inj, tz, tmp = self.z, self._inj, self._tz, self._t
-        if self.discretisation == "euler":
-            # classic forward Euler: inject with the state of the previous instant
-            self._injection(y)
-            np.dot(self._T, z, out=tz)
-            np.multiply(inj, h, out=inj)
-            np.add(tz, inj, out=z)
-            np.multiply(a, h, out=tmp)
-            np.add(self._z1, tmp, out=self._z1)
-            return
-        # taylor: predict the chain to this instant (model acceleration included), then
-        # correct it with the sample of this instant, so estimate and sample share a time.
-        np.dot(self._T, z, out=tz)
-        np.multiply(a, h, out=tmp)
-        np.add(self._tz1, tmp, out=self._tz1)
-        np.multiply(a, self._a_h2, out=tmp)
-        np.add(self._tz0, tmp, out=self._tz0)
-        np.copyto(z, tz)
-        self._injection(y)
-        np.multiply(inj, h, out=inj)
-        np.add(z, inj, out=z)
-
-    def step_compiled(
-        self, y: np.ndarray, a: np.ndarray, dt: float, M: np.ndarray, out: np.ndarray
-    ) -> None:
-        """:meth:`step` in one compiled kernel, then out = M·z3 [N·m] (numba required)."""
-        h = dt / self.substeps
-        if h != self._h:
-            self._set_step(h)
-        kernels.hofto_update(
-            self.z,
-            self._neg_gains,
-            self.powers,
-            self._T,
-            y,
-            self._hold.prev,
-            a,
-            h,
-            self._a_h2,
-            self.form == "recursive",
-            self.discretisation == "taylor",
-            self.substeps,
-            self._col,
-            M,
-            out,
+        sub, flags = self._ints
+        self._step(
+            self.z, self._neg_gains, self.powers, self.prev, self._work, sub, flags, y, a, dt
         )
+        return self.z[2]
 
 
 class HoftoObserver(SnapshotUpdate):
-    """HOFTO on a robot: tau_ext_hat = M(q)·z3 (eq. (17))."""
+    """HOFTO on a robot: tau_ext_hat = M(q)·z3 (eq. (17)); one ``kernels.hofto_update`` call
+    per update (``backend``: see :mod:`hofto_hw.observers.base`)."""
 
     name = "hofto"
     needs = Needs.ACCEL | Needs.MASS
@@ -284,25 +167,25 @@ class HoftoObserver(SnapshotUpdate):
         form: Form = "recursive",
         substeps: int = 1,
         discretisation: Literal["taylor", "euler"] = "taylor",
-        backend: kernels.Backend = "numpy",
+        backend: kernels.Backend = "auto",
     ) -> None:
         gains = np.asarray(gains, dtype=float)
         if gains.ndim != 2 or gains.shape[1] != model.n:
             raise ValueError(f"gains must have shape (n+2, {model.n}), got {gains.shape}")
         self.model = model
         self.n = model.n
-        self.core = HoftoCore(gains, powers, form, substeps, discretisation)
+        self.core = HoftoCore(gains, powers, form, substeps, discretisation, backend)
         self.order = self.core.order
         self._out = np.zeros(self.n)
         self._guard = SampleGuard(self.n)
-        self._own_backend(model, backend)
+        self._own_backend(model, backend, kernels.hofto_update)
 
     def _warm(self) -> None:
-        """Compile the kernel on scratch copies (the state is untouched)."""
-        core, snap = self.core, self.snapshot
-        scratch = HoftoCore(core.gains, core.powers, core.form, core.substeps, core.discretisation)
-        y = np.zeros(self.n)
-        scratch.step_compiled(y, snap.accel, 1e-3, snap.M, np.zeros(self.n))
+        """Compile the kernel on a scratch copy of the record (the state is untouched)."""
+        snap = self.snapshot
+        kernels.hofto_update(
+            self.core.record.copy(), np.zeros(self.n), snap.accel, 1e-3, snap.M, np.zeros(self.n)
+        )
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.snapshot.reset_memory()  # held friction: a new run has no memory
@@ -311,8 +194,5 @@ class HoftoObserver(SnapshotUpdate):
     def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
         if not self._guard.usable(snap, dt):
             return self._guard.nan()
-        if self.backend == "numba":
-            self.core.step_compiled(snap.q, snap.accel, dt, snap.M, self._out)
-            return self._out
-        z3 = self.core.step(snap.q, snap.accel, dt)
-        return np.dot(snap.M, z3, out=self._out)
+        self._kernel(self.core.record, snap.q, snap.accel, dt, snap.M, self._out)
+        return self._out

@@ -1,16 +1,24 @@
-"""Compiled per-joint kernels of the observers (numba), beside the numpy reference path.
+"""The observers' arithmetic: one per-joint kernel per observer, compiled by numba.
 
 On six joints an observer update is a few hundred floating-point operations; done as numpy
 calls on six-element arrays, the time goes to the ~0.5 µs each call costs, not to arithmetic.
-These kernels do one observer update (every stage, every joint, substeps, M·z3) in one call.
-The numpy code in each observer module stays the reference; tests/hofto_hw/observers/
-test_kernels.py checks that both agree to 1e-12 over thousands of random steps, Remark 7's
-equivalences and non-finite samples included.
+Each kernel does one observer update (every stage, every joint, substeps, M·z3) in one call,
+and these kernels are the only implementation of the observers' formulas in the package: an
+observer calls its kernel compiled (backend ``numba``) or the same source run by the
+interpreter (backend ``numpy``, :func:`compiled_or_python`). The numpy formulation of the
+paper's equations is kept in tests/hofto_hw/observers/reference.py, where
+tests/hofto_hw/observers/test_kernels.py checks both backends against it to 1e-12 over
+thousands of random steps, Remark 7's equivalences and non-finite samples included.
 
-numba is optional (extra ``fast``): without it, or if compiling fails, :func:`available`
-is False, :func:`unavailable_reason` says why and observers built with ``backend="auto"``
-run the numpy path. Kernels are compiled with ``cache=True`` (the machine code is kept in
-``__pycache__``); observers compile and warm theirs when built, so no compilation happens
+numba is a dependency of the package. Whether a missing compiled path may run at all is the
+loop's decision (``loop.acceleration``, :mod:`hofto_hw.runtime.acceleration`, which reads
+:func:`available` and :func:`unavailable_reason`): :func:`available` is False when
+``HOFTO_HW_NO_NUMBA=1`` (benchmarks and tests of the interpreted path) or when a kernel failed
+to compile (:func:`warm`); ``backend="auto"`` then runs the kernels' source as Python.
+numba's own switch, ``NUMBA_DISABLE_JIT=1``, runs every kernel as Python too (for debugging).
+
+Kernels are compiled with ``cache=True`` (the machine code is kept in ``__pycache__`` or
+``NUMBA_CACHE_DIR``); their users compile and warm them when built, so no compilation happens
 inside a loop. Kernels write only into the arrays passed in; none allocates.
 """
 
@@ -18,79 +26,58 @@ from __future__ import annotations
 
 import math
 import os
+import types
 from collections.abc import Callable
 from typing import Any, Literal
 
+import numba as _numba
 import numpy as np
 
 Backend = Literal["numpy", "numba", "auto"]
 
-try:  # numba is an optional dependency
-    import numba as _numba
-except Exception as exc:  # ImportError, or a numba that does not match the installed numpy
-    _numba = None
-    _IMPORT_ERROR = f"numba is not importable ({type(exc).__name__}: {exc})"
-else:
-    _IMPORT_ERROR = ""
-
-
-def _literal_unroll(group: Any) -> Any:  # without numba: the tuple itself
-    return group
-
-
-if _numba is not None:
-    _literal_unroll = _numba.literal_unroll
-
+_literal_unroll = _numba.literal_unroll  # as Python: the tuple itself
 _DISABLED = os.environ.get("HOFTO_HW_NO_NUMBA", "") not in ("", "0")
 _FAILED: str = ""  # first compilation failure, if any
 
 
-def _jit(fn: Callable[..., Any]) -> Callable[..., Any]:
-    if _numba is None:
-        return fn  # never called through the compiled path; keeps the module importable
+def _jit(fn: Callable[..., Any], **options: Any) -> Callable[..., Any]:
     try:
-        return _numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+        return _numba.njit(cache=True, nogil=True, error_model="numpy", **options)(fn)
     except RuntimeError:
         # no writable cache folder (a service user under ProtectSystem=strict, a read-only
         # install): compile at start-up every time instead (NUMBA_CACHE_DIR points elsewhere)
-        return _numba.njit(cache=False, nogil=True, error_model="numpy")(fn)
+        return _numba.njit(cache=False, nogil=True, error_model="numpy", **options)(fn)
 
 
 def _jit_inline(fn: Callable[..., Any]) -> Callable[..., Any]:
     """:func:`_jit` for small helpers inlined into their callers at numba's IR level: a call
     between compiled functions passes each array as a dozen values and counts references on
     it, which costs more than these helpers' arithmetic."""
-    if _numba is None:
-        return fn
-    try:
-        return _numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(fn)
-    except RuntimeError:
-        return _numba.njit(cache=False, nogil=True, error_model="numpy", inline="always")(fn)
+    return _jit(fn, inline="always")
 
 
-#: compile a function as these kernels are (cache=True, nogil, numpy's error model; the
-#: plain Python function without numba): for kernels elsewhere (drivers/cia402/kernels.py)
+#: compile a function as these kernels are (cache=True, nogil, numpy's error model): for
+#: kernels elsewhere (drivers/cia402/kernels.py, safety/, control/, model/, runtime/)
 jit = _jit
 
 
 def available() -> bool:
-    """True when the compiled kernels can run (numba importable, not disabled, compiled)."""
-    return _numba is not None and not _DISABLED and not _FAILED
+    """True when the compiled kernels can run (not disabled, none failed to compile)."""
+    return not _DISABLED and not _FAILED
 
 
 def unavailable_reason() -> str:
     """Why :func:`available` is False ('' when it is True)."""
     if _DISABLED:
         return "compiled kernels disabled by HOFTO_HW_NO_NUMBA"
-    if _numba is None:
-        return _IMPORT_ERROR
     return _FAILED
 
 
 def resolve(backend: Backend) -> Literal["numpy", "numba"]:
-    """The backend an observer runs: ``auto`` is numba when available, else numpy.
+    """The backend a kernel user runs: ``auto`` is numba when :func:`available`, else numpy
+    (the kernels' source as Python).
 
-    ``numba`` when numba is not available raises RuntimeError naming the reason.
+    ``numba`` when the compiled path is not available raises RuntimeError naming the reason.
     """
     if backend == "numpy":
         return "numpy"
@@ -119,9 +106,13 @@ def warm(call: Callable[[], object]) -> bool:
 
 
 def compiled_or_python(fn: Callable[..., Any], backend: str) -> Callable[..., Any]:
-    """The compiled kernel ``fn`` for the ``numba`` backend, else the same function as Python
-    (numba's ``py_func``): one source for both."""
-    return fn if backend == "numba" else getattr(fn, "py_func", fn)
+    """The compiled kernel ``fn`` for the ``numba`` backend, else the same source as Python,
+    the kernels it calls included (numba's ``py_func``; nothing is compiled): one source
+    for both."""
+    if backend == "numba":
+        return fn
+    py = getattr(fn, "py_func", fn)
+    return _python_namespace(py.__globals__).get(py.__name__, py) if _kernel(fn) else py
 
 
 def ready(backend: Backend, warm_call: Callable[[], object]) -> Literal["numpy", "numba"]:
@@ -131,6 +122,39 @@ def ready(backend: Backend, warm_call: Callable[[], object]) -> Literal["numpy",
     if chosen == "numba" and not warm(warm_call):
         return "numpy"
     return chosen
+
+
+def _kernel(obj: object) -> bool:
+    """``obj`` is a numba-compiled function (it carries its Python source as ``py_func``)."""
+    return isinstance(getattr(obj, "py_func", None), types.FunctionType)
+
+
+#: id(a kernel module's globals) -> that namespace with every kernel in it as Python
+_PYTHON: dict[int, dict[str, Any]] = {}
+
+
+def _python_namespace(module_globals: dict[str, Any]) -> dict[str, Any]:
+    """A copy of a kernel module's namespace in which every compiled function, its own and
+    those it imported, is its Python source bound to such a namespace: a kernel's
+    ``py_func`` alone would still call the compiled kernels it uses."""
+    ns = _PYTHON.get(id(module_globals))
+    if ns is not None:
+        return ns
+    ns = _PYTHON[id(module_globals)] = dict(module_globals)
+    imported = []
+    for name, obj in module_globals.items():
+        if not _kernel(obj):
+            continue
+        py = obj.py_func
+        if py.__globals__ is module_globals:
+            ns[name] = types.FunctionType(
+                py.__code__, ns, py.__name__, py.__defaults__, py.__closure__
+            )
+        else:
+            imported.append((name, py))
+    for name, py in imported:  # after the module's own: an import cycle finds them there
+        ns[name] = _python_namespace(py.__globals__).get(py.__name__, py)
+    return ns
 
 
 # ----------------------------------------------------------------- scalar helpers
@@ -274,25 +298,6 @@ def hofto_step(
 
 
 @_jit_inline
-def _inject(
-    z: np.ndarray,
-    jj: int,
-    y: float,
-    neg_gains: np.ndarray,
-    powers: np.ndarray,
-    recursive: bool,
-    inj: np.ndarray,
-) -> None:
-    """Output-injection terms of joint jj into inj (s,), powers in progression included (the
-    arithmetic of every path of :func:`hofto_step`, one joint and instant at a time)."""
-    ratio = _progression(powers) if not recursive else np.nan
-    if ratio == ratio:
-        _injection_progression(z, jj, y, neg_gains, powers, ratio, inj, 0.0, False)
-    else:
-        _injection(z, jj, y, neg_gains, powers, recursive, inj, 0.0, False)
-
-
-@_jit_inline
 def _injection(
     z: np.ndarray,
     jj: int,
@@ -429,35 +434,56 @@ def _taylor_progression(
 
 
 @_jit_inline
-def hofto_update(
+def hofto_advance(
     z: np.ndarray,
     neg_gains: np.ndarray,
     powers: np.ndarray,
-    T: np.ndarray,
-    y: np.ndarray,
-    y_prev: np.ndarray,
-    a: np.ndarray,
-    h: float,
-    a_h2: float,
-    recursive: bool,
-    taylor: bool,
+    prev: np.ndarray,
+    work: np.ndarray,
     substeps: int,
-    col: np.ndarray,
-    M: np.ndarray,
-    out: np.ndarray,
+    flags: int,
+    y: np.ndarray,
+    a: np.ndarray,
+    dt: float,
 ) -> None:
-    """:func:`hofto_step`, then y_prev = y and out = M·z3 [N·m]."""
-    hofto_step(z, neg_gains, powers, T, y, y_prev, a, h, a_h2, recursive, taylor, substeps, col)
+    """One sample period dt [s] of a HOFTO (the fields of ``HoftoCore.record``): the step
+    terms of h = dt/substeps (T, [h, a_h2] in ``work``) when h changed, :func:`hofto_step`
+    with the sample y and the model acceleration a (joints,), then prev = y.
+
+    Arrays, not the record, so that one compilation serves every order and joint count."""
+    s = z.shape[0]
+    T, hs = work[:s], work[s]
+    taylor = (flags & BANK_TAYLOR) != 0
+    h = dt / substeps
+    if h != hs[0]:
+        _hofto_transition(T, hs, h, taylor)
+    recursive = (flags & BANK_RECURSIVE) != 0
+    hofto_step(
+        z, neg_gains, powers, T, y, prev, a, h, hs[1], recursive, taylor, substeps, work[s + 1 :]
+    )
     for jj in range(y.shape[0]):
-        y_prev[jj] = y[jj]
+        prev[jj] = y[jj]
+
+
+@_jit
+def hofto_update(
+    record: np.ndarray, y: np.ndarray, a: np.ndarray, dt: float, M: np.ndarray, out: np.ndarray
+) -> None:
+    """:func:`hofto_advance` of a ``HoftoCore.record`` (shape (1,)), then out = M·z3 [N·m]:
+    the HOFTO observer's update."""
+    c = record[0]
+    z = c["z"]
+    hofto_advance(
+        z, c["neg_gains"], c["powers"], c["prev"], c["work"], c["substeps"], c["flags"], y, a, dt
+    )
     _mat_vec(M, z[2], out)
 
 
 # ----------------------------------------------------------------- ESO and STA (Euler)
 
 
-@_jit
-def eso_update(
+@_jit_inline
+def eso_step(
     z: np.ndarray,
     k: np.ndarray,
     y: np.ndarray,
@@ -465,11 +491,9 @@ def eso_update(
     a: np.ndarray,
     h: float,
     substeps: int,
-    M: np.ndarray,
-    out: np.ndarray,
 ) -> None:
-    """ESO eq. (5), explicit Euler: z (3, j) states, k (3, j) gains k1..k3, y_prev updated;
-    out = M·z3."""
+    """ESO eq. (5), explicit Euler with substeps of h [s] (q held first-order, a held):
+    z (3, j) states, k (3, j) gains k1..k3; y_prev = y after."""
     for jj in range(y.shape[0]):
         step = (y[jj] - y_prev[jj]) / substeps
         yk = y_prev[jj]
@@ -485,6 +509,22 @@ def eso_update(
             z3 = z3 + d3
         z[0, jj], z[1, jj], z[2, jj] = z1, z2, z3
         y_prev[jj] = y[jj]
+
+
+@_jit
+def eso_update(
+    z: np.ndarray,
+    k: np.ndarray,
+    y: np.ndarray,
+    y_prev: np.ndarray,
+    a: np.ndarray,
+    h: float,
+    substeps: int,
+    M: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """:func:`eso_step`, then out = M·z3 [N·m]: the ESO observer's update."""
+    eso_step(z, k, y, y_prev, a, h, substeps)
     _mat_vec(M, z[2], out)
 
 
@@ -554,15 +594,24 @@ def momentum_update(
 @_jit
 def dob_update(
     gj: np.ndarray,
-    alpha: np.ndarray,
+    cutoff: np.ndarray,
+    w: np.ndarray,
+    work: np.ndarray,
     qd: np.ndarray,
     tau: np.ndarray,
     nle: np.ndarray,
     f: np.ndarray,
-    w: np.ndarray,
+    dt: float,
     out: np.ndarray,
 ) -> None:
-    """DOB: u = g·Jn·qd + tau - nle - f; w += alpha·(u - w); out = g·Jn·qd - w."""
+    """DOB over dt [s]: the discrete pole alpha = 1 - exp(-g·dt) (work (2, n): [dt it was
+    computed for (< 0: none yet)], alpha; recomputed only when dt changes), then
+    u = g·Jn·qd + tau - nle - f; w += alpha·(u - w); out = g·Jn·qd - w."""
+    alpha = work[1]
+    if dt != work[0, 0]:
+        for i in range(alpha.shape[0]):
+            alpha[i] = -math.expm1(cutoff[i] * -dt)
+        work[0, 0] = dt
     for i in range(qd.shape[0]):
         gq = gj[i] * qd[i]
         u = gq + tau[i] - nle[i] - f[i]
@@ -591,7 +640,8 @@ BANK_TAYLOR = 2
 
 @_jit
 def _hofto_transition(T: np.ndarray, hs: np.ndarray, h: float, taylor: bool) -> None:
-    """T and [h, a_h2] for step h, as HoftoCore._set_step computes them (bit for bit)."""
+    """T and [h, a_h2] for step h: T[i, i+j] = h^j/j! for j < s (Taylor) or I + h·shift
+    (Euler): the transition matrix of the chain z_i' = z_{i+1}; a_h2 = h²/2 (Taylor) or 0."""
     s = T.shape[0]
     for i in range(s):
         for m in range(s):
@@ -623,18 +673,12 @@ def _bank_hofto(
         for entry in _literal_unroll(group):  # HOFTOs of different orders: records' types
             row, rec = entry
             c = rec[0]
-            z, work, sub, flags = c["z"], c["work"], c["substeps"], c["flags"]
-            s = z.shape[0]
-            T, hs = work[:s], work[s]
-            taylor = (flags & BANK_TAYLOR) != 0
-            h = dt / sub
-            if h != hs[0]:
-                _hofto_transition(T, hs, h, taylor)
-            recursive = (flags & BANK_RECURSIVE) != 0
-            hofto_update(
-                z, c["neg_gains"], c["powers"], T, y, c["prev"], a, h, hs[1], recursive, taylor,
-                sub, work[s + 1 :], M, out[row],
+            z = c["z"]
+            hofto_advance(
+                z, c["neg_gains"], c["powers"], c["prev"], c["work"], c["substeps"], c["flags"],
+                y, a, dt,
             )  # fmt: skip
+            _mat_vec(M, z[2], out[row])
 
 
 @_jit
@@ -677,12 +721,7 @@ def _bank_dob(
     if group is not None:
         _, _, f, _, _, nle = terms
         for row, gj, cutoff, w, work in group:
-            alpha = work[1]
-            if dt != work[0, 0]:  # the discrete pole, only when the period changes
-                for i in range(alpha.shape[0]):
-                    alpha[i] = -math.expm1(cutoff[i] * -dt)
-                work[0, 0] = dt
-            dob_update(gj, alpha, qd, tau, nle, f, w, out[row])
+            dob_update(gj, cutoff, w, work, qd, tau, nle, f, dt, out[row])
 
 
 @_jit

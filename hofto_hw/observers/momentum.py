@@ -7,7 +7,8 @@ beta(q, qd) = g(q) - C(q,qd)ᵀ·qd. The residual
 
 obeys r' = K_O·(tau_ext - r): a first-order low-pass of the external torque with bandwidth
 K_O [1/s] per joint, with no acceleration needed. The integral is forward Euler with the
-residual of the previous tick.
+residual of the previous tick. The arithmetic is :mod:`hofto_hw.observers.kernels`'
+(``momentum_update``; the numpy reference is in tests/hofto_hw/observers/reference.py).
 """
 
 from __future__ import annotations
@@ -23,11 +24,14 @@ _FIELDS = ("gain", "p0", "integral", "r")
 
 
 class MomentumObserver(SnapshotUpdate):
+    """The momentum residual r [N·m]; one ``kernels.momentum_update`` call per update
+    (``backend``: see :mod:`hofto_hw.observers.base`)."""
+
     name = "momentum"
     needs = Needs.MASS | Needs.GRAVITY | Needs.CORIOLIS_T | Needs.FRICTION
 
     def __init__(
-        self, model: RobotModel, gain: np.ndarray, backend: kernels.Backend = "numpy"
+        self, model: RobotModel, gain: np.ndarray, backend: kernels.Backend = "auto"
     ) -> None:
         n = model.n
         self.model = model
@@ -37,11 +41,9 @@ class MomentumObserver(SnapshotUpdate):
         self.record = np.zeros(1, np.dtype([(f, np.float64, (n,)) for f in _FIELDS]))
         self.gain, self.p0, self.integral, self.r = (self.record[0][f] for f in _FIELDS)
         self.gain[:] = per_joint(gain, n, "momentum.gain")
-        self._p = np.zeros(n)
-        self._tmp = np.zeros(n)
         self._guard = SampleGuard(self.n)
         self._reset_data = model.create_data()  # reset is off the tick
-        self._own_backend(model, backend)
+        self._own_backend(model, backend, kernels.momentum_update)
 
     def _warm(self) -> None:
         s, n = self.snapshot, self.n
@@ -68,30 +70,8 @@ class MomentumObserver(SnapshotUpdate):
     def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
         if not self._guard.usable(snap, dt):
             return self._guard.nan()
-        if self.backend == "numba":
-            kernels.momentum_update(
-                snap.M,
-                snap.qd,
-                snap.tau,
-                snap.f,
-                snap.g,
-                snap.ct_qd,
-                self.gain,
-                self.p0,
-                self.integral,
-                self.r,
-                dt,
-            )
-            return self.r
-        tmp = self._tmp
-        np.subtract(snap.tau, snap.f, out=tmp)
-        np.subtract(tmp, snap.g, out=tmp)
-        np.add(tmp, snap.ct_qd, out=tmp)  # tau - f - beta
-        np.add(tmp, self.r, out=tmp)
-        np.multiply(tmp, dt, out=tmp)
-        np.add(self.integral, tmp, out=self.integral)
-        np.dot(snap.M, snap.qd, out=self._p)
-        np.subtract(self._p, self.p0, out=tmp)
-        np.subtract(tmp, self.integral, out=tmp)
-        np.multiply(self.gain, tmp, out=self.r)
+        self._kernel(
+            snap.M, snap.qd, snap.tau, snap.f, snap.g, snap.ct_qd, self.gain, self.p0,
+            self.integral, self.r, dt,
+        )  # fmt: skip
         return self.r

@@ -114,13 +114,12 @@ OBSERVERS: dict[str, ObserverEntry] = {
 OBSERVER_TYPES = tuple(OBSERVERS)
 
 
-def make_observer(
-    cfg: ObserverConfig, model: RobotModel, *, backend: Backend = "numpy"
-) -> Observer:
+def make_observer(cfg: ObserverConfig, model: RobotModel, *, backend: Backend = "auto") -> Observer:
     """The observer a validated config section describes, on ``model``.
 
-    ``backend``: ``numpy`` (reference), ``numba`` (compiled kernels, compiled and warmed
-    here) or ``auto`` (numba when available; see :mod:`hofto_hw.observers.kernels`)."""
+    ``backend``: ``auto`` (compiled when available, as the loop runs), ``numba`` (compiled
+    and warmed here, or RuntimeError) or ``numpy`` (the same kernels' source as Python; see
+    :mod:`hofto_hw.observers.kernels`)."""
     entry = OBSERVERS.get(cfg.type)
     if entry is None or not isinstance(cfg, entry.config):
         raise TypeError(f"unknown observer config {type(cfg).__name__}")

@@ -11,7 +11,9 @@ integrates to the disturbance; it can only track disturbances with a bounded fir
 derivative (the paper's motivation for higher orders). Written on its own, not through
 HoftoCore, so that the equivalence test compares two implementations.
 Discretisation: explicit Euler at the sampling instants; with ``substeps`` > 1, q is
-interpolated linearly between samples and a is held (as HOFTO's).
+interpolated linearly between samples and a is held (as HOFTO's). The arithmetic is
+:mod:`hofto_hw.observers.kernels`' (``sta_update``; the numpy reference is in
+tests/hofto_hw/observers/reference.py).
 """
 
 from __future__ import annotations
@@ -21,10 +23,13 @@ import numpy as np
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import kernels
-from hofto_hw.observers.base import LinearHold, SampleGuard, SnapshotUpdate, per_joint
+from hofto_hw.observers.base import SampleGuard, SnapshotUpdate, per_joint
 
 
 class StaObserver(SnapshotUpdate):
+    """STA on a robot: tau_ext_hat = M(q)·z3; one ``kernels.sta_update`` call per update
+    (``backend``: see :mod:`hofto_hw.observers.base`)."""
+
     name = "sta"
     needs = Needs.ACCEL | Needs.MASS
 
@@ -35,7 +40,7 @@ class StaObserver(SnapshotUpdate):
         l2: np.ndarray,
         l3: np.ndarray,
         substeps: int = 1,
-        backend: kernels.Backend = "numpy",
+        backend: kernels.Backend = "auto",
     ) -> None:
         n = model.n
         self.model = model
@@ -47,73 +52,30 @@ class StaObserver(SnapshotUpdate):
         self.substeps = int(substeps)
         self.z = np.zeros((3, n))
         self.z1, self.z2, self.z3 = self.z
-        self._e, self._sqrt, self._sgn = np.zeros(n), np.zeros(n), np.zeros(n)
-        self._tmp = np.zeros(n)
+        self.prev = np.zeros(n)  # the previous sample of q
         self._out = np.zeros(n)
-        self._hold = LinearHold(n)
         self._guard = SampleGuard(self.n)
-        self._own_backend(model, backend)
+        self._own_backend(model, backend, kernels.sta_update)
 
     def _warm(self) -> None:
         snap, n = self.snapshot, self.n
         kernels.sta_update(
-            self.z.copy(),
-            self.gains,
+            self.z.copy(), self.gains, np.zeros(n), np.zeros(n), snap.accel, 1e-3, 1, snap.M,
             np.zeros(n),
-            np.zeros(n),
-            snap.accel,
-            1e-3,
-            1,
-            snap.M,
-            np.zeros(n),
-        )
+        )  # fmt: skip
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.snapshot.reset_memory()  # held friction: a new run has no memory
         self.z1[:] = q
         self.z2[:] = qd
         self.z3.fill(0.0)
-        self._hold.reset(q)
+        self.prev[:] = q
 
     def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
         if not self._guard.usable(snap, dt):
             return self._guard.nan()
         h = dt / self.substeps
-        a = snap.accel
-        if self.backend == "numba":
-            kernels.sta_update(
-                self.z,
-                self.gains,
-                snap.q,
-                self._hold.prev,
-                a,
-                h,
-                self.substeps,
-                snap.M,
-                self._out,
-            )
-            return self._out
-        e, root, sgn, tmp = self._e, self._sqrt, self._sgn, self._tmp
-        z1, z2, z3, l1, l2, l3 = self.z1, self.z2, self.z3, self.l1, self.l2, self.l3
-        self._hold.begin(snap.q, self.substeps)
-        for _ in range(self.substeps):
-            np.subtract(self._hold.next(), z1, out=e)
-            np.sign(e, out=sgn)
-            np.abs(e, out=root)
-            np.sqrt(root, out=root)
-            np.copysign(root, e, out=root)  # |e|^(1/2)·sign(e)
-            # z1, z2, z3 are advanced from the same (old) state: explicit Euler.
-            np.multiply(l1, root, out=tmp)
-            np.add(tmp, z2, out=tmp)
-            np.multiply(l2, root, out=root)
-            np.add(root, z3, out=root)
-            np.add(root, a, out=root)
-            np.multiply(l3, sgn, out=sgn)
-            np.multiply(tmp, h, out=tmp)
-            np.add(z1, tmp, out=z1)
-            np.multiply(root, h, out=root)
-            np.add(z2, root, out=z2)
-            np.multiply(sgn, h, out=sgn)
-            np.add(z3, sgn, out=z3)
-        self._hold.end(snap.q)
-        return np.dot(snap.M, z3, out=self._out)
+        self._kernel(
+            self.z, self.gains, snap.q, self.prev, snap.accel, h, self.substeps, snap.M, self._out
+        )
+        return self._out

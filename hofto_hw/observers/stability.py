@@ -43,6 +43,7 @@ from hofto_hw.config.models import (
 )
 from hofto_hw.errors import ConfigError
 from hofto_hw.model.robot import RobotModel
+from hofto_hw.observers.eso import error_matrices
 from hofto_hw.observers.hofto import HoftoCore
 
 GROWTH_LIMIT = 1.1  # largest accepted error growth per second of a linear observer
@@ -91,7 +92,7 @@ def _check_momentum(where: str, cfg: MomentumConfig, model: RobotModel, rate: fl
 def eso_growth(k1: float, k2: float, k3: float, dt: float, substeps: int) -> tuple[float, float]:
     """(error growth per tick, largest stable bandwidth scale s or 0 if none) of the Euler ESO."""
     h = dt / substeps
-    A = np.array([[-k1, 1.0, 0.0], [-k2, 0.0, 1.0], [-k3, 0.0, 0.0]])
+    A, _ = error_matrices(k1, k2, k3)
     lam = np.linalg.eigvals(A)
     rho = float(np.max(np.abs(1.0 + h * lam))) ** substeps
     if np.any(lam.real >= 0.0):

@@ -109,7 +109,7 @@ def recording_rate(rec: Recording) -> float:
 
 
 def observer_for(
-    name: str, cfg: ObserverConfig, setup: Setup, rec: Recording, backend: Backend = "numpy"
+    name: str, cfg: ObserverConfig, setup: Setup, rec: Recording, backend: Backend = "auto"
 ) -> Observer:
     """Observer ``name`` built from ``cfg`` on ``backend``, refused (ConfigError) if its gains
     are unstable at the recording's rate."""
@@ -128,7 +128,7 @@ def run_replay(
     thresholds: ThresholdsFile | None,
     merge_gap: float = 0.5,
     progress: Callable[[str], Progress | None] | None = None,
-    backend: Backend = "numpy",
+    backend: Backend = "auto",
 ) -> Report:
     """Replay ``observer_name`` (on ``backend``) over ``rec``; with thresholds also detect
     episodes."""

@@ -19,10 +19,8 @@ def jit_disabled() -> bool:
     """True when numba's own switch (NUMBA_DISABLE_JIT=1) runs the compiled path's source as
     Python: the same kernels, the native dynamics through ctypes; for tests and debugging,
     ~30-50x slower than compiled."""
-    try:
-        from numba import config
-    except Exception:  # no numba: hofto_hw.observers.kernels says why
-        return False
+    from numba import config
+
     return bool(config.DISABLE_JIT)
 
 
@@ -33,7 +31,7 @@ def missing() -> str:
     from hofto_hw.observers import kernels
 
     if not kernels.available():
-        return kernels.unavailable_reason() or "numba is not importable"
+        return kernels.unavailable_reason()
     if not native.ready():
         return native.unavailable_reason()
     return ""

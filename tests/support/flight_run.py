@@ -52,15 +52,17 @@ def recorded_run(folder: Path, *, event_delay: int = 0, duration: float = 1.2) -
             },
         ),
     )
+    observers = [make_observer(cfg.observers[name], model) for name in OBSERVERS]
+    # the observers' implementation, as `hofto-hw run` records it: the replay runs the same
+    metadata = {**run_metadata(CONFIG, cfg, "momentum"), "observer_backend": observers[0].backend}
     spec = LogSpec(
         folder / "run.mcap",
         list(cfg.robot.joints),
         OBSERVERS,
         attachments=run_attachments(CONFIG, cfg, thresholds_path=th_path),
-        metadata=run_metadata(CONFIG, cfg, "momentum"),
+        metadata=metadata,
         event_kinds={1: "collision"},
     )
-    observers = [make_observer(cfg.observers[name], model) for name in OBSERVERS]
     monitor = CollisionMonitor(MONITOR)
     rec = FlightRecorder(spec).start()
     tick, ev = new_record(rec.tick_dtype), new_record(EVENT_DTYPE)

@@ -6,21 +6,20 @@ from hofto_hw.commands import backend
 from hofto_hw.observers import kernels
 
 
-def test_numpy_fallback_is_said_once_on_stderr(monkeypatch, capsys):
+def test_the_python_fallback_is_said_once_on_stderr(monkeypatch, capsys):
     monkeypatch.setattr(kernels, "_DISABLED", True)
     monkeypatch.setattr(backend, "_said", False)
     assert backend.observer_backend() == "auto"
     assert backend.observer_backend() == "auto"
     err = capsys.readouterr().err
     assert err.count("\n") == 1
-    assert "numpy observers" in err and "HOFTO_HW_NO_NUMBA" in err
+    assert "kernels as Python" in err and "HOFTO_HW_NO_NUMBA" in err
 
 
 def test_nothing_is_said_when_the_compiled_kernels_run(monkeypatch, capsys):
     monkeypatch.setattr(backend, "_said", False)
     if not kernels.available():
         monkeypatch.setattr(kernels, "_DISABLED", False)
-        monkeypatch.setattr(kernels, "_numba", object())
         monkeypatch.setattr(kernels, "_FAILED", "")
     backend.observer_backend()
     assert capsys.readouterr().err == ""

@@ -12,10 +12,12 @@ from hofto_hw.observers.bank import _TERMS, ObserverBank
 from hofto_hw.observers.direct import DirectObserver
 from hofto_hw.observers.dob import DobObserver
 from hofto_hw.observers.eso import EsoObserver, bandwidth_gains
-from hofto_hw.observers.hofto import HoftoObserver, sigma_powers
+from hofto_hw.observers.hofto import HoftoObserver
 from hofto_hw.observers.momentum import MomentumObserver
 from hofto_hw.observers.registry import levant_gains
 from hofto_hw.observers.sta import StaObserver
+
+from .reference import sigma_powers
 
 needs_numba = pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
 

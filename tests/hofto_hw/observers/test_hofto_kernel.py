@@ -1,7 +1,7 @@
 """The HOFTO kernel's own arithmetic.
 
 Output injection: sig^p(x) = |x|^p·sign(x) on the compiled path against numpy's
-np.power (the reference path's arithmetic) on the values where a formulation other than
+np.power (the numpy reference's arithmetic) on the values where a formulation other than
 libm's pow could go wrong: zeros of both signs, subnormals, the extremes of the float range,
 infinities and NaN, for every kind of power the kernel treats apart (0, 1, the roots 1/4,
 1/2, 3/4, and the rest through one log2 shared by the stages of eq. (17)).
@@ -16,7 +16,8 @@ import pytest
 from support.compiled import require_compiled_kernels
 
 from hofto_hw.observers import kernels
-from hofto_hw.observers.hofto import sigma_powers
+
+from .reference import sigma_powers
 
 require_compiled_kernels()
 
@@ -39,10 +40,20 @@ FINITE = [
 
 
 def _reference(e: np.ndarray, p: float) -> np.ndarray:
-    """sig^p as HoftoCore._injection computes it (eq17 form, numpy)."""
+    """sig^p as reference.HoftoCore._injection computes it (eq17 form, numpy)."""
     if p == 0.0:
         return np.sign(e)
     return np.copysign(np.power(np.abs(e), p), e)
+
+
+def _inject(z, y, neg_gains, powers, recursive, inj):
+    """Injection terms of joint 0 into inj (s,) as hofto_step computes them: powers in
+    progression through their own path, the others stage by stage (compiled calls)."""
+    ratio = kernels._progression(powers) if not recursive else np.nan
+    if ratio == ratio:
+        kernels._injection_progression(z, 0, y, neg_gains, powers, ratio, inj, 0.0, False)
+    else:
+        kernels._injection(z, 0, y, neg_gains, powers, recursive, inj, 0.0, False)
 
 
 def _compiled(e: np.ndarray, powers: list[float], recursive: bool) -> np.ndarray:
@@ -57,11 +68,11 @@ def _compiled(e: np.ndarray, powers: list[float], recursive: bool) -> np.ndarray
             for i in range(s):  # one stage at a time: z_0 - y = x
                 z = np.zeros((1, 1))
                 z[0, 0] = x
-                kernels._inject(z, 0, 0.0, np.ones((1, 1)), p[i : i + 1], True, inj)
+                _inject(z, 0.0, np.ones((1, 1)), p[i : i + 1], True, inj)
                 out[i, jj] = inj[0]
         else:
             z = np.zeros((s, 1))
-            kernels._inject(z, 0, x, -np.ones((s, 1)), p, False, inj)  # e = x - 0
+            _inject(z, x, -np.ones((s, 1)), p, False, inj)  # e = x - 0
             out[:, jj] = inj
     return out
 

@@ -1,8 +1,8 @@
-"""The compiled kernels (numba) against the numpy reference path: 1e-12 over thousands of
-random steps, non-finite samples and Remark 7's equivalences included.
+"""The observers (their kernels, compiled and run as Python) against the numpy reference
+(tests/hofto_hw/observers/reference.py): 1e-12 over thousands of random steps, non-finite
+samples and Remark 7's equivalences included.
 
-numba is optional: these tests skip without it, except under CI (numba is in the dev extra
-there, so a missing numba is a failure, not a skip).
+The compiled path must run here (tests/support/compiled.py: a failure under CI, else a skip).
 """
 
 from __future__ import annotations
@@ -22,6 +22,8 @@ from hofto_hw.observers import (
     kernels,
 )
 from hofto_hw.observers.registry import levant_gains
+
+from . import reference
 
 require_compiled_kernels()
 
@@ -49,19 +51,39 @@ def _run(obs, q, qd, tau, dt=1e-3):
     return np.array([obs.update(q[k], qd[k], tau[k], dt).copy() for k in range(len(q))])
 
 
-def _agree(make, model, **kw):
+def _agree(make, model, python_steps=300, **kw):
+    """The observer ``make(backend)`` builds, compiled (every sample) and run as Python (the
+    first ``python_steps``: the same source, ~10-100x slower), against ``make("reference")``."""
     q, qd, tau = _inputs(model, **kw)
-    ref = make("numpy")
+    ref = make("reference")
     fast = make("numba")
-    assert ref.backend == "numpy" and fast.backend == "numba"
+    slow = make("numpy")
+    assert (fast.backend, slow.backend) == ("numba", "numpy")
     a = _run(ref, q, qd, tau)
     b = _run(fast, q, qd, tau)
+    c = _run(slow, q[:python_steps], qd[:python_steps], tau[:python_steps])
     finite = np.isfinite(a)
     np.testing.assert_array_equal(finite, np.isfinite(b))
     assert np.abs(a[finite]).max() > 1.0  # the inputs excite the observer
     scale = np.abs(a[finite]).max()
     np.testing.assert_allclose(b[finite], a[finite], rtol=TOL, atol=TOL * scale)
+    # the interpreted kernel is the compiled one's source: the same numbers, but for the
+    # rounding of libm against Python's math (to the same tolerance)
+    np.testing.assert_array_equal(np.isfinite(c), np.isfinite(b[:python_steps]))
+    ok = np.isfinite(c)
+    np.testing.assert_allclose(c[ok], b[:python_steps][ok], rtol=TOL, atol=TOL * scale)
     return a, b
+
+
+def _build(cls, *args):
+    """``make(backend)`` for the observer class ``cls``: its reference for "reference"."""
+
+    def make(backend):
+        if backend == "reference":
+            return reference.REFERENCE[cls.__name__](*args)
+        return cls(*args, backend=backend)
+
+    return make
 
 
 HOFTO_CASES = [
@@ -81,7 +103,7 @@ HOFTO_CASES = [
 
 
 @pytest.mark.parametrize(("order", "form", "disc", "substeps", "powers"), HOFTO_CASES)
-def test_hofto_kernel_matches_numpy(er3a_model, order, form, disc, substeps, powers):
+def test_hofto_kernel_matches_the_reference(er3a_model, order, form, disc, substeps, powers):
     k = order + 2
     if form == "recursive":  # Levant's gains, L = 1000 rad/s^4
         gains = np.array(levant_gains(1000.0, 6, (12.0, 8.0, 5.0, 3.0, 1.5, 1.1)[-k:]))
@@ -89,62 +111,46 @@ def test_hofto_kernel_matches_numpy(er3a_model, order, form, disc, substeps, pow
         w0 = 20.0
         gains = np.outer([comb(k, i) * w0**i for i in range(1, k + 1)], np.ones(6))
 
-    def make(backend):
-        return HoftoObserver(
-            er3a_model, gains, np.array(powers), form, substeps, disc, backend=backend
-        )
-
+    make = _build(HoftoObserver, er3a_model, gains, np.array(powers), form, substeps, disc)
     _agree(make, er3a_model)
 
 
-def test_eso_kernel_matches_numpy(er3a_model):
+def test_eso_kernel_matches_the_reference(er3a_model):
     for substeps in (1, 3):
-        _agree(
-            lambda b, s=substeps: EsoObserver(
-                er3a_model, np.full(6, 45.0), np.full(6, 675.0), np.full(6, 3375.0), s, b
-            ),
-            er3a_model,
-        )
+        k = (np.full(6, 45.0), np.full(6, 675.0), np.full(6, 3375.0))
+        _agree(_build(EsoObserver, er3a_model, *k, substeps), er3a_model)
 
 
-def test_sta_kernel_matches_numpy(er3a_model):
+def test_sta_kernel_matches_the_reference(er3a_model):
     for substeps in (1, 2):
-        _agree(
-            lambda b, s=substeps: StaObserver(
-                er3a_model, np.full(6, 20.0), np.full(6, 100.0), np.full(6, 300.0), s, b
-            ),
-            er3a_model,
-        )
+        gains = (np.full(6, 20.0), np.full(6, 100.0), np.full(6, 300.0))
+        _agree(_build(StaObserver, er3a_model, *gains, substeps), er3a_model)
 
 
-def test_momentum_kernel_matches_numpy(er3a_model):
-    _agree(lambda b: MomentumObserver(er3a_model, np.full(6, 50.0), backend=b), er3a_model)
+def test_momentum_kernel_matches_the_reference(er3a_model):
+    _agree(_build(MomentumObserver, er3a_model, np.full(6, 50.0)), er3a_model)
 
 
-def test_dob_kernel_matches_numpy(er3a_model):
-    _agree(lambda b: DobObserver(er3a_model, np.full(6, 30.0), backend=b), er3a_model)
+def test_dob_kernel_matches_the_reference(er3a_model):
+    _agree(_build(DobObserver, er3a_model, np.full(6, 30.0)), er3a_model)
 
 
-def test_nonfinite_samples_give_nan_and_keep_state_on_both_paths(er3a_model):
+def test_nonfinite_samples_give_nan_and_keep_state_on_every_path(er3a_model):
     nan_at = [(500, "q", 1), (501, "qd", 3), (1200, "tau", 0), (1201, "tau", 5)]
     makers = [
-        lambda b: HoftoObserver(
+        _build(
+            HoftoObserver,
             er3a_model,
             np.outer([50.0, 80.0, 60.0, 40.0], np.ones(6)),
             np.array([0.75, 2 / 3, 0.5, 0.0]),
-            backend=b,
         ),
-        lambda b: EsoObserver(
-            er3a_model, np.full(6, 45.0), np.full(6, 675.0), np.full(6, 3375.0), 1, b
-        ),
-        lambda b: StaObserver(
-            er3a_model, np.full(6, 20.0), np.full(6, 100.0), np.full(6, 300.0), 1, b
-        ),
-        lambda b: MomentumObserver(er3a_model, np.full(6, 50.0), backend=b),
-        lambda b: DobObserver(er3a_model, np.full(6, 30.0), backend=b),
+        _build(EsoObserver, er3a_model, np.full(6, 45.0), np.full(6, 675.0), np.full(6, 3375.0)),
+        _build(StaObserver, er3a_model, np.full(6, 20.0), np.full(6, 100.0), np.full(6, 300.0)),
+        _build(MomentumObserver, er3a_model, np.full(6, 50.0)),
+        _build(DobObserver, er3a_model, np.full(6, 30.0)),
     ]
-    for make in makers:
-        a, b = _agree(make, er3a_model, nan_at=nan_at)
+    for make in makers:  # the interpreted kernel through the first NaN and beyond
+        a, b = _agree(make, er3a_model, python_steps=520, nan_at=nan_at)
         for k, _, _ in nan_at:
             assert np.all(np.isnan(a[k])) and np.all(np.isnan(b[k]))
         assert np.all(np.isfinite(b[1202:]))
@@ -197,3 +203,17 @@ def test_backend_resolution():
     assert kernels.resolve("numba") == "numba"
     with pytest.raises(ValueError, match="backend"):
         kernels.resolve("fortran")  # type: ignore[arg-type]
+
+
+def test_the_python_path_runs_every_kernel_it_calls_as_python():
+    """``numpy``: the kernel's source with the kernels it calls as Python too (a kernel's
+    py_func alone would call compiled helpers, compiling them under HOFTO_HW_NO_NUMBA)."""
+    assert kernels.compiled_or_python(kernels.hofto_update, "numba") is kernels.hofto_update
+    for fn in (kernels.hofto_update, kernels.hofto_advance, kernels.bank_update):
+        py = kernels.compiled_or_python(fn, "numpy")
+        assert not kernels._kernel(py) and py.__code__ is fn.py_func.__code__
+        assert not [name for name, v in py.__globals__.items() if kernels._kernel(v)]
+    assert (
+        kernels.compiled_or_python(kernels.hofto_step, "numpy")
+        is (kernels.compiled_or_python(kernels.hofto_update, "numpy").__globals__["hofto_step"])
+    )

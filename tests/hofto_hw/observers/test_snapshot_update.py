@@ -20,14 +20,21 @@ def _inputs(model, steps=400, seed=9):
     return q, qd, tau
 
 
-def test_update_snapshot_equals_update_for_every_observer(er3a_model):
+@pytest.mark.parametrize("backend", ["numpy", "auto"])
+def test_update_snapshot_equals_update_for_every_observer(er3a_model, backend):
     q, qd, tau = _inputs(er3a_model)
-    alone = {name: make_observer(replay_default(name, 6), er3a_model) for name in OBSERVER_TYPES}
-    shared = {name: make_observer(replay_default(name, 6), er3a_model) for name in OBSERVER_TYPES}
+
+    def build():
+        return {
+            name: make_observer(replay_default(name, 6), er3a_model, backend=backend)
+            for name in OBSERVER_TYPES
+        }
+
+    alone, shared = build(), build()
     needs = Needs.NONE
     for obs in shared.values():
         needs |= obs.needs
-    snap = DynamicsSnapshot(er3a_model, needs)
+    snap = DynamicsSnapshot(er3a_model, needs, backend)  # the terms as the observers' own
     for obs in (*alone.values(), *shared.values()):
         obs.reset(q[0], qd[0])
     for k in range(len(q)):
@@ -49,7 +56,6 @@ def test_backend_auto_falls_back_to_numpy_when_compiled_kernels_are_off(er3a_mod
         make_observer(replay_default("momentum", 6), er3a_model, backend="numba")
 
 
-@pytest.mark.skipif(kernels._numba is None, reason="numba is not installed")
 def test_a_failing_compilation_marks_the_compiled_path_unavailable(monkeypatch):
     monkeypatch.setattr(kernels, "_FAILED", "")
     monkeypatch.setattr(kernels, "_DISABLED", False)
