@@ -1,6 +1,7 @@
 """The native dynamics (pinocchio's C++ algorithms called from one numba kernel) against the
-numpy reference over pinocchio's Python API (tests/hofto_hw/model/reference.py): every snapshot term and the feed-forward within 1e-12, parameter
-changes followed, non-finite samples, joint kinds, the build cache and the fallback."""
+numpy reference over pinocchio's Python API (tests/hofto_hw/model/reference.py): every
+snapshot term and the feed-forward within 1e-12, parameter changes followed, non-finite
+samples, joint kinds, the build cache and the fallback."""
 
 from __future__ import annotations
 
