@@ -108,3 +108,19 @@ def test_terms_agree_with_the_numpy_reference(er3a_model, backend):
         for a, b in ((ref.f, fast.f), (ref.ct_qd, fast.ct_qd), (ref.accel, fast.accel)):
             np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12 * np.abs(a).max())
         np.testing.assert_array_equal(fast.M, ref.M)
+
+
+def test_a_pinocchio_without_stable_views_is_refused_in_one_line(er3a_model, monkeypatch):
+    """The snapshot and the workspaces read pinocchio's Data storage in place: a pinocchio
+    that returns copies (or half of M) is refused naming its version, not run differently."""
+    from hofto_hw.errors import ModelError
+    from hofto_hw.model import snapshot
+
+    version = pinocchio_traits(er3a_model).version
+    for stable, full, what in ((False, True, "stable Data views"), (True, False, "full")):
+        monkeypatch.setattr(snapshot, "_TRAITS", snapshot.PinocchioTraits(version, stable, full))
+        with pytest.raises(ModelError, match=f"pinocchio {version} does not give .*{what}") as e:
+            er3a_model.create_data()
+        assert "\n" not in str(e.value) and "pin>=4.1,<5" in str(e.value)
+        with pytest.raises(ModelError):
+            DynamicsSnapshot(er3a_model, ALL)
