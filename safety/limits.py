@@ -3,7 +3,7 @@ error, position jumps between ticks and non-finite values anywhere in the tick.
 
 Each check reports the first offending joint and its value to the
 :class:`~safety.stop.StopController`; the controller latches and decides. Allocation-free
-(preallocated masks, ``out=`` everywhere). Units: rad, rad/s, N·m.
+(a preallocated workspace the kernels write in place). Units: rad, rad/s, N·m.
 
 The checks are :mod:`safety.kernels`' (``limits_scan``, ``limits_commit``, one call on a
 quiet tick: ``limits_quiet``): ``backend`` ``numba``/``auto`` (the observers' conventions)
