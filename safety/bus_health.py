@@ -15,8 +15,9 @@ enabled. Decides only: the loop reads the drive states and passes them in.
 Operation enabled or faulted (the rare path), never on a quiet tick.
 
 The CiA 402 state codes come from the caller (safety does not import drivers/).
-Allocation-free per tick. ``backend``: ``numpy`` (the reference) or the compiled drive-state
-scan of :mod:`safety.kernels` (``numba``/``auto``, the observers' conventions).
+Allocation-free per tick. The drive states are judged by :func:`safety.kernels.drive_scan`:
+``backend`` ``numba``/``auto`` (the observers' conventions) runs it compiled, ``numpy`` runs
+its Python source (the numpy implementation it replaced is tests/safety/reference.py).
 """
 
 from __future__ import annotations
@@ -33,8 +34,8 @@ from safety.stop import Fault, StopController
 
 class BusHealth:
     """``op_enabled``: the Operation-enabled state code; ``fault_states``: codes that count
-    as a drive fault (Fault, Fault reaction active, unknown); ``backend``: numpy (the
-    reference), numba or auto (compiled when available, warmed here)."""
+    as a drive fault (Fault, Fault reaction active, unknown); ``backend``: numpy (the scan's
+    Python source), numba or auto (compiled when available, warmed here)."""
 
     def __init__(
         self,
@@ -52,9 +53,10 @@ class BusHealth:
         self.fault_min = int(min(fault_states))
         self.streak = 0
         self.lost_total = 0
-        self._m = np.zeros(n, dtype=bool)
         self.backend = kernels.ready(backend, self._warm)
+        #: True exactly when the compiled scan runs (the fused tick's condition)
         self._use_kernel = self.backend == "numba"
+        self._scan = kernels.compiled_or_python(drive_scan, self.backend)
         #: axis -> whether its STO is active (the drive layer's reading of the process
         #: image); None: an axis out of Operation enabled is always DRIVE_DISABLED
         self.sto_of: Callable[[int], bool] | None = None
@@ -85,23 +87,13 @@ class BusHealth:
             if self.streak >= self.lost_cycles:
                 stop.report(Fault.BUS_LOSS, -1, float(status))
             return False  # states are stale: judge the drives on fresh data only
-        if self._use_kernel:
-            j = drive_scan(states, self.fault_min, self.op_enabled if expect_enabled else -1)
-            if j >= 0:
-                n = self.n
-                if j < n:
-                    self._fault(stop, j, error_codes)
-                else:
-                    self._disabled(stop, j - n, states)
-            return True
-        m = self._m
-        np.greater_equal(states, self.fault_min, out=m)
-        if m.any():
-            self._fault(stop, int(np.argmax(m)), error_codes)
-        elif expect_enabled:
-            np.not_equal(states, self.op_enabled, out=m)
-            if m.any():
-                self._disabled(stop, int(np.argmax(m)), states)
+        j = self._scan(states, self.fault_min, self.op_enabled if expect_enabled else -1)
+        if j >= 0:
+            n = self.n
+            if j < n:
+                self._fault(stop, j, error_codes)
+            else:
+                self._disabled(stop, j - n, states)
         return True
 
     def _fault(self, stop: StopController, j: int, error_codes: np.ndarray) -> None:

@@ -1,14 +1,13 @@
-"""Compiled scans of the per-tick safety checks (numba), beside the numpy reference path.
+"""The per-tick safety checks of the bus and the limits (numba): the one implementation.
 
-The bus and limit checks are a handful of comparisons on six joints; as numpy calls on
-six-element arrays their time goes to the ~0.5 µs each call costs. These kernels only look:
-they say whether anything is to be reported (and where, for the drive states). Whenever a
-limit kernel sees anything to report, the caller runs its numpy reference path, so the
-reports (fault class, joint, value, order) are the reference's by construction.
-
-The backend conventions are the observers' (:mod:`hofto_hw.observers.kernels`: ``jit``,
-``resolve``, warmed when the monitor is built, HOFTO_HW_NO_NUMBA=1 selects numpy).
-tests/safety/test_kernels.py checks both paths give the same reports.
+:class:`safety.bus_health.BusHealth` and :class:`safety.limits.LimitMonitor` always run
+these kernels: compiled (backend ``numba``/``auto``, the observers' conventions of
+:mod:`hofto_hw.observers.kernels`: ``jit``, warmed when the monitor is built) or as their
+own Python source (backend ``numpy``: ``py_func``; numba's ``NUMBA_DISABLE_JIT=1`` runs every
+line as Python). The kernels say what is to be reported (class, joint, value) and the
+monitor reports it to the stop controller in Python, so reports stay off the compiled path.
+The numpy implementations they replaced are the reference in tests/safety/reference.py;
+tests/safety/test_kernels.py compares every report over thousands of random ticks.
 """
 
 from __future__ import annotations
@@ -37,45 +36,79 @@ def drive_scan(states: np.ndarray, fault_min: int, op_enabled: int) -> int:
     return -1
 
 
-#: rows of the limit monitor's float64 workspace (LIM_ROWS, max(n, 3)): lower, upper [rad],
-#: velocity [rad/s], torque [N·m] limits, the previous fresh q [rad], and a row of scalars
-#: (PARAMS): following error [rad], position jump [rad], have-previous flag (0.0 / 1.0)
-LOWER, UPPER, VELOCITY, TORQUE, Q_PREV, PARAMS = range(6)
-LIM_ROWS = 6
+#: rows of the limit monitor's float64 workspace (LIM_ROWS, max(n, 5)): lower, upper [rad],
+#: velocity [rad/s], torque [N·m] limits, the previous fresh q [rad], a row of scalars
+#: (PARAMS): following error [rad], position jump [rad], have-previous flag (0.0 / 1.0), and
+#: the last scan's report per fault class (column = class below): the first joint (-1: none)
+#: and its value
+LOWER, UPPER, VELOCITY, TORQUE, Q_PREV, PARAMS, REPORT_JOINT, REPORT_VALUE = range(8)
+LIM_ROWS = 8
 FOLLOWING_ERROR, POSITION_JUMP, HAVE_PREV = 0, 1, 2
+#: fault classes of the report rows, in the order they are reported: position limit (value
+#: q [rad]), velocity (qd [rad/s]), torque (tau [N·m]), following error (|q_cmd - q|),
+#: position jump (|q - q_prev|)
+REP_POSITION, REP_VELOCITY, REP_TORQUE, REP_FOLLOWING, REP_JUMP = range(5)
+N_REPORTS = 5
 
 
 @jit
-def limits_quiet(sample: np.ndarray, q_cmd: np.ndarray, w: np.ndarray, how: int, gap: float) -> int:
-    """The limit checks of :meth:`safety.limits.LimitMonitor.check` with nothing reported, on
-    ``sample`` (3, n) = rows q, qd, tau and the workspace ``w`` (rows above); ``how`` = fresh
-    + 2·tracking (one int: bools cost a compiled call more to unbox): 0 when some check
-    would report (the caller runs the reference path; nothing was written), 1 when none
-    would, 2 when none would and ``q`` (fresh, all finite) was copied into the Q_PREV row
-    (HAVE_PREV set). The comparisons are the reference's (NaN compares false)."""
+def _note(w: np.ndarray, c: int, j: int, value: float) -> int:
+    """Record joint j and ``value`` for class c unless an earlier joint has; 1 if new."""
+    if w[REPORT_JOINT, c] >= 0.0:
+        return 0
+    w[REPORT_JOINT, c] = j
+    w[REPORT_VALUE, c] = value
+    return 1
+
+
+@jit
+def limits_scan(sample: np.ndarray, q_cmd: np.ndarray, w: np.ndarray, how: int, gap: float) -> int:
+    """The limit checks of :meth:`safety.limits.LimitMonitor.check` on ``sample`` (3, n) =
+    rows q, qd, tau, the last command q_cmd (n,) and the workspace ``w`` (rows above): for
+    each class the first offending joint and its value into the report rows; returns how many
+    classes have one. ``how`` = fresh + 2·tracking (one int: bools cost a compiled call more
+    to unbox): torque and following error only while tracking, jumps only on a fresh sample
+    with a previous one, against ``position_jump`` plus what the velocity limit covers in
+    ``gap`` [s] (a stall). NaN compares false. Writes nothing but the report rows."""
     n = q_cmd.shape[0]
     fresh = (how & 1) != 0
     tracking = (how & 2) != 0
     following_error = w[PARAMS, FOLLOWING_ERROR]
     position_jump = w[PARAMS, POSITION_JUMP]
     jumps = fresh and w[PARAMS, HAVE_PREV] != 0.0
+    for c in range(N_REPORTS):
+        w[REPORT_JOINT, c] = -1.0
+        w[REPORT_VALUE, c] = 0.0
+    found = 0
     for j in range(n):
         x = sample[0, j]
         if x < w[LOWER, j] or x > w[UPPER, j]:
-            return 0
-        if abs(sample[1, j]) > w[VELOCITY, j]:
-            return 0
+            found += _note(w, REP_POSITION, j, x)
+        v = sample[1, j]
+        if abs(v) > w[VELOCITY, j]:
+            found += _note(w, REP_VELOCITY, j, v)
         if tracking:
-            if abs(sample[2, j]) > w[TORQUE, j]:
-                return 0
-            if abs(q_cmd[j] - x) > following_error:
-                return 0
+            t = sample[2, j]
+            if abs(t) > w[TORQUE, j]:
+                found += _note(w, REP_TORQUE, j, t)
+            d = abs(q_cmd[j] - x)
+            if d > following_error:
+                found += _note(w, REP_FOLLOWING, j, d)
         if jumps:
             allow = w[VELOCITY, j] * gap + position_jump if gap > 0.0 else position_jump
-            if abs(x - w[Q_PREV, j]) > allow:
-                return 0
-    if not fresh:
+            d = abs(x - w[Q_PREV, j])
+            if d > allow:
+                found += _note(w, REP_JUMP, j, d)
+    return found
+
+
+@jit
+def limits_commit(sample: np.ndarray, w: np.ndarray, how: int) -> int:
+    """After the checks: on a fresh sample whose q (row 0 of ``sample`` (3, n)) is all finite,
+    q becomes the previous sample (Q_PREV, HAVE_PREV set): 2; else 1 (nothing written)."""
+    if (how & 1) == 0:
         return 1
+    n = sample.shape[1]
     for j in range(n):
         if not math.isfinite(sample[0, j]):
             return 1
@@ -83,3 +116,13 @@ def limits_quiet(sample: np.ndarray, q_cmd: np.ndarray, w: np.ndarray, how: int,
         w[Q_PREV, j] = sample[0, j]
     w[PARAMS, HAVE_PREV] = 1.0
     return 2
+
+
+@jit
+def limits_quiet(sample: np.ndarray, q_cmd: np.ndarray, w: np.ndarray, how: int, gap: float) -> int:
+    """:func:`limits_scan` then, when nothing is to be reported, :func:`limits_commit`: 0 when
+    some check reports (the report rows say what; Q_PREV untouched, so the caller reports
+    and commits), 1 when none does, 2 when none does and q was committed."""
+    if limits_scan(sample, q_cmd, w, how, gap) > 0:
+        return 0
+    return limits_commit(sample, w, how)

@@ -3,14 +3,15 @@ error, position jumps between ticks and non-finite values anywhere in the tick.
 
 Each check reports the first offending joint and its value to the
 :class:`~safety.stop.StopController`; the controller latches and decides. Allocation-free
-(preallocated masks, ``out=`` everywhere). Units: rad, rad/s, N·m.
+(a preallocated workspace the kernels write in place). Units: rad, rad/s, N·m.
 
-``backend`` ``numba``/``auto`` (the observers' conventions): a compiled scan
-(:func:`safety.kernels.limits_quiet`) settles the usual tick where nothing is to be reported;
-when anything is, the numpy reference path runs and reports, so reports are identical. The
-limits, the previous sample and the scalars are the rows of one float64 workspace and the
-measured q, qd, tau are passed as one (3, n) block (the drive group's rows, found once), so
-the scan takes six arguments instead of fifteen (each costs ~0.1 µs per call).
+The checks are :mod:`safety.kernels`' (``limits_scan``, ``limits_commit``, one call on a
+quiet tick: ``limits_quiet``): ``backend`` ``numba``/``auto`` (the observers' conventions)
+runs them compiled, ``numpy`` runs the same kernels' Python source; what they find is
+reported here, in Python, in a fixed class order. The limits, the previous sample, the
+scalars and the scan's report are the rows of one float64 workspace and the measured q, qd,
+tau are passed as one (3, n) block (the drive group's rows, found once), so the scan takes
+five arguments instead of fifteen (each costs ~0.1 µs per call).
 """
 
 from __future__ import annotations
@@ -24,15 +25,28 @@ from safety.kernels import (
     HAVE_PREV,
     LIM_ROWS,
     LOWER,
+    N_REPORTS,
     PARAMS,
     POSITION_JUMP,
     Q_PREV,
+    REPORT_JOINT,
+    REPORT_VALUE,
     TORQUE,
     UPPER,
     VELOCITY,
+    limits_commit,
     limits_quiet,
 )
 from safety.stop import Fault, StopController
+
+#: the fault of each report column of the scan (safety.kernels REP_*), in report order
+_FAULTS = (
+    Fault.POSITION_LIMIT,
+    Fault.VELOCITY_LIMIT,
+    Fault.TORQUE_LIMIT,
+    Fault.FOLLOWING_ERROR,
+    Fault.POSITION_JUMP,
+)
 
 
 def monitored_limits(
@@ -72,7 +86,7 @@ class LimitMonitor:
         self.n = n
         # the limits, the previous sample and the scalars as rows of one workspace (the
         # compiled scan's one argument); the attributes are views of its rows
-        self._w = np.zeros((LIM_ROWS, max(n, 3)))
+        self._w = np.zeros((LIM_ROWS, max(n, N_REPORTS)))
         self.lower = self._w[LOWER, :n]
         self.upper = self._w[UPPER, :n]
         self.velocity = self._w[VELOCITY, :n]
@@ -87,13 +101,12 @@ class LimitMonitor:
         self._sample = np.zeros((3, n))
         self._q_in = self._qd_in = self._tau_in = self._sample  # the arrays _block views
         self._block = self._sample
-        self._d = np.zeros(n)
-        self._allow = np.zeros(n)
-        self._m = np.zeros(n, dtype=bool)
-        self._m2 = np.zeros(n, dtype=bool)
         self._fin = np.zeros(n, dtype=bool)
         self.backend = kernels.ready(backend, self._warm)
+        #: True exactly when the compiled kernels run (the fused tick's condition)
         self._use_kernel = self.backend == "numba"
+        self._quiet = kernels.compiled_or_python(limits_quiet, self.backend)
+        self._commit = kernels.compiled_or_python(limits_commit, self.backend)
 
     @property
     def following_error(self) -> float:
@@ -116,6 +129,7 @@ class LimitMonitor:
     def _warm(self) -> None:
         w = self._w.copy()  # scratch: the scan writes Q_PREV and HAVE_PREV
         limits_quiet(self._sample, self.q_prev, w, 3, 0.0)
+        limits_commit(self._sample, w, 3)
 
     def _sample_block(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """q, qd, tau as the rows of one (3, n) float64 block: a view when they are
@@ -181,67 +195,19 @@ class LimitMonitor:
         ``tracking``: the drives are powered and follow q_cmd (following error and motor
         torque are checked only then: with the power stage off the brakes hold the arm).
         """
-        if self._use_kernel:
-            if q is self._q_in and qd is self._qd_in and tau is self._tau_in:
-                block = self._block  # the caller's rows, as last time
-            else:
-                block = self._sample_block(q, qd, tau)
-            if limits_quiet(block, q_cmd, self._w, fresh + 2 * tracking, gap):
-                return
-        self._check_numpy(stop, q, qd, tau, q_cmd, fresh, tracking, gap)
-
-    def _check_numpy(
-        self,
-        stop: StopController,
-        q: np.ndarray,
-        qd: np.ndarray,
-        tau: np.ndarray,
-        q_cmd: np.ndarray,
-        fresh: bool,
-        tracking: bool,
-        gap: float = 0.0,
-    ) -> None:
-        """The reference path of :meth:`check` (it reports)."""
-        d, m, m2 = self._d, self._m, self._m2
-        np.less(q, self.lower, out=m)
-        np.greater(q, self.upper, out=m2)
-        np.logical_or(m, m2, out=m)
-        if m.any():
-            j = int(np.argmax(m))
-            stop.report(Fault.POSITION_LIMIT, j, float(q[j]))
-        np.abs(qd, out=d)
-        np.greater(d, self.velocity, out=m)
-        if m.any():
-            j = int(np.argmax(m))
-            stop.report(Fault.VELOCITY_LIMIT, j, float(qd[j]))
-        if tracking:
-            np.abs(tau, out=d)
-            np.greater(d, self.torque, out=m)
-            if m.any():
-                j = int(np.argmax(m))
-                stop.report(Fault.TORQUE_LIMIT, j, float(tau[j]))
-            np.subtract(q_cmd, q, out=d)
-            np.abs(d, out=d)
-            np.greater(d, self.following_error, out=m)
-            if m.any():
-                j = int(np.argmax(m))
-                stop.report(Fault.FOLLOWING_ERROR, j, float(d[j]))
-        if fresh:
-            if self._have_prev:
-                np.subtract(q, self.q_prev, out=d)
-                np.abs(d, out=d)
-                if gap > 0.0:
-                    np.multiply(self.velocity, gap, out=self._allow)
-                    self._allow += self.position_jump
-                    np.greater(d, self._allow, out=m)
-                else:
-                    np.greater(d, self.position_jump, out=m)
-                if m.any():
-                    j = int(np.argmax(m))
-                    stop.report(Fault.POSITION_JUMP, j, float(d[j]))
-            if self._all_finite(q):
-                np.copyto(self.q_prev, q)
-                self._have_prev = True
+        if q is self._q_in and qd is self._qd_in and tau is self._tau_in:
+            block = self._block  # the caller's rows, as last time
+        else:
+            block = self._sample_block(q, qd, tau)
+        how = fresh + 2 * tracking
+        w = self._w
+        if self._quiet(block, q_cmd, w, how, gap):
+            return
+        for c in range(N_REPORTS):  # rare: something to report, in class order
+            j = int(w[REPORT_JOINT, c])
+            if j >= 0:
+                stop.report(_FAULTS[c], j, float(w[REPORT_VALUE, c]))
+        self._commit(block, w, how)
 
 
 def _rows_of_one_block(q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray | None:

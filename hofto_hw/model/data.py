@@ -35,63 +35,62 @@ class ModelData:
     """Workspace of one consumer: pinocchio Data and every buffer. Arrays float64, shape (n,)
     or (n, n); q [rad], qd [rad/s], qdd [rad/s²], torques [N·m].
 
-    ``backend`` "numpy" (default, the reference) or "numba"/"auto": then
-    :meth:`inverse_dynamics` (the tick's feed-forward) is RNEA plus one compiled call for the
-    friction and the sum (:func:`hofto_hw.model.kernels.add_friction`; equal to the numpy
-    path within 1e-12), its held-friction memory ``friction_state`` a row of the kernel's
-    workspace. ``backend`` says which path runs (numpy when numba is unavailable). With
-    ``native`` (and the native library built here, :mod:`hofto_hw.model.native`) the RNEA runs
-    inside that compiled call too: one call in all; ``native`` says whether it does."""
+    :meth:`inverse_dynamics` (the tick's feed-forward) is pinocchio's RNEA plus the friction
+    and the sum of one kernel (:func:`hofto_hw.model.kernels.add_friction`; its held-friction
+    memory ``friction_state`` is a row of the kernel's workspace): ``backend`` "numba"/"auto"
+    runs the kernel compiled, "numpy" (default) runs its Python source; ``backend`` says
+    which runs. With ``native`` (and the native library shipped in the wheel,
+    :mod:`hofto_hw.model.native`) and the compiled kernel, the RNEA runs inside that
+    compiled call too (:func:`~hofto_hw.model.kernels.inverse_dynamics_native`): one call in
+    all; ``native`` says whether it does. Without (a robot the native library refuses,
+    ``HOFTO_HW_NO_NATIVE``, backend numpy) the RNEA is pinocchio's Python call: the same
+    algorithm. The numpy implementation (RNEA + FrictionParams.torque) is the reference in
+    tests/hofto_hw/model/reference.py. A pinocchio outside pyproject's bound is refused in
+    one line (:func:`hofto_hw.model.snapshot.require_supported_pinocchio`)."""
 
     def __init__(self, model: RobotModel, backend: str = "numpy", native: bool = True) -> None:
+        # imported here: hofto_hw.observers (whose kernels module holds the one jit switch)
+        # imports this module's package
+        from hofto_hw.model import kernels as mk
+        from hofto_hw.model.snapshot import require_supported_pinocchio
+        from hofto_hw.observers import kernels
+
+        require_supported_pinocchio(model)
         self.model = model
         self.pin_data = model.pin_model.createData()
         n = model.n
         self.n = n
         self._M = np.zeros((n, n))
-        self._Mt = np.zeros((n, n))
-        self._lower = np.tril(np.ones((n, n), dtype=bool), -1)
-        self._symmetrise: bool | None = None
         self._C = np.zeros((n, n))
         self._Cqd = np.zeros(n)
         self._g = np.zeros(n)
         self._nle = np.zeros(n)
         self._f = np.zeros(n)
-        self._f_id = np.zeros(n)  # friction inside inverse_dynamics
         self._f_fd = np.zeros(n)  # friction inside forward_dynamics
         self._fscratch = np.zeros((3, n))
-        self.friction_state = np.zeros(n)  # held-friction sign (memory), see model.friction
+        W = self._W = mk.workspace(n)
+        #: held-friction sign (memory), see model.friction: a row of the kernel's workspace
+        self.friction_state = W[mk.STATE]
+        self._fr_src = model.friction
+        self._pack = mk.pack_friction
+        mk.pack_friction(self._fr_src, W)
         self._tau_id = np.zeros(n)
         self._qdd = np.zeros(n)
         self._tau_total = np.zeros(n)
         self._J = np.zeros((6, n))
-        self._fast = False
         self._native = None
-        if backend != "numpy":
-            self._compile(backend, native)
-        #: "numba": :meth:`inverse_dynamics` adds friction in one compiled call
-        self.backend = "numba" if self._fast else "numpy"
+        fast = False
+        if kernels.resolve(backend) == "numba":  # type: ignore[arg-type]
+            z = np.zeros(n)
+            fast = kernels.warm(lambda: mk.add_friction(z, z, W.copy(), np.zeros(n)))
+            if fast and native:
+                self._use_native(mk, kernels)
+        #: "numba": :meth:`inverse_dynamics`'s kernel runs compiled; "numpy": its Python source
+        self.backend = "numba" if fast else "numpy"
+        self._add_friction = kernels.compiled_or_python(mk.add_friction, self.backend)
         #: True: :meth:`inverse_dynamics` is one compiled call with pinocchio's C++ RNEA inside
         #: (hofto_hw.model.native)
         self.native = self._native is not None
-
-    def _compile(self, backend: str, native: bool) -> None:
-        # numba availability is the observers' module's (one switch for every kernel)
-        from hofto_hw.model import kernels as mk
-        from hofto_hw.observers import kernels
-
-        if kernels.resolve(backend) != "numba":  # type: ignore[arg-type]
-            return
-        self._add_friction = mk.add_friction
-        self._pack = mk.pack_friction
-        W = self._W = mk.workspace(self.n)
-        self.friction_state = W[mk.STATE]  # the held-friction memory lives in the workspace
-        self._fr_src = self.model.friction
-        mk.pack_friction(self._fr_src, W)
-        z = np.zeros(self.n)
-        self._fast = kernels.warm(lambda: mk.add_friction(z, z, W.copy(), np.zeros(self.n)))
-        if self._fast and native:
-            self._use_native(mk, kernels)
 
     def _use_native(self, mk: ModuleType, kernels: ModuleType) -> None:
         """RNEA and the friction as one compiled call with pinocchio's C++ RNEA inside
@@ -110,16 +109,8 @@ class ModelData:
 
     def mass_matrix(self, q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """M(q) [kg·m²], symmetric, shape (n, n), rotor inertia included."""
-        m = self.model
         M = self._M if out is None else out
-        np.copyto(M, pin.crba(m.pin_model, self.pin_data, q))
-        if self._symmetrise is None:  # measured once per process (snapshot.pinocchio_traits)
-            from hofto_hw.model.snapshot import pinocchio_traits
-
-            self._symmetrise = not pinocchio_traits(m).full_mass_matrix
-        if self._symmetrise:  # a pinocchio that fills the upper triangle only
-            np.copyto(self._Mt, M.T)
-            np.copyto(M, self._Mt, where=self._lower)
+        np.copyto(M, pin.crba(self.model.pin_model, self.pin_data, q))
         return M
 
     def coriolis_matrix(
@@ -173,15 +164,11 @@ class ModelData:
                     nm.sync()
             self._id_native(q, qd, qdd, self._W, tau, nm.handle)
             return tau
-        if self._fast:
-            # pinocchio's return (a transient copy of data.tau) is the kernel's input
-            if m.friction is not self._fr_src:
-                self._fr_src = m.friction
-                self._pack(self._fr_src, self._W)
-            self._add_friction(_rnea(m.pin_model, self.pin_data, q, qd, qdd), qd, self._W, tau)
-            return tau
-        np.copyto(tau, pin.rnea(m.pin_model, self.pin_data, q, qd, qdd))
-        np.add(tau, m.friction.torque(qd, self._f_id, self._fscratch, self.friction_state), out=tau)
+        if m.friction is not self._fr_src:
+            self._fr_src = m.friction
+            self._pack(self._fr_src, self._W)
+        # pinocchio's return (a transient copy of data.tau) is the kernel's input
+        self._add_friction(_rnea(m.pin_model, self.pin_data, q, qd, qdd), qd, self._W, tau)
         return tau
 
     def forward_dynamics(

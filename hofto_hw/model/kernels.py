@@ -1,13 +1,19 @@
-"""Compiled kernels of the model's per-tick arithmetic (numba): friction eq. (12), the
-snapshot's inputs and the inverse dynamics' friction, each one call between pinocchio calls.
+"""Kernels of the model's per-tick arithmetic (numba): friction eq. (12), the snapshot's
+inputs and the inverse dynamics' friction, each one call between pinocchio calls (or around
+the native library's, :mod:`hofto_hw.model.native`).
 
 On six joints this arithmetic is a few dozen floating-point operations; as numpy calls on
 six-element arrays the time goes to the ~0.5 µs each call costs (and to its cold caches
-inside a loop), so each use is one compiled call. The numpy code stays the reference
-(:meth:`hofto_hw.model.friction.FrictionParams.torque`, the numpy path of
-:class:`~hofto_hw.model.snapshot.DynamicsSnapshot` and of
-:class:`~hofto_hw.model.data.ModelData`); tests/hofto_hw/model/test_kernels.py checks that both
-agree to 1e-12 over thousands of random steps, held-friction memory and NaN included.
+inside a loop), so each use is one compiled call. These kernels are the ONE implementation
+of the snapshot's and the feed-forward's arithmetic (:class:`~hofto_hw.model.snapshot.
+DynamicsSnapshot`, :class:`~hofto_hw.model.data.ModelData`): compiled for backend numba, their
+Python source (``py_func``) for backend numpy. The numpy reference (pinocchio's Python API,
+:meth:`hofto_hw.model.friction.FrictionParams.torque`) is tests/hofto_hw/model/reference.py;
+tests/hofto_hw/model/test_kernels.py checks that every path agrees with it to 1e-12 over
+thousands of random steps, held-friction memory and NaN included. (FrictionParams.torque
+itself stays in the product for the workspace's friction_torque and forward_dynamics, the
+simulated plant's: it and :func:`friction_joint` differ in the last bit (measured), so moving
+the plant onto the kernel may move the main job's flight log; not done here.)
 
 Arguments are few (a compiled call costs ~0.1 µs per argument, more with cold caches): the
 friction parameters, the held-friction memory and the outputs travel in one workspace array

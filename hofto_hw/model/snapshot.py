@@ -15,35 +15,50 @@ declared (:class:`Needs`, the union of their ``needs``):
   numerically positive definite; implies FRICTION).
 
 No copies: on the native path (below) the arrays are rows of one buffer the compiled call
-writes, made once at construction; on the others they are views of pinocchio's Data storage
-(``data.M``, ``data.g``, ``data.nle``, ``data.ddq``, ``data.C``) taken once at construction;
-pinocchio writes into that storage in place, so the views show each tick's values. Whether
-the installed pinocchio keeps those views stable and fills both triangles of M is checked once
-per process (:func:`pinocchio_traits`); if not, the snapshot copies (and symmetrises M) into its own
-buffers instead. ``q``, ``qd`` and ``tau`` are references to the caller's arrays (the sample
-the terms belong to), valid while the caller keeps them unchanged.
+writes, made once at construction; on the pinocchio-Python path they are views of pinocchio's
+Data storage (``data.M``, ``data.g``, ``data.nle``, ``data.ddq``) taken once at construction
+and rows of the kernel's workspace (``f``, ``ct_qd``); pinocchio writes into that storage in
+place, so the views show each tick's values. A pinocchio that does not keep those views
+stable or fill both triangles of M (measured once per process, :func:`pinocchio_traits`) is
+refused in one line (pyproject's ``pin`` bound excludes it). ``q``, ``qd`` and ``tau`` are
+references to the caller's arrays (the sample the terms belong to), valid while the caller
+keeps them unchanged.
 
 A sample with a NaN or inf (or a non-finite dt, checked by the consumers) is not evaluated:
 ``finite`` is False and the terms keep the last finite sample's values.
 
+One implementation of the arithmetic around pinocchio's algorithms: the finiteness check,
+friction eq. (12) with its held memory, tau - f and Cᵀ·qd are the kernels of
+:mod:`hofto_hw.model.kernels`. Two ways to reach pinocchio's algorithms:
+
+- native (production: ``backend="numba"``, the native library shipped in the wheel,
+  :mod:`hofto_hw.model.native`): :meth:`~DynamicsSnapshot.compute` is ONE compiled call
+  (:func:`~hofto_hw.model.kernels.snapshot_native`: the checks and friction, then pinocchio's
+  own C++ algorithms the needs ask for on a copy of the model: CRBA, gravity, nonlinear
+  effects, the acceleration by pinocchio's Cholesky of CRBA's M, Cᵀ·qd as the kinetic
+  energy's gradient by one recursion; see dynamics.cpp);
+- pinocchio's Python API (ABA, CRBA, Coriolis matrix, gravity, nonlinear effects) and one
+  call of :func:`~hofto_hw.model.kernels.snapshot_terms`: compiled with ``backend="numba"``,
+  its Python source with ``backend="numpy"``. Kept, not a second formula (the same
+  pinocchio algorithms and the same kernel): for a robot the native library refuses (a
+  prismatic joint: RobotModel accepts it, dynamics.cpp knows revolute joints only),
+  ``native=False`` / ``HOFTO_HW_NO_NATIVE=1`` (``loop.acceleration: preferred``), and the
+  interpreter path (``backend="numpy"``: a Python-source kernel cannot call the native
+  library, which numba binds by name).
+
+The numpy implementation these replaced (pinocchio's Python API, FrictionParams.torque,
+numpy products) is the reference in tests/hofto_hw/model/reference.py; the agreement tests
+(tests/hofto_hw/model/test_snapshot.py, test_native.py, test_kernels.py) compare every path
+with it over random states, held friction and non-finite samples included.
+
 Cost: inside a loop whose other work flushes the caches each call costs ~2.5-4 µs more than
-back to back, whatever it computes, so the number of calls is what counts. With
-``backend="numba"`` and the native library built on this machine (:mod:`hofto_hw.model.native`)
-:meth:`~DynamicsSnapshot.compute` is ONE compiled call: the finiteness check, friction with its
-held memory and tau - f (:func:`hofto_hw.model.kernels.snapshot_native`), then pinocchio's own
-C++ algorithms the needs ask for on a copy of the model (CRBA, gravity, nonlinear effects; the
-acceleration by pinocchio's Cholesky of CRBA's M, the same whatever else is asked for; Cᵀ·qd as
-the kinetic energy's gradient by one recursion, without the Coriolis matrix; see dynamics.cpp)
-— no Python call per algorithm. Without the native
-library: the pinocchio Python calls the needs ask for (the tick's HOFTO + momentum: ABA, CRBA,
-Coriolis matrix, gravity — the floor) and one compiled call for everything else. The numpy
-path (the reference) makes ~8 numpy calls more.
+back to back, whatever it computes, so the number of calls is what counts: one on the native
+path, one per pinocchio algorithm plus one otherwise.
 """
 
 from __future__ import annotations
 
 import enum
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import ModuleType
@@ -103,6 +118,21 @@ def pinocchio_traits(model: RobotModel) -> PinocchioTraits:
     return _TRAITS
 
 
+def require_supported_pinocchio(model: RobotModel) -> None:
+    """ModelError in one line unless the installed pinocchio keeps its Data results as stable
+    views and fills both triangles of M (:func:`pinocchio_traits`; every ``pin`` within
+    pyproject's bound does: the workspaces and snapshots read pinocchio's storage in place)."""
+    t = pinocchio_traits(model)
+    if not (t.stable_views and t.full_mass_matrix):
+        from hofto_hw.errors import ModelError
+
+        what = "stable Data views" if not t.stable_views else "a full (symmetric) CRBA matrix"
+        raise ModelError(
+            f"pinocchio {t.version} does not give {what}; hofto-hw needs pin>=4.1,<5 "
+            "(pip install 'pin>=4.1,<5')"
+        )
+
+
 class DynamicsSnapshot:
     """The model terms of one sample for a set of consumers; see the module docstring.
 
@@ -118,30 +148,30 @@ class DynamicsSnapshot:
     def __init__(
         self, model: RobotModel, needs: Needs | int, backend: str = "numpy", native: bool = True
     ) -> None:
+        from hofto_hw.model import kernels as mk
+        from hofto_hw.observers import kernels
+
         needs = Needs(needs)
         if needs & Needs.ACCEL:
             needs |= Needs.FRICTION
         self.needs = needs
         self.model = model
         self.n = n = model.n
-        self.data = model.create_data()  # friction scratch and pinocchio Data
+        self.data = model.create_data()  # pinocchio Data (and the traits check)
         self.pin_model = model.pin_model
         pd = self.pin_data = self.data.pin_data
-        traits = self.traits = pinocchio_traits(model)
-        views = traits.stable_views
-        self._copy = not views
-        self._symmetrise = not traits.full_mass_matrix
-        own = self._copy or self._symmetrise
-        self.M = np.zeros((n, n)) if own else pd.M
-        self.g = pd.g if views else np.zeros(n)
-        self.nle = pd.nle if views else np.zeros(n)
-        self.accel = pd.ddq if views else np.zeros(n)
-        self._C = pd.C if views else np.zeros((n, n))
-        self.ct_qd = np.zeros(n)
-        self.f = np.zeros(n)
-        self._total = np.zeros(n)
-        self._lower = np.tril(np.ones((n, n), dtype=bool), -1)
-        self._Mt = np.zeros((n, n))
+        self.traits = pinocchio_traits(model)
+        self.M, self.g, self.nle, self.accel, self._C = pd.M, pd.g, pd.nle, pd.ddq, pd.C
+        W = self._W = mk.workspace(n)
+        self.f, self._total, self.ct_qd = W[mk.F], W[mk.TOTAL], W[mk.CT]
+        # the workspace's held-friction memory lives in W (reset_memory still works)
+        self.data.friction_state = W[mk.STATE]
+        W[mk.FLAGS] = (mk.FRICTION_TERM if needs & Needs.FRICTION else 0) | (
+            mk.CORIOLIS_T_TERM if needs & Needs.CORIOLIS_T else 0
+        )
+        self._fr_src = model.friction
+        mk.pack_friction(model.friction, W)
+        self._pack = mk.pack_friction
         zero = np.zeros(n)
         self.q: np.ndarray = zero
         self.qd: np.ndarray = zero
@@ -151,36 +181,18 @@ class DynamicsSnapshot:
         self._gravity = bool(needs & Needs.GRAVITY)
         self._nle = bool(needs & Needs.NLE)
         self._ct = bool(needs & Needs.CORIOLIS_T)
-        self._friction = bool(needs & Needs.FRICTION)
         self._accel = bool(needs & Needs.ACCEL)
         self._fast = False
         self._native = None
-        if backend != "numpy" and not self._copy:
-            # the finiteness check, friction and Cᵀ·qd as one compiled call (hofto_hw.model.
-            # kernels; numba availability is the observers' module's)
-            from hofto_hw.model import kernels as mk
-            from hofto_hw.observers import kernels
-
-            if kernels.resolve(backend) == "numba":  # type: ignore[arg-type]
-                self._terms = mk.snapshot_terms
-                self._pack = mk.pack_friction
-                W = self._W = mk.workspace(n)
-                self.f, self._total, self.ct_qd = W[mk.F], W[mk.TOTAL], W[mk.CT]
-                # the workspace's held-friction memory lives in W (reset_memory still works)
-                np.copyto(W[mk.STATE], self.data.friction_state)
-                self.data.friction_state = W[mk.STATE]
-                W[mk.FLAGS] = (mk.FRICTION_TERM if self._friction else 0) | (
-                    mk.CORIOLIS_T_TERM if self._ct else 0
-                )
-                self._fr_src = model.friction
-                mk.pack_friction(model.friction, W)
-                if native:
-                    self._use_native(mk, kernels)
-                if self._native is None:
-                    self._fast = kernels.warm(self._warm)
+        if kernels.resolve(backend) == "numba":  # type: ignore[arg-type]
+            if native:
+                self._use_native(mk, kernels)
+            if self._native is None:
+                self._fast = kernels.warm(self._warm)
         #: "numba": compiled (one call with ``native``, else the pinocchio calls and one
-        #: compiled call); "numpy": the reference
+        #: compiled call); "numpy": the pinocchio calls and the kernel's Python source
         self.backend = "numba" if self._fast else "numpy"
+        self._terms = kernels.compiled_or_python(mk.snapshot_terms, self.backend)
         #: True: :meth:`compute` is one compiled call with pinocchio's C++ algorithms inside
         self.native = self._native is not None
 
@@ -215,9 +227,11 @@ class DynamicsSnapshot:
         self._fast = True
 
     def _warm(self) -> None:
+        from hofto_hw.model import kernels as mk
+
         z = np.zeros(self.n)
         W = self._W.copy()  # scratch: the held-friction memory stays untouched
-        self._terms(z, z, z, self._C, W)
+        mk.snapshot_terms(z, z, z, self._C, W)
 
     def reset_memory(self) -> None:
         """Forget the held-friction memory of this snapshot's workspace (a new run)."""
@@ -237,49 +251,22 @@ class DynamicsSnapshot:
             self.finite = finite = self._snap(q, qd, tau, self._W, self._O, nm.handle)
             return finite
         pm, pd = self.pin_model, self.pin_data
-        if self._fast:
-            # Coriolis first: its matrix is no term of the snapshot (only Cᵀ·qd is), so a
-            # non-finite sample may pass through it; then one compiled call checks the sample
-            # and does every bit of arithmetic (friction, tau - f, Cᵀ·qd); then the pinocchio
-            # algorithms whose storage the snapshot's terms are, in any order (each one
-            # evaluates its own kinematics from q)
-            if self._ct:
-                _coriolis(pm, pd, q, qd)
-            if self.model.friction is not self._fr_src:
-                self._repack()
-            self.finite = finite = self._terms(q, qd, tau, self._C, self._W)
-            if not finite:
-                return False
-            if self._accel:
-                _aba(pm, pd, q, qd, self._total)
-            if self._mass:
-                _crba(pm, pd, q)
-            if self._gravity:
-                _gravity(pm, pd, q)
-            if self._nle:
-                _nle(pm, pd, q, qd)
-            return True
-        # the numpy path (the reference): one sum, NaN and ±inf propagate into it
-        self.finite = finite = math.isfinite(_sum(q) + _sum(qd) + _sum(tau))
+        # Coriolis first: its matrix is no term of the snapshot (only Cᵀ·qd is), so a
+        # non-finite sample may pass through it; then one kernel call checks the sample and
+        # does every bit of arithmetic (friction, tau - f, Cᵀ·qd); then the pinocchio
+        # algorithms whose storage the snapshot's terms are, in any order (each one evaluates
+        # its own kinematics from q)
+        if self._ct:
+            _coriolis(pm, pd, q, qd)
+        if self.model.friction is not self._fr_src:
+            self._repack()
+        self.finite = finite = self._terms(q, qd, tau, self._C, self._W)
         if not finite:
             return False
-        # A pinocchio call's return value (a copy) is dropped at once unless the Data
-        # views are unstable: one transient array at a time.
-        if self._copy:
-            return self._compute_copying(q, qd, tau)
-        if self._friction:
-            self.data.friction_torque(qd, out=self.f)
-            np.subtract(tau, self.f, out=self._total)
         if self._accel:
             _aba(pm, pd, q, qd, self._total)
         if self._mass:
-            if self._symmetrise:
-                self._symmetric(_crba(pm, pd, q))
-            else:
-                _crba(pm, pd, q)
-        if self._ct:
-            _coriolis(pm, pd, q, qd)
-            np.dot(self._C.T, qd, out=self.ct_qd)
+            _crba(pm, pd, q)
         if self._gravity:
             _gravity(pm, pd, q)
         if self._nle:
@@ -305,51 +292,21 @@ class DynamicsSnapshot:
                 q, qd, tau, W, O, nm.handle
             )
             return calls
-        if self._fast and self._ct:
+        if self._ct:
             calls["coriolis matrix"] = lambda q, qd, tau: _coriolis(pm, pd, q, qd)
-        if self._fast:
-            W, C = self._W, self._C
-            calls["kernel: finite, friction, Cᵀ·qd"] = lambda q, qd, tau: self._terms(
-                q, qd, tau, C, W
-            )
+        W, C, terms = self._W, self._C, self._terms
+        calls["kernel: finite, friction, Cᵀ·qd"] = lambda q, qd, tau: terms(q, qd, tau, C, W)
         if self._accel:
             calls["aba"] = lambda q, qd, tau: _aba(pm, pd, q, qd, tau)
         if self._mass:
             calls["crba"] = lambda q, qd, tau: _crba(pm, pd, q)
-        if self._ct and not self._fast:
-            calls["coriolis matrix"] = lambda q, qd, tau: _coriolis(pm, pd, q, qd)
         if self._gravity:
             calls["gravity"] = lambda q, qd, tau: _gravity(pm, pd, q)
         if self._nle:
             calls["nle"] = lambda q, qd, tau: _nle(pm, pd, q, qd)
         return calls
 
-    def _symmetric(self, r: np.ndarray) -> None:
-        M = self.M
-        np.copyto(M, r)
-        np.copyto(self._Mt, M.T)
-        np.copyto(M, self._Mt, where=self._lower)
 
-    def _compute_copying(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> bool:
-        """The same terms for a pinocchio whose Data attributes are no stable views."""
-        pm, pd = self.pin_model, self.pin_data
-        if self._friction:
-            self.data.friction_torque(qd, out=self.f)
-            np.subtract(tau, self.f, out=self._total)
-        if self._accel:
-            np.copyto(self.accel, pin.aba(pm, pd, q, qd, self._total))
-        if self._mass:
-            self._symmetric(pin.crba(pm, pd, q))
-        if self._ct:
-            np.dot(pin.computeCoriolisMatrix(pm, pd, q, qd).T, qd, out=self.ct_qd)
-        if self._gravity:
-            np.copyto(self.g, pin.computeGeneralizedGravity(pm, pd, q))
-        if self._nle:
-            np.copyto(self.nle, pin.nonLinearEffects(pm, pd, q, qd))
-        return True
-
-
-_sum = np.add.reduce
 # module globals: one dictionary lookup per call instead of a module attribute's two
 _aba = pin.aba
 _crba = pin.crba

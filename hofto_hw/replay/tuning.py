@@ -44,6 +44,7 @@ from hofto_hw.replay.pulses import (
     trips,
 )
 from hofto_hw.replay.runner import run_observer
+from safety.collision.kernel import threshold
 
 FloatArray = NDArray[np.float64]
 TERMS = (True, True, True, True, True)
@@ -100,9 +101,34 @@ def scaled(
 def thresholds_of(
     feats: FloatArray, env: FloatArray, margin: FloatArray, rest_margin: FloatArray | None = None
 ) -> FloatArray:
-    """(N, n) thresholds [N·m] from features (N, n, 5) and envelope (n, 5)·(1 + margin (n,))
-    (the standstill term by 1 + rest_margin (n,) when given)."""
-    return np.einsum("knf,nf->kn", feats, scaled(env, margin, rest_margin))
+    """(N, n) thresholds [N·m] from features (N, n, 5) [1, |qd|, |a|, r, s] and envelope (n,
+    5)·(1 + margin (n,)) (the standstill term by 1 + rest_margin (n,) when given): the
+    monitor's own threshold formula (safety.collision.kernel.threshold, run as Python on
+    arrays)."""
+    c = scaled(env, margin, rest_margin)
+    f = feats
+    return _threshold(
+        c[:, 0] * f[:, :, 0], c[:, 1], c[:, 2], c[:, 3], c[:, 4],
+        f[:, :, 1], f[:, :, 2], f[:, :, 3], f[:, :, 4],
+    )  # fmt: skip
+
+
+def thresholds_grid(
+    feats: FloatArray, env: FloatArray, m_scale: FloatArray, r_scale: FloatArray
+) -> FloatArray:
+    """(N, n, P) thresholds [N·m] for P margin settings at once: features (N, n, 5), envelope
+    (n, 5), every term but the standstill one scaled by ``m_scale`` (P,), the standstill term
+    by ``r_scale`` (P,) (the same formula as :func:`thresholds_of`, a last axis for P)."""
+    c = env[:, :, None] * m_scale  # (n, 5, P)
+    c[:, 4] = env[:, 4, None] * r_scale
+    f = feats[:, :, :, None]
+    return _threshold(
+        c[:, 0] * f[:, :, 0], c[:, 1], c[:, 2], c[:, 3], c[:, 4],
+        f[:, :, 1], f[:, :, 2], f[:, :, 3], f[:, :, 4],
+    )  # fmt: skip
+
+
+_threshold = getattr(threshold, "py_func", threshold)
 
 
 def trips_of(above: NDArray[np.bool_], t: FloatArray, debounce: float) -> NDArray[np.bool_]:
@@ -260,12 +286,7 @@ def cross_validate(
                     ]
                     for i in (i for i in range(len(first)) if fold[i] == f):
                         # thresholds are linear in the margins: (N, n, P) for every pair at once
-                        thrs = [
-                            np.einsum("knf,nf->kn", feats[i][..., :4], e[:, :4])[:, :, None]
-                            * m_scale
-                            + (feats[i][..., 4] * e[:, 4])[:, :, None] * r_scale
-                            for e in envs
-                        ]
+                        thrs = [thresholds_grid(feats[i], e, m_scale, r_scale) for e in envs]
                         false = judge_grid([row[i] for row in rows], thrs, deb, stats)
                         for k, c in enumerate(cand_list):
                             c.false += false[:, k]

@@ -43,8 +43,10 @@ belong to the stop controller (safety/stop.py).
 
 Modules: :mod:`params` (config -> constant arrays: the loop's CollisionLevelsConfig, or
 thresholds-file CollisionConfigs as one collision level, one phase), :mod:`state`,
-:mod:`reference` (the numpy implementation, the reference), :mod:`kernel` (the compiled
-twin, numba), :mod:`monitor` (:class:`CollisionLevels`, backend ``numpy|numba|auto``),
+:mod:`kernel` (the one implementation of a tick and of the threshold formula above,
+``kernel.threshold``, which replay, calibration and tuning call too; compiled by numba or run
+as its Python source; the numpy reference it is tested against is in tests/), :mod:`monitor`
+(:class:`CollisionLevels`, backend ``numpy|numba|auto``),
 :mod:`single` (:class:`CollisionMonitor`, one row), :mod:`tool_force`. Per tick nothing
 allocates.
 """

@@ -1,11 +1,18 @@
-"""The compiled twin of safety/collision/reference.py: one monitor tick in one call (numba).
+"""The collision monitor's one tick in one call (numba), and the formulas it is made of.
 
-Same arithmetic in the same order as the numpy reference, joint by joint (no fastmath, so no
-fused multiply-add); exp may differ from numpy's by an ulp on some machines (bit-identical
-here), so the test allows 1e-12 (tests/safety/collision/test_kernel.py). Writes only into
-the arrays passed in; allocates nothing. The compilation conventions (``cache=True``,
-warmed when the monitor is built, numpy fallback, HOFTO_HW_NO_NUMBA) are the observers'
-(hofto_hw/observers/kernels.py).
+The ONE implementation of the monitor's arithmetic: :func:`threshold` (the threshold formula
+of safety/collision/__init__.py, which the loop, flight-log replay, calibration and tuning all
+call), :func:`features_step` (the threshold features a, moving, r, s), :func:`monitor_step`
+(a whole tick) and :func:`monitor_tick` (the same on the packed state). Backend ``numba``
+runs them compiled; backend ``numpy`` runs the top-level function's own Python source
+(``py_func``; :func:`hofto_hw.observers.kernels.compiled_or_python`), and with numba's
+``NUMBA_DISABLE_JIT=1`` every line runs as Python. The numpy implementation this replaced is
+the reference in tests/safety/collision/reference.py (tests/safety/collision/test_kernel.py:
+agreement to 1e-12 over thousands of random steps, NaN/inf included).
+
+Joint by joint, no fastmath (so no fused multiply-add). Writes only into the arrays passed
+in; allocates nothing. The compilation conventions (``cache=True``, warmed when the monitor
+is built) are the observers' (hofto_hw/observers/kernels.py).
 """
 
 from __future__ import annotations
@@ -14,7 +21,7 @@ import math
 
 import numpy as np
 
-from hofto_hw.observers.kernels import _jit  # one jit policy (cache, read-only fallback)
+from hofto_hw.observers.kernels import _jit, _jit_inline  # one jit policy (cache, read-only)
 from safety.collision.state import flags_of
 
 _flags_of = _jit(flags_of)  # the numpy path's own function, compiled: one definition
@@ -30,6 +37,73 @@ ST_STARTED, ST_PHASE_LEFT, ST_ACCEL_PHASE = 0, 1, 2
 L_THR, L_RATIO, L_ABOVE, L_BELOW = 0, 1, 2, 3
 LOGIC_ANY, LOGIC_ALL, LOGIC_MEAN = 0, 1, 2
 COLLIDED, CONTACT, NONFINITE = 1, 2, 4
+
+
+@_jit_inline
+def threshold(base, kv, ka, kr, ks, aq, aa, rev, still):  # type: ignore[no-untyped-def]
+    """The collision threshold [N·m]: thr = kv·|qd| + base + ka·|a| + kr·r + ks·s, summed in
+    this order (the sums are rounded), from the gains of one level/row/joint (base of the
+    phase) and the features |qd| ``aq`` [rad/s], |a| ``aa`` [rad/s²], reversal ``rev`` and
+    standstill ``still`` (safety/collision/__init__.py). Floats in the kernels; as Python
+    (``threshold.py_func``) numpy arrays broadcast, which is how tuning evaluates it over a
+    whole recording (hofto_hw.replay.tuning.thresholds_of)."""
+    t = aq * kv
+    t = t + base
+    t = t + aa * ka
+    t = t + rev * kr
+    t = t + still * ks
+    return t
+
+
+@_jit_inline
+def features_step(feat: np.ndarray, sst: np.ndarray, bad_qd: np.ndarray, scal: np.ndarray,
+                  qd: np.ndarray, dt: float) -> None:  # fmt: skip
+    """Advance the threshold features ``feat`` (6, n) (state.py's rows) by dt [s] on qd (n,)
+    [rad/s]: the low-passed acceleration, the moving, reversal and standstill indicators;
+    ``bad_qd`` (n,) bool := qd not finite. A joint with a non-finite qd keeps its accel,
+    moving and reversal and uses its last finite velocity. ``sst`` (3,) marks the start (the
+    first call seeds qd_prev)."""
+    n = qd.shape[0]
+    if sst[ST_STARTED] == 0.0:
+        for j in range(n):
+            feat[F_QD_PREV, j] = qd[j] if math.isfinite(qd[j]) else 0.0
+        sst[ST_STARTED] = 1.0
+    v_rev = scal[S_V_REV]
+    alpha = dt / (scal[S_TAU_A] + dt)
+    inv_dt = 1.0 / dt
+    inv_v_rev = 1.0 / v_rev
+    inv_v_still = 1.0 / scal[S_V_STILL]
+    decay_moving = math.exp(-dt / scal[S_MOVING_TIME])
+    decay_rev = math.exp(-dt / scal[S_REVERSAL_TIME])
+    T = scal[S_STILL_TIME]
+    rise = 1.0 - math.exp(-dt / T) if T > 0.0 else 1.0
+    for j in range(n):
+        bq = not math.isfinite(qd[j])
+        bad_qd[j] = bq
+        v = feat[F_QD_PREV, j] if bq else qd[j]
+        feat[F_QD_OK, j] = v
+        x = (v - feat[F_QD_PREV, j]) * inv_dt
+        x = x - feat[F_ACCEL, j]
+        x = x * alpha
+        accel = feat[F_ACCEL, j] + x
+        feat[F_QD_PREV, j] = v
+        moving = feat[F_MOVING, j] * decay_moving
+        if abs(v) > v_rev:
+            moving = max(moving, 1.0)
+        y = v * inv_v_rev
+        rev_now = math.exp(-(y * y)) * moving
+        rev = max(feat[F_REVERSAL, j] * decay_rev, rev_now)
+        if not bq:
+            feat[F_ACCEL, j] = accel
+            feat[F_MOVING, j] = moving
+            feat[F_REVERSAL, j] = rev
+        z = v * inv_v_still
+        now = math.exp(-(z * z))
+        if T <= 0.0:
+            feat[F_STILL, j] = now
+        else:
+            s = feat[F_STILL, j]
+            feat[F_STILL, j] = min(now, (now - s) * rise + s)
 
 
 @_jit
@@ -104,46 +178,7 @@ def monitor_step(
     k = par.shape[2]
     n = par.shape[3]
     # ---- features (joints with a non-finite qd keep accel/moving/reversal)
-    if sst[ST_STARTED] == 0.0:
-        for j in range(n):
-            feat[F_QD_PREV, j] = qd[j] if math.isfinite(qd[j]) else 0.0
-        sst[ST_STARTED] = 1.0
-    v_rev = scal[S_V_REV]
-    alpha = dt / (scal[S_TAU_A] + dt)
-    inv_dt = 1.0 / dt
-    inv_v_rev = 1.0 / v_rev
-    inv_v_still = 1.0 / scal[S_V_STILL]
-    decay_moving = math.exp(-dt / scal[S_MOVING_TIME])
-    decay_rev = math.exp(-dt / scal[S_REVERSAL_TIME])
-    T = scal[S_STILL_TIME]
-    rise = 1.0 - math.exp(-dt / T) if T > 0.0 else 1.0
-    for j in range(n):
-        bq = not math.isfinite(qd[j])
-        bad[k + 1, j] = bq
-        v = feat[F_QD_PREV, j] if bq else qd[j]
-        feat[F_QD_OK, j] = v
-        x = (v - feat[F_QD_PREV, j]) * inv_dt
-        x = x - feat[F_ACCEL, j]
-        x = x * alpha
-        accel = feat[F_ACCEL, j] + x
-        feat[F_QD_PREV, j] = v
-        moving = feat[F_MOVING, j] * decay_moving
-        if abs(v) > v_rev:
-            moving = max(moving, 1.0)
-        y = v * inv_v_rev
-        rev_now = math.exp(-(y * y)) * moving
-        rev = max(feat[F_REVERSAL, j] * decay_rev, rev_now)
-        if not bq:
-            feat[F_ACCEL, j] = accel
-            feat[F_MOVING, j] = moving
-            feat[F_REVERSAL, j] = rev
-        z = v * inv_v_still
-        now = math.exp(-(z * z))
-        if T <= 0.0:
-            feat[F_STILL, j] = now
-        else:
-            s = feat[F_STILL, j]
-            feat[F_STILL, j] = min(now, (now - s) * rise + s)
+    features_step(feat, sst, bad[k + 1], scal, qd, dt)
     # ---- non-finite estimates (the fused row's only for the mean fusion)
     logic = int(scal[S_LOGIC])
     any_bad = False
@@ -185,11 +220,10 @@ def monitor_step(
             aa = abs(feat[F_ACCEL, j])
             fused = 0.0
             for r in range(k):
-                t = aq * par[lv, 2, r, j]
-                t = t + par[lv, phase, r, j]
-                t = t + aa * par[lv, 3, r, j]
-                t = t + feat[F_REVERSAL, j] * par[lv, 4, r, j]
-                t = t + feat[F_STILL, j] * par[lv, 5, r, j]
+                t = threshold(
+                    par[lv, phase, r, j], par[lv, 2, r, j], par[lv, 3, r, j], par[lv, 4, r, j],
+                    par[lv, 5, r, j], aq, aa, feat[F_REVERSAL, j], feat[F_STILL, j],
+                )  # fmt: skip
                 lev[lv, L_THR, r, j] = t
                 a = 0.0 if bad[r, j] else abs(tau[r, j])
                 ratio = a / t

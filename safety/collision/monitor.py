@@ -10,9 +10,8 @@ import numpy as np
 
 from hofto_hw.observers import kernels
 from safety.collision import params as P
-from safety.collision.kernel import monitor_tick as _kernel
+from safety.collision.kernel import features_step, monitor_step, monitor_tick
 from safety.collision.params import MonitorParams
-from safety.collision.reference import NumpyStep
 from safety.collision.state import (
     COLLIDED,
     CONTACT,
@@ -34,9 +33,10 @@ class CollisionLevels:
 
     Build with :meth:`from_config` (the loop's ``safety.collision``), :meth:`from_params`
     (e.g. :func:`safety.collision.params.from_thresholds`), or ``CollisionLevels(cfg, rows,
-    model, backend=...)`` (= from_config). ``backend``: ``numpy`` (the reference), ``numba``
-    (compiled; RuntimeError when unavailable) or ``auto`` (compiled when available, else
-    numpy; ``backend`` then says which runs).
+    model, backend=...)`` (= from_config). One implementation (safety/collision/kernel.py);
+    ``backend`` says how it runs: ``numba`` compiled (RuntimeError when unavailable),
+    ``numpy`` the kernel's own Python source run by the interpreter, ``auto`` compiled when
+    available, else the Python source (``backend`` then says which runs).
 
     Public state after :meth:`step`/:meth:`update` (views, valid until the next call):
     ``collision`` / ``contact`` (bool), ``collision_joints`` / ``contact_joints`` (n,) bool
@@ -53,7 +53,7 @@ class CollisionLevels:
         cfg: object,
         rows: Sequence[str],
         model: object | None = None,
-        backend: Backend = "numpy",
+        backend: Backend = "auto",
     ) -> None:
         self._build(P.from_levels_config(cfg, rows), model, cfg.tool_force, backend)  # type: ignore[attr-defined]
 
@@ -63,7 +63,7 @@ class CollisionLevels:
         cfg: object,
         rows: Sequence[str],
         model: object | None = None,
-        backend: Backend = "numpy",
+        backend: Backend = "auto",
     ) -> CollisionLevels:
         """From a CollisionLevelsConfig; ``model`` (RobotModel) only for ``tool_force``."""
         return cls(cfg, rows, model, backend)
@@ -74,7 +74,7 @@ class CollisionLevels:
         p: MonitorParams,
         model: object | None = None,
         tool_force: float | None = None,
-        backend: Backend = "numpy",
+        backend: Backend = "auto",
     ) -> CollisionLevels:
         self = cls.__new__(cls)
         self._build(p, model, tool_force, backend)
@@ -96,7 +96,6 @@ class CollisionLevels:
         np.copyto(s.deciding, p.deciding)
         self._par0 = p.par.copy()  # the configured thresholds (scale_thresholds' reference)
         self.threshold_scale = 1.0
-        self._numpy = NumpyStep(p, s)
         self.tool_force = tool_force
         self.tool_force_value = 0.0
         self._tool = None
@@ -128,7 +127,9 @@ class CollisionLevels:
         self._zero_qdd = np.zeros(n)
         self._tick = 0
         self.backend = kernels.ready(backend, self._warm)
+        #: True exactly when the compiled kernel runs (the fused tick's condition)
         self._use_kernel = self.backend == "numba"
+        self._features = kernels.compiled_or_python(features_step, self.backend)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -158,8 +159,10 @@ class CollisionLevels:
 
     def features(self, qd: np.ndarray, dt: float) -> None:
         """Advance only the threshold features (accel, moving, reversal, still) by dt [s]
-        (numpy reference; calibration reads them)."""
-        self._numpy.features(qd, dt)
+        (the tick's own :func:`~safety.collision.kernel.features_step`; calibration reads
+        them)."""
+        s = self.state
+        self._features(s.feat, s.sst, s.bad[self.k + 1], s.scal, qd, dt)
 
     # ------------------------------------------------------------------ one tick
 
@@ -170,11 +173,7 @@ class CollisionLevels:
         reference acceleration (n,) [rad/s²] (None: nominal phase), dt [s], the tick number
         recorded in ``first_tick``. Returns ``collision``."""
         qdd = self._zero_qdd if qdd_ref is None else qdd_ref
-        if self._use_kernel:
-            s = self.state
-            _kernel(s.fbuf, s.bbuf, s.first_tick, tau_ext, qd, qdd, dt, tick)
-        else:
-            self._numpy(tau_ext, qd, qdd, dt, tick)
+        self._run(tau_ext, qd, qdd, dt, tick)
         return bool(self._hits[self.L - 1])
 
     def update(
@@ -190,15 +189,10 @@ class CollisionLevels:
         (None: nominal phase), dt [s]. Reports COLLISION (latched by ``stop``), NON_FINITE and
         CONTACT (rising edge) events; returns the tick's flags (safety.collision.state):
         ``COLLIDED`` (the collision level decided), ``CONTACT`` (the contact level decided),
-        ``NONFINITE``; 0 on the common path. One compiled call when the kernel runs."""
+        ``NONFINITE``; 0 on the common path. One compiled call with backend numba."""
         if qdd_ref is None:
             qdd_ref = self._zero_qdd
-        if self._use_kernel:
-            s = self.state
-            f = _kernel(s.fbuf, s.bbuf, s.first_tick, tau_ext, qd, qdd_ref, dt, stop.tick)
-        else:
-            self._numpy(tau_ext, qd, qdd_ref, dt, stop.tick)
-            f = flags_of(self._hits)
+        f = self._run(tau_ext, qd, qdd_ref, dt, stop.tick)
         if f or self._was_contact:
             self._report(stop, f)
         if self._tool is not None:
@@ -206,6 +200,18 @@ class CollisionLevels:
             if self.tool_force_value > self.tool_force:  # type: ignore[operator]
                 stop.report(Fault.COLLISION, -1, self.tool_force_value)
         return f
+
+    def _run(self, tau: np.ndarray, qd: np.ndarray, qdd: np.ndarray, dt: float, tick: int) -> int:
+        """The kernel's tick: compiled on the packed state (one call), or monitor_step's
+        Python source on the state's own views (no view made per tick); returns the flags."""
+        s = self.state
+        if self._use_kernel:
+            return monitor_tick(s.fbuf, s.bbuf, s.first_tick, tau, qd, qdd, dt, tick)
+        _python_step(
+            s.par, s.scal, s.deciding, s.feat, s.sst, s.lev, s.joints, s.bad, s.row_hit,
+            s.level_joints, s.hits, s.first_tick, tau, qd, qdd, dt, tick,
+        )  # fmt: skip
+        return flags_of(s.hits)
 
     def _report(self, stop: StopController, flags: int) -> None:
         """Something happened (``flags`` of :meth:`update`): tell the stop controller
@@ -250,4 +256,7 @@ class CollisionLevels:
         np.copyto(s.scal, p.scal)
         np.copyto(s.deciding, p.deciding)
         z = np.zeros(n)
-        _kernel(s.fbuf, s.bbuf, s.first_tick, np.zeros((k, n)), z, z, 1e-3, 0)
+        monitor_tick(s.fbuf, s.bbuf, s.first_tick, np.zeros((k, n)), z, z, 1e-3, 0)
+
+
+_python_step = getattr(monitor_step, "py_func", monitor_step)

@@ -22,7 +22,7 @@ class CollisionMonitor:
     ``reversal``, ``still`` (n,).
     """
 
-    def __init__(self, cfg: CollisionConfig, backend: Backend = "numpy") -> None:
+    def __init__(self, cfg: CollisionConfig, backend: Backend = "auto") -> None:
         n = len(cfg.base)
         self.cfg = cfg
         self.n = n

@@ -1,9 +1,9 @@
-"""The compiled bus and limit scans (safety.kernels) give the numpy reference's reports.
+"""The bus and limit checks (safety.kernels, compiled and as their Python source) give the
+numpy reference's reports (tests/safety/reference.py).
 
 Every ``stop.report`` call (fault, joint, value, tick) is compared, not only the latched
 events, over thousands of random ticks with limits crossed, non-finite samples, stale data
-and drives in and out of Operation enabled. numba is optional: these tests skip without it,
-except under CI (a missing numba is then a failure).
+and drives in and out of Operation enabled.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from hofto_hw.config.safety import StopCategories
 from safety.bus_health import BusHealth
 from safety.limits import LimitMonitor
 from safety.stop import StopController
+from tests.safety.reference import ReferenceBus, ReferenceLimits
 
 require_compiled_kernels()
 
@@ -54,26 +55,29 @@ def _same(a: list[tuple[int, int, int, float]], b: list[tuple[int, int, int, flo
     return True
 
 
+_LIMITS = (
+    np.full(N, -1.0),
+    np.linspace(0.8, 1.2, N),
+    np.linspace(1.5, 2.5, N),
+    np.linspace(8.0, 12.0, N),
+    0.05,
+    0.02,
+)
+
+
 def _limit_monitor(backend: str) -> LimitMonitor:
-    return LimitMonitor(
-        np.full(N, -1.0),
-        np.linspace(0.8, 1.2, N),
-        np.linspace(1.5, 2.5, N),
-        np.linspace(8.0, 12.0, N),
-        0.05,
-        0.02,
-        backend=backend,  # type: ignore[arg-type]
-    )
+    return LimitMonitor(*_LIMITS, backend=backend)  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
 @pytest.mark.parametrize("packed", [False, True], ids=["separate arrays", "rows of one block"])
-def test_limit_monitor_backends_report_the_same(packed: bool) -> None:
-    """``packed``: q, qd, tau reach the compiled monitor as consecutive rows of one 2-D
-    array (as the drive group's are: the scan then reads that block in place), else as
-    separate arrays (the scan reads the monitor's copy)."""
+def test_limit_monitor_reports_the_references(packed: bool, backend: str) -> None:
+    """``packed``: q, qd, tau reach the monitor as consecutive rows of one 2-D array (as the
+    drive group's are: the scan then reads that block in place), else as separate arrays
+    (the scan reads the monitor's copy). ``numpy``: the kernels' Python source."""
     rng = np.random.default_rng(7)
-    ref, fast = _limit_monitor("numpy"), _limit_monitor("numba")
-    assert ref.backend == "numpy" and fast.backend == "numba"
+    ref, fast = ReferenceLimits(*_LIMITS), _limit_monitor(backend)
+    assert fast.backend == backend and fast._use_kernel == (backend == "numba")
     s_ref, s_fast = Recorder(), Recorder()
     q = np.zeros(N)
     start = q.copy()
@@ -117,7 +121,7 @@ def test_limit_monitor_backends_report_the_same(packed: bool) -> None:
         assert _same(s_ref.calls, s_fast.calls), k
         assert s_ref.latched == s_fast.latched and s_ref.category == s_fast.category
         np.testing.assert_array_equal(ref.q_prev, fast.q_prev)
-        assert ref._have_prev == fast._have_prev
+        assert ref.have_prev == fast._have_prev
         reported += len(s_ref.calls)
         if not np.all(np.isfinite(q)):
             q = np.zeros(N)
@@ -128,10 +132,11 @@ def _bus(backend: str) -> BusHealth:
     return BusHealth(N, 3, OP_ENABLED, FAULT_STATES, backend=backend)  # type: ignore[arg-type]
 
 
-def test_bus_health_backends_report_the_same() -> None:
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
+def test_bus_health_reports_the_references(backend: str) -> None:
     rng = np.random.default_rng(11)
-    ref, fast = _bus("numpy"), _bus("numba")
-    assert ref.backend == "numpy" and fast.backend == "numba"
+    ref, fast = ReferenceBus(N, 3, OP_ENABLED, FAULT_STATES), _bus(backend)
+    assert fast.backend == backend
     s_ref, s_fast = Recorder(), Recorder()
     codes = np.array([0, 1, 2, 3, 4, 5, 6, 6, 6, 6, 7, 8, 9], dtype=np.uint8)
     for k in range(TICKS):
@@ -152,6 +157,10 @@ def test_bus_health_backends_report_the_same() -> None:
     assert len({c[1] for c in s_ref.calls}) == 3  # bus loss, drive fault, drive disabled
 
 
-def test_numpy_switch_selects_the_reference() -> None:
-    assert _bus("numpy").backend == "numpy"
-    assert _limit_monitor("numpy")._use_kernel is False
+def test_numpy_switch_runs_the_kernels_source() -> None:
+    from safety import kernels
+
+    bus, lim = _bus("numpy"), _limit_monitor("numpy")
+    assert bus.backend == "numpy" and bus._use_kernel is False
+    assert bus._scan is kernels.drive_scan.py_func
+    assert lim._use_kernel is False and lim._quiet is kernels.limits_quiet.py_func

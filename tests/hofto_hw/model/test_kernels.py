@@ -1,6 +1,8 @@
-"""The model's compiled kernels (hofto_hw.model.kernels) against the numpy reference:
-friction eq. (12) with every optional term and its held-friction memory, the compiled
-snapshot (held friction included) and the compiled feed-forward inverse dynamics."""
+"""The model's kernels (hofto_hw.model.kernels) against the numpy reference
+(tests/hofto_hw/model/reference.py, FrictionParams.torque): friction eq. (12) with every
+optional term and its held-friction memory, the snapshot (held friction included) and the
+feed-forward inverse dynamics, each compiled (native and not) and as the kernels' Python
+source (backend numpy)."""
 
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ from support.compiled import require_compiled_kernels
 
 from hofto_hw.model import FrictionParams
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+from tests.hofto_hw.model.reference import ReferenceData, ReferenceSnapshot
 
 require_compiled_kernels()
 
@@ -82,11 +85,20 @@ def test_friction_kernel_equals_the_numpy_friction_with_its_memory() -> None:
                 W[mk.STATE].fill(0.0)
 
 
-def test_compiled_inverse_dynamics_equals_the_numpy_one(er3a_model) -> None:
+#: (backend, native) of the product's paths: one compiled call, pinocchio's Python calls and
+#: the compiled kernel, pinocchio's Python calls and the kernel's Python source
+PATHS = [("numba", True), ("numba", False), ("numpy", True)]
+
+
+@pytest.mark.parametrize(("backend", "native"), PATHS)
+def test_inverse_dynamics_equals_the_numpy_one(er3a_model, backend, native) -> None:
     rng = np.random.default_rng(12)
     n = er3a_model.n
-    ref, fast = er3a_model.create_data(), er3a_model.create_data(backend="numba")
-    assert ref.backend == "numpy" and fast.backend == "numba"
+    ref = ReferenceData(er3a_model)
+    fast = er3a_model.create_data(backend=backend)
+    if not native:
+        fast = type(fast)(er3a_model, backend, native=False)
+    assert fast.backend == backend and fast.native == (native and backend == "numba")
     for fr in _frictions(n, rng)[::3]:
         er3a_model.friction = fr  # a new parameter set: the compiled copy must follow
         ref.reset_friction_state()
@@ -104,18 +116,19 @@ def test_compiled_inverse_dynamics_equals_the_numpy_one(er3a_model) -> None:
             assert fast.inverse_dynamics(q, qd, qdd) is fast.inverse_dynamics(q, qd, qdd)
 
 
-def test_compiled_snapshot_with_held_friction_equals_the_numpy_one(er3a_model) -> None:
-    """A model with held friction and a quadratic term runs the compiled snapshot too (its
-    memory in the snapshot's workspace), with the numpy snapshot's terms and memory."""
+@pytest.mark.parametrize(("backend", "native"), PATHS)
+def test_snapshot_with_held_friction_equals_the_numpy_one(er3a_model, backend, native) -> None:
+    """A model with held friction and a quadratic term runs every snapshot path (its memory
+    in the snapshot's workspace), with the numpy reference's terms and memory."""
     rng = np.random.default_rng(13)
     n = er3a_model.n
     fr = _frictions(n, rng)[-1]  # smooth sign, Stribeck, quadratic, held, passive
     assert fr.held is not None and fr.quadratic is not None
     er3a_model.friction = fr
-    ref = DynamicsSnapshot(er3a_model, ALL)
-    fast = DynamicsSnapshot(er3a_model, ALL, backend="numba")
-    assert ref.backend == "numpy" and fast.backend == "numba"
-    for k in range(2000):
+    ref = ReferenceSnapshot(er3a_model, ALL)
+    fast = DynamicsSnapshot(er3a_model, ALL, backend=backend, native=native)
+    assert fast.backend == backend and fast.native == (native and backend == "numba")
+    for k in range(2000 if backend == "numba" else 500):
         q = er3a_model.home + rng.uniform(-1.0, 1.0, n)
         qd, tau = _velocity(n, rng), rng.normal(0.0, 20.0, n)
         assert ref.compute(q, qd, tau) == fast.compute(q, qd, tau) == bool(np.isfinite(qd).all())
@@ -125,7 +138,9 @@ def test_compiled_snapshot_with_held_friction_equals_the_numpy_one(er3a_model) -
         np.testing.assert_array_equal(fast.M, ref.M)
         np.testing.assert_array_equal(fast.g, ref.g)
         np.testing.assert_array_equal(fast.nle, ref.nle)
-        for a, b in ((ref.f, fast.f), (ref.ct_qd, fast.ct_qd), (ref.accel, fast.accel)):
+        pairs = ((ref.f, fast.f), (ref.ct_qd, fast.ct_qd), (ref.accel, fast.accel))
+        pairs += ((ref.total, tau - fast.f),)
+        for a, b in pairs:
             np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12 * (1.0 + np.abs(a).max()))
         if k % 500 == 0:
             ref.reset_memory()
@@ -133,10 +148,11 @@ def test_compiled_snapshot_with_held_friction_equals_the_numpy_one(er3a_model) -
             assert not fast.data.friction_state.any()
 
 
-def test_compiled_snapshot_follows_a_replaced_friction_model(er3a_model) -> None:
+@pytest.mark.parametrize(("backend", "native"), PATHS)
+def test_snapshot_follows_a_replaced_friction_model(er3a_model, backend, native) -> None:
     rng = np.random.default_rng(14)
-    fast = DynamicsSnapshot(er3a_model, ALL, backend="numba")
-    ref = DynamicsSnapshot(er3a_model, ALL)
+    fast = DynamicsSnapshot(er3a_model, ALL, backend=backend, native=native)
+    ref = ReferenceSnapshot(er3a_model, ALL)
     q, qd, tau = er3a_model.home, rng.normal(0.0, 1.0, 6), rng.normal(0.0, 5.0, 6)
     er3a_model.friction = _frictions(6, rng)[5]
     fast.compute(q, qd, tau)

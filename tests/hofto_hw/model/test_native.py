@@ -1,6 +1,7 @@
 """The native dynamics (pinocchio's C++ algorithms called from one numba kernel) against the
-pinocchio-Python path: every snapshot term and the feed-forward within 1e-12, parameter
-changes followed, non-finite samples, joint kinds, the build cache and the fallback."""
+numpy reference over pinocchio's Python API (tests/hofto_hw/model/reference.py): every
+snapshot term and the feed-forward within 1e-12, parameter changes followed, non-finite
+samples, joint kinds, the build cache and the fallback."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from hofto_hw.model.friction import FrictionParams
 from hofto_hw.model.payload import Payload, apply_payload
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+from tests.hofto_hw.model.reference import ReferenceData, ReferenceSnapshot
 
 ROOT = Path(__file__).resolve().parents[3]
 ALL = Needs.MASS | Needs.GRAVITY | Needs.NLE | Needs.CORIOLIS_T | Needs.ACCEL
@@ -72,9 +74,9 @@ def _agree(a: DynamicsSnapshot, b: DynamicsSnapshot) -> None:
 
 
 def _pair(model: RobotModel) -> tuple[DynamicsSnapshot, DynamicsSnapshot]:
-    ref = DynamicsSnapshot(model, ALL | Needs.FRICTION, "numpy")
+    ref = ReferenceSnapshot(model, ALL | Needs.FRICTION)
     fast = DynamicsSnapshot(model, ALL | Needs.FRICTION, "numba")
-    assert fast.native and not ref.native
+    assert fast.native
     return ref, fast
 
 
@@ -92,7 +94,7 @@ def test_snapshot_terms_equal_the_pinocchio_python_path(name: str) -> None:
 @pytest.mark.parametrize("name", ["er3a", "ur10e"])
 def test_inverse_dynamics_equals_rnea_plus_friction(name: str) -> None:
     model = _model(name)
-    ref, fast = model.create_data(), model.create_data("numba")
+    ref, fast = ReferenceData(model), model.create_data("numba")
     assert fast.native
     rng = np.random.default_rng(5)
     for q, qd, _ in _samples(model, 400, 4):
@@ -111,7 +113,7 @@ def test_parameter_changes_are_followed() -> None:
     workspaces were made: the native copy follows each (RobotModel.revision)."""
     model = _model("er3a")
     ref, fast = _pair(model)
-    ff_ref, ff = model.create_data(), model.create_data("numba")
+    ff_ref, ff = ReferenceData(model), model.create_data("numba")
     samples = _samples(model, 20, 9)
     qdd = np.linspace(-1.0, 1.0, model.n)
 
@@ -161,9 +163,9 @@ def test_non_finite_sample_keeps_the_last_terms(which: str) -> None:
 
 
 def _pair_of(model: RobotModel, needs: Needs) -> tuple[DynamicsSnapshot, DynamicsSnapshot]:
-    ref = DynamicsSnapshot(model, needs | Needs.FRICTION, "numpy")
+    ref = ReferenceSnapshot(model, needs | Needs.FRICTION)
     fast = DynamicsSnapshot(model, needs | Needs.FRICTION, "numba")
-    assert fast.native and not ref.native
+    assert fast.native
     return ref, fast
 
 
@@ -373,13 +375,18 @@ def test_a_joint_kind_it_does_not_know_runs_the_python_path() -> None:
     model = _chain([pin.JointModelRZ(), pin.JointModelPZ(), pin.JointModelRY()])
     with pytest.raises(ValueError, match="j2 is a JointModelPZ"):
         native.model_numbers(model)
-    ref = DynamicsSnapshot(model, ALL | Needs.FRICTION, "numpy")
+    ref = ReferenceSnapshot(model, ALL | Needs.FRICTION)
     fast = DynamicsSnapshot(model, ALL | Needs.FRICTION, "numba")
     assert not fast.native and fast.backend == "numba"
-    assert not model.create_data("numba").native
+    ff, ff_ref = model.create_data("numba"), ReferenceData(model)
+    assert not ff.native and ff.backend == "numba"
     for q, qd, tau in _samples(model, 50, 8):
         assert ref.compute(q, qd, tau) and fast.compute(q, qd, tau)
         _agree(fast, ref)
+        b = ff_ref.inverse_dynamics(q, qd, tau)
+        assert np.max(np.abs(ff.inverse_dynamics(q, qd, tau) - b)) <= TOL * max(
+            1.0, float(np.max(np.abs(b)))
+        )
 
 
 def _run(code: str, **env: str) -> subprocess.CompletedProcess:

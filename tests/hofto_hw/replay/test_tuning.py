@@ -13,8 +13,10 @@ from hofto_hw.replay.tuning import (
     judge,
     judge_grid,
     per_joint_best,
+    thresholds_grid,
     thresholds_of,
 )
+from safety.collision.kernel import threshold
 
 
 def test_envelope_objective_counts_every_sample() -> None:
@@ -58,6 +60,29 @@ def test_thresholds_of_scales_each_joint_by_its_margin() -> None:
     env = np.array([[1.0, 0, 0, 0, 0], [2.0, 0, 0, 0, 0]])
     thr = thresholds_of(feats, env, np.array([0.5, 1.0]))
     assert np.allclose(thr, [[1.5, 4.0]] * 4)
+
+
+def test_tuning_thresholds_are_the_monitors_formula() -> None:
+    """thresholds_of and the margin grid evaluate the monitor's own threshold function (the
+    compiled one, joint by joint) on random features and envelopes."""
+    rng = np.random.default_rng(4)
+    feats = rng.uniform(0.0, 2.0, (30, 3, 5))
+    feats[:, :, 0] = 1.0
+    env = rng.uniform(0.0, 1.5, (3, 5))
+    margin, rest = np.array([0.1, 0.2, 0.3]), np.array([0.5, 0.0, 1.0])
+    thr = thresholds_of(feats, env, margin, rest)
+    for k in range(30):
+        for j in range(3):
+            c = env[j] * (1.0 + margin[j])
+            ks = env[j, 4] * (1.0 + rest[j])
+            f = feats[k, j]
+            want = threshold(c[0], c[1], c[2], c[3], ks, f[1], f[2], f[3], f[4])
+            assert thr[k, j] == want
+    m_scale, r_scale = np.array([1.0, 1.25, 1.5]), np.array([1.0, 2.0, 3.0])
+    grid = thresholds_grid(feats, env, m_scale, r_scale)
+    for p in range(3):
+        one = thresholds_of(feats, env, np.full(3, m_scale[p] - 1.0), np.full(3, r_scale[p] - 1.0))
+        np.testing.assert_allclose(grid[:, :, p], one, rtol=1e-14)
 
 
 def test_choose_raises_each_margin_by_the_cushion() -> None:

@@ -1,7 +1,7 @@
-"""The compiled monitor tick (numba) against the numpy reference: same ratios and thresholds
-to 1e-12, identical trips, releases, decisions and first crossings over thousands of random
-steps with NaN/inf injections, both phases, every fusion logic, several rows. numba is
-optional: these tests skip without it, except under CI."""
+"""The monitor tick (safety/collision/kernel.py, compiled and as its Python source) against
+the numpy reference (tests/safety/collision/reference.py): same ratios and thresholds to
+1e-12, identical trips, releases, decisions and first crossings over thousands of random
+steps with NaN/inf injections, both phases, every fusion logic, several rows."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from safety.collision import kernel as K
 from safety.collision import params as P
 from safety.collision import state as S
 from safety.stop import StopController
+from tests.safety.collision.reference import ReferenceLevels
 
 require_compiled_kernels()
 
@@ -85,14 +86,20 @@ def _trace(mon, tau, qd, qdd, dt) -> dict[str, np.ndarray]:
 
 
 def _lockstep(make, k: int, seed: int) -> dict[str, int]:
-    ref, fast = make("numpy"), make("numba")
-    assert ref.backend == "numpy" and fast.backend == "numba"
+    """The reference, the kernel's Python source (backend numpy) and the compiled kernel over
+    the same inputs."""
+    fast, source = make("numba"), make("numpy")
+    assert fast.backend == "numba" and source.backend == "numpy"
+    ref = ReferenceLevels(fast.params)
     inputs = _inputs(k, seed)
-    a, b = _trace(ref, *inputs), _trace(fast, *inputs)
-    for f in ("collision", "joints", "hits", "level_joints", "row_hit", "bad", "sst", "first_tick"):
-        np.testing.assert_array_equal(a[f], b[f], err_msg=f)  # identical trips and releases
-    for f in ("lev", "feat"):
-        np.testing.assert_allclose(b[f], a[f], rtol=TOL, atol=TOL, err_msg=f)
+    a = _trace(ref, *inputs)
+    for mon in (fast, source):
+        b = _trace(mon, *inputs)
+        for f in ("collision", "joints", "hits", "level_joints", "row_hit", "bad", "sst"):
+            np.testing.assert_array_equal(a[f], b[f], err_msg=f)  # identical trips, releases
+        np.testing.assert_array_equal(a["first_tick"], b["first_tick"])
+        for f in ("lev", "feat"):
+            np.testing.assert_allclose(b[f], a[f], rtol=TOL, atol=TOL, err_msg=f)
     col = a["collision"]
     L = a["hits"].shape[1] - 1
     return {
@@ -198,7 +205,12 @@ def test_update_flags_agree_and_say_what_the_state_says(logic: str) -> None:
             assert bool(f & S.NONFINITE) == mon.fault_nonfinite
             flags.append(f)
         seen[be], stops[be] = flags, stop
-    assert seen["numpy"] == seen["numba"]
+    ref = ReferenceLevels(mon.params)
+    expected = []
+    for i in range(STEPS):
+        ref.step(tau[i], qd[i], qdd[i], dt[i], i)
+        expected.append(S.flags_of(ref.state.hits))
+    assert seen["numpy"] == seen["numba"] == expected
     f = np.array(seen["numpy"])
     for bit in (S.COLLIDED, S.CONTACT, S.NONFINITE):
         assert (f & bit).any() and not (f & bit).all(), bit  # the run exercised each flag
@@ -211,3 +223,31 @@ def test_update_flags_agree_and_say_what_the_state_says(logic: str) -> None:
 
 def test_flag_bits_match_the_state() -> None:
     assert (K.COLLIDED, K.CONTACT, K.NONFINITE) == (S.COLLIDED, S.CONTACT, S.NONFINITE)
+
+
+def test_features_are_the_ticks_and_agree_with_the_reference() -> None:
+    """CollisionLevels.features (what calibration reads) advances the features as a tick does:
+    the reference's features over random velocities with NaN/inf, both backends."""
+    cfg, rows = _levels_cfg("any"), ["hofto", "momentum"]
+    _, qd, _, dt = _inputs(len(rows), seed=13)
+    for be in ("numpy", "numba"):
+        mon = CollisionLevels(cfg, rows, backend=be)
+        ref = ReferenceLevels(mon.params)
+        for i in range(STEPS):
+            mon.features(qd[i], dt[i])
+            ref._step.features(qd[i], dt[i])
+            np.testing.assert_allclose(mon.state.feat, ref.state.feat, rtol=TOL, atol=TOL)
+            np.testing.assert_array_equal(mon.state.bad, ref.state.bad)
+        assert mon.state.feat[S.F_STILL].min() < 0.5 < mon.state.feat[S.F_REVERSAL].max()
+
+
+def test_threshold_formula_on_arrays_is_the_kernels() -> None:
+    """K.threshold run as Python on arrays (tuning's use) gives the compiled scalar's values
+    bit for bit, and the formula of safety/collision/__init__.py."""
+    rng = np.random.default_rng(2)
+    args = rng.uniform(0.0, 3.0, (9, 50))
+    as_arrays = K.threshold.py_func(*args)
+    compiled = np.array([K.threshold(*args[:, i]) for i in range(50)])
+    np.testing.assert_array_equal(as_arrays, compiled)
+    base, kv, ka, kr, ks, aq, aa, r, st = args
+    np.testing.assert_allclose(as_arrays, base + kv * aq + ka * aa + kr * r + ks * st, rtol=1e-14)

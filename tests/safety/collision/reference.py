@@ -1,6 +1,10 @@
-"""The numpy reference implementation of one monitor tick (allocation-free: every array is
-preallocated and written with ``out=``). safety/collision/kernel.py is its compiled twin;
-tests/safety/collision/test_kernel.py checks that both agree."""
+"""The numpy reference of one collision-monitor tick, for the agreement tests only (the
+product's one implementation is safety/collision/kernel.py; test_kernel.py checks that it
+agrees with this one, compiled and as Python source). Allocation-free: every array is
+preallocated and written with ``out=``.
+
+:class:`ReferenceLevels` is a monitor driven by it, with the state layout and the ``step``
+of :class:`safety.collision.CollisionLevels`."""
 
 from __future__ import annotations
 
@@ -254,3 +258,28 @@ class NumpyStep:
             else:
                 every = False
         s.hits[lv] = hit and (every or self.logic == "any")
+
+
+class ReferenceLevels:
+    """``state``, ``backend`` and ``step`` of a CollisionLevels, run by :class:`NumpyStep`."""
+
+    backend = "reference"
+
+    def __init__(self, p: MonitorParams) -> None:
+        from safety.collision.params import N_SCAL
+
+        L, _, k, n = p.par.shape
+        self.params, self.L = p, L
+        self.state = s = MonitorState(L, k, n, N_SCAL)
+        np.copyto(s.par, p.par)
+        np.copyto(s.scal, p.scal)
+        np.copyto(s.deciding, p.deciding)
+        s.reset(p.par, None, float(p.scal[S_V_REV]))
+        self._step = NumpyStep(p, s)
+
+    def step(
+        self, tau: np.ndarray, qd: np.ndarray, qdd: np.ndarray | None, dt: float, tick: int
+    ) -> bool:
+        n = qd.shape[0]
+        self._step(tau, qd, np.zeros(n) if qdd is None else qdd, dt, tick)
+        return bool(self.state.hits[self.L - 1])
