@@ -35,6 +35,14 @@ from drivers.cia402.pdo import RXPDO_DTYPE, RXPDO_SIZE, TXPDO_DTYPE, TXPDO_SIZE
 from drivers.cia402.state_machine import STATE_FROM_STATUS
 from hofto_hw.observers.kernels import Backend, jit, resolve, warm
 
+try:  # the byte helpers: compiled into the kernels that call them, plain Python otherwise
+    from numba.extending import register_jitable as _helper
+except Exception:  # numba missing or not importable: the kernels run as Python anyway
+
+    def _helper(fn):  # type: ignore[no-untyped-def]
+        return fn
+
+
 __all__ = [
     "POSITION",
     "SI_ROWS",
@@ -116,24 +124,24 @@ def image_bytes(image: np.ndarray) -> np.ndarray:
     return image.view(np.uint8)
 
 
-@jit
+@_helper
 def _u16(b: np.ndarray, o: int) -> int:
     return np.int64(b[o]) | (np.int64(b[o + 1]) << 8)
 
 
-@jit
+@_helper
 def _i16(b: np.ndarray, o: int) -> int:
     v = _u16(b, o)
     return v - 65536 if v >= 32768 else v
 
 
-@jit
+@_helper
 def _i32(b: np.ndarray, o: int) -> int:
     v = _u16(b, o) | (_u16(b, o + 2) << 16)
     return v - 4294967296 if v >= 2147483648 else v
 
 
-@jit
+@_helper
 def _put(b: np.ndarray, o: int, v: int, size: int) -> None:
     for k in range(size):
         b[o + k] = (v >> (8 * k)) & 0xFF
@@ -153,7 +161,7 @@ def read_si(tx: np.ndarray, w: np.ndarray, states: np.ndarray) -> None:
         states[i] = _STATE_TABLE[_u16(tx, o + _TX_SW) & 0x7F]
 
 
-@jit
+@_helper
 def _to_raw(x: float, lo: float, hi: float) -> float:
     """Round half to even and saturate (NaN stays NaN), as np.rint + np.clip."""
     x = np.rint(x)

@@ -200,3 +200,49 @@ def test_the_kernels_literal_layout_is_the_pdo_modules(
     for backend in ("numpy", "numba"):  # the kernels' source reads the same literals
         with pytest.raises(RuntimeError, match="layout literals"):
             DriveGroup.from_config(bus, cfg.bus, backend=backend)  # type: ignore[arg-type]
+
+
+def test_without_numba_the_group_runs_the_kernels_source_and_compiles_nothing(
+    tmp_path: Path,
+) -> None:
+    """HOFTO_HW_NO_NUMBA=1 (numba's switch of this project, read at import): the group runs
+    the kernels' Python source, byte helpers included (none is compiled on the way), and
+    reads the same SI values the numpy reference gives."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[3]
+    reference_py = str(Path(__file__).with_name("reference.py"))
+    script = f"""
+import importlib.util, numpy as np
+from hofto_hw.config import load_config
+from hofto_hw.runtime.build import build_sim_bus
+from drivers.cia402.drive_group import DriveGroup
+from drivers.cia402 import kernels
+spec = importlib.util.spec_from_file_location("ref", {reference_py!r})
+ref = importlib.util.module_from_spec(spec); spec.loader.exec_module(ref)
+cfg = load_config({str(root / "configs" / "er3a.yaml")!r})
+bus = build_sim_bus(cfg, external=False)
+bus.open()
+g = DriveGroup.from_config(bus, cfg.bus)
+assert g.backend == "numpy" and g._fast is None, g.backend
+bus.tx["position"] = [1000, -2000, 3, 2**31 - 1, -2**31, 0]
+bus.tx["statusword"] = [0x0237, 0x0250, 0x0208, 0x0233, 0x0231, 0x0240]
+g.read()
+g.command_position(np.full(6, 0.1), np.full(6, 2.0))
+want = ref.read(g)
+for f in ref.READ_FIELDS:
+    assert np.array_equal(getattr(g, f), want[f]), f
+assert bus.rx["target_position"].any() and bus.rx["torque_offset"].any()
+fns = ("read_si", "command_raw", "_u16", "_i16", "_i32", "_put", "_to_raw")
+compiled = [f for f in fns if getattr(getattr(kernels, f), "signatures", None)]
+assert not compiled, compiled
+print("ok")
+"""
+    env = {**os.environ, "HOFTO_HW_NO_NUMBA": "1"}
+    out = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
+        timeout=120,
+    )  # fmt: skip
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
