@@ -125,7 +125,6 @@ class DriveGroup(ImageFields):
         #: consecutive cycles without fresh data (0 after a good cycle)
         self.stale_cycles = 0
         self._bind_image(transport.rx, transport.tx)
-        self._u16 = np.zeros(n, dtype=np.uint16)
         self._cw = np.zeros(n, dtype=np.uint16)
         self._flags = np.zeros(n, dtype=bool)
         self._u32 = np.zeros(n, dtype=np.uint32)
