@@ -35,7 +35,7 @@ from drivers.errors import TransportError
 from drivers.transport import STATUS_OK, Transport, describe_status
 from hofto_hw.errors import ConfigError
 
-if TYPE_CHECKING:  # the kernels (and numba) load only when a compiled backend is asked for
+if TYPE_CHECKING:  # the kernels (and numba) load when the first group is built
     from drivers.cia402.kernels import Backend
 
 
@@ -59,6 +59,11 @@ class DriveGroup(ImageFields):
 
     ``transition_timeout`` [s] bounds each single state transition; it is converted to bus
     cycles with ``transport.cycle_time`` so simulated buses time out in simulated time.
+    ``backend``: the read and commands are the kernels of :mod:`drivers.cia402.kernels`
+    (their one implementation), ``numba`` compiled, ``numpy`` their Python source run by the
+    interpreter (for tests and debugging; ~75 µs a call against ~0.5), ``auto`` (default)
+    compiled when numba works. The numpy reference of the same arithmetic is a test's
+    (tests/drivers/cia402/reference.py).
     """
 
     def __init__(
@@ -67,7 +72,7 @@ class DriveGroup(ImageFields):
         scaling: Scaling,
         *,
         transition_timeout: float = 0.5,
-        backend: Backend = "numpy",
+        backend: Backend = "auto",
         profile_acceleration: Sequence[float] | None = None,
     ) -> None:
         n = transport.n_axes
@@ -120,25 +125,33 @@ class DriveGroup(ImageFields):
         #: consecutive cycles without fresh data (0 after a good cycle)
         self.stale_cycles = 0
         self._bind_image(transport.rx, transport.tx)
-        self._u16 = np.zeros(n, dtype=np.uint16)
         self._cw = np.zeros(n, dtype=np.uint16)
         self._flags = np.zeros(n, dtype=bool)
         self._u32 = np.zeros(n, dtype=np.uint32)
-        self._fast: Any = None
-        self._tx_bytes: Any = None  # the images' raw bytes (uint8 views) of the kernels
-        self._rx_bytes: Any = None
-        if backend != "numpy":
-            from drivers.cia402 import kernels
+        from drivers.cia402 import kernels
+        from hofto_hw.observers.kernels import compiled_or_python
 
-            self._tx_bytes = kernels.image_bytes(transport.tx)
-            self._rx_bytes = kernels.image_bytes(transport.rx)
-            if kernels.ready(backend, self._warm):
-                self._fast = kernels
-                # read() as the compiled call itself: no Python frame around it in the tick
-                # (an instance attribute, so tests and tools/bench_tick.py can still wrap it)
-                self.read = partial(kernels.read_si, self._tx_bytes, self._si, self.states)  # type: ignore[method-assign]
-        #: the implementation of read and command: ``numpy`` (reference) or ``numba``
-        self.backend = "numpy" if self._fast is None else "numba"
+        if not kernels.layout_matches():
+            raise RuntimeError(
+                "drivers/cia402/kernels.py: its PDO layout literals are not those of "
+                "drivers/cia402/pdo.py and state_machine.py (change both together)"
+            )
+        # the images' raw bytes (uint8 views) the kernels decode and encode
+        self._tx_bytes = kernels.image_bytes(transport.tx)
+        self._rx_bytes = kernels.image_bytes(transport.rx)
+        #: the implementation of read and command: the kernels of drivers/cia402/kernels.py,
+        #: ``numba`` compiled, ``numpy`` their Python source run by the interpreter
+        self.backend = kernels.resolve(backend)
+        if self.backend == "numba" and not kernels.ready(backend, self._warm):
+            self.backend = "numpy"
+        #: the kernels module when the compiled kernels run, else None (the tick's fused call
+        #: needs them: hofto_hw/runtime/fused.py)
+        self._fast: Any = kernels if self.backend == "numba" else None
+        self._read_si = compiled_or_python(kernels.read_si, self.backend)
+        self._command_raw = compiled_or_python(kernels.command_raw, self.backend)
+        # read() as the kernel call itself: no Python frame around it in the tick (an
+        # instance attribute, so tests and tools/bench_tick.py can still wrap it)
+        self.read = partial(self._read_si, self._tx_bytes, self._si, self.states)  # type: ignore[method-assign]
         self._init_commissioning()
 
     def _init_commissioning(self) -> None:
@@ -185,9 +198,10 @@ class DriveGroup(ImageFields):
             kernels.command_raw(q, q, rx, si, what)
 
     @classmethod
-    def from_config(cls, transport: Transport, bus: Any, backend: Backend = "numpy") -> DriveGroup:
+    def from_config(cls, transport: Transport, bus: Any, backend: Backend = "auto") -> DriveGroup:
         """From a :class:`hofto_hw.config.drives.BusConfig`; ``backend`` as the constructor's
-        (``numpy``, ``numba`` or ``auto``: compiled read/command when numba is available)."""
+        (``auto``: the compiled read/command when numba is available, else their Python
+        source; ``numba``: compiled; ``numpy``: the kernels' Python source)."""
         scaling = Scaling([AxisScaling.from_config(d) for d in bus.drives])
         return cls(
             transport,
@@ -200,14 +214,9 @@ class DriveGroup(ImageFields):
     # ------------------------------------------------------------ hot path (tick)
 
     def read(self) -> None:
-        """Decode the TxPDO into q, qd, tau, current, states (no allocation): the numpy
-        reference; with the compiled backend the instance's ``read`` is the kernel itself."""
-        sc = self.scaling
-        sc.position_to_si(self._tx_pos, self.q)
-        sc.velocity_to_si(self._tx_vel, self.qd)
-        np.multiply(self._tx_tau, self._si[6], out=self.tau)  # torque_scale's row
-        sc.current_to_si(self._tx_cur, self.current)
-        sm.decode_states(self._tx_sw, self.states, self._u16)
+        """Decode the TxPDO into q, qd, tau, current, states (no allocation):
+        :func:`drivers.cia402.kernels.read_si` (the instance's ``read`` is that call)."""
+        self._read_si(self._tx_bytes, self._si, self.states)
 
     def cycle(self) -> int:
         """Exchange the process image, then :meth:`read`. Returns the transport status
@@ -234,28 +243,20 @@ class DriveGroup(ImageFields):
         return self.transport.sample_dt
 
     def command_position(self, q: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
-        """CSP target q [rad] (n,) and optional torque feed-forward [N·m] (n,)."""
-        if self._fast is not None:
-            if tau_offset is None:
-                self._fast.command_raw(q, q, self._rx_bytes, self._si, 0)  # POSITION
-            else:
-                self._fast.command_raw(q, tau_offset, self._rx_bytes, self._si, 2)  # + WITH_TAU
-            return
-        self.scaling.position_to_raw(q, self._rx_pos)
-        if tau_offset is not None:
-            self.scaling.torque_to_raw(tau_offset, self._rx_off)
+        """CSP target q [rad] (n,) and optional torque feed-forward [N·m] (n,)
+        (:func:`drivers.cia402.kernels.command_raw`)."""
+        if tau_offset is None:
+            self._command_raw(q, q, self._rx_bytes, self._si, 0)  # POSITION
+        else:
+            self._command_raw(q, tau_offset, self._rx_bytes, self._si, 2)  # + WITH_TAU
 
     def command_velocity(self, qd: np.ndarray, tau_offset: np.ndarray | None = None) -> None:
-        """CSV target qd [rad/s] (n,) and optional torque feed-forward [N·m] (n,)."""
-        if self._fast is not None:
-            if tau_offset is None:
-                self._fast.command_raw(qd, qd, self._rx_bytes, self._si, 1)  # VELOCITY
-            else:
-                self._fast.command_raw(qd, tau_offset, self._rx_bytes, self._si, 3)  # + WITH_TAU
-            return
-        self.scaling.velocity_to_raw(qd, self._rx_vel)
-        if tau_offset is not None:
-            self.scaling.torque_to_raw(tau_offset, self._rx_off)
+        """CSV target qd [rad/s] (n,) and optional torque feed-forward [N·m] (n,)
+        (:func:`drivers.cia402.kernels.command_raw`)."""
+        if tau_offset is None:
+            self._command_raw(qd, qd, self._rx_bytes, self._si, 1)  # VELOCITY
+        else:
+            self._command_raw(qd, tau_offset, self._rx_bytes, self._si, 3)  # + WITH_TAU
 
     def command_torque(self, tau: np.ndarray) -> None:
         """CST target torque [N·m] (n,), joint side."""

@@ -1,11 +1,14 @@
-"""Compiled raw <-> SI conversions of the drive group's hot path (numba), beside the numpy
-reference path of :mod:`drivers.cia402.units`.
+"""The drive group's raw <-> SI conversions of its hot path, its one implementation: compiled
+(numba) or, for the ``numpy`` backend, the same functions' Python source run by the
+interpreter (:func:`hofto_hw.observers.kernels.compiled_or_python`).
 
 One drive-group read is five conversions of six-element arrays (position, velocity, torque,
 current, state); done as ~8 numpy calls the time goes to the ~0.5-1 µs each call costs. Here
-a read, and a CSP/CSV command with its torque offset, is one call each, with the same
-arithmetic as the numpy path (tests/drivers/cia402/test_cia402_kernels.py checks both agree
-exactly on random raw images and commands, saturation and NaN included).
+a read, and a CSP/CSV command with its torque offset, is one call each. The numpy reference
+of the same arithmetic (:mod:`drivers.cia402.units`' vector conversions) lives in
+tests/drivers/cia402/reference.py; tests/drivers/cia402/test_cia402_kernels.py checks both
+the compiled and the Python source agree with it exactly on random raw images and commands,
+saturation and NaN included.
 
 Few arguments: a compiled call pays per argument it unboxes (~0.1 µs alone, more with cold
 caches; tools/bench_kernel_args.py), and the process image's field views are strided views of
@@ -16,7 +19,7 @@ SI values and constant scale rows as the rows of one float64 workspace (:data:`S
 
 The backend conventions are those of :mod:`hofto_hw.observers.kernels` (its availability,
 ``HOFTO_HW_NO_NUMBA``, compile options and warm-up are reused, so one switch decides whether
-compiled code runs anywhere): ``numpy`` (the reference), ``numba``, ``auto``. Kernels write
+compiled code runs anywhere): ``numpy`` (the Python source), ``numba``, ``auto``. Kernels write
 only into the arrays passed in and never allocate.
 """
 
@@ -31,6 +34,14 @@ import numpy as np
 from drivers.cia402.pdo import RXPDO_DTYPE, RXPDO_SIZE, TXPDO_DTYPE, TXPDO_SIZE
 from drivers.cia402.state_machine import STATE_FROM_STATUS
 from hofto_hw.observers.kernels import Backend, jit, resolve, warm
+
+try:  # the byte helpers: compiled into the kernels that call them, plain Python otherwise
+    from numba.extending import register_jitable as _helper
+except Exception:  # numba missing or not importable: the kernels run as Python anyway
+
+    def _helper(fn):  # type: ignore[no-untyped-def]
+        return fn
+
 
 __all__ = [
     "POSITION",
@@ -66,8 +77,8 @@ _I16_MAX = float(np.iinfo(np.int16).max)
 # The PDO layout and the statusword table as the kernels' compile-time constants, written
 # out here: numba bakes globals into the cached machine code and invalidates its cache only
 # when this file changes, not when drivers/cia402/pdo.py or state_machine.py do. So they are
-# literals here, checked against those modules at import (:func:`layout_matches`; a
-# mismatch runs the numpy path, and tests/drivers/cia402/test_cia402_kernels.py fails).
+# literals here, checked against those modules (:func:`layout_matches`; on a mismatch a drive
+# group refuses to be built, and tests/drivers/cia402/test_cia402_kernels.py fails).
 _TX = 21  # TxPDO record size [bytes]
 _TX_SW, _TX_POS, _TX_VEL, _TX_TAU, _TX_CUR = 0, 3, 7, 11, 13  # u16, i32, i32, i16, i16
 _RX = 15  # RxPDO record size [bytes]
@@ -79,7 +90,8 @@ _STATE_TABLE_SHA256 = "730f61a170b27f65"  # first 16 hex digits of its bytes' SH
 def layout_matches() -> bool:
     """True when the literals above are the PDO layout of :mod:`drivers.cia402.pdo` and the
     statusword table of :mod:`drivers.cia402.state_machine` (else the kernels would decode
-    another layout than the images have: :func:`ready` then answers numpy)."""
+    another layout than the images have: :func:`ready` answers False and a drive group
+    refuses to be built)."""
     tx, rx = TXPDO_DTYPE.fields, RXPDO_DTYPE.fields
     want = (
         (tx, "statusword", "<u2", _TX_SW),
@@ -112,24 +124,24 @@ def image_bytes(image: np.ndarray) -> np.ndarray:
     return image.view(np.uint8)
 
 
-@jit
+@_helper
 def _u16(b: np.ndarray, o: int) -> int:
     return np.int64(b[o]) | (np.int64(b[o + 1]) << 8)
 
 
-@jit
+@_helper
 def _i16(b: np.ndarray, o: int) -> int:
     v = _u16(b, o)
     return v - 65536 if v >= 32768 else v
 
 
-@jit
+@_helper
 def _i32(b: np.ndarray, o: int) -> int:
     v = _u16(b, o) | (_u16(b, o + 2) << 16)
     return v - 4294967296 if v >= 2147483648 else v
 
 
-@jit
+@_helper
 def _put(b: np.ndarray, o: int, v: int, size: int) -> None:
     for k in range(size):
         b[o + k] = (v >> (8 * k)) & 0xFF
@@ -149,7 +161,7 @@ def read_si(tx: np.ndarray, w: np.ndarray, states: np.ndarray) -> None:
         states[i] = _STATE_TABLE[_u16(tx, o + _TX_SW) & 0x7F]
 
 
-@jit
+@_helper
 def _to_raw(x: float, lo: float, hi: float) -> float:
     """Round half to even and saturate (NaN stays NaN), as np.rint + np.clip."""
     x = np.rint(x)
@@ -183,7 +195,7 @@ def command_raw(
 def ready(backend: Backend, call: Callable[[], object]) -> bool:
     """True when ``backend`` resolves to the compiled kernels and ``call`` (the caller's
     kernels on scratch copies of its own arrays, so the exact signatures compile now,
-    outside any loop) succeeds; False means: run the numpy path."""
+    outside any loop) succeeds; False means: run the kernels' Python source."""
     if resolve(backend) != "numba" or not layout_matches():
         return False
     return warm(call)

@@ -1,10 +1,14 @@
-"""The compiled drive-group read/command (drivers/cia402/kernels.py) against the numpy
-reference path (drivers/cia402/units.py): the same raw image gives the same SI values, the
-same SI command the same raw image, bit for bit, saturation and NaN included."""
+"""The drive group's read/command, its one implementation the kernels of
+drivers/cia402/kernels.py (compiled, and their Python source), against the numpy reference
+(tests/drivers/cia402/reference.py: drivers/cia402/units.py's vector conversions): the same
+raw image gives the same SI values, the same SI command the same raw image, bit for bit,
+saturation and NaN included."""
 
 from __future__ import annotations
 
+import importlib.util
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,14 +23,23 @@ pytestmark = pytest.mark.skipif(
     not observer_kernels.available(), reason=observer_kernels.unavailable_reason() or "numba"
 )
 
+# the reference by its path (tests/drivers is not a package: `drivers` is the product's)
+_spec = importlib.util.spec_from_file_location(
+    "cia402_reference", Path(__file__).with_name("reference.py")
+)
+reference = importlib.util.module_from_spec(_spec)  # type: ignore[arg-type]
+_spec.loader.exec_module(reference)  # type: ignore[union-attr]
+
 
 @pytest.fixture
 def pair(bus: SimBus, cfg: SystemConfig) -> tuple[DriveGroup, DriveGroup]:
-    """A numpy and a compiled drive group over the same (opened) process image."""
+    """The kernels as Python source and compiled, two drive groups over the same (opened)
+    process image."""
     bus.open()
-    ref = DriveGroup.from_config(bus, cfg.bus)
+    ref = DriveGroup.from_config(bus, cfg.bus, backend="numpy")
     fast = DriveGroup.from_config(bus, cfg.bus, backend="numba")
     assert ref.backend == "numpy" and fast.backend == "numba"
+    assert ref._fast is None and fast._fast is not None  # what the tick's fused call checks
     return ref, fast
 
 
@@ -40,20 +53,21 @@ def _random_tx(tx: np.ndarray, rng: np.random.Generator) -> None:
     tx["statusword"] = rng.integers(0, 0xFFFF, n, endpoint=True)
 
 
-def test_read_agrees_with_the_numpy_path(pair: tuple[DriveGroup, DriveGroup]) -> None:
-    ref, fast = pair
-    tx = ref.transport.tx
+def test_read_agrees_with_the_numpy_reference(pair: tuple[DriveGroup, DriveGroup]) -> None:
+    py, fast = pair
+    tx = py.transport.tx
     rng = np.random.default_rng(11)
     for k in range(3000):
         _random_tx(tx, rng)
         if k % 7 == 0:  # the extremes of each raw type
-            tx["position"][k % ref.n] = np.iinfo(np.int32).min
-            tx["torque"][(k + 1) % ref.n] = np.iinfo(np.int16).min
-        ref.read()
-        fast.read()
-        for name in ("q", "qd", "tau", "current", "states"):
-            np.testing.assert_array_equal(getattr(fast, name), getattr(ref, name), err_msg=name)
-    assert len(set(ref.states.tolist())) >= 1 and np.any(ref.q != 0.0)
+            tx["position"][k % py.n] = np.iinfo(np.int32).min
+            tx["torque"][(k + 1) % py.n] = np.iinfo(np.int16).min
+        want = reference.read(py)
+        for g in (fast, py) if k % 10 == 0 else (fast,):  # the interpreter's source: slower
+            g.read()
+            for name in reference.READ_FIELDS:
+                np.testing.assert_array_equal(getattr(g, name), want[name], err_msg=name)
+    assert len(set(py.states.tolist())) > 1 and np.any(py.q != 0.0)
 
 
 def _random_si(rng: np.random.Generator, n: int, scale: float) -> np.ndarray:
@@ -68,10 +82,10 @@ def _random_si(rng: np.random.Generator, n: int, scale: float) -> np.ndarray:
     return x
 
 
-def test_commands_agree_with_the_numpy_path(pair: tuple[DriveGroup, DriveGroup]) -> None:
-    ref, fast = pair
-    rx = ref.transport.rx
-    n = ref.n
+def test_commands_agree_with_the_numpy_reference(pair: tuple[DriveGroup, DriveGroup]) -> None:
+    py, fast = pair
+    rx = py.transport.rx
+    n = py.n
     rng = np.random.default_rng(12)
     fields = ("target_position", "target_velocity", "torque_offset")
     with np.errstate(invalid="ignore"):  # numpy's cast of NaN warns; the kernel does not
@@ -81,16 +95,19 @@ def test_commands_agree_with_the_numpy_path(pair: tuple[DriveGroup, DriveGroup])
             tau = _random_si(rng, n, 10.0 ** rng.uniform(-2, 4))
             if k % 5 == 0:  # exact halves of a count: round half to even on both paths
                 counts = rng.integers(-1000, 1000, n) + 0.5
-                target = (counts - ref.scaling.zero_offset) / ref.scaling.count_per_rad
+                target = (counts - py.scaling.zero_offset) / py.scaling.count_per_rad
             off = tau if k % 3 else None
             for command in ("command_position", "command_velocity"):
                 rx[list(fields)] = 0
-                getattr(ref, command)(target, off)
+                reference.command(py, command, target, off)
                 want = rx.copy()
-                rx[list(fields)] = 0
-                getattr(fast, command)(target, off)
-                for f in fields:
-                    np.testing.assert_array_equal(rx[f], want[f], err_msg=f"{command} {f}")
+                for g in (fast, py) if k % 10 == 0 else (fast,):
+                    rx[list(fields)] = 0
+                    getattr(g, command)(target, off)
+                    for f in fields:
+                        np.testing.assert_array_equal(
+                            rx[f], want[f], err_msg=f"{g.backend} {command} {f}"
+                        )
 
 
 def test_compiled_group_enables_and_holds_over_the_simulated_bus(
@@ -162,11 +179,13 @@ def test_image_bytes_refuses_what_is_not_a_contiguous_process_image() -> None:
         image_bytes(np.zeros(6))
 
 
-def test_the_kernels_literal_layout_is_the_pdo_modules(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_kernels_literal_layout_is_the_pdo_modules(
+    monkeypatch: pytest.MonkeyPatch, bus: SimBus, cfg: SystemConfig
+) -> None:
     """The compiled read/command bake the PDO byte offsets and the statusword table into
     their cached machine code (numba does not see changes in other files): the literals in
     drivers/cia402/kernels.py must be pdo.py's and state_machine.py's, and a group whose
-    layout differs runs the numpy path instead of decoding the wrong bytes."""
+    layout differs is refused rather than decoding the wrong bytes."""
     from drivers.cia402 import kernels
 
     assert kernels.layout_matches()
@@ -178,3 +197,52 @@ def test_the_kernels_literal_layout_is_the_pdo_modules(monkeypatch: pytest.Monke
     monkeypatch.setattr(kernels, "_STATE_TABLE", table)
     assert not kernels.layout_matches()
     assert not kernels.ready("numba", lambda: None)
+    for backend in ("numpy", "numba"):  # the kernels' source reads the same literals
+        with pytest.raises(RuntimeError, match="layout literals"):
+            DriveGroup.from_config(bus, cfg.bus, backend=backend)  # type: ignore[arg-type]
+
+
+def test_without_numba_the_group_runs_the_kernels_source_and_compiles_nothing(
+    tmp_path: Path,
+) -> None:
+    """HOFTO_HW_NO_NUMBA=1 (numba's switch of this project, read at import): the group runs
+    the kernels' Python source, byte helpers included (none is compiled on the way), and
+    reads the same SI values the numpy reference gives."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[3]
+    reference_py = str(Path(__file__).with_name("reference.py"))
+    script = f"""
+import importlib.util, numpy as np
+from hofto_hw.config import load_config
+from hofto_hw.runtime.build import build_sim_bus
+from drivers.cia402.drive_group import DriveGroup
+from drivers.cia402 import kernels
+spec = importlib.util.spec_from_file_location("ref", {reference_py!r})
+ref = importlib.util.module_from_spec(spec); spec.loader.exec_module(ref)
+cfg = load_config({str(root / "configs" / "er3a.yaml")!r})
+bus = build_sim_bus(cfg, external=False)
+bus.open()
+g = DriveGroup.from_config(bus, cfg.bus)
+assert g.backend == "numpy" and g._fast is None, g.backend
+bus.tx["position"] = [1000, -2000, 3, 2**31 - 1, -2**31, 0]
+bus.tx["statusword"] = [0x0237, 0x0250, 0x0208, 0x0233, 0x0231, 0x0240]
+g.read()
+g.command_position(np.full(6, 0.1), np.full(6, 2.0))
+want = ref.read(g)
+for f in ref.READ_FIELDS:
+    assert np.array_equal(getattr(g, f), want[f]), f
+assert bus.rx["target_position"].any() and bus.rx["torque_offset"].any()
+fns = ("read_si", "command_raw", "_u16", "_i16", "_i32", "_put", "_to_raw")
+compiled = [f for f in fns if getattr(getattr(kernels, f), "signatures", None)]
+assert not compiled, compiled
+print("ok")
+"""
+    env = {**os.environ, "HOFTO_HW_NO_NUMBA": "1"}
+    out = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
+        timeout=120,
+    )  # fmt: skip
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]

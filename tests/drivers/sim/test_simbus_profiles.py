@@ -102,3 +102,48 @@ def test_ip_and_pv_drives_on_the_in_process_bus(tmp_path: Path) -> None:
         assert g.cycle() == STATUS_OK
     np.testing.assert_allclose(g.q - q0, 0.05, atol=5e-3)
     assert (bus.rx["target_velocity"] == 0).all()  # the loop's record stayed CSP
+
+
+def test_the_ip_pv_step_idles_when_no_axis_runs_ip_or_pv(tmp_path: Path) -> None:
+    """Drives that could run ip / pv skip that step on a cycle where no axis does (every
+    cycle of a CSP arm of them) and give the same bytes as running it: enabled in ip / pv,
+    moved, disabled (idle), enabled again, against the same run with the step on every
+    cycle."""
+    import yaml
+
+    root = Path(__file__).resolve().parents[3] / "configs" / "drives"
+    ip = yaml.safe_load((root / "technosoft_ipos.yaml").read_text())
+    pv = yaml.safe_load((root / "faulhaber_mcbl300x.yaml").read_text())
+
+    def run(every_cycle: bool) -> tuple[list[bytes], int]:
+        cfg, bus = _bus(tmp_path, [ip, pv] * 3)
+        drives = bus.drives
+        idle = drives._ip_pv_idle
+        calls = [0]
+
+        def spy() -> None:
+            calls[0] += 1
+            (drives._ip_pv if every_cycle else idle)()
+
+        drives._ip_pv_idle = spy
+        bus.open()
+        g = DriveGroup.from_config(bus, cfg.bus)
+        g.set_mode(Mode.CSP)
+        out = []
+        for _ in range(2):
+            g.enable()
+            q0 = g.q.copy()
+            for k in range(300):
+                g.command_position(q0 + 0.05 * min(1.0, k / 100))
+                g.cycle()
+                out.append(bus.tx.tobytes() + drives.plant.q_meas.tobytes())
+            g.disable()
+            for _ in range(20):
+                g.cycle()
+                out.append(bus.tx.tobytes() + drives.plant.q_meas.tobytes())
+        return out, calls[0]
+
+    idle, idle_cycles = run(every_cycle=False)
+    full, _ = run(every_cycle=True)
+    assert idle_cycles > 40  # the idle step ran (disabled, before enabling)
+    assert idle == full
