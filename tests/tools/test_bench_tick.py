@@ -102,3 +102,27 @@ def test_the_ethercat_loop_says_why_its_emulator_did_not_start(bench, monkeypatc
     tag = f"tm{os.getpid() % 100000}"  # ethercat_loop's master end
     assert res["skipped"].startswith("the EtherCAT emulator did not start: emulator exited")
     assert not Path(f"/sys/class/net/{tag}").exists()  # the pair deleted
+
+
+def test_beside_an_installed_wheel_the_tick_is_measured_and_the_reference_said_missing(
+    bench, monkeypatch, capsys
+) -> None:
+    """tools/ copied beside an installed wheel has no tests/: the tick's phases run, the
+    reference and the per-part figures are reported as not measured, the report prints."""
+    from hofto_hw.config import load_config
+
+    monkeypatch.setattr(bench, "reference_switch", lambda: None)
+    cfg = load_config(ROOT / "configs" / "er3a.yaml")
+    system = bench.build_system(cfg, float(cfg.loop.rate_hz), "sim")
+    res: dict = {}
+    try:
+        bench.run_phases(system, bench.loop_phases(system, 60, 30, 7.0, None, res))
+        # warm-up 300, the tick 60, the split 30, the floor 30: no reference, no parts
+        assert system.loop.ticks == 300 + 60 + 30 + 30
+    finally:
+        system.close()
+    assert res["reference"] == {"skipped": bench.NO_REFERENCE} and "parts" not in res
+    _finite_stats(res["tick"])
+    bench.print_loop("loop_1khz", res)
+    out = capsys.readouterr().out
+    assert "reference not measured" in out and bench.NO_REFERENCE in out
