@@ -73,7 +73,7 @@ class FrictionResidual:
         self.every = max(1, int(every))
         self._s = np.zeros(n)
         self._f = np.zeros(n)
-        self._scratch = np.zeros((3, n))
+        self._scratch = friction.workspace()  # FrictionParams.torque's, for the bound
         self._st = self.record["st"][0]  # count, pending time [s], seconds learned [s]
         self.backend = kernels.ready(backend, self._warm)
         #: True exactly when the compiled kernel runs (the tick's fused call reads it)
