@@ -45,7 +45,7 @@ class ModelData:
     compiled call too (:func:`~hofto_hw.model.kernels.inverse_dynamics_native`): one call in
     all; ``native`` says whether it does. Without (a robot the native library refuses,
     ``HOFTO_HW_NO_NATIVE``, backend numpy) the RNEA is pinocchio's Python call: the same
-    algorithm. The numpy implementation (RNEA + FrictionParams.torque) is the reference in
+    algorithm. The numpy implementation (RNEA + eq. (12) as numpy calls) is the reference in
     tests/hofto_hw/model/reference.py. A pinocchio outside pyproject's bound is refused in
     one line (:func:`hofto_hw.model.snapshot.require_supported_pinocchio`)."""
 

@@ -21,6 +21,11 @@ Optional terms, both linear in their parameters (identification stays least squa
   simulation the two-sided form pushes a joint that creeps backwards inside the band and
   makes a PD-held arm limit-cycle at about v_h;
 - **quadratic** ``Fq_j·qd_j·|qd_j|`` [N·m·s²/rad²].
+
+The formula itself is written once, as the kernel :func:`hofto_hw.model.kernels.friction_joint`
+(the tick's snapshot and feed-forward call it compiled); :meth:`FrictionParams.torque` runs
+that kernel in a workspace the caller owns (:meth:`FrictionParams.workspace`, packed with the
+parameters: the parameters stay constant, as pinocchio's Model, the workspace is the Data).
 """
 
 from __future__ import annotations
