@@ -18,7 +18,10 @@ the correction is zero. Units: rad/s, N·m. Allocation-free per tick (solve incl
 
 :meth:`FrictionResidual.learn` is the kernel :func:`hofto_hw.control.kernels.friction_learn`
 (its one place; the tick's fused call compiles the same function): compiled for backend
-``numba`` (``auto`` where numba works), its own source run by the interpreter for ``numpy``.
+``numba`` (``auto`` where numba works), its own source run by the interpreter for ``numpy``;
+the feature s(qd) of :meth:`correction` is that kernel's own
+(:func:`~hofto_hw.control.kernels.friction_feature`), and the bound's model friction is
+FrictionParams.torque (the model's friction kernel).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ import math
 
 import numpy as np
 
-from hofto_hw.control.kernels import friction_learn
+from hofto_hw.control.kernels import friction_features, friction_learn
 from hofto_hw.model.friction import FrictionParams
 from hofto_hw.observers import kernels
 from hofto_hw.observers.kernels import Backend
@@ -73,12 +76,13 @@ class FrictionResidual:
         self.every = max(1, int(every))
         self._s = np.zeros(n)
         self._f = np.zeros(n)
-        self._scratch = np.zeros((3, n))
+        self._scratch = friction.workspace()  # FrictionParams.torque's, for the bound
         self._st = self.record["st"][0]  # count, pending time [s], seconds learned [s]
         self.backend = kernels.ready(backend, self._warm)
         #: True exactly when the compiled kernel runs (the tick's fused call reads it)
         self._use_kernel = self.backend == "numba"
         self._learn = kernels.compiled_or_python(friction_learn, self.backend)
+        self._features = kernels.compiled_or_python(friction_features, self.backend)
 
     @property
     def seconds(self) -> float:
@@ -89,6 +93,7 @@ class FrictionResidual:
         z = np.zeros(self.n)
         S, b, st = np.zeros_like(self.S), np.zeros_like(self.b), np.zeros(3)
         friction_learn(z, z, 0.001, self.v_s, self.tau, self.min_speed, self.every, S, b, st)
+        friction_features(z, self.v_s, np.zeros(self.n))
 
     def reset(self) -> None:
         """Forget everything learned (another arm, a new payload)."""
@@ -148,8 +153,7 @@ class FrictionResidual:
         """The estimate's friction error at ``qd`` (n,) [rad/s], c_s·s(qd) + c_v·qd, bounded
         by ``limit``·|f_model(qd)|, into ``out`` (n,) [N·m]; subtract it from the estimate."""
         s = self._s
-        np.divide(qd, self.v_s, out=s)
-        np.tanh(s, out=s)
+        self._features(qd, self.v_s, s)
         np.multiply(self.coef[:, 1], s, out=out)
         np.multiply(self.coef[:, 2], qd, out=s)
         out += s

@@ -115,6 +115,21 @@ def ramp_step(accel: np.ndarray, dt: float, q: np.ndarray, qd: np.ndarray, qdd: 
 
 
 @jit
+def friction_feature(v: float, v_s: float) -> float:
+    """The friction residual's direction feature s(v) = tanh(v / v_s) [1] of a joint
+    velocity v [rad/s] (v_s > 0 [rad/s]): :func:`friction_learn` regresses on it,
+    :func:`friction_features` gives it to FrictionResidual.correction."""
+    return math.tanh(v / v_s)
+
+
+@jit
+def friction_features(qd: np.ndarray, v_s: float, out: np.ndarray) -> None:
+    """out_j = :func:`friction_feature` (qd_j, v_s), (n,)."""
+    for j in range(qd.shape[0]):
+        out[j] = friction_feature(qd[j], v_s)
+
+
+@jit
 def friction_learn(
     qd: np.ndarray,
     tau_ext: np.ndarray,
@@ -149,7 +164,7 @@ def friction_learn(
     beta = 1.0 - math.exp(-h / time_constant)
     for j in range(n):
         x0 = 1.0
-        x1 = math.tanh(qd[j] / v_s)
+        x1 = friction_feature(qd[j], v_s)
         x2 = qd[j]
         for r in range(3):
             xr = x0 if r == 0 else (x1 if r == 1 else x2)

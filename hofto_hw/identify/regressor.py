@@ -57,7 +57,7 @@ def standard_names(
 def held_sign_series(qd: np.ndarray, band: float, initial: np.ndarray | None = None) -> np.ndarray:
     """Held sign h (N, n) of a velocity sequence qd (N, n) [rad/s], in time order: h_k =
     sign(qd_k) where |qd_k| > ``band``, else h_{k-1} (``initial`` (n,), default 0). The same
-    rule as ``FrictionParams.update_held``."""
+    rule as the friction kernel's held memory (``FrictionParams.torque``)."""
     qd = np.asarray(qd, dtype=float)
     h = np.zeros_like(qd)
     last = np.zeros(qd.shape[1]) if initial is None else np.array(initial, dtype=float)

@@ -28,6 +28,7 @@ import pinocchio as pin
 from hofto_hw.errors import ModelError
 
 if TYPE_CHECKING:
+    from hofto_hw.model.friction import FrictionParams
     from hofto_hw.model.robot import RobotModel
 
 
@@ -44,7 +45,7 @@ class ModelData:
     compiled call too (:func:`~hofto_hw.model.kernels.inverse_dynamics_native`): one call in
     all; ``native`` says whether it does. Without (a robot the native library refuses,
     ``HOFTO_HW_NO_NATIVE``, backend numpy) the RNEA is pinocchio's Python call: the same
-    algorithm. The numpy implementation (RNEA + FrictionParams.torque) is the reference in
+    algorithm. The numpy implementation (RNEA + eq. (12) as numpy calls) is the reference in
     tests/hofto_hw/model/reference.py. A pinocchio outside pyproject's bound is refused in
     one line (:func:`hofto_hw.model.snapshot.require_supported_pinocchio`)."""
 
@@ -67,7 +68,10 @@ class ModelData:
         self._nle = np.zeros(n)
         self._f = np.zeros(n)
         self._f_fd = np.zeros(n)  # friction inside forward_dynamics
-        self._fscratch = np.zeros((3, n))
+        #: FrictionParams.torque's workspace (friction_torque, forward_dynamics), packed for
+        #: ``_fr_fd``
+        self._fr_fd = model.friction
+        self._fscratch = model.friction.workspace()
         W = self._W = mk.workspace(n)
         #: held-friction sign (memory), see model.friction: a row of the kernel's workspace
         self.friction_state = W[mk.STATE]
@@ -145,9 +149,17 @@ class ModelData:
 
     def friction_torque(self, qd: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """f(qd) [N·m], shape (n,), eq. (12)."""
-        return self.model.friction.torque(
+        return self._friction().torque(
             qd, self._f if out is None else out, self._fscratch, self.friction_state
         )
+
+    def _friction(self) -> FrictionParams:
+        """The model's friction, its workspace ``_fscratch`` repacked when it was replaced."""
+        fr = self.model.friction
+        if fr is not self._fr_fd:
+            self._fr_fd = fr
+            self._pack(fr, self._fscratch)
+        return fr
 
     def inverse_dynamics(
         self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, out: np.ndarray | None = None
@@ -182,9 +194,8 @@ class ModelData:
         """qdd [rad/s²] = M⁻¹·(tau + tau_ext - C·qd - g - f), shape (n,) (ABA)."""
         m = self.model
         total = self._tau_total
-        np.subtract(
-            tau, m.friction.torque(qd, self._f_fd, self._fscratch, self.friction_state), out=total
-        )
+        fr = self._friction()
+        np.subtract(tau, fr.torque(qd, self._f_fd, self._fscratch, self.friction_state), out=total)
         if tau_ext is not None:
             np.add(total, tau_ext, out=total)
         qdd = self._qdd if out is None else out

@@ -21,10 +21,16 @@ Optional terms, both linear in their parameters (identification stays least squa
   simulation the two-sided form pushes a joint that creeps backwards inside the band and
   makes a PD-held arm limit-cycle at about v_h;
 - **quadratic** ``Fq_j·qd_j·|qd_j|`` [N·m·s²/rad²].
+
+The formula itself is written once, as the kernel :func:`hofto_hw.model.kernels.friction_joint`
+(the tick's snapshot and feed-forward call it compiled); :meth:`FrictionParams.torque` runs
+that kernel in a workspace the caller owns (:meth:`FrictionParams.workspace`, packed with the
+parameters: the parameters stay constant, as pinocchio's Model, the workspace is the Data).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -113,18 +119,16 @@ class FrictionParams:
             self.held_passive,
         )
 
-    def update_held(self, qd: np.ndarray, state: np.ndarray, scratch: np.ndarray) -> np.ndarray:
-        """Advance the held sign ``state`` (n,) in place: h_j = sign(qd_j) where |qd_j| > v_h,
-        unchanged inside the band. ``scratch`` (2, n) float; allocation-free."""
-        t, u = scratch[0], scratch[1]
-        np.abs(qd, out=t)
-        np.subtract(t, self.held_velocity, out=t)
-        np.heaviside(t, 0.0, out=t)  # 1 outside the band, 0 inside
-        np.sign(qd, out=u)
-        np.subtract(u, state, out=u)
-        np.multiply(u, t, out=u)
-        np.add(state, u, out=state)
-        return state
+    def workspace(self) -> np.ndarray:
+        """A workspace for :meth:`torque`: (ROWS, n) float64 with these parameters packed in
+        (:func:`hofto_hw.model.kernels.pack_friction`). The caller owns it (one per caller,
+        as pinocchio's Data to its Model); a workspace belongs to the parameters that made it:
+        new parameters (a new FrictionParams) need a new workspace or a repack."""
+        from hofto_hw.model import kernels as mk
+
+        W = mk.workspace(self.coulomb.shape[0])
+        mk.pack_friction(self, W)
+        return W
 
     def torque(
         self,
@@ -135,54 +139,51 @@ class FrictionParams:
     ) -> np.ndarray:
         """Friction torque [N·m] for joint velocity ``qd`` [rad/s], written into ``out`` (n,).
 
-        ``scratch`` (3, n) is the caller's workspace (a ModelData owns one); allocation-free
-        when given. ``state`` (n,): the held sign of the held-friction term, advanced in place
-        (see :meth:`update_held`); None = no memory (the sign of this sample outside the band,
-        0 inside). The parameters themselves are constant: two callers never share a buffer.
-        """
-        if scratch is None or scratch.shape[0] < 3:
-            scratch = np.zeros((3, qd.shape[0]))
-        s = scratch[0]
-        if self.smooth_velocity > 0.0:
-            np.divide(qd, self.smooth_velocity, out=s)
-            np.tanh(s, out=s)
+        ``scratch`` is the caller's workspace from :meth:`workspace` (a ModelData owns one);
+        allocation-free when given (None: a new one is made for this call). ``state`` (n,):
+        the held sign of the held-friction term, advanced in place: h_j = sign(qd_j) where
+        |qd_j| > v_h, unchanged inside the band; None = no memory (the sign of this sample
+        outside the band, 0 inside). The parameters themselves are constant: two callers
+        never share a buffer.
+
+        The arithmetic is the one kernel :func:`hofto_hw.model.kernels.friction` (compiled
+        where numba works, else its source run by the interpreter), the same the tick runs;
+        the numpy formula is the agreement tests' reference (tests/hofto_hw/model/
+        reference.py)."""
+        kernel, F, STATE, ROWS = _kernel()
+        if scratch is None:
+            scratch = self.workspace()
+        elif scratch.shape != (ROWS, self.coulomb.shape[0]):
+            raise ValueError(
+                f"friction workspace has shape {scratch.shape}, expected "
+                f"{(ROWS, self.coulomb.shape[0])}: make it with FrictionParams.workspace()"
+            )
+        h = scratch[STATE]
+        if state is None:
+            h.fill(0.0)
         else:
-            np.sign(qd, out=s)
-        np.multiply(self.coulomb, s, out=out)
-        if self._stribeck_gap is not None:
-            t = scratch[1]
-            np.divide(qd, self.stribeck_velocity, out=t)
-            np.square(t, out=t)
-            np.negative(t, out=t)
-            np.exp(t, out=t)
-            np.multiply(t, s, out=t)
-            np.multiply(t, self._stribeck_gap, out=t)
-            np.add(out, t, out=out)
-        np.multiply(self.viscous, qd, out=s)
-        np.add(out, s, out=out)
-        np.add(out, self.bias, out=out)
-        if self.quadratic is not None:
-            np.abs(qd, out=s)
-            np.multiply(s, qd, out=s)
-            np.multiply(s, self.quadratic, out=s)
-            np.add(out, s, out=out)
-        if self.held is not None:
-            h = scratch[2]
-            if state is None:
-                h.fill(0.0)
-                state = h
-            self.update_held(qd, state, scratch[:2])
-            t = scratch[0]
-            np.divide(qd, self.held_velocity, out=t)
-            np.square(t, out=t)
-            np.negative(t, out=t)
-            np.exp(t, out=t)
-            np.multiply(t, state, out=t)
-            if self.held_passive:  # zero while moving against the held sign (qd·h < 0)
-                u = scratch[1]
-                np.multiply(qd, state, out=u)
-                np.heaviside(u, 1.0, out=u)
-                np.multiply(t, u, out=t)
-            np.multiply(t, self.held, out=t)
-            np.add(out, t, out=out)
+            np.copyto(h, state)
+        kernel(qd, scratch)
+        np.copyto(out, scratch[F])
+        if state is not None:
+            np.copyto(state, h)
         return out
+
+
+_Kernel = tuple[Callable[[np.ndarray, np.ndarray], None], int, int, int]
+_KERNEL: list[_Kernel] = []
+
+
+def _kernel() -> _Kernel:
+    """The friction kernel (compiled and warmed on first use where numba works, else its
+    source as Python) and its workspace's rows F, STATE and ROWS. Imported on first use:
+    hofto_hw.model.kernels imports this module's package."""
+    if not _KERNEL:
+        from hofto_hw.model import kernels as mk
+        from hofto_hw.observers import kernels
+
+        z, W = np.zeros(1), mk.workspace(1)
+        backend = kernels.ready("auto", lambda: mk.friction(z, W))
+        fn = kernels.compiled_or_python(mk.friction, backend)
+        _KERNEL.append((fn, mk.F, mk.STATE, mk.ROWS))
+    return _KERNEL[0]

@@ -7,13 +7,12 @@ six-element arrays the time goes to the ~0.5 µs each call costs (and to its col
 inside a loop), so each use is one compiled call. These kernels are the ONE implementation
 of the snapshot's and the feed-forward's arithmetic (:class:`~hofto_hw.model.snapshot.
 DynamicsSnapshot`, :class:`~hofto_hw.model.data.ModelData`): compiled for backend numba, their
-Python source (``py_func``) for backend numpy. The numpy reference (pinocchio's Python API,
-:meth:`hofto_hw.model.friction.FrictionParams.torque`) is tests/hofto_hw/model/reference.py;
+Python source (``py_func``) for backend numpy; :func:`friction` is also
+:meth:`hofto_hw.model.friction.FrictionParams.torque` (the simulated plant's forward dynamics,
+the workspace's friction_torque, the drag's friction bound). The numpy reference (pinocchio's
+Python API, eq. (12) as numpy calls) is tests/hofto_hw/model/reference.py;
 tests/hofto_hw/model/test_kernels.py checks that every path agrees with it to 1e-12 over
-thousands of random steps, held-friction memory and NaN included. (FrictionParams.torque
-itself stays in the product for the workspace's friction_torque and forward_dynamics, the
-simulated plant's: it and :func:`friction_joint` differ in the last bit (measured), so moving
-the plant onto the kernel may move the main job's flight log; not done here.)
+thousands of random steps, held-friction memory and NaN included.
 
 Arguments are few (a compiled call costs ~0.1 µs per argument, more with cold caches): the
 friction parameters, the held-friction memory and the outputs travel in one workspace array
@@ -117,7 +116,7 @@ def _step(x: float, at_zero: float) -> float:
 
 @jit
 def friction_joint(v: float, j: int, W: np.ndarray) -> float:
-    """f_j(v) [N·m] of eq. (12) with every optional term, in FrictionParams.torque's order of
+    """f_j(v) [N·m] of eq. (12) with every optional term, in the numpy reference's order of
     operations; advances the held sign ``W[STATE, j]`` when the model has held friction."""
     smooth = W[SMOOTH, j]
     s = math.tanh(v / smooth) if smooth > 0.0 else _sign(v)

@@ -46,7 +46,7 @@ friction eq. (12) with its held memory, tau - f and Cᵀ·qd are the kernels of
   interpreter path (``backend="numpy"``: a Python-source kernel cannot call the native
   library, which numba binds by name).
 
-The numpy implementation these replaced (pinocchio's Python API, FrictionParams.torque,
+The numpy implementation these replaced (pinocchio's Python API, eq. (12) as numpy calls,
 numpy products) is the reference in tests/hofto_hw/model/reference.py; the agreement tests
 (tests/hofto_hw/model/test_snapshot.py, test_native.py, test_kernels.py) compare every path
 with it over random states, held friction and non-finite samples included.

@@ -29,7 +29,9 @@ from scipy.optimize import linprog
 from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.errors import UserError
 from hofto_hw.identify.data import Recording
+from hofto_hw.observers.kernels import compiled_or_python
 from safety.collision import CollisionMonitor
+from safety.collision.kernel import standstill_now
 
 FloatArray = NDArray[np.float64]
 TERMS = ("base", "velocity_gain", "acceleration_gain", "reversal_margin", "standstill_margin")
@@ -75,7 +77,10 @@ def features(rec: Recording, template: CollisionConfig) -> FloatArray:
         out[k, :, 3] = mon.reversal
         out[k, :, 4] = mon.still
     out[0, :, 2:] = 0.0
-    out[0, :, 4] = np.exp(-((rec.qd[0] / template.standstill_velocity) ** 2))
+    now = compiled_or_python(standstill_now, mon.backend)  # the monitor's own formula
+    inv_v_still = 1.0 / template.standstill_velocity
+    for j in range(n):
+        out[0, j, 4] = now(rec.qd[0, j], inv_v_still)
     return out
 
 

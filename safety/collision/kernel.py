@@ -56,6 +56,15 @@ def threshold(base, kv, ka, kr, ks, aq, aa, rev, still):  # type: ignore[no-unty
 
 
 @_jit_inline
+def standstill_now(v: float, inv_v_still: float) -> float:
+    """The standstill indicator of one velocity sample, exp(-(v/v_s)²) in [0, 1] (v [rad/s],
+    ``inv_v_still`` = 1/v_s [s/rad]); :func:`features_step` low-passes it, calibration's
+    first sample (hofto_hw/replay/calibrate.py) takes it as is."""
+    z = v * inv_v_still
+    return math.exp(-(z * z))
+
+
+@_jit_inline
 def features_step(feat: np.ndarray, sst: np.ndarray, bad_qd: np.ndarray, scal: np.ndarray,
                   qd: np.ndarray, dt: float) -> None:  # fmt: skip
     """Advance the threshold features ``feat`` (6, n) (state.py's rows) by dt [s] on qd (n,)
@@ -97,8 +106,7 @@ def features_step(feat: np.ndarray, sst: np.ndarray, bad_qd: np.ndarray, scal: n
             feat[F_ACCEL, j] = accel
             feat[F_MOVING, j] = moving
             feat[F_REVERSAL, j] = rev
-        z = v * inv_v_still
-        now = math.exp(-(z * z))
+        now = standstill_now(v, inv_v_still)
         if T <= 0.0:
             feat[F_STILL, j] = now
         else:

@@ -77,3 +77,13 @@ class FrictionLearning:
         self.b += (x * tau_ext[:, None] - self.b) * beta
         self.seconds += h
         return True
+
+
+def friction_correction(
+    coef: np.ndarray, v_s: float, limit: float, friction: np.ndarray, qd: np.ndarray
+) -> np.ndarray:
+    """FrictionResidual.correction as numpy calls: c_s·tanh(qd/v_s) + c_v·qd (n,) [N·m],
+    clipped to ±limit·|friction| (the model's friction at qd, (n,) [N·m])."""
+    out = coef[:, 1] * np.tanh(qd / v_s) + coef[:, 2] * qd
+    bound = limit * np.abs(friction)
+    return np.maximum(np.minimum(out, bound), -bound)

@@ -119,3 +119,38 @@ def test_compiled_learning_agrees_with_its_source_and_the_numpy_reference() -> N
     )
     tracemalloc.stop()
     assert grown < 1024, grown
+
+
+def test_correction_is_the_learning_feature_and_equals_the_numpy_one() -> None:
+    """FrictionResidual.correction compiled and as the kernels' source, bit for bit, and the
+    numpy reference (numpy's tanh, eq. (12) in numpy) to 1e-12, over random learned
+    coefficients and velocities (zeros, the smooth sign's band, fast motion)."""
+    from support.compiled import require_compiled_kernels
+
+    from hofto_hw.control.kernels import friction_feature
+    from tests.hofto_hw.model.reference import friction_torque
+
+    from . import reference
+
+    require_compiled_kernels()
+    model = _model()
+    slow = FrictionResidual(model.friction, backend="numpy")
+    fast = FrictionResidual(model.friction, backend="numba")
+    rng = np.random.default_rng(17)
+    a, b, f = np.zeros(6), np.zeros(6), np.zeros(6)
+    for k in range(2000):
+        coef = rng.normal(0.0, 0.5, (6, 3))
+        fast.coef[:], slow.coef[:] = coef, coef
+        qd = rng.normal(0.0, (0.01, 0.3, 2.0)[k % 3], 6)
+        if k % 7 == 0:
+            qd[rng.integers(6)] = rng.choice([0.0, -0.0])
+        fast.correction(qd, a)
+        slow.correction(qd, b)
+        np.testing.assert_array_equal(a, b)
+        friction_torque(model.friction, qd, f)
+        ref = reference.friction_correction(coef, fast.v_s, fast.limit, f, qd)
+        np.testing.assert_allclose(a, ref, rtol=0, atol=1e-12)
+        # the feature is the one the learning regresses on (libm's tanh, the same bits)
+        s = np.array([friction_feature.py_func(v, fast.v_s) for v in qd])
+        fast._features(qd, fast.v_s, f)
+        np.testing.assert_array_equal(f, s)

@@ -23,7 +23,7 @@ def _held(n: int = 2) -> FrictionParams:
 
 def test_held_sign_keeps_last_direction_at_rest() -> None:
     f = _held()
-    out, scratch, state = np.zeros(2), np.zeros((3, 2)), np.zeros(2)
+    out, scratch, state = np.zeros(2), f.workspace(), np.zeros(2)
     f.torque(np.array([0.5, -0.5]), out, scratch, state)  # moving: + and -
     assert state.tolist() == [1.0, -1.0]
     at_rest = f.torque(np.array([1e-4, 1e-4]), out, scratch, state).copy()

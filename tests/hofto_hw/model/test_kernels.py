@@ -1,5 +1,5 @@
 """The model's kernels (hofto_hw.model.kernels) against the numpy reference
-(tests/hofto_hw/model/reference.py, FrictionParams.torque): friction eq. (12) with every
+(tests/hofto_hw/model/reference.py, friction_torque): friction eq. (12) with every
 optional term and its held-friction memory, the snapshot (held friction included) and the
 feed-forward inverse dynamics, each compiled (native and not) and as the kernels' Python
 source (backend numpy)."""
@@ -14,7 +14,7 @@ from support.compiled import require_compiled_kernels
 
 from hofto_hw.model import FrictionParams
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
-from tests.hofto_hw.model.reference import ReferenceData, ReferenceSnapshot
+from tests.hofto_hw.model.reference import ReferenceData, ReferenceSnapshot, friction_torque
 
 require_compiled_kernels()
 
@@ -67,7 +67,11 @@ def _velocity(n: int, rng: np.random.Generator) -> np.ndarray:
     return qd
 
 
-def test_friction_kernel_equals_the_numpy_friction_with_its_memory() -> None:
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
+def test_friction_kernel_equals_the_numpy_friction_with_its_memory(backend) -> None:
+    from hofto_hw.observers.kernels import compiled_or_python
+
+    kernel = compiled_or_python(mk.friction, backend)
     rng = np.random.default_rng(11)
     n = 6
     for fr in _frictions(n, rng):
@@ -76,13 +80,54 @@ def test_friction_kernel_equals_the_numpy_friction_with_its_memory() -> None:
         ref_out, scratch, ref_state = np.zeros(n), np.zeros((3, n)), np.zeros(n)
         for _ in range(300):
             qd = _velocity(n, rng)
-            fr.torque(qd, ref_out, scratch, ref_state)
-            mk.friction(qd, W)
+            friction_torque(fr, qd, ref_out, scratch, ref_state)
+            kernel(qd, W)
             np.testing.assert_allclose(W[mk.F], ref_out, rtol=1e-12, atol=1e-12, equal_nan=True)
             np.testing.assert_array_equal(W[mk.STATE], ref_state)
             if np.isnan(ref_state).any():  # a NaN velocity poisons the memory in both
                 ref_state.fill(0.0)
                 W[mk.STATE].fill(0.0)
+
+
+def test_friction_params_torque_is_the_kernel_and_equals_the_numpy_friction() -> None:
+    """FrictionParams.torque (the product's entry, the kernel in the caller's workspace)
+    against the numpy formula: with and without memory, every optional term, zero, NaN and
+    infinite velocities; allocation-free with a workspace."""
+    rng = np.random.default_rng(21)
+    n = 6
+    for fr in _frictions(n, rng):
+        W = fr.workspace()
+        out, ref_out, scratch = np.zeros(n), np.zeros(n), np.zeros((3, n))
+        state, ref_state = np.zeros(n), np.zeros(n)
+        for _ in range(300):
+            qd = _velocity(n, rng)
+            assert fr.torque(qd, out, W, state) is out
+            friction_torque(fr, qd, ref_out, scratch, ref_state)
+            np.testing.assert_allclose(out, ref_out, rtol=1e-12, atol=1e-12, equal_nan=True)
+            np.testing.assert_array_equal(state, ref_state)
+            fr.torque(qd, out)  # no memory, a workspace of its own
+            friction_torque(fr, qd, ref_out)
+            np.testing.assert_allclose(out, ref_out, rtol=1e-12, atol=1e-12, equal_nan=True)
+            if np.isnan(ref_state).any():
+                ref_state.fill(0.0)
+                state.fill(0.0)
+        qd = _velocity(n, rng)
+        qd[~np.isfinite(qd)] = 0.0
+        fr.torque(qd, out, W, state)
+        tracemalloc.start()
+        try:
+            for _ in range(50):
+                fr.torque(qd, out, W, state)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert peak < 1024, f"FrictionParams.torque allocated {peak} bytes"
+
+
+def test_friction_params_torque_refuses_a_foreign_workspace() -> None:
+    fr = FrictionParams.zeros(3)
+    with pytest.raises(ValueError, match=r"friction workspace has shape \(3, 3\)"):
+        fr.torque(np.zeros(3), np.zeros(3), np.zeros((3, 3)))
 
 
 #: (backend, native) of the product's paths: one compiled call, pinocchio's Python calls and

@@ -251,3 +251,32 @@ def test_threshold_formula_on_arrays_is_the_kernels() -> None:
     np.testing.assert_array_equal(as_arrays, compiled)
     base, kv, ka, kr, ks, aq, aa, r, st = args
     np.testing.assert_allclose(as_arrays, base + kv * aq + ka * aa + kr * r + ks * st, rtol=1e-14)
+
+
+def test_standstill_indicator_is_one_formula_for_the_monitor_and_calibration() -> None:
+    """standstill_now (compiled and as Python) is exp(-(v/v_s)²) to 1e-12 (numpy's exp and a
+    division in the reference), zero, NaN and infinite velocities included; with no
+    standstill time the monitor's feature is exactly it."""
+    require_compiled_kernels()
+    rng = np.random.default_rng(5)
+    v_s = 0.02
+    v = np.concatenate([rng.normal(0.0, 0.05, 500), [0.0, -0.0, np.inf, -np.inf, np.nan]])
+    ref = np.exp(-((v / v_s) ** 2))
+    for fn in (K.standstill_now, K.standstill_now.py_func):
+        got = np.array([fn(x, 1.0 / v_s) for x in v])
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12, equal_nan=True)
+    n = 4
+    feat, sst, bad = np.zeros((6, n)), np.zeros(3), np.zeros(n, dtype=bool)
+    scal = np.zeros(P.N_SCAL)
+    scal[[P.S_V_REV, P.S_TAU_A, P.S_V_STILL, P.S_MOVING_TIME, P.S_REVERSAL_TIME]] = (
+        0.05,
+        0.01,
+        v_s,
+        0.5,
+        0.5,
+    )
+    scal[P.S_STILL_TIME] = 0.0
+    qd = rng.normal(0.0, 0.03, n)
+    K.features_step(feat, sst, bad, scal, qd, 1e-3)
+    expect = [K.standstill_now(x, 1.0 / v_s) for x in qd]
+    np.testing.assert_array_equal(feat[S.F_STILL], expect)
