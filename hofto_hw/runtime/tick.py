@@ -214,6 +214,7 @@ class Tick(TickEvents):
         r = self.tick_rec
         r["wrench"][...] = np.nan
         self._events_pushed = 0
+        self._events = stop.events  # the stop controller's event log (never replaced)
         self._rec1 = r.reshape(1)  # the same memory as a one-element array, for the kernel
         self._sample = group.sample  # q, qd, tau as rows of one (3, n) view
         # drag (hand guiding): controller, enabling input, the observer row that drives it
@@ -286,7 +287,7 @@ class Tick(TickEvents):
         Sections 1-3 run as one compiled call (:mod:`hofto_hw.runtime.fused`), and on a quiet
         tick sections 4-7 too (the same kernels in the same order); it answers the stage where
         these methods take over for the rest of the tick (what is rare)."""
-        g, stop = self.group, self.stop
+        stop = self.stop
         self.tick += 1
         self.t = t
         stop.begin_tick(self.tick)
@@ -299,7 +300,7 @@ class Tick(TickEvents):
             self._follow_model()  # rare: the native models and the call's arguments first
 
         # 1. exchange
-        status = g.exchange()
+        status = self.group.exchange()
         # missed deadlines keep a tick quiet while the overrun streak stays short of its fault
         # (counted after the call, as _requests would; _requests is skipped from CONTROL on)
         quiet = self.busy == 0 and not (
@@ -307,13 +308,29 @@ class Tick(TickEvents):
             or self.reset_requested or self.mode_request >= 0
             or self.overrun_streak + missed >= self.overrun_limit
         )  # fmt: skip
-        # 2. joint state, 3. snapshot and observers; on a quiet tick 4-7 (fused.py)
-        stage = self._fused_step(dt, wakeup_us, compute_us, quiet)
-        if stage >= CONTROL and (missed or self.overrun_streak):
-            self._overrun(missed)  # counted only: the streak stays short of its fault
-        if stage == DONE:
+        # 2. joint state, 3. snapshot and observers; on a quiet tick 4-7 (fused.py). It keeps
+        # t_cmd, sample_dt, since_fresh and the sample's finiteness in the tick's state; the
+        # state's other scalars are kept by _refresh
+        stage = self._fz_call(
+            *self._fz_args, self.t, dt, self._transport.sample_dt, self.tick, wakeup_us,
+            compute_us, quiet,
+        )  # fmt: skip
+        if stage == DONE:  # the quiet tick: its few attribute updates inline (it is hot)
+            self.bus.streak = 0  # good data, judged by the call (what bus.check does on it)
+            if self._fz_kind == MOVE_PATH:  # the path wrote the reference
+                motion = self.motion
+                motion.version += 1
+                self._ff_version = motion.version
+            self.fused_ticks += 1
+            if missed or self.overrun_streak:
+                self._overrun(missed)  # counted only: the streak stays short of its fault
             self._push()  # 7. the record (filled by the fused call) into the sink
             return
+        if stage >= MONITOR:  # good data, judged by the call
+            self.bus.streak = 0
+        self.snapshot.finite = bool(self.st["finite"])
+        if stage == CONTROL and (missed or self.overrun_streak):
+            self._overrun(missed)  # counted only: the streak stays short of its fault
         if stage == SAFETY:
             self._drag_front()  # 3b. drag
             self._safety(status, dt)  # 4. safety: decides, latches, picks the stop category
@@ -462,27 +479,6 @@ class Tick(TickEvents):
 
     # ----------------------------------------------------------- the fused call
 
-    def _fused_step(self, dt: float, wakeup_us: float, compute_us: float, quiet: bool) -> int:
-        """The fused call (hofto_hw/runtime/fused.py) on this tick's scalars (``quiet``: it may
-        go on past section 3); its stage code. It keeps t_cmd, sample_dt, since_fresh and
-        the sample's finiteness in the tick's state; the state's other scalars are kept by
-        :meth:`_refresh`."""
-        stage = self._fz_call(
-            *self._fz_args, self.t, dt, self._transport.sample_dt, self.tick, wakeup_us,
-            compute_us, quiet,
-        )  # fmt: skip
-        if stage >= MONITOR:  # good data, judged by the call (what bus.check does on it)
-            self.bus.streak = 0
-        if stage == DONE:
-            if self._fz_kind == MOVE_PATH:  # the path wrote the reference
-                motion = self.motion
-                motion.version += 1
-                self._ff_version = motion.version
-            self.fused_ticks += 1
-            return DONE
-        self.snapshot.finite = bool(self.st["finite"])
-        return stage
-
     def _follow_model(self) -> None:
         """The model changed since tau_ff was evaluated (new parameters, rotor inertia,
         payload or friction; rare): the snapshot's and the feed-forward's native models and
@@ -608,8 +604,8 @@ class Tick(TickEvents):
         """The filled tick record into the sink, with the new events (and every
         ``diag_every`` ticks the diagnostics)."""
         self.sink.push_tick(self.tick_rec)
-        ev = self.stop.events
-        while self._events_pushed < ev.count:
+        ev = self._events
+        while self._events_pushed < ev.count:  # one integer compare on a tick without events
             i = self._events_pushed % ev.capacity
             e = self.event_rec
             e["t"] = self.t
