@@ -474,7 +474,7 @@ def warm_call(system, calls: int, res: dict) -> None:
     tick = system.tick
     call, args = tick._fz_call, tick._fz_args
     # the last tick's time and number, one period, the bus's sample interval, as
-    # Tick._fused_step passes them on a quiet tick; no loop timings (only for the record)
+    # Tick.step passes them on a quiet tick; no loop timings (only for the record)
     t, n, dt, sdt = tick.t, tick.tick, system.loop.period, tick._transport.sample_dt
     clock = time.perf_counter_ns
     ns = np.zeros(calls)

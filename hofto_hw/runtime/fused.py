@@ -499,5 +499,5 @@ class FusedTick:
         read, here on a copy of the hot record: no state of the tick is touched."""
         hot, obs, tx, rx, rec = self.args()
         # a lost sample (sdt -1) on a tick that is not quiet: the read into the copy's rows,
-        # then SAFETY; the argument types the tick passes (Tick._fused_step)
+        # then SAFETY; the argument types the tick passes (Tick.step)
         fused_tick(hot.copy(), obs, tx, rx, rec, 0.0, 0.0, -1.0, 0, 0.0, 0.0, False)
