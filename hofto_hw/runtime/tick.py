@@ -510,10 +510,12 @@ class Tick(TickEvents):
         hold them now; not after a script's step, ``rebuild`` False) and the state's slow
         scalars (off the common path)."""
         fz = self._fz
-        if not fz.bound():  # a part replaced an array of the hot record: not what the call reads
-            raise RuntimeError("the tick's compiled call: a part replaced its hot record's array")
-        if self._fz_args[1] is not self._bank.args:  # a new bank (a reset)
-            rebuild = True
+        new_bank = self._fz_args[1] is not self._bank.args  # a reset built one: checked again
+        why = "a part replaced its hot record's array" if not fz.bound() else ""
+        why = why or (fz._check(self) if new_bank else "")
+        if why:
+            raise RuntimeError(f"the tick's compiled call cannot take its parts: {why}")
+        rebuild = rebuild or new_bank
         if rebuild:
             self._fz_args = fz.args()
         self.busy = self._busy()
