@@ -79,6 +79,9 @@ class ModelData:
         #: ``_fr_fd``
         self._fr_fd = model.friction
         self._fscratch = model.friction.workspace()
+        # its kernel compiled (or loaded from numba's cache) now, not in the first step of
+        # whatever steps this model: an emulator answering a bus would stall there for seconds
+        model.friction.torque(np.zeros(n), np.zeros(n), self._fscratch.copy())
         W = self._W = mk.workspace(n) if hot is None else hot["W"]
         #: held-friction sign (memory), see model.friction: a row of the kernel's workspace
         self.friction_state = W[mk.STATE]
