@@ -16,6 +16,8 @@ five arguments instead of fifteen (each costs ~0.1 µs per call).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from hofto_hw.observers import kernels
@@ -81,12 +83,13 @@ class LimitMonitor:
         following_error: float,
         position_jump: float,
         backend: Backend = "numpy",
+        hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         n = len(lower)
         self.n = n
         # the limits, the previous sample and the scalars as rows of one workspace (the
         # compiled scan's one argument); the attributes are views of its rows
-        self._w = np.zeros((LIM_ROWS, max(n, N_REPORTS)))
+        self._w = np.zeros((LIM_ROWS, max(n, N_REPORTS))) if hot is None else hot["w"]
         self.lower = self._w[LOWER, :n]
         self.upper = self._w[UPPER, :n]
         self.velocity = self._w[VELOCITY, :n]
@@ -147,14 +150,27 @@ class LimitMonitor:
         return block
 
     @classmethod
-    def from_config(cls, cfg: object, limits: object, backend: Backend = "numpy") -> LimitMonitor:
+    def from_config(
+        cls,
+        cfg: object,
+        limits: object,
+        backend: Backend = "numpy",
+        hot: Mapping[str, np.ndarray] | None = None,
+    ) -> LimitMonitor:
         """From ``safety.limits`` (LimitsSafetyConfig) and the model's JointLimits."""
         return cls(
             *monitored_limits(cfg, limits),
             cfg.following_error,  # type: ignore[attr-defined]
             cfg.position_jump,  # type: ignore[attr-defined]
             backend,
+            hot,
         )
+
+    @staticmethod
+    def hot_fields(n: int) -> dict[str, np.dtype]:
+        """The workspace as a field of a caller-owned record (``hot=``: the constructor takes
+        it, zeroed, instead of allocating)."""
+        return {"w": np.dtype((np.float64, (LIM_ROWS, max(n, N_REPORTS))))}
 
     def reset(self, q: np.ndarray) -> None:
         """Start from the measured position ``q`` (no jump is seen against it)."""

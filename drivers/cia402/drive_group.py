@@ -19,7 +19,7 @@ The service, the EtherCAT master and the CANopen transport all use this class un
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
@@ -74,6 +74,7 @@ class DriveGroup(ImageFields):
         transition_timeout: float = 0.5,
         backend: Backend = "auto",
         profile_acceleration: Sequence[float] | None = None,
+        hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         n = transport.n_axes
         if scaling.n != n:
@@ -91,7 +92,7 @@ class DriveGroup(ImageFields):
         )
         # the group's SI values as the first rows of one float64 workspace, the scale rows the
         # compiled read and command use after them (one argument: drivers/cia402/kernels.py)
-        self._si = np.zeros((10, n))
+        self._si = np.zeros((10, n)) if hot is None else hot["si"]
         #: joint angle [rad], (n,)
         self.q = self._si[0]
         #: joint velocity [rad/s], (n,)
@@ -115,7 +116,7 @@ class DriveGroup(ImageFields):
         #: q, qd, tau as the rows of one (3, n) view (one copy of the whole sample)
         self.sample = self._si[:3]
         #: State code per axis, uint8 (n,)
-        self.states = np.zeros(n, dtype=np.uint8)
+        self.states = np.zeros(n, dtype=np.uint8) if hot is None else hot["states"]
         #: status of the last exchange (0 = ok, see drivers.transport.STATUS_TEXT)
         self.status = STATUS_OK
         #: True only when the last :meth:`cycle` brought new TxPDO data; after a lost frame
@@ -153,6 +154,12 @@ class DriveGroup(ImageFields):
         # instance attribute, so tests and tools/bench_tick.py can still wrap it)
         self.read = partial(self._read_si, self._tx_bytes, self._si, self.states)  # type: ignore[method-assign]
         self._init_commissioning()
+
+    @staticmethod
+    def hot_fields(n: int) -> dict[str, np.dtype]:
+        """The arrays the tick's compiled call reads, as fields of a caller-owned record
+        (``hot=``: the constructor then takes these arrays, zeroed, instead of allocating)."""
+        return {"si": np.dtype((np.float64, (10, n))), "states": np.dtype((np.uint8, (n,)))}
 
     def _init_commissioning(self) -> None:
         """Per axis from its profile (issue 28): where STO is read and how the drive runs a
@@ -198,10 +205,16 @@ class DriveGroup(ImageFields):
             kernels.command_raw(q, q, rx, si, what)
 
     @classmethod
-    def from_config(cls, transport: Transport, bus: Any, backend: Backend = "auto") -> DriveGroup:
-        """From a :class:`hofto_hw.config.drives.BusConfig`; ``backend`` as the constructor's
-        (``auto``: the compiled read/command when numba is available, else their Python
-        source; ``numba``: compiled; ``numpy``: the kernels' Python source)."""
+    def from_config(
+        cls,
+        transport: Transport,
+        bus: Any,
+        backend: Backend = "auto",
+        hot: Mapping[str, np.ndarray] | None = None,
+    ) -> DriveGroup:
+        """From a :class:`hofto_hw.config.drives.BusConfig`; ``backend`` and ``hot`` as the
+        constructor's (``auto``: the compiled read/command when numba is available, else their
+        Python source; ``numba``: compiled; ``numpy``: the kernels' Python source)."""
         scaling = Scaling([AxisScaling.from_config(d) for d in bus.drives])
         return cls(
             transport,
@@ -209,6 +222,7 @@ class DriveGroup(ImageFields):
             transition_timeout=bus.transition_timeout,
             backend=backend,
             profile_acceleration=[d.quick_stop_deceleration for d in bus.drives],
+            hot=hot,
         )
 
     # ------------------------------------------------------------ hot path (tick)

@@ -36,6 +36,7 @@ tick an off-tool contact is first detected. Units SI.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from enum import IntEnum
 
 import numpy as np
@@ -69,6 +70,7 @@ class DragController:
         model: RobotModel,
         gravity: tuple[float, float, float] = (0.0, 0.0, -9.81),
         backend: Backend = "numpy",
+        hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         n = model.n
         self.cfg = cfg
@@ -98,6 +100,7 @@ class DragController:
                 cfg.friction_learning_speed,
                 limit=cfg.friction_learning_limit,
                 backend=backend,
+                hot=hot,
             )
             if cfg.friction_learning
             else None

@@ -27,6 +27,7 @@ FrictionParams.torque (the model's friction kernel).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -55,6 +56,7 @@ class FrictionResidual:
         limit: float = 0.25,
         every: int = 4,
         backend: Backend = "numpy",
+        hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         n = friction.coulomb.shape[0]
         self.friction = friction
@@ -66,10 +68,7 @@ class FrictionResidual:
         self.n = n
         #: the learned sums as one record (the tick's compiled call takes it as one argument):
         #: S, b and _st are its fields
-        self.record = np.zeros(
-            1, np.dtype([("S", np.float64, (n, 3, 3)), ("b", np.float64, (n, 3)),
-                         ("st", np.float64, (3,))])
-        )  # fmt: skip
+        self.record = np.zeros(1, self.hot_fields(n)["record"]) if hot is None else hot["record"]
         self.S = self.record["S"][0]  # weighted mean of x·xᵀ per joint
         self.b = self.record["b"][0]  # weighted mean of x·r per joint
         self.coef = np.zeros((n, 3))
@@ -83,6 +82,14 @@ class FrictionResidual:
         self._use_kernel = self.backend == "numba"
         self._learn = kernels.compiled_or_python(friction_learn, self.backend)
         self._features = kernels.compiled_or_python(friction_features, self.backend)
+
+    @staticmethod
+    def hot_fields(n: int) -> dict[str, np.dtype]:
+        """The learned sums (S, b, st) as one record, a field of a caller-owned record
+        (``hot=``: the constructor takes it, zeroed, instead of allocating)."""
+        rec = np.dtype([("S", np.float64, (n, 3, 3)), ("b", np.float64, (n, 3)),
+                        ("st", np.float64, (3,))])  # fmt: skip
+        return {"record": rec}
 
     @property
     def seconds(self) -> float:

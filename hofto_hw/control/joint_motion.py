@@ -19,11 +19,12 @@ compiled, ``numpy`` runs the kernels' own source in the interpreter (same bits).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hofto_hw.control.kernels import path_eval, path_workspace, ramp_step
+from hofto_hw.control.kernels import PATH_ROWS, path_eval, path_workspace, ramp_step
 from hofto_hw.observers import kernels
 from hofto_hw.observers.kernels import Backend
 
@@ -72,18 +73,28 @@ class DemoPath:
         phase: np.ndarray | None = None,
         ramp: float = 1.0,
         backend: Backend = "numpy",
+        hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         self.a = np.asarray(amplitude, dtype=float).copy()
         self.w = 2.0 * math.pi / np.asarray(period, dtype=float)
         self.phi = np.zeros_like(self.a) if phase is None else np.asarray(phase, float).copy()
         self.offset = self.a * np.sin(self.phi)
         self.ramp = float(ramp)
-        self._k = path_workspace(self.a, self.w, self.phi, self.offset)  # the kernel's rows
+        k = path_workspace(self.a, self.w, self.phi, self.offset)  # the kernel's rows
+        self._k = k if hot is None else hot["k"]
+        if hot is not None:
+            np.copyto(self._k, k)
         self.backend = kernels.ready(backend, self._warm)
         #: True exactly when the compiled kernel runs (the tick's fused call reads it)
         self._use_kernel = self.backend == "numba"
         #: the kernel this path calls: path_eval compiled, or its source (backend numpy)
         self._eval = kernels.compiled_or_python(path_eval, self.backend)
+
+    @staticmethod
+    def hot_fields(n: int) -> dict[str, np.dtype]:
+        """The kernel's rows as a field of a caller-owned record (``hot=``: the constructor
+        writes them there instead of keeping its own)."""
+        return {"k": np.dtype((np.float64, (PATH_ROWS, n)))}
 
     def _warm(self) -> None:
         z = np.zeros(self.a.shape[0])
@@ -111,15 +122,14 @@ class JointMotion:
         accel_limit: np.ndarray,
         path: DemoPath | None,
         backend: Backend = "numpy",
+        hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         self.n = n
         self.accel = np.asarray(accel_limit, dtype=float).copy()
         self.path = path
         #: the reference q, qd, qdd and the path's start pose q0 (n,) as one record (the
         #: tick's compiled call takes it as one argument); the attributes are its fields
-        self.state = np.zeros(
-            1, np.dtype([(f, np.float64, (n,)) for f in ("q", "qd", "qdd", "q0")])
-        )
+        self.state = np.zeros(1, self.hot_fields(n)["state"]) if hot is None else hot["state"]
         self.q, self.qd, self.qdd, self.q0 = (self.state[f][0] for f in ("q", "qd", "qdd", "q0"))
         self.mode = HOLD
         self.t0 = 0.0
@@ -133,6 +143,12 @@ class JointMotion:
         self.backend = kernels.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"  # True exactly when ramp_step is compiled
         self._ramp_step = kernels.compiled_or_python(ramp_step, self.backend)
+
+    @staticmethod
+    def hot_fields(n: int) -> dict[str, np.dtype]:
+        """The reference q, qd, qdd and q0 (n,) as one record, a field of a caller-owned
+        record (``hot=``: the constructor takes it, zeroed, instead of allocating)."""
+        return {"state": np.dtype([(f, np.float64, (n,)) for f in ("q", "qd", "qdd", "q0")])}
 
     def _warm(self) -> None:
         z = np.zeros(self.n)

@@ -19,6 +19,7 @@ The workspace reads the model's parameters at every call, so a change of paramet
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from types import ModuleType
 from typing import TYPE_CHECKING
 
@@ -49,7 +50,13 @@ class ModelData:
     tests/hofto_hw/model/reference.py. A pinocchio outside pyproject's bound is refused in
     one line (:func:`hofto_hw.model.snapshot.require_supported_pinocchio`)."""
 
-    def __init__(self, model: RobotModel, backend: str = "numpy", native: bool = True) -> None:
+    def __init__(
+        self,
+        model: RobotModel,
+        backend: str = "numpy",
+        native: bool = True,
+        hot: Mapping[str, np.ndarray] | None = None,
+    ) -> None:
         # imported here: hofto_hw.observers (whose kernels module holds the one jit switch)
         # imports this module's package
         from hofto_hw.model import kernels as mk
@@ -75,7 +82,7 @@ class ModelData:
         # its kernel compiled (or loaded from numba's cache) now, not in the first step of
         # whatever steps this model: an emulator answering a bus would stall there for seconds
         model.friction.torque(np.zeros(n), np.zeros(n), self._fscratch.copy())
-        W = self._W = mk.workspace(n)
+        W = self._W = mk.workspace(n) if hot is None else hot["W"]
         #: held-friction sign (memory), see model.friction: a row of the kernel's workspace
         self.friction_state = W[mk.STATE]
         self._fr_src = model.friction
@@ -98,6 +105,14 @@ class ModelData:
         #: True: :meth:`inverse_dynamics` is one compiled call with pinocchio's C++ RNEA inside
         #: (hofto_hw.model.native)
         self.native = self._native is not None
+
+    @staticmethod
+    def hot_fields(n: int) -> dict[str, np.dtype]:
+        """The kernels' workspace W as a field of a caller-owned record (``hot=``: the
+        constructor takes it, zeroed, instead of allocating)."""
+        from hofto_hw.model import kernels as mk
+
+        return {"W": np.dtype((np.float64, (mk.ROWS, n)))}
 
     def _use_native(self, mk: ModuleType, kernels: ModuleType) -> None:
         """RNEA and the friction as one compiled call with pinocchio's C++ RNEA inside

@@ -17,6 +17,7 @@ kinematics and the nominal values.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree
@@ -237,11 +238,14 @@ class RobotModel:
 
     # ------------------------------------------------------------------ workspaces
 
-    def create_data(self, backend: str = "numpy") -> ModelData:
+    def create_data(
+        self, backend: str = "numpy", hot: Mapping[str, np.ndarray] | None = None
+    ) -> ModelData:
         """A new caller-owned workspace for this model's dynamics (pinocchio Data + buffers);
         ``backend`` "numba"/"auto": its inverse dynamics adds friction in one compiled call
-        (:class:`~hofto_hw.model.data.ModelData`)."""
-        return ModelData(self, backend)
+        (:class:`~hofto_hw.model.data.ModelData`); ``hot``: its kernel workspace W given by the
+        caller (``ModelData.hot_fields``)."""
+        return ModelData(self, backend, hot=hot)
 
 
 def _check_link_inertias(urdf: Path) -> None:

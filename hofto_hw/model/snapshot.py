@@ -59,7 +59,7 @@ path, one per pinocchio algorithm plus one otherwise.
 from __future__ import annotations
 
 import enum
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import ModuleType
 from typing import TYPE_CHECKING
@@ -146,7 +146,12 @@ class DynamicsSnapshot:
     """
 
     def __init__(
-        self, model: RobotModel, needs: Needs | int, backend: str = "numpy", native: bool = True
+        self,
+        model: RobotModel,
+        needs: Needs | int,
+        backend: str = "numpy",
+        native: bool = True,
+        hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         from hofto_hw.model import kernels as mk
         from hofto_hw.observers import kernels
@@ -162,7 +167,8 @@ class DynamicsSnapshot:
         pd = self.pin_data = self.data.pin_data
         self.traits = pinocchio_traits(model)
         self.M, self.g, self.nle, self.accel, self._C = pd.M, pd.g, pd.nle, pd.ddq, pd.C
-        W = self._W = mk.workspace(n)
+        self._hot = hot  # the caller's record fields (hot_fields), else None: allocated here
+        W = self._W = mk.workspace(n) if hot is None else hot["W"]
         self.f, self._total, self.ct_qd = W[mk.F], W[mk.TOTAL], W[mk.CT]
         # the workspace's held-friction memory lives in W (reset_memory still works)
         self.data.friction_state = W[mk.STATE]
@@ -196,6 +202,15 @@ class DynamicsSnapshot:
         #: True: :meth:`compute` is one compiled call with pinocchio's C++ algorithms inside
         self.native = self._native is not None
 
+    @staticmethod
+    def hot_fields(n: int) -> dict[str, np.dtype]:
+        """The workspace W and the native call's output rows O (n+4, n) as fields of a
+        caller-owned record (``hot=``: the constructor takes them, zeroed, instead of
+        allocating)."""
+        from hofto_hw.model import kernels as mk
+
+        return {"W": np.dtype((np.float64, (mk.ROWS, n))), "O": np.dtype((np.float64, (n + 4, n)))}
+
     def _use_native(self, mk: ModuleType, kernels: ModuleType) -> None:
         """The whole snapshot as one compiled call with pinocchio's C++ algorithms inside
         (hofto_hw.model.native), when the native library is built here; else nothing."""
@@ -214,7 +229,7 @@ class DynamicsSnapshot:
         )
         W = self._W
         W[mk.FLAGS] = int(W[mk.FLAGS, 0]) | (terms << mk.NATIVE_SHIFT)
-        O = np.zeros((n + 4, n))
+        O = np.zeros((n + 4, n)) if self._hot is None else self._hot["O"]
         z = np.zeros(n)
         snap = mk.snapshot_native
         if not kernels.warm(lambda: snap(z, z, z, W.copy(), O.copy(), nm.handle)):

@@ -16,7 +16,7 @@ All raise :class:`hofto_hw.errors.ConfigError` naming the missing or wrong field
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from hofto_hw.config.drives import BusConfig
 from hofto_hw.config.models import SimulationConfig, SystemConfig
@@ -142,12 +142,15 @@ def build_transport(cfg: SystemConfig) -> Transport:
     return cls.from_config(bus, axis_names=list(cfg.robot.joints), cycle_time=cycle_time(cfg))
 
 
-def build_drive_group(cfg: SystemConfig, transport: Transport) -> DriveGroup:
+def build_drive_group(
+    cfg: SystemConfig, transport: Transport, hot: dict[str, Any] | None = None
+) -> DriveGroup:
     """The CiA-402 drive layer for ``bus.drives`` over ``transport`` (scaling, timeouts),
-    with the compiled read/command when numba is available (the same numbers as numpy's)."""
+    with the compiled read/command when numba is available (the same numbers as numpy's);
+    ``hot``: its hot arrays in the tick's record (DriveGroup.hot_fields)."""
     from drivers.cia402.drive_group import DriveGroup
     from hofto_hw.commands.backend import observer_backend
 
     return DriveGroup.from_config(
-        transport, _bus(cfg, "the drive group"), backend=observer_backend()
+        transport, _bus(cfg, "the drive group"), backend=observer_backend(), hot=hot
     )

@@ -25,8 +25,10 @@ from hofto_hw.commands.backend import observer_backend
 from hofto_hw.config.models import ExternalTorqueConfig, SystemConfig
 from hofto_hw.control.drag import DragController
 from hofto_hw.control.enabling import EnableInput
+from hofto_hw.control.friction_residual import FrictionResidual
 from hofto_hw.control.joint_motion import DemoPath, JointMotion
 from hofto_hw.errors import ConfigError
+from hofto_hw.model.data import ModelData
 from hofto_hw.model.payload import apply_payload, payload_from_config
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
@@ -41,12 +43,14 @@ from hofto_hw.runtime.build import (
     build_sim_bus,
     build_transport,
 )
+from hofto_hw.runtime.fused import hot_record, tick_state_dtype
 from hofto_hw.runtime.loop import Loop, RealClock, SimClock
 from hofto_hw.runtime.motion_check import check_motion
 from hofto_hw.runtime.realtime import collect_before_loop
 from hofto_hw.runtime.tick import Tick
 from safety.bus_health import BusHealth
 from safety.collision import CollisionLevels
+from safety.collision.state import MonitorState
 from safety.limits import LimitMonitor
 from safety.stop import StopController
 
@@ -138,7 +142,9 @@ def build_model(cfg: SystemConfig) -> RobotModel:
     return model
 
 
-def shared_snapshot(model: RobotModel, observers: list[Observer]) -> DynamicsSnapshot:
+def shared_snapshot(
+    model: RobotModel, observers: list[Observer], hot: dict[str, np.ndarray] | None = None
+) -> DynamicsSnapshot:
     """The tick's one dynamics snapshot: the union of the observers' ``needs``, computed with
     the implementation their own snapshots use (the compiled friction and Cᵀ·qd when every
     observer runs compiled, else numpy), so the shared terms equal each observer's own.
@@ -152,7 +158,27 @@ def shared_snapshot(model: RobotModel, observers: list[Observer]) -> DynamicsSna
         needs |= obs.needs
         own = getattr(obs, "snapshot", None)
         compiled = compiled and own is not None and own.backend == "numba"
-    return DynamicsSnapshot(model, needs, "numba" if compiled else "numpy")
+    return DynamicsSnapshot(model, needs, "numba" if compiled else "numpy", hot=hot)
+
+
+def hot_parts(cfg: SystemConfig, n: int, names: list[str]) -> dict[str, dict[str, np.dtype]]:
+    """The fields of the tick's hot record (runtime.fused.hot_record), per part, from each
+    part's own ``hot_fields``; an absent part (no collision monitor, no friction learning, no
+    demo path) keeps a zeroed field of its type, which the compiled call does not read."""
+    k, coll = max(1, len(names)), cfg.safety.collision
+    return {
+        "tick": {"state": tick_state_dtype(n, k)},
+        "group": DriveGroup.hot_fields(n),
+        "snap": DynamicsSnapshot.hot_fields(n),
+        "ff": ModelData.hot_fields(n),
+        "lim": LimitMonitor.hot_fields(n),
+        "motion": JointMotion.hot_fields(n),
+        "coll": (
+            CollisionLevels.hot_fields(coll, names) if coll else MonitorState.hot_fields(1, k, n)
+        ),
+        "learn": FrictionResidual.hot_fields(n),
+        "path": DemoPath.hot_fields(n),
+    }
 
 
 def build(
@@ -190,17 +216,20 @@ def build(
     backend = observer_backend()  # compiled kernels when numba is there, warmed here
     observers = [make_observer(table[name], model, backend=backend) for name in names]
     sink = sink if sink is not None else MemorySink(tick_dtype(model.n, len(names)))
+    # the tick's one hot record first; each part is built on its fields (no part allocates
+    # an array the compiled call reads, nothing is moved afterwards)
+    hot, on = hot_record(hot_parts(cfg, model.n, names))
     if before_bus is not None:
         before_bus()
 
     say("opening the bus")
-    bus, group = build_bus(cfg, clock)
+    bus, group = build_bus(cfg, clock, hot=on["group"])
     try:
         say("loading the safety checks and the tick (compiled code)")
 
         s = cfg.safety
         stop = StopController.from_config(s.categories)
-        limits = LimitMonitor.from_config(s.limits, model.limits, backend=backend)
+        limits = LimitMonitor.from_config(s.limits, model.limits, backend, on["lim"])
         health = BusHealth(
             model.n,
             s.bus.lost_cycles,
@@ -210,26 +239,28 @@ def build(
         )
         collision = None
         if s.collision is not None:
-            collision = CollisionLevels(s.collision, names, model, backend=backend)
+            collision = CollisionLevels(s.collision, names, model, backend, on["coll"])
         if collision is not None and s.profiles is not None:  # the active profile's scale
             collision.scale_thresholds(s.profiles.sets[s.profiles.active].collision_scale)
         accel = np.where(np.isfinite(model.limits.acceleration), model.limits.acceleration, 10.0)
         p = cfg.run.path
-        path = DemoPath(p.amplitude, p.period, p.phase, p.ramp, backend) if p is not None else None
-        motion = JointMotion(model.n, accel, path, backend=backend)
-        drag, enable, drag_row = _build_drag(cfg, model, names, backend)
+        path = None
+        if p is not None:
+            path = DemoPath(p.amplitude, p.period, p.phase, p.ramp, backend, on["path"])
+        motion = JointMotion(model.n, accel, path, backend, on["motion"])
+        drag, enable, drag_row = _build_drag(cfg, model, names, backend, on["learn"])
         if drag is not None and s.profiles is not None:  # the active safety profile's drag
             drag.apply_profile(*s.profiles.sets[s.profiles.active].drag_factors())
         tick = Tick(
             group,
             observers,
-            shared_snapshot(model, observers),
+            shared_snapshot(model, observers, on["snap"]),
             stop,
             limits,
             health,
             collision,
             motion,
-            model.create_data(backend),  # the feed-forward: compiled friction
+            model.create_data(backend, on["ff"]),  # the feed-forward: compiled friction
             sink,
             overrun_limit=s.overrun_streak,
             drag=drag,
@@ -237,6 +268,7 @@ def build(
             drag_row=drag_row,
             period=1.0 / rate,
             backend=backend,
+            hot=hot,
         )
         tick.diag_every = max(1, round(rate / 10.0))
         # issue 28: STO and brake faults named by the drive layer (their sources: the profiles);
@@ -285,9 +317,12 @@ def _silent(text: str) -> None:
     """No progress lines."""
 
 
-def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:
+def build_bus(
+    cfg: SystemConfig, clock: str, hot: dict[str, np.ndarray] | None = None
+) -> tuple[Transport, DriveGroup]:
     """The transport ``bus.transport`` names and its drive group, opened, configured and in
-    CSP, not yet enabled (:func:`enable_drives`).
+    CSP, not yet enabled (:func:`enable_drives`); ``hot``: the group's fields of the tick's
+    hot record (DriveGroup.hot_fields).
 
     ``sim``: the in-process plant (the run's payload and model error, no scripted world
     torques: the run scripts its own contact). Any other registered transport (``ethercat``,
@@ -306,7 +341,7 @@ def build_bus(cfg: SystemConfig, clock: str) -> tuple[Transport, DriveGroup]:
                 "real clock (use --clock real)"
             )
         bus = build_transport(cfg)
-    group = build_drive_group(cfg, bus)
+    group = build_drive_group(cfg, bus, hot)
     try:
         bus.open()
         group.configure(cfg.bus.drives)
@@ -420,7 +455,11 @@ def enable_drives(bus: Transport, group: DriveGroup) -> None:
 
 
 def _build_drag(
-    cfg: SystemConfig, model: RobotModel, names: list[str], backend: Backend
+    cfg: SystemConfig,
+    model: RobotModel,
+    names: list[str],
+    backend: Backend,
+    hot: dict[str, np.ndarray] | None = None,
 ) -> tuple[DragController | None, EnableInput | None, int]:
     """The drag controller of the ``drag:`` section, its enabling input and the row of
     ``tau_ext`` (observer) that drives it; (None, None, 0) without the section."""
@@ -433,7 +472,7 @@ def _build_drag(
         raise ConfigError(
             f"drag.observer: {d.observer!r} is not one of the loop's observers {names}"
         )
-    ctrl = DragController(d, model, cfg.robot.gravity, backend)
+    ctrl = DragController(d, model, cfg.robot.gravity, backend, hot)
     return ctrl, EnableInput.from_config(d.enable_input), names.index(d.observer)
 
 

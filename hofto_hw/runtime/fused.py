@@ -19,9 +19,10 @@ tick, sections 1-3 through the parts' own methods: the reference the tests compa
 
 Arguments: few, so that numba's dispatch unboxes little on every call (each array argument
 costs ~0.1-0.3 µs, more with the caches cold after the exchange): the tick's one hot record
-(:func:`hot_dtype`: the tick's state and the parts' hot arrays as its fields, the parts'
-arrays being views into it, :func:`relocate`), the observer bank's tuple (its observers'
-own records), the process images' bytes, the tick record (a one-element structured array)
+(:func:`hot_record`: the tick's state and the parts' hot arrays as its fields, allocated by
+the composition root before the parts, which are built on their fields), the observer bank's
+tuple (its observers' own records), the process images' bytes, the tick record (a
+one-element structured array)
 and this tick's scalars (loop time, dt, the bus's sample interval, tick number, the loop's
 timings). Numba types each field by its dtype and shape; with numba's JIT switched off
 (NUMBA_DISABLE_JIT=1) the same source runs as Python.
@@ -30,7 +31,6 @@ timings). Numba types each field by its dtype and shape; with numba's JIT switch
 from __future__ import annotations
 
 import sys
-from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -41,7 +41,6 @@ from hofto_hw.control.kernels import friction_learn, path_eval
 from hofto_hw.model import kernels as MK
 from hofto_hw.model.kernels import inverse_dynamics_native, snapshot_native
 from hofto_hw.observers import kernels as K
-from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.observers.kernels import bank_update
 from hofto_hw.recording.kernels import fill_tick
 from hofto_hw.runtime.tick_kernels import (
@@ -163,16 +162,16 @@ def fused_tick(
     quiet: bool,
 ) -> int:
     """One tick after the exchange (module docstring) on the tick's hot record ``hot`` (1,)
-    (:func:`hot_dtype`), the observer bank's tuple ``obs``, the process images' bytes ``tx``,
+    (:func:`hot_record`), the observer bank's tuple ``obs``, the process images' bytes ``tx``,
     ``rx`` and the tick record ``rec`` (1,), for loop time ``t_loop`` [s], ``dt`` [s] since the
     last tick, the bus's sample interval ``sdt`` [s] (0: unknown, -1: no sample), tick number
     ``tick`` and the loop's wake-up and compute times [µs]. Sections 1-3 run on every call;
     the rest only when the caller found the tick ``quiet``. Returns the stage code where the
     Python stages go on."""
     h = hot[0]
-    ts = h["tick"]
+    ts = h["tick_state"]
     tau_ext, prev, q_sent, tau_ff = ts["tau_ext"], ts["prev"], ts["q_sent"], ts["tau_ff"]
-    si, states = h["si"], h["states"]
+    si, states = h["group_si"], h["group_states"]
     # 1-2. the drive read (the exchange is the caller's)
     read_si(tx, si, states)
     sample = si[:3]
@@ -185,7 +184,7 @@ def fused_tick(
     obs_dt = 0.0
     if sdt >= 0.0:
         obs_dt = sdt if sdt > 0.0 else dt
-        sw, so, sh = h["snap_w"], h["snap_o"], ts["snap_h"]
+        sw, so, sh = h["snap_W"], h["snap_O"], ts["snap_h"]
         k = 1 if obs_dt <= ts["stall"] else _gap_steps(obs_dt, period)
         if k == 1:
             finite = _observe(obs, sw, so, sh, tau_ext, sample, obs_dt)
@@ -213,13 +212,13 @@ def fused_tick(
         return SAFETY
     if not finite:
         return SAFETY
-    ms = h["motion"]
+    ms = h["motion_state"]
     mq, mqd, mqdd, q0 = ms["q"], ms["qd"], ms["qdd"], ms["q0"]
     flags = tick_flags(tau_ext, states, POWERED, mqdd, rec[0]["qdd_cmd"])
     if not flags & ESTIMATES_FINITE:
         return SAFETY
     gap = _jump_gap(ts["since_fresh"] + dt, period)
-    if limits_quiet(sample, q_sent, h["lim"], 1 + 2 * expect, gap) == 0:
+    if limits_quiet(sample, q_sent, h["lim_w"], 1 + 2 * expect, gap) == 0:
         return SAFETY
     ts["since_fresh"] = 0.0  # good data (what bus.check and Tick._safety do on it)
     monitored = ts["has_coll"] and _judged(tick, ts["judge_from"], flags)
@@ -229,14 +228,14 @@ def fused_tick(
     ts["mflags"] = 0
     if monitored:
         mdt = obs_dt if obs_dt > 0.0 else dt
-        c = h["coll"]
-        bbuf = h["bbuf"].view(np.bool_)  # numba has no boolean subarray fields: uint8 bytes
+        c = h["coll_record"]
+        bbuf = h["coll_bbuf"].view(np.bool_)  # numba has no boolean subarray fields: uint8 bytes
         f = monitor_tick(c["fbuf"], bbuf, c["first_tick"], tau_ext, qd, mqdd, mdt, tick)
         ts["mflags"] = f
         if f != 0 or ts["was_contact"]:
             return MONITOR
         if ts["has_learn"]:
-            lrn = h["learn"]
+            lrn = h["learn_record"]
             friction_learn(
                 qd, tau_ext[ts["l_row"]], mdt, ts["l_vs"], ts["l_tau"], ts["l_min"],
                 ts["l_every"], lrn["S"], lrn["b"], lrn["st"],
@@ -250,9 +249,9 @@ def fused_tick(
         t = t_cmd - ts["t0"]
         # the exponent 2 from the state: the compiler cannot turn libm's pow into x·x
         b, bd, bdd = _fade_in(t, ts["ramp"], ts["two"])
-        path_eval(h["path"], t, b, bd, bdd, q0, mq, mqd, mqdd)
+        path_eval(h["path_k"], t, b, bd, bdd, q0, mq, mqd, mqdd)
         # the feed-forward: when the reference moved
-        inverse_dynamics_native(mq, mqd, mqdd, h["ff_w"], tau_ff, ts["ff_h"])
+        inverse_dynamics_native(mq, mqd, mqdd, h["ff_W"], tau_ff, ts["ff_h"])
     # 6. command (CSP with the torque offset)
     command_raw(mq, tau_ff, rx, si, 2)
     # 7. the record (and q_sent = the command just sent)
@@ -263,54 +262,57 @@ def fused_tick(
     return DONE
 
 
-def hot_dtype(t: Tick) -> np.dtype:
-    """The tick's one hot record: its state (:func:`tick_state_dtype`) and, as fields of
-    their own dtypes and shapes, the hot arrays of its parts (:func:`hot_arrays`). Every
-    field starts on a 16-byte boundary: a part's record dtype is packed (alignment 1), and
-    an array moved to an unaligned address would be another type to numba (a compile in the
-    loop at its first call from Python) and slower to numpy."""
+def hot_record(parts: dict[str, dict[str, np.dtype]]) -> tuple[np.ndarray, dict[str, dict]]:
+    """The tick's one hot record (1,), zeroed, allocated before its parts: ``parts`` maps a
+    part ("group", "snap", ...) to its ``hot_fields`` (name -> a record's or an array's
+    dtype); field ``part_name``. Returns the record and, per part, its fields as the arrays
+    its constructor takes (``hot=``): a record (1,), an array of its shape (booleans stored
+    as their bytes: numba has no boolean subarray fields). Every field starts on a 16-byte
+    boundary: a part's record dtype is packed (alignment 1), and an unaligned array is
+    another type to numba (a compile in the loop) and slower to numpy."""
     names, formats, offsets, at = [], [], [], 0
-    for name, arr in [("tick", t.state), *hot_arrays(t)]:
-        if arr.dtype.names:  # a part's record (1,): a nested record field
-            fmt = arr.dtype
-        else:  # numba has no boolean subarray fields: booleans as their bytes
-            fmt = np.dtype((np.uint8 if arr.dtype == np.bool_ else arr.dtype, arr.shape))
-        at = -(-at // 16) * 16
-        names.append(name)
-        formats.append(fmt)
-        offsets.append(at)
-        at += fmt.itemsize
+    for part, fields in parts.items():
+        for name, dt in fields.items():
+            if dt.subdtype is not None and dt.subdtype[0] == np.bool_:
+                dt = np.dtype((np.uint8, dt.shape))
+            at = -(-at // 16) * 16
+            names.append(f"{part}_{name}")
+            formats.append(dt)
+            offsets.append(at)
+            at += dt.itemsize
     size = -(-at // 16) * 16
-    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": size})
+    hot = np.zeros(1, {"names": names, "formats": formats, "offsets": offsets, "itemsize": size})
+    # plain arrays on the record's bytes (a field view's np.void keeps allocating when its
+    # fields are written: ~1 kB per thousand ticks in the drag test, tracemalloc)
+    buf, at_ = hot.view(np.uint8), iter(offsets)
+    views = {
+        part: {
+            name: np.ndarray((1,), dt, buf, next(at_))
+            if dt.names
+            else np.ndarray(dt.shape, dt.base, buf, next(at_))
+            for name, dt in fields.items()
+        }
+        for part, fields in parts.items()
+    }
+    return hot, views
 
 
-def hot_arrays(t: Tick) -> list[tuple[str, np.ndarray]]:
-    """The parts' arrays the fused call reads and writes (name: the hot record's field), and
-    the owners that may hold views of them (:func:`relocate`'s ``holders``)."""
-    g, snap, ff, m = t.group, t.snapshot, t.feedforward, t.motion
-    out = [
-        ("si", g._si), ("states", g.states), ("snap_w", snap._W), ("snap_o", snap._O),
-        ("ff_w", ff._W), ("lim", t.limits._w), ("motion", m.state),
-    ]  # fmt: skip
-    c = t.collision
-    # absent parts: small stand-ins of the right types (the call checks has_coll/has_learn)
+def _parts(t: Tick) -> list[tuple[str, Any, str]]:
+    """(field of the hot record, owner, attribute) of every hot array the fused call reads."""
+    g, snap, m, c, fr = t.group, t.snapshot, t.motion, t.collision, _learning(t)
+    out = [("tick_state", t, "state"), ("group_si", g, "_si"), ("group_states", g, "states")]
+    out += [("snap_W", snap, "_W"), ("snap_O", snap, "_O"), ("ff_W", t.feedforward, "_W")]
+    out += [("lim_w", t.limits, "_w"), ("motion_state", m, "state")]
     if c is not None:
-        out += [("coll", c.state.record), ("bbuf", c.state.bbuf)]
-    else:
-        k = max(1, len(t.observers))
-        stand = np.dtype([("fbuf", np.float64, (1,)), ("first_tick", np.int64, (k,))])
-        out += [("coll", np.zeros(1, stand)), ("bbuf", np.zeros(1, dtype=bool))]
-    fr = _learning(t)
+        out += [("coll_record", c.state, "record"), ("coll_bbuf", c.state, "bbuf")]
     if fr is not None:
-        out.append(("learn", fr.record))
-    else:
-        n = t.n
-        stand = np.dtype([("S", np.float64, (n, 3, 3)), ("b", np.float64, (n, 3)),
-                          ("st", np.float64, (3,))])  # fmt: skip
-        out.append(("learn", np.zeros(1, stand)))
-    p = m.path
-    out.append(("path", p._k if _path_ok(p) else np.zeros((1, t.n))))
+        out.append(("learn_record", fr, "record"))
     return out
+
+
+def _on(hot: np.ndarray, field: str, a: np.ndarray) -> bool:
+    """``a`` is the field ``field`` of ``hot`` (its view, from the part's construction)."""
+    return a.ctypes.data == hot[field].ctypes.data and a.nbytes == hot[field].nbytes
 
 
 def _learning(t: Tick) -> Any:
@@ -325,80 +327,6 @@ def _path_ok(p: Any) -> bool:
     return p is not None and p._use_kernel and p._eval is path_eval
 
 
-def _holders(t: Tick) -> list[Any]:
-    """Every object that may hold a view of a hot array (its attributes, tuples, partials)."""
-    snap, ff = t.snapshot, t.feedforward
-    out = [t, t.group, snap, getattr(snap, "data", None), ff, t.limits, t.motion]
-    out += [t.motion.path, t.collision, getattr(t.collision, "state", None)]
-    out += [t.drag, _learning(t)]
-    return [o for o in out if o is not None]
-
-
-def relocate(t: Tick, hot: np.ndarray) -> list[tuple[Any, str, np.ndarray]]:
-    """Move the tick's state and its parts' hot arrays into ``hot`` (a zeroed (1,) record of
-    :func:`hot_dtype`): each array's numbers are copied into its field, and every attribute of
-    the holders (:func:`_holders`) that views one of them (an array, a tuple's or a partial's
-    array) is replaced by the same view into ``hot`` (one new view per old one: identities
-    between the parts stay). Returns (owner, attribute, array) of each part's array, which
-    :meth:`FusedTick.bound` checks later."""
-    buf = hot.view(np.uint8)
-    base = hot.ctypes.data
-    olds = [("tick", t.state)] + hot_arrays(t)
-    fields = [hot[name][0] if old.dtype.names is None else hot[name] for name, old in olds]
-    spans = [
-        (old.ctypes.data, old.ctypes.data + old.nbytes, f.ctypes.data - base)
-        for (_, old), f in zip(olds, fields, strict=True)
-    ]
-    for owner in _holders(t):  # before anything moves: a view we could not rebind
-        for attr, v in getattr(owner, "__dict__", {}).items():
-            for x in v if isinstance(v, list | set) else v.values() if isinstance(v, dict) else ():
-                if isinstance(x, np.ndarray) and any(
-                    lo <= x.ctypes.data < hi for lo, hi, _ in spans
-                ):
-                    raise ValueError(
-                        f"{type(owner).__name__}.{attr} holds a hot array in a container"
-                    )
-    for (_, old), f in zip(olds, fields, strict=True):
-        np.copyto(f.view(old.dtype) if f.dtype != old.dtype else f, old)
-    memo: dict[int, tuple[Any, Any]] = {}
-
-    def moved(v: Any) -> Any:
-        if isinstance(v, np.ndarray) and v.nbytes:
-            if id(v) in memo:
-                return memo[id(v)][1]
-            p = v.ctypes.data
-            for lo, hi, at in spans:
-                if lo <= p < hi:
-                    nv = np.ndarray(v.shape, v.dtype, buf, at + p - lo, v.strides)
-                    memo[id(v)] = (v, nv)
-                    return nv
-            return v
-        if isinstance(v, tuple):
-            new = tuple(moved(x) for x in v)
-            return new if any(a is not b for a, b in zip(new, v, strict=True)) else v
-        if isinstance(v, partial):
-            args = moved(v.args)
-            return v if args is v.args else partial(v.func, *args, **v.keywords)
-        return v
-
-    for owner in _holders(t):
-        for attr, v in list(getattr(owner, "__dict__", {}).items()):
-            nv = moved(v)
-            if nv is not v:
-                setattr(owner, attr, nv)
-    t.st = t.state[0]
-    g, snap, ff, c, fr, m = t.group, t.snapshot, t.feedforward, t.collision, _learning(t), t.motion
-    kept = [(t, "state"), (g, "_si"), (g, "states"), (snap, "_W"), (snap, "_O"), (ff, "_W")]
-    kept += [(t.limits, "_w"), (m, "state")]
-    if c is not None:
-        kept += [(c.state, "record"), (c.state, "bbuf")]
-    if fr is not None:
-        kept.append((fr, "record"))
-    if _path_ok(m.path):
-        kept.append((m.path, "_k"))
-    return [(o, a, getattr(o, a)) for o, a in kept]
-
-
 _SAID: list[str] = []
 
 
@@ -410,25 +338,18 @@ def say_once(line: str) -> None:
 
 
 class FusedTick:
-    """The fused call's arguments for one :class:`~hofto_hw.runtime.tick.Tick`: its hot
-    record, into which the tick's state and its parts' hot arrays are moved when this is
-    built (``why`` says why not when ``ok`` is False; then nothing was moved)."""
+    """The fused call's arguments for one :class:`~hofto_hw.runtime.tick.Tick`: the hot record
+    ``tick.hot`` its parts were built on (:func:`hot_record`; ``why`` says why not when ``ok``
+    is False). Nothing is copied or rebound: a part whose array is not its field is refused."""
 
     def __init__(self, tick: Tick) -> None:
         self.tick = tick
+        self.hot: np.ndarray = tick.hot
         self.why = self._check(tick)
         self.ok = not self.why
         self.path: Any = None
-        self.kept: list[tuple[Any, str, np.ndarray]] = []
+        self.kept = [(o, a, getattr(o, a)) for _, o, a in _parts(tick)] if self.ok else []
         if self.ok:
-            self.hot = np.zeros(1, hot_dtype(tick))
-            try:
-                self.kept = relocate(tick, self.hot)
-            except ValueError as exc:
-                self.ok, self.why = False, f"the hot record cannot take over: {exc}"
-                return
-            # a new bank: its model terms and output rows are views of the moved arrays
-            tick._bank = ObserverBank(tick.observers, tick.snapshot, tick.tau_ext)
             try:
                 self._warm()
             except Exception as exc:  # numba's TypingError/LoweringError, a cache problem
@@ -436,8 +357,8 @@ class FusedTick:
                 self.why = f"compiling the fused tick failed ({type(exc).__name__})"
 
     def bound(self) -> bool:
-        """The parts still hold the arrays moved into the hot record (a part that replaced
-        one, e.g. a snapshot rebuilt for a new model, needs a new FusedTick)."""
+        """The parts still hold the arrays they were built on (a part that replaced one, e.g. a
+        snapshot rebuilt for a new model, is not what the fused call reads)."""
         return all(getattr(o, a) is arr for o, a, arr in self.kept)
 
     def _check(self, t: Tick) -> str:
@@ -468,11 +389,15 @@ class FusedTick:
         ff = t.feedforward
         if ff._native is None or ff._id_native is not inverse_dynamics_native:
             return "the feed-forward does not run the native RNEA"
-        return ""
+        if t.hot is None:
+            return "its parts were not built on one hot record (runtime.compose.build)"
+        names = t.hot.dtype.names
+        off = [f for f, o, a in _parts(t) if f not in names or not _on(t.hot, f, getattr(o, a))]
+        return "parts not built on the tick's hot record: " + ", ".join(off) if off else ""
 
     def args(self) -> tuple[Any, ...]:
         """The call's arguments before this tick's scalars, and the parts' constants into the
-        tick's state (:attr:`path_ok`: the motion's path is the compiled one moved here)."""
+        tick's state (:attr:`path_ok`: the motion's path is the compiled one on the hot record)."""
         t = self.tick
         g, m, st = t.group, t.motion, t.st
         st["fault_min"], st["op_enabled"] = t.bus.fault_min, t.bus.op_enabled
@@ -491,8 +416,8 @@ class FusedTick:
         return (self.hot, t._bank.args, g._tx_bytes, g._rx_bytes, t._rec1)
 
     def hot_path(self, p: Any) -> bool:
-        """The path's workspace is the one moved into the hot record."""
-        return any(o is p and a == "_k" and arr is p._k for o, a, arr in self.kept)
+        """The path's workspace is its field of the hot record (built on it)."""
+        return _on(self.hot, "path_k", p._k)
 
     def _warm(self) -> None:
         """Compile the kernel (all of it) with a lost sample, which returns after the drive

@@ -115,6 +115,7 @@ class Tick(TickEvents):
         drag_row: int = 0,
         period: float = 0.0,
         backend: Backend = "auto",
+        hot: np.ndarray | None = None,
     ) -> None:
         n = group.n
         self.n = n
@@ -145,9 +146,13 @@ class Tick(TickEvents):
         #: does not jump), and the jump check allows for the gap
         self.period = float(period)
         self._stall_dt = 1.5 * self.period if self.period > 0.0 else math.inf  # see gap_steps
+        #: the hot record the parts were built on (fused.hot_record, by runtime.compose.build;
+        #: None: the compiled call refuses the tick)
+        self.hot = hot
         #: the tick's state (fused.tick_state_dtype): the scalars both paths read and write
         #: (``st["t_cmd"]``, ``st["sample_dt"]``, ...) and the arrays below, as one record
-        self.state = np.zeros(1, tick_state_dtype(n, max(1, len(self.observers))))
+        rows = max(1, len(self.observers))
+        self.state = np.zeros(1, tick_state_dtype(n, rows)) if hot is None else hot["tick_state"]
         self.st = self.state[0]  # its fields by name (a view)
         self.st["stall"], self.st["two"] = self._stall_dt, 2.0
         self.st["period"] = self.period
@@ -247,8 +252,8 @@ class Tick(TickEvents):
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
         # sections 1-3 of every tick, and the rest of a quiet one, as one compiled call
-        # (fused.py) on the parts' hot arrays (moved into its record here); a configuration
-        # it cannot run is refused here, in one line
+        # (fused.py) on the hot record the parts were built on; a configuration it cannot run
+        # is refused here, in one line
         self.busy = 0  # BUSY_* bits: the rare states now (0: the next tick may be quiet)
         self._fz_kind = OTHER
         self.fused_ticks = 0  # ticks the fused call finished
@@ -501,12 +506,12 @@ class Tick(TickEvents):
         hold them now; not after a script's step, ``rebuild`` False) and the state's slow
         scalars (off the common path)."""
         fz = self._fz
-        if self._fz_args[1] is not self._bank.args or not fz.bound():
-            # a new bank (a reset) or a part that replaced a hot array: moved and checked again
-            self._fz = fz = FusedTick(self)
-            if not fz.ok:
-                raise RuntimeError(f"the tick's compiled call cannot take its parts: {fz.why}")
-            rebuild = True
+        new_bank = self._fz_args[1] is not self._bank.args  # a reset built one: checked again
+        why = "a part replaced its hot record's array" if not fz.bound() else ""
+        why = why or (fz._check(self) if new_bank else "")
+        if why:
+            raise RuntimeError(f"the tick's compiled call cannot take its parts: {why}")
+        rebuild = rebuild or new_bank
         if rebuild:
             self._fz_args = fz.args()
         self.busy = self._busy()

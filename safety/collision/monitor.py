@@ -3,7 +3,7 @@ flight-log replay and recordings (see safety/collision/__init__.py for the rules
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Literal
 
 import numpy as np
@@ -54,8 +54,17 @@ class CollisionLevels:
         rows: Sequence[str],
         model: object | None = None,
         backend: Backend = "auto",
+        hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
-        self._build(P.from_levels_config(cfg, rows), model, cfg.tool_force, backend)  # type: ignore[attr-defined]
+        p = P.from_levels_config(cfg, rows)
+        self._build(p, model, cfg.tool_force, backend, hot)  # type: ignore[attr-defined]
+
+    @staticmethod
+    def hot_fields(cfg: object, rows: Sequence[str]) -> dict[str, np.dtype]:
+        """The monitor's state (:meth:`MonitorState.hot_fields`) for this config, as fields of
+        a caller-owned record (``hot=``)."""
+        L, _, k, n = P.from_levels_config(cfg, rows).par.shape
+        return MonitorState.hot_fields(L, k, n, P.N_SCAL)
 
     @classmethod
     def from_config(
@@ -81,7 +90,12 @@ class CollisionLevels:
         return self
 
     def _build(
-        self, p: MonitorParams, model: object | None, tool_force: float | None, backend: Backend
+        self,
+        p: MonitorParams,
+        model: object | None,
+        tool_force: float | None,
+        backend: Backend,
+        hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         L, _, k, n = p.par.shape
         self.params = p
@@ -90,7 +104,7 @@ class CollisionLevels:
         self.deciding = p.deciding
         self.logic = p.logic
         self.v_rev = float(p.scal[P.S_V_REV])
-        self.state = s = MonitorState(L, k, n, P.N_SCAL)
+        self.state = s = MonitorState(L, k, n, P.N_SCAL, hot)
         np.copyto(s.par, p.par)
         np.copyto(s.scal, p.scal)
         np.copyto(s.deciding, p.deciding)

@@ -20,6 +20,8 @@ Shapes, with L levels, k observer rows and n joints (row k is the fused ``mean``
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 # feat rows
@@ -50,8 +52,35 @@ class MonitorState:
     ``deciding`` (k,)) a view of ``bbuf``: the compiled kernel then takes two arrays instead of
     fifteen (numba's per-argument call cost dominates a tick this small)."""
 
-    def __init__(self, levels: int, k: int, n: int, n_scal: int = 12) -> None:
-        L = levels
+    def __init__(
+        self,
+        levels: int,
+        k: int,
+        n: int,
+        n_scal: int = 12,
+        hot: Mapping[str, np.ndarray] | None = None,
+    ) -> None:
+        fshapes, bshapes = self._shapes(levels, k, n, n_scal)
+        #: the packed numbers as one record (the tick's compiled call takes it and bbuf as its
+        #: arguments: numba has no boolean fields); fbuf and first_tick are its fields
+        f = self.hot_fields(levels, k, n, n_scal)
+        if hot is None:
+            self.record, self.bbuf = np.zeros(1, f["record"]), np.zeros(f["bbuf"].shape, bool)
+        else:
+            self.record, self.bbuf = hot["record"], hot["bbuf"]
+        self.fbuf = self.record["fbuf"][0]
+        for buf, shapes in ((self.fbuf, fshapes), (self.bbuf, bshapes)):
+            at = 0
+            for name, shape in shapes.items():
+                size = int(np.prod(shape))
+                setattr(self, name, buf[at : at + size].reshape(shape))
+                at += size
+        self.first_tick = self.record["first_tick"][0]
+        self.first_tick.fill(-1)
+
+    @staticmethod
+    def _shapes(L: int, k: int, n: int, n_scal: int) -> tuple[dict, dict]:
+        """The float and bool arrays' shapes, in their buffers' order."""
         fshapes = {
             "par": (L, 6, k, n),
             "scal": (n_scal,),
@@ -67,23 +96,17 @@ class MonitorState:
             "level_joints": (L, n),
             "hits": (L + 1,),
         }
-        nf = sum(int(np.prod(v)) for v in fshapes.values())
-        nb = sum(int(np.prod(v)) for v in bshapes.values())
-        #: the packed numbers as one record (the tick's compiled call takes it and bbuf as its
-        #: arguments: numba has no boolean fields); fbuf and first_tick are its fields
-        self.record = np.zeros(
-            1, np.dtype([("fbuf", np.float64, (nf,)), ("first_tick", np.int64, (k,))])
-        )
-        self.fbuf = self.record["fbuf"][0]
-        self.bbuf = np.zeros(nb, dtype=bool)
-        for buf, shapes in ((self.fbuf, fshapes), (self.bbuf, bshapes)):
-            at = 0
-            for name, shape in shapes.items():
-                size = int(np.prod(shape))
-                setattr(self, name, buf[at : at + size].reshape(shape))
-                at += size
-        self.first_tick = self.record["first_tick"][0]
-        self.first_tick.fill(-1)
+        return fshapes, bshapes
+
+    @staticmethod
+    def hot_fields(levels: int, k: int, n: int, n_scal: int = 12) -> dict[str, np.dtype]:
+        """``record`` (fbuf, first_tick) and ``bbuf`` as fields of a caller-owned record
+        (``hot=``: the constructor takes them, zeroed, instead of allocating)."""
+        fs, bs = MonitorState._shapes(levels, k, n, n_scal)
+        nf = sum(int(np.prod(v)) for v in fs.values())
+        nb = sum(int(np.prod(v)) for v in bs.values())
+        rec = np.dtype([("fbuf", np.float64, (nf,)), ("first_tick", np.int64, (k,))])
+        return {"record": rec, "bbuf": np.dtype((np.bool_, (nb,)))}
 
     def reset(self, par: np.ndarray, qd: np.ndarray | None, v_rev: float) -> None:
         """Forget everything; thresholds back to the nominal bases; a finite ``qd`` (n,)

@@ -300,3 +300,37 @@ def test_a_part_the_compiled_call_cannot_run_is_refused_in_one_line() -> None:
             )  # fmt: skip
     finally:
         system.close()
+
+
+def test_the_parts_are_built_on_the_hot_record_and_a_part_off_it_is_refused() -> None:
+    """compose.build allocates the hot record first and builds every part on its fields: the
+    arrays the compiled call reads are the parts' own (a drive read lands in the record, no
+    copy). A tick given a part whose array is not its field, or no record at all, is
+    refused in one line naming why (nothing is copied or rebound to make it fit)."""
+    import copy
+
+    from hofto_hw.runtime.fused import _parts
+
+    cfg = load_config(CONFIG)
+    system = build(cfg, clock="sim", contact=False)
+    try:
+        t = system.tick
+        hot = t.hot
+        for field, owner, attr in _parts(t):
+            a = getattr(owner, attr)
+            assert a.ctypes.data == hot[field].ctypes.data, field
+            assert np.shares_memory(a, hot), field
+        assert t.motion.path is not None and t._fz.hot_path(t.motion.path)
+        t.group.cycle()
+        assert np.array_equal(hot["group_si"][0][:3], t.group.sample)
+        assert hot["group_si"][0, 0].ctypes.data == t.group.q.ctypes.data
+        parts = (t.group, t.observers, t.snapshot, t.stop)
+        rest = (t.bus, t.collision, t.motion, t.feedforward, t.sink)
+        with pytest.raises(ConfigError, match=r"^the tick cannot run compiled: its parts were not"):
+            Tick(*parts, t.limits, *rest, backend="numba")
+        off = copy.copy(t.limits)
+        off._w = t.limits._w.copy()  # same numbers, its own memory
+        with pytest.raises(ConfigError, match=r"hot record: lim_w$"):
+            Tick(*parts, off, *rest, backend="numba", hot=hot)
+    finally:
+        system.close()
