@@ -202,9 +202,20 @@ def test_status_and_state_show_sto_and_brake_per_axis(in_process, capsys) -> Non
         s = wait_for(lambda: (st := robot.state()).axes[2].sto and st, "STO seen")
         assert not any(a.sto for i, a in enumerate(s.axes) if i != 2)
         wait_for(lambda: robot.state().axes[2].brake == "closed", "brake closed (power off)")
-        code, out, _ = _cli(capsys, "status", "--socket", sock, "--json")
-        doc = json.loads(out)
-        assert doc["axes"][2] == {"name": "joint_3", "sto": True, "brake": "closed"}
+        # status is a read of its own: waited for as a state (the per-axis words are
+        # refreshed every 8th tick), and on a timeout the last answers are in the message
+        seen: list = []
+
+        def status_shows_sto() -> bool:
+            code, out, _ = _cli(capsys, "status", "--socket", sock, "--json")
+            doc = json.loads(out)
+            seen[:] = [code, doc["axes"], doc["ticks"], robot.state().axes[2]]
+            return doc["axes"][2] == {"name": "joint_3", "sto": True, "brake": "closed"}
+
+        try:
+            wait_for(status_shows_sto, "status --json: joint_3 STO active, brake closed", 30.0)
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}; last: {seen}") from None
         code, out, _ = _cli(capsys, "status", "--socket", sock)
         assert "joint_3 ACTIVE/closed" in out
         assert robot.state().faults  # STO while running is a category 0 stop
