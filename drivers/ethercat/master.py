@@ -122,8 +122,11 @@ class EtherCATTransport(Transport):
     lost slave stops the transport). ``receive_timeout`` [s]: how long ``exchange`` waits
     for its frame (default: one cycle). ``state_timeout`` [s]: per AL state change.
     ``mailbox_retries``: extra attempts of an SDO or register access that got no answer.
-    ``pdo_watchdog`` [s]: SM (process-data) watchdog written to every slave before SAFE-OP
-    (None keeps the slave's default, typically 100 ms). ``positions``: the 1-based line
+    ``sdo_timeout`` [s]: how long an SDO transfer waits for its answer (None: SOEM's 700 ms); a
+    transfer that got no valid answer brings the slave's mailbox back in step before the
+    next one (:mod:`drivers.ethercat.mailbox`). ``pdo_watchdog`` [s]: SM (process-data)
+    watchdog written to every slave before SAFE-OP (None keeps the slave's default,
+    typically 100 ms). ``positions``: the 1-based line
     position of each drive device, in device order, when the transport runs only part of a
     longer line (a commissioning check of some drives); the other slaves are brought to
     PRE-OP with the line (SOEM's mapping reads their PDOs by CoE) and left there: no process
@@ -146,6 +149,7 @@ class EtherCATTransport(Transport):
         mailbox_retries: int = 3,
         pdo_watchdog: float | None = None,
         positions: Sequence[int] | None = None,
+        sdo_timeout: float | None = None,
     ) -> None:
         super().__init__(len(drives), cycle_time, axis_names)
         self.interface = interface
@@ -211,8 +215,17 @@ class EtherCATTransport(Transport):
         self.state_timeout = state_timeout
         self.mailbox_retries = max(0, int(mailbox_retries))
         self.pdo_watchdog = pdo_watchdog
+        if sdo_timeout is not None and not 0.0 < sdo_timeout <= 10.0:
+            raise ValueError(f"sdo_timeout {sdo_timeout} s not in (0, 10]")
+        #: how long an SDO transfer waits for the drive's answer [s] (None: SOEM's 0.7 s)
+        self.sdo_timeout = sdo_timeout
         #: mailbox accesses that needed a retry (start-up and SDO), for diagnostics
         self.mailbox_retried = 0
+        #: device -> object of its last SDO transfer that got no valid answer: its mailbox is
+        #: brought back in step before the next transfer (:meth:`_resync`)
+        self._out_of_step: dict[int, int] = {}
+        #: mailbox resynchronisations done (diagnostics, tests)
+        self.mailbox_resynced = 0
         timeout = cycle_time if receive_timeout is None else receive_timeout
         self._timeout_us = max(100, int(timeout * 1e6))
         self.master: Any = None
@@ -340,6 +353,11 @@ class EtherCATTransport(Transport):
                 "CAP_NET_RAW"
             ) from None
         self.master = master
+        if self.sdo_timeout is not None:
+            us = round(self.sdo_timeout * 1e6)
+            master.sdo_read_timeout = us
+            master.sdo_write_timeout = us
+        self._out_of_step = {}
         self.warnings = []
         try:
             self._start(pysoem)
@@ -406,6 +424,7 @@ class EtherCATTransport(Transport):
         if self.pdo_watchdog is not None:
             for s in self.slaves:
                 s.config_func = self._set_watchdog
+        self._resync_all()  # SOEM's config_map reads the PDO assignment by CoE itself
         try:
             m.config_map()
         except pysoem.ConfigMapError as exc:
@@ -861,14 +880,51 @@ class EtherCATTransport(Transport):
         pysoem = _pysoem()
         if self.master is None:
             raise EtherCATError(f"EtherCAT master on {self.interface} is not open")
-        slave = self.slaves[self.serve[axis][0]]
+        d = self.serve[axis][0]
+        slave = self.slaves[d]
         what = f"SDO {action} 0x{index:04X}:{subindex:02X}"
+        transient = (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError)
+
+        def attempt() -> Any:
+            if d in self._out_of_step:
+                self._resync(d, axis, what, index)
+            try:
+                return call(slave)
+            except transient:
+                self._out_of_step[d] = index  # its answer may still come: resync first
+                raise
+
         try:
-            return self._retry(lambda: call(slave), axis, what)
+            return self._retry(attempt, axis, what)
         except pysoem.SdoError as exc:
             raise SdoAbortError(
                 axis, index, subindex, exc.abort_code, action, self.axis_names[axis]
             ) from None
+
+    def _resync(self, d: int, axis: int, what: str, index: int) -> None:
+        """Bring device ``d``'s mailbox back in step before ``what`` is sent: a transfer to it
+        got no valid answer, and its late answer must not be taken for the next one
+        (:mod:`drivers.ethercat.mailbox`). Raises EtherCATError naming the slave, the failed
+        transfer and the fence objects when none of them answers cleanly."""
+        from drivers.ethercat.mailbox import fence_names, resync
+
+        pysoem = _pysoem()
+        errors = (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError, pysoem.SdoError)
+        failed = self._out_of_step[d]
+        s = self.slaves[d]
+        if resync(lambda i, sub: s.sdo_read(i, sub), errors, failed) is None:
+            raise EtherCATError(
+                f"{self._who(axis)}: {what} not sent: mailbox out of step since an SDO transfer "
+                f"of 0x{failed:04X} got no valid answer, and none of {fence_names(failed)} "
+                "answered cleanly either"
+            )
+        del self._out_of_step[d]
+        self.mailbox_resynced += 1
+
+    def _resync_all(self) -> None:
+        """Every device's mailbox in step (before SOEM's own CoE transfers: config_map)."""
+        for d in list(self._out_of_step):
+            self._resync(d, self._first[d], "PDO mapping", self._out_of_step[d])
 
     # ----------------------------------------------------------------------- close
 

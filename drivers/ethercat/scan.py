@@ -21,6 +21,7 @@ from typing import Any
 from drivers.cia402.pdo import RXPDO_ASSIGN_INDEX, TXPDO_ASSIGN_INDEX
 from drivers.cia402.scan import PROBED_OBJECTS, ScanError, ScannedDrive, ScannedPdo, check_unique
 from drivers.ethercat.al_status import STATE_PREOP
+from drivers.ethercat.mailbox import resync
 
 _CAT_DC = 60
 _CAT_END = 0xFFFF
@@ -90,16 +91,34 @@ def scan(iface: str, timeout: float = 5.0) -> list[ScannedDrive]:
 def _read_slave(i: int, s: Any, pysoem: Any) -> ScannedDrive:
     address = f"slave {i + 1}"
 
-    def read(index: int, sub: int, size: int) -> int | None:
+    transient = (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError)
+    in_step = [True]  # False after a transfer got no valid answer: resync before the next
+
+    def transfer(call: Any, index: int, what: str) -> Any:
+        """``call()`` with retries; an SdoError (the drive's answer) propagates. After a
+        transfer that got no valid answer the mailbox is brought back in step before the
+        next (its late answer must not be taken for another: drivers.ethercat.mailbox)."""
         for _attempt in range(4):
+            if not in_step[0]:
+                if resync(s.sdo_read, transient + (pysoem.SdoError,), index) is None:
+                    time.sleep(0.01)
+                    continue
+                in_step[0] = True
             try:
-                data = bytes(s.sdo_read(index, sub))
-                return int.from_bytes(data[:size].ljust(size, b"\0"), "little")
-            except pysoem.SdoError:
-                return None
-            except (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError):
+                return call()
+            except transient:
+                in_step[0] = False
                 time.sleep(0.01)
-        raise ScanError(f"{address} ('{s.name}'): SDO read 0x{index:04X}:{sub:02X} got no answer")
+        raise ScanError(f"{address} ('{s.name}'): {what} got no answer")
+
+    def read(index: int, sub: int, size: int) -> int | None:
+        try:
+            data = bytes(
+                transfer(lambda: s.sdo_read(index, sub), index, f"SDO read 0x{index:04X}:{sub:02X}")
+            )
+        except pysoem.SdoError:
+            return None
+        return int.from_bytes(data[:size].ljust(size, b"\0"), "little")
 
     def pdos(assign: int) -> list[ScannedPdo]:
         count = read(assign, 0, 1) or 0
@@ -118,16 +137,12 @@ def _read_slave(i: int, s: Any, pysoem: Any) -> ScannedDrive:
         """Whether mapping object ``index`` is configurable: its entry count written back
         unchanged in PRE-OP (a no-op for a configurable PDO) and read back. A fixed PDO
         aborts the write (0x06010002 read-only, or another abort code)."""
-        for _attempt in range(4):
-            try:
-                s.sdo_write(index, 0, bytes([count]))
-                break
-            except pysoem.SdoError:
-                return False
-            except (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError):
-                time.sleep(0.01)
-        else:
-            raise ScanError(f"{address} ('{s.name}'): SDO write 0x{index:04X}:00 got no answer")
+        try:
+            transfer(
+                lambda: s.sdo_write(index, 0, bytes([count])), index, f"SDO write 0x{index:04X}:00"
+            )
+        except pysoem.SdoError:
+            return False
         return read(index, 0, 1) == count
 
     ident = [read(0x1018, k, 4) for k in (1, 2, 3)]

@@ -31,7 +31,7 @@ import numpy as np
 from drivers.cia402 import pdo
 from drivers.sim.esc import pdo_map
 from drivers.sim.esc import registers as r
-from drivers.sim.esc.coe import CoeServer
+from drivers.sim.esc.coe import COE_SDO_REQUEST, MBX_HEADER, MBX_TYPE_COE, CoeServer
 from drivers.sim.esc.description import SlaveDescription
 from drivers.sim.esc.sii import build_image
 from drivers.sim.object_dictionary import ObjectDictionary
@@ -100,6 +100,17 @@ def _writable_mask() -> bytearray:
 _WRITABLE = _writable_mask()
 
 
+def _sdo_request_object(frame: bytes) -> tuple[int, int] | None:
+    """(index, subindex) of a CoE SDO upload or download request (its initiation), else None."""
+    if len(frame) < MBX_HEADER + 6 or frame[5] & 0x0F != MBX_TYPE_COE:
+        return None
+    service = struct.unpack_from("<H", frame, MBX_HEADER)[0] >> 12
+    if service != COE_SDO_REQUEST or frame[MBX_HEADER + 2] >> 5 not in (1, 2):
+        return None
+    index, sub = struct.unpack_from("<HB", frame, MBX_HEADER + 3)
+    return index, sub
+
+
 class Esc:
     """One emulated slave (see module docstring).
 
@@ -140,6 +151,12 @@ class Esc:
         self.refuse: dict[int, int] = {}
         #: fault injection: the slave does not process datagrams (link down)
         self.silent = False
+        #: fault injection: (index, subindex) -> how many answers to SDO requests of that
+        #: object come late: such an answer is held until the master's next mailbox request
+        #: (it has given up waiting by then) and goes out just before that request's own
+        #: answer, in order, as a slow drive's does
+        self.late: dict[tuple[int, int], int] = {}
+        self._held: list[bytes] = []
         #: set when the master completed a write of the SM2 buffer (new outputs)
         self.outputs_fresh = False
         self.last_output_ns = 0
@@ -380,14 +397,22 @@ class Esc:
         start, length, _c, _a = self.sm(k)
         frame = bytes(self.mem[start : start + length])
         self._mbx_set_full(k, True)
+        if self._held:  # the master gave up on them and asks again: they come now
+            self.outbox.extend(self._held)
+            self._held.clear()
         if self.coe is None:
             reply = None
         else:
             reply = self.coe.handle(frame)
         self._mbx_set_full(k, False)  # the application has read it
+        key = _sdo_request_object(frame)
+        if reply is not None and key is not None and self.late.get(key, 0) > 0:
+            self.late[key] -= 1
+            self._held.append(reply)
+            reply = None
         if reply is not None:
             self.outbox.append(reply)
-            self._fill_read_mailbox()
+        self._fill_read_mailbox()
 
     def queue_mailbox(self, frame: bytes) -> None:
         """Queue a slave-initiated mailbox frame (e.g. an emergency) for the master."""

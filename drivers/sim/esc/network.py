@@ -212,9 +212,11 @@ class EmulatedNetwork:
         of plant time; with ``trace`` [s] also a trace from then); ``trace`` (seconds: record
         the true arm's t, q, qd at every plant step for that long from now); ``trace_read``
         (the trace so far: t, q, qd lists, ``done`` once its time is over); ``sdo_abort`` (slave,
-        index, sub (-1 = all), code; code 0 removes); ``refuse_state`` (slave, state, code;
-        code 0 removes); ``al_error`` (slave, code: the slave drops to SAFE-OP, or stays
-        lower, with the error flag and this code);
+        index, sub (-1 = all), code; code 0 removes); ``sdo_late`` (slave, index, sub, count:
+        the answers to the next ``count`` SDO requests of that object are held until the
+        master's next mailbox request, then go out before its answer); ``refuse_state``
+        (slave, state, code; code 0 removes); ``al_error`` (slave, code: the slave drops to
+        SAFE-OP, or stays lower, with the error flag and this code);
         ``restart`` (slave: power-cycled, registers reset, INIT, no station address);
         ``sto``, ``brake``, ``home_switch``, ``index_phase`` (slave and the fields of
         :meth:`drivers.sim.drive.EmulatedDrives.commissioning`); ``stop``. Slaves are 0-based
@@ -274,6 +276,15 @@ class EmulatedNetwork:
                     s.coe.forced_aborts[key] = code
                 else:
                     s.coe.forced_aborts.pop(key, None)
+            elif op == "sdo_late":
+                s = self.slaves[self._slave_index(request["slave"])]
+                if s.coe is None:
+                    raise ValueError("slave has no CoE server")
+                key = (int(request["index"]), int(request["sub"]))
+                count = int(request.get("count", 1))
+                if count < 0:
+                    raise ValueError(f"count {count} < 0")
+                s.late[key] = count
             elif op == "refuse_state":
                 s = self.slaves[self._slave_index(request["slave"])]
                 state, code = int(request["state"]), int(request["code"])

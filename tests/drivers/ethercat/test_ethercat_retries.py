@@ -46,10 +46,12 @@ def transport(er3a_config) -> EtherCATTransport:
 
 
 def test_a_lost_mailbox_answer_is_retried(transport: EtherCATTransport) -> None:
-    slave = FakeSlave([pysoem.WkcError(wkc=0), pysoem.PacketError(1, 1), b"\x10\x23"])
+    fence = b"\x92\x01\x02\x00"  # 0x1000:00, read to bring the mailbox back in step
+    slave = FakeSlave([pysoem.WkcError(wkc=0), fence, pysoem.PacketError(1, 1), fence, b"\x10\x23"])
     transport.slaves = [slave]
     assert transport.read_value(0, 0x603F, 0, "u16") == 0x2310
-    assert slave.calls == 3 and transport.mailbox_retried == 2
+    assert slave.calls == 5 and transport.mailbox_retried == 2
+    assert transport.mailbox_resynced == 2
 
 
 def test_an_sdo_abort_is_the_drives_answer_and_not_retried(transport: EtherCATTransport) -> None:
@@ -65,14 +67,16 @@ def test_retries_run_out_with_one_line_naming_slave_and_access(
     transport: EtherCATTransport,
 ) -> None:
     transport.mailbox_retries = 2
-    slave = FakeSlave([pysoem.PacketError(1, 99)] * 3)  # a code pysoem cannot describe
+    late = pysoem.PacketError(1, 99)  # a code pysoem cannot describe
+    fence = b"\x92\x01\x02\x00"
+    slave = FakeSlave([late, fence, late, fence, late])
     transport.slaves = [slave]
     with pytest.raises(EtherCATError) as err:
         transport.sdo_read(0, 0x1018, 1)
     assert isinstance(err.value, TransportError)
     msg = str(err.value)
     assert msg.startswith("slave 1 (joint_1) on ecm0: SDO read 0x1018:01 failed after 3 attempts")
-    assert "\n" not in msg and slave.calls == 3
+    assert "\n" not in msg and slave.calls == 5
 
 
 def test_only_an_expired_sm_watchdog_is_acknowledged(transport: EtherCATTransport) -> None:
@@ -85,3 +89,87 @@ def test_only_an_expired_sm_watchdog_is_acknowledged(transport: EtherCATTranspor
     assert refused.written == [] and fine.written == []
     late.state, late.al_status = 0x14, 0x001A
     assert not transport._ack_watchdog_errors(0x08)
+
+
+class MailboxSlave:
+    """A slave's mailbox as SOEM's ecx_SDOread sees it: answers come in order; before its
+    request SOEM empties the read mailbox once without waiting; it takes the first SDO
+    answer whose index matches (not the subindex), any other is an unexpected frame
+    (PacketError). ``late``: objects whose next answer is held until the master's next
+    request (the master timed out on it: WkcError)."""
+
+    def __init__(self, values: dict[tuple[int, int], int], late: list[tuple[int, int]]) -> None:
+        self.values = values
+        self.late = list(late)
+        self.pending: list[tuple[int, int]] = []  # answers in the read mailbox, in order
+        self.held: list[tuple[int, int]] = []
+        self.requests: list[tuple[int, int]] = []
+
+    def sdo_read(self, index: int, sub: int) -> bytes:
+        if self.pending:
+            self.pending.pop(0)  # SOEM's drain: one frame, no wait
+        self.requests.append((index, sub))
+        self.pending.extend(self.held)  # the master asks again: the late ones come now
+        self.held.clear()
+        if (index, sub) in self.late:
+            self.late.remove((index, sub))
+            self.held.append((index, sub))
+        else:
+            self.pending.append((index, sub))
+        if not self.pending:
+            raise pysoem.WkcError(wkc=0)
+        answer = self.pending.pop(0)
+        if answer[0] != index:
+            raise pysoem.PacketError(1, 1)  # "unexpected frame returned"
+        return self.values[answer].to_bytes(4, "little")
+
+
+IDENTITY = {(0x1018, 1): 0x00000A5F, (0x1018, 2): 0x00000DEC, (0x1000, 0): 0x00020192}
+IDENTITY |= {(0x1C00, 0): 4, (0x1018, 0): 4, (0x6041, 0): 0x0237}
+
+
+def test_a_late_answer_is_not_taken_for_the_next_read_of_another_subindex(
+    transport: EtherCATTransport,
+) -> None:
+    """0x1018:01 times out; its answer comes with the next request. Without resync the read
+    of 0x1018:02 takes it (SOEM compares the index only) and returns the vendor id."""
+    transport.mailbox_retries = 0
+    slave = MailboxSlave(IDENTITY, late=[(0x1018, 1)])
+    transport.slaves = [slave]
+    with pytest.raises(EtherCATError, match=r"SDO read 0x1018:01 failed after 1 attempts"):
+        transport.sdo_read(0, 0x1018, 1)
+    assert transport.read_value(0, 0x1018, 2, "u32") == 0x00000DEC
+    assert transport.mailbox_resynced == 1 and slave.pending == []
+    # the fence never used the failed object's index (a late answer would pass for it)
+    fences = slave.requests[1:-1]
+    assert fences and all(i != 0x1018 for i, _s in fences)
+
+
+def test_a_retry_that_took_the_late_answer_leaves_its_own_behind_no_more(
+    transport: EtherCATTransport,
+) -> None:
+    """Two late answers in a row: the retry of 0x1018:01 would take the first late answer
+    (the right value) and leave its own for the read of 0x1018:02."""
+    slave = MailboxSlave(IDENTITY, late=[(0x1018, 1), (0x1018, 1)])
+    transport.slaves = [slave]
+    assert transport.read_value(0, 0x1018, 1, "u32") == 0x00000A5F
+    assert transport.read_value(0, 0x1018, 2, "u32") == 0x00000DEC
+    assert transport.mailbox_resynced == 2
+
+
+def test_a_mailbox_that_stays_out_of_step_is_refused_in_one_line(
+    transport: EtherCATTransport,
+) -> None:
+    transport.mailbox_retries = 0
+    slave = MailboxSlave(IDENTITY, late=[(0x1018, 1), (0x1000, 0), (0x1C00, 0), (0x6041, 0)])
+    transport.slaves = [slave]
+    with pytest.raises(EtherCATError):
+        transport.sdo_read(0, 0x1018, 1)
+    with pytest.raises(EtherCATError) as err:
+        transport.sdo_read(0, 0x1018, 2)
+    assert str(err.value) == (
+        "slave 1 (joint_1) on ecm0: SDO read 0x1018:02 not sent: mailbox out of step since an "
+        "SDO transfer of 0x1018 got no valid answer, and none of 0x1000:00, 0x1C00:00, "
+        "0x6041:00 answered cleanly either"
+    )
+    assert (0x1018, 2) not in slave.requests

@@ -210,3 +210,25 @@ def test_unsupported_mailbox_protocol_gets_a_mailbox_error(mailbox: Mailbox) -> 
     reply = mailbox.receive()
     assert reply[5] & 0x0F == 0x00
     assert struct.unpack_from("<HH", reply, 6) == (1, 0x0002)
+
+
+def test_a_late_answer_comes_with_the_masters_next_request_before_its_own(
+    mailbox: Mailbox,
+) -> None:
+    """``late``: the answer to 0x1018:01 is held (the master times out on it) and goes out
+    when the master's next request arrives, before that request's own answer, in order."""
+    esc = mailbox.esc
+    esc.late[(0x1018, 1)] = 1
+    mailbox.send(struct.pack("<HBHB", 2 << 12, 0x40, 0x1018, 1) + bytes(4))
+    assert mailbox.receive() is None  # held: nothing to read however often asked
+    assert mailbox.receive() is None
+    mailbox.send(struct.pack("<HBHB", 2 << 12, 0x40, 0x1018, 2) + bytes(4))
+    late = mailbox.receive()
+    assert late is not None and _coe(late)[2:4] == (0x1018, 1)
+    assert struct.unpack("<I", _coe(late)[4][:4])[0] == esc.od.get(0x1018, 1)
+    own = mailbox.receive()
+    assert own is not None and _coe(own)[2:4] == (0x1018, 2)
+    assert mailbox.receive() is None
+    # one answer only: the next request of 0x1018:01 is answered at once
+    assert esc.late[(0x1018, 1)] == 0
+    assert _coe(mailbox.sdo(0x40, 0x1018, 1))[2:4] == (0x1018, 1)
