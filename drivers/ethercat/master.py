@@ -226,6 +226,8 @@ class EtherCATTransport(Transport):
         self._out_of_step: dict[int, int] = {}
         #: mailbox resynchronisations done (diagnostics, tests)
         self.mailbox_resynced = 0
+        #: device -> why its reconfiguration after a loss failed (set by :meth:`_reconfigure`)
+        self._not_reconfigured: dict[int, str] = {}
         timeout = cycle_time if receive_timeout is None else receive_timeout
         self._timeout_us = max(100, int(timeout * 1e6))
         self.master: Any = None
@@ -409,10 +411,7 @@ class EtherCATTransport(Transport):
         from drivers.cia402.wire import WireImage
 
         self.startup_written = 0
-        layouts = []
-        for i in self._first:  # per slave, through its first axis
-            self._startup(i, ("IP", "PS"))
-            layouts.append(self._configure_pdos(i))
+        layouts = [self._configure_preop(d) for d in range(self.n_devices)]
         wire = WireImage(layouts, self.axis_names, self.serve)
         wire.bind_master(self.rx, self.tx)
         from drivers.cia402.profiles import csp_adapter
@@ -452,16 +451,14 @@ class EtherCATTransport(Transport):
         if self.dc_sync:
             if not m.config_dc():
                 raise EtherCATError(f"{self.interface}: no slave supports distributed clocks")
-            for i, s in enumerate(self.slaves):
-                self._program_dc(self._first[i], s)
-            self._program_cyclic_units()
+            self._configure_dc(range(self.n_devices))
         self._dc_prev = -1
         self.sample_dt = 0.0
         if self.derived is not None:
             self.derived.reset()
         self._request(STATE_SAFEOP)
-        for i in self._first:
-            self._startup(i, ("SO",))
+        for d in range(self.n_devices):
+            self._configure_safeop(d)
         self.rx.fill(0)
         self._request(STATE_OP, cyclic=True)
 
@@ -489,6 +486,26 @@ class EtherCATTransport(Transport):
     def _axis_of_slave(self, d: int) -> int:
         """The first axis on slave ``d`` (0-based); 0 for a position off the bus."""
         return self._first[d] if 0 <= d < self.n_devices else 0
+
+    # What a device needs before each transition: one path for the start and for a device
+    # brought back by recover_slaves (a power cycle loses start-up values, PDOs, DC).
+
+    def _configure_preop(self, d: int) -> Any:
+        """In PRE-OP, device ``d``: its INIT -> PRE-OP and PRE-OP -> SAFE-OP start-up SDOs,
+        then its PDOs written, assigned and read back; returns the layout it reports."""
+        self._startup(self._first[d], ("IP", "PS"))
+        return self._configure_pdos(self._first[d])
+
+    def _configure_dc(self, devices: Any) -> None:
+        """In PRE-OP, after ``config_dc``: SYNC0/SYNC1 and AssignActivate's 0x0980 of
+        ``devices`` (0-based) as their profiles say."""
+        for d in devices:
+            self._program_dc(self._first[d], self.slaves[d])
+        self._program_cyclic_units(devices)
+
+    def _configure_safeop(self, d: int) -> None:
+        """In SAFE-OP, device ``d``: its SAFE-OP -> OP start-up SDOs."""
+        self._startup(self._first[d], ("SO",))
 
     def _startup(self, axis: int, transitions: tuple[str, ...]) -> None:
         """Write the profile's start-up SDOs of ``transitions`` to the slave of ``axis``, in
@@ -532,17 +549,17 @@ class EtherCATTransport(Transport):
         else:
             slave.dc_sync(True, cycle, dc.sync0_shift_ns)
 
-    def _program_cyclic_units(self) -> None:
+    def _program_cyclic_units(self, devices: Any) -> None:
         """AssignActivate's low byte into ESC register 0x0980 (cyclic unit control: SYNC
-        out and latch units to the drive's PDI, e.g. Nanotec's 0x0330 -> 0x30) for every
-        device whose profile asks for another value than the 0x00 SOEM's ``dc_sync``
+        out and latch units to the drive's PDI, e.g. Nanotec's 0x0330 -> 0x30) for each
+        of ``devices`` whose profile asks for another value than the 0x00 SOEM's ``dc_sync``
         writes, then read back: a difference is refused in one line naming the slave, the
         register, the expected and the found value (a drive needing it refuses SAFE-OP
         with AL status 0x0030 otherwise). pysoem has no public register write, so the
         datagrams go out on a socket of our own (:mod:`drivers.ethercat.registers`), here,
         after dc_sync and before the SAFE-OP request, when SOEM has no frame in flight."""
         todo = []
-        for d in range(self.n_devices):
+        for d in devices:
             dc = self.profiles[self._first[d]].dc
             if dc is not None and dc.assign_activate & 0xFF != SOEM_CYCLIC_UNIT_CONTROL:
                 todo.append((d, dc.assign_activate))
@@ -566,15 +583,27 @@ class EtherCATTransport(Transport):
                     )
 
     def _reconfigure(self, pos: int) -> None:
-        """PRE-OP -> SAFE-OP hook of a slave brought back by :meth:`recover_slaves`: its
-        start-up SDOs and PDOs again, checked against the layout the bus runs with."""
+        """PRE-OP -> SAFE-OP hook of a slave brought back by :meth:`recover_slaves` (SOEM's
+        reconfig calls it in PRE-OP, then asks for SAFE-OP): what the start did before
+        SAFE-OP, by the same methods: start-up SDOs and PDOs (the layout checked against
+        the one the bus runs with), the SM watchdog, DC (SYNC0/SYNC1, 0x0980). Its DC
+        system-time offset is not written again (pysoem's config_dc is line-wide and would
+        move the running slaves' time): SYNC0 starts on the slave's own clock. pysoem keeps
+        an exception raised here to itself: it is noted for recover_slaves, which then
+        keeps the slave out of OP and says why."""
         d = self._device_of(pos)  # pysoem passes the 0-based line position
-        self._startup(self._first[d], ("IP", "PS"))
-        layout = self._configure_pdos(self._first[d])
-        if self.wire is not None and layout != self.wire.layouts[d]:
-            raise EtherCATError(f"{self._who_slave(d)}: came back with another PDO layout")
-        if self.pdo_watchdog is not None:
-            self._set_watchdog(pos)
+        try:
+            layout = self._configure_preop(d)
+            if self.wire is not None and layout != self.wire.layouts[d]:
+                raise EtherCATError(f"{self._who_slave(d)}: came back with another PDO layout")
+            if self.pdo_watchdog is not None:
+                self._set_watchdog(pos)
+            if self.dc_sync:
+                self._configure_dc([d])
+        except Exception as exc:
+            self._not_reconfigured[d] = str(exc) or type(exc).__name__
+            raise
+        self._not_reconfigured.pop(d, None)
 
     def _set_watchdog(self, pos: int) -> None:
         """PRE-OP -> SAFE-OP hook: the SM watchdog time (``pdo_watchdog``)."""
@@ -750,11 +779,16 @@ class EtherCATTransport(Transport):
         return out
 
     def recover_slaves(self) -> list[str]:
-        """Bring slaves that are not in OP back to OP; returns what was done, in words.
+        """Bring slaves that are not in OP back to OP; returns what was done, in words (one
+        line each).
 
-        A lost slave is re-addressed and reconfigured (PDO mapping again) once it answers;
-        a slave in an error state is acknowledged and requested to OP. Without ``recover``
-        the transport stops instead and :class:`SlaveLostError` is raised.
+        A lost slave (reset or powered off and back: INIT, no station address) is
+        re-addressed once it answers and configured again as at the start, by the same
+        methods (:meth:`_reconfigure`: start-up SDOs, PDOs checked against the running
+        layout, SM watchdog, DC; then the SAFE-OP -> OP start-up SDOs); one that cannot be
+        is left out of OP, named with the reason. A slave in an error state is acknowledged
+        and requested to OP. Without ``recover`` the transport stops instead and
+        :class:`SlaveLostError` is raised.
         """
         problems = self.check_bus()
         if not problems:
@@ -764,14 +798,30 @@ class EtherCATTransport(Transport):
             raise SlaveLostError("EtherCAT bus stopped: " + "; ".join(problems))
         done = []
         pysoem = _pysoem()
+        refused: set[int] = set()
         for i, s in enumerate(self.slaves):
             if s.state == STATE_OP:
                 continue
             if s.state == 0:
                 if not self._until(lambda s=s: s.recover(20_000) > 0):
                     done.append(f"{self._who_slave(i)} still does not answer")
+                    refused.add(i)
                     continue
+                self._out_of_step.pop(i, None)  # a reset slave's mailbox starts empty
+                self._not_reconfigured[i] = "it did not reach PRE-OP to be configured"
                 self._until(lambda s=s: s.reconfig(50_000) >= STATE_PREOP)
+                why = self._not_reconfigured.pop(i, None)
+                if why is None and s.state == STATE_SAFEOP:
+                    try:
+                        self._configure_safeop(i)
+                    except TransportError as exc:  # an SDO abort, a mailbox out of step
+                        why = str(exc)
+                if why is not None:  # never OP with what the start would have refused
+                    s.state = STATE_PREOP
+                    s.write_state()
+                    refused.add(i)
+                    done.append(f"{self._who_slave(i)} answered again but stays out of OP: {why}")
+                    continue
                 done.append(f"{self._who_slave(i)} answered again and was reconfigured")
             elif s.state & 0x10:
                 s.state = (s.state & 0x0F) | _STATE_ACK
@@ -783,10 +833,11 @@ class EtherCATTransport(Transport):
             if s.state & 0x0F == STATE_SAFEOP or s.state & 0x10:
                 s.state = pysoem.OP_STATE
                 s.write_state()
+        wanted = [s for i, s in enumerate(self.slaves) if i not in refused]
         deadline = time.monotonic() + self.state_timeout
         while time.monotonic() < deadline:
             self._raw_exchange()
-            if all(s.state_check(STATE_OP, 1000) == STATE_OP for s in self.slaves):
+            if all(s.state_check(STATE_OP, 1000) == STATE_OP for s in wanted):
                 break
             self.master.read_state()
             self._ack_watchdog_errors(STATE_OP)

@@ -93,6 +93,9 @@ class EmulatedNetwork:
         ]
         self.drives = drives
         self.n = n
+        #: per slave, its drives' writable objects as they power on (``restart`` restores
+        #: them: start-up values and PDO configuration are lost with the power)
+        self._power_on = [_power_on_values(od) for od in ods]
         #: the true arm's (t, q, qd) at every plant step until ``_trace_until`` [s of plant
         #: time] (requests ``trace`` / ``push`` with ``trace``; read by ``trace_read``): a
         #: client sees every cycle however rarely it is scheduled to ask
@@ -217,7 +220,8 @@ class EmulatedNetwork:
         master's next mailbox request, then go out before its answer); ``refuse_state``
         (slave, state, code; code 0 removes); ``al_error`` (slave, code: the slave drops to
         SAFE-OP, or stays lower, with the error flag and this code);
-        ``restart`` (slave: power-cycled, registers reset, INIT, no station address);
+        ``restart`` (slave: power-cycled, registers reset, INIT, no station address, its
+        drives' writable objects back to their power-on values);
         ``sto``, ``brake``, ``home_switch``, ``index_phase`` (slave and the fields of
         :meth:`drivers.sim.drive.EmulatedDrives.commissioning`); ``stop``. Slaves are 0-based
         positions on the line.
@@ -299,6 +303,11 @@ class EmulatedNetwork:
             elif op == "restart":
                 k = self._slave_index(request["slave"])
                 old = self.slaves[k]
+                for entry, value in self._power_on[k]:
+                    if entry.bound is not None:
+                        entry.set(value)
+                    else:
+                        entry.value = value
                 self.slaves[k] = Esc(
                     old.desc, old.od, k, self.n, dc_clock=self._dc_clock, records=old.records
                 )
@@ -375,6 +384,20 @@ class EmulatedNetwork:
                 **self.drives.commissioning_status(),
             )
         return out
+
+
+def _power_on_values(od: Any) -> list[tuple[Any, int | bytes]]:
+    """The writable objects of a slave's dictionary (every axis of a multi-axis one) with
+    their values now, as the drive powers on; [] for a slave without one."""
+    if od is None:
+        return []
+    dicts = [d for d in getattr(od, "axes", [od]) if d is not None]
+    return [
+        (e, e.value if e.bound is None else e.get())
+        for d in dicts
+        for e in d
+        if e.access in ("rw", "wo")
+    ]
 
 
 # -------------------------------------------------------------------- the process

@@ -15,7 +15,12 @@ import pytest
 from drivers.cia402.codes import describe_error_code, describe_sdo_abort
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import Mode, State
-from drivers.ethercat.errors import IdentityMismatchError, SlaveLostError, StateChangeError
+from drivers.ethercat.errors import (
+    EtherCATError,
+    IdentityMismatchError,
+    SlaveLostError,
+    StateChangeError,
+)
 from drivers.ethercat.master import EtherCATTransport
 from drivers.transport import (
     STATUS_BUS_ERROR,
@@ -291,6 +296,42 @@ def test_sdo_abort_is_surfaced_with_its_meaning(emulated_bus) -> None:
         with pytest.raises(SdoAbortError) as err:
             t.sdo_write(4, 0x1C12, 0, b"\x00")
         assert err.value.code == 0x08000022 and err.value.axis == 4
+    finally:
+        t.close()
+
+
+def test_a_late_sdo_answer_is_not_taken_for_the_next_read_of_another_subindex(
+    emulated_bus,
+) -> None:
+    """The emulated drive answers 0x1018:01 only after the master has given up (held until
+    its next mailbox request). SOEM matches an answer by index, not subindex: without the
+    resync the read of 0x1018:02 that follows would return 0x1018:01's value."""
+    ident = emulated_bus.cfg.bus.drives[2].identity
+    t = _transport(emulated_bus, mailbox_retries=0, sdo_timeout=0.2)
+    try:
+        t.open()
+        emulated_bus.call(op="sdo_late", slave=2, index=0x1018, sub=1, count=1)
+        with pytest.raises(EtherCATError, match=r"slave 3 .*SDO read 0x1018:01 failed after 1"):
+            t.sdo_read(2, 0x1018, 1)
+        assert t.read_value(2, 0x1018, 2, "u32") == ident.product_code
+        assert t.read_value(2, 0x1018, 1, "u32") == ident.vendor_id
+        assert t.mailbox_resynced == 1
+    finally:
+        t.close()
+
+
+def test_a_retry_of_a_late_sdo_leaves_no_answer_behind_for_the_next_read(emulated_bus) -> None:
+    """Two late answers in a row: the retry of 0x1018:01 would take the first (the right
+    value) and leave its own for the read of 0x1018:02 (the 'product code 0x00000DEC'
+    start-up refusal of issue 25, there with a stalled emulator)."""
+    ident = emulated_bus.cfg.bus.drives[2].identity
+    t = _transport(emulated_bus, sdo_timeout=0.2)
+    try:
+        t.open()
+        emulated_bus.call(op="sdo_late", slave=2, index=0x1018, sub=1, count=2)
+        assert t.read_value(2, 0x1018, 1, "u32") == ident.vendor_id
+        assert t.read_value(2, 0x1018, 2, "u32") == ident.product_code
+        assert t.mailbox_resynced == 2
     finally:
         t.close()
 

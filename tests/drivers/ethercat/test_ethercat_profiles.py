@@ -35,7 +35,7 @@ def mixed_bus(tmp_path: Path):
         yield master, cfg, emu
 
 
-def _transport(master: str, cfg, profiles=None) -> EtherCATTransport:
+def _transport(master: str, cfg, profiles=None, **kw) -> EtherCATTransport:
     from drivers.cia402.profiles import profiles_for
 
     return EtherCATTransport(
@@ -46,6 +46,7 @@ def _transport(master: str, cfg, profiles=None) -> EtherCATTransport:
         receive_timeout=0.02,
         pdo_watchdog=2.0,
         profiles=profiles if profiles is not None else profiles_for(cfg.bus.drives, "ethercat"),
+        **kw,
     )
 
 
@@ -98,6 +99,67 @@ def test_six_profiles_run_on_one_bus_with_the_layouts_the_drives_report(mixed_bu
         assert g.tau[3] != 0.0
         assert g.tau[3] == pytest.approx(g.current[3] * d3.torque_constant * d3.gear_ratio)
         g.disable()
+    finally:
+        t.close()
+
+
+def _cycles_ok(t: EtherCATTransport, n: int) -> list[int]:
+    out = []
+    for _ in range(n):
+        out.append(t.exchange())
+        t.wait_next_cycle()
+    return out
+
+
+def test_power_cycled_drives_come_back_to_op_with_their_dc_and_start_up_values(mixed_bus) -> None:
+    """The Inovance (DC-only, its mode set by a start-up SDO) and the Nanotec (0x0980 =
+    0x30, SYNC0 fixed at 1 ms) lose power mid-run and come back in INIT with their start-up
+    values, PDOs and DC gone: recovery programs them as the start did, and both reach OP."""
+    master, cfg, emu = mixed_bus
+    t = _transport(master, cfg, recover=True)
+    try:
+        t.open()
+        written = t.startup_written
+        for slave in (1, 2):
+            emu.call(op="restart", slave=slave)
+        status = emu.call(op="status")
+        assert status["cyclic_unit_control"][2] == 0 and status["al_state"][1:3] == [1, 1]
+        lost = t.check_bus()
+        assert len(lost) == 2 and all("does not answer" in p for p in lost)
+        notes = t.recover_slaves()
+        assert [n for n in notes if "reconfigured" in n] == [
+            f"slave 2 (joint_2) on {master} answered again and was reconfigured",
+            f"slave 3 (joint_3) on {master} answered again and was reconfigured",
+        ], notes
+        assert t.check_bus() == []
+        status = emu.call(op="status")
+        assert status["al_state"] == [0x08] * 6
+        assert status["cyclic_unit_control"] == [0, 0, 0x30, 0, 0, 0]
+        assert t.startup_written == written + 1  # the Inovance's mode, once more
+        assert t.read_value(1, 0x6060, 0, "i8") == 8
+        assert set(_cycles_ok(t, 20)) == {STATUS_OK}
+    finally:
+        t.close()
+
+
+def test_a_drive_that_cannot_be_configured_again_stays_out_of_op_named_in_one_line(
+    mixed_bus,
+) -> None:
+    master, cfg, emu = mixed_bus
+    t = _transport(master, cfg, recover=True)
+    try:
+        t.open()
+        emu.call(op="restart", slave=1)
+        emu.call(op="sdo_abort", slave=1, index=0x6060, sub=0, code=0x06090030)
+        notes = t.recover_slaves()
+        mine = [n for n in notes if n.startswith("slave 2 ")]
+        assert mine and mine[0].startswith(
+            f"slave 2 (joint_2) on {master} answered again but stays out of OP: "
+        ), notes
+        assert "0x6060" in mine[0] and all("\n" not in n for n in notes)
+        status = emu.call(op="status")
+        assert status["al_state"][1] == 0x02  # PRE-OP: no process data from a wrong drive
+        assert [s for k, s in enumerate(status["al_state"]) if k != 1] == [0x08] * 5
     finally:
         t.close()
 

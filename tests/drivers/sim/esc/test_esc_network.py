@@ -96,3 +96,21 @@ def test_a_trace_records_the_true_arm_at_every_plant_step(er3a_config) -> None:
     assert (
         "no drives" in EmulatedNetwork([make_desc()], None).control({"op": "trace_read"})["error"]
     )
+
+
+def test_restart_takes_the_drives_start_up_values_and_pdo_configuration_with_the_power(
+    er3a_config,
+) -> None:
+    from hofto_hw.runtime.build import build_emulated_network
+
+    net = build_emulated_network(er3a_config)
+    od = net.slaves[1].od
+    mode, count = od.get(0x6060), od.get(0x1600, 0)
+    od.write(0x6060, 0, bytes([10]))  # a start-up SDO: CST
+    od.write(0x1600, 0, b"\x00")  # a PDO being remapped
+    other = net.slaves[2].od
+    other.write(0x6060, 0, bytes([10]))
+    net.control({"op": "restart", "slave": 1})
+    assert net.slaves[1].od is od  # the same drive, powered on again
+    assert (od.get(0x6060), od.get(0x1600, 0)) == (mode, count) != (10, 0)
+    assert other.get(0x6060) == 10  # the others keep theirs
