@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pysoem
 import pytest
+from support.soem_mailbox import MailboxSlave
 
 from drivers.errors import EtherCATError, SdoAbortError, TransportError
 from drivers.ethercat.master import EtherCATTransport
@@ -89,39 +90,6 @@ def test_only_an_expired_sm_watchdog_is_acknowledged(transport: EtherCATTranspor
     assert refused.written == [] and fine.written == []
     late.state, late.al_status = 0x14, 0x001A
     assert not transport._ack_watchdog_errors(0x08)
-
-
-class MailboxSlave:
-    """A slave's mailbox as SOEM's ecx_SDOread sees it: answers come in order; before its
-    request SOEM empties the read mailbox once without waiting; it takes the first SDO
-    answer whose index matches (not the subindex), any other is an unexpected frame
-    (PacketError). ``late``: objects whose next answer is held until the master's next
-    request (the master timed out on it: WkcError)."""
-
-    def __init__(self, values: dict[tuple[int, int], int], late: list[tuple[int, int]]) -> None:
-        self.values = values
-        self.late = list(late)
-        self.pending: list[tuple[int, int]] = []  # answers in the read mailbox, in order
-        self.held: list[tuple[int, int]] = []
-        self.requests: list[tuple[int, int]] = []
-
-    def sdo_read(self, index: int, sub: int) -> bytes:
-        if self.pending:
-            self.pending.pop(0)  # SOEM's drain: one frame, no wait
-        self.requests.append((index, sub))
-        self.pending.extend(self.held)  # the master asks again: the late ones come now
-        self.held.clear()
-        if (index, sub) in self.late:
-            self.late.remove((index, sub))
-            self.held.append((index, sub))
-        else:
-            self.pending.append((index, sub))
-        if not self.pending:
-            raise pysoem.WkcError(wkc=0)
-        answer = self.pending.pop(0)
-        if answer[0] != index:
-            raise pysoem.PacketError(1, 1)  # "unexpected frame returned"
-        return self.values[answer].to_bytes(4, "little")
 
 
 IDENTITY = {(0x1018, 1): 0x00000A5F, (0x1018, 2): 0x00000DEC, (0x1000, 0): 0x00020192}

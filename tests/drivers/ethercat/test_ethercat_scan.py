@@ -111,3 +111,20 @@ def test_a_bus_where_two_drives_claim_one_station_alias_is_refused_end_to_end(
     assert "\n" not in err and "Traceback" not in err
     assert "slave 2 (" in err and "slave 4 (" in err and "both claim station alias 7" in err
     assert not out.exists()  # nothing written
+
+
+def test_scan_reads_each_object_as_its_own_after_a_late_answer() -> None:
+    """``bus scan`` reads CoE with SOEM too: 0x1018:01 answered late twice (the retry would
+    take the first late answer and leave its own for 0x1018:02). The mailbox is brought
+    back in step before the next read, so the product code is the product code."""
+    import pysoem
+    from support.soem_mailbox import MailboxSlave
+
+    from drivers.ethercat.scan import _read_slave
+
+    values = {(0x1018, 1): 0x00000A5F, (0x1018, 2): 0x00402001, (0x1018, 3): 7}
+    values |= {(0x1000, 0): 0x00020192, (0x1C00, 0): 4, (0x1C12, 0): 0, (0x1C13, 0): 0}
+    slave = MailboxSlave(values, late=[(0x1018, 1), (0x1018, 1)])
+    drive = _read_slave(0, slave, pysoem)
+    assert (drive.vendor_id, drive.product_code, drive.revision) == (0x00000A5F, 0x00402001, 7)
+    assert slave.pending == [] and slave.held == []
