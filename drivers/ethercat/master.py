@@ -33,7 +33,10 @@ Start-up waits for states, never for a fixed time: every state change is polled 
 ``state_timeout``; mailbox traffic (SDOs, the watchdog register) that fails for lack of an
 answer (WkcError, MailboxError, PacketError: a lost or late frame on a busy machine) is
 retried ``mailbox_retries`` times with a short pause, as SOEM's users do; an SDO *abort* is
-the drive's answer and is never retried. A slave whose SM watchdog expired while the master
+the drive's answer and is never retried. After an SDO transfer that got no valid answer the
+slave's mailbox is brought back in step before the next transfer (SOEM matches an answer by
+index, not subindex: a late answer must not pass for another subindex's;
+:mod:`drivers.ethercat.mailbox`). A slave whose SM watchdog expired while the master
 was late (SAFE-OP + ERROR, 0x001B) is acknowledged and requested to OP again.
 
 Every cycle (:meth:`EtherCATTransport.exchange`): copy ``rx`` into the slaves' outputs, send
@@ -44,7 +47,9 @@ makes one small ``bytes`` object per slave and direction; nothing else is alloca
 
 Outside the cycle: :meth:`check_bus` reads every slave's AL state and says in words what is
 wrong (lost slave, SAFE-OP + ERROR with its AL status code), :meth:`recover_slaves` brings
-them back when they answer again, :meth:`drive_faults` reads 0x603F of faulted drives.
+them back when they answer again (a slave that was reset or lost power is configured by
+the start's own steps: start-up SDOs, PDOs read back, DC; or kept out of OP, named),
+:meth:`drive_faults` reads 0x603F of faulted drives.
 """
 
 from __future__ import annotations
