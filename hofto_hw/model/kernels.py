@@ -115,30 +115,83 @@ def _step(x: float, at_zero: float) -> float:
 
 
 @jit
-def friction_joint(v: float, j: int, W: np.ndarray) -> float:
-    """f_j(v) [N·m] of eq. (12) with every optional term, in the numpy reference's order of
-    operations; advances the held sign ``W[STATE, j]`` when the model has held friction."""
+def held_advance(v: float, h: float, band: float) -> float:
+    """The held sign after velocity v [rad/s]: sign(v) where |v| > ``band`` v_h [rad/s], else
+    the previous held sign ``h`` (-1/0/+1); idempotent for a repeated v."""
+    return h + (_sign(v) - h) * _step(abs(v) - band, 0.0)
+
+
+#: what :func:`friction_features` returns, in order: the parameter each feature multiplies
+#: (the workspace's parameter rows; eq. (12)'s torque is the sum of the products)
+FEATURE_ROWS = (COULOMB, STRIBECK_GAP, VISCOUS, BIAS, QUADRATIC, HELD)
+N_FEATURES = 6
+
+
+@jit
+def friction_features(v: float, h: float, j: int, W: np.ndarray) -> tuple:
+    """The features of eq. (12) of joint j at velocity v [rad/s] with held sign h: the partial
+    derivatives of f_j with respect to its linear parameters Fc, Fs - Fc, Fv, B, Fq, Fh
+    (:data:`FEATURE_ROWS`), 0.0 for a term the model (W's flags) does not have:
+    s(v), exp(-(v/vs)²)·s(v), v, 1, v·|v|, exp(-(v/v_h)²)·h (times [v·h >= 0] when passive),
+    with s(v) = tanh(v/v_s) or sign(v) for v_s = 0. The ONE place these terms are written:
+    :func:`friction_joint` (the torque) sums them times the parameters, identification's
+    regressor columns are these values over a recording (:func:`feature_matrix`)."""
     smooth = W[SMOOTH, j]
     s = math.tanh(v / smooth) if smooth > 0.0 else _sign(v)
-    out = W[COULOMB, j] * s
+    stribeck = 0.0
     if W[HAS_STRIBECK, j] != 0.0:
         t = v / W[STRIBECK_VELOCITY, j]
-        out = out + math.exp(-(t * t)) * s * W[STRIBECK_GAP, j]
-    out = out + W[VISCOUS, j] * v
-    out = out + W[BIAS, j]
-    if W[HAS_QUADRATIC, j] != 0.0:
-        out = out + abs(v) * v * W[QUADRATIC, j]
+        stribeck = math.exp(-(t * t)) * s
+    quadratic = abs(v) * v if W[HAS_QUADRATIC, j] != 0.0 else 0.0
+    held = 0.0
     if W[HAS_HELD, j] != 0.0:
-        hv = W[HELD_VELOCITY, j]
-        h = W[STATE, j]
-        h = h + (_sign(v) - h) * _step(abs(v) - hv, 0.0)
-        W[STATE, j] = h
-        t = v / hv
-        t = math.exp(-(t * t)) * h
+        t = v / W[HELD_VELOCITY, j]
+        held = math.exp(-(t * t)) * h
         if W[HELD_PASSIVE, j] != 0.0:
-            t = t * _step(v * h, 1.0)
-        out = out + t * W[HELD, j]
+            held = held * _step(v * h, 1.0)
+    return s, stribeck, v, 1.0, quadratic, held
+
+
+@jit
+def friction_joint(v: float, j: int, W: np.ndarray) -> float:
+    """f_j(v) [N·m] of eq. (12) with every optional term: :func:`friction_features` times the
+    parameters, summed in the numpy reference's order (an absent term adds 0.0); advances the
+    held sign ``W[STATE, j]`` when the model has held friction."""
+    h = W[STATE, j]
+    if W[HAS_HELD, j] != 0.0:
+        h = held_advance(v, h, W[HELD_VELOCITY, j])
+        W[STATE, j] = h
+    coulomb, stribeck, viscous, bias, quadratic, held = friction_features(v, h, j, W)
+    out = coulomb * W[COULOMB, j]
+    out = out + stribeck * W[STRIBECK_GAP, j]
+    out = out + viscous * W[VISCOUS, j]
+    out = out + bias * W[BIAS, j]
+    out = out + quadratic * W[QUADRATIC, j]
+    out = out + held * W[HELD, j]
     return out
+
+
+@jit
+def held_series(qd: np.ndarray, band: float, h: np.ndarray, out: np.ndarray) -> None:
+    """out[k] = the held sign (n,) after sample k of a velocity sequence qd (N, n) [rad/s] in
+    time order (:func:`held_advance` with band v_h [rad/s]), starting from and advancing the
+    held sign ``h`` (n,) in place."""
+    for k in range(qd.shape[0]):
+        for j in range(qd.shape[1]):
+            h[j] = held_advance(qd[k, j], h[j], band)
+            out[k, j] = h[j]
+
+
+@jit
+def feature_matrix(qd: np.ndarray, held: np.ndarray, W: np.ndarray, out: np.ndarray) -> None:
+    """out[k, j] = :func:`friction_features` (qd[k, j], held[k, j], j, W), (N, n,
+    :data:`N_FEATURES`): the friction columns of identification's linear regressor over a
+    recording, velocities qd (N, n) [rad/s] and held signs (N, n) (:func:`held_series`)."""
+    for k in range(qd.shape[0]):
+        for j in range(qd.shape[1]):
+            f = friction_features(qd[k, j], held[k, j], j, W)
+            for i in range(N_FEATURES):
+                out[k, j, i] = f[i]
 
 
 @jit
