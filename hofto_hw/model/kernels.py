@@ -65,6 +65,12 @@ except Exception:  # no numba: the native path is never chosen (hofto_hw.model.n
     _dyn_terms = _dyn_rnea = None
 
 
+def _inline(fn):  # type: ignore[no-untyped-def]
+    """:func:`jit` inlined into its callers at numba's IR level (per-joint helpers of the
+    friction kernel: a compiled call passing W costs more than their arithmetic)."""
+    return jit(fn, inline="always")
+
+
 def workspace(n: int) -> np.ndarray:
     """A zeroed workspace W (ROWS, n) float64 for the kernels of this module."""
     return np.zeros((ROWS, n))
@@ -114,7 +120,7 @@ def _step(x: float, at_zero: float) -> float:
     return x
 
 
-@jit
+@_inline
 def held_advance(v: float, h: float, band: float) -> float:
     """The held sign after velocity v [rad/s]: sign(v) where |v| > ``band`` v_h [rad/s], else
     the previous held sign ``h`` (-1/0/+1); idempotent for a repeated v."""
@@ -127,7 +133,7 @@ FEATURE_ROWS = (COULOMB, STRIBECK_GAP, VISCOUS, BIAS, QUADRATIC, HELD)
 N_FEATURES = 6
 
 
-@jit
+@_inline
 def friction_features(v: float, h: float, j: int, W: np.ndarray) -> tuple:
     """The features of eq. (12) of joint j at velocity v [rad/s] with held sign h: the partial
     derivatives of f_j with respect to its linear parameters Fc, Fs - Fc, Fv, B, Fq, Fh
@@ -155,19 +161,23 @@ def friction_features(v: float, h: float, j: int, W: np.ndarray) -> tuple:
 @jit
 def friction_joint(v: float, j: int, W: np.ndarray) -> float:
     """f_j(v) [N·m] of eq. (12) with every optional term: :func:`friction_features` times the
-    parameters, summed in the numpy reference's order (an absent term adds 0.0); advances the
+    parameters, summed in the numpy reference's order (absent terms skipped); advances the
     held sign ``W[STATE, j]`` when the model has held friction."""
     h = W[STATE, j]
-    if W[HAS_HELD, j] != 0.0:
+    held_term = W[HAS_HELD, j] != 0.0
+    if held_term:
         h = held_advance(v, h, W[HELD_VELOCITY, j])
-        W[STATE, j] = h
     coulomb, stribeck, viscous, bias, quadratic, held = friction_features(v, h, j, W)
     out = coulomb * W[COULOMB, j]
-    out = out + stribeck * W[STRIBECK_GAP, j]
+    if W[HAS_STRIBECK, j] != 0.0:  # an absent term would add 0.0: skipped, for speed only
+        out = out + stribeck * W[STRIBECK_GAP, j]
     out = out + viscous * W[VISCOUS, j]
     out = out + bias * W[BIAS, j]
-    out = out + quadratic * W[QUADRATIC, j]
-    out = out + held * W[HELD, j]
+    if W[HAS_QUADRATIC, j] != 0.0:
+        out = out + quadratic * W[QUADRATIC, j]
+    if held_term:
+        out = out + held * W[HELD, j]
+        W[STATE, j] = h  # stored last: the reads of W above can be merged
     return out
 
 
