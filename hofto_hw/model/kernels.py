@@ -121,6 +121,13 @@ def _step(x: float, at_zero: float) -> float:
 
 
 @_inline
+def coulomb_sign(v: float, smooth: float) -> float:
+    """s(v) of eq. (12), the feature of Coulomb friction [1]: tanh(v / v_s) for a smoothing
+    velocity ``smooth`` v_s > 0 [rad/s], sign(v) for v_s = 0 (v [rad/s])."""
+    return math.tanh(v / smooth) if smooth > 0.0 else _sign(v)
+
+
+@_inline
 def held_advance(v: float, h: float, band: float) -> float:
     """The held sign after velocity v [rad/s]: sign(v) where |v| > ``band`` v_h [rad/s], else
     the previous held sign ``h`` (-1/0/+1); idempotent for a repeated v."""
@@ -142,8 +149,7 @@ def friction_features(v: float, h: float, j: int, W: np.ndarray) -> tuple:
     with s(v) = tanh(v/v_s) or sign(v) for v_s = 0. The ONE place these terms are written:
     :func:`friction_joint` (the torque) sums them times the parameters, identification's
     regressor columns are these values over a recording (:func:`feature_matrix`)."""
-    smooth = W[SMOOTH, j]
-    s = math.tanh(v / smooth) if smooth > 0.0 else _sign(v)
+    s = coulomb_sign(v, W[SMOOTH, j])
     stribeck = 0.0
     if W[HAS_STRIBECK, j] != 0.0:
         t = v / W[STRIBECK_VELOCITY, j]
