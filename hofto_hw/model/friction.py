@@ -38,7 +38,7 @@ import numpy as np
 from hofto_hw.config.models import FrictionConfig
 
 #: the linear parameters of eq. (12) in the order of :meth:`FrictionParams.features`' last
-#: axis (the kernel's :data:`hofto_hw.model.kernels.FEATURE_ROWS`); ``stribeck_gap`` is Fs - Fc
+#: axis (:func:`hofto_hw.model.kernels.friction_features`); ``stribeck_gap`` is Fs - Fc
 FEATURES = ("coulomb", "stribeck_gap", "viscous", "bias", "quadratic", "held")
 
 

@@ -24,6 +24,7 @@ switch, ``HOFTO_HW_NO_NUMBA``). Kernels write only into the arrays passed in; no
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 
@@ -65,10 +66,9 @@ except Exception:  # no numba: the native path is never chosen (hofto_hw.model.n
     _dyn_terms = _dyn_rnea = None
 
 
-def _inline(fn):  # type: ignore[no-untyped-def]
-    """:func:`jit` inlined into its callers at numba's IR level (per-joint helpers of the
-    friction kernel: a compiled call passing W costs more than their arithmetic)."""
-    return jit(fn, inline="always")
+# the friction kernel's per-joint helpers are inlined at numba's IR level: a compiled call
+# passing W costs more than their arithmetic (twice the kernel's time, measured)
+_inline = partial(jit, inline="always")
 
 
 def workspace(n: int) -> np.ndarray:
@@ -134,21 +134,17 @@ def held_advance(v: float, h: float, band: float) -> float:
     return h + (_sign(v) - h) * _step(abs(v) - band, 0.0)
 
 
-#: what :func:`friction_features` returns, in order: the parameter each feature multiplies
-#: (the workspace's parameter rows; eq. (12)'s torque is the sum of the products)
-FEATURE_ROWS = (COULOMB, STRIBECK_GAP, VISCOUS, BIAS, QUADRATIC, HELD)
-N_FEATURES = 6
+N_FEATURES = 6  # what friction_features returns (hofto_hw.model.friction.FEATURES)
 
 
 @_inline
 def friction_features(v: float, h: float, j: int, W: np.ndarray) -> tuple:
     """The features of eq. (12) of joint j at velocity v [rad/s] with held sign h: the partial
-    derivatives of f_j with respect to its linear parameters Fc, Fs - Fc, Fv, B, Fq, Fh
-    (:data:`FEATURE_ROWS`), 0.0 for a term the model (W's flags) does not have:
-    s(v), exp(-(v/vs)²)·s(v), v, 1, v·|v|, exp(-(v/v_h)²)·h (times [v·h >= 0] when passive),
-    with s(v) = tanh(v/v_s) or sign(v) for v_s = 0. The ONE place these terms are written:
-    :func:`friction_joint` (the torque) sums them times the parameters, identification's
-    regressor columns are these values over a recording (:func:`feature_matrix`)."""
+    derivatives of f_j with respect to Fc, Fs - Fc, Fv, B, Fq, Fh, 0.0 for a term the model
+    (W's flags) does not have: s(v), exp(-(v/vs)²)·s(v), v, 1, v·|v|, exp(-(v/v_h)²)·h (times
+    [v·h >= 0] when passive). The ONE place these terms are written: :func:`friction_joint`
+    sums them times the parameters, identification's regressor columns are their values over
+    a recording (:func:`feature_matrix`)."""
     s = coulomb_sign(v, W[SMOOTH, j])
     stribeck = 0.0
     if W[HAS_STRIBECK, j] != 0.0:
