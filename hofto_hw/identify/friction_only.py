@@ -61,7 +61,7 @@ def refresh_friction(
         phi = structure.features(rec.qd)[:, :, columns]  # eq. (12)'s terms, held from 0
         moving += int(np.sum(np.abs(rec.qd).max(axis=1) > 0.05))
         for j in range(n):
-            cols[j].append(phi[:, j])
+            cols[j].append(np.ascontiguousarray(phi[:, j]))  # the solver sees C order
             rhs[j].append(rec.tau[:, j] - tau_rigid[:, j])
     if moving < 50:
         raise UserError(
