@@ -134,6 +134,28 @@ def held_advance(v: float, h: float, band: float) -> float:
     return h + (_sign(v) - h) * _step(abs(v) - band, 0.0)
 
 
+@_inline
+def stribeck_feature(v: float, s: float, vs: float) -> float:
+    """exp(-(v/vs)²)·s(v) [1], the feature of the Stribeck gap Fs - Fc (vs [rad/s])."""
+    t = v / vs
+    return math.exp(-(t * t)) * s
+
+
+@_inline
+def quadratic_feature(v: float) -> float:
+    """v·|v| [rad²/s²], the feature of quadratic friction Fq."""
+    return abs(v) * v
+
+
+@_inline
+def held_feature(v: float, h: float, band: float, passive: bool) -> float:
+    """exp(-(v/v_h)²)·h [1], the feature of held friction Fh (band v_h [rad/s], held sign h);
+    ``passive``: times [v·h >= 0] (the term only resists motion)."""
+    t = v / band
+    t = math.exp(-(t * t)) * h
+    return t * _step(v * h, 1.0) if passive else t
+
+
 N_FEATURES = 6  # what friction_features returns (hofto_hw.model.friction.FEATURES)
 
 
@@ -141,45 +163,38 @@ N_FEATURES = 6  # what friction_features returns (hofto_hw.model.friction.FEATUR
 def friction_features(v: float, h: float, j: int, W: np.ndarray) -> tuple:
     """The features of eq. (12) of joint j at velocity v [rad/s] with held sign h: the partial
     derivatives of f_j with respect to Fc, Fs - Fc, Fv, B, Fq, Fh, 0.0 for a term the model
-    (W's flags) does not have: s(v), exp(-(v/vs)²)·s(v), v, 1, v·|v|, exp(-(v/v_h)²)·h (times
-    [v·h >= 0] when passive). The ONE place these terms are written: :func:`friction_joint`
-    sums them times the parameters, identification's regressor columns are their values over
-    a recording (:func:`feature_matrix`)."""
+    (W's flags) does not have: identification's regressor columns (:func:`feature_matrix`).
+    Made of the same term functions as :func:`friction_joint`'s torque."""
     s = coulomb_sign(v, W[SMOOTH, j])
     stribeck = 0.0
     if W[HAS_STRIBECK, j] != 0.0:
-        t = v / W[STRIBECK_VELOCITY, j]
-        stribeck = math.exp(-(t * t)) * s
-    quadratic = abs(v) * v if W[HAS_QUADRATIC, j] != 0.0 else 0.0
+        stribeck = stribeck_feature(v, s, W[STRIBECK_VELOCITY, j])
+    quadratic = quadratic_feature(v) if W[HAS_QUADRATIC, j] != 0.0 else 0.0
     held = 0.0
     if W[HAS_HELD, j] != 0.0:
-        t = v / W[HELD_VELOCITY, j]
-        held = math.exp(-(t * t)) * h
-        if W[HELD_PASSIVE, j] != 0.0:
-            held = held * _step(v * h, 1.0)
+        held = held_feature(v, h, W[HELD_VELOCITY, j], W[HELD_PASSIVE, j] != 0.0)
     return s, stribeck, v, 1.0, quadratic, held
 
 
 @jit
 def friction_joint(v: float, j: int, W: np.ndarray) -> float:
-    """f_j(v) [N·m] of eq. (12) with every optional term: :func:`friction_features` times the
-    parameters, summed in the numpy reference's order (absent terms skipped); advances the
-    held sign ``W[STATE, j]`` when the model has held friction."""
-    h = W[STATE, j]
-    held_term = W[HAS_HELD, j] != 0.0
-    if held_term:
-        h = held_advance(v, h, W[HELD_VELOCITY, j])
-    coulomb, stribeck, viscous, bias, quadratic, held = friction_features(v, h, j, W)
-    out = coulomb * W[COULOMB, j]
-    if W[HAS_STRIBECK, j] != 0.0:  # an absent term would add 0.0: skipped, for speed only
-        out = out + stribeck * W[STRIBECK_GAP, j]
-    out = out + viscous * W[VISCOUS, j]
-    out = out + bias * W[BIAS, j]
+    """f_j(v) [N·m] of eq. (12) with every optional term: each term's feature (the functions
+    above, which :func:`friction_features` returns for identification) times its parameter,
+    in the numpy reference's order of operations; advances the held sign ``W[STATE, j]`` when
+    the model has held friction."""
+    s = coulomb_sign(v, W[SMOOTH, j])
+    out = s * W[COULOMB, j]
+    if W[HAS_STRIBECK, j] != 0.0:
+        out = out + stribeck_feature(v, s, W[STRIBECK_VELOCITY, j]) * W[STRIBECK_GAP, j]
+    out = out + v * W[VISCOUS, j]
+    out = out + W[BIAS, j]
     if W[HAS_QUADRATIC, j] != 0.0:
-        out = out + quadratic * W[QUADRATIC, j]
-    if held_term:
-        out = out + held * W[HELD, j]
-        W[STATE, j] = h  # stored last: the reads of W above can be merged
+        out = out + quadratic_feature(v) * W[QUADRATIC, j]
+    if W[HAS_HELD, j] != 0.0:
+        band = W[HELD_VELOCITY, j]
+        h = held_advance(v, W[STATE, j], band)
+        W[STATE, j] = h
+        out = out + held_feature(v, h, band, W[HELD_PASSIVE, j] != 0.0) * W[HELD, j]
     return out
 
 
