@@ -22,8 +22,11 @@ Optional terms, both linear in their parameters (identification stays least squa
   makes a PD-held arm limit-cycle at about v_h;
 - **quadratic** ``Fq_j·qd_j·|qd_j|`` [N·m·s²/rad²].
 
-The formula itself is written once, as the kernel :func:`hofto_hw.model.kernels.friction_joint`
-(the tick's snapshot and feed-forward call it compiled); :meth:`FrictionParams.torque` runs
+The formula itself is written once, in :mod:`hofto_hw.model.kernels`: each term's feature
+(the partial derivative of f_j with respect to its parameter) is one small function there, the
+kernel ``friction_joint`` sums them times the parameters (the tick's snapshot and feed-forward
+call it compiled) and ``friction_features`` returns them (:meth:`FrictionParams.features`:
+identification's regressor columns); :meth:`FrictionParams.torque` runs
 that kernel in a workspace the caller owns (:meth:`FrictionParams.workspace`, packed with the
 parameters: the parameters stay constant, as pinocchio's Model, the workspace is the Data).
 """
