@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from hofto_hw.model.kernels import coulomb_sign
 from hofto_hw.observers.kernels import jit
 
 #: rows of the demo path's float64 workspace (PATH_ROWS, n): amplitude [rad], ω [rad/s],
@@ -117,9 +118,10 @@ def ramp_step(accel: np.ndarray, dt: float, q: np.ndarray, qd: np.ndarray, qdd: 
 @jit
 def friction_feature(v: float, v_s: float) -> float:
     """The friction residual's direction feature s(v) = tanh(v / v_s) [1] of a joint
-    velocity v [rad/s] (v_s > 0 [rad/s]): :func:`friction_learn` regresses on it,
+    velocity v [rad/s] (v_s > 0 [rad/s]): eq. (12)'s Coulomb feature
+    (:func:`hofto_hw.model.kernels.coulomb_sign`); :func:`friction_learn` regresses on it,
     :func:`friction_features` gives it to FrictionResidual.correction."""
-    return math.tanh(v / v_s)
+    return coulomb_sign(v, v_s)
 
 
 @jit

@@ -18,8 +18,7 @@ import scipy.optimize
 
 from hofto_hw.errors import UserError
 from hofto_hw.identify.pipeline import Samples
-from hofto_hw.identify.regressor import held_sign_series
-from hofto_hw.model.friction import FrictionParams
+from hofto_hw.model.friction import FEATURES, FrictionParams
 from hofto_hw.model.parameters import ParametersFile, apply_parameters
 from hofto_hw.model.robot import RobotModel
 
@@ -48,6 +47,10 @@ def refresh_friction(
         held_velocity = pf.held_velocity
     if quadratic is None:
         quadratic = pf.quadratic is not None
+    structure = FrictionParams.structure(n, v_s, None, held_velocity, bool(quadratic))
+    names = ["coulomb", "viscous", "bias"]
+    names += (["held"] if held_velocity is not None else []) + (["quadratic"] if quadratic else [])
+    columns = [FEATURES.index(name) for name in names]
     cols: list[list[np.ndarray]] = [[] for _ in range(n)]
     rhs: list[list[np.ndarray]] = [[] for _ in range(n)]
     moving = 0
@@ -55,23 +58,17 @@ def refresh_friction(
         tau_rigid = np.empty_like(rec.tau)
         for k in range(tau_rigid.shape[0]):
             data.inverse_dynamics(rec.q[k], rec.qd[k], rec.qdd[k], out=tau_rigid[k])
-        s = np.tanh(rec.qd / v_s) if v_s > 0 else np.sign(rec.qd)
-        parts = [s, rec.qd, np.ones_like(rec.qd)]
-        if held_velocity is not None:
-            h = held_sign_series(rec.qd, held_velocity)
-            parts.append(h * np.exp(-((rec.qd / held_velocity) ** 2)))
-        if quadratic:
-            parts.append(rec.qd * np.abs(rec.qd))
+        phi = structure.features(rec.qd)[:, :, columns]  # eq. (12)'s terms, held from 0
         moving += int(np.sum(np.abs(rec.qd).max(axis=1) > 0.05))
         for j in range(n):
-            cols[j].append(np.column_stack([p[:, j] for p in parts]))
+            cols[j].append(np.ascontiguousarray(phi[:, j]))  # the solver sees C order
             rhs[j].append(rec.tau[:, j] - tau_rigid[:, j])
     if moving < 50:
         raise UserError(
             f"identify --friction-only: only {moving} moving samples (|qd| > 0.05 rad/s); "
             "the run must move every joint"
         )
-    k = 3 + (held_velocity is not None) + bool(quadratic)
+    k = len(names)
     lower = np.full(k, -np.inf)
     lower[[0, 1]] = 0.0
     if held_velocity is not None:

@@ -24,6 +24,7 @@ import numpy as np
 import pinocchio as pin
 
 from hofto_hw.errors import UserError
+from hofto_hw.model.friction import FEATURES, FrictionParams
 
 N_RIGID = 10
 N_PER_JOINT = 14
@@ -32,6 +33,10 @@ EXTRA_NAMES = ("Ia", "Fc", "Fv", "B")
 STRIBECK_NAME = "S"
 HELD_NAME = "H"
 QUADRATIC_NAME = "Q"
+
+
+#: the friction feature (hofto_hw.model.friction.FEATURES) of each optional block
+_BLOCK_FEATURE = {STRIBECK_NAME: "stribeck_gap", HELD_NAME: "held", QUADRATIC_NAME: "quadratic"}
 
 
 def optional_names(stribeck: bool = False, held: bool = False, quadratic: bool = False) -> tuple:
@@ -56,17 +61,10 @@ def standard_names(
 
 def held_sign_series(qd: np.ndarray, band: float, initial: np.ndarray | None = None) -> np.ndarray:
     """Held sign h (N, n) of a velocity sequence qd (N, n) [rad/s], in time order: h_k =
-    sign(qd_k) where |qd_k| > ``band``, else h_{k-1} (``initial`` (n,), default 0). The same
-    rule as the friction kernel's held memory (``FrictionParams.torque``)."""
+    sign(qd_k) where |qd_k| > ``band``, else h_{k-1} (``initial`` (n,), default 0). The
+    friction kernel's own held memory (``FrictionParams.held_signs``)."""
     qd = np.asarray(qd, dtype=float)
-    h = np.zeros_like(qd)
-    last = np.zeros(qd.shape[1]) if initial is None else np.array(initial, dtype=float)
-    outside = np.abs(qd) > band
-    sgn = np.sign(qd)
-    for k in range(qd.shape[0]):
-        np.copyto(last, sgn[k], where=outside[k])
-        h[k] = last
-    return h
+    return FrictionParams.structure(qd.shape[1], held_velocity=band).held_signs(qd, initial)
 
 
 def standard_parameters(
@@ -150,12 +148,15 @@ class Regressor:
             self.stribeck_velocity is not None, self.held_velocity is not None, self.quadratic
         )
         self.n_std = (N_PER_JOINT + len(self.optional)) * self.n
-
-    def friction_sign(self, qd: np.ndarray) -> np.ndarray:
-        """s(qd), same shape as ``qd``."""
-        if self.smooth_velocity > 0.0:
-            return np.tanh(np.asarray(qd) / self.smooth_velocity)
-        return np.sign(qd)
+        # the friction columns are this model's features (hofto_hw.model.friction)
+        self._friction = FrictionParams.structure(
+            self.n,
+            self.smooth_velocity,
+            self.stribeck_velocity,
+            self.held_velocity,
+            self.quadratic,
+            self.held_passive,
+        )
 
     def stack(
         self,
@@ -192,22 +193,9 @@ class Regressor:
             H3[k, :, :r] = fn(model, data, q[k], qd[k], qdd[k])
         idx = np.arange(n)
         H3[:, idx, r + idx] = qdd
-        sgn = self.friction_sign(qd)
-        H3[:, idx, r + n + idx] = sgn
-        H3[:, idx, r + 2 * n + idx] = qd
-        H3[:, idx, r + 3 * n + idx] = 1.0
-        col = r + 4 * n
-        if self.stribeck_velocity is not None:
-            H3[:, idx, col + idx] = np.exp(-((qd / self.stribeck_velocity) ** 2)) * sgn
-            col += n
-        if self.held_velocity is not None:
-            v_h = self.held_velocity
-            h = held_sign_series(qd, v_h) if held is None else np.asarray(held, dtype=float)
-            w = np.exp(-((qd / v_h) ** 2))
-            if self.held_passive:
-                w = w * (qd * h >= 0.0)
-            H3[:, idx, col + idx] = h * w
-            col += n
-        if self.quadratic:
-            H3[:, idx, col + idx] = qd * np.abs(qd)
+        phi = self._friction.features(qd, held)  # (N, n, FEATURES): eq. (12)'s own terms
+        blocks = ["coulomb", "viscous", "bias"]
+        blocks += [_BLOCK_FEATURE[name] for name in self.optional]
+        for b, name in enumerate(blocks):
+            H3[:, idx, r + (1 + b) * n + idx] = phi[:, :, FEATURES.index(name)]
         return H

@@ -22,8 +22,11 @@ Optional terms, both linear in their parameters (identification stays least squa
   makes a PD-held arm limit-cycle at about v_h;
 - **quadratic** ``Fq_j·qd_j·|qd_j|`` [N·m·s²/rad²].
 
-The formula itself is written once, as the kernel :func:`hofto_hw.model.kernels.friction_joint`
-(the tick's snapshot and feed-forward call it compiled); :meth:`FrictionParams.torque` runs
+The formula itself is written once, in :mod:`hofto_hw.model.kernels`: each term's feature
+(the partial derivative of f_j with respect to its parameter) is one small function there, the
+kernel ``friction_joint`` sums them times the parameters (the tick's snapshot and feed-forward
+call it compiled) and ``friction_features`` returns them (:meth:`FrictionParams.features`:
+identification's regressor columns); :meth:`FrictionParams.torque` runs
 that kernel in a workspace the caller owns (:meth:`FrictionParams.workspace`, packed with the
 parameters: the parameters stay constant, as pinocchio's Model, the workspace is the Data).
 """
@@ -36,6 +39,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hofto_hw.config.models import FrictionConfig
+
+#: the linear parameters of eq. (12) in the order of :meth:`FrictionParams.features`' last
+#: axis (:func:`hofto_hw.model.kernels.friction_features`); ``stribeck_gap`` is Fs - Fc
+FEATURES = ("coulomb", "stribeck_gap", "viscous", "bias", "quadratic", "held")
 
 
 @dataclass
@@ -83,6 +90,33 @@ class FrictionParams:
     def zeros(cls, n: int) -> FrictionParams:
         """No friction on ``n`` joints."""
         return cls(np.zeros(n), np.zeros(n), np.zeros(n))
+
+    @classmethod
+    def structure(
+        cls,
+        n: int,
+        smooth_velocity: float = 0.0,
+        stribeck_velocity: np.ndarray | None = None,
+        held_velocity: float | None = None,
+        quadratic: bool = False,
+        held_passive: bool = False,
+    ) -> FrictionParams:
+        """Every coefficient 0 on ``n`` joints, with the terms asked for (Stribeck with
+        velocities vs (n,) [rad/s], held with band ``held_velocity`` v_h [rad/s], quadratic):
+        the model a fit's :meth:`features` come from."""
+        z = np.zeros(n)
+        return cls(
+            z,
+            z,
+            z,
+            stribeck_static=None if stribeck_velocity is None else z,
+            stribeck_velocity=stribeck_velocity,
+            smooth_velocity=smooth_velocity,
+            held=None if held_velocity is None else z,
+            held_velocity=0.005 if held_velocity is None else held_velocity,
+            quadratic=z if quadratic else None,
+            held_passive=held_passive,
+        )
 
     @classmethod
     def from_config(cls, cfg: FrictionConfig | None, n: int) -> FrictionParams:
@@ -169,6 +203,41 @@ class FrictionParams:
             np.copyto(state, h)
         return out
 
+    def held_signs(self, qd: np.ndarray, initial: np.ndarray | None = None) -> np.ndarray:
+        """The held sign (N, n) after each sample of velocities ``qd`` (N, n) [rad/s] in time
+        order, from ``initial`` (n,) (default 0): the held-friction memory of :meth:`torque`
+        (band ``held_velocity``) run over a whole recording, as identification needs it."""
+        qd = self._samples(qd)
+        h = np.zeros(qd.shape[1]) if initial is None else np.array(initial, dtype=float)
+        out = np.empty_like(qd)
+        _batch()[0](qd, self.held_velocity, h, out)
+        return out
+
+    def features(self, qd: np.ndarray, held: np.ndarray | None = None) -> np.ndarray:
+        """The features of eq. (12) over N samples, (N, n, 6): per sample and joint the partial
+        derivatives of the friction torque with respect to Fc, Fs - Fc, Fv, B, Fq, Fh
+        (:data:`FEATURES`; 0 for a term these parameters do not have): the torque is their
+        product with the parameters. ``qd`` (N, n) [rad/s]; ``held`` (N, n) the held sign at
+        each sample (default :meth:`held_signs` of ``qd`` from 0). Only the structure counts
+        (v_s, vs, v_h, which terms, passive), not the values: identification's regressor
+        columns. The kernel is :func:`hofto_hw.model.kernels.friction_features`, the one
+        :meth:`torque` sums."""
+        qd = self._samples(qd)
+        held = self.held_signs(qd) if held is None else np.ascontiguousarray(held, dtype=float)
+        if held.shape != qd.shape:
+            raise ValueError(f"friction features: held has shape {held.shape}, qd {qd.shape}")
+        out = np.empty((*qd.shape, len(FEATURES)))
+        _batch()[1](qd, held, self.workspace(), out)
+        return out
+
+    def _samples(self, qd: np.ndarray) -> np.ndarray:
+        qd = np.ascontiguousarray(qd, dtype=float)
+        if qd.ndim != 2 or qd.shape[1] != self.coulomb.shape[0]:
+            raise ValueError(
+                f"friction: velocities must have shape (N, {self.coulomb.shape[0]}), got {qd.shape}"
+            )
+        return qd
+
 
 _Kernel = tuple[Callable[[np.ndarray, np.ndarray], None], int, int, int]
 _KERNEL: list[_Kernel] = []
@@ -187,3 +256,30 @@ def _kernel() -> _Kernel:
         fn = kernels.compiled_or_python(mk.friction, backend)
         _KERNEL.append((fn, mk.F, mk.STATE, mk.ROWS))
     return _KERNEL[0]
+
+
+_BATCH: list[tuple[Callable[..., None], Callable[..., None]]] = []
+
+
+def _batch() -> tuple[Callable[..., None], Callable[..., None]]:
+    """The recording-wide kernels (held_series, feature_matrix), compiled and warmed on first
+    use where numba works, else their source as Python (as :func:`_kernel`)."""
+    if not _BATCH:
+        from hofto_hw.model import kernels as mk
+        from hofto_hw.observers import kernels
+
+        z, W = np.zeros((1, 1)), mk.workspace(1)
+        out = np.zeros((1, 1, mk.N_FEATURES))
+
+        def warm() -> None:
+            mk.held_series(z, 1.0, np.zeros(1), z.copy())
+            mk.feature_matrix(z, z, W, out)
+
+        backend = kernels.ready("auto", warm)
+        _BATCH.append(
+            (
+                kernels.compiled_or_python(mk.held_series, backend),
+                kernels.compiled_or_python(mk.feature_matrix, backend),
+            )
+        )
+    return _BATCH[0]

@@ -24,6 +24,7 @@ switch, ``HOFTO_HW_NO_NUMBA``). Kernels write only into the arrays passed in; no
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 
@@ -63,6 +64,11 @@ try:  # the native library's C functions, bound by name (hofto_hw/model/native/d
         from hofto_hw.model.native import python_terms as _dyn_terms
 except Exception:  # no numba: the native path is never chosen (hofto_hw.model.native.ready)
     _dyn_terms = _dyn_rnea = None
+
+
+# the friction kernel's per-joint helpers are inlined at numba's IR level: a compiled call
+# passing W costs more than their arithmetic (twice the kernel's time, measured)
+_inline = partial(jit, inline="always")
 
 
 def workspace(n: int) -> np.ndarray:
@@ -114,31 +120,105 @@ def _step(x: float, at_zero: float) -> float:
     return x
 
 
+@_inline
+def coulomb_sign(v: float, smooth: float) -> float:
+    """s(v) of eq. (12), the feature of Coulomb friction [1]: tanh(v / v_s) for a smoothing
+    velocity ``smooth`` v_s > 0 [rad/s], sign(v) for v_s = 0 (v [rad/s])."""
+    return math.tanh(v / smooth) if smooth > 0.0 else _sign(v)
+
+
+@_inline
+def held_advance(v: float, h: float, band: float) -> float:
+    """The held sign after velocity v [rad/s]: sign(v) where |v| > ``band`` v_h [rad/s], else
+    the previous held sign ``h`` (-1/0/+1); idempotent for a repeated v."""
+    return h + (_sign(v) - h) * _step(abs(v) - band, 0.0)
+
+
+@_inline
+def stribeck_feature(v: float, s: float, vs: float) -> float:
+    """exp(-(v/vs)²)·s(v) [1], the feature of the Stribeck gap Fs - Fc (vs [rad/s])."""
+    t = v / vs
+    return math.exp(-(t * t)) * s
+
+
+@_inline
+def quadratic_feature(v: float) -> float:
+    """v·|v| [rad²/s²], the feature of quadratic friction Fq."""
+    return abs(v) * v
+
+
+@_inline
+def held_feature(v: float, h: float, band: float, passive: bool) -> float:
+    """exp(-(v/v_h)²)·h [1], the feature of held friction Fh (band v_h [rad/s], held sign h);
+    ``passive``: times [v·h >= 0] (the term only resists motion)."""
+    t = v / band
+    t = math.exp(-(t * t)) * h
+    return t * _step(v * h, 1.0) if passive else t
+
+
+N_FEATURES = 6  # what friction_features returns (hofto_hw.model.friction.FEATURES)
+
+
+@_inline
+def friction_features(v: float, h: float, j: int, W: np.ndarray) -> tuple:
+    """The features of eq. (12) of joint j at velocity v [rad/s] with held sign h: the partial
+    derivatives of f_j with respect to Fc, Fs - Fc, Fv, B, Fq, Fh, 0.0 for a term the model
+    (W's flags) does not have: identification's regressor columns (:func:`feature_matrix`).
+    Made of the same term functions as :func:`friction_joint`'s torque."""
+    s = coulomb_sign(v, W[SMOOTH, j])
+    stribeck = 0.0
+    if W[HAS_STRIBECK, j] != 0.0:
+        stribeck = stribeck_feature(v, s, W[STRIBECK_VELOCITY, j])
+    quadratic = quadratic_feature(v) if W[HAS_QUADRATIC, j] != 0.0 else 0.0
+    held = 0.0
+    if W[HAS_HELD, j] != 0.0:
+        held = held_feature(v, h, W[HELD_VELOCITY, j], W[HELD_PASSIVE, j] != 0.0)
+    return s, stribeck, v, 1.0, quadratic, held
+
+
 @jit
 def friction_joint(v: float, j: int, W: np.ndarray) -> float:
-    """f_j(v) [N·m] of eq. (12) with every optional term, in the numpy reference's order of
-    operations; advances the held sign ``W[STATE, j]`` when the model has held friction."""
-    smooth = W[SMOOTH, j]
-    s = math.tanh(v / smooth) if smooth > 0.0 else _sign(v)
-    out = W[COULOMB, j] * s
+    """f_j(v) [N·m] of eq. (12) with every optional term: each term's feature (the functions
+    above, which :func:`friction_features` returns for identification) times its parameter,
+    in the numpy reference's order of operations; advances the held sign ``W[STATE, j]`` when
+    the model has held friction."""
+    s = coulomb_sign(v, W[SMOOTH, j])
+    out = s * W[COULOMB, j]
     if W[HAS_STRIBECK, j] != 0.0:
-        t = v / W[STRIBECK_VELOCITY, j]
-        out = out + math.exp(-(t * t)) * s * W[STRIBECK_GAP, j]
-    out = out + W[VISCOUS, j] * v
+        out = out + stribeck_feature(v, s, W[STRIBECK_VELOCITY, j]) * W[STRIBECK_GAP, j]
+    out = out + v * W[VISCOUS, j]
     out = out + W[BIAS, j]
     if W[HAS_QUADRATIC, j] != 0.0:
-        out = out + abs(v) * v * W[QUADRATIC, j]
+        out = out + quadratic_feature(v) * W[QUADRATIC, j]
     if W[HAS_HELD, j] != 0.0:
-        hv = W[HELD_VELOCITY, j]
-        h = W[STATE, j]
-        h = h + (_sign(v) - h) * _step(abs(v) - hv, 0.0)
+        band = W[HELD_VELOCITY, j]
+        h = held_advance(v, W[STATE, j], band)
         W[STATE, j] = h
-        t = v / hv
-        t = math.exp(-(t * t)) * h
-        if W[HELD_PASSIVE, j] != 0.0:
-            t = t * _step(v * h, 1.0)
-        out = out + t * W[HELD, j]
+        out = out + held_feature(v, h, band, W[HELD_PASSIVE, j] != 0.0) * W[HELD, j]
     return out
+
+
+@jit
+def held_series(qd: np.ndarray, band: float, h: np.ndarray, out: np.ndarray) -> None:
+    """out[k] = the held sign (n,) after sample k of a velocity sequence qd (N, n) [rad/s] in
+    time order (:func:`held_advance` with band v_h [rad/s]), starting from and advancing the
+    held sign ``h`` (n,) in place."""
+    for k in range(qd.shape[0]):
+        for j in range(qd.shape[1]):
+            h[j] = held_advance(qd[k, j], h[j], band)
+            out[k, j] = h[j]
+
+
+@jit
+def feature_matrix(qd: np.ndarray, held: np.ndarray, W: np.ndarray, out: np.ndarray) -> None:
+    """out[k, j] = :func:`friction_features` (qd[k, j], held[k, j], j, W), (N, n,
+    :data:`N_FEATURES`): the friction columns of identification's linear regressor over a
+    recording, velocities qd (N, n) [rad/s] and held signs (N, n) (:func:`held_series`)."""
+    for k in range(qd.shape[0]):
+        for j in range(qd.shape[1]):
+            f = friction_features(qd[k, j], held[k, j], j, W)
+            for i in range(N_FEATURES):
+                out[k, j, i] = f[i]
 
 
 @jit

@@ -55,6 +55,40 @@ def test_stribeck_columns_match_friction_model(ur10e_model) -> None:
     np.testing.assert_allclose(tau, expected, rtol=1e-10, atol=1e-9)
 
 
+@pytest.mark.parametrize("passive", [False, True])
+def test_every_friction_block_matches_the_model_with_its_memory(ur10e_model, passive) -> None:
+    """Stribeck, held (two-sided and passive) and quadratic columns together: H_s·theta_s is
+    the model's inverse dynamics over a sequence, the held memory running in both."""
+    model = ur10e_model.copy()
+    n = model.n
+    rng = np.random.default_rng(5)
+    vs = rng.uniform(0.03, 0.1, n)
+    model.friction = FrictionParams(
+        rng.uniform(0.5, 5, n),
+        rng.uniform(0.5, 5, n),
+        rng.normal(0, 1, n),
+        rng.uniform(5.5, 8, n),
+        vs,
+        smooth_velocity=0.02,
+        held=rng.uniform(0.2, 2.5, n),
+        held_velocity=0.01,
+        quadratic=rng.uniform(-0.5, 0.5, n),
+        held_passive=passive,
+    )
+    reg = Regressor(model.pin_model, 0.02, vs, 0.01, quadratic=True, held_passive=passive)
+    N = 60
+    q, qdd = rng.uniform(-2, 2, (N, n)), rng.uniform(-1, 1, (N, n))
+    qd = np.cumsum(rng.normal(0, 0.006, (N, n)), axis=0)  # creeps through the held band
+    theta = nominal_theta(model, stribeck=True, held=True, quadratic=True)
+    tau = (reg.stack(q, qd, qdd) @ theta).reshape(N, n)
+    data = model.create_data()
+    expected = np.array([data.inverse_dynamics(q[k], qd[k], qdd[k]).copy() for k in range(N)])
+    np.testing.assert_allclose(tau, expected, rtol=1e-10, atol=1e-9)
+    H = reg.stack(q, qd, qdd).reshape(N, n, -1)
+    held_cols = H[:, :, 15 * n : 16 * n]
+    assert np.any(held_cols != 0.0) and np.any(held_cols.sum(axis=2) * qd < 0.0) != passive
+
+
 def test_names_and_shape_errors(ur10e_model) -> None:
     names = standard_names(ur10e_model.joint_names)
     assert len(names) == 84 and names[0] == "shoulder_pan_joint.m"

@@ -130,6 +130,64 @@ def test_friction_params_torque_refuses_a_foreign_workspace() -> None:
         fr.torque(np.zeros(3), np.zeros(3), np.zeros((3, 3)))
 
 
+def _sequence(n: int, rng: np.random.Generator, N: int = 400) -> np.ndarray:
+    """(N, n) finite joint speeds in time order (standstill, the held band, fast motion)."""
+    qd = np.array([_velocity(n, rng) for _ in range(N)])
+    qd[~np.isfinite(qd)] = 0.0
+    return qd
+
+
+def _linear_parameters(fr: FrictionParams) -> np.ndarray:
+    """(n, 6) the coefficients of eq. (12) in FEATURES order, 0 for an absent term."""
+    from hofto_hw.model.friction import FEATURES
+
+    z = np.zeros_like(fr.coulomb)
+    gap = z if fr.stribeck_static is None else fr.stribeck_static - fr.coulomb
+    values = {"coulomb": fr.coulomb, "stribeck_gap": gap, "viscous": fr.viscous}
+    values |= {"bias": fr.bias, "quadratic": z if fr.quadratic is None else fr.quadratic}
+    values["held"] = z if fr.held is None else fr.held
+    return np.stack([values[name] for name in FEATURES], axis=1)
+
+
+def test_friction_features_times_the_parameters_is_the_torque() -> None:
+    """The features (FrictionParams.features: the regressor's friction columns) times the
+    coefficients give the numpy formula's torque over a recording, held memory included, for
+    every combination of terms; held_signs is the formula's memory sample by sample."""
+    rng = np.random.default_rng(31)
+    n = 6
+    for fr in _frictions(n, rng):
+        qd = _sequence(n, rng)
+        held = fr.held_signs(qd)
+        phi = fr.features(qd)
+        np.testing.assert_array_equal(phi, fr.features(qd, held))
+        tau = np.einsum("kji,ji->kj", phi, _linear_parameters(fr))
+        ref, state = np.zeros(n), np.zeros(n)
+        for k in range(qd.shape[0]):
+            friction_torque(fr, qd[k], ref, None, state)
+            np.testing.assert_allclose(tau[k], ref, rtol=1e-12, atol=1e-12)
+            if fr.held is not None:  # the formula keeps a memory only with the term
+                np.testing.assert_array_equal(held[k], state)
+        assert not phi[:, :, 1].any() if fr.stribeck_static is None else phi[:, :, 1].any()
+        assert not phi[:, :, 4].any() if fr.quadratic is None else phi[:, :, 4].any()
+        assert not phi[:, :, 5].any() if fr.held is None else phi[:, :, 5].any()
+
+
+def test_held_signs_start_from_the_given_memory() -> None:
+    fr = FrictionParams.structure(2, held_velocity=0.01)
+    qd = np.array([[0.001, 0.02], [-0.5, 0.0], [0.0, -0.0]])
+    h = fr.held_signs(qd, initial=np.array([-1.0, 1.0]))
+    np.testing.assert_array_equal(h, [[-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]])
+    np.testing.assert_array_equal(fr.held_signs(qd), [[0.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]])
+
+
+def test_friction_features_refuse_wrong_shapes() -> None:
+    fr = FrictionParams.structure(3, 0.02)
+    with pytest.raises(ValueError, match=r"velocities must have shape \(N, 3\), got \(4, 2\)"):
+        fr.features(np.zeros((4, 2)))
+    with pytest.raises(ValueError, match=r"held has shape \(2, 3\), qd \(4, 3\)"):
+        fr.features(np.zeros((4, 3)), np.zeros((2, 3)))
+
+
 #: (backend, native) of the product's paths: one compiled call, pinocchio's Python calls and
 #: the compiled kernel, pinocchio's Python calls and the kernel's Python source
 PATHS = [("numba", True), ("numba", False), ("numpy", True)]
