@@ -179,11 +179,11 @@ def _kernel() -> _Kernel:
     source as Python) and its workspace's rows F, STATE and ROWS. Imported on first use:
     hofto_hw.model.kernels imports this module's package."""
     if not _KERNEL:
+        from hofto_hw import jit
         from hofto_hw.model import kernels as mk
-        from hofto_hw.observers import kernels
 
         z, W = np.zeros(1), mk.workspace(1)
-        backend = kernels.ready("auto", lambda: mk.friction(z, W))
-        fn = kernels.compiled_or_python(mk.friction, backend)
+        backend = jit.ready("auto", lambda: mk.friction(z, W))
+        fn = jit.compiled_or_python(mk.friction, backend)
         _KERNEL.append((fn, mk.F, mk.STATE, mk.ROWS))
     return _KERNEL[0]

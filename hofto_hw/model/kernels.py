@@ -17,8 +17,8 @@ thousands of random steps, held-friction memory and NaN included.
 Arguments are few (a compiled call costs ~0.1 µs per argument, more with cold caches): the
 friction parameters, the held-friction memory and the outputs travel in one workspace array
 ``W`` (:data:`ROWS`, n) made by :func:`workspace` and filled by :func:`pack_friction`.
-Availability, compilation and warming are those of :mod:`hofto_hw.observers.kernels` (one
-switch, ``HOFTO_HW_NO_NUMBA``). Kernels write only into the arrays passed in; none allocates.
+Availability, compilation and warming are :mod:`hofto_hw.jit`'s (one switch,
+``HOFTO_HW_NO_NUMBA``). Kernels write only into the arrays passed in; none allocates.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from hofto_hw.model.friction import FrictionParams
-from hofto_hw.observers.kernels import jit
+from hofto_hw.jit import jit
 
 # rows of the workspace W (ROWS, n): outputs, the held-friction memory, then the friction
 # parameters per joint (a scalar parameter or flag is repeated on every joint)

@@ -21,6 +21,7 @@ import numpy as np
 
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+from hofto_hw import jit
 from hofto_hw.observers import kernels
 from hofto_hw.observers.base import SampleGuard, SnapshotUpdate, per_joint
 
@@ -43,7 +44,7 @@ class EsoCore:
 
     States z (3, joints) (``z1``, ``z2``, ``z3`` are row views), gains k (3, joints), the
     previous sample ``prev`` (joints,). :meth:`step` runs ``kernels.eso_step`` on
-    ``backend`` (see :mod:`hofto_hw.observers.kernels`; compiled at its first call)."""
+    ``backend`` (see :mod:`hofto_hw.jit`; compiled at its first call)."""
 
     def __init__(
         self,
@@ -51,7 +52,7 @@ class EsoCore:
         k2: np.ndarray,
         k3: np.ndarray,
         substeps: int = 1,
-        backend: kernels.Backend = "auto",
+        backend: jit.Backend = "auto",
     ) -> None:
         self.k = np.vstack([np.asarray(k, dtype=float) for k in (k1, k2, k3)])
         self.k1, self.k2, self.k3 = self.k
@@ -60,8 +61,8 @@ class EsoCore:
         self.z = np.zeros((3, j))
         self.z1, self.z2, self.z3 = self.z
         self.prev = np.zeros(j)
-        self.backend = kernels.resolve(backend)
-        self._step = kernels.compiled_or_python(kernels.eso_step, self.backend)
+        self.backend = jit.resolve(backend)
+        self._step = jit.compiled_or_python(kernels.eso_step, self.backend)
 
     def reset(self, y: np.ndarray, yd: np.ndarray | None = None) -> None:
         self.z1[:] = y
@@ -89,7 +90,7 @@ class EsoObserver(SnapshotUpdate):
         k2: np.ndarray,
         k3: np.ndarray,
         substeps: int = 1,
-        backend: kernels.Backend = "auto",
+        backend: jit.Backend = "auto",
     ) -> None:
         n = model.n
         self.model = model

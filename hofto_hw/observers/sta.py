@@ -22,6 +22,7 @@ import numpy as np
 
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
+from hofto_hw import jit
 from hofto_hw.observers import kernels
 from hofto_hw.observers.base import SampleGuard, SnapshotUpdate, per_joint
 
@@ -40,7 +41,7 @@ class StaObserver(SnapshotUpdate):
         l2: np.ndarray,
         l3: np.ndarray,
         substeps: int = 1,
-        backend: kernels.Backend = "auto",
+        backend: jit.Backend = "auto",
     ) -> None:
         n = model.n
         self.model = model

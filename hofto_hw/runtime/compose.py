@@ -34,7 +34,7 @@ from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import make_observer
 from hofto_hw.observers.base import Observer
-from hofto_hw.observers.kernels import Backend
+from hofto_hw.jit import Backend
 from hofto_hw.observers.stability import check_observer
 from hofto_hw.recording.record import MemorySink, RecordSink, tick_dtype
 from hofto_hw.runtime.build import (
