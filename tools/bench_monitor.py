@@ -28,9 +28,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from hofto_hw import jit  # noqa: E402
 from hofto_hw.config import load_config  # noqa: E402
 from hofto_hw.model import RobotModel  # noqa: E402
-from hofto_hw import jit  # noqa: E402
 from hofto_hw.replay.thresholds import read_thresholds  # noqa: E402
 from safety.collision import COLLIDED, CollisionLevels, CollisionMonitor  # noqa: E402
 from safety.stop import StopController  # noqa: E402

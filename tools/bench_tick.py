@@ -801,11 +801,11 @@ def numpy_path(config: Path, quick: bool, floor: float) -> dict:
 
 
 def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
-    from hofto_hw.config import load_config
-    from hofto_hw.model.snapshot import pinocchio_traits
     import numba
 
     from hofto_hw import jit
+    from hofto_hw.config import load_config
+    from hofto_hw.model.snapshot import pinocchio_traits
 
     cfg = load_config(config)
     policy = realtime(cfg.loop.cpu_latency_us)

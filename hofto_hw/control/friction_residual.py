@@ -31,10 +31,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from hofto_hw.control.kernels import friction_features, friction_learn
-from hofto_hw.model.friction import FrictionParams
 from hofto_hw import jit
+from hofto_hw.control.kernels import friction_features, friction_learn
 from hofto_hw.jit import Backend
+from hofto_hw.model.friction import FrictionParams
 
 
 class FrictionResidual:

@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hofto_hw.control.kernels import PATH_ROWS, path_eval, path_workspace, ramp_step
 from hofto_hw import jit
+from hofto_hw.control.kernels import PATH_ROWS, path_eval, path_workspace, ramp_step
 from hofto_hw.jit import Backend
 
 if TYPE_CHECKING:

@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from hofto_hw.model.friction import FrictionParams
 from hofto_hw.jit import jit
+from hofto_hw.model.friction import FrictionParams
 
 # rows of the workspace W (ROWS, n): outputs, the held-friction memory, then the friction
 # parameters per joint (a scalar parameter or flag is repeated on every joint)

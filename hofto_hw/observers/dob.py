@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
-from hofto_hw import jit
 from hofto_hw.observers import kernels
 from hofto_hw.observers.base import SampleGuard, SnapshotUpdate, per_joint
 

@@ -22,7 +22,6 @@ from numba import literal_unroll
 
 from hofto_hw.jit import jit, jit_inline
 
-
 # ----------------------------------------------------------------- scalar helpers
 
 
@@ -121,7 +120,7 @@ def hofto_step(
     """One HOFTO sample period for every joint (see :class:`~hofto_hw.observers.hofto.HoftoCore`).
 
     z (s, j) states, updated in place; neg_gains (s, j) = -L; powers (s,); T (s, s) the
-    chain's transition matrix for step h; y, y_prev, a (j,); col (2, s) scratch.
+    chain's transition matrix for step h; y, y_prev, a (j,); col (2, s) scratch (row 0).
     """
     s, joints = z.shape
     inj = col[0]
@@ -142,24 +141,15 @@ def hofto_step(
                 yk = _held(y, y_prev, jj, k, substeps)
                 _injection(z, jj, yk, neg_gains, powers, recursive, inj, h, True)
         return
-    zz = col[1]
     for jj in range(joints):  # euler: inject with the state before the prediction
-        step = (y[jj] - y_prev[jj]) / substeps
-        yk = y_prev[jj]
-        for _ in range(substeps):
-            if substeps == 1:
-                yk = y[jj]
-            else:
-                yk = yk + step
+        for k in range(substeps):
+            yk = _held(y, y_prev, jj, k, substeps)
             _injection(z, jj, yk, neg_gains, powers, recursive, inj, h, False)
-            # prediction along the chain: zz = T·z (upper triangular)
-            for i in range(s):
+            for i in range(s):  # z = T·z + inj·h: row i reads rows >= i, not yet updated
                 acc = 0.0
                 for m in range(i, s):
                     acc += T[i, m] * z[m, jj]
-                zz[i] = acc
-            for i in range(s):
-                z[i, jj] = zz[i] + inj[i] * h
+                z[i, jj] = acc + inj[i] * h
             z[1, jj] = z[1, jj] + a[jj] * h
 
 
@@ -331,12 +321,12 @@ def hofto_advance(
         prev[jj] = y[jj]
 
 
-@jit
+@jit_inline
 def hofto_update(
     record: np.ndarray, y: np.ndarray, a: np.ndarray, dt: float, M: np.ndarray, out: np.ndarray
 ) -> None:
     """:func:`hofto_advance` of a ``HoftoCore.record`` (shape (1,)), then out = M·z3 [N·m]:
-    the HOFTO observer's update."""
+    the HOFTO observer's update (inlined into the bank's call)."""
     c = record[0]
     z = c["z"]
     hofto_advance(
@@ -349,17 +339,20 @@ def hofto_update(
 
 
 @jit_inline
-def eso_step(
+def euler_step(
     z: np.ndarray,
-    k: np.ndarray,
+    gains: np.ndarray,
     y: np.ndarray,
     y_prev: np.ndarray,
     a: np.ndarray,
     h: float,
     substeps: int,
+    sta: bool,
 ) -> None:
-    """ESO eq. (5), explicit Euler with substeps of h [s] (q held first-order, a held):
-    z (3, j) states, k (3, j) gains k1..k3; y_prev = y after."""
+    """ESO eq. (5) or, with ``sta``, the super-twisting observer (Remark 7): explicit Euler
+    with substeps of h [s] (q held first-order, a held); z (3, j) states, gains (3, j) k1..k3
+    (ESO) or l1..l3 (STA); y_prev = y after. The STA injects sig^(1/2)(e) and sign(e) where
+    the ESO injects e."""
     for jj in range(y.shape[0]):
         step = (y[jj] - y_prev[jj]) / substeps
         yk = y_prev[jj]
@@ -367,64 +360,33 @@ def eso_step(
         for _ in range(substeps):
             yk = yk + step
             e = yk - z1
-            d1 = (k[0, jj] * e + z2) * h
-            d2 = (k[1, jj] * e + z3 + a[jj]) * h
-            d3 = (k[2, jj] * e) * h
-            z1 = z1 + d1
-            z2 = z2 + d2
-            z3 = z3 + d3
+            u = u3 = e
+            if sta:
+                u, u3 = _sig_log(e, abs(e), 0.5, 0.0), _sign(e)
+            z1, z2, z3 = (
+                z1 + (gains[0, jj] * u + z2) * h,
+                z2 + (gains[1, jj] * u + z3 + a[jj]) * h,
+                z3 + (gains[2, jj] * u3) * h,
+            )
         z[0, jj], z[1, jj], z[2, jj] = z1, z2, z3
         y_prev[jj] = y[jj]
 
 
 @jit
-def eso_update(
+def euler_update(
     z: np.ndarray,
-    k: np.ndarray,
+    gains: np.ndarray,
     y: np.ndarray,
     y_prev: np.ndarray,
     a: np.ndarray,
     h: float,
     substeps: int,
+    sta: bool,
     M: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """:func:`eso_step`, then out = M·z3 [N·m]: the ESO observer's update."""
-    eso_step(z, k, y, y_prev, a, h, substeps)
-    _mat_vec(M, z[2], out)
-
-
-@jit
-def sta_update(
-    z: np.ndarray,
-    l: np.ndarray,
-    y: np.ndarray,
-    y_prev: np.ndarray,
-    a: np.ndarray,
-    h: float,
-    substeps: int,
-    M: np.ndarray,
-    out: np.ndarray,
-) -> None:
-    """Super-twisting observer (Remark 7), explicit Euler: z (3, j), l (3, j) gains l1..l3;
-    out = M·z3."""
-    for jj in range(y.shape[0]):
-        step = (y[jj] - y_prev[jj]) / substeps
-        yk = y_prev[jj]
-        z1, z2, z3 = z[0, jj], z[1, jj], z[2, jj]
-        for _ in range(substeps):
-            yk = yk + step
-            e = yk - z1
-            sgn = _sign(e)
-            root = math.copysign(math.sqrt(abs(e)), e) if e != 0.0 else e * 0.0
-            d1 = (l[0, jj] * root + z2) * h
-            d2 = (l[1, jj] * root + z3 + a[jj]) * h
-            d3 = (l[2, jj] * sgn) * h
-            z1 = z1 + d1
-            z2 = z2 + d2
-            z3 = z3 + d3
-        z[0, jj], z[1, jj], z[2, jj] = z1, z2, z3
-        y_prev[jj] = y[jj]
+    """:func:`euler_step`, then out = M·z3 [N·m]: the ESO's or the STA's update."""
+    euler_step(z, gains, y, y_prev, a, h, substeps, sta)
     _mat_vec(M, z[2], out)
 
 
@@ -538,13 +500,7 @@ def _bank_hofto(
     if group is not None:
         for entry in literal_unroll(group):  # HOFTOs of different orders: records' types
             row, rec = entry
-            c = rec[0]
-            z = c["z"]
-            hofto_advance(
-                z, c["neg_gains"], c["powers"], c["prev"], c["work"], c["substeps"], c["flags"],
-                y, a, dt,
-            )  # fmt: skip
-            _mat_vec(M, z[2], out[row])
+            hofto_update(rec, y, a, dt, M, out[row])
 
 
 @jit
@@ -574,10 +530,7 @@ def _bank_euler(
 ) -> None:
     if group is not None:
         for row, z, gains, y_prev, sub in group:
-            if sta:
-                sta_update(z, gains, y, y_prev, a, dt / sub, sub, M, out[row])
-            else:
-                eso_update(z, gains, y, y_prev, a, dt / sub, sub, M, out[row])
+            euler_update(z, gains, y, y_prev, a, dt / sub, sub, sta, M, out[row])
 
 
 @jit

@@ -36,13 +36,13 @@ from hofto_hw.config.models import (
     ObserverConfig,
     StaConfig,
 )
+from hofto_hw.jit import Backend
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers.base import Observer
 from hofto_hw.observers.direct import DirectObserver
 from hofto_hw.observers.dob import DobObserver
 from hofto_hw.observers.eso import EsoObserver
 from hofto_hw.observers.hofto import HoftoObserver
-from hofto_hw.jit import Backend
 from hofto_hw.observers.momentum import MomentumObserver
 from hofto_hw.observers.sta import StaObserver
 

@@ -29,12 +29,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.config.loader import parse_config, parse_yaml_bytes
 from hofto_hw.config.models import ObserverConfig, SystemConfig
 from hofto_hw.errors import ConfigError, UserError
 from hofto_hw.identify.data import Recording
 from hofto_hw.model import RobotModel
-from hofto_hw import jit
 from hofto_hw.observers import make_observer
 from hofto_hw.recording import attachments as att
 from hofto_hw.replay.flight_log import FlightLog, RecordedEvent

@@ -35,14 +35,14 @@ import numpy as np
 
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import State
+from hofto_hw import jit
 from hofto_hw.control.drag import DragController
 from hofto_hw.control.enabling import EnableInput
 from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, JointMotion
 from hofto_hw.errors import ConfigError
+from hofto_hw.jit import Backend
 from hofto_hw.model.data import ModelData
 from hofto_hw.model.snapshot import DynamicsSnapshot
-from hofto_hw import jit
-from hofto_hw.jit import Backend
 from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.observers.base import Observer
 from hofto_hw.recording.kernels import fill_tick

@@ -16,8 +16,8 @@ import pytest
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import Mode, State
 from drivers.sim.simbus import SimBus
-from hofto_hw.config.models import SystemConfig
 from hofto_hw import jit as observer_jit
+from hofto_hw.config.models import SystemConfig
 
 pytestmark = pytest.mark.skipif(
     not observer_jit.available(), reason=observer_jit.unavailable_reason() or "numba"

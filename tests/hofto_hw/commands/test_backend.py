@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from hofto_hw.commands import backend
 from hofto_hw import jit
+from hofto_hw.commands import backend
 
 
 def test_the_python_fallback_is_said_once_on_stderr(monkeypatch, capsys):

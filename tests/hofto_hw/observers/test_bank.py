@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw import jit
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers.bank import _TERMS, ObserverBank
 from hofto_hw.observers.direct import DirectObserver
 from hofto_hw.observers.dob import DobObserver

@@ -19,7 +19,6 @@ from hofto_hw.observers import (
     HoftoObserver,
     MomentumObserver,
     StaObserver,
-    kernels,
 )
 from hofto_hw.observers.registry import levant_gains
 

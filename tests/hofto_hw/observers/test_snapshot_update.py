@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw import jit
+from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import OBSERVER_TYPES, make_observer
 from hofto_hw.observers.registry import replay_default
 

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from drivers.cia402 import kernels as drive_kernels
+from hofto_hw import jit
 from hofto_hw.config.loader import load_config
 from hofto_hw.control.joint_motion import HOLD, MOVE
 from hofto_hw.errors import ConfigError
 from hofto_hw.model.payload import Payload, apply_payload
-from hofto_hw import jit
 from hofto_hw.runtime import tick_events
 from hofto_hw.runtime.compose import build
 from hofto_hw.runtime.fused import DONE, FusedTick, fused_tick

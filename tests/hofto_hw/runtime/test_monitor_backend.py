@@ -3,8 +3,8 @@ is there (issue 12); tests/safety/collision/test_kernel.py checks both paths agr
 
 from __future__ import annotations
 
-from hofto_hw.config.models import SystemConfig
 from hofto_hw import jit
+from hofto_hw.config.models import SystemConfig
 from hofto_hw.runtime.compose import build
 from safety.collision import CollisionLevels
 

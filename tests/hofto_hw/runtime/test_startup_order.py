@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from drivers.cia402.state_machine import State
-from hofto_hw.config.models import SystemConfig
 from hofto_hw import jit
+from hofto_hw.config.models import SystemConfig
 from hofto_hw.runtime import compose
 
 

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hofto_hw import jit
 from hofto_hw.config.loader import load_config
 from hofto_hw.control.joint_motion import MOVE
-from hofto_hw import jit
 from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.runtime.compose import build
 from tests.support.reference_tick import use_reference
