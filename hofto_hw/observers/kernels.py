@@ -120,7 +120,7 @@ def hofto_step(
     """One HOFTO sample period for every joint (see :class:`~hofto_hw.observers.hofto.HoftoCore`).
 
     z (s, j) states, updated in place; neg_gains (s, j) = -L; powers (s,); T (s, s) the
-    chain's transition matrix for step h; y, y_prev, a (j,); col (2, s) scratch (row 0).
+    chain's transition matrix for step h; y, y_prev, a (j,); col (2, s) scratch.
     """
     s, joints = z.shape
     inj = col[0]
@@ -141,15 +141,24 @@ def hofto_step(
                 yk = _held(y, y_prev, jj, k, substeps)
                 _injection(z, jj, yk, neg_gains, powers, recursive, inj, h, True)
         return
+    zz = col[1]
     for jj in range(joints):  # euler: inject with the state before the prediction
-        for k in range(substeps):
-            yk = _held(y, y_prev, jj, k, substeps)
+        step = (y[jj] - y_prev[jj]) / substeps
+        yk = y_prev[jj]
+        for _ in range(substeps):
+            if substeps == 1:
+                yk = y[jj]
+            else:
+                yk = yk + step
             _injection(z, jj, yk, neg_gains, powers, recursive, inj, h, False)
-            for i in range(s):  # z = T·z + inj·h: row i reads rows >= i, not yet updated
+            # prediction along the chain: zz = T·z (upper triangular)
+            for i in range(s):
                 acc = 0.0
                 for m in range(i, s):
                     acc += T[i, m] * z[m, jj]
-                z[i, jj] = acc + inj[i] * h
+                zz[i] = acc
+            for i in range(s):
+                z[i, jj] = zz[i] + inj[i] * h
             z[1, jj] = z[1, jj] + a[jj] * h
 
 
