@@ -330,12 +330,12 @@ def hofto_advance(
         prev[jj] = y[jj]
 
 
-@jit_inline
+@jit
 def hofto_update(
     record: np.ndarray, y: np.ndarray, a: np.ndarray, dt: float, M: np.ndarray, out: np.ndarray
 ) -> None:
     """:func:`hofto_advance` of a ``HoftoCore.record`` (shape (1,)), then out = M·z3 [N·m]:
-    the HOFTO observer's update (inlined into the bank's call)."""
+    the HOFTO observer's update."""
     c = record[0]
     z = c["z"]
     hofto_advance(
@@ -509,7 +509,13 @@ def _bank_hofto(
     if group is not None:
         for entry in literal_unroll(group):  # HOFTOs of different orders: records' types
             row, rec = entry
-            hofto_update(rec, y, a, dt, M, out[row])
+            c = rec[0]
+            z = c["z"]
+            hofto_advance(
+                z, c["neg_gains"], c["powers"], c["prev"], c["work"], c["substeps"], c["flags"],
+                y, a, dt,
+            )  # fmt: skip
+            _mat_vec(M, z[2], out[row])
 
 
 @jit
