@@ -26,8 +26,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from hofto_hw.observers import kernels
-from hofto_hw.observers.kernels import Backend
+from hofto_hw import jit
+from hofto_hw.jit import Backend
 from safety.kernels import drive_scan
 from safety.stop import Fault, StopController
 
@@ -53,10 +53,10 @@ class BusHealth:
         self.fault_min = int(min(fault_states))
         self.streak = 0
         self.lost_total = 0
-        self.backend = kernels.ready(backend, self._warm)
+        self.backend = jit.ready(backend, self._warm)
         #: True exactly when the compiled scan runs (the fused tick's condition)
         self._use_kernel = self.backend == "numba"
-        self._scan = kernels.compiled_or_python(drive_scan, self.backend)
+        self._scan = jit.compiled_or_python(drive_scan, self.backend)
         #: axis -> whether its STO is active (the drive layer's reading of the process
         #: image); None: an axis out of Operation enabled is always DRIVE_DISABLED
         self.sto_of: Callable[[int], bool] | None = None

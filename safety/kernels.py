@@ -1,8 +1,8 @@
 """The per-tick safety checks of the bus and the limits (numba): the one implementation.
 
 :class:`safety.bus_health.BusHealth` and :class:`safety.limits.LimitMonitor` always run
-these kernels: compiled (backend ``numba``/``auto``, the observers' conventions of
-:mod:`hofto_hw.observers.kernels`: ``jit``, warmed when the monitor is built) or as their
+these kernels: compiled (backend ``numba``/``auto``, the conventions of
+:mod:`hofto_hw.jit`: ``jit``, warmed when the monitor is built) or as their
 own Python source (backend ``numpy``: ``py_func``; numba's ``NUMBA_DISABLE_JIT=1`` runs every
 line as Python). The kernels say what is to be reported (class, joint, value) and the
 monitor reports it to the stop controller in Python, so reports stay off the compiled path.
@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from hofto_hw.observers.kernels import jit
+from hofto_hw.jit import jit
 
 
 @jit

@@ -20,8 +20,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from hofto_hw.observers import kernels
-from hofto_hw.observers.kernels import Backend
+from hofto_hw import jit
+from hofto_hw.jit import Backend
 from safety.kernels import (
     FOLLOWING_ERROR,
     HAVE_PREV,
@@ -105,11 +105,11 @@ class LimitMonitor:
         self._q_in = self._qd_in = self._tau_in = self._sample  # the arrays _block views
         self._block = self._sample
         self._fin = np.zeros(n, dtype=bool)
-        self.backend = kernels.ready(backend, self._warm)
+        self.backend = jit.ready(backend, self._warm)
         #: True exactly when the compiled kernels run (the fused tick's condition)
         self._use_kernel = self.backend == "numba"
-        self._quiet = kernels.compiled_or_python(limits_quiet, self.backend)
-        self._commit = kernels.compiled_or_python(limits_commit, self.backend)
+        self._quiet = jit.compiled_or_python(limits_quiet, self.backend)
+        self._commit = jit.compiled_or_python(limits_commit, self.backend)
 
     @property
     def following_error(self) -> float:

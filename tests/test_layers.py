@@ -2,8 +2,8 @@
 
 Layers (each may import itself and the layers below it, never the layers above):
 
-- foundation: hofto_hw.errors, hofto_hw.outputs, hofto_hw.config, hofto_hw.model,
-  hofto_hw.observers, hofto_hw.control;
+- foundation: hofto_hw.errors, hofto_hw.outputs, hofto_hw.jit, hofto_hw.config,
+  hofto_hw.model, hofto_hw.observers, hofto_hw.control;
 - drivers/ and safety/: the foundation only (and themselves; never each other);
 - application: everything else under hofto_hw (runtime, commands, cli, replay, experiments,
   identify, recording): anything.
@@ -29,6 +29,7 @@ PACKAGES = ("hofto_hw", "drivers", "safety")
 FOUNDATION = (
     "hofto_hw.errors",
     "hofto_hw.outputs",
+    "hofto_hw.jit",
     "hofto_hw.config",
     "hofto_hw.model",
     "hofto_hw.observers",

@@ -200,10 +200,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--per-block", type=int, default=2000)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
-    from hofto_hw.observers import kernels as K
+    from hofto_hw import jit
 
-    if not K.available():
-        print(f"bench_bank: the compiled path is unavailable: {K.unavailable_reason()}")
+    if not jit.available():
+        print(f"bench_bank: the compiled path is unavailable: {jit.unavailable_reason()}")
         return 2
     r = measure(args.config, args.blocks, args.per_block)
     if args.json:

@@ -28,9 +28,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from hofto_hw import jit  # noqa: E402
 from hofto_hw.config import load_config  # noqa: E402
 from hofto_hw.model import RobotModel  # noqa: E402
-from hofto_hw.observers import kernels  # noqa: E402
 from hofto_hw.replay.thresholds import read_thresholds  # noqa: E402
 from safety.collision import COLLIDED, CollisionLevels, CollisionMonitor  # noqa: E402
 from safety.stop import StopController  # noqa: E402
@@ -121,8 +121,8 @@ def bench(ticks: int) -> dict:
     tool = col.model_copy(update={"tool_force": 1e6})
     th = read_thresholds(ROOT / "configs/ur10e/thresholds.yaml")
     single = th.observers["momentum"].monitor
-    backends = ["numpy"] + (["numba"] if kernels.available() else [])
-    res: dict = {"ticks": ticks, "compiled_available": kernels.available(), "cases": {}}
+    backends = ["numpy"] + (["numba"] if jit.available() else [])
+    res: dict = {"ticks": ticks, "compiled_available": jit.available(), "cases": {}}
     for name, make in (
         ("loop", lambda b: _levels_case(col, model, b, ticks, qd, tau, qdd, q)),
         ("loop_mean", lambda b: _levels_case(mean, model, b, ticks, qd, tau, qdd, q)),
@@ -149,7 +149,7 @@ def main() -> int:
         for b, r in per.items():
             print(f"{name:12s} {b:8s} {r['median']:8.2f} {r['p99']:8.2f} {r['alloc_bytes']:8d}")
     if not res["compiled_available"]:
-        print(f"compiled path unavailable: {kernels.unavailable_reason()}")
+        print(f"compiled path unavailable: {jit.unavailable_reason()}")
     return 0
 
 

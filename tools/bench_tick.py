@@ -498,11 +498,13 @@ def warm_call(system, calls: int, res: dict) -> None:
 def _noop_kernel():
     """A compiled function that does nothing with one array (the fixed cost of a call),
     compiled and called once; None without numba."""
-    from hofto_hw.observers import kernels
+    import numba
 
-    if not kernels.available():
+    from hofto_hw import jit
+
+    if not jit.available():
         return None
-    noop = kernels._numba.njit(lambda a: a.shape[0])  # not cached: it compiles in ~0.1 s
+    noop = numba.njit(lambda a: a.shape[0])  # not cached: it compiles in ~0.1 s
     noop(np.zeros(1))
     return noop
 
@@ -799,9 +801,11 @@ def numpy_path(config: Path, quick: bool, floor: float) -> dict:
 
 
 def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
+    import numba
+
+    from hofto_hw import jit
     from hofto_hw.config import load_config
     from hofto_hw.model.snapshot import pinocchio_traits
-    from hofto_hw.observers import kernels
 
     cfg = load_config(config)
     policy = realtime(cfg.loop.cpu_latency_us)
@@ -811,7 +815,7 @@ def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
         "machine": platform.platform(),
         "python": platform.python_version(),
         "numpy": np.__version__,
-        "numba": kernels.available() and kernels._numba.__version__,
+        "numba": jit.available() and numba.__version__,
         "scheduler": policy,
         "load_average": list(os.getloadavg()),
         "quick": quick,
@@ -823,12 +827,12 @@ def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
 
     res["pinocchio"] = pinocchio_traits(RobotModel.from_config(cfg.robot)).__dict__
     res["paths"]["numpy"] = numpy_path(config, quick, f)
-    if kernels.available():
+    if jit.available():
         res["paths"]["numba"] = bench_path(cfg, quick, f)
         res["paths"]["numba"]["alloc"] = allocations(cfg, 1000 if quick else 10000)
         res["paths"]["numba"]["snapshot_parts"] = snapshot_parts(cfg, 1000 if quick else 20000)
     else:
-        res["paths"]["numba"] = {"skipped": kernels.unavailable_reason()}
+        res["paths"]["numba"] = {"skipped": jit.unavailable_reason()}
     best = "numba" if "back_to_back" in res["paths"]["numba"] else "numpy"
     res["path"] = best
     for key in (*LOOPS, HOLD_LOOP):

@@ -130,7 +130,7 @@ class DriveGroup(ImageFields):
         self._flags = np.zeros(n, dtype=bool)
         self._u32 = np.zeros(n, dtype=np.uint32)
         from drivers.cia402 import kernels
-        from hofto_hw.observers.kernels import compiled_or_python
+        from hofto_hw.jit import compiled_or_python
 
         if not kernels.layout_matches():
             raise RuntimeError(

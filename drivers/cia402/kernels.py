@@ -1,6 +1,6 @@
 """The drive group's raw <-> SI conversions of its hot path, its one implementation: compiled
 (numba) or, for the ``numpy`` backend, the same functions' Python source run by the
-interpreter (:func:`hofto_hw.observers.kernels.compiled_or_python`).
+interpreter (:func:`hofto_hw.jit.compiled_or_python`).
 
 One drive-group read is five conversions of six-element arrays (position, velocity, torque,
 current, state); done as ~8 numpy calls the time goes to the ~0.5-1 µs each call costs. Here
@@ -17,7 +17,7 @@ a packed record array, one argument each. So the kernels take the images as thei
 layout, :mod:`drivers.cia402.pdo`, little-endian as the layout says) and the drive group's
 SI values and constant scale rows as the rows of one float64 workspace (:data:`SI_ROWS`).
 
-The backend conventions are those of :mod:`hofto_hw.observers.kernels` (its availability,
+The backend conventions are those of :mod:`hofto_hw.jit` (its availability,
 ``HOFTO_HW_NO_NUMBA``, compile options and warm-up are reused, so one switch decides whether
 compiled code runs anywhere): ``numpy`` (the Python source), ``numba``, ``auto``. Kernels write
 only into the arrays passed in and never allocate.
@@ -33,7 +33,7 @@ import numpy as np
 
 from drivers.cia402.pdo import RXPDO_DTYPE, RXPDO_SIZE, TXPDO_DTYPE, TXPDO_SIZE
 from drivers.cia402.state_machine import STATE_FROM_STATUS
-from hofto_hw.observers.kernels import Backend, jit, resolve, warm
+from hofto_hw.jit import Backend, jit, resolve, warm
 
 try:  # the byte helpers: compiled into the kernels that call them, plain Python otherwise
     from numba.extending import register_jitable as _helper

@@ -5,19 +5,19 @@ from __future__ import annotations
 
 import sys
 
-from hofto_hw.observers import kernels
+from hofto_hw import jit
 
 _said = False
 
 
-def observer_backend() -> kernels.Backend:
+def observer_backend() -> jit.Backend:
     """``auto``; prints one line on stderr (once) when the compiled kernels are unavailable."""
     global _said
-    if not kernels.available() and not _said:
+    if not jit.available() and not _said:
         _said = True
         print(
             "hofto-hw: the observers run their kernels as Python, not compiled "
-            f"({kernels.unavailable_reason()})",
+            f"({jit.unavailable_reason()})",
             file=sys.stderr,
         )
     return "auto"

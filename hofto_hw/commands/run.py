@@ -444,9 +444,9 @@ def _start_recorder(cfg: object, args: argparse.Namespace, writer: object = None
     """The MCAP flight recorder for this run's log file, its writer process (``writer``:
     started already, runtime.startup.Helpers) sent its arguments; not awaited
     (``Helpers.await_ready``)."""
+    from hofto_hw import jit
     from hofto_hw.commands.backend import observer_backend
     from hofto_hw.errors import UserError
-    from hofto_hw.observers import kernels
     from hofto_hw.recording.attachments import run_attachments, run_metadata
     from hofto_hw.recording.log_spec import LogSpec
     from hofto_hw.recording.recorder import FlightRecorder
@@ -467,7 +467,7 @@ def _start_recorder(cfg: object, args: argparse.Namespace, writer: object = None
         attachments=run_attachments(args.config, cfg),  # type: ignore[arg-type]
         metadata={
             **run_metadata(args.config, cfg, names[0]),  # type: ignore[arg-type]
-            "observer_backend": kernels.resolve(observer_backend()),
+            "observer_backend": jit.resolve(observer_backend()),
             "acceleration": acceleration.missing() or "compiled",  # else why not
         },
         event_kinds=dict(EVENT_NAMES),

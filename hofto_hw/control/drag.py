@@ -47,8 +47,8 @@ from hofto_hw.control.enabling import EnableEvent, Enabling
 from hofto_hw.control.friction_residual import FrictionResidual
 from hofto_hw.control.isolation import ContactIsolation
 from hofto_hw.control.wrench import ToolJacobian, WrenchEstimator, norm3
+from hofto_hw.jit import Backend
 from hofto_hw.model.robot import RobotModel
-from hofto_hw.observers.kernels import Backend
 
 
 class DragReason(IntEnum):

@@ -31,10 +31,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.control.kernels import friction_features, friction_learn
+from hofto_hw.jit import Backend
 from hofto_hw.model.friction import FrictionParams
-from hofto_hw.observers import kernels
-from hofto_hw.observers.kernels import Backend
 
 
 class FrictionResidual:
@@ -77,11 +77,11 @@ class FrictionResidual:
         self._f = np.zeros(n)
         self._scratch = friction.workspace()  # FrictionParams.torque's, for the bound
         self._st = self.record["st"][0]  # count, pending time [s], seconds learned [s]
-        self.backend = kernels.ready(backend, self._warm)
+        self.backend = jit.ready(backend, self._warm)
         #: True exactly when the compiled kernel runs (the tick's fused call reads it)
         self._use_kernel = self.backend == "numba"
-        self._learn = kernels.compiled_or_python(friction_learn, self.backend)
-        self._features = kernels.compiled_or_python(friction_features, self.backend)
+        self._learn = jit.compiled_or_python(friction_learn, self.backend)
+        self._features = jit.compiled_or_python(friction_features, self.backend)
 
     @staticmethod
     def hot_fields(n: int) -> dict[str, np.dtype]:

@@ -24,9 +24,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.control.kernels import PATH_ROWS, path_eval, path_workspace, ramp_step
-from hofto_hw.observers import kernels
-from hofto_hw.observers.kernels import Backend
+from hofto_hw.jit import Backend
 
 if TYPE_CHECKING:
     from hofto_hw.control.path_timing import TrajectoryPlayer
@@ -84,11 +84,11 @@ class DemoPath:
         self._k = k if hot is None else hot["k"]
         if hot is not None:
             np.copyto(self._k, k)
-        self.backend = kernels.ready(backend, self._warm)
+        self.backend = jit.ready(backend, self._warm)
         #: True exactly when the compiled kernel runs (the tick's fused call reads it)
         self._use_kernel = self.backend == "numba"
         #: the kernel this path calls: path_eval compiled, or its source (backend numpy)
-        self._eval = kernels.compiled_or_python(path_eval, self.backend)
+        self._eval = jit.compiled_or_python(path_eval, self.backend)
 
     @staticmethod
     def hot_fields(n: int) -> dict[str, np.dtype]:
@@ -140,9 +140,9 @@ class JointMotion:
         #: bumped whenever q, qd or qdd may have changed (see the class docstring)
         self.version = 0
         self._still = True  # qd and qdd hold +0.0: a hold's update has nothing to write
-        self.backend = kernels.ready(backend, self._warm)
+        self.backend = jit.ready(backend, self._warm)
         self._use_kernel = self.backend == "numba"  # True exactly when ramp_step is compiled
-        self._ramp_step = kernels.compiled_or_python(ramp_step, self.backend)
+        self._ramp_step = jit.compiled_or_python(ramp_step, self.backend)
 
     @staticmethod
     def hot_fields(n: int) -> dict[str, np.dtype]:

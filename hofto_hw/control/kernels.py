@@ -16,7 +16,7 @@ The demo path is one call with few arguments (a compiled call pays ~0.1 µs per 
 unboxes, tools/bench_kernel_args.py): its constants (amplitude, ω, phase, offset) are the rows
 of one float64 workspace (:func:`path_workspace`).
 
-Backend conventions are the observers' (:mod:`hofto_hw.observers.kernels`). Kernels write
+Backend conventions are :mod:`hofto_hw.jit`'s. Kernels write
 only into the arrays passed in; none allocates.
 """
 
@@ -26,8 +26,8 @@ import math
 
 import numpy as np
 
+from hofto_hw.jit import jit
 from hofto_hw.model.kernels import coulomb_sign
-from hofto_hw.observers.kernels import jit
 
 #: rows of the demo path's float64 workspace (PATH_ROWS, n): amplitude [rad], ω [rad/s],
 #: phase [rad], offset a·sin(phase) [rad]

@@ -24,9 +24,9 @@ from hofto_hw.config.models import DobConfig, EsoConfig, HoftoConfig, SystemConf
 from hofto_hw.control.computed_torque import ComputedTorque
 from hofto_hw.control.trajectory import cartesian_loop
 from hofto_hw.errors import ConfigError
+from hofto_hw.jit import Backend
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers import HoftoCore, make_observer
-from hofto_hw.observers.kernels import Backend
 from hofto_hw.observers.metrics import error_indices
 from hofto_hw.observers.tuning import ESO_3DB_FACTOR, bandwidth_3db, first_harmonic_gain
 

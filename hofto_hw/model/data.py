@@ -57,11 +57,11 @@ class ModelData:
         native: bool = True,
         hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
-        # imported here: hofto_hw.observers (whose kernels module holds the one jit switch)
-        # imports this module's package
+        # imported here: hofto_hw.model.kernels imports this module's package (and numba
+        # loads with the first model data, not with the package)
+        from hofto_hw import jit
         from hofto_hw.model import kernels as mk
         from hofto_hw.model.snapshot import require_supported_pinocchio
-        from hofto_hw.observers import kernels
 
         require_supported_pinocchio(model)
         self.model = model
@@ -94,14 +94,14 @@ class ModelData:
         self._J = np.zeros((6, n))
         self._native = None
         fast = False
-        if kernels.resolve(backend) == "numba":  # type: ignore[arg-type]
+        if jit.resolve(backend) == "numba":  # type: ignore[arg-type]
             z = np.zeros(n)
-            fast = kernels.warm(lambda: mk.add_friction(z, z, W.copy(), np.zeros(n)))
+            fast = jit.warm(lambda: mk.add_friction(z, z, W.copy(), np.zeros(n)))
             if fast and native:
-                self._use_native(mk, kernels)
+                self._use_native(mk, jit)
         #: "numba": :meth:`inverse_dynamics`'s kernel runs compiled; "numpy": its Python source
         self.backend = "numba" if fast else "numpy"
-        self._add_friction = kernels.compiled_or_python(mk.add_friction, self.backend)
+        self._add_friction = jit.compiled_or_python(mk.add_friction, self.backend)
         #: True: :meth:`inverse_dynamics` is one compiled call with pinocchio's C++ RNEA inside
         #: (hofto_hw.model.native)
         self.native = self._native is not None
@@ -114,7 +114,7 @@ class ModelData:
 
         return {"W": np.dtype((np.float64, (mk.ROWS, n)))}
 
-    def _use_native(self, mk: ModuleType, kernels: ModuleType) -> None:
+    def _use_native(self, mk: ModuleType, jit: ModuleType) -> None:
         """RNEA and the friction as one compiled call with pinocchio's C++ RNEA inside
         (hofto_hw.model.native), when the native library is built here; else nothing."""
         from hofto_hw.model import native
@@ -123,7 +123,7 @@ class ModelData:
         if nm is None:
             return
         z, W, fn = np.zeros(self.n), self._W, mk.inverse_dynamics_native
-        if kernels.warm(lambda: fn(z, z, z, W.copy(), np.zeros(self.n), nm.handle)):
+        if jit.warm(lambda: fn(z, z, z, W.copy(), np.zeros(self.n), nm.handle)):
             self._native = nm
             self._id_native = fn
 

@@ -248,12 +248,12 @@ def _kernel() -> _Kernel:
     source as Python) and its workspace's rows F, STATE and ROWS. Imported on first use:
     hofto_hw.model.kernels imports this module's package."""
     if not _KERNEL:
+        from hofto_hw import jit
         from hofto_hw.model import kernels as mk
-        from hofto_hw.observers import kernels
 
         z, W = np.zeros(1), mk.workspace(1)
-        backend = kernels.ready("auto", lambda: mk.friction(z, W))
-        fn = kernels.compiled_or_python(mk.friction, backend)
+        backend = jit.ready("auto", lambda: mk.friction(z, W))
+        fn = jit.compiled_or_python(mk.friction, backend)
         _KERNEL.append((fn, mk.F, mk.STATE, mk.ROWS))
     return _KERNEL[0]
 
@@ -265,8 +265,8 @@ def _batch() -> tuple[Callable[..., None], Callable[..., None]]:
     """The recording-wide kernels (held_series, feature_matrix), compiled and warmed on first
     use where numba works, else their source as Python (as :func:`_kernel`)."""
     if not _BATCH:
+        from hofto_hw import jit
         from hofto_hw.model import kernels as mk
-        from hofto_hw.observers import kernels
 
         z, W = np.zeros((1, 1)), mk.workspace(1)
         out = np.zeros((1, 1, mk.N_FEATURES))
@@ -275,11 +275,11 @@ def _batch() -> tuple[Callable[..., None], Callable[..., None]]:
             mk.held_series(z, 1.0, np.zeros(1), z.copy())
             mk.feature_matrix(z, z, W, out)
 
-        backend = kernels.ready("auto", warm)
+        backend = jit.ready("auto", warm)
         _BATCH.append(
             (
-                kernels.compiled_or_python(mk.held_series, backend),
-                kernels.compiled_or_python(mk.feature_matrix, backend),
+                jit.compiled_or_python(mk.held_series, backend),
+                jit.compiled_or_python(mk.feature_matrix, backend),
             )
         )
     return _BATCH[0]

@@ -17,19 +17,18 @@ thousands of random steps, held-friction memory and NaN included.
 Arguments are few (a compiled call costs ~0.1 µs per argument, more with cold caches): the
 friction parameters, the held-friction memory and the outputs travel in one workspace array
 ``W`` (:data:`ROWS`, n) made by :func:`workspace` and filled by :func:`pack_friction`.
-Availability, compilation and warming are those of :mod:`hofto_hw.observers.kernels` (one
-switch, ``HOFTO_HW_NO_NUMBA``). Kernels write only into the arrays passed in; none allocates.
+Availability, compilation and warming are :mod:`hofto_hw.jit`'s (one switch,
+``HOFTO_HW_NO_NUMBA``). Kernels write only into the arrays passed in; none allocates.
 """
 
 from __future__ import annotations
 
 import math
-from functools import partial
 
 import numpy as np
 
+from hofto_hw.jit import jit, jit_inline
 from hofto_hw.model.friction import FrictionParams
-from hofto_hw.observers.kernels import jit
 
 # rows of the workspace W (ROWS, n): outputs, the held-friction memory, then the friction
 # parameters per joint (a scalar parameter or flag is repeated on every joint)
@@ -64,11 +63,6 @@ try:  # the native library's C functions, bound by name (hofto_hw/model/native/d
         from hofto_hw.model.native import python_terms as _dyn_terms
 except Exception:  # no numba: the native path is never chosen (hofto_hw.model.native.ready)
     _dyn_terms = _dyn_rnea = None
-
-
-# the friction kernel's per-joint helpers are inlined at numba's IR level: a compiled call
-# passing W costs more than their arithmetic (twice the kernel's time, measured)
-_inline = partial(jit, inline="always")
 
 
 def workspace(n: int) -> np.ndarray:
@@ -120,34 +114,34 @@ def _step(x: float, at_zero: float) -> float:
     return x
 
 
-@_inline
+@jit_inline
 def coulomb_sign(v: float, smooth: float) -> float:
     """s(v) of eq. (12), the feature of Coulomb friction [1]: tanh(v / v_s) for a smoothing
     velocity ``smooth`` v_s > 0 [rad/s], sign(v) for v_s = 0 (v [rad/s])."""
     return math.tanh(v / smooth) if smooth > 0.0 else _sign(v)
 
 
-@_inline
+@jit_inline
 def held_advance(v: float, h: float, band: float) -> float:
     """The held sign after velocity v [rad/s]: sign(v) where |v| > ``band`` v_h [rad/s], else
     the previous held sign ``h`` (-1/0/+1); idempotent for a repeated v."""
     return h + (_sign(v) - h) * _step(abs(v) - band, 0.0)
 
 
-@_inline
+@jit_inline
 def stribeck_feature(v: float, s: float, vs: float) -> float:
     """exp(-(v/vs)²)·s(v) [1], the feature of the Stribeck gap Fs - Fc (vs [rad/s])."""
     t = v / vs
     return math.exp(-(t * t)) * s
 
 
-@_inline
+@jit_inline
 def quadratic_feature(v: float) -> float:
     """v·|v| [rad²/s²], the feature of quadratic friction Fq."""
     return abs(v) * v
 
 
-@_inline
+@jit_inline
 def held_feature(v: float, h: float, band: float, passive: bool) -> float:
     """exp(-(v/v_h)²)·h [1], the feature of held friction Fh (band v_h [rad/s], held sign h);
     ``passive``: times [v·h >= 0] (the term only resists motion)."""
@@ -159,7 +153,7 @@ def held_feature(v: float, h: float, band: float, passive: bool) -> float:
 N_FEATURES = 6  # what friction_features returns (hofto_hw.model.friction.FEATURES)
 
 
-@_inline
+@jit_inline
 def friction_features(v: float, h: float, j: int, W: np.ndarray) -> tuple:
     """The features of eq. (12) of joint j at velocity v [rad/s] with held sign h: the partial
     derivatives of f_j with respect to Fc, Fs - Fc, Fv, B, Fq, Fh, 0.0 for a term the model

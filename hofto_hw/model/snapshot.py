@@ -153,8 +153,8 @@ class DynamicsSnapshot:
         native: bool = True,
         hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
+        from hofto_hw import jit
         from hofto_hw.model import kernels as mk
-        from hofto_hw.observers import kernels
 
         needs = Needs(needs)
         if needs & Needs.ACCEL:
@@ -190,15 +190,15 @@ class DynamicsSnapshot:
         self._accel = bool(needs & Needs.ACCEL)
         self._fast = False
         self._native = None
-        if kernels.resolve(backend) == "numba":  # type: ignore[arg-type]
+        if jit.resolve(backend) == "numba":  # type: ignore[arg-type]
             if native:
-                self._use_native(mk, kernels)
+                self._use_native(mk, jit)
             if self._native is None:
-                self._fast = kernels.warm(self._warm)
+                self._fast = jit.warm(self._warm)
         #: "numba": compiled (one call with ``native``, else the pinocchio calls and one
         #: compiled call); "numpy": the pinocchio calls and the kernel's Python source
         self.backend = "numba" if self._fast else "numpy"
-        self._terms = kernels.compiled_or_python(mk.snapshot_terms, self.backend)
+        self._terms = jit.compiled_or_python(mk.snapshot_terms, self.backend)
         #: True: :meth:`compute` is one compiled call with pinocchio's C++ algorithms inside
         self.native = self._native is not None
 
@@ -211,7 +211,7 @@ class DynamicsSnapshot:
 
         return {"W": np.dtype((np.float64, (mk.ROWS, n))), "O": np.dtype((np.float64, (n + 4, n)))}
 
-    def _use_native(self, mk: ModuleType, kernels: ModuleType) -> None:
+    def _use_native(self, mk: ModuleType, jit: ModuleType) -> None:
         """The whole snapshot as one compiled call with pinocchio's C++ algorithms inside
         (hofto_hw.model.native), when the native library is built here; else nothing."""
         from hofto_hw.model import native
@@ -232,7 +232,7 @@ class DynamicsSnapshot:
         O = np.zeros((n + 4, n)) if self._hot is None else self._hot["O"]
         z = np.zeros(n)
         snap = mk.snapshot_native
-        if not kernels.warm(lambda: snap(z, z, z, W.copy(), O.copy(), nm.handle)):
+        if not jit.warm(lambda: snap(z, z, z, W.copy(), O.copy(), nm.handle)):
             W[mk.FLAGS] = int(W[mk.FLAGS, 0]) & ((1 << mk.NATIVE_SHIFT) - 1)
             return
         self._O = O

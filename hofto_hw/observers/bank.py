@@ -32,6 +32,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.model.snapshot import DynamicsSnapshot
 from hofto_hw.observers import kernels as K
 from hofto_hw.observers.base import Observer
@@ -111,7 +112,7 @@ class ObserverBank:
             terms.append(arr)
         self.terms = tuple(terms)
         for i, obs in enumerate(self.observers):
-            entry = self._entry(obs, i, n) if fuse and K.available() else None
+            entry = self._entry(obs, i, n) if fuse and jit.available() else None
             if entry is None:
                 self._rest.append((obs, out[i]))
             else:
@@ -121,7 +122,7 @@ class ObserverBank:
         self.args = tuple(tuple(g) if g else None for g in groups)
         self.fused = tuple(fused)
         self.rest = tuple(o.name for o, _ in self._rest)
-        if fused and not K.warm(self._warm):
+        if fused and not jit.warm(self._warm):
             self.args = (None,) * 5
             self._rest = [(o, out[i]) for i, o in enumerate(self.observers)]
             self.fused, self.rest = (), tuple(o.name for o in self.observers)

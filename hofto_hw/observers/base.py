@@ -77,13 +77,13 @@ class SnapshotUpdate:
         compile + warm ``kernel`` through ``self._warm`` (a failed compilation runs the
         kernel's source as Python: ``self.backend`` says which runs) and keep the kernel to
         call as ``self._kernel``."""
-        from hofto_hw.observers import kernels
+        from hofto_hw import jit
 
-        self.backend = kernels.resolve(backend)  # type: ignore[arg-type]
+        self.backend = jit.resolve(backend)  # type: ignore[arg-type]
         self._own_snapshot(model, self.backend)
-        if self.backend == "numba" and not kernels.warm(self._warm):  # type: ignore[attr-defined]
+        if self.backend == "numba" and not jit.warm(self._warm):  # type: ignore[attr-defined]
             self.backend = "numpy"
-        self._kernel = kernels.compiled_or_python(kernel, self.backend)
+        self._kernel = jit.compiled_or_python(kernel, self.backend)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
         """Advance by dt [s] with the newest samples; return tau_ext_hat [N·m], shape (n,)."""

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import kernels
@@ -39,7 +40,7 @@ class DobObserver(SnapshotUpdate):
         model: RobotModel,
         cutoff: np.ndarray,
         nominal_inertia: np.ndarray | None = None,
-        backend: kernels.Backend = "auto",
+        backend: jit.Backend = "auto",
     ) -> None:
         n = model.n
         self.model = model

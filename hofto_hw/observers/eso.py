@@ -12,13 +12,14 @@ bound ||A⁻¹B||·zeta of eq. (10). :func:`bandwidth_gains` places all three po
 Discretisation: explicit Euler at the sampling instants; with ``substeps`` > 1, q is
 interpolated linearly between samples and a is held — exactly as HOFTO's, so that Remark 7's
 equivalence holds sample by sample. The arithmetic is :mod:`hofto_hw.observers.kernels`'
-(``eso_step``; the numpy reference is in tests/hofto_hw/observers/reference.py).
+(``euler_step``; the numpy reference is in tests/hofto_hw/observers/reference.py).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import kernels
@@ -42,8 +43,8 @@ class EsoCore:
     """ESO dynamics for independent channels (arrays of shape (joints,)).
 
     States z (3, joints) (``z1``, ``z2``, ``z3`` are row views), gains k (3, joints), the
-    previous sample ``prev`` (joints,). :meth:`step` runs ``kernels.eso_step`` on
-    ``backend`` (see :mod:`hofto_hw.observers.kernels`; compiled at its first call)."""
+    previous sample ``prev`` (joints,). :meth:`step` runs ``kernels.euler_step`` on
+    ``backend`` (see :mod:`hofto_hw.jit`; compiled at its first call)."""
 
     def __init__(
         self,
@@ -51,7 +52,7 @@ class EsoCore:
         k2: np.ndarray,
         k3: np.ndarray,
         substeps: int = 1,
-        backend: kernels.Backend = "auto",
+        backend: jit.Backend = "auto",
     ) -> None:
         self.k = np.vstack([np.asarray(k, dtype=float) for k in (k1, k2, k3)])
         self.k1, self.k2, self.k3 = self.k
@@ -60,8 +61,8 @@ class EsoCore:
         self.z = np.zeros((3, j))
         self.z1, self.z2, self.z3 = self.z
         self.prev = np.zeros(j)
-        self.backend = kernels.resolve(backend)
-        self._step = kernels.compiled_or_python(kernels.eso_step, self.backend)
+        self.backend = jit.resolve(backend)
+        self._step = jit.compiled_or_python(kernels.euler_step, self.backend)
 
     def reset(self, y: np.ndarray, yd: np.ndarray | None = None) -> None:
         self.z1[:] = y
@@ -71,12 +72,12 @@ class EsoCore:
 
     def step(self, y: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
         """Advance ``dt`` [s]; returns z3 (a view), the x3 estimate."""
-        self._step(self.z, self.k, y, self.prev, a, dt / self.substeps, self.substeps)
+        self._step(self.z, self.k, y, self.prev, a, dt / self.substeps, self.substeps, False)
         return self.z3
 
 
 class EsoObserver(SnapshotUpdate):
-    """ESO on a robot: tau_ext_hat = M(q)·z3; one ``kernels.eso_update`` call per update
+    """ESO on a robot: tau_ext_hat = M(q)·z3; one ``kernels.euler_update`` call per update
     (``backend``: see :mod:`hofto_hw.observers.base`)."""
 
     name = "eso"
@@ -89,7 +90,7 @@ class EsoObserver(SnapshotUpdate):
         k2: np.ndarray,
         k3: np.ndarray,
         substeps: int = 1,
-        backend: kernels.Backend = "auto",
+        backend: jit.Backend = "auto",
     ) -> None:
         n = model.n
         self.model = model
@@ -103,13 +104,11 @@ class EsoObserver(SnapshotUpdate):
         )
         self._out = np.zeros(n)
         self._guard = SampleGuard(self.n)
-        self._own_backend(model, backend, kernels.eso_update)
+        self._own_backend(model, backend, kernels.euler_update)
 
     def _warm(self) -> None:
-        c, snap, n = self.core, self.snapshot, self.n
-        kernels.eso_update(
-            c.z.copy(), c.k, np.zeros(n), np.zeros(n), snap.accel, 1e-3, 1, snap.M, np.zeros(n)
-        )
+        c, snap, z = self.core, self.snapshot, np.zeros(self.n)
+        kernels.euler_update(c.z.copy(), c.k, z, z.copy(), snap.accel, 1e-3, 1, False, snap.M, z)
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
         self.snapshot.reset_memory()  # held friction: a new run has no memory
@@ -118,8 +117,6 @@ class EsoObserver(SnapshotUpdate):
     def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
         if not self._guard.usable(snap, dt):
             return self._guard.nan()
-        c = self.core
-        self._kernel(
-            c.z, c.k, snap.q, c.prev, snap.accel, dt / c.substeps, c.substeps, snap.M, self._out
-        )
+        c, h = self.core, dt / self.core.substeps
+        self._kernel(c.z, c.k, snap.q, c.prev, snap.accel, h, c.substeps, False, snap.M, self._out)
         return self._out

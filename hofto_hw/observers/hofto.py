@@ -39,6 +39,7 @@ from typing import Literal
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import kernels
@@ -64,7 +65,7 @@ class HoftoCore:
       It lags: on a unit double integrator with a ramp x3 of slope s its error settles at
       ~5·dt·s for n = 2, and it grows with time on a parabola.
 
-    ``backend`` (``auto``, ``numba``, ``numpy``: see :mod:`hofto_hw.observers.kernels`) is
+    ``backend`` (``auto``, ``numba``, ``numpy``: see :mod:`hofto_hw.jit`) is
     the one :meth:`step` runs (``kernels.hofto_advance``, compiled at its first call); the
     observer updates the same record through its own kernel call.
     """
@@ -76,7 +77,7 @@ class HoftoCore:
         form: Form = "recursive",
         substeps: int = 1,
         discretisation: Literal["taylor", "euler"] = "taylor",
-        backend: kernels.Backend = "auto",
+        backend: jit.Backend = "auto",
     ) -> None:
         gains = np.asarray(gains, dtype=float)
         powers = np.asarray(powers, dtype=float).reshape(-1)
@@ -132,8 +133,8 @@ class HoftoCore:
         np.negative(self.gains, out=self._neg_gains)
         self._work = work
         self._ints = int(rec["substeps"]), int(rec["flags"])
-        self.backend = kernels.resolve(backend)
-        self._step = kernels.compiled_or_python(kernels.hofto_advance, self.backend)
+        self.backend = jit.resolve(backend)
+        self._step = jit.compiled_or_python(kernels.hofto_advance, self.backend)
 
     def reset(self, y: np.ndarray, yd: np.ndarray | None = None) -> None:
         """z1 = y, z2 = yd (or 0), higher states 0."""
@@ -167,7 +168,7 @@ class HoftoObserver(SnapshotUpdate):
         form: Form = "recursive",
         substeps: int = 1,
         discretisation: Literal["taylor", "euler"] = "taylor",
-        backend: kernels.Backend = "auto",
+        backend: jit.Backend = "auto",
     ) -> None:
         gains = np.asarray(gains, dtype=float)
         if gains.ndim != 2 or gains.shape[1] != model.n:

@@ -5,162 +5,27 @@ calls on six-element arrays, the time goes to the ~0.5 µs each call costs, not 
 Each kernel does one observer update (every stage, every joint, substeps, M·z3) in one call,
 and these kernels are the only implementation of the observers' formulas in the package: an
 observer calls its kernel compiled (backend ``numba``) or the same source run by the
-interpreter (backend ``numpy``, :func:`compiled_or_python`). The numpy formulation of the
-paper's equations is kept in tests/hofto_hw/observers/reference.py, where
-tests/hofto_hw/observers/test_kernels.py checks both backends against it to 1e-12 over
-thousands of random steps, Remark 7's equivalences and non-finite samples included.
-
-numba is a dependency of the package. Whether a missing compiled path may run at all is the
-loop's decision (``loop.acceleration``, :mod:`hofto_hw.runtime.acceleration`, which reads
-:func:`available` and :func:`unavailable_reason`): :func:`available` is False when
-``HOFTO_HW_NO_NUMBA=1`` (benchmarks and tests of the interpreted path) or when a kernel failed
-to compile (:func:`warm`); ``backend="auto"`` then runs the kernels' source as Python.
-numba's own switch, ``NUMBA_DISABLE_JIT=1``, runs every kernel as Python too (for debugging).
-
-Kernels are compiled with ``cache=True`` (the machine code is kept in ``__pycache__`` or
-``NUMBA_CACHE_DIR``); their users compile and warm them when built, so no compilation happens
-inside a loop. Kernels write only into the arrays passed in; none allocates.
+interpreter (backend ``numpy``); compilation, the backends and the switch that turns compiled
+code off are :mod:`hofto_hw.jit`'s. The numpy formulation of the paper's equations is kept in
+tests/hofto_hw/observers/reference.py, where tests/hofto_hw/observers/test_kernels.py checks
+both backends against it to 1e-12 over thousands of random steps, Remark 7's equivalences and
+non-finite samples included. Kernels write only into the arrays passed in; none allocates.
 """
 
 from __future__ import annotations
 
 import math
-import os
-import types
-from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any
 
-import numba as _numba
 import numpy as np
+from numba import literal_unroll
 
-Backend = Literal["numpy", "numba", "auto"]
-
-_literal_unroll = _numba.literal_unroll  # as Python: the tuple itself
-_DISABLED = os.environ.get("HOFTO_HW_NO_NUMBA", "") not in ("", "0")
-_FAILED: str = ""  # first compilation failure, if any
-
-
-def _jit(fn: Callable[..., Any], **options: Any) -> Callable[..., Any]:
-    try:
-        return _numba.njit(cache=True, nogil=True, error_model="numpy", **options)(fn)
-    except RuntimeError:
-        # no writable cache folder (a service user under ProtectSystem=strict, a read-only
-        # install): compile at start-up every time instead (NUMBA_CACHE_DIR points elsewhere)
-        return _numba.njit(cache=False, nogil=True, error_model="numpy", **options)(fn)
-
-
-def _jit_inline(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """:func:`_jit` for small helpers inlined into their callers at numba's IR level: a call
-    between compiled functions passes each array as a dozen values and counts references on
-    it, which costs more than these helpers' arithmetic."""
-    return _jit(fn, inline="always")
-
-
-#: compile a function as these kernels are (cache=True, nogil, numpy's error model): for
-#: kernels elsewhere (drivers/cia402/kernels.py, safety/, control/, model/, runtime/)
-jit = _jit
-
-
-def available() -> bool:
-    """True when the compiled kernels can run (not disabled, none failed to compile)."""
-    return not _DISABLED and not _FAILED
-
-
-def unavailable_reason() -> str:
-    """Why :func:`available` is False ('' when it is True)."""
-    if _DISABLED:
-        return "compiled kernels disabled by HOFTO_HW_NO_NUMBA"
-    return _FAILED
-
-
-def resolve(backend: Backend) -> Literal["numpy", "numba"]:
-    """The backend a kernel user runs: ``auto`` is numba when :func:`available`, else numpy
-    (the kernels' source as Python).
-
-    ``numba`` when the compiled path is not available raises RuntimeError naming the reason.
-    """
-    if backend == "numpy":
-        return "numpy"
-    if backend not in ("numba", "auto"):
-        raise ValueError(f"backend must be 'numpy', 'numba' or 'auto', got {backend!r}")
-    if available():
-        return "numba"
-    if backend == "numba":
-        raise RuntimeError(f"compiled observer kernels unavailable: {unavailable_reason()}")
-    return "numpy"
-
-
-def warm(call: Callable[[], object]) -> bool:
-    """Run ``call`` (which invokes a kernel on scratch data) to compile it now; on a
-    compilation failure, mark the compiled path unavailable and return False."""
-    global _FAILED
-    if not available():
-        return False
-    try:
-        call()
-    except Exception as exc:  # numba's TypingError/LoweringError, or a cache problem
-        _FAILED = f"compiling the observer kernels failed ({type(exc).__name__}: {exc})"
-        _FAILED = _FAILED.splitlines()[0]
-        return False
-    return True
-
-
-def compiled_or_python(fn: Callable[..., Any], backend: str) -> Callable[..., Any]:
-    """The compiled kernel ``fn`` for the ``numba`` backend, else the same source as Python,
-    the kernels it calls included (numba's ``py_func``; nothing is compiled): one source
-    for both."""
-    if backend == "numba":
-        return fn
-    py = getattr(fn, "py_func", fn)
-    return _python_namespace(py.__globals__).get(py.__name__, py) if _kernel(fn) else py
-
-
-def ready(backend: Backend, warm_call: Callable[[], object]) -> Literal["numpy", "numba"]:
-    """The backend a kernel user runs: :func:`resolve`, and for numba :func:`warm` with
-    ``warm_call`` now (compiled before the loop); numpy when that compilation fails."""
-    chosen = resolve(backend)
-    if chosen == "numba" and not warm(warm_call):
-        return "numpy"
-    return chosen
-
-
-def _kernel(obj: object) -> bool:
-    """``obj`` is a numba-compiled function (it carries its Python source as ``py_func``)."""
-    return isinstance(getattr(obj, "py_func", None), types.FunctionType)
-
-
-#: id(a kernel module's globals) -> that namespace with every kernel in it as Python
-_PYTHON: dict[int, dict[str, Any]] = {}
-
-
-def _python_namespace(module_globals: dict[str, Any]) -> dict[str, Any]:
-    """A copy of a kernel module's namespace in which every compiled function, its own and
-    those it imported, is its Python source bound to such a namespace: a kernel's
-    ``py_func`` alone would still call the compiled kernels it uses."""
-    ns = _PYTHON.get(id(module_globals))
-    if ns is not None:
-        return ns
-    ns = _PYTHON[id(module_globals)] = dict(module_globals)
-    imported = []
-    for name, obj in module_globals.items():
-        if not _kernel(obj):
-            continue
-        py = obj.py_func
-        if py.__globals__ is module_globals:
-            ns[name] = types.FunctionType(
-                py.__code__, ns, py.__name__, py.__defaults__, py.__closure__
-            )
-        else:
-            imported.append((name, py))
-    for name, py in imported:  # after the module's own: an import cycle finds them there
-        ns[name] = _python_namespace(py.__globals__).get(py.__name__, py)
-    return ns
-
+from hofto_hw.jit import jit, jit_inline
 
 # ----------------------------------------------------------------- scalar helpers
 
 
-@_jit
+@jit
 def _sign(x: float) -> float:
     """np.sign for one float: -1, 0, 1 (NaN stays NaN)."""
     if x > 0.0:
@@ -170,7 +35,7 @@ def _sign(x: float) -> float:
     return x * 0.0  # 0 -> 0, NaN -> NaN
 
 
-@_jit
+@jit
 def _sig_log(x: float, a: float, p: float, log2a: float) -> float:
     """sig^p(x) = |x|^p·sign(x) for a = |x| and log2a = log2(a): sign for p = 0, x for
     p = 1, roots for p = 1/2, 1/4, 3/4, else 2^(p·log2 a).
@@ -194,20 +59,20 @@ def _sig_log(x: float, a: float, p: float, log2a: float) -> float:
     return math.copysign(math.exp2(p * log2a), x)
 
 
-@_jit
+@jit
 def _log2(a: float) -> float:
     """math.log2 of a = |x|, -inf at zero as compiled (C's log2); Python's math.log2(0) raises,
     and NUMBA_DISABLE_JIT runs these kernels as Python."""
     return math.log2(a) if a != 0.0 else -math.inf
 
 
-@_jit
+@jit
 def _needs_log(p: float) -> bool:
     """True when :func:`_sig_log` reads log2a for power p."""
     return p != 0.0 and p != 1.0 and p != 0.5 and p != 0.25 and p != 0.75
 
 
-@_jit
+@jit
 def _progression(powers: np.ndarray) -> float:
     """The common difference d of powers p_i = p_0 + i·d (to 4.5e-16, two roundings of
     1 + i·sigma) when there are at least two and each needs the logarithm (see
@@ -223,7 +88,7 @@ def _progression(powers: np.ndarray) -> float:
     return d
 
 
-@_jit
+@jit
 def _mat_vec(M: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
     n = M.shape[0]
     for i in range(n):
@@ -236,7 +101,7 @@ def _mat_vec(M: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
 # ----------------------------------------------------------------- HOFTO (any order)
 
 
-@_jit
+@jit
 def hofto_step(
     z: np.ndarray,
     neg_gains: np.ndarray,
@@ -297,7 +162,7 @@ def hofto_step(
             z[1, jj] = z[1, jj] + a[jj] * h
 
 
-@_jit_inline
+@jit_inline
 def _injection(
     z: np.ndarray,
     jj: int,
@@ -343,7 +208,7 @@ def _injection(
                 inj[i] = v
 
 
-@_jit_inline
+@jit_inline
 def _injection_progression(
     z: np.ndarray,
     jj: int,
@@ -376,7 +241,7 @@ def _injection_progression(
         _injection(z, jj, y, neg_gains, powers, False, inj, h, apply)
 
 
-@_jit_inline
+@jit_inline
 def _predict(z: np.ndarray, T: np.ndarray, a: np.ndarray, h: float, a_h2: float) -> None:
     """z = T·z (the chain's prediction, upper triangular) for every joint, in place: row i
     reads rows >= i, not yet predicted; summed from T[i, i]·z_i up, as a dot product; then
@@ -395,7 +260,7 @@ def _predict(z: np.ndarray, T: np.ndarray, a: np.ndarray, h: float, a_h2: float)
         z[0, jj] = z[0, jj] + a[jj] * a_h2
 
 
-@_jit_inline
+@jit_inline
 def _held(y: np.ndarray, y_prev: np.ndarray, jj: int, k: int, substeps: int) -> float:
     """Joint jj's measured position at substep k (first-order hold): y at one substep, else
     y_prev + step + ... + step (k + 1 times, as summed substep by substep)."""
@@ -408,7 +273,7 @@ def _held(y: np.ndarray, y_prev: np.ndarray, jj: int, k: int, substeps: int) -> 
     return yk
 
 
-@_jit
+@jit
 def _taylor_progression(
     z: np.ndarray,
     neg_gains: np.ndarray,
@@ -433,7 +298,7 @@ def _taylor_progression(
             _injection_progression(z, jj, yk, neg_gains, powers, ratio, inj, h, True)
 
 
-@_jit_inline
+@jit_inline
 def hofto_advance(
     z: np.ndarray,
     neg_gains: np.ndarray,
@@ -465,7 +330,7 @@ def hofto_advance(
         prev[jj] = y[jj]
 
 
-@_jit
+@jit
 def hofto_update(
     record: np.ndarray, y: np.ndarray, a: np.ndarray, dt: float, M: np.ndarray, out: np.ndarray
 ) -> None:
@@ -482,18 +347,21 @@ def hofto_update(
 # ----------------------------------------------------------------- ESO and STA (Euler)
 
 
-@_jit_inline
-def eso_step(
+@jit_inline
+def euler_step(
     z: np.ndarray,
-    k: np.ndarray,
+    gains: np.ndarray,
     y: np.ndarray,
     y_prev: np.ndarray,
     a: np.ndarray,
     h: float,
     substeps: int,
+    sta: bool,
 ) -> None:
-    """ESO eq. (5), explicit Euler with substeps of h [s] (q held first-order, a held):
-    z (3, j) states, k (3, j) gains k1..k3; y_prev = y after."""
+    """ESO eq. (5) or, with ``sta``, the super-twisting observer (Remark 7): explicit Euler
+    with substeps of h [s] (q held first-order, a held); z (3, j) states, gains (3, j) k1..k3
+    (ESO) or l1..l3 (STA); y_prev = y after. The STA injects sig^(1/2)(e) and sign(e) where
+    the ESO injects e."""
     for jj in range(y.shape[0]):
         step = (y[jj] - y_prev[jj]) / substeps
         yk = y_prev[jj]
@@ -501,71 +369,40 @@ def eso_step(
         for _ in range(substeps):
             yk = yk + step
             e = yk - z1
-            d1 = (k[0, jj] * e + z2) * h
-            d2 = (k[1, jj] * e + z3 + a[jj]) * h
-            d3 = (k[2, jj] * e) * h
-            z1 = z1 + d1
-            z2 = z2 + d2
-            z3 = z3 + d3
+            u = u3 = e
+            if sta:
+                u, u3 = _sig_log(e, abs(e), 0.5, 0.0), _sign(e)
+            z1, z2, z3 = (
+                z1 + (gains[0, jj] * u + z2) * h,
+                z2 + (gains[1, jj] * u + z3 + a[jj]) * h,
+                z3 + (gains[2, jj] * u3) * h,
+            )
         z[0, jj], z[1, jj], z[2, jj] = z1, z2, z3
         y_prev[jj] = y[jj]
 
 
-@_jit
-def eso_update(
+@jit
+def euler_update(
     z: np.ndarray,
-    k: np.ndarray,
+    gains: np.ndarray,
     y: np.ndarray,
     y_prev: np.ndarray,
     a: np.ndarray,
     h: float,
     substeps: int,
+    sta: bool,
     M: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """:func:`eso_step`, then out = M·z3 [N·m]: the ESO observer's update."""
-    eso_step(z, k, y, y_prev, a, h, substeps)
-    _mat_vec(M, z[2], out)
-
-
-@_jit
-def sta_update(
-    z: np.ndarray,
-    l: np.ndarray,
-    y: np.ndarray,
-    y_prev: np.ndarray,
-    a: np.ndarray,
-    h: float,
-    substeps: int,
-    M: np.ndarray,
-    out: np.ndarray,
-) -> None:
-    """Super-twisting observer (Remark 7), explicit Euler: z (3, j), l (3, j) gains l1..l3;
-    out = M·z3."""
-    for jj in range(y.shape[0]):
-        step = (y[jj] - y_prev[jj]) / substeps
-        yk = y_prev[jj]
-        z1, z2, z3 = z[0, jj], z[1, jj], z[2, jj]
-        for _ in range(substeps):
-            yk = yk + step
-            e = yk - z1
-            sgn = _sign(e)
-            root = math.copysign(math.sqrt(abs(e)), e) if e != 0.0 else e * 0.0
-            d1 = (l[0, jj] * root + z2) * h
-            d2 = (l[1, jj] * root + z3 + a[jj]) * h
-            d3 = (l[2, jj] * sgn) * h
-            z1 = z1 + d1
-            z2 = z2 + d2
-            z3 = z3 + d3
-        z[0, jj], z[1, jj], z[2, jj] = z1, z2, z3
-        y_prev[jj] = y[jj]
+    """:func:`euler_step`, then out = M·z3 [N·m]: the ESO's or the STA's update."""
+    euler_step(z, gains, y, y_prev, a, h, substeps, sta)
     _mat_vec(M, z[2], out)
 
 
 # ----------------------------------------------------------------- momentum, DOB
 
 
-@_jit_inline
+@jit_inline
 def momentum_update(
     M: np.ndarray,
     qd: np.ndarray,
@@ -591,7 +428,7 @@ def momentum_update(
         r[i] = gain[i] * (p - p0[i] - integral[i])
 
 
-@_jit
+@jit
 def dob_update(
     gj: np.ndarray,
     cutoff: np.ndarray,
@@ -638,7 +475,7 @@ BANK_RECURSIVE = 1  # flags of a HOFTO tuple
 BANK_TAYLOR = 2
 
 
-@_jit
+@jit
 def _hofto_transition(T: np.ndarray, hs: np.ndarray, h: float, taylor: bool) -> None:
     """T and [h, a_h2] for step h: T[i, i+j] = h^j/j! for j < s (Taylor) or I + h·shift
     (Euler): the transition matrix of the chain z_i' = z_{i+1}; a_h2 = h²/2 (Taylor) or 0."""
@@ -656,21 +493,21 @@ def _hofto_transition(T: np.ndarray, hs: np.ndarray, h: float, taylor: bool) -> 
     hs[1] = 0.5 * h * h if taylor else 0.0
 
 
-@_jit
+@jit
 def _nan_rows(group: Any, out: np.ndarray) -> None:
     if group is not None:
-        for o in _literal_unroll(group):
+        for o in literal_unroll(group):
             r = out[o[0]]
             for i in range(r.shape[0]):
                 r[i] = np.nan
 
 
-@_jit
+@jit
 def _bank_hofto(
     group: Any, M: np.ndarray, a: np.ndarray, y: np.ndarray, dt: float, out: np.ndarray
 ) -> None:
     if group is not None:
-        for entry in _literal_unroll(group):  # HOFTOs of different orders: records' types
+        for entry in literal_unroll(group):  # HOFTOs of different orders: records' types
             row, rec = entry
             c = rec[0]
             z = c["z"]
@@ -681,7 +518,7 @@ def _bank_hofto(
             _mat_vec(M, z[2], out[row])
 
 
-@_jit
+@jit
 def _bank_momentum(
     group: Any,
     M: np.ndarray,
@@ -702,19 +539,16 @@ def _bank_momentum(
                 o[i] = r[i]
 
 
-@_jit
+@jit
 def _bank_euler(
     group: Any, sta: bool, M: np.ndarray, a: np.ndarray, y: np.ndarray, dt: float, out: np.ndarray
 ) -> None:
     if group is not None:
         for row, z, gains, y_prev, sub in group:
-            if sta:
-                sta_update(z, gains, y, y_prev, a, dt / sub, sub, M, out[row])
-            else:
-                eso_update(z, gains, y, y_prev, a, dt / sub, sub, M, out[row])
+            euler_update(z, gains, y, y_prev, a, dt / sub, sub, sta, M, out[row])
 
 
-@_jit
+@jit
 def _bank_dob(
     group: Any, terms: Any, qd: np.ndarray, tau: np.ndarray, dt: float, out: np.ndarray
 ) -> None:
@@ -724,7 +558,7 @@ def _bank_dob(
             dob_update(gj, cutoff, w, work, qd, tau, nle, f, dt, out[row])
 
 
-@_jit
+@jit
 def bank_update(
     obs: Any,
     terms: Any,

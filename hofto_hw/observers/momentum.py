@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import kernels
@@ -30,9 +31,7 @@ class MomentumObserver(SnapshotUpdate):
     name = "momentum"
     needs = Needs.MASS | Needs.GRAVITY | Needs.CORIOLIS_T | Needs.FRICTION
 
-    def __init__(
-        self, model: RobotModel, gain: np.ndarray, backend: kernels.Backend = "auto"
-    ) -> None:
+    def __init__(self, model: RobotModel, gain: np.ndarray, backend: jit.Backend = "auto") -> None:
         n = model.n
         self.model = model
         self.n = n

@@ -36,13 +36,13 @@ from hofto_hw.config.models import (
     ObserverConfig,
     StaConfig,
 )
+from hofto_hw.jit import Backend
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.observers.base import Observer
 from hofto_hw.observers.direct import DirectObserver
 from hofto_hw.observers.dob import DobObserver
 from hofto_hw.observers.eso import EsoObserver
 from hofto_hw.observers.hofto import HoftoObserver
-from hofto_hw.observers.kernels import Backend
 from hofto_hw.observers.momentum import MomentumObserver
 from hofto_hw.observers.sta import StaObserver
 
@@ -119,7 +119,7 @@ def make_observer(cfg: ObserverConfig, model: RobotModel, *, backend: Backend = 
 
     ``backend``: ``auto`` (compiled when available, as the loop runs), ``numba`` (compiled
     and warmed here, or RuntimeError) or ``numpy`` (the same kernels' source as Python; see
-    :mod:`hofto_hw.observers.kernels`)."""
+    :mod:`hofto_hw.jit`)."""
     entry = OBSERVERS.get(cfg.type)
     if entry is None or not isinstance(cfg, entry.config):
         raise TypeError(f"unknown observer config {type(cfg).__name__}")

@@ -12,7 +12,7 @@ derivative (the paper's motivation for higher orders). Written on its own, not t
 HoftoCore, so that the equivalence test compares two implementations.
 Discretisation: explicit Euler at the sampling instants; with ``substeps`` > 1, q is
 interpolated linearly between samples and a is held (as HOFTO's). The arithmetic is
-:mod:`hofto_hw.observers.kernels`' (``sta_update``; the numpy reference is in
+:mod:`hofto_hw.observers.kernels`' (``euler_step`` with ``sta``; the numpy reference is in
 tests/hofto_hw/observers/reference.py).
 """
 
@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import kernels
@@ -27,7 +28,7 @@ from hofto_hw.observers.base import SampleGuard, SnapshotUpdate, per_joint
 
 
 class StaObserver(SnapshotUpdate):
-    """STA on a robot: tau_ext_hat = M(q)·z3; one ``kernels.sta_update`` call per update
+    """STA on a robot: tau_ext_hat = M(q)·z3; one ``kernels.euler_update`` call per update
     (``backend``: see :mod:`hofto_hw.observers.base`)."""
 
     name = "sta"
@@ -40,7 +41,7 @@ class StaObserver(SnapshotUpdate):
         l2: np.ndarray,
         l3: np.ndarray,
         substeps: int = 1,
-        backend: kernels.Backend = "auto",
+        backend: jit.Backend = "auto",
     ) -> None:
         n = model.n
         self.model = model
@@ -55,13 +56,13 @@ class StaObserver(SnapshotUpdate):
         self.prev = np.zeros(n)  # the previous sample of q
         self._out = np.zeros(n)
         self._guard = SampleGuard(self.n)
-        self._own_backend(model, backend, kernels.sta_update)
+        self._own_backend(model, backend, kernels.euler_update)
 
     def _warm(self) -> None:
         snap, n = self.snapshot, self.n
-        kernels.sta_update(
-            self.z.copy(), self.gains, np.zeros(n), np.zeros(n), snap.accel, 1e-3, 1, snap.M,
-            np.zeros(n),
+        kernels.euler_update(
+            self.z.copy(), self.gains, np.zeros(n), np.zeros(n), snap.accel, 1e-3, 1, True,
+            snap.M, np.zeros(n),
         )  # fmt: skip
 
     def reset(self, q: np.ndarray, qd: np.ndarray) -> None:
@@ -74,8 +75,6 @@ class StaObserver(SnapshotUpdate):
     def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
         if not self._guard.usable(snap, dt):
             return self._guard.nan()
-        h = dt / self.substeps
-        self._kernel(
-            self.z, self.gains, snap.q, self.prev, snap.accel, h, self.substeps, snap.M, self._out
-        )
+        z, h, sub = self.z, dt / self.substeps, self.substeps
+        self._kernel(z, self.gains, snap.q, self.prev, snap.accel, h, sub, True, snap.M, self._out)
         return self._out

@@ -5,7 +5,7 @@ writes every per-tick field of a record in one call (the sample as one (3, n) ar
 tick's copy of the command riding along; scalars packed into small arrays measured slower:
 each element written from Python costs more than an argument). ``rec`` is the tick record
 seen as a one-element array (``new_record(...).reshape(1)``: a view, the same memory). Backend
-conventions are the observers' (:mod:`hofto_hw.observers.kernels`); the tick warms the
+conventions are :mod:`hofto_hw.jit`'s; the tick warms the
 kernel when built. tests/hofto_hw/runtime/test_record_kernel.py checks it against a
 field-by-field numpy reference kept there.
 """
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hofto_hw.observers.kernels import jit
+from hofto_hw.jit import jit
 
 
 @jit

@@ -29,7 +29,7 @@ from scipy.optimize import linprog
 from hofto_hw.config.collision import CollisionConfig
 from hofto_hw.errors import UserError
 from hofto_hw.identify.data import Recording
-from hofto_hw.observers.kernels import compiled_or_python
+from hofto_hw.jit import compiled_or_python
 from safety.collision import CollisionMonitor
 from safety.collision.kernel import standstill_now
 

@@ -29,12 +29,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from hofto_hw import jit
 from hofto_hw.config.loader import parse_config, parse_yaml_bytes
 from hofto_hw.config.models import ObserverConfig, SystemConfig
 from hofto_hw.errors import ConfigError, UserError
 from hofto_hw.identify.data import Recording
 from hofto_hw.model import RobotModel
-from hofto_hw.observers import kernels, make_observer
+from hofto_hw.observers import make_observer
 from hofto_hw.recording import attachments as att
 from hofto_hw.replay.flight_log import FlightLog, RecordedEvent
 from hofto_hw.replay.runner import run_observer
@@ -291,7 +292,7 @@ def first_detection(
     return None, []
 
 
-def recorded_backend(log: FlightLog) -> kernels.Backend:
+def recorded_backend(log: FlightLog) -> jit.Backend:
     """The observer implementation the run used (metadata ``observer_backend``; numpy when
     absent): the same arithmetic is what makes the replay bit-exact. A run on the compiled
     kernels replays on them; without numba here it falls back to numpy (then to ~1e-11)."""

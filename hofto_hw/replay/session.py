@@ -18,8 +18,8 @@ from hofto_hw.identify.data import (
     load_recording,
     with_drive_gains,
 )
+from hofto_hw.jit import Backend
 from hofto_hw.observers import Observer, make_observer
-from hofto_hw.observers.kernels import Backend
 from hofto_hw.observers.stability import check_observer
 from hofto_hw.replay.episodes import Episode, find_episodes
 from hofto_hw.replay.runner import Progress, ReplayResult, replay

@@ -27,11 +27,11 @@ def jit_disabled() -> bool:
 def missing() -> str:
     """Why the compiled path cannot run in this process ('' when it can). Loads the native
     library (the first call of a process decides)."""
+    from hofto_hw import jit
     from hofto_hw.model import native
-    from hofto_hw.observers import kernels
 
-    if not kernels.available():
-        return kernels.unavailable_reason()
+    if not jit.available():
+        return jit.unavailable_reason()
     if not native.ready():
         return native.unavailable_reason()
     return ""

@@ -28,13 +28,13 @@ from hofto_hw.control.enabling import EnableInput
 from hofto_hw.control.friction_residual import FrictionResidual
 from hofto_hw.control.joint_motion import DemoPath, JointMotion
 from hofto_hw.errors import ConfigError
+from hofto_hw.jit import Backend
 from hofto_hw.model.data import ModelData
 from hofto_hw.model.payload import apply_payload, payload_from_config
 from hofto_hw.model.robot import RobotModel
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
 from hofto_hw.observers import make_observer
 from hofto_hw.observers.base import Observer
-from hofto_hw.observers.kernels import Backend
 from hofto_hw.observers.stability import check_observer
 from hofto_hw.recording.record import MemorySink, RecordSink, tick_dtype
 from hofto_hw.runtime.build import (

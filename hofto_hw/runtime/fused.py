@@ -36,11 +36,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from drivers.cia402.kernels import command_raw, read_si
+from hofto_hw import jit as K  # the project's jit: K.jit, K.available
 from hofto_hw.control.joint_motion import fade_in
 from hofto_hw.control.kernels import friction_learn, path_eval
 from hofto_hw.model import kernels as MK
 from hofto_hw.model.kernels import inverse_dynamics_native, snapshot_native
-from hofto_hw.observers import kernels as K
 from hofto_hw.observers.kernels import bank_update
 from hofto_hw.recording.kernels import fill_tick
 from hofto_hw.runtime.tick_kernels import (

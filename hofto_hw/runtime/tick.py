@@ -35,16 +35,16 @@ import numpy as np
 
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import State
+from hofto_hw import jit
 from hofto_hw.control.drag import DragController
 from hofto_hw.control.enabling import EnableInput
 from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, JointMotion
 from hofto_hw.errors import ConfigError
+from hofto_hw.jit import Backend
 from hofto_hw.model.data import ModelData
 from hofto_hw.model.snapshot import DynamicsSnapshot
-from hofto_hw.observers import kernels
 from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.observers.base import Observer
-from hofto_hw.observers.kernels import Backend
 from hofto_hw.recording.kernels import fill_tick
 from hofto_hw.recording.record import (
     DIAG_DTYPE,
@@ -245,9 +245,9 @@ class Tick(TickEvents):
         self._qdd_rec = r["qdd_cmd"]
         #: the record fill and the tick's flags: one compiled call each (recording/kernels.py,
         #: tick_kernels.py); without the compiled path the same functions run as Python
-        self.backend = kernels.ready(backend, self._warm)
-        self._fill = kernels.compiled_or_python(fill_tick, self.backend)
-        self._flags = kernels.compiled_or_python(tick_flags, self.backend)
+        self.backend = jit.ready(backend, self._warm)
+        self._fill = jit.compiled_or_python(fill_tick, self.backend)
+        self._flags = jit.compiled_or_python(tick_flags, self.backend)
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)

@@ -3,7 +3,7 @@ glue arithmetic (one definition each, for the reference stages and the fused cal
 
 Each of these is a numpy call or a Python loop over six elements (~1-4 µs each with the
 caches cold after the exchange); together they are one compiled call. Backend conventions are
-the observers' (:mod:`hofto_hw.observers.kernels`); the tick warms the kernel when built and
+:mod:`hofto_hw.jit`'s; the tick warms the kernel when built and
 runs the same source as Python without the compiled path.
 tests/hofto_hw/runtime/test_tick_kernels.py checks it against a numpy reference kept there.
 """
@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from drivers.cia402.state_machine import State
-from hofto_hw.observers.kernels import jit
+from hofto_hw.jit import jit
 
 #: bit of :func:`tick_flags`'s answer: every estimate in ``tau_ext`` is finite
 ESTIMATES_FINITE = 1

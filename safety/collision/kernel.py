@@ -5,14 +5,14 @@ of safety/collision/__init__.py, which the loop, flight-log replay, calibration 
 call), :func:`features_step` (the threshold features a, moving, r, s), :func:`monitor_step`
 (a whole tick) and :func:`monitor_tick` (the same on the packed state). Backend ``numba``
 runs them compiled; backend ``numpy`` runs the top-level function's own Python source
-(``py_func``; :func:`hofto_hw.observers.kernels.compiled_or_python`), and with numba's
+(``py_func``; :func:`hofto_hw.jit.compiled_or_python`), and with numba's
 ``NUMBA_DISABLE_JIT=1`` every line runs as Python. The numpy implementation this replaced is
 the reference in tests/safety/collision/reference.py (tests/safety/collision/test_kernel.py:
 agreement to 1e-12 over thousands of random steps, NaN/inf included).
 
 Joint by joint, no fastmath (so no fused multiply-add). Writes only into the arrays passed
 in; allocates nothing. The compilation conventions (``cache=True``, warmed when the monitor
-is built) are the observers' (hofto_hw/observers/kernels.py).
+is built) are every kernel's (:mod:`hofto_hw.jit`).
 """
 
 from __future__ import annotations
@@ -21,10 +21,10 @@ import math
 
 import numpy as np
 
-from hofto_hw.observers.kernels import _jit, _jit_inline  # one jit policy (cache, read-only)
+from hofto_hw.jit import jit, jit_inline
 from safety.collision.state import flags_of
 
-_flags_of = _jit(flags_of)  # the numpy path's own function, compiled: one definition
+_flags_of = jit(flags_of)  # the numpy path's own function, compiled: one definition
 
 # indices repeated from params.py / state.py as plain ints (numba reads module globals as
 # compile-time constants); tests/safety/collision/test_kernel.py checks they agree
@@ -39,7 +39,7 @@ LOGIC_ANY, LOGIC_ALL, LOGIC_MEAN = 0, 1, 2
 COLLIDED, CONTACT, NONFINITE = 1, 2, 4
 
 
-@_jit_inline
+@jit_inline
 def threshold(base, kv, ka, kr, ks, aq, aa, rev, still):  # type: ignore[no-untyped-def]
     """The collision threshold [N·m]: thr = kv·|qd| + base + ka·|a| + kr·r + ks·s, summed in
     this order (the sums are rounded), from the gains of one level/row/joint (base of the
@@ -55,7 +55,7 @@ def threshold(base, kv, ka, kr, ks, aq, aa, rev, still):  # type: ignore[no-unty
     return t
 
 
-@_jit_inline
+@jit_inline
 def standstill_now(v: float, inv_v_still: float) -> float:
     """The standstill indicator of one velocity sample, exp(-(v/v_s)²) in [0, 1] (v [rad/s],
     ``inv_v_still`` = 1/v_s [s/rad]); :func:`features_step` low-passes it, calibration's
@@ -64,7 +64,7 @@ def standstill_now(v: float, inv_v_still: float) -> float:
     return math.exp(-(z * z))
 
 
-@_jit_inline
+@jit_inline
 def features_step(feat: np.ndarray, sst: np.ndarray, bad_qd: np.ndarray, scal: np.ndarray,
                   qd: np.ndarray, dt: float) -> None:  # fmt: skip
     """Advance the threshold features ``feat`` (6, n) (state.py's rows) by dt [s] on qd (n,)
@@ -114,7 +114,7 @@ def features_step(feat: np.ndarray, sst: np.ndarray, bad_qd: np.ndarray, scal: n
             feat[F_STILL, j] = min(now, (now - s) * rise + s)
 
 
-@_jit
+@jit
 def monitor_tick(
     fbuf: np.ndarray,
     bbuf: np.ndarray,
@@ -161,7 +161,7 @@ def monitor_tick(
     return _flags_of(hits)
 
 
-@_jit
+@jit
 def monitor_step(
     par: np.ndarray,
     scal: np.ndarray,

@@ -8,7 +8,7 @@ from typing import Literal
 
 import numpy as np
 
-from hofto_hw.observers import kernels
+from hofto_hw import jit
 from safety.collision import params as P
 from safety.collision.kernel import features_step, monitor_step, monitor_tick
 from safety.collision.params import MonitorParams
@@ -140,10 +140,10 @@ class CollisionLevels:
         self._was_contact = False
         self._zero_qdd = np.zeros(n)
         self._tick = 0
-        self.backend = kernels.ready(backend, self._warm)
+        self.backend = jit.ready(backend, self._warm)
         #: True exactly when the compiled kernel runs (the fused tick's condition)
         self._use_kernel = self.backend == "numba"
-        self._features = kernels.compiled_or_python(features_step, self.backend)
+        self._features = jit.compiled_or_python(features_step, self.backend)
         self.reset()
 
     # ------------------------------------------------------------------ state

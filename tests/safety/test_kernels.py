@@ -162,7 +162,7 @@ def test_numpy_switch_runs_the_kernels_source() -> None:
 
     bus, lim = _bus("numpy"), _limit_monitor("numpy")
     assert bus.backend == "numpy" and bus._use_kernel is False
-    # the kernels' own source as Python (observers.kernels.compiled_or_python: the kernels
+    # the kernels' own source as Python (hofto_hw.jit.compiled_or_python: the kernels
     # they call run as Python too), not a compiled dispatcher
     assert bus._scan.__code__ is kernels.drive_scan.py_func.__code__
     assert not hasattr(bus._scan, "py_func")

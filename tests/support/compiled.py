@@ -10,12 +10,12 @@ import pytest
 
 def require_compiled_kernels() -> None:
     """Call at module level of a test module that needs the compiled kernels."""
-    from hofto_hw.observers import kernels
+    from hofto_hw import jit
 
-    if kernels.available():
+    if jit.available():
         return
     if os.environ.get("CI"):
-        pytest.fail(f"CI: compiled kernels must run: {kernels.unavailable_reason()}")
+        pytest.fail(f"CI: compiled kernels must run: {jit.unavailable_reason()}")
     pytest.skip(
-        f"compiled kernels unavailable: {kernels.unavailable_reason()}", allow_module_level=True
+        f"compiled kernels unavailable: {jit.unavailable_reason()}", allow_module_level=True
     )

@@ -142,10 +142,10 @@ def _load() -> str:
     global _LIB
     if os.environ.get("HOFTO_HW_NO_NATIVE", "") not in ("", "0"):
         return "disabled by HOFTO_HW_NO_NATIVE"
-    from hofto_hw.observers import kernels
+    from hofto_hw import jit
 
-    if not kernels.available():
-        return kernels.unavailable_reason() or "numba unavailable"
+    if not jit.available():
+        return jit.unavailable_reason() or "numba unavailable"
     path = library_path()
     if path is None:
         return (

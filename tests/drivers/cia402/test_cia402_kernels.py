@@ -16,11 +16,11 @@ import pytest
 from drivers.cia402.drive_group import DriveGroup
 from drivers.cia402.state_machine import Mode, State
 from drivers.sim.simbus import SimBus
+from hofto_hw import jit as observer_jit
 from hofto_hw.config.models import SystemConfig
-from hofto_hw.observers import kernels as observer_kernels
 
 pytestmark = pytest.mark.skipif(
-    not observer_kernels.available(), reason=observer_kernels.unavailable_reason() or "numba"
+    not observer_jit.available(), reason=observer_jit.unavailable_reason() or "numba"
 )
 
 # the reference by its path (tests/drivers is not a package: `drivers` is the product's)

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
+from hofto_hw import jit
 from hofto_hw.commands import backend
-from hofto_hw.observers import kernels
 
 
 def test_the_python_fallback_is_said_once_on_stderr(monkeypatch, capsys):
-    monkeypatch.setattr(kernels, "_DISABLED", True)
+    monkeypatch.setattr(jit, "_DISABLED", True)
     monkeypatch.setattr(backend, "_said", False)
     assert backend.observer_backend() == "auto"
     assert backend.observer_backend() == "auto"
@@ -18,8 +18,8 @@ def test_the_python_fallback_is_said_once_on_stderr(monkeypatch, capsys):
 
 def test_nothing_is_said_when_the_compiled_kernels_run(monkeypatch, capsys):
     monkeypatch.setattr(backend, "_said", False)
-    if not kernels.available():
-        monkeypatch.setattr(kernels, "_DISABLED", False)
-        monkeypatch.setattr(kernels, "_FAILED", "")
+    if not jit.available():
+        monkeypatch.setattr(jit, "_DISABLED", False)
+        monkeypatch.setattr(jit, "_FAILED", "")
     backend.observer_backend()
     assert capsys.readouterr().err == ""

@@ -17,7 +17,7 @@ from support.compiled import require_compiled_kernels
 
 from hofto_hw.control.joint_motion import MOVE, RAMP_DOWN, DemoPath, JointMotion, fade_in
 from hofto_hw.control.kernels import path_eval, ramp_step
-from hofto_hw.observers.kernels import compiled_or_python
+from hofto_hw.jit import compiled_or_python
 
 from . import reference
 

@@ -69,7 +69,7 @@ def _velocity(n: int, rng: np.random.Generator) -> np.ndarray:
 
 @pytest.mark.parametrize("backend", ["numba", "numpy"])
 def test_friction_kernel_equals_the_numpy_friction_with_its_memory(backend) -> None:
-    from hofto_hw.observers.kernels import compiled_or_python
+    from hofto_hw.jit import compiled_or_python
 
     kernel = compiled_or_python(mk.friction, backend)
     rng = np.random.default_rng(11)

@@ -66,9 +66,9 @@ def test_terms_are_views_of_pinocchio_storage_when_pinocchio_allows(er3a_model):
 
 
 def _backends():
-    from hofto_hw.observers import kernels
+    from hofto_hw import jit
 
-    return ["numpy"] + (["numba"] if kernels.available() else [])
+    return ["numpy"] + (["numba"] if jit.available() else [])
 
 
 # numpy warns when it sums +inf and -inf (the NaN the numpy path's finiteness check relies on)

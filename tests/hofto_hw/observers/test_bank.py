@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hofto_hw import jit
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
-from hofto_hw.observers import kernels
 from hofto_hw.observers.bank import _TERMS, ObserverBank
 from hofto_hw.observers.direct import DirectObserver
 from hofto_hw.observers.dob import DobObserver
@@ -19,7 +19,7 @@ from hofto_hw.observers.sta import StaObserver
 
 from .reference import sigma_powers
 
-needs_numba = pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
+needs_numba = pytest.mark.skipif(not jit.available(), reason=jit.unavailable_reason())
 
 
 def _hofto(model, backend, order=2, form="recursive", substeps=1, disc="taylor"):
@@ -111,7 +111,7 @@ def test_bank_gives_the_per_observer_estimates_bit_for_bit(er3a_model):
 
 
 def test_without_compiled_kernels_the_bank_calls_each_observer(er3a_model, monkeypatch):
-    monkeypatch.setattr(kernels, "_DISABLED", True)  # as HOFTO_HW_NO_NUMBA=1
+    monkeypatch.setattr(jit, "_DISABLED", True)  # as HOFTO_HW_NO_NUMBA=1
     bank, _, banked = _agree(er3a_model, "auto", steps=600)
     assert all(obs.backend == "numpy" for obs in banked if hasattr(obs, "backend"))
     assert bank.fused == ()

@@ -19,7 +19,6 @@ from hofto_hw.observers import (
     HoftoObserver,
     MomentumObserver,
     StaObserver,
-    kernels,
 )
 from hofto_hw.observers.registry import levant_gains
 
@@ -195,25 +194,3 @@ def test_remark7_equivalences_hold_on_the_compiled_path(er3a_model):
     )
     assert np.abs(sta).max() > 1.0
     np.testing.assert_allclose(hofto, sta, rtol=1e-9, atol=1e-9)
-
-
-def test_backend_resolution():
-    assert kernels.resolve("numpy") == "numpy"
-    assert kernels.resolve("auto") == "numba"
-    assert kernels.resolve("numba") == "numba"
-    with pytest.raises(ValueError, match="backend"):
-        kernels.resolve("fortran")  # type: ignore[arg-type]
-
-
-def test_the_python_path_runs_every_kernel_it_calls_as_python():
-    """``numpy``: the kernel's source with the kernels it calls as Python too (a kernel's
-    py_func alone would call compiled helpers, compiling them under HOFTO_HW_NO_NUMBA)."""
-    assert kernels.compiled_or_python(kernels.hofto_update, "numba") is kernels.hofto_update
-    for fn in (kernels.hofto_update, kernels.hofto_advance, kernels.bank_update):
-        py = kernels.compiled_or_python(fn, "numpy")
-        assert not kernels._kernel(py) and py.__code__ is fn.py_func.__code__
-        assert not [name for name, v in py.__globals__.items() if kernels._kernel(v)]
-    assert (
-        kernels.compiled_or_python(kernels.hofto_step, "numpy")
-        is (kernels.compiled_or_python(kernels.hofto_update, "numpy").__globals__["hofto_step"])
-    )

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hofto_hw import jit
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
-from hofto_hw.observers import OBSERVER_TYPES, kernels, make_observer
+from hofto_hw.observers import OBSERVER_TYPES, make_observer
 from hofto_hw.observers.registry import replay_default
 
 
@@ -47,9 +48,9 @@ def test_update_snapshot_equals_update_for_every_observer(er3a_model, backend):
 
 
 def test_backend_auto_falls_back_to_numpy_when_compiled_kernels_are_off(er3a_model, monkeypatch):
-    monkeypatch.setattr(kernels, "_DISABLED", True)
-    assert not kernels.available()
-    assert "HOFTO_HW_NO_NUMBA" in kernels.unavailable_reason()
+    monkeypatch.setattr(jit, "_DISABLED", True)
+    assert not jit.available()
+    assert "HOFTO_HW_NO_NUMBA" in jit.unavailable_reason()
     obs = make_observer(replay_default("hofto", 6), er3a_model, backend="auto")
     assert obs.backend == "numpy"
     with pytest.raises(RuntimeError, match="unavailable"):
@@ -57,15 +58,15 @@ def test_backend_auto_falls_back_to_numpy_when_compiled_kernels_are_off(er3a_mod
 
 
 def test_a_failing_compilation_marks_the_compiled_path_unavailable(monkeypatch):
-    monkeypatch.setattr(kernels, "_FAILED", "")
-    monkeypatch.setattr(kernels, "_DISABLED", False)
+    monkeypatch.setattr(jit, "_FAILED", "")
+    monkeypatch.setattr(jit, "_DISABLED", False)
 
     def broken() -> None:
         raise TypeError("no matching definition\nsecond line")
 
-    assert kernels.warm(broken) is False
-    assert not kernels.available()
-    assert kernels.unavailable_reason() == (
-        "compiling the observer kernels failed (TypeError: no matching definition"
+    assert jit.warm(broken) is False
+    assert not jit.available()
+    assert jit.unavailable_reason() == (
+        "compiling the kernels failed (TypeError: no matching definition"
     )
-    assert kernels.resolve("auto") == "numpy"
+    assert jit.resolve("auto") == "numpy"

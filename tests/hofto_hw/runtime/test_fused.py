@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from drivers.cia402 import kernels as drive_kernels
+from hofto_hw import jit
 from hofto_hw.config.loader import load_config
 from hofto_hw.control.joint_motion import HOLD, MOVE
 from hofto_hw.errors import ConfigError
 from hofto_hw.model.payload import Payload, apply_payload
-from hofto_hw.observers import kernels
 from hofto_hw.runtime import tick_events
 from hofto_hw.runtime.compose import build
 from hofto_hw.runtime.fused import DONE, FusedTick, fused_tick
@@ -28,7 +28,7 @@ from tests.support.reference_tick import ReferenceTick, use_reference
 
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
-pytestmark = pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
+pytestmark = pytest.mark.skipif(not jit.available(), reason=jit.unavailable_reason())
 
 
 def _arrays(obj: Any) -> list[bytes]:

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from drivers.cia402.state_machine import State
+from hofto_hw import jit
 from hofto_hw.config.models import SystemConfig
-from hofto_hw.observers import kernels
 from hofto_hw.runtime import compose
 
 
@@ -31,7 +31,7 @@ def test_drives_are_enabled_after_the_warm_up_and_the_collection(
     def enabled() -> bool:
         return bool(groups) and bool(np.any(groups[0].states == State.OPERATION_ENABLED))
 
-    warm = kernels.warm
+    warm = jit.warm
 
     def watch_warm(fn):
         seen.append(("warm", enabled()))
@@ -44,7 +44,7 @@ def test_drives_are_enabled_after_the_warm_up_and_the_collection(
         collect()
 
     monkeypatch.setattr(compose, "build_bus", capture)
-    monkeypatch.setattr(kernels, "warm", watch_warm)
+    monkeypatch.setattr(jit, "warm", watch_warm)
     monkeypatch.setattr(compose, "collect_before_loop", watch_collect)
     system = compose.build(cfg, clock="real", contact=False)
     try:

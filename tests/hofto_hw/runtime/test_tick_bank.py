@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hofto_hw import jit
 from hofto_hw.config.loader import load_config
 from hofto_hw.control.joint_motion import MOVE
-from hofto_hw.observers import kernels
 from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.runtime.compose import build
 from tests.support.reference_tick import use_reference
@@ -18,7 +18,7 @@ from tests.support.reference_tick import use_reference
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
 
-@pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
+@pytest.mark.skipif(not jit.available(), reason=jit.unavailable_reason())
 def test_the_banked_tick_equals_the_per_observer_tick_over_stalls() -> None:
     cfg = load_config(CONFIG)
     fused, alone = build(cfg, clock="sim", contact=False), build(cfg, clock="sim", contact=False)
@@ -47,7 +47,7 @@ def test_the_banked_tick_equals_the_per_observer_tick_over_stalls() -> None:
         alone.close()
 
 
-@pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
+@pytest.mark.skipif(not jit.available(), reason=jit.unavailable_reason())
 def test_an_observer_that_rebinds_its_state_on_reset_gets_a_new_bank() -> None:
     """The bank passes its owners' records: when a reset hands an observer new arrays, the
     tick builds a new bank instead of integrating the dropped ones; the compiled call cannot

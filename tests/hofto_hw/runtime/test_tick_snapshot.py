@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 from support.alloc import tick_memory
 
+from hofto_hw import jit
 from hofto_hw.config.models import SystemConfig
 from hofto_hw.control.joint_motion import MOVE
 from hofto_hw.model.snapshot import DynamicsSnapshot, Needs
-from hofto_hw.observers import kernels, make_observer
+from hofto_hw.observers import make_observer
 from hofto_hw.runtime import compose
 from hofto_hw.runtime.compose import build, loop_observer_table, shared_snapshot
 from tests.support.reference_tick import use_reference
 
-pytestmark = pytest.mark.skipif(not kernels.available(), reason=kernels.unavailable_reason())
+pytestmark = pytest.mark.skipif(not jit.available(), reason=jit.unavailable_reason())
 BACKENDS = ["auto"]
 
 
