@@ -28,7 +28,7 @@ from typing import Any, Literal
 
 import numba as _numba
 
-Backend = Literal["numpy", "numba", "auto"]
+Backend = Literal["python", "numba", "auto"]
 
 _DISABLED = os.environ.get("HOFTO_HW_NO_NUMBA", "") not in ("", "0")
 _FAILED: str = ""  # first compilation failure, if any
@@ -65,21 +65,21 @@ def unavailable_reason() -> str:
     return _FAILED
 
 
-def resolve(backend: Backend) -> Literal["numpy", "numba"]:
+def resolve(backend: Backend) -> Literal["python", "numba"]:
     """The backend a kernel user runs: ``auto`` is numba when :func:`available`, else numpy
     (the kernels' source as Python).
 
     ``numba`` when the compiled path is not available raises RuntimeError naming the reason.
     """
-    if backend == "numpy":
-        return "numpy"
+    if backend == "python":
+        return "python"
     if backend not in ("numba", "auto"):
-        raise ValueError(f"backend must be 'numpy', 'numba' or 'auto', got {backend!r}")
+        raise ValueError(f"backend must be 'python', 'numba' or 'auto', got {backend!r}")
     if available():
         return "numba"
     if backend == "numba":
         raise RuntimeError(f"compiled kernels unavailable: {unavailable_reason()}")
-    return "numpy"
+    return "python"
 
 
 def warm(call: Callable[[], object]) -> bool:
@@ -97,12 +97,12 @@ def warm(call: Callable[[], object]) -> bool:
     return True
 
 
-def ready(backend: Backend, warm_call: Callable[[], object]) -> Literal["numpy", "numba"]:
+def ready(backend: Backend, warm_call: Callable[[], object]) -> Literal["python", "numba"]:
     """The backend a kernel user runs: :func:`resolve`, and for numba :func:`warm` with
     ``warm_call`` now (compiled before the loop); numpy when that compilation fails."""
     chosen = resolve(backend)
     if chosen == "numba" and not warm(warm_call):
-        return "numpy"
+        return "python"
     return chosen
 
 

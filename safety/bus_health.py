@@ -43,7 +43,7 @@ class BusHealth:
         lost_cycles: int,
         op_enabled: int,
         fault_states: tuple[int, ...],
-        backend: Backend = "numpy",
+        backend: Backend = "python",
     ):
         self.n = n
         self.lost_cycles = int(lost_cycles)

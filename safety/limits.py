@@ -82,7 +82,7 @@ class LimitMonitor:
         torque: np.ndarray,
         following_error: float,
         position_jump: float,
-        backend: Backend = "numpy",
+        backend: Backend = "python",
         hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         n = len(lower)
@@ -154,7 +154,7 @@ class LimitMonitor:
         cls,
         cfg: object,
         limits: object,
-        backend: Backend = "numpy",
+        backend: Backend = "python",
         hot: Mapping[str, np.ndarray] | None = None,
     ) -> LimitMonitor:
         """From ``safety.limits`` (LimitsSafetyConfig) and the model's JointLimits."""

@@ -68,7 +68,7 @@ def main() -> int:
 
     res = {"config": Path(args.config).name, "axes": group.n}
     res["master_read_command_us"] = _median_us(master, args.cycles, args.blocks)
-    for backend in ("numpy", "numba"):
+    for backend in ("python", "numba"):
         g = DriveGroup.from_config(bus, cfg.bus, backend=backend)  # type: ignore[arg-type]
         res[f"read_{g.backend}_us"] = _median_us(g.read, args.cycles, args.blocks)
     res["simbus_exchange_us"] = _median_us(bus.exchange, args.cycles, args.blocks)

@@ -121,7 +121,7 @@ def bench(ticks: int) -> dict:
     tool = col.model_copy(update={"tool_force": 1e6})
     th = read_thresholds(ROOT / "configs/ur10e/thresholds.yaml")
     single = th.observers["momentum"].monitor
-    backends = ["numpy"] + (["numba"] if jit.available() else [])
+    backends = ["python"] + (["numba"] if jit.available() else [])
     res: dict = {"ticks": ticks, "compiled_available": jit.available(), "cases": {}}
     for name, make in (
         ("loop", lambda b: _levels_case(col, model, b, ticks, qd, tau, qdd, q)),

@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true")
     parser.add_argument(
         "--backend",
-        choices=("numpy", "numba", "auto"),
+        choices=("python", "numba", "auto"),
         default="auto",
         help="observer path (numpy: the kernels run as Python)",
     )

@@ -118,7 +118,7 @@ def measure(config: Path, blocks: int, per_block: int = 300) -> dict:
         return {
             "snapshot_backend": snap.backend,
             "snapshot_native": snap.native,
-            "feedforward_backend": getattr(ff, "backend", "numpy"),
+            "feedforward_backend": getattr(ff, "backend", "python"),
             "feedforward_native": ff.native,
             "native_unavailable": unavailable_reason(),
             "native_build": _build_info(),

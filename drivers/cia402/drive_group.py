@@ -144,7 +144,7 @@ class DriveGroup(ImageFields):
         #: ``numba`` compiled, ``numpy`` their Python source run by the interpreter
         self.backend = kernels.resolve(backend)
         if self.backend == "numba" and not kernels.ready(backend, self._warm):
-            self.backend = "numpy"
+            self.backend = "python"
         #: the kernels module when the compiled kernels run, else None (the tick's fused call
         #: needs them: hofto_hw/runtime/fused.py)
         self._fast: Any = kernels if self.backend == "numba" else None

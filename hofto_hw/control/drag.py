@@ -69,7 +69,7 @@ class DragController:
         cfg: DragConfig,
         model: RobotModel,
         gravity: tuple[float, float, float] = (0.0, 0.0, -9.81),
-        backend: Backend = "numpy",
+        backend: Backend = "python",
         hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         n = model.n

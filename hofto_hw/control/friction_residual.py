@@ -55,7 +55,7 @@ class FrictionResidual:
         ridge: float = 0.01,
         limit: float = 0.25,
         every: int = 4,
-        backend: Backend = "numpy",
+        backend: Backend = "python",
         hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         n = friction.coulomb.shape[0]

@@ -72,7 +72,7 @@ class DemoPath:
         period: np.ndarray,
         phase: np.ndarray | None = None,
         ramp: float = 1.0,
-        backend: Backend = "numpy",
+        backend: Backend = "python",
         hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         self.a = np.asarray(amplitude, dtype=float).copy()
@@ -87,7 +87,7 @@ class DemoPath:
         self.backend = jit.ready(backend, self._warm)
         #: True exactly when the compiled kernel runs (the tick's fused call reads it)
         self._use_kernel = self.backend == "numba"
-        #: the kernel this path calls: path_eval compiled, or its source (backend numpy)
+        #: the kernel this path calls: path_eval compiled, or its source (backend python)
         self._eval = jit.compiled_or_python(path_eval, self.backend)
 
     @staticmethod
@@ -121,7 +121,7 @@ class JointMotion:
         n: int,
         accel_limit: np.ndarray,
         path: DemoPath | None,
-        backend: Backend = "numpy",
+        backend: Backend = "python",
         hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         self.n = n

@@ -1609,7 +1609,7 @@ def _acceleration(bits: int) -> dict[str, Any] | None:
         return None
     out: dict[str, Any] = {
         "compiled": bool(bits & ch.ACCEL_COMPILED),
-        "kernels": "numba" if bits & ch.ACCEL_NUMBA else "numpy",
+        "kernels": "numba" if bits & ch.ACCEL_NUMBA else "python",
         "native": bool(bits & ch.ACCEL_NATIVE),
     }
     if bits & ch.ACCEL_HAS_FUSED:

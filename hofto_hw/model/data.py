@@ -40,12 +40,12 @@ class ModelData:
     :meth:`inverse_dynamics` (the tick's feed-forward) is pinocchio's RNEA plus the friction
     and the sum of one kernel (:func:`hofto_hw.model.kernels.add_friction`; its held-friction
     memory ``friction_state`` is a row of the kernel's workspace): ``backend`` "numba"/"auto"
-    runs the kernel compiled, "numpy" (default) runs its Python source; ``backend`` says
+    runs the kernel compiled, "python" (default) runs its Python source; ``backend`` says
     which runs. With ``native`` (and the native library shipped in the wheel,
     :mod:`hofto_hw.model.native`) and the compiled kernel, the RNEA runs inside that
     compiled call too (:func:`~hofto_hw.model.kernels.inverse_dynamics_native`): one call in
     all; ``native`` says whether it does. Without (a robot the native library refuses,
-    ``HOFTO_HW_NO_NATIVE``, backend numpy) the RNEA is pinocchio's Python call: the same
+    ``HOFTO_HW_NO_NATIVE``, backend python) the RNEA is pinocchio's Python call: the same
     algorithm. The numpy implementation (RNEA + eq. (12) as numpy calls) is the reference in
     tests/hofto_hw/model/reference.py. A pinocchio outside pyproject's bound is refused in
     one line (:func:`hofto_hw.model.snapshot.require_supported_pinocchio`)."""
@@ -53,7 +53,7 @@ class ModelData:
     def __init__(
         self,
         model: RobotModel,
-        backend: str = "numpy",
+        backend: str = "python",
         native: bool = True,
         hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
@@ -99,8 +99,8 @@ class ModelData:
             fast = jit.warm(lambda: mk.add_friction(z, z, W.copy(), np.zeros(n)))
             if fast and native:
                 self._use_native(mk, jit)
-        #: "numba": :meth:`inverse_dynamics`'s kernel runs compiled; "numpy": its Python source
-        self.backend = "numba" if fast else "numpy"
+        #: "numba": :meth:`inverse_dynamics`'s kernel runs compiled; "python": its Python source
+        self.backend = "numba" if fast else "python"
         self._add_friction = jit.compiled_or_python(mk.add_friction, self.backend)
         #: True: :meth:`inverse_dynamics` is one compiled call with pinocchio's C++ RNEA inside
         #: (hofto_hw.model.native)

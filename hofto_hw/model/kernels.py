@@ -7,7 +7,7 @@ six-element arrays the time goes to the ~0.5 µs each call costs (and to its col
 inside a loop), so each use is one compiled call. These kernels are the ONE implementation
 of the snapshot's and the feed-forward's arithmetic (:class:`~hofto_hw.model.snapshot.
 DynamicsSnapshot`, :class:`~hofto_hw.model.data.ModelData`): compiled for backend numba, their
-Python source (``py_func``) for backend numpy; :func:`friction` is also
+Python source (``py_func``) for backend python; :func:`friction` is also
 :meth:`hofto_hw.model.friction.FrictionParams.torque` (the simulated plant's forward dynamics,
 the workspace's friction_torque, the drag's friction bound). The numpy reference (pinocchio's
 Python API, eq. (12) as numpy calls) is tests/hofto_hw/model/reference.py;

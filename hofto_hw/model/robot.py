@@ -239,7 +239,7 @@ class RobotModel:
     # ------------------------------------------------------------------ workspaces
 
     def create_data(
-        self, backend: str = "numpy", hot: Mapping[str, np.ndarray] | None = None
+        self, backend: str = "python", hot: Mapping[str, np.ndarray] | None = None
     ) -> ModelData:
         """A new caller-owned workspace for this model's dynamics (pinocchio Data + buffers);
         ``backend`` "numba"/"auto": its inverse dynamics adds friction in one compiled call

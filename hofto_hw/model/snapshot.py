@@ -39,11 +39,11 @@ friction eq. (12) with its held memory, tau - f and Cᵀ·qd are the kernels of
   energy's gradient by one recursion; see dynamics.cpp);
 - pinocchio's Python API (ABA, CRBA, Coriolis matrix, gravity, nonlinear effects) and one
   call of :func:`~hofto_hw.model.kernels.snapshot_terms`: compiled with ``backend="numba"``,
-  its Python source with ``backend="numpy"``. Kept, not a second formula (the same
+  its Python source with ``backend="python"``. Kept, not a second formula (the same
   pinocchio algorithms and the same kernel): for a robot the native library refuses (a
   prismatic joint: RobotModel accepts it, dynamics.cpp knows revolute joints only),
   ``native=False`` / ``HOFTO_HW_NO_NATIVE=1`` (``loop.acceleration: preferred``), and the
-  interpreter path (``backend="numpy"``: a Python-source kernel cannot call the native
+  interpreter path (``backend="python"``: a Python-source kernel cannot call the native
   library, which numba binds by name).
 
 The numpy implementation these replaced (pinocchio's Python API, eq. (12) as numpy calls,
@@ -149,7 +149,7 @@ class DynamicsSnapshot:
         self,
         model: RobotModel,
         needs: Needs | int,
-        backend: str = "numpy",
+        backend: str = "python",
         native: bool = True,
         hot: Mapping[str, np.ndarray] | None = None,
     ) -> None:
@@ -196,8 +196,8 @@ class DynamicsSnapshot:
             if self._native is None:
                 self._fast = jit.warm(self._warm)
         #: "numba": compiled (one call with ``native``, else the pinocchio calls and one
-        #: compiled call); "numpy": the pinocchio calls and the kernel's Python source
-        self.backend = "numba" if self._fast else "numpy"
+        #: compiled call); "python": the pinocchio calls and the kernel's Python source
+        self.backend = "numba" if self._fast else "python"
         self._terms = jit.compiled_or_python(mk.snapshot_terms, self.backend)
         #: True: :meth:`compute` is one compiled call with pinocchio's C++ algorithms inside
         self.native = self._native is not None

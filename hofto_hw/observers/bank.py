@@ -166,7 +166,7 @@ class ObserverBank:
     def _entry(self, obs: Observer, i: int, n: int) -> tuple[int, tuple] | None:
         """(kind, the observer's tuple) of a fusable observer (kernels.BANK_*), else None."""
         kind = type(obs)
-        if kind not in _READS or getattr(obs, "backend", "numpy") != "numba" or obs.n != n:
+        if kind not in _READS or getattr(obs, "backend", "python") != "numba" or obs.n != n:
             return None
         if obs.needs & ~self.snapshot.needs or not all(t in self._has for t in _READS[kind]):
             return None  # the snapshot does not compute (or hold) what this observer reads

@@ -15,7 +15,7 @@ does it for all its observers at once through :class:`~hofto_hw.observers.bank.O
 (one compiled call, the same numbers).
 
 Backends: every observer but ``direct`` runs its kernel of :mod:`hofto_hw.observers.kernels`,
-the only implementation of its formula: ``backend="numba"`` runs it compiled, ``"numpy"``
+the only implementation of its formula: ``backend="numba"`` runs it compiled, ``"python"``
 runs the same source as Python (no compilation; ~10-100x slower, for tests and debugging;
 the name is kept for the callers), ``"auto"`` numba when available (what the loop runs).
 The numpy formulation of each observer is the reference in
@@ -69,7 +69,7 @@ class SnapshotUpdate:
     needs: Needs
     snapshot: DynamicsSnapshot
 
-    def _own_snapshot(self, model: RobotModel, backend: str = "numpy") -> None:
+    def _own_snapshot(self, model: RobotModel, backend: str = "python") -> None:
         self.snapshot = DynamicsSnapshot(model, self.needs, backend)
 
     def _own_backend(self, model: RobotModel, backend: str, kernel: Callable[..., Any]) -> None:
@@ -82,7 +82,7 @@ class SnapshotUpdate:
         self.backend = jit.resolve(backend)  # type: ignore[arg-type]
         self._own_snapshot(model, self.backend)
         if self.backend == "numba" and not jit.warm(self._warm):  # type: ignore[attr-defined]
-            self.backend = "numpy"
+            self.backend = "python"
         self._kernel = jit.compiled_or_python(kernel, self.backend)
 
     def update(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:

@@ -296,7 +296,7 @@ def recorded_backend(log: FlightLog) -> jit.Backend:
     """The observer implementation the run used (metadata ``observer_backend``; numpy when
     absent): the same arithmetic is what makes the replay bit-exact. A run on the compiled
     kernels replays on them; without numba here it falls back to numpy (then to ~1e-11)."""
-    return "auto" if log.metadata.get("observer_backend") == "numba" else "numpy"
+    return "auto" if log.metadata.get("observer_backend") == "numba" else "python"
 
 
 def reproduce(log: FlightLog, detector_factory=make_detector) -> Reproduction:

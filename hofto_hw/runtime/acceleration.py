@@ -55,12 +55,12 @@ def require(mode: str, source: str) -> None:
 
 def report(system: Any) -> dict[str, Any]:
     """What the built ``system``'s tick runs: ``compiled`` (numba kernels and native dynamics
-    both in use), ``kernels`` (numba | numpy), ``native`` (the snapshot runs the native
+    both in use), ``kernels`` (numba | python), ``native`` (the snapshot runs the native
     dynamics), ``fused`` (the tick's fused call, while the tick has one), ``why`` (what is
     missing, '' when compiled) and ``jit`` (False: NUMBA_DISABLE_JIT runs that same path's
     source as Python)."""
     tick = system.tick
-    kernels = "numba" if getattr(tick, "backend", "numpy") == "numba" else "numpy"
+    kernels = "numba" if getattr(tick, "backend", "python") == "numba" else "python"
     native = bool(getattr(tick.snapshot, "native", False))
     out: dict[str, Any] = {
         "compiled": kernels == "numba" and native,

@@ -158,7 +158,7 @@ def shared_snapshot(
         needs |= obs.needs
         own = getattr(obs, "snapshot", None)
         compiled = compiled and own is not None and own.backend == "numba"
-    return DynamicsSnapshot(model, needs, "numba" if compiled else "numpy", hot=hot)
+    return DynamicsSnapshot(model, needs, "numba" if compiled else "python", hot=hot)
 
 
 def hot_parts(cfg: SystemConfig, n: int, names: list[str]) -> dict[str, dict[str, np.dtype]]:

@@ -367,7 +367,7 @@ class FusedTick:
             return "the fused tick needs numba (" + K.unavailable_reason() + ")"
         g = t.group
         if g._fast is None:
-            return "the drive group runs its numpy path"
+            return "the drive group runs its kernels as Python"
         snap = t.snapshot
         if snap.model is not t.feedforward.model:
             return "the snapshot and the feed-forward use different models"
@@ -382,10 +382,10 @@ class FusedTick:
             return "the drive scan or the limit checks run their numpy path"
         c = t.collision
         if c is not None and not c._use_kernel:
-            return "the collision monitor runs its numpy path"
+            return "the collision monitor runs its kernels as Python"
         fr = _learning(t)
         if fr is not None and not fr._use_kernel:
-            return "the friction learning runs its numpy path"
+            return "the friction learning runs its kernels as Python"
         ff = t.feedforward
         if ff._native is None or ff._id_native is not inverse_dynamics_native:
             return "the feed-forward does not run the native RNEA"

@@ -25,7 +25,7 @@ from safety.collision.state import (
 )
 from safety.stop import EventKind, Fault, StopController
 
-Backend = Literal["numpy", "numba", "auto"]
+Backend = Literal["python", "numba", "auto"]
 
 
 class CollisionLevels:

@@ -13,7 +13,7 @@ require_compiled_kernels()
 
 
 def test_backend_resolution():
-    assert jit.resolve("numpy") == "numpy"
+    assert jit.resolve("python") == "python"
     assert jit.resolve("auto") == "numba"
     assert jit.resolve("numba") == "numba"
     with pytest.raises(ValueError, match="backend"):
@@ -25,10 +25,10 @@ def test_the_python_path_runs_every_kernel_it_calls_as_python():
     py_func alone would call compiled helpers, compiling them under HOFTO_HW_NO_NUMBA)."""
     assert jit.compiled_or_python(kernels.hofto_update, "numba") is kernels.hofto_update
     for fn in (kernels.hofto_update, kernels.hofto_advance, kernels.bank_update):
-        py = jit.compiled_or_python(fn, "numpy")
+        py = jit.compiled_or_python(fn, "python")
         assert not jit._kernel(py) and py.__code__ is fn.py_func.__code__
         assert not [name for name, v in py.__globals__.items() if jit._kernel(v)]
     assert (
-        jit.compiled_or_python(kernels.hofto_step, "numpy")
-        is (jit.compiled_or_python(kernels.hofto_update, "numpy").__globals__["hofto_step"])
+        jit.compiled_or_python(kernels.hofto_step, "python")
+        is (jit.compiled_or_python(kernels.hofto_update, "python").__globals__["hofto_step"])
     )

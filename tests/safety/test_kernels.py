@@ -69,7 +69,7 @@ def _limit_monitor(backend: str) -> LimitMonitor:
     return LimitMonitor(*_LIMITS, backend=backend)  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("backend", ["numba", "numpy"])
+@pytest.mark.parametrize("backend", ["numba", "python"])
 @pytest.mark.parametrize("packed", [False, True], ids=["separate arrays", "rows of one block"])
 def test_limit_monitor_reports_the_references(packed: bool, backend: str) -> None:
     """``packed``: q, qd, tau reach the monitor as consecutive rows of one 2-D array (as the
@@ -132,7 +132,7 @@ def _bus(backend: str) -> BusHealth:
     return BusHealth(N, 3, OP_ENABLED, FAULT_STATES, backend=backend)  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("backend", ["numba", "numpy"])
+@pytest.mark.parametrize("backend", ["numba", "python"])
 def test_bus_health_reports_the_references(backend: str) -> None:
     rng = np.random.default_rng(11)
     ref, fast = ReferenceBus(N, 3, OP_ENABLED, FAULT_STATES), _bus(backend)
@@ -160,8 +160,8 @@ def test_bus_health_reports_the_references(backend: str) -> None:
 def test_numpy_switch_runs_the_kernels_source() -> None:
     from safety import kernels
 
-    bus, lim = _bus("numpy"), _limit_monitor("numpy")
-    assert bus.backend == "numpy" and bus._use_kernel is False
+    bus, lim = _bus("python"), _limit_monitor("python")
+    assert bus.backend == "python" and bus._use_kernel is False
     # the kernels' own source as Python (hofto_hw.jit.compiled_or_python: the kernels
     # they call run as Python too), not a compiled dispatcher
     assert bus._scan.__code__ is kernels.drive_scan.py_func.__code__

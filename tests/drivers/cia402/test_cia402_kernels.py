@@ -36,9 +36,9 @@ def pair(bus: SimBus, cfg: SystemConfig) -> tuple[DriveGroup, DriveGroup]:
     """The kernels as Python source and compiled, two drive groups over the same (opened)
     process image."""
     bus.open()
-    ref = DriveGroup.from_config(bus, cfg.bus, backend="numpy")
+    ref = DriveGroup.from_config(bus, cfg.bus, backend="python")
     fast = DriveGroup.from_config(bus, cfg.bus, backend="numba")
-    assert ref.backend == "numpy" and fast.backend == "numba"
+    assert ref.backend == "python" and fast.backend == "numba"
     assert ref._fast is None and fast._fast is not None  # what the tick's fused call checks
     return ref, fast
 
@@ -197,7 +197,7 @@ def test_the_kernels_literal_layout_is_the_pdo_modules(
     monkeypatch.setattr(kernels, "_STATE_TABLE", table)
     assert not kernels.layout_matches()
     assert not kernels.ready("numba", lambda: None)
-    for backend in ("numpy", "numba"):  # the kernels' source reads the same literals
+    for backend in ("python", "numba"):  # the kernels' source reads the same literals
         with pytest.raises(RuntimeError, match="layout literals"):
             DriveGroup.from_config(bus, cfg.bus, backend=backend)  # type: ignore[arg-type]
 
@@ -226,7 +226,7 @@ cfg = load_config({str(root / "configs" / "er3a.yaml")!r})
 bus = build_sim_bus(cfg, external=False)
 bus.open()
 g = DriveGroup.from_config(bus, cfg.bus)
-assert g.backend == "numpy" and g._fast is None, g.backend
+assert g.backend == "python" and g._fast is None, g.backend
 bus.tx["position"] = [1000, -2000, 3, 2**31 - 1, -2**31, 0]
 bus.tx["statusword"] = [0x0237, 0x0250, 0x0208, 0x0233, 0x0231, 0x0240]
 g.read()

@@ -61,7 +61,7 @@ def test_no_motion_learns_nothing_and_the_correction_is_bounded() -> None:
 
 
 def test_compiled_learning_agrees_with_its_source_and_the_numpy_reference() -> None:
-    """The kernel compiled (one call per tick) and run as Python source (backend numpy), bit
+    """The kernel compiled (one call per tick) and run as Python source (backend python), bit
     for bit, and the numpy reference of tests/hofto_hw/control/reference.py over 6000 ticks of
     random speeds (some below min_speed, signed zeros, NaN in the estimate): same counts,
     sums to 1e-12 (numpy's tanh may differ from libm's by an ulp), same coefficients and
@@ -72,10 +72,10 @@ def test_compiled_learning_agrees_with_its_source_and_the_numpy_reference() -> N
 
     require_compiled_kernels()
     model = _model()
-    slow = FrictionResidual(model.friction, time_constant=0.5, backend="numpy")
+    slow = FrictionResidual(model.friction, time_constant=0.5, backend="python")
     fast = FrictionResidual(model.friction, time_constant=0.5, backend="numba")
     assert fast.backend == "numba" and fast._use_kernel
-    assert slow.backend == "numpy" and not slow._use_kernel
+    assert slow.backend == "python" and not slow._use_kernel
     ref = reference.FrictionLearning(6, fast.v_s, 0.5, fast.min_speed, fast.every)
     rng = np.random.default_rng(7)
     for k in range(6000):
@@ -134,7 +134,7 @@ def test_correction_is_the_learning_feature_and_equals_the_numpy_one() -> None:
 
     require_compiled_kernels()
     model = _model()
-    slow = FrictionResidual(model.friction, backend="numpy")
+    slow = FrictionResidual(model.friction, backend="python")
     fast = FrictionResidual(model.friction, backend="numba")
     rng = np.random.default_rng(17)
     a, b, f = np.zeros(6), np.zeros(6), np.zeros(6)

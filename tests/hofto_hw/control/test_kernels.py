@@ -43,7 +43,7 @@ def _identical(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 def _source(kernel):  # the kernel's Python source (numba's py_func)
-    return compiled_or_python(kernel, "numpy")
+    return compiled_or_python(kernel, "python")
 
 
 def _numpy_sines_are_libms() -> bool:
@@ -71,7 +71,7 @@ def _motion(backend: str) -> JointMotion:
 
 def test_the_backends_call_the_one_kernel() -> None:
     """numba: the compiled kernel (what the tick's fused call checks); numpy: its source."""
-    fast, slow = _motion("numba"), _motion("numpy")
+    fast, slow = _motion("numba"), _motion("python")
     assert fast.path is not None and slow.path is not None
     assert fast.path._use_kernel and fast.path._eval is path_eval
     assert not slow.path._use_kernel and slow.path._eval is _source(path_eval)
@@ -80,7 +80,7 @@ def test_the_backends_call_the_one_kernel() -> None:
 
 def test_demo_path_agrees_with_the_numpy_reference() -> None:
     rng = np.random.default_rng(3)
-    fast, slow = _motion("numba").path, _motion("numpy").path
+    fast, slow = _motion("numba").path, _motion("python").path
     assert fast is not None and slow is not None
     exact = _numpy_sines_are_libms()
     w, q0 = 2.0 * np.pi / PERIOD, rng.normal(0.0, 1.0, N)
@@ -117,8 +117,8 @@ def test_motion_update_agrees_through_mode_changes() -> None:
     """JointMotion compiled and as Python source, bit for bit; its ramp to standstill against
     the numpy reference (no sines: bit for bit), signed zeros and NaN velocities included."""
     rng = np.random.default_rng(5)
-    fast, slow = _motion("numba"), _motion("numpy")
-    assert fast.backend == "numba" and slow.backend == "numpy"
+    fast, slow = _motion("numba"), _motion("python")
+    assert fast.backend == "numba" and slow.backend == "python"
     start = rng.normal(0.0, 0.5, N)
     fast.start(start)
     slow.start(start)

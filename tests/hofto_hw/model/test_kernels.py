@@ -2,7 +2,7 @@
 (tests/hofto_hw/model/reference.py, friction_torque): friction eq. (12) with every
 optional term and its held-friction memory, the snapshot (held friction included) and the
 feed-forward inverse dynamics, each compiled (native and not) and as the kernels' Python
-source (backend numpy)."""
+source (backend python)."""
 
 from __future__ import annotations
 
@@ -67,7 +67,7 @@ def _velocity(n: int, rng: np.random.Generator) -> np.ndarray:
     return qd
 
 
-@pytest.mark.parametrize("backend", ["numba", "numpy"])
+@pytest.mark.parametrize("backend", ["numba", "python"])
 def test_friction_kernel_equals_the_numpy_friction_with_its_memory(backend) -> None:
     from hofto_hw.jit import compiled_or_python
 
@@ -190,7 +190,7 @@ def test_friction_features_refuse_wrong_shapes() -> None:
 
 #: (backend, native) of the product's paths: one compiled call, pinocchio's Python calls and
 #: the compiled kernel, pinocchio's Python calls and the kernel's Python source
-PATHS = [("numba", True), ("numba", False), ("numpy", True)]
+PATHS = [("numba", True), ("numba", False), ("python", True)]
 
 
 @pytest.mark.parametrize(("backend", "native"), PATHS)

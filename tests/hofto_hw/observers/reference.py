@@ -195,7 +195,7 @@ class _Observer(SnapshotUpdate):
         self.n = model.n
         self.backend = "reference"
         self._guard = SampleGuard(self.n)
-        self._own_snapshot(model, "numpy")
+        self._own_snapshot(model, "python")
 
     def update_snapshot(self, snap: DynamicsSnapshot, dt: float) -> np.ndarray:
         if not self._guard.usable(snap, dt):

@@ -113,7 +113,7 @@ def test_bank_gives_the_per_observer_estimates_bit_for_bit(er3a_model):
 def test_without_compiled_kernels_the_bank_calls_each_observer(er3a_model, monkeypatch):
     monkeypatch.setattr(jit, "_DISABLED", True)  # as HOFTO_HW_NO_NUMBA=1
     bank, _, banked = _agree(er3a_model, "auto", steps=600)
-    assert all(obs.backend == "numpy" for obs in banked if hasattr(obs, "backend"))
+    assert all(obs.backend == "python" for obs in banked if hasattr(obs, "backend"))
     assert bank.fused == ()
     assert bank.rest == tuple(obs.name for obs in banked)
 
@@ -123,7 +123,7 @@ def test_numpy_observers_beside_compiled_ones_run_through_their_own_update(er3a_
     n = er3a_model.n
     obs = [
         _hofto(er3a_model, "numba"),
-        MomentumObserver(er3a_model, np.full(n, 40.0), backend="numpy"),
+        MomentumObserver(er3a_model, np.full(n, 40.0), backend="python"),
     ]
     snap = _snapshot(er3a_model, obs, "numba")
     bank = ObserverBank(obs, snap, np.zeros((2, n)))
@@ -162,7 +162,7 @@ def test_the_bank_writes_only_its_rows_and_follows_the_owners_arrays(er3a_model)
 
 def test_bad_output_arrays_are_refused(er3a_model):
     obs = [MomentumObserver(er3a_model, np.full(er3a_model.n, 40.0))]
-    snap = _snapshot(er3a_model, obs, "numpy")
+    snap = _snapshot(er3a_model, obs, "python")
     with pytest.raises(ValueError, match="rows"):
         ObserverBank(obs * 2, snap, np.zeros((1, er3a_model.n)))
     with pytest.raises(ValueError, match="C-contiguous"):

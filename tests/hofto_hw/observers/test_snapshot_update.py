@@ -21,7 +21,7 @@ def _inputs(model, steps=400, seed=9):
     return q, qd, tau
 
 
-@pytest.mark.parametrize("backend", ["numpy", "auto"])
+@pytest.mark.parametrize("backend", ["python", "auto"])
 def test_update_snapshot_equals_update_for_every_observer(er3a_model, backend):
     q, qd, tau = _inputs(er3a_model)
 
@@ -52,7 +52,7 @@ def test_backend_auto_falls_back_to_numpy_when_compiled_kernels_are_off(er3a_mod
     assert not jit.available()
     assert "HOFTO_HW_NO_NUMBA" in jit.unavailable_reason()
     obs = make_observer(replay_default("hofto", 6), er3a_model, backend="auto")
-    assert obs.backend == "numpy"
+    assert obs.backend == "python"
     with pytest.raises(RuntimeError, match="unavailable"):
         make_observer(replay_default("momentum", 6), er3a_model, backend="numba")
 
@@ -69,4 +69,4 @@ def test_a_failing_compilation_marks_the_compiled_path_unavailable(monkeypatch):
     assert jit.unavailable_reason() == (
         "compiling the kernels failed (TypeError: no matching definition"
     )
-    assert jit.resolve("auto") == "numpy"
+    assert jit.resolve("auto") == "python"

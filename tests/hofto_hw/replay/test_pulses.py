@@ -70,7 +70,7 @@ def test_pulse_through_the_momentum_observer_is_found_and_counted(er3a_model) ->
     cfg = MomentumConfig(type="momentum", gain=[20.0] * 6)
     p, pulses = pulse_train(t, qd, 10.0, 0.4, np.random.default_rng(1))
     pulsed = dataclasses.replace(rec, tau=rec.tau - p)
-    est = run_observer(pulsed, make_observer(cfg, er3a_model, backend="numpy"))
+    est = run_observer(pulsed, make_observer(cfg, er3a_model, backend="python"))
     for q_ in pulses:  # a contact p on the held arm is estimated as +p (after the lag)
         seg = est[q_.start : q_.stop, q_.joint]
         peak = seg[np.argmax(np.abs(seg))]

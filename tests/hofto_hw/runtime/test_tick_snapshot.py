@@ -86,16 +86,16 @@ def test_shared_snapshot_takes_the_observers_implementation(
     system = _system(cfg, "auto", monkeypatch)
     table = loop_observer_table(cfg)
     plain = [
-        make_observer(table[name], system.model, backend="numpy") for name in system.tick.names
+        make_observer(table[name], system.model, backend="python") for name in system.tick.names
     ]
-    assert shared_snapshot(system.model, plain).backend == "numpy"
+    assert shared_snapshot(system.model, plain).backend == "python"
     compiled = [
         make_observer(table[name], system.model, backend="numba") for name in system.tick.names
     ]
     assert shared_snapshot(system.model, compiled).backend == "numba"
     assert system.tick.snapshot.backend == "numba"
     mixed = [compiled[0], *plain[1:]]
-    assert shared_snapshot(system.model, mixed).backend == "numpy"
+    assert shared_snapshot(system.model, mixed).backend == "python"
 
 
 def test_a_snapshot_missing_a_term_is_refused(

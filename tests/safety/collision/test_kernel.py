@@ -86,10 +86,10 @@ def _trace(mon, tau, qd, qdd, dt) -> dict[str, np.ndarray]:
 
 
 def _lockstep(make, k: int, seed: int) -> dict[str, int]:
-    """The reference, the kernel's Python source (backend numpy) and the compiled kernel over
+    """The reference, the kernel's Python source (backend python) and the compiled kernel over
     the same inputs."""
-    fast, source = make("numba"), make("numpy")
-    assert fast.backend == "numba" and source.backend == "numpy"
+    fast, source = make("numba"), make("python")
+    assert fast.backend == "numba" and source.backend == "python"
     ref = ReferenceLevels(fast.params)
     inputs = _inputs(k, seed)
     a = _trace(ref, *inputs)
@@ -193,7 +193,7 @@ def test_update_flags_agree_and_say_what_the_state_says(logic: str) -> None:
     q = np.zeros(N)
     seen: dict[str, list[int]] = {}
     stops = {}
-    for be in ("numpy", "numba"):
+    for be in ("python", "numba"):
         mon = CollisionLevels(cfg, rows, backend=be)
         stop = StopController.from_config(StopCategories())
         flags = []
@@ -210,11 +210,11 @@ def test_update_flags_agree_and_say_what_the_state_says(logic: str) -> None:
     for i in range(STEPS):
         ref.step(tau[i], qd[i], qdd[i], dt[i], i)
         expected.append(S.flags_of(ref.state.hits))
-    assert seen["numpy"] == seen["numba"] == expected
-    f = np.array(seen["numpy"])
+    assert seen["python"] == seen["numba"] == expected
+    f = np.array(seen["python"])
     for bit in (S.COLLIDED, S.CONTACT, S.NONFINITE):
         assert (f & bit).any() and not (f & bit).all(), bit  # the run exercised each flag
-    a, b = stops["numpy"].events, stops["numba"].events
+    a, b = stops["python"].events, stops["numba"].events
     assert a.count == b.count > 0
     for name in ("tick", "kind", "joint", "category"):
         np.testing.assert_array_equal(getattr(a, name)[: a.count], getattr(b, name)[: b.count])
@@ -230,7 +230,7 @@ def test_features_are_the_ticks_and_agree_with_the_reference() -> None:
     the reference's features over random velocities with NaN/inf, both backends."""
     cfg, rows = _levels_cfg("any"), ["hofto", "momentum"]
     _, qd, _, dt = _inputs(len(rows), seed=13)
-    for be in ("numpy", "numba"):
+    for be in ("python", "numba"):
         mon = CollisionLevels(cfg, rows, backend=be)
         ref = ReferenceLevels(mon.params)
         for i in range(STEPS):
