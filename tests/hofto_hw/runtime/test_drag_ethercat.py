@@ -267,7 +267,7 @@ def _free_motion(r: DragRig, attempts: int = 3) -> int:
         # a starved 200 Hz CANopen loop (a 136 ms stall) also tripped the following-error
         # monitor once in the free motion; neither is under test here
         tolerated = (
-            (["collision"], ["following_error"]) if rig.bus == "canopen" else (["collision"],)
+            (["collision"], ["following_error"]) if r.bus == "canopen" else (["collision"],)
         )
         assert st["faults"] in tolerated, f"the free motion was stopped: {st}"
         wait_for(lambda: s.status()["state"] == "stopped", 30, "stopped", s.proc)
