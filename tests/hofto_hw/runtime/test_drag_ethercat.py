@@ -252,18 +252,22 @@ def _free_motion(r: DragRig, attempts: int = 3) -> int:
     median 1.2-1.6 ms, above the 1 ms cycle): reset and move on; the friction learning skips
     stopped ticks."""
     s = r.service
+    # classes the config only reports (log_failure: the flight recorder's writer starved on a
+    # loaded machine) stop nothing: they are no stop of the free motion
+    report_only = {k for k, v in r.data["safety"]["categories"].items() if v is None}
     for attempt in range(attempts):
         _until_ok(r, "mode move")
         t_moved = r.plant_time() + MOVE_TIME
         wait_for(
-            lambda t=t_moved: r.plant_time() > t or bool(s.status()["faults"]),
+            lambda t=t_moved: r.plant_time() > t or s.status()["category"] >= 0,
             60,
             "the demo path moved",
             s.proc,
         )
         st = s.status()
-        if not st["faults"]:
+        if st["category"] < 0:
             return attempt
+        st["faults"] = [f for f in st["faults"] if f not in report_only]
         # a starved 200 Hz CANopen loop (a 136 ms stall) also tripped the following-error
         # monitor once in the free motion; neither is under test here
         tolerated = (["collision"], ["following_error"]) if r.bus == "canopen" else (["collision"],)
