@@ -39,16 +39,20 @@ class FrameLoop:
 
     def __init__(self, path: Path) -> None:
         self.srv = open_control_socket(str(path))
-        self.clients = ControlConnections(self.srv, _handler)
+        self.clients = ControlConnections(self.srv, self._handle)
         self.frames = 0
-        self.handled = 0
+        self.handled = 0  # counted before the reply leaves (a client that has it sees it)
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
+
+    def _handle(self, request: dict[str, Any]) -> dict[str, Any]:
+        self.handled += 1
+        return _handler(request)
 
     def _run(self) -> None:
         while not self.stop.is_set():
             r, w, _ = select.select(self.clients.readers(), self.clients.writers(), [], 0.001)
-            self.handled += self.clients.ready(r, w)
+            self.clients.ready(r, w)
             self.frames += 1
 
     def frames_during(self, seconds_of_frames: int) -> int:
@@ -98,7 +102,7 @@ def test_a_request_is_answered_from_the_loop(tmp_path: Path) -> None:
         bad.settimeout(10.0)
         assert "bad JSON" in json.loads(bad.recv(65536))["error"]
         bad.close()
-        assert loop.handled == 3
+        assert loop.handled == 2  # the bad line is answered without the handler
 
 
 def test_a_client_that_sends_nothing_or_reads_slowly_holds_up_no_frame(tmp_path: Path) -> None:
@@ -110,7 +114,7 @@ def test_a_client_that_sends_nothing_or_reads_slowly_holds_up_no_frame(tmp_path:
         slow.connect(str(path))
         slow.sendall(b'{"op": "big"}\n')  # its long reply not read yet
         # the loop goes round while both wait (it used to block in recv / sendall)
-        assert loop.frames_during(200) == 200
+        assert loop.frames_during(200) >= 200
         assert _call(path, {"op": "status"})["ok"]  # another client is served meanwhile
         silent.sendall(b'{"op": "late"}\n')
         silent.settimeout(10.0)
