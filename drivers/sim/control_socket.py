@@ -5,6 +5,14 @@ that is not a socket is refused, a live socket (another emulator answering) too.
 socket is created with mode 0600 (umask set around bind), so only its owner can inject
 faults; on exit an emulator removes the socket file only if it is still the one it made.
 Both emulators (EtherCAT and CANopen) use these functions.
+
+An emulator's frame path never waits for a control client: the EtherCAT emulator serves its
+control socket from its frame loop through :class:`ControlConnections` (non-blocking: a
+request is taken once its whole line has arrived, a reply is sent as the client reads it),
+the CANopen emulator from a thread of its own (:func:`serve_control`). Before, the EtherCAT
+emulator read each request and wrote each reply blocking, in the thread that answers frames:
+a client preempted between its connect and its line (a test process on a loaded 2-core
+machine) or slow to read a long reply (``trace_read``) held every frame until it ran again.
 """
 
 from __future__ import annotations
@@ -15,6 +23,7 @@ import os
 import socket
 import stat
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -92,11 +101,29 @@ def remove_own_socket(path: str, ident: tuple[int, int]) -> None:
             os.unlink(path)
 
 
-def answer(conn: socket.socket, handler: Callable[[dict[str, Any]], dict[str, Any]]) -> None:
+Handler = Callable[[dict[str, Any]], dict[str, Any]]
+
+#: [s] a control client has this long to send its line and read the reply
+CLIENT_TIMEOUT = 2.0
+
+
+def _reply(data: bytes, handler: Handler) -> bytes:
+    """``handler``'s JSON line for the request line ``data`` (a bad request gets
+    ``{"ok": false, "error": ...}``)."""
+    try:
+        request = json.loads(data.decode() or "{}")
+        reply = handler(request if isinstance(request, dict) else {})
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        reply = {"ok": False, "error": f"bad JSON: {exc}"}
+    return json.dumps(reply).encode() + b"\n"
+
+
+def answer(conn: socket.socket, handler: Handler) -> None:
     """One request on an accepted connection: read a JSON line, reply with ``handler``'s JSON
-    line (a bad request gets ``{"ok": false, "error": ...}``); closes ``conn``."""
+    line; closes ``conn``. Blocks up to :data:`CLIENT_TIMEOUT` on the client: for a thread
+    that does nothing else (:func:`serve_control`)."""
     with conn:
-        conn.settimeout(2.0)
+        conn.settimeout(CLIENT_TIMEOUT)
         data = b""
         try:
             while not data.endswith(b"\n"):
@@ -104,27 +131,122 @@ def answer(conn: socket.socket, handler: Callable[[dict[str, Any]], dict[str, An
                 if not chunk:
                     break
                 data += chunk
-            try:
-                request = json.loads(data.decode() or "{}")
-                reply = handler(request if isinstance(request, dict) else {})
-            except json.JSONDecodeError as exc:
-                reply = {"ok": False, "error": f"bad JSON: {exc}"}
-            conn.sendall(json.dumps(reply).encode() + b"\n")
+            conn.sendall(_reply(data, handler))
         except OSError:
             pass
 
 
+class _Client:
+    __slots__ = ("conn", "data", "deadline", "out")
+
+    def __init__(self, conn: socket.socket, deadline: float) -> None:
+        self.conn = conn
+        self.data = b""
+        self.out: memoryview | None = None  # the reply not yet sent
+        self.deadline = deadline
+
+
+class ControlConnections:
+    """The control socket ``srv`` (non-blocking, :func:`open_control_socket`) served from a
+    ``select`` loop that has other work: nothing here blocks. Select on :meth:`readers`
+    and :meth:`writers` beside your own descriptors, then call :meth:`ready` with what
+    ``select`` returned; it accepts, reads, calls ``handler`` once a whole line is in and
+    sends the reply as far as the client takes it. A client that has not sent its line or
+    read its reply within :data:`CLIENT_TIMEOUT` is dropped."""
+
+    def __init__(self, srv: socket.socket, handler: Handler) -> None:
+        self.srv = srv
+        self.handler = handler
+        self._clients: dict[socket.socket, _Client] = {}
+
+    def readers(self) -> list[socket.socket]:
+        return [self.srv, *(c.conn for c in self._clients.values() if c.out is None)]
+
+    def writers(self) -> list[socket.socket]:
+        return [c.conn for c in self._clients.values() if c.out is not None]
+
+    def ready(self, readable: list[Any], writable: list[Any]) -> int:
+        """Serve what ``select`` found ready; returns the number of requests handled."""
+        handled = 0
+        now = time.monotonic()
+        if self.srv in readable:
+            self._accept(now)
+        for conn in list(self._clients):
+            c = self._clients[conn]
+            if conn in readable and c.out is None:
+                handled += self._read(c)
+            if conn in writable and c.out is not None:
+                self._write(c)
+            if conn in self._clients and now > c.deadline:
+                self._drop(c)
+        return handled
+
+    def close(self) -> None:
+        for c in list(self._clients.values()):
+            self._drop(c)
+
+    def _accept(self, now: float) -> None:
+        while True:
+            try:
+                conn, _ = self.srv.accept()
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                return
+            conn.setblocking(False)
+            self._clients[conn] = _Client(conn, now + CLIENT_TIMEOUT)
+
+    def _read(self, c: _Client) -> int:
+        try:
+            chunk = c.conn.recv(65536)
+        except (BlockingIOError, InterruptedError):
+            return 0
+        except OSError:
+            self._drop(c)
+            return 0
+        c.data += chunk
+        if chunk and not c.data.endswith(b"\n"):
+            return 0
+        c.out = memoryview(_reply(c.data, self.handler))
+        self._write(c)
+        return 1
+
+    def _write(self, c: _Client) -> None:
+        assert c.out is not None
+        try:
+            sent = c.conn.send(c.out)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            self._drop(c)
+            return
+        c.out = c.out[sent:]
+        if not len(c.out):
+            self._drop(c)
+
+    def _drop(self, c: _Client) -> None:
+        self._clients.pop(c.conn, None)
+        with contextlib.suppress(OSError):
+            c.conn.close()
+
+
 def serve_control(
-    path: str, handler: Callable[[dict[str, Any]], dict[str, Any]], stop: threading.Event
+    path: str,
+    handler: Handler,
+    stop: threading.Event,
+    setup: Callable[[], None] | None = None,
 ) -> threading.Thread:
     """Serve ``handler`` on ``path`` in a daemon thread until ``stop`` is set; the socket
-    file is removed on exit."""
+    file is removed on exit. ``setup`` runs first in that thread (e.g. its priority:
+    drivers.sim.pacing.control_beside_frames)."""
     srv = open_control_socket(path)
     st = os.lstat(path)
     ident = (st.st_dev, st.st_ino)
     srv.settimeout(0.1)
 
     def loop() -> None:
+        if setup is not None:
+            setup()
         try:
             while not stop.is_set():
                 try:

@@ -13,7 +13,11 @@ position jump at 200 Hz. The loop instead takes a stall's gap in one-cycle obser
 
 :func:`answer_first`: the emulator process answers frames before other work (SCHED_FIFO
 below the kernel's threaded IRQs when allowed, else a better nice value; no cyclic garbage
-collection on the frame path).
+collection on the frame path). :func:`control_beside_frames`: a control thread beside the
+frame path (the CANopen emulator's) one step below it: it takes the drives' lock and the
+interpreter's lock, and left at normal priority it was preempted by ordinary load while
+holding them, which held up the frames behind it (a priority inversion: SYNCs unanswered for
+tens of ms on a loaded machine, a false following error in the loop).
 """
 
 from __future__ import annotations
@@ -40,3 +44,12 @@ def answer_first() -> None:
     gc.collect()
     gc.freeze()
     gc.disable()
+
+
+def control_beside_frames() -> None:
+    """For a thread that serves control requests beside the frame path: SCHED_FIFO one below
+    :data:`RT_PRIORITY` when allowed (never preempted by ordinary load while it holds a lock
+    the frames need, never ahead of them), else as it is. Call it in that thread."""
+    with contextlib.suppress(AttributeError, OSError):
+        if os.sched_getscheduler(0) not in (os.SCHED_FIFO, os.SCHED_RR):
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY - 1))

@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     from drivers.canopen.socket_buffer import widen_receive_buffer
     from drivers.sim.canopen_node import CanopenDrives
     from drivers.sim.control_socket import serve_control
-    from drivers.sim.pacing import answer_first
+    from drivers.sim.pacing import answer_first, control_beside_frames
     from hofto_hw.config.loader import load_config
     from hofto_hw.config.locate import find_config
     from hofto_hw.errors import UserError
@@ -94,7 +94,9 @@ def run(args: argparse.Namespace) -> int:
     ctl = None
     if args.control:
         try:
-            ctl = serve_control(args.control, _collecting(net.control), stop_control)
+            ctl = serve_control(
+                args.control, _collecting(net.control), stop_control, control_beside_frames
+            )
         except BaseException:
             bus.shutdown()
             raise

@@ -89,33 +89,51 @@ def wait_for(cond: Callable[[], Any], what: str, timeout: float = 120.0) -> Any:
 
 class LeaseHolder:
     """Holds the remote enabling input of the service at ``sock``: ``enable on`` renewed
-    every 50 ms on a connection of its own (the lease is 0.25 s) until :meth:`release`."""
+    every 50 ms (the lease is 0.25 s) by a process of its own, SCHED_FIFO when root
+    (tests/support/lease_process.py says why), until :meth:`release`."""
 
     def __init__(self, sock: Path) -> None:
-        import threading
+        import json
 
-        from hofto_hw.client.connection import Connection
-
-        self.conn = Connection(sock)
-        r = self.conn.call({"cmd": "enable", "on": True})
-        assert r["ok"], r
-        self._done = threading.Event()
-        self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._renew, daemon=True)
-        self._thread.start()
-
-    def _renew(self) -> None:
-        while not self._done.wait(0.05):
-            with self._lock:
-                self.conn.call({"cmd": "enable", "on": True})
+        self._json = json
+        env = {**os.environ, "PYTHONPATH": f"{ROOT}:{ROOT / 'tests'}"}
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "support.lease_process", str(sock)],
+            cwd=ROOT,
+            env=env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert self.proc.stdout is not None
+        first = self.proc.stdout.readline()
+        if not first:
+            self.proc.wait(30)
+            raise AssertionError(f"the lease holder exited with {self.proc.returncode}")
+        r = json.loads(first)
+        if not r["ok"]:
+            self.close()
+            raise AssertionError(f"enable on refused: {r}")
+        #: replies other than ok on the way (a renewal refused), and the last one
+        self.replies: list[dict[str, Any]] = []
 
     def release(self) -> dict[str, Any]:
-        """Stop renewing, ``enable off``, close; returns the reply."""
-        self._done.set()
-        self._thread.join()
-        r = self.conn.call({"cmd": "enable", "on": False})
-        self.conn.close()
-        return r
+        """Stop renewing, ``enable off``; returns its reply (with ``renew_late_max_s``, the
+        largest delay of a renewal beyond its period)."""
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write("release\n")
+        self.proc.stdin.close()
+        out = self.proc.stdout.read()
+        self.proc.wait(30)
+        self.replies = [self._json.loads(line) for line in out.splitlines() if line]
+        if not self.replies:
+            raise AssertionError(f"the lease holder exited with {self.proc.returncode}")
+        return self.replies[-1]
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
 
 
 def children(pid: int) -> list[tuple[int, str]]:

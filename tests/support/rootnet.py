@@ -7,6 +7,17 @@ The rule: unprivileged, these tests skip with the reason; with env CI set they f
 (CI must run them). Names carry the pid and a per-process counter, since other sessions
 run such tests at the same time. Every wait is for a state (a ready file, a line, a
 status), bounded by a generous timeout, never a sleep for a fixed time.
+
+One rig at a time per machine (:func:`rig_slot`, held by :func:`emulator`): a rig is a
+SCHED_FIFO loop (priority 50) and a SCHED_FIFO emulator (40) that must both keep their
+rate for the scenario to mean anything. On the shared 2-core machine several sessions ran
+such rigs at once (besides CI's): FIFO tasks of equal priority do not preempt each other,
+and loops and emulators were held off their CPU for ~100 ms (measured in the flight logs:
+wake-up 100.3 ms late; the CANopen emulator's arm, stepped per SYNC, froze meanwhile, so
+the observers integrated 105 ms over one plant step: a false collision in free motion; a
+following error at the demo path's 3.4 rad/s). The slot is an exclusive lock on
+:data:`RIG_LOCK` (every session on the machine, any worktree): waiting for it is waiting
+for the machine's real-time capacity, a state.
 """
 
 from __future__ import annotations
@@ -30,6 +41,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 ER3A = ROOT / "configs" / "er3a.yaml"
 _counter = itertools.count()
+#: the machine-wide rig slot (see the module docstring); HOFTO_HW_RIG_LOCK overrides it
+RIG_LOCK = Path(os.environ.get("HOFTO_HW_RIG_LOCK", "/tmp/hofto-hw-rt-rig.lock"))
+RIG_WAIT = 1800.0  # [s] a whole rig test file of another session may run first
+_rig_depth = 0
 
 
 def require_root(need: str = "veth pairs and raw sockets") -> None:
@@ -220,6 +235,49 @@ def sim_canopen_args(interface: str, channel: str, config: Path | str) -> list[s
 
 
 @contextmanager
+def rig_slot(what: str, timeout: float = RIG_WAIT) -> Iterator[None]:
+    """Hold the machine's real-time rig slot (an exclusive ``flock`` on :data:`RIG_LOCK`)
+    while ``what`` runs; re-entrant within a process. Waits for it (a state: the other
+    session's rig ended), AssertionError naming the holder after ``timeout`` [s]."""
+    import fcntl
+
+    global _rig_depth
+    if _rig_depth:
+        _rig_depth += 1
+        try:
+            yield
+        finally:
+            _rig_depth -= 1
+        return
+    fd = os.open(RIG_LOCK, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+
+        def taken() -> bool:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return False
+            return True
+
+        try:
+            wait_for(taken, timeout, f"the rig slot {RIG_LOCK} for {what}")
+        except AssertionError as exc:
+            holder = RIG_LOCK.read_text(errors="replace").strip()
+            raise AssertionError(f"{exc}: held by {holder or 'an unnamed holder'}") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()}: {what} since {time.ctime()}\n".encode(), 0)
+        _rig_depth = 1
+        try:
+            yield
+        finally:
+            _rig_depth = 0
+            os.ftruncate(fd, 0)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
+@contextmanager
 def emulator(
     command: Sequence[str],
     folder: Path,
@@ -230,7 +288,21 @@ def emulator(
 ) -> Iterator[Emulator]:
     """Start ``hofto-hw <command> --control ... --ready-file ...`` (sim-ethercat or
     sim-canopen, see :func:`sim_ethercat_args`), wait for its ready file, yield it; SIGTERM
-    afterwards. A start-up failure raises AssertionError with the emulator's log."""
+    afterwards. A start-up failure raises AssertionError with the emulator's log. Holds the
+    machine's rig slot (:func:`rig_slot`) from before the start to after the stop: the loop
+    a test runs against it lives inside this context."""
+    with rig_slot(" ".join(command[:1]) + f" in {folder.name}"):
+        yield from _emulator(command, folder, netns=netns, timeout=timeout, quiet_arm=quiet_arm)
+
+
+def _emulator(
+    command: Sequence[str],
+    folder: Path,
+    *,
+    netns: str | None,
+    timeout: float,
+    quiet_arm: bool,
+) -> Iterator[Emulator]:
     control, ready = str(folder / "ctl.sock"), folder / "ready"
     log_path = folder / "emulator.log"
     cmd = [*python_argv(netns), "-m", "hofto_hw.cli", *command, "--control", control]

@@ -33,7 +33,11 @@ from typing import Any
 import numpy as np
 
 from drivers.cia402 import pdo
-from drivers.sim.control_socket import answer, open_control_socket, remove_own_socket
+from drivers.sim.control_socket import (
+    ControlConnections,
+    open_control_socket,
+    remove_own_socket,
+)
 from drivers.sim.drive import FAULTS, EmulatedDrives
 from drivers.sim.esc import datagram
 from drivers.sim.esc import registers as r
@@ -418,14 +422,6 @@ def open_packet_socket(iface: str) -> socket.socket:
     return sock
 
 
-def _serve_control(net: EmulatedNetwork, srv: socket.socket) -> None:
-    try:
-        conn, _ = srv.accept()
-    except BlockingIOError:
-        return
-    answer(conn, net.control)
-
-
 def serve(
     net: EmulatedNetwork,
     iface: str,
@@ -438,14 +434,16 @@ def serve(
 
     Meant to run in a process of its own (``hofto-hw sim-ethercat``): it raises the calling
     process to real-time priority when allowed and pauses its garbage collector while
-    serving (see :func:`_answer_first`)."""
+    serving (see :func:`_answer_first`). Control requests are served in the same loop
+    without waiting for their clients (drivers.sim.control_socket.ControlConnections)."""
     sock = open_packet_socket(iface)
     srv = open_control_socket(control) if control else None
     ident = None
+    clients = None
     if srv is not None and control:
         st = os.lstat(control)
         ident = (st.st_dev, st.st_ino)
-    fds: list[Any] = [sock] + ([srv] if srv is not None else [])
+        clients = ControlConnections(srv, net.control)
     buf = bytearray(2048)
     view = memoryview(buf)
     answer_first()
@@ -456,7 +454,12 @@ def serve(
     next_watchdog = time.monotonic()
     try:
         while not net.stopping:
-            readable, _, _ = select.select(fds, [], [], 0.01)
+            fds: list[Any] = [sock]
+            out: list[Any] = []
+            if clients is not None:
+                fds += clients.readers()
+                out = clients.writers()
+            readable, writable, _ = select.select(fds, out, [], 0.01)
             if sock in readable:
                 while True:
                     try:
@@ -469,9 +472,9 @@ def serve(
                         sock.send(view[:n])
                     if net.pending_step:
                         net.step()
-            if srv is not None and srv in readable:
-                _serve_control(net, srv)
-                gc.collect()
+            if clients is not None and (len(readable) > (sock in readable) or writable):
+                if clients.ready(readable, writable):
+                    gc.collect()
             now = time.monotonic()
             if now >= next_watchdog:
                 net.check_watchdogs()
@@ -482,6 +485,8 @@ def serve(
         gc.unfreeze()
         gc.enable()
         sock.close()
+        if clients is not None:
+            clients.close()
         if srv is not None:
             srv.close()
             if control and ident is not None:

@@ -245,30 +245,42 @@ def _rest_time(
 
 
 def _free_motion(r: DragRig, attempts: int = 3) -> int:
-    """The demo path for MOVE_TIME of plant time; returns the number of collision stops it
-    met. When this 2-core machine starves the loop (50 ms stalls, thousands of overruns: not
-    under test here, as bus loss and overrun faults above) the monitor has stopped the free
-    motion (full amplitude 2 of 5 runs, 0.4 amplitude 4 of 12; the two inspected: compute
-    median 1.2-1.6 ms, above the 1 ms cycle): reset and move on; the friction learning skips
-    stopped ticks."""
+    """The demo path for MOVE_TIME of plant time, then hold until the arm is at rest (the
+    deceleration from the path is part of the free motion); returns the number of collision
+    stops it met. When this 2-core machine starves the loop (50 ms stalls, thousands of
+    overruns: not under test here, as bus loss and overrun faults above) the monitor has
+    stopped the free motion (full amplitude 2 of 5 runs, 0.4 amplitude 4 of 12; the two
+    inspected: compute median 1.2-1.6 ms, above the 1 ms cycle), also while it came to rest
+    ('mode move-to' then refused: a fault is latched): reset and move on; the friction
+    learning skips stopped ticks."""
     s = r.service
+    # classes the config only reports (log_failure: the flight recorder's writer starved on a
+    # loaded machine) stop nothing: they are no stop of the free motion
+    report_only = {k for k, v in r.data["safety"]["categories"].items() if v is None}
     for attempt in range(attempts):
         _until_ok(r, "mode move")
         t_moved = r.plant_time() + MOVE_TIME
         wait_for(
-            lambda t=t_moved: r.plant_time() > t or bool(s.status()["faults"]),
+            lambda t=t_moved: r.plant_time() > t or s.status()["category"] >= 0,
             60,
             "the demo path moved",
             s.proc,
         )
+        if s.status()["category"] < 0:
+            _until_ok(r, "mode hold")
+            wait_for(
+                lambda: _at_rest(r, 0.002) or s.status()["category"] >= 0,
+                30,
+                "the arm at rest after the move",
+                s.proc,
+            )
         st = s.status()
-        if not st["faults"]:
+        if st["category"] < 0:
             return attempt
+        st["faults"] = [f for f in st["faults"] if f not in report_only]
         # a starved 200 Hz CANopen loop (a 136 ms stall) also tripped the following-error
         # monitor once in the free motion; neither is under test here
-        tolerated = (
-            (["collision"], ["following_error"]) if rig.bus == "canopen" else (["collision"],)
-        )
+        tolerated = (["collision"], ["following_error"]) if r.bus == "canopen" else (["collision"],)
         assert st["faults"] in tolerated, f"the free motion was stopped: {st}"
         wait_for(lambda: s.status()["state"] == "stopped", 30, "stopped", s.proc)
         _until_ok(r, "reset")
@@ -288,8 +300,6 @@ def test_drag_after_collision_and_reset(rig: DragRig) -> None:
     # contact-free motion first (the demo path, as the main job): the drag learns the
     # friction model's error from it (drag.friction_learning) and takes it off the estimate
     false_stops = _free_motion(rig)
-    _until_ok(rig, "mode hold")
-    wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest after the move", r.proc)
     # back to the hold pose: the drag runs where --hold started (not where the path stopped)
     home = ",".join(repr(float(x)) for x in rig.data["robot"]["home"])
     _until_ok(rig, f"mode move-to {home}")
@@ -311,22 +321,37 @@ def test_drag_after_collision_and_reset(rig: DragRig) -> None:
     wait_for(lambda: _at_rest(rig, 0.002), 30, "the arm at rest before the press", r.proc)
     t_tared = rig.plant_time() + TARE_WAIT
     wait_for(lambda: rig.plant_time() > t_tared, 30, "the tare's wait", r.proc)
-    lease = LeaseHolder(r.socket)  # the enabling input: a lease, renewed while held
-    # the true arm's state at every plant step from the push on, traced by the emulator (a
-    # test process starved of CPU would sample it too rarely to judge the steady window)
-    t0 = rig.push((PUSH, 0.0, 0.0), PUSH_TIME, ramp=RAMP, trace=PUSH_TIME + 0.3)
-    t_end = t0 + PUSH_TIME
-    wait_for(lambda: rig.plant_time() > t_end + 0.3, 60, "the push over", r.proc)
-    trace = rig.emu.call(op="trace_read")
-    assert trace["done"], "the trace is not over"
-    samples = list(zip(trace["t"], trace["q"], trace["qd"], strict=True))
-    st = r.status()
-    if st["mode"] != "drag":
-        lease.release()
-        _, s = r.terminate()
-        raise AssertionError(f"left drag mode during the push: {st}; events {s['events']}")
-    assert lease.release()["ok"]
-    r.wait_latched("enabling_released")
+    # the enabling input: a lease renewed while held, by a process of its own (a thread of
+    # this test process was starved of CPU long enough for the lease to lapse mid-push)
+    lease = LeaseHolder(r.socket)
+    try:
+        # the true arm's state at every plant step from the push on, traced by the emulator
+        # (a test process starved of CPU would sample it too rarely to judge the window)
+        t0 = rig.push((PUSH, 0.0, 0.0), PUSH_TIME, ramp=RAMP, trace=PUSH_TIME + 0.3)
+        t_end = t0 + PUSH_TIME
+        # for a failure's message: whether the press had entered dragging as the push began
+        # (on the loaded machine the arm was seen not to follow the hand, cause not found)
+        enabling = r.request("state").get("enabling")
+        wait_for(lambda: rig.plant_time() > t_end + 0.3, 60, "the push over", r.proc)
+        trace = rig.emu.call(op="trace_read")
+        assert trace["done"], "the trace is not over"
+        samples = list(zip(trace["t"], trace["q"], trace["qd"], strict=True))
+        st = r.status()
+        if st["mode"] != "drag":
+            held = lease.release()
+            _, s = r.terminate()
+            raise AssertionError(
+                f"left drag mode during the push: {st}; events {s['events']}; lease {held};"
+                f" enabling as the push began {enabling}"
+            )
+        released = lease.release()
+    finally:
+        lease.close()
+    assert released["ok"], released
+    try:
+        r.wait_latched("enabling_released")
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}; enabling as the push began {enabling}") from None
     status = r.status()
     # the file leaves this class at the schema's default
     assert status["category"] == 2 == load_config(CONFIG).safety.categories.enabling_released
@@ -339,8 +364,7 @@ def test_drag_after_collision_and_reset(rig: DragRig) -> None:
     assert kinds[k : k + 4] == ["collision", "reset", "enabling_released", "stop_request"], s[
         "events"
     ]
-    released = first_event(s, "enabling_released")
-    assert released["category"] == 2
+    assert first_event(s, "enabling_released")["category"] == 2
 
     cfg = load_config(CONFIG)
     t = np.array([x[0] for x in samples])
@@ -361,6 +385,7 @@ def test_drag_after_collision_and_reset(rig: DragRig) -> None:
         f"{expected * 1e3:.1f} mm/s off_axis={off_axis * 1e3:.2f} mm/s rest<={rest * 1e3:.0f} ms"
         f" (sampling gap {gap * 1e3:.0f} ms) samples={int(window.sum())}"
         f" overruns={s['overruns']} false_stops={false_stops}"
+        f" lease_renew_late_max={released['renew_late_max_s'] * 1e3:.0f} ms"
     )
     assert abs(steady - expected) < 0.1 * expected, (steady, expected)
     can = rig.bus == "canopen"
