@@ -45,6 +45,7 @@ import argparse
 import contextlib
 import json
 import os
+import secrets
 import subprocess
 import sys
 import tempfile
@@ -531,8 +532,9 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="hofto-drive-check-") as tmp:
         folder = Path(tmp)
         if args.emulated and profile.bus == "ethercat":
-            tag = f"{os.getpid() % 100000}"
-            iface = f"dcm{tag}"
+            # random: the machine's network namespace is shared with other sessions, whose
+            # pids (from another pid namespace) can equal ours
+            iface = f"dcm{secrets.token_hex(4)}"
         path = _check_config(base, profile, n, folder, args.emulated, iface, options, picks)
         if args.emulated:  # the emulator runs the whole arm of the base config
             cfg = load_config(path)

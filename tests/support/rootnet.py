@@ -25,6 +25,7 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import secrets
 import signal
 import subprocess
 import sys
@@ -57,8 +58,9 @@ def require_root(need: str = "veth pairs and raw sockets") -> None:
 
 
 def unique_tag() -> str:
-    """pid + counter: unique among the processes running such tests now."""
-    return f"{os.getpid() % 100000}{next(_counter)}"
+    """Six random hex digits + a counter: the names live in the machine's network namespace,
+    which other sessions share (their pids, from another pid namespace, can equal ours)."""
+    return f"{secrets.token_hex(3)}{next(_counter) % 100}"
 
 
 def wait_for(
@@ -89,7 +91,8 @@ def stop_process(proc: subprocess.Popen | None, timeout: float = 30.0) -> None:
 
 @contextmanager
 def veth_pair(master_prefix: str = "hm", slave_prefix: str = "hs") -> Iterator[tuple[str, str]]:
-    """A veth pair named uniquely (``<prefix><pid><k>``), deleted afterwards; needs root."""
+    """A veth pair named uniquely (``<prefix>`` + :func:`unique_tag`), deleted afterwards;
+    needs root."""
     require_root()
     from drivers.sim.esc import veth
 
@@ -111,7 +114,7 @@ def private_netns(prefix: str = "hns") -> Iterator[str]:
     """A network namespace with loopback up and multicast routed to it (python-can
     ``udp_multicast`` stays inside), deleted afterwards; needs root."""
     require_root("a private network namespace")
-    name = f"{prefix}{os.getpid() % 100000}x{next(_counter)}"
+    name = f"{prefix}{unique_tag()}"
     _ip("netns", "add", name)
     try:
         _ip("netns", "exec", name, "ip", "link", "set", "lo", "up")
