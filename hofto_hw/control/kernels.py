@@ -147,7 +147,8 @@ def friction_learn(
     """:meth:`hofto_hw.control.friction_residual.FrictionResidual.learn` in one call:
     ``st`` = [count, pending time [s], seconds learned [s]] updated in place, ``S`` (n, 3, 3)
     and ``b`` (n, 3) the exponentially weighted sums. Same operations in the same order as
-    the numpy path (tanh may differ from numpy's by one ulp)."""
+    the numpy reference (tests/hofto_hw/control/reference.py; tanh may differ from
+    numpy's by one ulp)."""
     n = qd.shape[0]
     fastest = 0.0
     for j in range(n):

@@ -243,7 +243,7 @@ def snapshot_terms(
     q: np.ndarray, qd: np.ndarray, tau: np.ndarray, C: np.ndarray, W: np.ndarray
 ) -> bool:
     """The snapshot's arithmetic around pinocchio: is the sample finite (the sum of q, qd and
-    tau, as the numpy path's check); if so, with ``W[FLAGS] & FRICTION_TERM`` the friction
+    tau, as the numpy reference's check); if so, with ``W[FLAGS] & FRICTION_TERM`` the friction
     ``W[F]`` = f(qd) and ``W[TOTAL]`` = tau - f, with ``& CORIOLIS_T_TERM`` ``W[CT]`` = Cᵀ·qd
     (C (n, n) evaluated at this sample). Returns the finiteness; W is untouched (held-friction
     memory included) for a non-finite sample."""

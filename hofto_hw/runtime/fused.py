@@ -379,7 +379,7 @@ class FusedTick:
         if t._flags is not tick_flags or t._fill is not fill_tick:
             return "the tick's flags and record fill run as Python"
         if not t.bus._use_kernel or not t.limits._use_kernel:
-            return "the drive scan or the limit checks run their numpy path"
+            return "the drive scan or the limit checks run their kernels as Python"
         c = t.collision
         if c is not None and not c._use_kernel:
             return "the collision monitor runs its kernels as Python"

@@ -24,7 +24,7 @@ import numpy as np
 from hofto_hw.jit import jit, jit_inline
 from safety.collision.state import flags_of
 
-_flags_of = jit(flags_of)  # the numpy path's own function, compiled: one definition
+_flags_of = jit(flags_of)  # the Python side's own function, compiled: one definition
 
 # indices repeated from params.py / state.py as plain ints (numba reads module globals as
 # compile-time constants); tests/safety/collision/test_kernel.py checks they agree

@@ -287,7 +287,7 @@ def test_a_quiet_tick_is_one_fused_call() -> None:
 
 def test_a_part_the_compiled_call_cannot_run_is_refused_in_one_line() -> None:
     """No silent Python path: a tick whose parts the compiled call cannot take (here the
-    drive group on its numpy path) is refused when built, naming why."""
+    drive group on its interpreter path) is refused when built, naming why."""
     cfg = load_config(CONFIG)
     system = build(cfg, clock="sim", contact=False)
     try:
