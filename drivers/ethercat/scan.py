@@ -92,22 +92,24 @@ def _read_slave(i: int, s: Any, pysoem: Any) -> ScannedDrive:
     address = f"slave {i + 1}"
 
     transient = (pysoem.WkcError, pysoem.MailboxError, pysoem.PacketError)
-    in_step = [True]  # False after a transfer got no valid answer: resync before the next
+    # the object of the last transfer that got no valid answer (None: in step); the mailbox
+    # is brought back in step before the next transfer, fenced off that object (as the master)
+    failed: list[int | None] = [None]
 
     def transfer(call: Any, index: int, what: str) -> Any:
         """``call()`` with retries; an SdoError (the drive's answer) propagates. After a
         transfer that got no valid answer the mailbox is brought back in step before the
         next (its late answer must not be taken for another: drivers.ethercat.mailbox)."""
         for _attempt in range(4):
-            if not in_step[0]:
-                if resync(s.sdo_read, transient + (pysoem.SdoError,), index) is None:
+            if failed[0] is not None:
+                if resync(s.sdo_read, transient + (pysoem.SdoError,), failed[0]) is None:
                     time.sleep(0.01)
                     continue
-                in_step[0] = True
+                failed[0] = None
             try:
                 return call()
             except transient:
-                in_step[0] = False
+                failed[0] = index
                 time.sleep(0.01)
         raise ScanError(f"{address} ('{s.name}'): {what} got no answer")
 
