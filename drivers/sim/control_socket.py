@@ -189,9 +189,7 @@ class ControlConnections:
         while True:
             try:
                 conn, _ = self.srv.accept()
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError:
+            except OSError:  # none waiting (EAGAIN), or EMFILE and the like: the next select
                 return
             conn.setblocking(False)
             self._clients[conn] = _Client(conn, now + CLIENT_TIMEOUT)

@@ -4,9 +4,9 @@ emulator child process (``hofto-hw sim-ethercat`` / ``sim-canopen``) with its co
 socket, and a ``hofto-hw run`` child process with its control socket and summary.
 
 The rule: unprivileged, these tests skip with the reason; with env CI set they fail instead
-(CI must run them). Names carry the pid and a per-process counter, since other sessions
-run such tests at the same time. Every wait is for a state (a ready file, a line, a
-status), bounded by a generous timeout, never a sleep for a fixed time.
+(CI must run them). Names carry random hex and a per-process counter (:func:`unique_tag`),
+since other sessions run such tests at the same time. Every wait is for a state (a ready
+file, a line, a status), bounded by a generous timeout, never a sleep for a fixed time.
 
 One rig at a time per machine (:func:`rig_slot`, held by :func:`emulator`): a rig is a
 SCHED_FIFO loop (priority 50) and a SCHED_FIFO emulator (40) that must both keep their
