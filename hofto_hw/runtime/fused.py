@@ -348,6 +348,7 @@ class FusedTick:
         self.why = self._check(tick)
         self.ok = not self.why
         self.path: Any = None
+        self._seen: tuple[Any, ...] = ()  # what args() read (stale() compares with it)
         self.kept = [(o, a, getattr(o, a)) for _, o, a in _parts(tick)] if self.ok else []
         if self.ok:
             try:
@@ -413,7 +414,45 @@ class FusedTick:
         self.path_ok = _path_ok(p) and self.hot_path(p)
         if self.path_ok:
             st["ramp"] = p.ramp
+        self._seen = self._inputs()
         return (self.hot, t._bank.args, g._tx_bytes, g._rx_bytes, t._rec1)
+
+    def _inputs(self) -> tuple[Any, ...]:
+        """What :meth:`args` read that can change while the tick runs (objects and the
+        numbers it copied into the state), besides the motion's path (:attr:`path`)."""
+        t, p = self.tick, self.path
+        return (
+            t.snapshot._native.handle,  # type: ignore[union-attr]
+            t.feedforward._native.handle,  # type: ignore[union-attr]
+            t.bus.fault_min, t.bus.op_enabled, t.collision, _learning(t), t.drag_row,
+            t._bank.args, t.group._tx_bytes, t.group._rx_bytes, t._rec1,
+            None if p is None else p._k, None if p is None else p.ramp,
+        )  # fmt: skip
+
+    def stale(self) -> bool:
+        """:meth:`args` would answer differently now: the motion's path replaced, a native
+        model's new handle (a model change), the bus's codes, the collision monitor, the
+        friction learning on or off, the bank, the process images, the tick record, the path's
+        workspace or ramp changed (the friction learning's constants are its own, set when it
+        is built). Identities and numbers, no allocation: args itself writes numpy scalars and
+        compares addresses (~6 µs)."""
+        t, p = self.tick, self.path
+        snap_h, ff_h, fault_min, op_enabled, coll, fr, row, bank, tx, rx, rec, k, ramp = self._seen
+        return not (
+            t.motion.path is p
+            and t.snapshot._native.handle == snap_h  # type: ignore[union-attr]
+            and t.feedforward._native.handle == ff_h  # type: ignore[union-attr]
+            and t.bus.fault_min == fault_min
+            and t.bus.op_enabled == op_enabled
+            and t.collision is coll
+            and _learning(t) is fr
+            and t.drag_row == row
+            and t._bank.args is bank
+            and t.group._tx_bytes is tx
+            and t.group._rx_bytes is rx
+            and t._rec1 is rec
+            and (p is None or (p._k is k and p.ramp == ramp))
+        )
 
     def hot_path(self, p: Any) -> bool:
         """The path's workspace is its field of the hot record (built on it)."""

@@ -502,17 +502,16 @@ class Tick(TickEvents):
 
     def _refresh(self, rebuild: bool = True) -> None:
         """After a tick the stages finished, at start, after a model change and a script's
-        step: the rare states (:attr:`busy`), the call's arguments (the parts' arrays as they
-        hold them now; not after a script's step, ``rebuild`` False) and the state's slow
-        scalars (off the common path)."""
+        step: the rare states (:attr:`busy`), the call's arguments when something they are
+        made of changed (:meth:`FusedTick.stale`; not looked at after a script's step,
+        ``rebuild`` False) and the state's slow scalars (off the common path)."""
         fz = self._fz
         new_bank = self._fz_args[1] is not self._bank.args  # a reset built one: checked again
         why = "a part replaced its hot record's array" if not fz.bound() else ""
         why = why or (fz._check(self) if new_bank else "")
         if why:
             raise RuntimeError(f"the tick's compiled call cannot take its parts: {why}")
-        rebuild = rebuild or new_bank
-        if rebuild:
+        if new_bank or (rebuild and fz.stale()):  # a drag tick: every tick, rarely stale
             self._fz_args = fz.args()
         self.busy = self._busy()
         m = self.motion
