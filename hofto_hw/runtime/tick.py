@@ -262,6 +262,7 @@ class Tick(TickEvents):
         if not self._fz.ok:
             raise ConfigError(f"the tick cannot run compiled: {self._fz.why}")
         self._fz_args: tuple[Any, ...] = self._fz.args()
+        self._slow: tuple[Any, ...] = ()  # the state's slow scalars as _refresh last wrote them
 
     # --------------------------------------------------------------- start-up
 
@@ -522,10 +523,15 @@ class Tick(TickEvents):
         else:
             kind = OTHER
         self._fz_kind = kind
-        st, c = self.st, self.collision
-        st["kind"], st["t0"], st["mode"] = kind, m.t0, m.mode
-        st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
-        st["was_contact"] = c is not None and c._was_contact
+        c = self.collision
+        was_contact = c is not None and c._was_contact
+        slow = (kind, m.t0, m.mode, self.expect_enabled, self._judge_from, was_contact)
+        if slow != self._slow:  # written when one changed: numpy scalar writes (~0.3 µs each)
+            self._slow = slow
+            st = self.st
+            st["kind"], st["t0"], st["mode"] = kind, m.t0, m.mode
+            st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
+            st["was_contact"] = was_contact
 
     def _busy(self) -> int:
         """The rare states now, as BUSY_* bits (0: nothing keeps the next tick off the quiet
