@@ -398,7 +398,9 @@ class FusedTick:
 
     def args(self) -> tuple[Any, ...]:
         """The call's arguments before this tick's scalars, and the parts' constants into the
-        tick's state (:attr:`path_ok`: the motion's path is the compiled one on the hot record)."""
+        tick's state (:attr:`path_ok`: the motion's path is the compiled one on the hot record).
+        Called again only when :meth:`stale`: whatever it reads that can change goes into
+        :meth:`_inputs` and :meth:`stale` too."""
         t = self.tick
         g, m, st = t.group, t.motion, t.st
         st["fault_min"], st["op_enabled"] = t.bus.fault_min, t.bus.op_enabled
