@@ -360,7 +360,10 @@ class FusedTick:
     def bound(self) -> bool:
         """The parts still hold the arrays they were built on (a part that replaced one, e.g. a
         snapshot rebuilt for a new model, is not what the fused call reads)."""
-        return all(getattr(o, a) is arr for o, a, arr in self.kept)
+        for o, a, arr in self.kept:  # a loop, not all() over a generator: ~2x faster
+            if getattr(o, a) is not arr:
+                return False
+        return True
 
     def _check(self, t: Tick) -> str:
         """'' when every part can be fused, else why not."""
