@@ -425,24 +425,29 @@ class FusedTick:
     def _inputs(self) -> tuple[Any, ...]:
         """What :meth:`args` read that can change while the tick runs (objects and the
         numbers it copied into the state), besides the motion's path (:attr:`path`)."""
-        t, p = self.tick, self.path
+        t, p, c = self.tick, self.path, self.tick.collision
         return (
             t.snapshot._native.handle,  # type: ignore[union-attr]
             t.feedforward._native.handle,  # type: ignore[union-attr]
-            t.bus.fault_min, t.bus.op_enabled, t.collision, _learning(t), t.drag_row,
+            t.bus.fault_min, t.bus.op_enabled, c, _learning(t), t.drag_row,
             t._bank.args, t.group._tx_bytes, t.group._rx_bytes, t._rec1,
             None if p is None else p._k, None if p is None else p.ramp,
+            # the tool-force check and the stop categories (section 4's compiled checks)
+            None if c is None else c._tool, None if c is None else c.tool_force,
+            t.stop.categories,
         )  # fmt: skip
 
     def stale(self) -> bool:
         """:meth:`args` would answer differently now: the motion's path replaced, a native
         model's new handle (a model change), the bus's codes, the collision monitor, the
         friction learning on or off, the bank, the process images, the tick record, the path's
-        workspace or ramp changed (the friction learning's constants are its own, set when it
-        is built). Identities and numbers, no allocation: args itself writes numpy scalars and
-        compares addresses (~6 µs)."""
-        t, p = self.tick, self.path
-        snap_h, ff_h, fault_min, op_enabled, coll, fr, row, bank, tx, rx, rec, k, ramp = self._seen
+        workspace or ramp, the collision monitor's tool-force check or the stop categories
+        changed (the friction learning's constants are its own, set when it is built).
+        Identities and numbers, no allocation: args itself writes numpy scalars and compares
+        addresses (~6 µs)."""
+        t, p, c = self.tick, self.path, self.tick.collision
+        (snap_h, ff_h, fault_min, op_enabled, coll, fr, row, bank, tx, rx, rec, k, ramp, tool,
+         tool_force, cats) = self._seen  # fmt: skip
         return not (
             t.motion.path is p
             and t.snapshot._native.handle == snap_h  # type: ignore[union-attr]
@@ -457,6 +462,8 @@ class FusedTick:
             and t.group._rx_bytes is rx
             and t._rec1 is rec
             and (p is None or (p._k is k and p.ramp == ramp))
+            and (c is None or (c._tool is tool and c.tool_force == tool_force))
+            and t.stop.categories is cats
         )
 
     def hot_path(self, p: Any) -> bool:

@@ -80,6 +80,9 @@ def test_a_model_change_a_bus_code_and_a_new_path_rebuild_them(cfg: SystemConfig
         assert tick._fz.stale()
         tick.bus.op_enabled -= 1
         assert not tick._fz.stale()
+        cats, tick.stop.categories = tick.stop.categories, tick.stop.categories.copy()
+        assert tick._fz.stale()  # section 4's compiled checks read the categories
+        tick.stop.categories = cats
         path, tick.motion.path = tick.motion.path, None
         assert tick._fz.stale()
         tick.motion.path = path
