@@ -262,6 +262,7 @@ class Tick(TickEvents):
         if not self._fz.ok:
             raise ConfigError(f"the tick cannot run compiled: {self._fz.why}")
         self._fz_args: tuple[Any, ...] = self._fz.args()
+        self._slow: tuple[Any, ...] = ()  # the state's slow scalars as _refresh last wrote them
 
     # --------------------------------------------------------------- start-up
 
@@ -502,17 +503,16 @@ class Tick(TickEvents):
 
     def _refresh(self, rebuild: bool = True) -> None:
         """After a tick the stages finished, at start, after a model change and a script's
-        step: the rare states (:attr:`busy`), the call's arguments (the parts' arrays as they
-        hold them now; not after a script's step, ``rebuild`` False) and the state's slow
-        scalars (off the common path)."""
+        step: the rare states (:attr:`busy`), the call's arguments when something they are
+        made of changed (:meth:`FusedTick.stale`; not looked at after a script's step,
+        ``rebuild`` False) and the state's slow scalars (off the common path)."""
         fz = self._fz
         new_bank = self._fz_args[1] is not self._bank.args  # a reset built one: checked again
         why = "a part replaced its hot record's array" if not fz.bound() else ""
         why = why or (fz._check(self) if new_bank else "")
         if why:
             raise RuntimeError(f"the tick's compiled call cannot take its parts: {why}")
-        rebuild = rebuild or new_bank
-        if rebuild:
+        if new_bank or (rebuild and fz.stale()):  # a drag tick: every tick, rarely stale
             self._fz_args = fz.args()
         self.busy = self._busy()
         m = self.motion
@@ -523,10 +523,15 @@ class Tick(TickEvents):
         else:
             kind = OTHER
         self._fz_kind = kind
-        st, c = self.st, self.collision
-        st["kind"], st["t0"], st["mode"] = kind, m.t0, m.mode
-        st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
-        st["was_contact"] = c is not None and c._was_contact
+        c = self.collision
+        was_contact = c is not None and c._was_contact
+        slow = (kind, m.t0, m.mode, self.expect_enabled, self._judge_from, was_contact)
+        if slow != self._slow:  # written when one changed: numpy scalar writes (~0.3 µs each)
+            self._slow = slow
+            st = self.st
+            st["kind"], st["t0"], st["mode"] = kind, m.t0, m.mode
+            st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
+            st["was_contact"] = was_contact
 
     def _busy(self) -> int:
         """The rare states now, as BUSY_* bits (0: nothing keeps the next tick off the quiet

@@ -1,0 +1,91 @@
+"""The fused call's arguments (FusedTick.args) are rebuilt when something they are made of
+changed and only then: a drag tick (never quiet) does not rebuild them; a model change (new
+native handles: the old ones are freed), a changed bus code and a new path do."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from hofto_hw import jit
+from hofto_hw.config.models import SystemConfig
+from hofto_hw.config.runtime import ScriptedDragConfig
+from hofto_hw.control.joint_motion import DRAG, MOVE
+from hofto_hw.model.payload import Payload, apply_payload
+from hofto_hw.runtime.compose import build
+from hofto_hw.runtime.drag_script import DragScript
+
+pytestmark = pytest.mark.skipif(not jit.available(), reason=jit.unavailable_reason())
+
+
+def _count_args(tick: Any) -> list[int]:
+    """Wrap the tick's FusedTick.args to count its calls."""
+    calls = [0]
+    inner = tick._fz.args
+
+    def args() -> tuple[Any, ...]:
+        calls[0] += 1
+        return inner()
+
+    tick._fz.args = args
+    return calls
+
+
+def _handles_in_state(tick: Any) -> bool:
+    st = tick.st
+    return (
+        int(st["snap_h"]) == tick.snapshot._native.handle
+        and int(st["ff_h"]) == tick.feedforward._native.handle
+    )
+
+
+def test_drag_ticks_do_not_rebuild_the_arguments(cfg: SystemConfig) -> None:
+    system = build(cfg, clock="sim", contact=False)
+    try:
+        tick = system.tick
+        hand = ScriptedDragConfig(reset=0.01, mode=0.05, press=0.1, push_start=0.3)
+        tick.script = DragScript(hand, system.bus.plant, system.rate_hz, enable=True)
+        system.loop.run(max_ticks=100)
+        assert tick.motion.mode == DRAG, tick.mode_result
+        calls = _count_args(tick)
+        before = tick._fz_args
+        system.loop.run(max_ticks=500)
+        assert tick.motion.mode == DRAG and tick.fused_ticks < 100
+        assert calls[0] == 0 and tick._fz_args is before
+        assert not tick._fz.stale()
+    finally:
+        system.close()
+
+
+def test_a_model_change_a_bus_code_and_a_new_path_rebuild_them(cfg: SystemConfig) -> None:
+    system = build(cfg, clock="sim", contact=False)
+    try:
+        tick = system.tick
+        calls = _count_args(tick)
+        system.loop.run(max_ticks=50)
+        tick.mode_request = MOVE  # the demo path (the motion's own: the arguments hold it)
+        system.loop.run(max_ticks=200)
+        assert tick._fz.path is tick.motion.path and tick._fz.path_ok
+        assert calls[0] == 0 and tick.fused_ticks > 150
+        handles = (tick.snapshot._native.handle, tick.feedforward._native.handle)
+        apply_payload(tick.feedforward.model, Payload(1.0, (0.0, 0.0, 0.05), (0.0,) * 6))
+        system.loop.run(max_ticks=1)  # the native models follow: new handles in the state
+        new = (tick.snapshot._native.handle, tick.feedforward._native.handle)
+        assert calls[0] == 1 and new[0] != handles[0] and new[1] != handles[1]
+        assert _handles_in_state(tick)
+        system.loop.run(max_ticks=100)
+        assert calls[0] == 1
+        tick.bus.op_enabled += 1  # the drive code the call compares with
+        assert tick._fz.stale()
+        tick.bus.op_enabled -= 1
+        assert not tick._fz.stale()
+        cats, tick.stop.categories = tick.stop.categories, tick.stop.categories.copy()
+        assert tick._fz.stale()  # section 4's compiled checks read the categories
+        tick.stop.categories = cats
+        path, tick.motion.path = tick.motion.path, None
+        assert tick._fz.stale()
+        tick.motion.path = path
+        assert not tick._fz.stale()
+    finally:
+        system.close()
