@@ -3,19 +3,22 @@
 :func:`fused_tick` runs on every tick, the only place sections 1-3 run: the drive read
 (``read_si``) and the dynamics snapshot and observers (``snapshot_native``,
 ``bank_update``) over the sample interval, a lost sample held and a stall integrated in
-one-cycle sub-steps. On a tick where nothing unusual can happen (the caller's ``quiet``) it
-goes on, in the order of :meth:`hofto_hw.runtime.tick.Tick.step` and through the same
-kernels (not copies of them): the tick's flags (``tick_flags``), the drive scan
-(``drive_scan``), the limit checks (``limits_quiet``), the collision monitor
-(``monitor_tick``), the friction learning (``friction_learn``), the demo path (``path_eval``),
-the feed-forward (``inverse_dynamics_native``), the command (``command_raw``) and the record
-fill (``fill_tick``). The flight recorder's push stays in Python (the tick's sink).
+one-cycle sub-steps. Then section 4, the one place the safety checks are sequenced
+(:func:`_section4`, on every tick; after a Python pre-safety step as the second call
+:func:`section4`): the bus (``drive_scan``), the finiteness checks, the tick's flags
+(``tick_flags``), the limits (``limits_scan``, ``limits_commit``), the collision monitor
+(``monitor_tick``) and the friction learning (``friction_learn``). The checks report into
+the tick state's fault array, never to the stop controller; Python turns it into reports
+(``Tick._report_faults``). On a tick where nothing unusual can happen (the caller's
+``quiet``) and section 4 found nothing it goes on through the same kernels (not copies of
+them): the demo path (``path_eval``), the feed-forward (``inverse_dynamics_native``), the
+command (``command_raw``) and the record fill (``fill_tick``). The flight recorder's push
+stays in Python (the tick's sink).
 
-When a part finds something that is not quiet, the kernel returns the stage where the tick's
-Python stages take over for the rest of the SAME tick (the :data:`STAGES` codes); it has not
-written anything they redo from there (every earlier stage is done as they would have done
-it, every later one untouched). tests/support/reference_tick.py runs those stages on every
-tick, sections 1-3 through the parts' own methods: the reference the tests compare with.
+Otherwise the kernel returns the stage where the tick's Python takes over for the rest of
+the SAME tick (the :data:`STAGES` codes); it has not written anything Python redoes from
+there. tests/support/reference_tick.py runs every stage in Python on every tick, sections
+1-4 through the parts' own methods: the reference the tests compare with.
 
 Arguments: few, so that numba's dispatch unboxes little on every call (each array argument
 costs ~0.1-0.3 µs, more with the caches cold after the exchange): the tick's one hot record

@@ -10,14 +10,20 @@ call for every observer it can fuse, each estimate written into its row of ``tau
 same numbers as each observer's own ``update``, which replay and the demo use).
 
 Sections 1-3 (the read, the snapshot and the observers, a lost sample or a stall included)
-run as ONE compiled call on every tick (:mod:`hofto_hw.runtime.fused`: the one place their
-arithmetic lives); on a quiet tick (nothing rare can happen: :attr:`Tick.busy` is 0 and no
-request, fault or bad status came in) the same call goes on through sections 4-7. When it
-stops early it answers a stage and the stage methods below finish the same tick from there:
-they handle what is rare (events, stop decisions, requests, reset, mode changes, enabling,
-brake release, drag, homing, teach). A configuration the compiled call cannot run is refused
-when the tick is built, in one line. The Python reference that runs the stages on every tick
-is tests/support/reference_tick.py; tests/hofto_hw/runtime/test_fused.py checks both tick by
+and section 4 (the safety checks, the collision monitor, the friction learning) run as ONE
+compiled call on every tick (:mod:`hofto_hw.runtime.fused`: the one place their arithmetic
+and their order live); the checks report into a fault array that :meth:`Tick._report_faults`
+turns into the stop controller's reports in the order they ran. The steps before section 4
+that have no compiled form (the drag's front, a homing step, the tool force) run between
+section 3 and a second compiled call of section 4; the drive scan's finding is named in
+Python (STO, brake) and section 4 resumes. On a quiet tick (nothing rare can happen:
+:attr:`Tick.busy` is 0 and no request, fault or bad status came in) on which section 4 found
+nothing the same call goes on through sections 5-7. When it stops early it answers a stage
+and the methods below finish the same tick from there: they handle what is rare (reports,
+events, stop decisions, requests, reset, mode changes, enabling, brake release, drag,
+homing, teach). A configuration the compiled call cannot run is refused when the tick is
+built, in one line. The Python reference that runs every stage on every tick is
+tests/support/reference_tick.py; tests/hofto_hw/runtime/test_fused.py checks both tick by
 tick, bit for bit.
 
 The :class:`Tick` owns every buffer it writes; the loop (hofto_hw/runtime/loop.py) calls
@@ -293,9 +299,9 @@ class Tick(TickEvents):
         """One cycle at loop time ``t`` [s], ``dt`` [s] since the last tick (the real one after a
         stall), ``missed`` deadlines before this tick, timings of the loop [µs].
 
-        Sections 1-3 run as one compiled call (:mod:`hofto_hw.runtime.fused`), and on a quiet
-        tick sections 4-7 too (the same kernels in the same order); it answers the stage where
-        these methods take over for the rest of the tick (what is rare)."""
+        Sections 1-4 run as one compiled call (:mod:`hofto_hw.runtime.fused`), and on a quiet
+        tick 5-7 too (the same kernels in the same order); it answers the stage where these
+        methods take over for the rest of the tick (what is rare)."""
         stop = self.stop
         self.tick += 1
         self.t = t
