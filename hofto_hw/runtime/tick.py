@@ -74,7 +74,6 @@ from hofto_hw.runtime.fused import (
     tick_state_dtype,
 )
 from hofto_hw.runtime.tick_events import MAX_STOPS, STANDSTILL, TickEvents
-from hofto_hw.runtime.tick_kernels import POWERED, tick_flags
 from safety.bus_health import BusHealth
 from safety.collision import CollisionLevels
 from safety.limits import LimitMonitor
@@ -252,15 +251,14 @@ class Tick(TickEvents):
         self._wrench = r["wrench"]
         self._wrench_set = False  # the record's wrench holds a drag estimate (else all NaN)
         self._qdd_rec = r["qdd_cmd"]
-        #: the record fill and the tick's flags: one compiled call each (recording/kernels.py,
-        #: tick_kernels.py); without the compiled path the same functions run as Python
+        #: the record fill: one compiled call (recording/kernels.py); without the compiled
+        #: path the same function runs as Python
         self.backend = jit.ready(backend, self._warm)
         self._fill = jit.compiled_or_python(fill_tick, self.backend)
-        self._flags = jit.compiled_or_python(tick_flags, self.backend)
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
-        # sections 1-3 of every tick, and the rest of a quiet one, as one compiled call
+        # sections 1-4 of every tick, and the rest of a quiet one, as one compiled call
         # (fused.py) on the hot record the parts were built on; a configuration it cannot run
         # is refused here, in one line
         self.busy = 0  # BUSY_* bits: the rare states now (0: the next tick may be quiet)
@@ -595,14 +593,12 @@ class Tick(TickEvents):
             self.stop.report(Fault.OVERRUN, -1, float(self.overrun_streak))
 
     def _warm(self) -> None:
-        """Compile the record fill (into a scratch record) and the flags call (on the tick's
-        own arrays: it copies motion.qdd into the record, as every tick does)."""
+        """Compile the record fill (into a scratch record)."""
         g, scratch = self.group, np.zeros(1, dtype=self.tick_rec.dtype)
         q_sent = self.q_sent.copy()
         fill_tick(
             scratch, g.sample, self.motion.q, self.tau_ext, q_sent, 0.0, 0, 0, 0, 0, 0.0, 0.0, 0.0
         )
-        tick_flags(self.tau_ext, g.states, POWERED, self.motion.qdd, self._qdd_rec)
 
     def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
         """The tick record of this tick (and q_sent = motion.q, the command just sent), then

@@ -24,6 +24,7 @@ from hofto_hw.runtime.tick_kernels import (
     judged,
     jump_gap,
     lerp,
+    tick_flags,
 )
 from safety.collision import COLLIDED, CONTACT
 
@@ -64,7 +65,7 @@ class ReferenceTick(Tick):
         good = self.bus.check(stop, status, g.fresh, g.states, self.err_codes, self.expect_enabled)
         lim = self.limits
         ok = snap.finite or (lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau))
-        flags = self._flags(self.tau_ext, g.states, POWERED, motion.qdd, self._qdd_rec)
+        flags = tick_flags(self.tau_ext, g.states, POWERED, motion.qdd, self._qdd_rec)
         if not flags & ESTIMATES_FINITE:
             for i in range(len(self.observers)):
                 ok &= lim.finite(stop, self.tau_ext[i])
