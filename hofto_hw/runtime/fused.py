@@ -93,8 +93,6 @@ STAGES = {SAFETY: "safety", BUS: "bus", CONTROL: "control", DONE: "done"}
 #: monitor's flags (joint column; CollisionLevels._report turns them into reports) and the
 #: tool-force check's value (reported when above its limit)
 K_MONITOR, K_TOOL = 200, 201
-#: :data:`fault_cap` entries at most per tick: the bus (1), the finiteness of q, qd, tau and
-#: of each estimate row (3 + k), the five limit classes, the monitor and the tool force
 _LIMIT_FAULTS = np.array([int(f) for f in LIMIT_FAULTS], dtype=np.int64)
 _DRIVE_CAUSES = int(DRIVE_CAUSES)
 _BUS_LOSS, _NON_FINITE = int(Fault.BUS_LOSS), int(Fault.NON_FINITE)
@@ -103,7 +101,9 @@ _MON_CONTACT = COLLIDED | CONTACT
 
 
 def fault_cap(k: int) -> int:
-    """Capacity of the fault array for k observer rows (every check reporting at once)."""
+    """Capacity of the fault array for k observer rows, every check reporting at once: the
+    bus (1), the finiteness of q, qd, tau and of each estimate row (3 + k), the five limit
+    classes, the monitor and the tool force."""
     return 1 + 3 + k + N_REPORTS + 2
 
 
