@@ -79,13 +79,9 @@ class BusHealth:
     ) -> bool:
         """One tick; returns whether this exchange brought good data."""
         good = status == 0 and fresh
-        if good:
-            self.streak = 0
-        else:
-            self.streak += 1
-            self.lost_total += 1
-            if self.streak >= self.lost_cycles:
-                stop.report(Fault.BUS_LOSS, -1, float(status))
+        if self.count(good):
+            stop.report(Fault.BUS_LOSS, -1, float(status))
+        if not good:
             return False  # states are stale: judge the drives on fresh data only
         j = self._scan(states, self.fault_min, self.op_enabled if expect_enabled else -1)
         if j >= 0:
@@ -95,6 +91,18 @@ class BusHealth:
             else:
                 self._disabled(stop, j - n, states)
         return True
+
+    def count(self, good: bool) -> bool:
+        """The loss streak after an exchange that brought ``good`` data or not; returns
+        whether BUS_LOSS is to be reported (``lost_cycles`` bad exchanges in a row). The
+        tick's compiled safety section reports it (hofto_hw/runtime/fused.py), :meth:`check`
+        here."""
+        if good:
+            self.streak = 0
+            return False
+        self.streak += 1
+        self.lost_total += 1
+        return self.streak >= self.lost_cycles
 
     def _fault(self, stop: StopController, j: int, error_codes: np.ndarray) -> None:
         code = int(error_codes[j])

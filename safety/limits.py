@@ -42,7 +42,7 @@ from safety.kernels import (
 from safety.stop import Fault, StopController
 
 #: the fault of each report column of the scan (safety.kernels REP_*), in report order
-_FAULTS = (
+LIMIT_FAULTS = (
     Fault.POSITION_LIMIT,
     Fault.VELOCITY_LIMIT,
     Fault.TORQUE_LIMIT,
@@ -222,7 +222,7 @@ class LimitMonitor:
         for c in range(N_REPORTS):  # rare: something to report, in class order
             j = int(w[REPORT_JOINT, c])
             if j >= 0:
-                stop.report(_FAULTS[c], j, float(w[REPORT_VALUE, c]))
+                stop.report(LIMIT_FAULTS[c], j, float(w[REPORT_VALUE, c]))
         self._commit(block, w, how)
 
 

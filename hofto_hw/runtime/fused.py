@@ -3,19 +3,22 @@
 :func:`fused_tick` runs on every tick, the only place sections 1-3 run: the drive read
 (``read_si``) and the dynamics snapshot and observers (``snapshot_native``,
 ``bank_update``) over the sample interval, a lost sample held and a stall integrated in
-one-cycle sub-steps. On a tick where nothing unusual can happen (the caller's ``quiet``) it
-goes on, in the order of :meth:`hofto_hw.runtime.tick.Tick.step` and through the same
-kernels (not copies of them): the tick's flags (``tick_flags``), the drive scan
-(``drive_scan``), the limit checks (``limits_quiet``), the collision monitor
-(``monitor_tick``), the friction learning (``friction_learn``), the demo path (``path_eval``),
-the feed-forward (``inverse_dynamics_native``), the command (``command_raw``) and the record
-fill (``fill_tick``). The flight recorder's push stays in Python (the tick's sink).
+one-cycle sub-steps. Then section 4, the one place the safety checks are sequenced
+(:func:`_section4`, on every tick; after a Python pre-safety step as the second call
+:func:`section4`): the bus (``drive_scan``), the finiteness checks, the tick's flags
+(``tick_flags``), the limits (``limits_scan``, ``limits_commit``), the collision monitor
+(``monitor_tick``) and the friction learning (``friction_learn``). The checks report into
+the tick state's fault array, never to the stop controller; Python turns it into reports
+(``Tick._report_faults``). On a tick where nothing unusual can happen (the caller's
+``quiet``) and section 4 found nothing it goes on through the same kernels (not copies of
+them): the demo path (``path_eval``), the feed-forward (``inverse_dynamics_native``), the
+command (``command_raw``) and the record fill (``fill_tick``). The flight recorder's push
+stays in Python (the tick's sink).
 
-When a part finds something that is not quiet, the kernel returns the stage where the tick's
-Python stages take over for the rest of the SAME tick (the :data:`STAGES` codes); it has not
-written anything they redo from there (every earlier stage is done as they would have done
-it, every later one untouched). tests/support/reference_tick.py runs those stages on every
-tick, sections 1-3 through the parts' own methods: the reference the tests compare with.
+Otherwise the kernel returns the stage where the tick's Python takes over for the rest of
+the SAME tick (the :data:`STAGES` codes); it has not written anything Python redoes from
+there. tests/support/reference_tick.py runs every stage in Python on every tick, sections
+1-4 through the parts' own methods: the reference the tests compare with.
 
 Arguments: few, so that numba's dispatch unboxes little on every call (each array argument
 costs ~0.1-0.3 µs, more with the caches cold after the exchange): the tick's one hot record
@@ -30,6 +33,7 @@ timings). Numba types each field by its dtype and shape; with numba's JIT switch
 
 from __future__ import annotations
 
+import math
 import sys
 from typing import TYPE_CHECKING, Any
 
@@ -37,12 +41,13 @@ import numpy as np
 
 from drivers.cia402.kernels import command_raw, read_si
 from hofto_hw import jit as K  # the project's jit: K.jit, K.available
-from hofto_hw.control.joint_motion import fade_in
+from hofto_hw.control.joint_motion import DRAG, fade_in
 from hofto_hw.control.kernels import friction_learn, path_eval
 from hofto_hw.model import kernels as MK
 from hofto_hw.model.kernels import inverse_dynamics_native, snapshot_native
 from hofto_hw.observers.kernels import bank_update
 from hofto_hw.recording.kernels import fill_tick
+from hofto_hw.runtime.tick_events import DRIVE_CAUSES
 from hofto_hw.runtime.tick_kernels import (
     ESTIMATES_FINITE,
     POWERED,
@@ -54,7 +59,17 @@ from hofto_hw.runtime.tick_kernels import (
     tick_flags,
 )
 from safety.collision.kernel import monitor_tick
-from safety.kernels import drive_scan, limits_quiet
+from safety.collision.state import COLLIDED, CONTACT, NONFINITE
+from safety.kernels import (
+    N_REPORTS,
+    REPORT_JOINT,
+    REPORT_VALUE,
+    drive_scan,
+    limits_commit,
+    limits_scan,
+)
+from safety.limits import LIMIT_FAULTS
+from safety.stop import N_FAULTS, Fault
 
 if TYPE_CHECKING:
     from hofto_hw.runtime.tick import Tick
@@ -67,12 +82,29 @@ _judged = K.jit(judged)
 _gap_steps = K.jit(gap_steps)
 _lerp = K.jit(lerp)
 
-#: stage codes (fused_tick's answer): where the tick's Python stages go on with this tick
-SAFETY = 1  # sections 1-3 done: the stages from the drag and the safety checks on (3b, 4)
-MONITOR = 2  # the monitor ran and flagged: its report, then the stages from there on
-CONTROL = 3  # section 4 done, nothing reported: the stages from the controller on (5)
+#: stage codes (the answer of fused_tick and of section4): where the tick's Python goes on
+SAFETY = 1  # sections 1-3 done; a pre-safety step is Python's (3b), then section4 (4)
+BUS = 2  # the drive scan found an axis: Python names its fault (STO? brake?), section4 resumes
+CONTROL = 3  # section 4 done, its findings in the fault array: their reports, then 4 (end)-7
 DONE = 4  # everything but the sink's push (and the diagnostics record)
-STAGES = {SAFETY: "safety", MONITOR: "monitor", CONTROL: "control", DONE: "done"}
+STAGES = {SAFETY: "safety", BUS: "bus", CONTROL: "control", DONE: "done"}
+
+#: kinds of the fault array's entries besides the Fault codes (< N_FAULTS): the collision
+#: monitor's flags (joint column; CollisionLevels._report turns them into reports) and the
+#: tool-force check's value (reported when above its limit)
+K_MONITOR, K_TOOL = 200, 201
+_LIMIT_FAULTS = np.array([int(f) for f in LIMIT_FAULTS], dtype=np.int64)
+_DRIVE_CAUSES = int(DRIVE_CAUSES)
+_BUS_LOSS, _NON_FINITE = int(Fault.BUS_LOSS), int(Fault.NON_FINITE)
+_COLLISION = int(Fault.COLLISION)
+_MON_CONTACT = COLLIDED | CONTACT
+
+
+def fault_cap(k: int) -> int:
+    """Capacity of the fault array for k observer rows, every check reporting at once: the
+    bus (1), the finiteness of q, qd, tau and of each estimate row (3 + k), the five limit
+    classes, the monitor and the tool force."""
+    return 1 + 3 + k + N_REPORTS + 2
 
 
 def tick_state_dtype(n: int, k: int) -> np.dtype:
@@ -113,10 +145,33 @@ def tick_state_dtype(n: int, k: int) -> np.dtype:
             ("l_tau", f8),
             ("l_min", f8),
             ("l_every", i8),
-            # what the fused call found on a tick it did not finish
-            ("finite", b1),  # the sample was finite
-            ("mflags", i8),  # the monitor's flags
+            ("cats", i8, (N_FAULTS,)),  # the stop category of each fault class (-1: none)
+            ("has_tool", b1),  # the collision monitor's tool-force check is configured
+            ("tool_limit", f8),  # its limit [N]
+            # section 4's inputs from Python (Tick._inputs, on a tick that is not quiet; a
+            # quiet one takes them as: nothing latched or active, good data, no bus loss)
+            ("s_latched", i8),  # the stop's latched, active and category, kept by section 4
+            ("s_active", i8),  # as its findings would change them (StopController.report)
+            ("s_cat", i8),
+            ("good", b1),  # the exchange brought good data (status ok and fresh)
+            ("bus_loss", b1),  # the bus's loss streak reached its limit (BusHealth.count)
+            ("status", i8),  # the exchange's status
+            ("enabling", b1),
+            ("homing", b1),  # a homing run by the loop (the drive moves the axis)
+            ("pre", b1),  # a pre-safety step is Python's (drag, homing, tool force)
+            ("use_mon", b1),  # the monitor judges tau_mon (dragging), not tau_ext
+            ("tool_value", f8),  # the tool force of this tick [N] (Python's pre-step)
+            # what section 4 found: the fault array (kind, joint, value) in the order the
+            # checks ran, the drive scan's axis, the monitor's flags; the sample was finite
+            ("nf", i8),
+            ("fk", i8, (fault_cap(k),)),
+            ("fj", i8, (fault_cap(k),)),
+            ("fv", f8, (fault_cap(k),)),
+            ("scan_j", i8),
+            ("finite", b1),
+            ("mflags", i8),
             ("tau_ext", f8, (k, n)),  # the observers' estimates [N·m]
+            ("tau_mon", f8, (k, n)),  # the monitor's input while dragging [N·m]
             ("prev", f8, (3, n)),  # last tick's q, qd, tau (a stall's interpolation start)
             ("interp", f8, (3, n)),  # one stall sub-step's q, qd, tau
             ("q_sent", f8, (n,)),  # position target of the last command [rad]
@@ -144,6 +199,152 @@ def _observe(
     terms = (so[:n], so[n + 2], sw[MK.F], so[n], so[n + 3], so[n + 1])
     bank_update(obs, terms, tau_ext, q, qd, tau, finite, dt)
     return finite
+
+
+@K.jit
+def _entry(ts: Any, kind: int, joint: int, value: float) -> None:
+    """Append (kind, joint, value) to the fault array (its capacity covers every check)."""
+    i = ts["nf"]
+    if i < ts["fk"].shape[0]:
+        ts["fk"][i], ts["fj"][i], ts["fv"][i] = kind, joint, value
+        ts["nf"] = i + 1
+
+
+@K.jit
+def _effect(ts: Any, fault: int) -> None:
+    """What StopController.report does to latched, active and category (the configured
+    categories), on section 4's copies: later checks of the same tick read them."""
+    bit = np.int64(1) << fault
+    ts["s_active"] = ts["s_active"] | bit
+    lat = ts["s_latched"]
+    if lat & bit == 0:
+        ts["s_latched"] = lat | bit
+        c = ts["cats"][fault]
+        cur = ts["s_cat"]
+        if c >= 0 and (cur < 0 or c < cur):
+            ts["s_cat"] = c
+
+
+@K.jit
+def _report(ts: Any, fault: int, joint: int, value: float) -> None:
+    """A fault found: its entry and its effect (StopController.report's, in order)."""
+    _entry(ts, fault, joint, value)
+    _effect(ts, fault)
+
+
+@K.jit
+def _finite(ts: Any, x: np.ndarray) -> bool:
+    """LimitMonitor.finite: NON_FINITE on the first non-finite entry of ``x`` (n,)."""
+    for j in range(x.shape[0]):
+        if not math.isfinite(x[j]):
+            _report(ts, _NON_FINITE, j, x[j])
+            return False
+    return True
+
+
+@K.jit
+def _quiet_inputs(ts: Any) -> None:
+    """Section 4's inputs on a quiet tick: nothing latched or active, good data."""
+    ts["s_latched"], ts["s_active"], ts["s_cat"] = 0, 0, -1
+    ts["good"], ts["bus_loss"], ts["enabling"], ts["homing"] = True, False, False, False
+
+
+@K.jit
+def _section4(h: Any, ts: Any, rec: np.ndarray, tick: int, dt: float, resume: bool) -> int:
+    """Section 4 of every tick, the one sequencing of the safety checks: the bus (loss streak,
+    drive scan), the finiteness of the sample and of the estimates, the limits, the collision
+    monitor (with the tool force) and the friction learning. Each finding goes into the fault
+    array in the order the checks ran, with its effect on the stop's state that later checks
+    read (``powered``, ``trusted``, the learning's "no stop"); Python turns the array into
+    stop.report calls (Tick._report_faults). Returns -1 when the drive scan found an axis
+    (its fault is Python's to name; then called again with ``resume``), else the entries."""
+    si, states = h["group_si"], h["group_states"]
+    sample = si[:3]
+    q, qd, tau = si[0], si[1], si[2]
+    good = ts["good"]
+    if not resume:
+        ts["nf"] = 0
+        if ts["bus_loss"]:
+            _report(ts, _BUS_LOSS, -1, float(ts["status"]))
+        if good:
+            j = drive_scan(states, ts["fault_min"], ts["op_enabled"] if ts["expect"] else -1)
+            if j >= 0:
+                ts["scan_j"] = j
+                return -1
+    # a finite snapshot sample means q, qd, tau are all finite (their sum is): the checks
+    # that name the joint run only when something is not (each of the three: no short cut)
+    ok = ts["finite"]
+    if not ok:
+        a, b, c = _finite(ts, q), _finite(ts, qd), _finite(ts, tau)
+        ok = a and b and c
+    tau_ext, ms = ts["tau_ext"], h["motion_state"]
+    # the estimates' finiteness, the power stage, motion.qdd into the record
+    flags = tick_flags(tau_ext, states, POWERED, ms["qdd"], rec[0]["qdd_cmd"])
+    if not flags & ESTIMATES_FINITE:
+        for i in range(tau_ext.shape[0]):
+            if not _finite(ts, tau_ext[i]):
+                ok = False
+    cat = ts["s_cat"]
+    powered = ts["expect"] and not ts["enabling"] and (cat == -1 or cat == 2)
+    since = ts["since_fresh"] + dt
+    ts["since_fresh"] = since
+    how = (1 if good else 0) + (2 if powered else 0)
+    w = h["lim_w"]
+    if limits_scan(sample, ts["q_sent"], w, how, _jump_gap(since, ts["period"])) > 0:
+        for c in range(N_REPORTS):  # in class order
+            if w[REPORT_JOINT, c] >= 0.0:
+                _report(ts, _LIMIT_FAULTS[c], int(w[REPORT_JOINT, c]), w[REPORT_VALUE, c])
+    limits_commit(sample, w, how)
+    if good:
+        ts["since_fresh"] = 0.0
+    # judged on trustworthy data only: fresh (a lost frame repeats the last sample) and from
+    # drives that report no fault (a failed encoder freezes its position); an observer with
+    # poles at a few hundred rad/s reads either as a contact; not while enabling or homing
+    trusted = ok and good and ts["s_active"] & _DRIVE_CAUSES == 0
+    trusted = trusted and not ts["enabling"] and not ts["homing"]
+    monitored = ts["has_coll"] and trusted and _judged(tick, ts["judge_from"], flags)
+    if monitored != ts["monitored"]:
+        ts["monitored"] = monitored
+        rec[0]["monitored"] = monitored  # replay judges the same ticks
+    ts["mflags"] = 0
+    if monitored:
+        # over the interval the observers integrated (DC: the drives' own; a stalled
+        # master's dt made the acceleration feature, and the threshold, too small)
+        obs_dt = ts["sample_dt"]
+        mdt = obs_dt if obs_dt > 0.0 else dt
+        est = ts["tau_mon"] if ts["use_mon"] else tau_ext
+        cr = h["coll_record"]
+        bbuf = h["coll_bbuf"].view(np.bool_)  # numba has no boolean subarray fields
+        f = monitor_tick(cr["fbuf"], bbuf, cr["first_tick"], est, qd, ms["qdd"], mdt, tick)
+        ts["mflags"] = f
+        if f != 0 or ts["was_contact"]:  # CollisionLevels._report's findings, in its order
+            _entry(ts, K_MONITOR, f, 0.0)
+            if f & NONFINITE:
+                _effect(ts, _NON_FINITE)
+            if f & COLLIDED:
+                _effect(ts, _COLLISION)
+        if ts["has_tool"]:
+            v = ts["tool_value"]
+            _entry(ts, K_TOOL, -1, v)
+            if v > ts["tool_limit"]:
+                _effect(ts, _COLLISION)
+        # the friction's error learned from contact-free motion (not dragging, no stop)
+        if ts["has_learn"] and ts["mode"] != DRAG and ts["s_cat"] == -1 and f & _MON_CONTACT == 0:
+            lrn = h["learn_record"]
+            friction_learn(
+                qd, tau_ext[ts["l_row"]], mdt, ts["l_vs"], ts["l_tau"], ts["l_min"],
+                ts["l_every"], lrn["S"], lrn["b"], lrn["st"],
+            )  # fmt: skip
+    return ts["nf"]
+
+
+@K.jit
+def section4(hot: np.ndarray, rec: np.ndarray, tick: int, dt: float, resume: bool) -> int:
+    """The tick's second compiled call (after a pre-safety step or the drive scan's finding,
+    both Python's): section 4 (:func:`_section4`) on the hot record ``hot`` (1,) and the tick
+    record ``rec`` (1,); returns BUS or CONTROL."""
+    h = hot[0]
+    return BUS if _section4(h, h["tick_state"], rec, tick, dt, resume) < 0 else CONTROL
 
 
 @K.jit
@@ -175,7 +376,7 @@ def fused_tick(
     # 1-2. the drive read (the exchange is the caller's)
     read_si(tx, si, states)
     sample = si[:3]
-    q, qd = si[0], si[1]
+    q = si[0]
     # 3. snapshot and observers over the sample interval: the bus's when it knows it (DC: the
     # drives sample at their own clock), else dt; held over a lost sample (sdt < 0: a repeated
     # sample integrated as new reads as a contact); after a stall the gap in one-cycle steps
@@ -203,43 +404,18 @@ def fused_tick(
     t_cmd = ts["t_cmd"] + cmd_dt
     ts["t_cmd"], ts["cmd_dt"] = t_cmd, cmd_dt
     ts["sample_dt"] = obs_dt
-    if not quiet or sdt < 0.0:
+    # 4. safety: here unless a pre-safety step is Python's (then its second call, section4)
+    if quiet:
+        _quiet_inputs(ts)
+    elif ts["pre"]:
         return SAFETY
-    finite = ts["finite"]
-    # 4. safety (good data: the caller checked the status; no fault latched or active)
-    expect = ts["expect"]
-    if drive_scan(states, ts["fault_min"], ts["op_enabled"] if expect else -1) >= 0:
-        return SAFETY
-    if not finite:
-        return SAFETY
+    ts["use_mon"] = False
+    if _section4(h, ts, rec, tick, dt, False) < 0:
+        return BUS
+    if not quiet or ts["nf"] > 0 or sdt < 0.0:
+        return CONTROL
     ms = h["motion_state"]
     mq, mqd, mqdd, q0 = ms["q"], ms["qd"], ms["qdd"], ms["q0"]
-    flags = tick_flags(tau_ext, states, POWERED, mqdd, rec[0]["qdd_cmd"])
-    if not flags & ESTIMATES_FINITE:
-        return SAFETY
-    gap = _jump_gap(ts["since_fresh"] + dt, period)
-    if limits_quiet(sample, q_sent, h["lim_w"], 1 + 2 * expect, gap) == 0:
-        return SAFETY
-    ts["since_fresh"] = 0.0  # good data (what bus.check and Tick._safety do on it)
-    monitored = ts["has_coll"] and _judged(tick, ts["judge_from"], flags)
-    if monitored != ts["monitored"]:
-        ts["monitored"] = monitored
-        rec[0]["monitored"] = monitored
-    ts["mflags"] = 0
-    if monitored:
-        mdt = obs_dt if obs_dt > 0.0 else dt
-        c = h["coll_record"]
-        bbuf = h["coll_bbuf"].view(np.bool_)  # numba has no boolean subarray fields: uint8 bytes
-        f = monitor_tick(c["fbuf"], bbuf, c["first_tick"], tau_ext, qd, mqdd, mdt, tick)
-        ts["mflags"] = f
-        if f != 0 or ts["was_contact"]:
-            return MONITOR
-        if ts["has_learn"]:
-            lrn = h["learn_record"]
-            friction_learn(
-                qd, tau_ext[ts["l_row"]], mdt, ts["l_vs"], ts["l_tau"], ts["l_min"],
-                ts["l_every"], lrn["S"], lrn["b"], lrn["st"],
-            )  # fmt: skip
     # 5. controller (HOLD at rest: nothing; MOVE: the demo path)
     kind = ts["kind"]
     if kind == OTHER:
@@ -380,8 +556,8 @@ class FusedTick:
         bank = t._bank
         if not (bank._any and bank._only) or bank._kernel is not bank_update:
             return "an observer is not fused in the bank: " + ", ".join(bank.rest)
-        if t._flags is not tick_flags or t._fill is not fill_tick:
-            return "the tick's flags and record fill run as Python"
+        if t._fill is not fill_tick:
+            return "the tick's record fill runs as Python"
         if not t.bus._use_kernel or not t.limits._use_kernel:
             return "the drive scan or the limit checks run their kernels as Python"
         c = t.collision
@@ -409,7 +585,11 @@ class FusedTick:
         st["fault_min"], st["op_enabled"] = t.bus.fault_min, t.bus.op_enabled
         st["snap_h"] = t.snapshot._native.handle  # type: ignore[union-attr]
         st["ff_h"] = t.feedforward._native.handle  # type: ignore[union-attr]
-        st["has_coll"] = t.collision is not None
+        c = t.collision
+        st["has_coll"] = c is not None
+        st["has_tool"] = c is not None and c._tool is not None
+        st["tool_limit"] = c.tool_force if st["has_tool"] else 0.0  # type: ignore[union-attr]
+        st["cats"] = t.stop.categories
         fr = _learning(t)
         st["has_learn"] = fr is not None
         if fr is not None:
@@ -477,3 +657,8 @@ class FusedTick:
         # a lost sample (sdt -1) on a tick that is not quiet: the read into the copy's rows,
         # then SAFETY; the argument types the tick passes (Tick.step)
         fused_tick(hot.copy(), obs, tx, rx, rec, 0.0, 0.0, -1.0, 0, 0.0, 0.0, False)
+        # section 4's own call on a copy whose drive states read "not expected enabled", no
+        # fault: the checks on the copy's zero sample, the tick record's copy written
+        copy = hot.copy()
+        copy[0]["tick_state"]["expect"] = False
+        section4(copy, rec.copy(), 0, 1e-3, False)

@@ -10,14 +10,20 @@ call for every observer it can fuse, each estimate written into its row of ``tau
 same numbers as each observer's own ``update``, which replay and the demo use).
 
 Sections 1-3 (the read, the snapshot and the observers, a lost sample or a stall included)
-run as ONE compiled call on every tick (:mod:`hofto_hw.runtime.fused`: the one place their
-arithmetic lives); on a quiet tick (nothing rare can happen: :attr:`Tick.busy` is 0 and no
-request, fault or bad status came in) the same call goes on through sections 4-7. When it
-stops early it answers a stage and the stage methods below finish the same tick from there:
-they handle what is rare (events, stop decisions, requests, reset, mode changes, enabling,
-brake release, drag, homing, teach). A configuration the compiled call cannot run is refused
-when the tick is built, in one line. The Python reference that runs the stages on every tick
-is tests/support/reference_tick.py; tests/hofto_hw/runtime/test_fused.py checks both tick by
+and section 4 (the safety checks, the collision monitor, the friction learning) run as ONE
+compiled call on every tick (:mod:`hofto_hw.runtime.fused`: the one place their arithmetic
+and their order live); the checks report into a fault array that :meth:`Tick._report_faults`
+turns into the stop controller's reports in the order they ran. The steps before section 4
+that have no compiled form (the drag's front, a homing step, the tool force) run between
+section 3 and a second compiled call of section 4; the drive scan's finding is named in
+Python (STO, brake) and section 4 resumes. On a quiet tick (nothing rare can happen:
+:attr:`Tick.busy` is 0 and no request, fault or bad status came in) on which section 4 found
+nothing the same call goes on through sections 5-7. When it stops early it answers a stage
+and the methods below finish the same tick from there: they handle what is rare (reports,
+events, stop decisions, requests, reset, mode changes, enabling, brake release, drag,
+homing, teach). A configuration the compiled call cannot run is refused when the tick is
+built, in one line. The Python reference that runs every stage on every tick is
+tests/support/reference_tick.py; tests/hofto_hw/runtime/test_fused.py checks both tick by
 tick, bit for bit.
 
 The :class:`Tick` owns every buffer it writes; the loop (hofto_hw/runtime/loop.py) calls
@@ -54,21 +60,22 @@ from hofto_hw.recording.record import (
     tick_dtype,
 )
 from hofto_hw.runtime.fused import (
-    CONTROL,
+    BUS,
     DONE,
     HOLD_STILL,
-    MONITOR,
+    K_MONITOR,
+    K_TOOL,
     MOVE_PATH,
     OTHER,
     SAFETY,
     FusedTick,
     fused_tick,
+    section4,
     tick_state_dtype,
 )
-from hofto_hw.runtime.tick_events import DRIVE_CAUSES, MAX_STOPS, STANDSTILL, TickEvents
-from hofto_hw.runtime.tick_kernels import ESTIMATES_FINITE, POWERED, judged, jump_gap, tick_flags
+from hofto_hw.runtime.tick_events import MAX_STOPS, STANDSTILL, TickEvents
 from safety.bus_health import BusHealth
-from safety.collision import COLLIDED, CONTACT, CollisionLevels
+from safety.collision import CollisionLevels
 from safety.limits import LimitMonitor
 from safety.stop import NO_CATEGORY, Fault, StopController
 
@@ -77,7 +84,6 @@ __all__ = ["STANDSTILL", "Tick"]
 _OE = int(State.OPERATION_ENABLED)
 _QSA = int(State.QUICK_STOP_ACTIVE)
 _FRA = int(State.FAULT_REACTION_ACTIVE)
-_COLLIDED_OR_CONTACT = COLLIDED | CONTACT  # the monitor's flags
 
 #: :attr:`Tick.busy` bits: a rare state that keeps the next tick off the quiet path (the
 #: compiled call stops after section 3 and the stages finish the tick). Computed in one place
@@ -90,6 +96,8 @@ BUSY_TEACH = 16  # a recording or a playback
 BUSY_NONFINITE = 32  # the last sample was not finite
 BUSY_REFERENCE = 64  # the feed-forward to evaluate again (a new reference or a new model)
 BUSY_TOOL_FORCE = 128  # the collision monitor's tool-force check (no compiled form)
+#: the rare states whose steps come before section 4 and are Python's (Tick._pre_safety)
+_PRE = BUSY_HOMING | BUSY_DRAG | BUSY_TOOL_FORCE
 
 
 class Tick(TickEvents):
@@ -239,25 +247,25 @@ class Tick(TickEvents):
         self.play_request = None  # Playback for the next REPLAY/MOVE_TO request
         self.playback = None  # the last Playback started (the summary's replay figures)
         self.script = None  # simulation script: .step(tick) at the start of every tick
-        self._tau_mon = np.zeros_like(self.tau_ext)  # the collision monitor's input
+        self._tau_mon = self.state["tau_mon"][0]  # the collision monitor's input (dragging)
         self._wrench = r["wrench"]
         self._wrench_set = False  # the record's wrench holds a drag estimate (else all NaN)
         self._qdd_rec = r["qdd_cmd"]
-        #: the record fill and the tick's flags: one compiled call each (recording/kernels.py,
-        #: tick_kernels.py); without the compiled path the same functions run as Python
+        #: the record fill: one compiled call (recording/kernels.py); without the compiled
+        #: path the same function runs as Python
         self.backend = jit.ready(backend, self._warm)
         self._fill = jit.compiled_or_python(fill_tick, self.backend)
-        self._flags = jit.compiled_or_python(tick_flags, self.backend)
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
-        # sections 1-3 of every tick, and the rest of a quiet one, as one compiled call
+        # sections 1-4 of every tick, and the rest of a quiet one, as one compiled call
         # (fused.py) on the hot record the parts were built on; a configuration it cannot run
         # is refused here, in one line
         self.busy = 0  # BUSY_* bits: the rare states now (0: the next tick may be quiet)
         self._fz_kind = OTHER
         self.fused_ticks = 0  # ticks the fused call finished
         self._fz_call = fused_tick
+        self._s4_call = section4  # section 4 alone (after a pre-safety step, the scan's find)
         self._fz = FusedTick(self)
         if not self._fz.ok:
             raise ConfigError(f"the tick cannot run compiled: {self._fz.why}")
@@ -290,9 +298,9 @@ class Tick(TickEvents):
         """One cycle at loop time ``t`` [s], ``dt`` [s] since the last tick (the real one after a
         stall), ``missed`` deadlines before this tick, timings of the loop [µs].
 
-        Sections 1-3 run as one compiled call (:mod:`hofto_hw.runtime.fused`), and on a quiet
-        tick sections 4-7 too (the same kernels in the same order); it answers the stage where
-        these methods take over for the rest of the tick (what is rare)."""
+        Sections 1-4 run as one compiled call (:mod:`hofto_hw.runtime.fused`), and on a quiet
+        tick 5-7 too (the same kernels in the same order); it answers the stage where these
+        methods take over for the rest of the tick (what is rare)."""
         stop = self.stop
         self.tick += 1
         self.t = t
@@ -308,21 +316,24 @@ class Tick(TickEvents):
         # 1. exchange
         status = self.group.exchange()
         # missed deadlines keep a tick quiet while the overrun streak stays short of its fault
-        # (counted after the call, as _requests would; _requests is skipped from CONTROL on)
+        # (counted in _requests, or after the call on a finished tick)
         quiet = self.busy == 0 and not (
             status or stop.active or self.stop_requested or self.log_failure
             or self.reset_requested or self.mode_request >= 0
             or self.overrun_streak + missed >= self.overrun_limit
         )  # fmt: skip
-        # 2. joint state, 3. snapshot and observers; on a quiet tick 4-7 (fused.py). It keeps
-        # t_cmd, sample_dt, since_fresh and the sample's finiteness in the tick's state; the
-        # state's other scalars are kept by _refresh
+        if quiet:
+            self.bus.streak = 0  # good data (what BusHealth.count does on it)
+        else:
+            self._inputs(status)  # what section 4 reads of the Python state
+        # 2. joint state, 3. snapshot and observers, 4. safety (unless a pre-safety step is
+        # Python's); on a quiet tick 5-7 (fused.py). It keeps t_cmd, sample_dt, since_fresh
+        # and the sample's finiteness in the tick's state; its other scalars _refresh keeps
         stage = self._fz_call(
             *self._fz_args, self.t, dt, self._transport.sample_dt, self.tick, wakeup_us,
             compute_us, quiet,
         )  # fmt: skip
         if stage == DONE:  # the quiet tick: its few attribute updates inline (it is hot)
-            self.bus.streak = 0  # good data, judged by the call (what bus.check does on it)
             if self._fz_kind == MOVE_PATH:  # the path wrote the reference
                 motion = self.motion
                 motion.version += 1
@@ -332,18 +343,14 @@ class Tick(TickEvents):
                 self._overrun(missed)  # counted only: the streak stays short of its fault
             self._push()  # 7. the record (filled by the fused call) into the sink
             return
-        if stage >= MONITOR:  # good data, judged by the call
-            self.bus.streak = 0
         self.snapshot.finite = bool(self.st["finite"])
-        if stage == CONTROL and (missed or self.overrun_streak):
-            self._overrun(missed)  # counted only: the streak stays short of its fault
         if stage == SAFETY:
-            self._drag_front()  # 3b. drag
-            self._safety(status, dt)  # 4. safety: decides, latches, picks the stop category
-        elif stage == MONITOR:
-            self._monitor_flagged(dt)  # the fused monitor flagged: its report, then on
-        if stage < CONTROL:
-            self._requests(missed)  # 4 (end): overruns, requests, reset, stop measurement
+            stage = self._pre_safety(dt)  # 3b. drag, homing, tool force; then 4. (compiled)
+        while stage == BUS:
+            self._bus_found()  # the axis the drive scan found: its fault named, then 4. on
+            stage = self._s4_call(self._fz_args[0], self._rec1, self.tick, dt, True)
+        self._report_faults()  # 4. what the checks found, as reports, in their order
+        self._requests(missed)  # 4 (end): overruns, requests, reset, stop measurement
         self._control()  # 5. controller and 6. command (acting the stop category)
         self._record(status, wakeup_us, compute_us)  # 7. the record into the sink
         self._refresh()
@@ -361,68 +368,70 @@ class Tick(TickEvents):
             self._wrench.fill(np.nan)
             self._wrench_set = False
 
-    def _safety(self, status: int, dt: float) -> None:
-        """Section 4 up to the collision monitor's decision (and the friction learning)."""
-        g, stop, motion, snap = self.group, self.stop, self.motion, self.snapshot
+    def _inputs(self, status: int) -> None:
+        """A tick that is not quiet, before the compiled call: what section 4 reads of the
+        Python state (:data:`~hofto_hw.runtime.fused.tick_state_dtype`'s inputs): the bus's
+        good data and loss streak (counted here, once per tick), whether a pre-safety step
+        runs, and :meth:`_state_in`."""
+        st = self.st
+        good = status == 0 and self.group.fresh
+        st["good"], st["status"] = good, status
+        st["bus_loss"] = self.bus.count(good)
+        st["pre"] = self.busy & _PRE != 0
+        self._state_in()
+
+    def _state_in(self) -> None:
+        """The stop's state (latched, active, category: section 4 keeps its copies as its
+        findings change them) and the tick's that section 4 reads; again after a pre-safety
+        step or a report Python made (the drive scan's)."""
+        st, stop, c = self.st, self.stop, self.collision
+        st["s_latched"], st["s_active"], st["s_cat"] = stop.latched, stop.active, stop.category
+        st["enabling"], st["homing"] = self.enabling, self.homing is not None
+        st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
+        st["mode"], st["was_contact"] = self.motion.mode, c is not None and c._was_contact
+
+    def _pre_safety(self, dt: float) -> int:
+        """Section 3b and the steps before section 4 that have no compiled form (rare): the
+        drag's front, a homing run's step (before the limit checks), the monitor's input while
+        dragging and the tool-force check; then section 4 as the second compiled call."""
+        self._drag_front()
         if self.homing is not None and self.homing.step(self):  # before the limit checks
             self.homing = None
             self.restart_estimates()
-        q, qd, tau = g.q, g.qd, g.tau
-        st = self.st
-        obs_dt = float(st["sample_dt"])
-        dragging = motion.mode == DRAG
-        good = self.bus.check(stop, status, g.fresh, g.states, self.err_codes, self.expect_enabled)
-        lim = self.limits
-        # a finite snapshot sample means q, qd, tau are all finite (their sum is): the per-array
-        # checks, which name the joint, run only when something is not
-        ok = snap.finite or (lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau))
-        # one call: the estimates' finiteness, the power stage, motion.qdd into the record
-        flags = self._flags(self.tau_ext, g.states, POWERED, motion.qdd, self._qdd_rec)
-        if not flags & ESTIMATES_FINITE:
-            for i in range(len(self.observers)):
-                ok &= lim.finite(stop, self.tau_ext[i])
-        powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
-        st["since_fresh"] += dt
-        gap = jump_gap(float(st["since_fresh"]), self.period)
-        lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap)
-        if good:
-            st["since_fresh"] = 0.0
-        # judged on trustworthy data only: fresh (a lost frame repeats the last sample) and
-        # from drives that report no fault (a failed encoder freezes its position); an
-        # observer with poles at a few hundred rad/s reads either as a contact
-        trusted = ok and good and not stop.active & DRIVE_CAUSES and not self.enabling
-        trusted = trusted and self.homing is None  # the drive moves a homing axis, not we
-        monitored = (
-            self.collision is not None and trusted and judged(self.tick, self._judge_from, flags)
-        )
-        if monitored != st["monitored"]:
-            monitored = bool(monitored)
-            st["monitored"] = monitored
-            self.tick_rec["monitored"] = monitored  # replay judges the same ticks
-        if monitored:
-            # only while the power stage is on (quick-stop ramps included): with it off the
-            # brakes act and the motor torque no longer explains the motion
-            # over the interval the observers integrated (DC: the drives' own; a stalled
-            # master's dt made the acceleration feature, and the threshold, too small)
-            mdt = obs_dt if obs_dt > 0.0 else dt
-            c = self.collision
-            est = self._monitored(True) if dragging else self.tau_ext
-            flags = c.update(stop, est, q, qd, motion.qdd, mdt)
-            self._learn_step(flags, mdt)
+        st, c = self.st, self.collision
+        est = self._monitored(True) if self.motion.mode == DRAG else self.tau_ext
+        st["use_mon"] = est is not self.tau_ext  # then it is _tau_mon (tau_mon's field)
+        if c is not None and c._tool is not None:
+            st["tool_value"] = c._tool.check(est, self.group.q)
+        self._state_in()
+        return self._s4_call(self._fz_args[0], self._rec1, self.tick, dt, False)
 
-    def _monitor_flagged(self, dt: float) -> None:
-        """The fused call's monitor flagged (or a contact was on): what CollisionLevels.update
-        does after its kernel, then the rest of :meth:`_safety`."""
-        flags = int(self.st["mflags"])
-        self.collision._report(self.stop, flags)  # type: ignore[union-attr]
-        obs_dt = float(self.st["sample_dt"])
-        self._learn_step(flags, obs_dt if obs_dt > 0.0 else dt)
+    def _bus_found(self) -> None:
+        """The drive scan found an axis faulted (j < n) or out of Operation enabled: its fault
+        named by the bus (STO, brake fault: the drive layer's readings) and reported."""
+        j, n, bus = int(self.st["scan_j"]), self.n, self.bus
+        if j < n:
+            bus._fault(self.stop, j, self.err_codes)
+        else:
+            bus._disabled(self.stop, j - n, self.group.states)
+        self._state_in()
 
-    def _learn_step(self, flags: int, mdt: float) -> None:
-        """The friction's error learned from contact-free motion (not dragging, no stop)."""
-        if self._learn is not None and self.motion.mode != DRAG and self.stop.category == -1:
-            if not flags & _COLLIDED_OR_CONTACT:  # contact-free motion: friction error
-                self._learn(self.group.qd, self._drag_est, mdt)
+    def _report_faults(self) -> None:
+        """Section 4's fault array as stop.report calls, in the order the checks ran (the
+        events, latch ticks and categories the checks' own reports would give)."""
+        st, stop = self.st, self.stop
+        for i in range(int(st["nf"])):
+            kind, j, v = int(st["fk"][i]), int(st["fj"][i]), float(st["fv"][i])
+            if kind == K_MONITOR:
+                self.collision._report(stop, j)  # type: ignore[union-attr]
+            elif kind == K_TOOL:
+                c = self.collision
+                c.tool_force_value = v  # type: ignore[union-attr]
+                if v > c.tool_force:  # type: ignore[union-attr,operator]
+                    stop.report(Fault.COLLISION, -1, v)
+            else:
+                stop.report(kind, j, v)
+        st["nf"] = 0
 
     def _requests(self, missed: int) -> None:
         """The end of section 4: overruns, requests from other threads, the stop's timing."""
@@ -589,14 +598,12 @@ class Tick(TickEvents):
             self.stop.report(Fault.OVERRUN, -1, float(self.overrun_streak))
 
     def _warm(self) -> None:
-        """Compile the record fill (into a scratch record) and the flags call (on the tick's
-        own arrays: it copies motion.qdd into the record, as every tick does)."""
+        """Compile the record fill (into a scratch record)."""
         g, scratch = self.group, np.zeros(1, dtype=self.tick_rec.dtype)
         q_sent = self.q_sent.copy()
         fill_tick(
             scratch, g.sample, self.motion.q, self.tau_ext, q_sent, 0.0, 0, 0, 0, 0, 0.0, 0.0, 0.0
         )
-        tick_flags(self.tau_ext, g.states, POWERED, self.motion.qdd, self._qdd_rec)
 
     def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
         """The tick record of this tick (and q_sent = motion.q, the command just sent), then

@@ -13,8 +13,20 @@ from typing import Any
 
 import numpy as np
 
+from hofto_hw.control.joint_motion import DRAG
 from hofto_hw.runtime.tick import Tick
-from hofto_hw.runtime.tick_kernels import command_dt, gap_steps, lerp
+from hofto_hw.runtime.tick_events import DRIVE_CAUSES
+from hofto_hw.runtime.tick_kernels import (
+    ESTIMATES_FINITE,
+    POWERED,
+    command_dt,
+    gap_steps,
+    judged,
+    jump_gap,
+    lerp,
+    tick_flags,
+)
+from safety.collision import COLLIDED, CONTACT
 
 
 class ReferenceTick(Tick):
@@ -38,6 +50,47 @@ class ReferenceTick(Tick):
 
     def _refresh(self, rebuild: bool = True) -> None:
         """Nothing to keep for a compiled call (the reference never takes it)."""
+
+    def _safety(self, status: int, dt: float) -> None:
+        """Section 4 through the parts' own methods, each reporting to the stop controller as
+        it finds (production: fused._section4's fault array, Tick._report_faults)."""
+        g, stop, motion, snap = self.group, self.stop, self.motion, self.snapshot
+        if self.homing is not None and self.homing.step(self):  # before the limit checks
+            self.homing = None
+            self.restart_estimates()
+        q, qd, tau = g.q, g.qd, g.tau
+        st = self.st
+        obs_dt = float(st["sample_dt"])
+        dragging = motion.mode == DRAG
+        good = self.bus.check(stop, status, g.fresh, g.states, self.err_codes, self.expect_enabled)
+        lim = self.limits
+        ok = snap.finite or (lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau))
+        flags = tick_flags(self.tau_ext, g.states, POWERED, motion.qdd, self._qdd_rec)
+        if not flags & ESTIMATES_FINITE:
+            for i in range(len(self.observers)):
+                ok &= lim.finite(stop, self.tau_ext[i])
+        powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
+        st["since_fresh"] += dt
+        gap = jump_gap(float(st["since_fresh"]), self.period)
+        lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap)
+        if good:
+            st["since_fresh"] = 0.0
+        trusted = ok and good and not stop.active & DRIVE_CAUSES and not self.enabling
+        trusted = trusted and self.homing is None
+        monitored = (
+            self.collision is not None and trusted and judged(self.tick, self._judge_from, flags)
+        )
+        if monitored != st["monitored"]:
+            monitored = bool(monitored)
+            st["monitored"] = monitored
+            self.tick_rec["monitored"] = monitored
+        if monitored:
+            mdt = obs_dt if obs_dt > 0.0 else dt
+            est = self._monitored(True) if dragging else self.tau_ext
+            flags = self.collision.update(stop, est, q, qd, motion.qdd, mdt)
+            if self._learn is not None and motion.mode != DRAG and stop.category == -1:
+                if not flags & (COLLIDED | CONTACT):  # contact-free motion: friction error
+                    self._learn(g.qd, self._drag_est, mdt)
 
     def _front(self, dt: float) -> None:
         """Sections 2-3: the joint state in SI, the snapshot and the observers over the sample

@@ -24,8 +24,12 @@ from hofto_hw.runtime import tick_events
 from hofto_hw.runtime.compose import build
 from hofto_hw.runtime.fused import DONE, FusedTick, fused_tick
 from hofto_hw.runtime.tick import Tick
+from safety.stop import Fault
 from tests.support.reference_tick import ReferenceTick, use_reference
 
+#: the tool force's limit [N]: over the move's own (17.75 N at most), under the obstacle's push
+#: the tick before the monitor's collision (18.16 N at tick 3004): the tool force reports it
+TOOL_FORCE = 18.0
 CONFIG = Path(__file__).resolve().parents[3] / "configs" / "er3a.yaml"
 
 pytestmark = pytest.mark.skipif(not jit.available(), reason=jit.unavailable_reason())
@@ -57,6 +61,7 @@ def _state(system: Any) -> list[Any]:
         (t.motion.version, t._ff_version, t.motion.mode, t.expect_enabled, t.enabling),
         (t.stop.latched, t.stop.category, t.stop.events.count, t.snapshot.finite),
         (t.n_stops, t.reset_result, t.mode_result, t.overruns, t.overrun_streak),
+        t.stop.events.kind.tobytes() + t.stop.events.value.tobytes(),
     ]
     for obs in t.observers:
         out += _arrays(obs)
@@ -66,13 +71,15 @@ def _state(system: Any) -> list[Any]:
     if t.collision is not None:
         s = t.collision.state
         out += [s.fbuf.tobytes(), s.bbuf.tobytes(), s.first_tick.tobytes()]
+        out.append((t.collision.tool_force_value, t.collision._was_contact))
     if t.drag is not None and t.drag.friction is not None:
         out += _arrays(t.drag.friction)
     return out
 
 
-def _pair(contact: bool) -> tuple[Any, Any]:
+def _pair(contact: bool, tool_force: float | None = None) -> tuple[Any, Any]:
     cfg = load_config(CONFIG)
+    cfg.safety.collision.tool_force = tool_force
     fused, reference = (
         build(cfg, clock="sim", contact=contact),
         build(cfg, clock="sim", contact=contact),
@@ -233,6 +240,31 @@ def test_faults_resets_and_mode_changes_are_the_reference_tick_by_tick() -> None
         # changed run the reference; the rest the fused call
         assert t.fused_ticks > 2800, t.fused_ticks
         assert reference.tick.fused_ticks == 0
+    finally:
+        fused.close()
+        reference.close()
+
+
+def test_the_tool_force_check_is_the_reference_tick_by_tick() -> None:
+    """The collision monitor's tool-force limit configured (no compiled form: a Python step
+    before section 4 on every tick, then section 4's own compiled call): the move into the
+    main job's obstacle, tick by tick, the tool force's COLLISION report included."""
+    fused, reference = _pair(contact=True, tool_force=TOOL_FORCE)
+    try:
+
+        def event(k: int, period: float) -> float:
+            if k == 50:
+                for s in (fused, reference):
+                    s.tick.mode_request = MOVE
+            return period
+
+        _lockstep(fused, reference, 3400, event)
+        t = fused.tick
+        assert t.fused_ticks == 0  # never quiet: the tool force is Python's every tick
+        assert t.collision.tool_force_value > 0.0
+        ev = t.stop.events
+        tool = [i for i in range(ev.count) if ev.kind[i] == Fault.COLLISION and ev.joint[i] < 0]
+        assert tool, "the tool force did not report the contact"
     finally:
         fused.close()
         reference.close()

@@ -10,6 +10,7 @@ from hofto_hw.config.models import SystemConfig
 from hofto_hw.control.joint_motion import MOVE
 from hofto_hw.runtime.compose import build
 from safety.stop import Fault
+from tests.support.reference_tick import use_reference
 
 
 def test_a_100_ms_stall_in_hold_is_no_contact(cfg: SystemConfig) -> None:
@@ -63,32 +64,46 @@ def test_the_monitor_judges_over_the_interval_the_observers_integrated(
     """A DC bus whose drives sampled one cycle apart while the master stalled 50 cycles: the
     collision monitor (its acceleration feature, hence the threshold) and the drag's friction
     learning advance by the drives' interval, as the observers do, not by the master's dt
-    (a 50x too small acceleration estimate dropped the threshold while the arm accelerated)."""
-    system = build(cfg, clock="sim", contact=False)
-    tick, transport = system.tick, system.group.transport
-    assert tick.collision is not None and tick.drag is not None
-    tick.mode_request = MOVE
-    system.loop.run(max_ticks=400)
-    seen: list[float] = []
-    learned: list[float] = []
-    update, learn = tick.collision.update, tick.drag.learn
+    (a 50x too small acceleration estimate dropped the threshold while the arm accelerated).
+    Seen on the reference tick's monitor call; the compiled tick's monitor and learning keep
+    the same state bit for bit."""
+    fused, reference = (build(cfg, clock="sim", contact=False) for _ in range(2))
+    use_reference(reference)
+    try:
+        tick = reference.tick
+        assert tick.collision is not None and tick.drag is not None
+        for s in (fused, reference):
+            s.tick.mode_request = MOVE
+            s.loop.run(max_ticks=400)
+        seen: list[float] = []
+        learned: list[float] = []
+        update, learn = tick.collision.update, tick._learn
 
-    def spy_update(stop, tau_ext, q, qd, qdd, dt):  # type: ignore[no-untyped-def]
-        seen.append(dt)
-        return update(stop, tau_ext, q, qd, qdd, dt)
+        def spy_update(stop, tau_ext, q, qd, qdd, dt):  # type: ignore[no-untyped-def]
+            seen.append(dt)
+            return update(stop, tau_ext, q, qd, qdd, dt)
 
-    def spy_learn(qd, tau_ext, dt):  # type: ignore[no-untyped-def]
-        learned.append(dt)
-        return learn(qd, tau_ext, dt)
+        def spy_learn(qd, tau_ext, dt):  # type: ignore[no-untyped-def]
+            learned.append(dt)
+            return learn(qd, tau_ext, dt)
 
-    tick.collision.update = spy_update  # type: ignore[method-assign]
-    tick.drag.learn = spy_learn  # type: ignore[method-assign]
-    transport.sample_dt = tick.period  # DC: the drives sampled one cycle after the last
-    system.clock.stall(50)
-    system.loop.run(max_ticks=1)
-    assert seen == [tick.period], seen
-    assert learned in ([], [tick.period]), learned
-    transport.sample_dt = 0.0  # no DC: the loop's dt, as before
-    system.clock.stall(9)
-    system.loop.run(max_ticks=1)
-    assert abs(seen[-1] - 10 * tick.period) < 1e-9, seen
+        tick.collision.update = spy_update  # type: ignore[method-assign]
+        tick._learn = spy_learn
+
+        def stalled(sample_dt: float, cycles: int) -> None:
+            for s in (fused, reference):
+                s.group.transport.sample_dt = sample_dt
+                s.clock.stall(cycles)
+                s.loop.run(max_ticks=1)
+            a, b = fused.tick, tick
+            assert a.collision.state.fbuf.tobytes() == b.collision.state.fbuf.tobytes()
+            assert a.drag.friction.record.tobytes() == b.drag.friction.record.tobytes()
+
+        stalled(tick.period, 50)  # DC: the drives sampled one cycle after the last
+        assert seen == [tick.period], seen
+        assert learned in ([], [tick.period]), learned
+        stalled(0.0, 9)  # no DC: the loop's dt, as before
+        assert abs(seen[-1] - 10 * tick.period) < 1e-9, seen
+    finally:
+        fused.close()
+        reference.close()
