@@ -57,6 +57,16 @@ N_FAULTS = len(Fault)
 NO_CATEGORY = -1
 
 
+def commanded(current: int, cat: int) -> int:
+    """The stop category commanded once a fault of category ``cat`` latches while ``current``
+    is commanded (NO_CATEGORY: none; ``cat`` NO_CATEGORY: report only): the stronger, i.e.
+    the lower, of the two. The one place of this rule: StopController.report and the tick's
+    compiled section 4 (hofto_hw/runtime/fused.py, its copy of the stop's state) call it."""
+    if cat == NO_CATEGORY or (current != NO_CATEGORY and current <= cat):
+        return current
+    return cat
+
+
 def kind_name(kind: int) -> str:
     """Name of an event kind code (fault class or other event)."""
     return EVENT_NAMES.get(int(kind), f"kind {int(kind)}")
@@ -136,13 +146,9 @@ class StopController:
         self.latched |= bit
         cat = self._cat[fault]
         self.events.add(self.tick, fault, joint, cat, value)
-        if cat == NO_CATEGORY:
-            return
-        if self.category == NO_CATEGORY:
+        if cat != NO_CATEGORY and self.category == NO_CATEGORY:
             self.first_tick = self.tick
-            self.category = cat
-        elif cat < self.category:
-            self.category = cat
+        self.category = commanded(self.category, cat)
 
     def note(self, kind: int, joint: int = -1, value: float = 0.0) -> None:
         """Record a non-fault event (contact, standstill) this tick."""

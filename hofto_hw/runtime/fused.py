@@ -69,7 +69,7 @@ from safety.kernels import (
     limits_scan,
 )
 from safety.limits import LIMIT_FAULTS
-from safety.stop import N_FAULTS, Fault
+from safety.stop import N_FAULTS, Fault, commanded
 
 if TYPE_CHECKING:
     from hofto_hw.runtime.tick import Tick
@@ -80,6 +80,7 @@ _command_dt = K.jit(command_dt)
 _jump_gap = K.jit(jump_gap)
 _judged = K.jit(judged)
 _gap_steps = K.jit(gap_steps)
+_commanded = K.jit(commanded)
 _lerp = K.jit(lerp)
 
 #: stage codes (the answer of fused_tick and of section4): where the tick's Python goes on
@@ -219,10 +220,7 @@ def _effect(ts: Any, fault: int) -> None:
     lat = ts["s_latched"]
     if lat & bit == 0:
         ts["s_latched"] = lat | bit
-        c = ts["cats"][fault]
-        cur = ts["s_cat"]
-        if c >= 0 and (cur < 0 or c < cur):
-            ts["s_cat"] = c
+        ts["s_cat"] = _commanded(ts["s_cat"], ts["cats"][fault])
 
 
 @K.jit

@@ -389,6 +389,7 @@ class Tick(TickEvents):
         st["enabling"], st["homing"] = self.enabling, self.homing is not None
         st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
         st["mode"], st["was_contact"] = self.motion.mode, c is not None and c._was_contact
+        self._slow = ()  # _refresh writes its slow scalars again (they were written here)
 
     def _pre_safety(self, dt: float) -> int:
         """Section 3b and the steps before section 4 that have no compiled form (rare): the
