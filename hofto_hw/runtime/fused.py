@@ -10,10 +10,12 @@ one-cycle sub-steps. Then section 4, the one place the safety checks are sequenc
 (``monitor_tick``) and the friction learning (``friction_learn``). The checks report into
 the tick state's fault array, never to the stop controller; Python turns it into reports
 (``Tick._report_faults``). On a tick where nothing unusual can happen (the caller's
-``quiet``) and section 4 found nothing it goes on through the same kernels (not copies of
-them): the demo path (``path_eval``), the feed-forward (``inverse_dynamics_native``), the
-command (``command_raw``) and the record fill (``fill_tick``). The flight recorder's push
-stays in Python (the tick's sink).
+``quiet``) and section 4 found nothing it goes on into sections 5-7 (:func:`_section57`,
+their one sequencing; on every other tick the third call :func:`section57`, after the
+Python stages' rare decisions): the demo path (``path_eval``), the feed-forward
+(``inverse_dynamics_native``), the hand's torque on it, the command (``command_raw``) and
+the record fill (``fill_tick``). The flight recorder's push stays in Python (the tick's
+sink).
 
 Otherwise the kernel returns the stage where the tick's Python takes over for the rest of
 the SAME tick (the :data:`STAGES` codes); it has not written anything Python redoes from
@@ -84,6 +86,7 @@ _commanded = K.jit(commanded)
 _lerp = K.jit(lerp)
 
 #: stage codes (the answer of fused_tick and of section4): where the tick's Python goes on
+#: (after CONTROL: its stages, then section57)
 SAFETY = 1  # sections 1-3 done; a pre-safety step is Python's (3b), then section4 (4)
 BUS = 2  # the drive scan found an axis: Python names its fault (STO? brake?), section4 resumes
 CONTROL = 3  # section 4 done, its findings in the fault array: their reports, then 4 (end)-7

@@ -16,12 +16,16 @@ and their order live); the checks report into a fault array that :meth:`Tick._re
 turns into the stop controller's reports in the order they ran. The steps before section 4
 that have no compiled form (the drag's front, a homing step, the tool force) run between
 section 3 and a second compiled call of section 4; the drive scan's finding is named in
-Python (STO, brake) and section 4 resumes. On a quiet tick (nothing rare can happen:
-:attr:`Tick.busy` is 0 and no request, fault or bad status came in) on which section 4 found
-nothing the same call goes on through sections 5-7. When it stops early it answers a stage
-and the methods below finish the same tick from there: they handle what is rare (reports,
-events, stop decisions, requests, reset, mode changes, enabling, brake release, drag,
-homing, teach). A configuration the compiled call cannot run is refused when the tick is
+Python (STO, brake) and section 4 resumes. Sections 5-7 (the demo path, the feed-forward,
+the command, the record fill) are sequenced once too (``fused._section57``): on a quiet tick
+(nothing rare can happen: :attr:`Tick.busy` is 0 and no request, fault or bad status came
+in) on which section 4 found nothing the same call goes on into them. When it stops early it
+answers a stage and the methods below finish the same tick from there: they handle what is
+rare (reports, events, stop decisions, requests, reset, mode changes, enabling, brake
+release, drag, homing, teach; :meth:`Tick._control` writes the motion's reference and says
+which steps of sections 5-7 the tick takes), then a last compiled call
+(``fused.section57``) runs sections 5-7. A configuration the compiled call cannot run is
+refused when the tick is
 built, in one line. The Python reference that runs every stage on every tick is
 tests/support/reference_tick.py; tests/hofto_hw/runtime/test_fused.py checks both tick by
 tick, bit for bit.
