@@ -615,8 +615,8 @@ class FusedTick:
         bank = t._bank
         if not (bank._any and bank._only) or bank._kernel is not bank_update:
             return "an observer is not fused in the bank: " + ", ".join(bank.rest)
-        if t._fill is not fill_tick:
-            return "the tick's record fill runs as Python"
+        if t.backend != "numba":
+            return "the tick's kernels run as Python (backend python)"
         if not t.bus._use_kernel or not t.limits._use_kernel:
             return "the drive scan or the limit checks run their kernels as Python"
         c = t.collision

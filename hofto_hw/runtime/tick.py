@@ -55,7 +55,6 @@ from hofto_hw.model.data import ModelData
 from hofto_hw.model.snapshot import DynamicsSnapshot
 from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.observers.base import Observer
-from hofto_hw.recording.kernels import fill_tick
 from hofto_hw.recording.record import (
     DIAG_DTYPE,
     EVENT_DTYPE,
@@ -260,10 +259,9 @@ class Tick(TickEvents):
         self._wrench = r["wrench"]
         self._wrench_set = False  # the record's wrench holds a drag estimate (else all NaN)
         self._qdd_rec = r["qdd_cmd"]
-        #: the record fill: one compiled call (recording/kernels.py); without the compiled
-        #: path the same function runs as Python
-        self.backend = jit.ready(backend, self._warm)
-        self._fill = jit.compiled_or_python(fill_tick, self.backend)
+        #: the kernels' backend (the compiled calls below compile and warm every kernel;
+        #: python: the tick is refused)
+        self.backend = jit.resolve(backend)
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
@@ -626,14 +624,6 @@ class Tick(TickEvents):
             self.overrun_streak = 0
         if self.overrun_streak >= self.overrun_limit:
             self.stop.report(Fault.OVERRUN, -1, float(self.overrun_streak))
-
-    def _warm(self) -> None:
-        """Compile the record fill (into a scratch record)."""
-        g, scratch = self.group, np.zeros(1, dtype=self.tick_rec.dtype)
-        q_sent = self.q_sent.copy()
-        fill_tick(
-            scratch, g.sample, self.motion.q, self.tau_ext, q_sent, 0.0, 0, 0, 0, 0, 0.0, 0.0, 0.0
-        )
 
     def _push(self) -> None:
         """The filled tick record into the sink, with the new events (and every

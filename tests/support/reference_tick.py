@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from hofto_hw.control.joint_motion import DRAG
+from hofto_hw.recording.kernels import fill_tick
 from hofto_hw.runtime.tick import Tick
 from hofto_hw.runtime.tick_events import DRIVE_CAUSES
 from hofto_hw.runtime.tick_kernels import (
@@ -98,7 +99,7 @@ class ReferenceTick(Tick):
         record fill (production: fused._section57), then into the sink."""
         m = self.motion
         # the casts keep the kernel on its warmed signature whatever numbers callers pass
-        self._fill(
+        fill_tick(
             self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t), self.tick,
             m.mode, self.stop.latched, int(status), float(wakeup_us), float(compute_us),
             float(self.st["sample_dt"]),
