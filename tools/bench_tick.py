@@ -11,8 +11,8 @@ but is the bus's work, not the controller's: it is timed separately and taken of
 objects (bus.exchange, tick.step; for the parts also group.read, snapshot.compute, each
 observer's update_snapshot, the tick's observer bank's update — "observers", the one call
 that updates them all; "hofto_plus_momentum" is its time when it fuses both —, the
-collision monitor's update, group.command_position, feedforward.inverse_dynamics); the
-tick's own code runs unchanged.
+collision monitor's update, the compiled sections 5-7 of a tick that is not quiet, the
+record's push); the tick's own code runs unchanged.
 
 Figures (µs; median / p99 / p99.9):
 - floor: the pinocchio calls the tick's estimators need (ABA, CRBA, Coriolis matrix,
@@ -153,11 +153,13 @@ class Probe:
                 "observers": (self.bank, "update"),
                 "monitor": (tick.collision, "update"),
                 "feedforward": (tick.feedforward, "inverse_dynamics"),
-                "command": (system.group, "command_position"),
+                # a tick that is not quiet: sections 5-7's compiled call (the path, the
+                # feed-forward, the command, the record fill: fused.section57)
+                "command": (tick, "_s57_call"),
                 "bus": (tick.bus, "check"),
                 "limits": (tick.limits, "check"),
                 "motion": (tick.motion, "update"),
-                "record": (tick, "_record"),
+                "record": (tick, "_push"),  # the filled record into the sink
             }
             for i, name in enumerate(self.names):
                 target, method = targets[name]

@@ -10,10 +10,12 @@ one-cycle sub-steps. Then section 4, the one place the safety checks are sequenc
 (``monitor_tick``) and the friction learning (``friction_learn``). The checks report into
 the tick state's fault array, never to the stop controller; Python turns it into reports
 (``Tick._report_faults``). On a tick where nothing unusual can happen (the caller's
-``quiet``) and section 4 found nothing it goes on through the same kernels (not copies of
-them): the demo path (``path_eval``), the feed-forward (``inverse_dynamics_native``), the
-command (``command_raw``) and the record fill (``fill_tick``). The flight recorder's push
-stays in Python (the tick's sink).
+``quiet``) and section 4 found nothing it goes on into sections 5-7 (:func:`_section57`,
+their one sequencing; on every other tick the third call :func:`section57`, after the
+Python stages' rare decisions): the demo path (``path_eval``), the feed-forward
+(``inverse_dynamics_native``), the hand's torque on it, the command (``command_raw``) and
+the record fill (``fill_tick``). The flight recorder's push stays in Python (the tick's
+sink).
 
 Otherwise the kernel returns the stage where the tick's Python takes over for the rest of
 the SAME tick (the :data:`STAGES` codes); it has not written anything Python redoes from
@@ -84,6 +86,7 @@ _commanded = K.jit(commanded)
 _lerp = K.jit(lerp)
 
 #: stage codes (the answer of fused_tick and of section4): where the tick's Python goes on
+#: (after CONTROL: its stages, then section57)
 SAFETY = 1  # sections 1-3 done; a pre-safety step is Python's (3b), then section4 (4)
 BUS = 2  # the drive scan found an axis: Python names its fault (STO? brake?), section4 resumes
 CONTROL = 3  # section 4 done, its findings in the fault array: their reports, then 4 (end)-7
@@ -177,6 +180,7 @@ def tick_state_dtype(n: int, k: int) -> np.dtype:
             ("interp", f8, (3, n)),  # one stall sub-step's q, qd, tau
             ("q_sent", f8, (n,)),  # position target of the last command [rad]
             ("tau_ff", f8, (n,)),  # the feed-forward torque [N·m]
+            ("tau_off", f8, (n,)),  # the hand's torque while dragging (S_OFF) [N·m]
         ],
         align=True,
     )
@@ -345,6 +349,78 @@ def section4(hot: np.ndarray, rec: np.ndarray, tick: int, dt: float, resume: boo
     return BUS if _section4(h, h["tick_state"], rec, tick, dt, resume) < 0 else CONTROL
 
 
+#: :func:`_section57`'s ``what`` bits: the steps of sections 5-6 this tick takes
+S_PATH = 1  # 5. the demo path at t_cmd - t0 (MOVE on the compiled path)
+S_FF = 2  # 5. the feed-forward of the reference (a new reference or a new model)
+S_OFF = 4  # 5. the hand's torque (tau_off, dragging) added to the feed-forward
+
+
+@K.jit
+def _section57(
+    h: Any,
+    ts: Any,
+    rx: np.ndarray,
+    rec: np.ndarray,
+    t_loop: float,
+    tick: int,
+    what: int,
+    mode: int,
+    latched: int,
+    status: int,
+    wake: float,
+    comp: float,
+) -> None:
+    """Sections 5-7 of every tick, their one sequencing, after Python's rare decisions (the
+    stop category's drive commands, mode changes, enabling, the drag's follow, playback, the
+    ramp, teach recording: they wrote the motion's reference): the demo path (``what`` &
+    S_PATH), the feed-forward (S_FF) and the hand's torque on it (S_OFF), the command (CSP
+    with the torque offset) and the tick record (q_sent = the command just sent) with the
+    motion's ``mode``, the stop's ``latched`` faults, the exchange's ``status`` and the
+    loop's timings [µs]. The sink's push is Python's."""
+    ms = h["motion_state"]
+    mq, mqd, mqdd = ms["q"], ms["qd"], ms["qdd"]
+    tau_ff = ts["tau_ff"]
+    if what & S_PATH:
+        t = ts["t_cmd"] - ts["t0"]
+        # the exponent 2 from the state: the compiler cannot turn libm's pow into x·x
+        b, bd, bdd = _fade_in(t, ts["ramp"], ts["two"])
+        path_eval(h["path_k"], t, b, bd, bdd, ms["q0"], mq, mqd, mqdd)
+    if what & S_FF:
+        inverse_dynamics_native(mq, mqd, mqdd, h["ff_W"], tau_ff, ts["ff_h"])
+    if what & S_OFF:
+        off = ts["tau_off"]
+        for j in range(tau_ff.shape[0]):
+            tau_ff[j] += off[j]
+    # 6. command (CSP with the torque offset)
+    command_raw(mq, tau_ff, rx, h["group_si"], 2)
+    # 7. the record (and q_sent = the command just sent)
+    fill_tick(
+        rec, h["group_si"][:3], mq, ts["tau_ext"], ts["q_sent"], t_loop, tick, mode,
+        np.int64(latched), np.int64(status), wake, comp, ts["sample_dt"],
+    )  # fmt: skip
+
+
+@K.jit
+def section57(
+    hot: np.ndarray,
+    rx: np.ndarray,
+    rec: np.ndarray,
+    t_loop: float,
+    tick: int,
+    what: int,
+    mode: int,
+    latched: int,
+    status: int,
+    wake: float,
+    comp: float,
+) -> None:
+    """The tick's last compiled call on a tick that is not quiet: sections 5-7
+    (:func:`_section57`) on the hot record ``hot`` (1,), the output image's bytes ``rx`` and
+    the tick record ``rec`` (1,), after Python's stages decided what is rare."""
+    h = hot[0]
+    _section57(h, h["tick_state"], rx, rec, t_loop, tick, what, mode, latched, status, wake, comp)
+
+
 @K.jit
 def fused_tick(
     hot: np.ndarray,
@@ -369,7 +445,7 @@ def fused_tick(
     Python stages go on."""
     h = hot[0]
     ts = h["tick_state"]
-    tau_ext, prev, q_sent, tau_ff = ts["tau_ext"], ts["prev"], ts["q_sent"], ts["tau_ff"]
+    tau_ext, prev = ts["tau_ext"], ts["prev"]
     si, states = h["group_si"], h["group_states"]
     # 1-2. the drive read (the exchange is the caller's)
     read_si(tx, si, states)
@@ -412,27 +488,12 @@ def fused_tick(
         return BUS
     if not quiet or ts["nf"] > 0 or sdt < 0.0:
         return CONTROL
-    ms = h["motion_state"]
-    mq, mqd, mqdd, q0 = ms["q"], ms["qd"], ms["qdd"], ms["q0"]
-    # 5. controller (HOLD at rest: nothing; MOVE: the demo path)
+    # 5-7 (HOLD at rest: no controller step; MOVE: the demo path and its feed-forward)
     kind = ts["kind"]
     if kind == OTHER:
         return CONTROL
-    moved = kind == MOVE_PATH
-    if moved:
-        t = t_cmd - ts["t0"]
-        # the exponent 2 from the state: the compiler cannot turn libm's pow into x·x
-        b, bd, bdd = _fade_in(t, ts["ramp"], ts["two"])
-        path_eval(h["path_k"], t, b, bd, bdd, q0, mq, mqd, mqdd)
-        # the feed-forward: when the reference moved
-        inverse_dynamics_native(mq, mqd, mqdd, h["ff_W"], tau_ff, ts["ff_h"])
-    # 6. command (CSP with the torque offset)
-    command_raw(mq, tau_ff, rx, si, 2)
-    # 7. the record (and q_sent = the command just sent)
-    fill_tick(
-        rec, sample, mq, tau_ext, q_sent, t_loop, tick, ts["mode"], np.int64(0),
-        np.int64(0), wake, comp, obs_dt,
-    )  # fmt: skip
+    what = S_PATH | S_FF if kind == MOVE_PATH else 0
+    _section57(h, ts, rx, rec, t_loop, tick, what, ts["mode"], 0, 0, wake, comp)
     return DONE
 
 
@@ -554,8 +615,8 @@ class FusedTick:
         bank = t._bank
         if not (bank._any and bank._only) or bank._kernel is not bank_update:
             return "an observer is not fused in the bank: " + ", ".join(bank.rest)
-        if t._fill is not fill_tick:
-            return "the tick's record fill runs as Python"
+        if t.backend != "numba":
+            return "the tick's kernels run as Python (backend python)"
         if not t.bus._use_kernel or not t.limits._use_kernel:
             return "the drive scan or the limit checks run their kernels as Python"
         c = t.collision
@@ -660,3 +721,7 @@ class FusedTick:
         copy = hot.copy()
         copy[0]["tick_state"]["expect"] = False
         section4(copy, rec.copy(), 0, 1e-3, False)
+        # sections 5-7's own call (a tick that is not quiet) on a copy: every step but the
+        # demo path (its workspace may be absent), the argument types the tick passes
+        copy = hot.copy()
+        section57(copy, rx.copy(), rec.copy(), 0.0, 0, S_FF | S_OFF, 0, 0, 0, 0.0, 0.0)

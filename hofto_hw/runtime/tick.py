@@ -16,12 +16,16 @@ and their order live); the checks report into a fault array that :meth:`Tick._re
 turns into the stop controller's reports in the order they ran. The steps before section 4
 that have no compiled form (the drag's front, a homing step, the tool force) run between
 section 3 and a second compiled call of section 4; the drive scan's finding is named in
-Python (STO, brake) and section 4 resumes. On a quiet tick (nothing rare can happen:
-:attr:`Tick.busy` is 0 and no request, fault or bad status came in) on which section 4 found
-nothing the same call goes on through sections 5-7. When it stops early it answers a stage
-and the methods below finish the same tick from there: they handle what is rare (reports,
-events, stop decisions, requests, reset, mode changes, enabling, brake release, drag,
-homing, teach). A configuration the compiled call cannot run is refused when the tick is
+Python (STO, brake) and section 4 resumes. Sections 5-7 (the demo path, the feed-forward,
+the command, the record fill) are sequenced once too (``fused._section57``): on a quiet tick
+(nothing rare can happen: :attr:`Tick.busy` is 0 and no request, fault or bad status came
+in) on which section 4 found nothing the same call goes on into them. When it stops early it
+answers a stage and the methods below finish the same tick from there: they handle what is
+rare (reports, events, stop decisions, requests, reset, mode changes, enabling, brake
+release, drag, homing, teach; :meth:`Tick._control` writes the motion's reference and says
+which steps of sections 5-7 the tick takes), then a last compiled call
+(``fused.section57``) runs sections 5-7. A configuration the compiled call cannot run is
+refused when the tick is
 built, in one line. The Python reference that runs every stage on every tick is
 tests/support/reference_tick.py; tests/hofto_hw/runtime/test_fused.py checks both tick by
 tick, bit for bit.
@@ -51,7 +55,6 @@ from hofto_hw.model.data import ModelData
 from hofto_hw.model.snapshot import DynamicsSnapshot
 from hofto_hw.observers.bank import ObserverBank
 from hofto_hw.observers.base import Observer
-from hofto_hw.recording.kernels import fill_tick
 from hofto_hw.recording.record import (
     DIAG_DTYPE,
     EVENT_DTYPE,
@@ -67,10 +70,14 @@ from hofto_hw.runtime.fused import (
     K_TOOL,
     MOVE_PATH,
     OTHER,
+    S_FF,
+    S_OFF,
+    S_PATH,
     SAFETY,
     FusedTick,
     fused_tick,
     section4,
+    section57,
     tick_state_dtype,
 )
 from hofto_hw.runtime.tick_events import MAX_STOPS, STANDSTILL, TickEvents
@@ -169,6 +176,7 @@ class Tick(TickEvents):
         self.tau_ext = self.state["tau_ext"][0]
         self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
         self.tau_ff = self.state["tau_ff"][0]
+        self._tau_off = self.state["tau_off"][0]  # the hand's torque (dragging) [N·m]
         #: the motion's version that tau_ff was evaluated for (-1: evaluate on the next tick),
         #: and the model's revision, friction and payload objects it was evaluated with
         self._ff_version = -1
@@ -251,10 +259,9 @@ class Tick(TickEvents):
         self._wrench = r["wrench"]
         self._wrench_set = False  # the record's wrench holds a drag estimate (else all NaN)
         self._qdd_rec = r["qdd_cmd"]
-        #: the record fill: one compiled call (recording/kernels.py); without the compiled
-        #: path the same function runs as Python
-        self.backend = jit.ready(backend, self._warm)
-        self._fill = jit.compiled_or_python(fill_tick, self.backend)
+        #: the kernels' backend (the compiled calls below compile and warm every kernel;
+        #: python: the tick is refused)
+        self.backend = jit.resolve(backend)
         #: first collision-level crossing per observer row over the whole run (the monitor's
         #: own first_tick is cleared by a reset) [tick, -1 = none]
         self.first_detect = np.full(len(self.observers), -1, dtype=np.int64)
@@ -266,6 +273,7 @@ class Tick(TickEvents):
         self.fused_ticks = 0  # ticks the fused call finished
         self._fz_call = fused_tick
         self._s4_call = section4  # section 4 alone (after a pre-safety step, the scan's find)
+        self._s57_call = section57  # sections 5-7 after the Python stages (not quiet)
         self._fz = FusedTick(self)
         if not self._fz.ok:
             raise ConfigError(f"the tick cannot run compiled: {self._fz.why}")
@@ -351,8 +359,14 @@ class Tick(TickEvents):
             stage = self._s4_call(self._fz_args[0], self._rec1, self.tick, dt, True)
         self._report_faults()  # 4. what the checks found, as reports, in their order
         self._requests(missed)  # 4 (end): overruns, requests, reset, stop measurement
-        self._control()  # 5. controller and 6. command (acting the stop category)
-        self._record(status, wakeup_us, compute_us)  # 7. the record into the sink
+        what = self._control()  # 5-6: what is rare (the stop category's commands, ...)
+        # 5-7 compiled: the demo path, the feed-forward, the command, the record's fill
+        self._s57_call(
+            self._fz_args[0], self._fz_args[3], self._rec1, self.t, self.tick, what,
+            self.motion.mode, self.stop.latched, int(status), float(wakeup_us),
+            float(compute_us),
+        )  # fmt: skip
+        self._push()  # 7. the record into the sink
         self._refresh()
 
     # ------------------------------------------------------------ the tick's stages
@@ -450,11 +464,15 @@ class Tick(TickEvents):
         if self._measuring or stop.first_tick == self.tick:
             self._measure_stop(self.group.q, self.group.qd)
 
-    def _control(self) -> None:
-        """Sections 5 (controller) and 6 (command, acting the stop category)."""
+    def _control(self) -> int:
+        """Sections 5 (controller) and 6 (command, acting the stop category): what is rare,
+        in Python (the stop category's drive commands, mode changes, enabling, the drag's
+        follow, playback, the ramp, teach recording), writing the motion's reference; returns
+        the steps of the compiled sections 5-7 (:func:`~hofto_hw.runtime.fused.section57`'s
+        ``what``: the demo path, the feed-forward, the hand's torque) that this tick takes."""
         g, stop, motion = self.group, self.stop, self.motion
         q, qd = g.q, g.qd
-        cmd_dt = float(self.st["cmd_dt"])
+        what = 0
         cat = stop.category
         if cat == 0 or cat == 1:
             self.expect_enabled = False
@@ -480,18 +498,27 @@ class Tick(TickEvents):
             if motion.mode == DRAG:
                 d = self.drag
                 motion.follow(d.q_cmd, d.qd_cmd, d.qdd_cmd)
+            elif motion.mode == MOVE and self._fz.path_ok and motion.path is self._fz.path:
+                motion.version += 1  # JointMotion.update's, the path in the compiled call
+                motion._still = False
+                self.st["t0"] = motion.t0  # a move started this tick: _refresh has not
+                what = S_PATH
             else:
-                motion.update(float(self.st["t_cmd"]), cmd_dt)
+                motion.update(float(self.st["t_cmd"]), float(self.st["cmd_dt"]))
         if self.recording is not None or self.playback is not None:
             self._teach_record(q)
         # the feed-forward is a function of the reference (and the model): a hold reuses it
-        if self._ff_model_changed() or motion.version != self._ff_version:
-            self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
-            self._ff_version = motion.version
+        if self._ff_model_changed():
+            self._follow_model()  # its native model synced, the call's handle with it
+            what |= S_FF
+        elif motion.version != self._ff_version:
+            what |= S_FF
+        self._ff_version = motion.version
         if motion.mode == DRAG:
-            self.tau_ff += self.drag.tau_offset  # the hand's torque off the drives' offset
+            np.copyto(self._tau_off, self.drag.tau_offset)  # the hand's torque, added to it
+            what |= S_OFF
             self._ff_version = -1  # tau_ff holds the hand's torque: evaluate it again
-        g.command_position(motion.q, self.tau_ff)
+        return what
 
     # ----------------------------------------------------------- the fused call
 
@@ -597,26 +624,6 @@ class Tick(TickEvents):
             self.overrun_streak = 0
         if self.overrun_streak >= self.overrun_limit:
             self.stop.report(Fault.OVERRUN, -1, float(self.overrun_streak))
-
-    def _warm(self) -> None:
-        """Compile the record fill (into a scratch record)."""
-        g, scratch = self.group, np.zeros(1, dtype=self.tick_rec.dtype)
-        q_sent = self.q_sent.copy()
-        fill_tick(
-            scratch, g.sample, self.motion.q, self.tau_ext, q_sent, 0.0, 0, 0, 0, 0, 0.0, 0.0, 0.0
-        )
-
-    def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
-        """The tick record of this tick (and q_sent = motion.q, the command just sent), then
-        into the sink with the new events (and every ``diag_every`` ticks the diagnostics)."""
-        m = self.motion
-        # the casts keep the kernel on its warmed signature whatever numbers callers pass
-        self._fill(
-            self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t), self.tick,
-            m.mode, self.stop.latched, int(status), float(wakeup_us), float(compute_us),
-            float(self.st["sample_dt"]),
-        )  # fmt: skip
-        self._push()
 
     def _push(self) -> None:
         """The filled tick record into the sink, with the new events (and every

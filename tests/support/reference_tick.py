@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from hofto_hw.control.joint_motion import DRAG
+from hofto_hw.recording.kernels import fill_tick
 from hofto_hw.runtime.tick import Tick
 from hofto_hw.runtime.tick_events import DRIVE_CAUSES
 from hofto_hw.runtime.tick_kernels import (
@@ -47,6 +48,63 @@ class ReferenceTick(Tick):
         self._requests(missed)  # 4 (end): overruns, requests, reset, stop measurement
         self._control()  # 5. controller and 6. command
         self._record(status, wakeup_us, compute_us)  # 7. the record into the sink
+
+    def _control(self) -> None:  # type: ignore[override]
+        """Sections 5 (controller) and 6 (command, acting the stop category) through the
+        parts' own methods (production: the rare part in Tick._control, the rest in
+        fused._section57)."""
+        g, stop, motion = self.group, self.stop, self.motion
+        q, qd = g.q, g.qd
+        cmd_dt = float(self.st["cmd_dt"])
+        cat = stop.category
+        if cat == 0 or cat == 1:
+            self.expect_enabled = False
+            self.enabling = False
+            if cat == 0:
+                g.command_disable_voltage()
+            else:
+                g.command_quick_stop()
+            if self._fault_resetting > 0:
+                self._fault_reset_edge()
+            motion.start(q)  # targets follow the arm: bumpless when enabled again
+            if self.mode_request >= 0:
+                self._refuse_mode()
+        else:
+            if cat == 2:
+                motion.ramp_down()
+                if self.mode_request >= 0:
+                    self._refuse_mode()
+            elif self.mode_request >= 0:
+                self._change_mode(qd)
+            if self.enabling:
+                self._enable_step()
+            if motion.mode == DRAG:
+                d = self.drag
+                motion.follow(d.q_cmd, d.qd_cmd, d.qdd_cmd)
+            else:
+                motion.update(float(self.st["t_cmd"]), cmd_dt)
+        if self.recording is not None or self.playback is not None:
+            self._teach_record(q)
+        # the feed-forward is a function of the reference (and the model): a hold reuses it
+        if self._ff_model_changed() or motion.version != self._ff_version:
+            self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
+            self._ff_version = motion.version
+        if motion.mode == DRAG:
+            self.tau_ff += self.drag.tau_offset  # the hand's torque off the drives' offset
+            self._ff_version = -1  # tau_ff holds the hand's torque: evaluate it again
+        g.command_position(motion.q, self.tau_ff)
+
+    def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
+        """Section 7: the tick record (and q_sent = motion.q, the command just sent) by the
+        record fill (production: fused._section57), then into the sink."""
+        m = self.motion
+        # the casts keep the kernel on its warmed signature whatever numbers callers pass
+        fill_tick(
+            self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t), self.tick,
+            m.mode, self.stop.latched, int(status), float(wakeup_us), float(compute_us),
+            float(self.st["sample_dt"]),
+        )  # fmt: skip
+        self._push()
 
     def _refresh(self, rebuild: bool = True) -> None:
         """Nothing to keep for a compiled call (the reference never takes it)."""

@@ -144,6 +144,21 @@ def _lockstep(
         return stage
 
     fused.tick._fz_call = counted
+    # sections 5-7 have one sequencing: the quiet tick's call, else section57 after the
+    # Python stages; never the parts' Python feed-forward or command
+    late57: set[int] = set()
+    call57 = fused.tick._s57_call
+
+    def counted57(*args: Any) -> None:
+        late57.add(fused.tick.tick)
+        call57(*args)
+
+    def python_step(*args: Any, **kw: Any) -> None:
+        raise AssertionError(f"tick {fused.tick.tick}: a section 5-7 step ran as Python")
+
+    fused.tick._s57_call = counted57
+    fused.tick.feedforward.inverse_dynamics = python_step
+    fused.group.command_position = python_step
     for k in range(1, ticks + 1):
         dt = event(k, period)
         now += dt
@@ -153,6 +168,7 @@ def _lockstep(
         _compare(fused, reference, k)
         assert not (k in busy and stages.get(k) == DONE), f"tick {k}: taken as quiet"
     assert bool(busy) == rare, sorted(busy)[:10]
+    assert late57 == {k for k, stage in stages.items() if stage != DONE}
     return stages
 
 
