@@ -14,10 +14,15 @@ enabled. Decides only: the loop reads the drive states and passes them in.
 ``sto_of`` and ``brake_code`` are asked only on the tick that found an axis out of
 Operation enabled or faulted (the rare path), never on a quiet tick.
 
-The CiA 402 state codes come from the caller (safety does not import drivers/).
-Allocation-free per tick. The drive states are judged by :func:`safety.kernels.drive_scan`:
-``backend`` ``numba``/``auto`` (the observers' conventions) runs it compiled, ``numpy`` runs
-its Python source (the numpy implementation it replaced is tests/safety/reference.py).
+The CiA 402 state codes come from the caller (safety does not import drivers/). The tick's
+compiled section 4 (hofto_hw/runtime/fused.py) runs the per-tick part: the loss streak of
+:meth:`BusHealth.count` (kept here, its one place) on every exchange and
+:func:`safety.kernels.drive_scan` on the drive states of good data only (stale states are not
+the drives'); what the scan finds is named here, in Python (:meth:`BusHealth._fault`,
+:meth:`BusHealth._disabled`), on that rare tick. ``backend`` ``numba``/``auto`` compiles and
+warms the scan, ``python`` does not. The numpy implementation it replaced is
+tests/safety/reference.py; the same checks as Python calls on a monitor, for tests and the
+tick's Python reference, are tests/support/reference_safety.py.
 """
 
 from __future__ import annotations
@@ -34,8 +39,8 @@ from safety.stop import Fault, StopController
 
 class BusHealth:
     """``op_enabled``: the Operation-enabled state code; ``fault_states``: codes that count
-    as a drive fault (Fault, Fault reaction active, unknown); ``backend``: numpy (the scan's
-    Python source), numba or auto (compiled when available, warmed here)."""
+    as a drive fault (Fault, Fault reaction active, unknown); ``backend``: python (the scan is
+    not compiled), numba or auto (compiled when available, warmed here)."""
 
     def __init__(
         self,
@@ -56,7 +61,6 @@ class BusHealth:
         self.backend = jit.ready(backend, self._warm)
         #: True exactly when the compiled scan runs (the fused tick's condition)
         self._use_kernel = self.backend == "numba"
-        self._scan = jit.compiled_or_python(drive_scan, self.backend)
         #: axis -> whether its STO is active (the drive layer's reading of the process
         #: image); None: an axis out of Operation enabled is always DRIVE_DISABLED
         self.sto_of: Callable[[int], bool] | None = None
@@ -68,35 +72,10 @@ class BusHealth:
         for dtype in (np.uint8, np.int64):
             drive_scan(np.zeros(self.n, dtype=dtype), self.fault_min, self.op_enabled)
 
-    def check(
-        self,
-        stop: StopController,
-        status: int,
-        fresh: bool,
-        states: np.ndarray,
-        error_codes: np.ndarray,
-        expect_enabled: bool,
-    ) -> bool:
-        """One tick; returns whether this exchange brought good data."""
-        good = status == 0 and fresh
-        if self.count(good):
-            stop.report(Fault.BUS_LOSS, -1, float(status))
-        if not good:
-            return False  # states are stale: judge the drives on fresh data only
-        j = self._scan(states, self.fault_min, self.op_enabled if expect_enabled else -1)
-        if j >= 0:
-            n = self.n
-            if j < n:
-                self._fault(stop, j, error_codes)
-            else:
-                self._disabled(stop, j - n, states)
-        return True
-
     def count(self, good: bool) -> bool:
         """The loss streak after an exchange that brought ``good`` data or not; returns
-        whether BUS_LOSS is to be reported (``lost_cycles`` bad exchanges in a row). The
-        tick's compiled safety section reports it (hofto_hw/runtime/fused.py), :meth:`check`
-        here."""
+        whether BUS_LOSS is to be reported (``lost_cycles`` bad exchanges in a row; the tick
+        reports it)."""
         if good:
             self.streak = 0
             return False
@@ -105,12 +84,16 @@ class BusHealth:
         return self.streak >= self.lost_cycles
 
     def _fault(self, stop: StopController, j: int, error_codes: np.ndarray) -> None:
+        """Axis ``j`` in a fault state: DRIVE_FAULT with its 0x603F code, and BRAKE when the
+        drive layer reads that code as a holding-brake fault."""
         code = int(error_codes[j])
         stop.report(Fault.DRIVE_FAULT, j, float(code))
         if self.brake_code is not None and self.brake_code(j, code):
             stop.report(Fault.BRAKE, j, float(code))
 
     def _disabled(self, stop: StopController, j: int, states: np.ndarray) -> None:
+        """Axis ``j`` out of Operation enabled while expected in it: STO when the drive layer
+        says its safe torque off is active, else DRIVE_DISABLED (with its state code)."""
         if self.sto_of is not None and self.sto_of(j):
             stop.report(Fault.STO, j, float(states[j]))
         else:

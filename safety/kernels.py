@@ -1,13 +1,16 @@
 """The per-tick safety checks of the bus and the limits (numba): the one implementation.
 
-:class:`safety.bus_health.BusHealth` and :class:`safety.limits.LimitMonitor` always run
-these kernels: compiled (backend ``numba``/``auto``, the conventions of
-:mod:`hofto_hw.jit`: ``jit``, warmed when the monitor is built) or as their
-own Python source (backend ``numpy``: ``py_func``; numba's ``NUMBA_DISABLE_JIT=1`` runs every
-line as Python). The kernels say what is to be reported (class, joint, value) and the
-monitor reports it to the stop controller in Python, so reports stay off the compiled path.
-The numpy implementations they replaced are the reference in tests/safety/reference.py;
-tests/safety/test_kernels.py compares every report over thousands of random ticks.
+The tick's compiled section 4 (hofto_hw/runtime/fused.py) calls them on every tick:
+``drive_scan`` on the drive states, ``limits_scan`` then ``limits_commit`` on the sample in
+the workspace of :class:`safety.limits.LimitMonitor`; :class:`safety.bus_health.BusHealth`
+keeps the loss streak and names what the drive scan found. Compiled when the monitors are
+built with backend ``numba``/``auto`` (the conventions of :mod:`hofto_hw.jit`: ``jit``,
+warmed then), their own Python source otherwise (``hofto_hw.jit.compiled_or_python``;
+numba's ``NUMBA_DISABLE_JIT=1`` runs every line as Python). The kernels say what is to be
+reported (class, joint, value); the caller reports it. The numpy implementations they
+replaced are the reference in tests/safety/reference.py; tests/safety/test_kernels.py
+compares every report over thousands of random ticks, through the Python twins of the
+monitors' checks in tests/support/reference_safety.py.
 """
 
 from __future__ import annotations
@@ -63,16 +66,22 @@ def _note(w: np.ndarray, c: int, j: int, value: float) -> int:
 
 @jit
 def limits_scan(sample: np.ndarray, q_cmd: np.ndarray, w: np.ndarray, how: int, gap: float) -> int:
-    """The limit checks of :meth:`safety.limits.LimitMonitor.check` on ``sample`` (3, n) =
-    rows q, qd, tau, the last command q_cmd (n,) and the workspace ``w`` (rows above): for
-    each class the first offending joint and its value into the report rows; returns how many
-    classes have one. ``how`` = fresh + 2·tracking (one int: bools cost a compiled call more
-    to unbox): torque and following error only while tracking, jumps only on a fresh sample
-    with a previous one, against ``position_jump`` plus what the velocity limit covers in
-    ``gap`` [s] (a stall). NaN compares false. Writes nothing but the report rows."""
+    """The limit checks on ``sample`` (3, n) = rows q, qd, tau, the last command q_cmd (n,)
+    and the workspace ``w`` (rows above): for each class the first offending joint and its
+    value into the report rows; returns how many classes have one. ``how`` = fresh +
+    2·tracking (one int: bools cost a compiled call more to unbox).
+
+    What a sample is judged on: position and velocity always; torque while tracking (a
+    repeated torque is still the last one the drive measured); the following error only on a
+    fresh sample while tracking (a stale sample is an old position against a newer command:
+    its lag is not the drive's; a run of lost samples is the bus-loss check's); jumps only on
+    a fresh sample with a previous one, against ``position_jump`` plus what the velocity
+    limit covers in ``gap`` [s] (a stall). NaN compares false. Writes nothing but the report
+    rows."""
     n = q_cmd.shape[0]
     fresh = (how & 1) != 0
     tracking = (how & 2) != 0
+    lag = fresh and tracking
     following_error = w[PARAMS, FOLLOWING_ERROR]
     position_jump = w[PARAMS, POSITION_JUMP]
     jumps = fresh and w[PARAMS, HAVE_PREV] != 0.0
@@ -91,6 +100,7 @@ def limits_scan(sample: np.ndarray, q_cmd: np.ndarray, w: np.ndarray, how: int, 
             t = sample[2, j]
             if abs(t) > w[TORQUE, j]:
                 found += _note(w, REP_TORQUE, j, t)
+        if lag:
             d = abs(q_cmd[j] - x)
             if d > following_error:
                 found += _note(w, REP_FOLLOWING, j, d)
@@ -116,13 +126,3 @@ def limits_commit(sample: np.ndarray, w: np.ndarray, how: int) -> int:
         w[Q_PREV, j] = sample[0, j]
     w[PARAMS, HAVE_PREV] = 1.0
     return 2
-
-
-@jit
-def limits_quiet(sample: np.ndarray, q_cmd: np.ndarray, w: np.ndarray, how: int, gap: float) -> int:
-    """:func:`limits_scan` then, when nothing is to be reported, :func:`limits_commit`: 0 when
-    some check reports (the report rows say what; Q_PREV untouched, so the caller reports
-    and commits), 1 when none does, 2 when none does and q was committed."""
-    if limits_scan(sample, q_cmd, w, how, gap) > 0:
-        return 0
-    return limits_commit(sample, w, how)

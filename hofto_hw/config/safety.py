@@ -53,8 +53,10 @@ class LimitsSafetyConfig(FileModel):
 
     ``position_margin`` [rad] shrinks the model's position range (soft limits);
     ``velocity_scale`` / ``torque_scale`` scale the model's velocity / torque limits;
-    ``following_error`` [rad] bounds |q_cmd - q| per joint; ``position_jump`` [rad] bounds
-    |q_k - q_{k-1}| between two fresh samples (an encoder glitch, not motion).
+    ``following_error`` [rad] bounds |q_cmd - q| per joint while the drives track the
+    command, judged on fresh samples only (a stale sample is an old q against a newer q_cmd;
+    a run of them is the bus loss); ``position_jump`` [rad] bounds |q_k - q_{k-1}| between
+    two fresh samples (an encoder glitch, not motion).
     """
 
     position_margin: NonNeg = 0.02

@@ -1,6 +1,7 @@
 """The numpy references of the bus and limit checks, for the agreement tests only (the
-product's one implementation is safety/kernels.py, run by safety.bus_health.BusHealth and
-safety.limits.LimitMonitor; tests/safety/test_kernels.py compares every report)."""
+product's one implementation is safety/kernels.py, on the workspaces of
+safety.bus_health.BusHealth and safety.limits.LimitMonitor; tests/safety/test_kernels.py
+compares every report of tests/support/reference_safety.py's calls with these)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from safety.stop import Fault, StopController
 
 
 class ReferenceLimits:
-    """LimitMonitor.check as numpy calls on the limits (n,) [rad, rad/s, N·m] and bounds."""
+    """reference_safety.limits_check as numpy calls on the limits (n,) [rad, rad/s, N·m] and
+    bounds."""
 
     def __init__(
         self,
@@ -63,6 +65,7 @@ class ReferenceLimits:
             if m.any():
                 j = int(np.argmax(m))
                 stop.report(Fault.TORQUE_LIMIT, j, float(tau[j]))
+        if tracking and fresh:  # a stale sample's lag is an old q against a newer q_cmd
             np.subtract(q_cmd, q, out=d)
             np.abs(d, out=d)
             np.greater(d, self.following_error, out=m)
@@ -88,7 +91,8 @@ class ReferenceLimits:
 
 
 class ReferenceBus:
-    """BusHealth.check's drive-state judgement as numpy calls (bus loss counted as there)."""
+    """reference_safety.bus_check's drive-state judgement as numpy calls (bus loss counted as
+    there)."""
 
     def __init__(self, n: int, lost_cycles: int, op_enabled: int, fault_states: tuple[int, ...]):
         self.lost_cycles, self.op_enabled = lost_cycles, op_enabled

@@ -1,5 +1,6 @@
-"""The bus and limit checks (safety.kernels, compiled and as their Python source) give the
-numpy reference's reports (tests/safety/reference.py).
+"""The bus and limit checks (safety.kernels, compiled and as their Python source, through
+tests/support/reference_safety.py) give the numpy reference's reports
+(tests/safety/reference.py).
 
 Every ``stop.report`` call (fault, joint, value, tick) is compared, not only the latched
 events, over thousands of random ticks with limits crossed, non-finite samples, stale data
@@ -17,6 +18,7 @@ from safety.bus_health import BusHealth
 from safety.limits import LimitMonitor
 from safety.stop import StopController
 from tests.safety.reference import ReferenceBus, ReferenceLimits
+from tests.support.reference_safety import bus_check, limits_check
 
 require_compiled_kernels()
 
@@ -114,10 +116,11 @@ def test_limit_monitor_reports_the_references(packed: bool, backend: str) -> Non
         ref.check(s_ref, q, qd, tau, q_cmd, fresh, tracking, gap)
         if packed:
             block[1:4] = q, qd, tau
-            fast.check(s_fast, *rows, q_cmd.copy(), fresh, tracking, gap)
-            assert fast._block.base is block  # the scan read the caller's rows in place
+            read = limits_check(fast, s_fast, *rows, q_cmd.copy(), fresh, tracking, gap)
+            assert read.base is block  # the scan read the caller's rows in place
         else:
-            fast.check(s_fast, q.copy(), qd.copy(), tau.copy(), q_cmd.copy(), fresh, tracking, gap)
+            args = q.copy(), qd.copy(), tau.copy(), q_cmd.copy()
+            limits_check(fast, s_fast, *args, fresh, tracking, gap)
         assert _same(s_ref.calls, s_fast.calls), k
         assert s_ref.latched == s_fast.latched and s_ref.category == s_fast.category
         np.testing.assert_array_equal(ref.q_prev, fast.q_prev)
@@ -150,22 +153,24 @@ def test_bus_health_reports_the_references(backend: str) -> None:
         fresh = bool(rng.random() < 0.95)
         expect = bool(rng.random() < 0.7)
         a = ref.check(s_ref, status, fresh, states, errors, expect)
-        b = fast.check(s_fast, status, fresh, states.copy(), errors.copy(), expect)
+        b = bus_check(fast, s_fast, status, fresh, states.copy(), errors.copy(), expect)
         assert a == b
         assert s_ref.calls == s_fast.calls, k
         assert (ref.streak, ref.lost_total) == (fast.streak, fast.lost_total)
     assert len({c[1] for c in s_ref.calls}) == 3  # bus loss, drive fault, drive disabled
 
 
-def test_numpy_switch_runs_the_kernels_source() -> None:
+def test_python_backend_runs_the_kernels_source() -> None:
+    """backend python: the monitors compile nothing and their checks run the kernels' own
+    source as Python (hofto_hw.jit.compiled_or_python: the kernels they call run as Python
+    too), not a compiled dispatcher; numba: the compiled kernels."""
+    from hofto_hw import jit
     from safety import kernels
 
     bus, lim = _bus("python"), _limit_monitor("python")
     assert bus.backend == "python" and bus._use_kernel is False
-    # the kernels' own source as Python (hofto_hw.jit.compiled_or_python: the kernels
-    # they call run as Python too), not a compiled dispatcher
-    assert bus._scan.__code__ is kernels.drive_scan.py_func.__code__
-    assert not hasattr(bus._scan, "py_func")
-    assert lim._use_kernel is False
-    assert lim._quiet.__code__ is kernels.limits_quiet.py_func.__code__
-    assert not hasattr(lim._quiet, "py_func")
+    assert lim.backend == "python" and lim._use_kernel is False
+    for kernel in (kernels.drive_scan, kernels.limits_scan, kernels.limits_commit):
+        py = jit.compiled_or_python(kernel, "python")
+        assert py.__code__ is kernel.py_func.__code__ and not hasattr(py, "py_func")
+        assert jit.compiled_or_python(kernel, "numba") is kernel

@@ -28,6 +28,7 @@ from hofto_hw.runtime.tick_kernels import (
     tick_flags,
 )
 from safety.collision import COLLIDED, CONTACT
+from tests.support.reference_safety import bus_check, finite, limits_check
 
 
 class ReferenceTick(Tick):
@@ -120,17 +121,19 @@ class ReferenceTick(Tick):
         st = self.st
         obs_dt = float(st["sample_dt"])
         dragging = motion.mode == DRAG
-        good = self.bus.check(stop, status, g.fresh, g.states, self.err_codes, self.expect_enabled)
+        good = bus_check(
+            self.bus, stop, status, g.fresh, g.states, self.err_codes, self.expect_enabled
+        )
         lim = self.limits
-        ok = snap.finite or (lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau))
+        ok = snap.finite or (finite(stop, q) & finite(stop, qd) & finite(stop, tau))
         flags = tick_flags(self.tau_ext, g.states, POWERED, motion.qdd, self._qdd_rec)
         if not flags & ESTIMATES_FINITE:
             for i in range(len(self.observers)):
-                ok &= lim.finite(stop, self.tau_ext[i])
+                ok &= finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
         st["since_fresh"] += dt
         gap = jump_gap(float(st["since_fresh"]), self.period)
-        lim.check(stop, q, qd, tau, self.q_sent, good, powered, gap)
+        limits_check(lim, stop, q, qd, tau, self.q_sent, good, powered, gap)
         if good:
             st["since_fresh"] = 0.0
         trusted = ok and good and not stop.active & DRIVE_CAUSES and not self.enabling

@@ -227,6 +227,7 @@ def test_a_tpdo_stream_late_by_whole_cycles_is_never_fresh_and_a_bus_loss(rig) -
     node's backlog (sent in order when the spell ends) makes the bus ok again."""
     from drivers.canopen.master import STATUS_TPDO_LATE
     from safety.stop import Fault
+    from tests.support.reference_safety import bus_check
 
     cycle = 1.0 / rig.cfg.loop.rate_hz
     t, g = _group(rig, tpdo_deadline=0.8 * cycle, tpdo_resync=2.0)
@@ -240,7 +241,7 @@ def test_a_tpdo_stream_late_by_whole_cycles_is_never_fresh_and_a_bus_loss(rig) -
         t.wait_next_cycle()
         g.cycle()
         stop.begin_tick(k)
-        health.check(stop, g.status, g.fresh, g.states, t.tx["error_code"], False)
+        bus_check(health, stop, g.status, g.fresh, g.states, t.tx["error_code"], False)
         statuses.append(g.status)
     assert STATUS_OK not in statuses, statuses
     assert not g.fresh

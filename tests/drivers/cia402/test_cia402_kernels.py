@@ -153,15 +153,15 @@ def test_compiled_read_and_commands_do_not_allocate(pair: tuple[DriveGroup, Driv
 def test_the_sample_is_one_block_the_limit_monitor_reads_in_place(
     pair: tuple[DriveGroup, DriveGroup],
 ) -> None:
-    """q, qd, tau stay views of one workspace across reads: safety's compiled limit scan
+    """q, qd, tau stay views of one workspace across reads: the tick's compiled limit scan
     then takes them as one (3, n) argument instead of copying them."""
-    from safety.limits import _rows_of_one_block
+    from tests.support.reference_safety import rows_of_one_block
 
     for g in pair:
         q, qd, tau = g.q, g.qd, g.tau
         g.read()
         assert g.q is q and g.qd is qd and g.tau is tau
-        block = _rows_of_one_block(q, qd, tau)
+        block = rows_of_one_block(q, qd, tau)
         assert block is not None and np.shares_memory(block, g.sample)
         np.testing.assert_array_equal(block, g.sample)
 

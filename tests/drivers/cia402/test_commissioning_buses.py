@@ -33,6 +33,7 @@ from hofto_hw.errors import UserError
 from hofto_hw.runtime import compose
 from safety.bus_health import BusHealth
 from safety.stop import Fault, StopController
+from tests.support.reference_safety import bus_check
 
 ROOT = Path(__file__).resolve().parents[3]
 SHOULDER, ELBOW, WRIST = 1, 2, 3  # joint_2 (brake by 0x60FE output), joint_3 (by the drive)
@@ -301,7 +302,7 @@ def test_a_brake_that_does_not_open_is_a_latched_brake_fault(rig: Rig) -> None:
         status = bus.exchange()
         group.read()
         if group.states[ELBOW] == int(State.FAULT) and codes[ELBOW]:
-            health.check(stop, status, group.fresh, group.states, codes, True)
+            bus_check(health, stop, status, group.fresh, group.states, codes, True)
             break
         bus.wait_next_cycle()
     assert stop.is_latched(Fault.BRAKE), (stop.latched_names(), group.states, codes)
@@ -343,7 +344,7 @@ def test_sto_while_enabled_is_category_0_naming_the_axis(rig: Rig) -> None:
         stop.begin_tick(k)
         status = bus.exchange()
         group.read()
-        health.check(stop, status, group.fresh, group.states, bus.tx["error_code"], True)
+        bus_check(health, stop, status, group.fresh, group.states, bus.tx["error_code"], True)
         if stop.latched:
             break
         bus.wait_next_cycle()
