@@ -236,7 +236,7 @@ def _report(ts: Any, fault: int, joint: int, value: float) -> None:
 
 @K.jit
 def _finite(ts: Any, x: np.ndarray) -> bool:
-    """LimitMonitor.finite: NON_FINITE on the first non-finite entry of ``x`` (n,)."""
+    """NON_FINITE on the first non-finite entry of ``x`` (n,); whether all were finite."""
     for j in range(x.shape[0]):
         if not math.isfinite(x[j]):
             _report(ts, _NON_FINITE, j, x[j])
