@@ -1,5 +1,6 @@
 """Joint supervision on measured values: soft position limits, velocity, torque, following
-error, position jumps between ticks and non-finite values anywhere in the tick.
+error and position jumps between ticks (a non-finite value anywhere in the tick is section
+4's own check, NON_FINITE: hofto_hw/runtime/fused.py).
 
 What is judged on which sample: position and velocity always; motor torque while the drives
 are powered and track the command (with the power stage off the brakes hold the arm); the
