@@ -14,16 +14,25 @@ loop's decision (``loop.acceleration``, :mod:`hofto_hw.runtime.acceleration`, wh
 to compile (:func:`warm`); ``auto`` then runs the kernels' source as Python. numba's own switch,
 ``NUMBA_DISABLE_JIT=1``, runs every kernel as Python too (for debugging).
 
-Kernels are compiled with ``cache=True`` (the machine code is kept in ``__pycache__`` or
-``NUMBA_CACHE_DIR``); their users compile and warm them when built (:func:`ready`), so no
-compilation happens inside a loop.
+Kernels are compiled with ``cache=True``; their users compile and warm them when built
+(:func:`ready`), so no compilation happens inside a loop. numba's cache checks only the file
+that defines a function, never the files of the kernels it calls (a documented limitation:
+numba's "Notes on Caching"); the compiled tick calls kernels of a dozen files, so after an
+edit of one of them it would load machine code of the old source. The cache therefore lives in
+a folder per state of the sources (:func:`cache_folder`): ``$NUMBA_CACHE_DIR/hofto-<stamp>``,
+or ``$XDG_CACHE_HOME/hofto-hw/numba/hofto-<stamp>`` (``~/.cache``) when ``NUMBA_CACHE_DIR`` is
+not set, the stamp a hash of every source file's path, size and modification time (what numba
+compares per file). A changed source compiles into a new folder; old folders are not used
+again and may be deleted at any time.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import types
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any, Literal
 
 import numba as _numba
@@ -32,6 +41,41 @@ Backend = Literal["python", "numba", "auto"]
 
 _DISABLED = os.environ.get("HOFTO_HW_NO_NUMBA", "") not in ("", "0")
 _FAILED: str = ""  # first compilation failure, if any
+
+#: the packages whose kernels call one another (beside this one in the checkout or install)
+PACKAGES = ("hofto_hw", "drivers", "safety")
+
+
+def sources_stamp(roots: Iterable[Path]) -> str:
+    """16 hex digits of a hash of the relative path, size and modification time [ns] of every
+    ``.py`` file under ``roots`` (folders; ``__pycache__`` skipped, a missing root ignored)."""
+    h = hashlib.blake2b(digest_size=8)
+    for root in roots:
+        for folder, dirs, files in os.walk(root):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            for name in sorted(files):
+                if name.endswith(".py"):
+                    path = os.path.join(folder, name)
+                    st = os.stat(path)
+                    rel = os.path.relpath(path, os.path.dirname(root))
+                    h.update(f"{rel}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
+    return h.hexdigest()
+
+
+def cache_folder(environ: dict[str, str] | os._Environ[str] = os.environ) -> Path:
+    """The folder numba's cache uses for the sources as they are now (module docstring)."""
+    base = environ.get("NUMBA_CACHE_DIR", "")
+    if not base:
+        xdg = environ.get("XDG_CACHE_HOME", "") or os.path.join(
+            environ.get("HOME", "") or os.path.expanduser("~"), ".cache"
+        )
+        base = os.path.join(xdg, "hofto-hw", "numba")
+    top = Path(__file__).resolve().parent.parent
+    return Path(base) / ("hofto-" + sources_stamp(top / p for p in PACKAGES))
+
+
+# before any kernel is decorated: numba's cache locator reads the folder when it is
+_numba.config.CACHE_DIR = str(cache_folder())
 
 
 def jit(fn: Callable[..., Any], **options: Any) -> Callable[..., Any]:
