@@ -86,7 +86,7 @@ namespace hofto_native
     // per joint (index 1..n): the rotation axis in the joint's frame, constant for the
     // revolute joints of ArmJointsTpl, and the subtree momentum (scratch of ct_qd_of)
     std::vector<Eigen::Vector3d> axis;
-    PINOCCHIO_ALIGNED_STD_VECTOR(pinocchio::Force) momentum;
+    std::vector<pinocchio::Force> momentum; // C++17: aligned by std::allocator
     explicit Handle(const Model & m)
     : model(m)
     , data(model)
