@@ -1,32 +1,18 @@
 """Native dynamics: pinocchio's algorithms for the robot's model, called from numba kernels.
 
-Why: inside a 1 kHz loop every Python→compiled call costs ~2.5-4 µs more than back to back
-(cold caches), whatever it computes; the snapshot made five such calls (ABA, CRBA, Coriolis
-matrix, gravity through pinocchio's Python binding, and one numba kernel) and the feed-forward
-two (RNEA, one kernel). ``dynamics.cpp`` runs the same pinocchio algorithms (pinocchio's own
-templates, compiled here against the installed pinocchio's headers; for Cᵀ·qd one recursion
-of ours on pinocchio's spatial types, the kinetic energy's gradient, where pinocchio offers
-only the whole Coriolis matrix) behind plain C functions, and the numba kernels of
-:mod:`hofto_hw.model.kernels` call them directly, so that :meth:`DynamicsSnapshot.compute
-<hofto_hw.model.snapshot.DynamicsSnapshot.compute>` and :meth:`ModelData.inverse_dynamics
-<hofto_hw.model.data.ModelData.inverse_dynamics>` are one call each.
+``dynamics.cpp`` (built with the package by setup.py, shipped as ``_dynamics.so`` next to this
+file) runs pinocchio's own algorithms behind plain C functions, which the kernels of
+:mod:`hofto_hw.model.kernels` call by name, so that a snapshot or a feed-forward is one
+Python->compiled call (docs/ARCHITECTURE.md, "Native dynamics": why, how, build). Its model is
+a copy of the Python pinocchio model's own numbers (:class:`NativeModel`), which follows
+``RobotModel.revision``; same numbers, same algorithms, same terms (test_native.py: 1e-12).
 
-The C++ model is a copy, made by :class:`NativeModel` from the Python pinocchio model's own
-numbers (parents, joint kinds and axes, joint placements, link inertias with the payload,
-armature, gravity): exactly the same values, so the same algorithms give the same terms
-(tests/hofto_hw/model/test_native.py: within 1e-12). A :class:`NativeModel` follows
-``RobotModel.revision`` (bumped by the model's parameter setters and ``apply_payload``).
-
-Availability: the library is built when the package is built (setup.py, against the headers of
-the build environment's ``pin``, ``cmeel-eigen`` and ``cmeel-boost``) and ships in the wheel as
-``_dynamics.so`` next to this file; nothing is compiled at run time. It is loaded only when
-the pinocchio it was built against has the installed pinocchio's major.minor version (the
-algorithms compiled in must be the ones the Python model is made for) and, in a source checkout
-(``pip install -e .``), only when ``dynamics.cpp`` beside it is the source it was built from.
-Without it, on a mismatch, without numba or with ``HOFTO_HW_NO_NATIVE=1`` (or
-``HOFTO_HW_NO_NUMBA=1``) :func:`ready` is False, :func:`unavailable_reason` says why in one
-line (printed once per process on stderr) and the pinocchio-Python path runs, unless
-``loop.acceleration: required`` refuses to start (hofto_hw.runtime.acceleration).
+The library is loaded only when the pinocchio it was built against has the installed one's
+major.minor and, in a source checkout, when ``dynamics.cpp`` beside it is its source. Without
+it, on a mismatch, without numba or with ``HOFTO_HW_NO_NATIVE=1`` (or ``HOFTO_HW_NO_NUMBA=1``)
+:func:`ready` is False, :func:`unavailable_reason` says why in one line (printed once per
+process on stderr) and the pinocchio-Python path runs for the offline commands;
+``hofto-hw run`` refuses to start (hofto_hw.runtime.acceleration).
 """
 
 from __future__ import annotations
@@ -59,16 +45,12 @@ _REASON = ""  # why the native path is unavailable ('' = not tried yet or fine)
 _SAID = False
 
 
-def _say(line: str) -> None:
-    print(f"hofto-hw: {line}", file=sys.stderr)
-
-
 def say_once(line: str) -> None:
     """Print ``line`` on stderr unless this process said something about the native path."""
     global _SAID
     if not _SAID:
         _SAID = True
-        _say(line)
+        print(f"hofto-hw: {line}", file=sys.stderr)
 
 
 def ready() -> bool:

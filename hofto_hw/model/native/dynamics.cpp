@@ -1,5 +1,5 @@
 // The tick's rigid-body dynamics as plain C functions: pinocchio's own algorithms (CRBA,
-// Coriolis matrix, gravity, the sparse Cholesky of M, ABA, nonlinear effects, RNEA), and one
+// gravity, nonlinear effects, the sparse Cholesky of M, ABA as its fallback, RNEA), and one
 // recursion of ours for Cᵀ·qd (ct_qd_of: pinocchio has it only as the whole Coriolis matrix),
 // on a copy of the robot's pinocchio model, called from numba kernels
 // (hofto_hw/model/kernels.py) so that a snapshot or a feed-forward is one Python->compiled
@@ -28,9 +28,8 @@
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 
-#include <cstdint>
 #include <algorithm>
-#include <chrono>
+#include <cstdint>
 #include <exception>
 #include <limits>
 #include <stdexcept>
@@ -87,7 +86,7 @@ namespace hofto_native
     // per joint (index 1..n): the rotation axis in the joint's frame, constant for the
     // revolute joints of ArmJointsTpl, and the subtree momentum (scratch of ct_qd_of)
     std::vector<Eigen::Vector3d> axis;
-    PINOCCHIO_ALIGNED_STD_VECTOR(pinocchio::Force) momentum;
+    std::vector<pinocchio::Force> momentum; // C++17: aligned by std::allocator
     explicit Handle(const Model & m)
     : model(m)
     , data(model)
@@ -138,16 +137,6 @@ namespace hofto_native
     ACCEL = 16
   };
 
-  // How terms_of gets the acceleration and the nonlinear effects: SHARED (what the library
-  // runs) reuses what the other terms computed; SEPARATE runs one algorithm per term (ABA for
-  // the acceleration, nonLinearEffects for nle: the library before; kept to time and check
-  // SHARED against, and ABA is SHARED's fallback).
-  enum Route : std::int64_t
-  {
-    SHARED = 0,
-    SEPARATE = 1
-  };
-
   // M⁻¹·(total − nle) into ddq by pinocchio's sparse Cholesky (U·D·Uᵀ) of data.M, which crba
   // has just filled: the acceleration ABA gives, without ABA's three passes over the tree.
   // False (ddq unspecified) when a pivot is not positive and finite: M is not numerically
@@ -171,8 +160,8 @@ namespace hofto_native
   // velocity, H_k the momentum of the bodies joint k carries (its subtree), all in body k's
   // frame. One backward pass over data.v and data.liMi, which `kinematics` says are those of
   // (q, qd) already (nonLinearEffects leaves them so); otherwise forwardKinematics first.
-  // ~0.4 µs where computeCoriolisMatrix takes ~1.8 µs (tools/bench_native.py), and it sums
-  // momenta, never inertias (no clamped composite mass).
+  // Cheaper than computeCoriolisMatrix (~0.4 against ~1.8 µs), and it sums momenta, never
+  // inertias (no clamped composite mass).
   void ct_qd_of(Handle & h, const In & Q, const In & V, bool kinematics, double * out)
   {
     const Model & model = h.model;
@@ -195,32 +184,25 @@ namespace hofto_native
     }
   }
 
+  // hofto_dyn1_terms' work. The acceleration takes the same arithmetic whatever else is asked
+  // for: an observer's estimate must not depend on which other observers share the snapshot
+  // (HOFTO's gains, ~1e10, turn a rounding difference in the acceleration into 1e-10 N·m).
+  // nle is never C·qd + g from the Coriolis matrix (not nle when identified link masses of
+  // both signs cancel: pinocchio clamps summed masses).
   void terms_of(
     Handle & h,
     std::int64_t terms,
     const double * q,
     const double * qd,
     const double * total,
-    double * out,
-    Route route = SHARED)
+    double * out)
   {
     const Eigen::Index n = h.n;
     const In Q(q, n), V(qd, n);
     double * row = out + n * n;
     Eigen::Map<Eigen::VectorXd> g(row, n), nle(row + n, n), ddq(row + 2 * n, n);
-    // SHARED: the acceleration from CRBA's M by its Cholesky, its right-hand side with
-    // nonLinearEffects' nle, whatever else is asked for: an observer's estimate must not
-    // depend on which other observers share the snapshot (HOFTO's gains, ~1e10, turn a
-    // rounding difference in the acceleration into 1e-10 N·m); C·qd + g from the Coriolis
-    // matrix would save 0.9 µs only when the momentum observer runs beside (and is not nle
-    // when identified link masses of both signs cancel: pinocchio clamps summed masses)
-    const bool by_mass = route == SHARED && (terms & ACCEL);
-    if ((terms & ACCEL) && !by_mass)
-    {
-      pinocchio::aba(h.model, h.data, Q, V, In(total, n));
-      ddq = h.data.ddq;
-    }
-    if ((terms & MASS) || by_mass)
+    const bool accel = terms & ACCEL;
+    if ((terms & MASS) || accel)
       pinocchio::crba(h.model, h.data, Q);
     if (terms & MASS)
     {
@@ -229,33 +211,20 @@ namespace hofto_native
         for (Eigen::Index k = 0; k < n; ++k)
           out[i * n + k] = k >= i ? M(i, k) : M(k, i);
     }
-    if ((terms & CORIOLIS_T) && route == SEPARATE)
-    {
-      pinocchio::computeCoriolisMatrix(h.model, h.data, Q, V);
-      const Eigen::MatrixXd & C = h.data.C;
-      for (Eigen::Index i = 0; i < n; ++i)
-      {
-        double acc = 0.0;
-        for (Eigen::Index k = 0; k < n; ++k)
-          acc += C(k, i) * qd[k];
-        row[3 * n + i] = acc;
-      }
-    }
     if (terms & GRAVITY)
     {
       pinocchio::computeGeneralizedGravity(h.model, h.data, Q);
       g = h.data.g;
     }
     // the nonlinear effects: into their row when asked for, and for the solve
-    const bool nle_ran = (terms & NLE) || by_mass;
+    const bool nle_ran = (terms & NLE) || accel;
     if (nle_ran)
       pinocchio::nonLinearEffects(h.model, h.data, Q, V);
-    const Eigen::VectorXd & scratch = h.data.nle;
     if (terms & NLE)
-      nle = scratch;
-    if ((terms & CORIOLIS_T) && route == SHARED)
+      nle = h.data.nle;
+    if (terms & CORIOLIS_T)
       ct_qd_of(h, Q, V, nle_ran, row + 3 * n);
-    if (by_mass && !accel_by_mass(h, total, scratch, ddq))
+    if (accel && !accel_by_mass(h, total, h.data.nle, ddq))
     {
       pinocchio::aba(h.model, h.data, Q, V, In(total, n));
       ddq = h.data.ddq;
@@ -351,16 +320,11 @@ std::int64_t hofto_dyn1_set_inertia(void * handle, std::int64_t joint, const dou
   return 0;
 }
 
-std::int64_t hofto_dyn1_dof(void * handle)
-{
-  return static_cast<Handle *>(handle)->n;
-}
-
 // The terms of one sample into out (n + 4, n), row-major: rows 0..n-1 M(q) (symmetric), row
 // n g(q), n+1 C(q,qd)·qd + g(q), n+2 the acceleration M(q)⁻¹·(total − C·qd − g) for the
 // torque `total`, n+3 C(q,qd)^T·qd [SI]; only the rows `terms` (Terms) asks for are written.
-// With MASS the acceleration is a Cholesky solve with CRBA's M and nonLinearEffects' nle (ABA
-// when M is not positive definite numerically, or without MASS); Cᵀ·qd is ct_qd_of's.
+// The acceleration is a Cholesky solve with CRBA's M and nonLinearEffects' nle (ABA when M
+// is not positive definite numerically); Cᵀ·qd is ct_qd_of's.
 void hofto_dyn1_terms(
   void * handle,
   std::int64_t terms,
@@ -378,73 +342,6 @@ void hofto_dyn1_terms(
   {
     std::fill(out, out + (h.n + 4) * h.n, std::numeric_limits<double>::quiet_NaN());
   }
-}
-
-// For tools/bench_native.py: the median over `reps` passes of the mean time of one call [ns]
-// over the `count` samples q, qd, total (count, n) row-major. `which`: 0 ABA, 1 CRBA, 2
-// Coriolis matrix, 3 gravity, 4 nonlinear effects, 5 the Cholesky decomposition and solve of
-// accel_by_mass (on each sample's M, computed before the clock starts), 6 terms_of(`terms`),
-// 7 terms_of(`terms`) by the SEPARATE route (the Coriolis matrix for Cᵀ·qd), 8 ct_qd_of (with
-// its forward kinematics). out (n + 4, n) is terms_of's scratch.
-double hofto_dyn1_time(
-  void * handle,
-  std::int64_t which,
-  std::int64_t terms,
-  std::int64_t count,
-  std::int64_t reps,
-  const double * q,
-  const double * qd,
-  const double * total,
-  double * out)
-{
-  Handle & h = *static_cast<Handle *>(handle);
-  const Eigen::Index n = h.n;
-  std::vector<double> per_call;
-  std::vector<Eigen::MatrixXd> masses;
-  if (which == 5)
-    for (std::int64_t s = 0; s < count; ++s)
-      masses.push_back(pinocchio::crba(h.model, h.data, In(q + s * n, n)));
-  Eigen::Map<Eigen::VectorXd> ddq(out, n);
-  const Eigen::VectorXd nle = Eigen::VectorXd::Zero(n);
-  for (std::int64_t r = 0; r < reps; ++r)
-  {
-    const auto t0 = std::chrono::steady_clock::now();
-    for (std::int64_t s = 0; s < count; ++s)
-    {
-      const double *qs = q + s * n, *vs = qd + s * n, *ts = total + s * n;
-      switch (which)
-      {
-      case 0:
-        pinocchio::aba(h.model, h.data, In(qs, n), In(vs, n), In(ts, n));
-        break;
-      case 1:
-        pinocchio::crba(h.model, h.data, In(qs, n));
-        break;
-      case 2:
-        pinocchio::computeCoriolisMatrix(h.model, h.data, In(qs, n), In(vs, n));
-        break;
-      case 3:
-        pinocchio::computeGeneralizedGravity(h.model, h.data, In(qs, n));
-        break;
-      case 4:
-        pinocchio::nonLinearEffects(h.model, h.data, In(qs, n), In(vs, n));
-        break;
-      case 5:
-        h.data.M = masses[s];
-        accel_by_mass(h, ts, nle, ddq);
-        break;
-      case 8:
-        ct_qd_of(h, In(qs, n), In(vs, n), false, out);
-        break;
-      default:
-        terms_of(h, terms, qs, vs, ts, out, which == 7 ? SEPARATE : SHARED);
-      }
-    }
-    const auto t1 = std::chrono::steady_clock::now();
-    per_call.push_back(std::chrono::duration<double, std::nano>(t1 - t0).count() / count);
-  }
-  std::sort(per_call.begin(), per_call.end());
-  return per_call.empty() ? 0.0 : per_call[per_call.size() / 2];
 }
 
 // RNEA: out (n) = M(q)·qdd + C(q,qd)·qd + g(q) [N m].
