@@ -4,18 +4,17 @@
 (``read_si``) and the dynamics snapshot and observers (``snapshot_native``,
 ``bank_update``) over the sample interval, a lost sample held and a stall integrated in
 one-cycle sub-steps. Then section 4, the one place the safety checks are sequenced
-(:func:`_section4`, on every tick; after a Python pre-safety step as the second call
-:func:`section4`): the bus (``drive_scan``), the finiteness checks, the tick's flags
-(``tick_flags``), the limits (``limits_scan``, ``limits_commit``), the collision monitor
-(``monitor_tick``) and the friction learning (``friction_learn``). The checks report into
-the tick state's fault array, never to the stop controller; Python turns it into reports
+(:func:`section4`, which it calls; after a Python pre-safety step the tick calls it itself):
+the bus (``drive_scan``), the finiteness checks, the tick's flags (``tick_flags``), the
+limits (``limits_scan``, ``limits_commit``), the collision monitor (``monitor_tick``) and
+the friction learning (``friction_learn``). The checks report into the tick state's fault
+array, never to the stop controller; Python turns it into reports
 (``Tick._report_faults``). On a tick where nothing unusual can happen (the caller's
-``quiet``) and section 4 found nothing it goes on into sections 5-7 (:func:`_section57`,
-their one sequencing; on every other tick the third call :func:`section57`, after the
-Python stages' rare decisions): the demo path (``path_eval``), the feed-forward
-(``inverse_dynamics_native``), the hand's torque on it, the command (``command_raw``) and
-the record fill (``fill_tick``). The flight recorder's push stays in Python (the tick's
-sink).
+``quiet``) and section 4 found nothing it goes on into sections 5-7 (:func:`section57`, their
+one sequencing, which the tick calls itself on every other tick after the Python stages' rare
+decisions): the demo path (``path_eval``), the feed-forward (``inverse_dynamics_native``),
+the hand's torque on it, the command (``command_raw``) and the record fill (``fill_tick``).
+The flight recorder's push stays in Python (the tick's sink).
 
 Otherwise the kernel returns the stage where the tick's Python takes over for the rest of
 the SAME tick (the :data:`STAGES` codes); it has not written anything Python redoes from
@@ -36,7 +35,6 @@ timings). Numba types each field by its dtype and shape; with numba's JIT switch
 from __future__ import annotations
 
 import math
-import sys
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -252,14 +250,18 @@ def _quiet_inputs(ts: Any) -> None:
 
 
 @K.jit
-def _section4(h: Any, ts: Any, rec: np.ndarray, tick: int, dt: float, resume: bool) -> int:
-    """Section 4 of every tick, the one sequencing of the safety checks: the bus (loss streak,
-    drive scan), the finiteness of the sample and of the estimates, the limits, the collision
-    monitor (with the tool force) and the friction learning. Each finding goes into the fault
-    array in the order the checks ran, with its effect on the stop's state that later checks
-    read (``powered``, ``trusted``, the learning's "no stop"); Python turns the array into
-    stop.report calls (Tick._report_faults). Returns -1 when the drive scan found an axis
-    (its fault is Python's to name; then called again with ``resume``), else the entries."""
+def section4(hot: np.ndarray, rec: np.ndarray, tick: int, dt: float, resume: bool) -> int:
+    """Section 4 of every tick, the one sequencing of the safety checks, on the hot record
+    ``hot`` (1,) and the tick record ``rec`` (1,): the bus (loss streak, drive scan), the
+    finiteness of the sample and of the estimates, the limits, the collision monitor (with the
+    tool force) and the friction learning. Each finding goes into the fault array (``nf``
+    entries) in the order the checks ran, with its effect on the stop's state that later
+    checks read (``powered``, ``trusted``, the learning's "no stop"); Python turns the array
+    into stop.report calls (Tick._report_faults). Called by :func:`fused_tick`, and by the
+    tick's Python after a pre-safety step. Returns BUS when the drive scan found an axis (its
+    fault is Python's to name; then called again with ``resume``), else CONTROL."""
+    h = hot[0]
+    ts = h["tick_state"]
     si, states = h["group_si"], h["group_states"]
     sample = si[:3]
     q, qd, tau = si[0], si[1], si[2]
@@ -272,7 +274,7 @@ def _section4(h: Any, ts: Any, rec: np.ndarray, tick: int, dt: float, resume: bo
             j = drive_scan(states, ts["fault_min"], ts["op_enabled"] if ts["expect"] else -1)
             if j >= 0:
                 ts["scan_j"] = j
-                return -1
+                return BUS
     # a finite snapshot sample means q, qd, tau are all finite (their sum is): the checks
     # that name the joint run only when something is not (each of the three: no short cut)
     ok = ts["finite"]
@@ -337,28 +339,18 @@ def _section4(h: Any, ts: Any, rec: np.ndarray, tick: int, dt: float, resume: bo
                 qd, tau_ext[ts["l_row"]], mdt, ts["l_vs"], ts["l_tau"], ts["l_min"],
                 ts["l_every"], lrn["S"], lrn["b"], lrn["st"],
             )  # fmt: skip
-    return ts["nf"]
+    return CONTROL
 
 
-@K.jit
-def section4(hot: np.ndarray, rec: np.ndarray, tick: int, dt: float, resume: bool) -> int:
-    """The tick's second compiled call (after a pre-safety step or the drive scan's finding,
-    both Python's): section 4 (:func:`_section4`) on the hot record ``hot`` (1,) and the tick
-    record ``rec`` (1,); returns BUS or CONTROL."""
-    h = hot[0]
-    return BUS if _section4(h, h["tick_state"], rec, tick, dt, resume) < 0 else CONTROL
-
-
-#: :func:`_section57`'s ``what`` bits: the steps of sections 5-6 this tick takes
+#: :func:`section57`'s ``what`` bits: the steps of sections 5-6 this tick takes
 S_PATH = 1  # 5. the demo path at t_cmd - t0 (MOVE on the compiled path)
 S_FF = 2  # 5. the feed-forward of the reference (a new reference or a new model)
 S_OFF = 4  # 5. the hand's torque (tau_off, dragging) added to the feed-forward
 
 
 @K.jit
-def _section57(
-    h: Any,
-    ts: Any,
+def section57(
+    hot: np.ndarray,
     rx: np.ndarray,
     rec: np.ndarray,
     t_loop: float,
@@ -370,13 +362,17 @@ def _section57(
     wake: float,
     comp: float,
 ) -> None:
-    """Sections 5-7 of every tick, their one sequencing, after Python's rare decisions (the
-    stop category's drive commands, mode changes, enabling, the drag's follow, playback, the
-    ramp, teach recording: they wrote the motion's reference): the demo path (``what`` &
-    S_PATH), the feed-forward (S_FF) and the hand's torque on it (S_OFF), the command (CSP
-    with the torque offset) and the tick record (q_sent = the command just sent) with the
-    motion's ``mode``, the stop's ``latched`` faults, the exchange's ``status`` and the
-    loop's timings [µs]. The sink's push is Python's."""
+    """Sections 5-7 of every tick, their one sequencing, on the hot record ``hot`` (1,), the
+    output image's bytes ``rx`` and the tick record ``rec`` (1,): called by :func:`fused_tick`
+    on a quiet tick, else by the tick's Python after its rare decisions (the stop category's
+    drive commands, mode changes, enabling, the drag's follow, playback, the ramp, teach
+    recording: they wrote the motion's reference). The demo path (``what`` & S_PATH), the
+    feed-forward (S_FF) and the hand's torque on it (S_OFF), the command (CSP with the torque
+    offset) and the tick record (q_sent = the command just sent) with the motion's ``mode``,
+    the stop's ``latched`` faults, the exchange's ``status`` and the loop's timings [µs]. The
+    sink's push is Python's."""
+    h = hot[0]
+    ts = h["tick_state"]
     ms = h["motion_state"]
     mq, mqd, mqdd = ms["q"], ms["qd"], ms["qdd"]
     tau_ff = ts["tau_ff"]
@@ -398,27 +394,6 @@ def _section57(
         rec, h["group_si"][:3], mq, ts["tau_ext"], ts["q_sent"], t_loop, tick, mode,
         np.int64(latched), np.int64(status), wake, comp, ts["sample_dt"],
     )  # fmt: skip
-
-
-@K.jit
-def section57(
-    hot: np.ndarray,
-    rx: np.ndarray,
-    rec: np.ndarray,
-    t_loop: float,
-    tick: int,
-    what: int,
-    mode: int,
-    latched: int,
-    status: int,
-    wake: float,
-    comp: float,
-) -> None:
-    """The tick's last compiled call on a tick that is not quiet: sections 5-7
-    (:func:`_section57`) on the hot record ``hot`` (1,), the output image's bytes ``rx`` and
-    the tick record ``rec`` (1,), after Python's stages decided what is rare."""
-    h = hot[0]
-    _section57(h, h["tick_state"], rx, rec, t_loop, tick, what, mode, latched, status, wake, comp)
 
 
 @K.jit
@@ -484,7 +459,7 @@ def fused_tick(
     elif ts["pre"]:
         return SAFETY
     ts["use_mon"] = False
-    if _section4(h, ts, rec, tick, dt, False) < 0:
+    if section4(hot, rec, tick, dt, False) == BUS:
         return BUS
     if not quiet or ts["nf"] > 0 or sdt < 0.0:
         return CONTROL
@@ -493,7 +468,7 @@ def fused_tick(
     if kind == OTHER:
         return CONTROL
     what = S_PATH | S_FF if kind == MOVE_PATH else 0
-    _section57(h, ts, rx, rec, t_loop, tick, what, ts["mode"], 0, 0, wake, comp)
+    section57(hot, rx, rec, t_loop, tick, what, ts["mode"], 0, 0, wake, comp)
     return DONE
 
 
@@ -560,16 +535,6 @@ def _learning(t: Tick) -> Any:
 def _path_ok(p: Any) -> bool:
     """``p`` is a demo path the fused call evaluates (its compiled form)."""
     return p is not None and p._use_kernel and p._eval is path_eval
-
-
-_SAID: list[str] = []
-
-
-def say_once(line: str) -> None:
-    """Print ``line`` on stderr once per process (why the tick runs without the fused call)."""
-    if not _SAID:
-        _SAID.append(line)
-        print(f"hofto-hw: {line}", file=sys.stderr)
 
 
 class FusedTick:

@@ -17,16 +17,15 @@ turns into the stop controller's reports in the order they ran. The steps before
 that have no compiled form (the drag's front, a homing step, the tool force) run between
 section 3 and a second compiled call of section 4; the drive scan's finding is named in
 Python (STO, brake) and section 4 resumes. Sections 5-7 (the demo path, the feed-forward,
-the command, the record fill) are sequenced once too (``fused._section57``): on a quiet tick
+the command, the record fill) are sequenced once too (``fused.section57``): on a quiet tick
 (nothing rare can happen: :attr:`Tick.busy` is 0 and no request, fault or bad status came
-in) on which section 4 found nothing the same call goes on into them. When it stops early it
-answers a stage and the methods below finish the same tick from there: they handle what is
-rare (reports, events, stop decisions, requests, reset, mode changes, enabling, brake
-release, drag, homing, teach; :meth:`Tick._control` writes the motion's reference and says
-which steps of sections 5-7 the tick takes), then a last compiled call
-(``fused.section57``) runs sections 5-7. A configuration the compiled call cannot run is
-refused when the tick is
-built, in one line. The Python reference that runs every stage on every tick is
+in) on which section 4 found nothing the fused call goes on into them. When it stops early
+it answers a stage and the methods below finish the same tick from there: they handle what
+is rare (reports, events, stop decisions, requests, reset, mode changes, enabling, brake
+release, drag, homing, teach; :meth:`Tick._decide` writes the motion's reference and says
+which steps of sections 5-7 the tick takes), then the tick calls ``fused.section57``
+itself. A configuration the compiled call cannot run is refused when the tick is built, in
+one line. The Python reference that runs every stage on every tick is
 tests/support/reference_tick.py; tests/hofto_hw/runtime/test_fused.py checks both tick by
 tick, bit for bit.
 
@@ -359,7 +358,7 @@ class Tick(TickEvents):
             stage = self._s4_call(self._fz_args[0], self._rec1, self.tick, dt, True)
         self._report_faults()  # 4. what the checks found, as reports, in their order
         self._requests(missed)  # 4 (end): overruns, requests, reset, stop measurement
-        what = self._control()  # 5-6: what is rare (the stop category's commands, ...)
+        what = self._decide()  # 5-6: what is rare (the stop category's commands, ...)
         # 5-7 compiled: the demo path, the feed-forward, the command, the record's fill
         self._s57_call(
             self._fz_args[0], self._fz_args[3], self._rec1, self.t, self.tick, what,
@@ -464,12 +463,13 @@ class Tick(TickEvents):
         if self._measuring or stop.first_tick == self.tick:
             self._measure_stop(self.group.q, self.group.qd)
 
-    def _control(self) -> int:
+    def _decide(self) -> int:
         """Sections 5 (controller) and 6 (command, acting the stop category): what is rare,
         in Python (the stop category's drive commands, mode changes, enabling, the drag's
         follow, playback, the ramp, teach recording), writing the motion's reference; returns
-        the steps of the compiled sections 5-7 (:func:`~hofto_hw.runtime.fused.section57`'s
-        ``what``: the demo path, the feed-forward, the hand's torque) that this tick takes."""
+        the steps of sections 5-7 (:func:`~hofto_hw.runtime.fused.section57`'s ``what``: the
+        demo path, the feed-forward, the hand's torque) that this tick takes. The tick runs
+        them compiled; tests/support/reference_tick.py runs them in Python."""
         g, stop, motion = self.group, self.stop, self.motion
         q, qd = g.q, g.qd
         what = 0
