@@ -35,6 +35,7 @@ timings). Numba types each field by its dtype and shape; with numba's JIT switch
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -537,6 +538,35 @@ def _path_ok(p: Any) -> bool:
     return p is not None and p._use_kernel and p._eval is path_eval
 
 
+#: what :meth:`FusedTick.args` reads that can change while the tick runs (:meth:`FusedTick.
+#: stale` compares): objects by identity, numbers by value. The motion's path, the native
+#: models' handles (a model change), the bus's codes, the collision monitor, the friction
+#: learning on or off and its row, the bank, the process images, the tick record, the path's
+#: workspace and ramp, the tool-force check and its limit, the stop categories (the friction
+#: learning's constants are its own, set when it is built)
+_INPUTS: tuple[Callable[[Tick], Any], ...] = (
+    lambda t: t.motion.path,
+    lambda t: t.snapshot._native.handle,
+    lambda t: t.feedforward._native.handle,
+    lambda t: t.bus.fault_min,
+    lambda t: t.bus.op_enabled,
+    lambda t: t.collision,
+    _learning,
+    lambda t: t.drag_row,
+    lambda t: t._bank.args,
+    lambda t: t.group._tx_bytes,
+    lambda t: t.group._rx_bytes,
+    lambda t: t._rec1,
+    lambda t: None if t.motion.path is None else t.motion.path._k,
+    lambda t: None if t.motion.path is None else t.motion.path.ramp,
+    lambda t: None if t.collision is None else t.collision._tool,
+    lambda t: None if t.collision is None else t.collision.tool_force,
+    lambda t: t.stop.categories,
+)
+_N_INPUTS = len(_INPUTS)
+_NUMBERS = (int, float, np.integer)
+
+
 class FusedTick:
     """The fused call's arguments for one :class:`~hofto_hw.runtime.tick.Tick`: the hot record
     ``tick.hot`` its parts were built on (:func:`hot_record`; ``why`` says why not when ``ok``
@@ -548,7 +578,7 @@ class FusedTick:
         self.why = self._check(tick)
         self.ok = not self.why
         self.path: Any = None
-        self._seen: tuple[Any, ...] = ()  # what args() read (stale() compares with it)
+        self._seen: list[Any] = []  # what args() read of _INPUTS (stale() compares with it)
         self.kept = [(o, a, getattr(o, a)) for _, o, a in _parts(tick)] if self.ok else []
         if self.ok:
             try:
@@ -603,7 +633,7 @@ class FusedTick:
         """The call's arguments before this tick's scalars, and the parts' constants into the
         tick's state (:attr:`path_ok`: the motion's path is the compiled one on the hot record).
         Called again only when :meth:`stale`: whatever it reads that can change goes into
-        :meth:`_inputs` and :meth:`stale` too."""
+        :data:`_INPUTS`."""
         t = self.tick
         g, m, st = t.group, t.motion, t.st
         st["fault_min"], st["op_enabled"] = t.bus.fault_min, t.bus.op_enabled
@@ -623,52 +653,20 @@ class FusedTick:
         self.path_ok = _path_ok(p) and self.hot_path(p)
         if self.path_ok:
             st["ramp"] = p.ramp
-        self._seen = self._inputs()
+        self._seen = [get(t) for get in _INPUTS]
         return (self.hot, t._bank.args, g._tx_bytes, g._rx_bytes, t._rec1)
 
-    def _inputs(self) -> tuple[Any, ...]:
-        """What :meth:`args` read that can change while the tick runs (objects and the
-        numbers it copied into the state), besides the motion's path (:attr:`path`)."""
-        t, p, c = self.tick, self.path, self.tick.collision
-        return (
-            t.snapshot._native.handle,  # type: ignore[union-attr]
-            t.feedforward._native.handle,  # type: ignore[union-attr]
-            t.bus.fault_min, t.bus.op_enabled, c, _learning(t), t.drag_row,
-            t._bank.args, t.group._tx_bytes, t.group._rx_bytes, t._rec1,
-            None if p is None else p._k, None if p is None else p.ramp,
-            # the tool-force check and the stop categories (section 4's compiled checks)
-            None if c is None else c._tool, None if c is None else c.tool_force,
-            t.stop.categories,
-        )  # fmt: skip
-
     def stale(self) -> bool:
-        """:meth:`args` would answer differently now: the motion's path replaced, a native
-        model's new handle (a model change), the bus's codes, the collision monitor, the
-        friction learning on or off, the bank, the process images, the tick record, the path's
-        workspace or ramp, the collision monitor's tool-force check or the stop categories
-        changed (the friction learning's constants are its own, set when it is built).
-        Identities and numbers, no allocation: args itself writes numpy scalars and compares
-        addresses (~6 µs)."""
-        t, p, c = self.tick, self.path, self.tick.collision
-        (snap_h, ff_h, fault_min, op_enabled, coll, fr, row, bank, tx, rx, rec, k, ramp, tool,
-         tool_force, cats) = self._seen  # fmt: skip
-        return not (
-            t.motion.path is p
-            and t.snapshot._native.handle == snap_h  # type: ignore[union-attr]
-            and t.feedforward._native.handle == ff_h  # type: ignore[union-attr]
-            and t.bus.fault_min == fault_min
-            and t.bus.op_enabled == op_enabled
-            and t.collision is coll
-            and _learning(t) is fr
-            and t.drag_row == row
-            and t._bank.args is bank
-            and t.group._tx_bytes is tx
-            and t.group._rx_bytes is rx
-            and t._rec1 is rec
-            and (p is None or (p._k is k and p.ramp == ramp))
-            and (c is None or (c._tool is tool and c.tool_force == tool_force))
-            and t.stop.categories is cats
-        )
+        """:meth:`args` would answer differently now: one of :data:`_INPUTS` is another
+        object or number than it read. Allocates nothing (an index, not an iterator: a drag
+        tick asks on every tick)."""
+        t, seen, i = self.tick, self._seen, 0
+        while i < _N_INPUTS:
+            now, was = _INPUTS[i](t), seen[i]
+            if now is not was and not (isinstance(now, _NUMBERS) and now == was):
+                return True
+            i += 1
+        return False
 
     def hot_path(self, p: Any) -> bool:
         """The path's workspace is its field of the hot record (built on it)."""
