@@ -165,14 +165,14 @@ def tick_state_dtype(n: int, k: int) -> np.dtype:
             ("use_mon", b1),  # the monitor judges tau_mon (dragging), not tau_ext
             ("tool_value", f8),  # the tool force of this tick [N] (Python's pre-step)
             # what section 4 found: the fault array (kind, joint, value) in the order the
-            # checks ran, the drive scan's axis, the monitor's flags; the sample was finite
+            # checks ran (the monitor's flags in its entry's joint column), the drive scan's
+            # axis; the sample was finite
             ("nf", i8),
             ("fk", i8, (fault_cap(k),)),
             ("fj", i8, (fault_cap(k),)),
             ("fv", f8, (fault_cap(k),)),
             ("scan_j", i8),
             ("finite", b1),
-            ("mflags", i8),
             ("tau_ext", f8, (k, n)),  # the observers' estimates [N·m]
             ("tau_mon", f8, (k, n)),  # the monitor's input while dragging [N·m]
             ("prev", f8, (3, n)),  # last tick's q, qd, tau (a stall's interpolation start)
@@ -311,7 +311,6 @@ def section4(hot: np.ndarray, rec: np.ndarray, tick: int, dt: float, resume: boo
     if monitored != ts["monitored"]:
         ts["monitored"] = monitored
         rec[0]["monitored"] = monitored  # replay judges the same ticks
-    ts["mflags"] = 0
     if monitored:
         # over the interval the observers integrated (DC: the drives' own; a stalled
         # master's dt made the acceleration feature, and the threshold, too small)
@@ -321,7 +320,6 @@ def section4(hot: np.ndarray, rec: np.ndarray, tick: int, dt: float, resume: boo
         cr = h["coll_record"]
         bbuf = h["coll_bbuf"].view(np.bool_)  # numba has no boolean subarray fields
         f = monitor_tick(cr["fbuf"], bbuf, cr["first_tick"], est, qd, ms["qdd"], mdt, tick)
-        ts["mflags"] = f
         if f != 0 or ts["was_contact"]:  # CollisionLevels._report's findings, in its order
             _entry(ts, K_MONITOR, f, 0.0)
             if f & NONFINITE:

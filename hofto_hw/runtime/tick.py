@@ -171,7 +171,6 @@ class Tick(TickEvents):
         self.st["stall"], self.st["two"] = self._stall_dt, 2.0
         self.st["period"] = self.period
         self._prev = self.state["prev"][0]  # last tick's q, qd, tau (interpolation start)
-        self._interp = self.state["interp"][0]  # one substep's q, qd, tau
         self.tau_ext = self.state["tau_ext"][0]
         self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
         self.tau_ff = self.state["tau_ff"][0]
@@ -222,7 +221,6 @@ class Tick(TickEvents):
         self._q_detect = np.zeros(n)
         self._d = np.zeros(n)
         self._cw = np.zeros(n, dtype=np.uint16)
-        self._fin = np.zeros(n, dtype=bool)
         # records (preallocated; field views fetched once)
         self.tick_rec = new_record(tick_dtype(n, len(self.observers)))
         self.event_rec = new_record(EVENT_DTYPE)
@@ -236,13 +234,11 @@ class Tick(TickEvents):
         self._events_pushed = 0
         self._events = stop.events  # the stop controller's event log (never replaced)
         self._rec1 = r.reshape(1)  # the same memory as a one-element array, for the kernel
-        self._sample = group.sample  # q, qd, tau as rows of one (3, n) view
         # drag (hand guiding): controller, enabling input, the observer row that drives it
         self.drag = drag
         self.enable_input = enable_input if enable_input is not None else EnableInput()
         self._din = group.transport.tx["digital_inputs"]
         self.drag_row = int(drag_row)
-        self._drag_est = self.tau_ext[self.drag_row]  # the drag's observer row (a view)
         #: the drag's friction learning outside drag mode (None: no drag or no learning)
         self._learn = drag.learn if drag is not None else None
         self.drag_reason = 0
@@ -257,7 +253,6 @@ class Tick(TickEvents):
         self._tau_mon = self.state["tau_mon"][0]  # the collision monitor's input (dragging)
         self._wrench = r["wrench"]
         self._wrench_set = False  # the record's wrench holds a drag estimate (else all NaN)
-        self._qdd_rec = r["qdd_cmd"]
         #: the kernels' backend (the compiled calls below compile and warm every kernel;
         #: python: the tick is refused)
         self.backend = jit.resolve(backend)

@@ -61,7 +61,7 @@ class ReferenceTick(Tick):
         m = self.motion
         # the casts keep the kernel on its warmed signature whatever numbers callers pass
         fill_tick(
-            self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t), self.tick,
+            self._rec1, self.group.sample, m.q, self.tau_ext, self.q_sent, float(self.t), self.tick,
             m.mode, self.stop.latched, int(status), float(wakeup_us), float(compute_us),
             float(self.st["sample_dt"]),
         )  # fmt: skip
@@ -84,7 +84,9 @@ class ReferenceTick(Tick):
         good = self.bus.check(stop, status, g.fresh, g.states, self.err_codes, self.expect_enabled)
         lim = self.limits
         ok = snap.finite or (lim.finite(stop, q) & lim.finite(stop, qd) & lim.finite(stop, tau))
-        flags = tk.tick_flags(self.tau_ext, g.states, tk.POWERED, motion.qdd, self._qdd_rec)
+        flags = tk.tick_flags(
+            self.tau_ext, g.states, tk.POWERED, motion.qdd, self.tick_rec["qdd_cmd"]
+        )
         if not flags & tk.ESTIMATES_FINITE:
             for i in range(len(self.observers)):
                 ok &= lim.finite(stop, self.tau_ext[i])
@@ -109,7 +111,7 @@ class ReferenceTick(Tick):
             flags = self.collision.update(stop, est, q, qd, motion.qdd, mdt)
             if self._learn is not None and motion.mode != DRAG and stop.category == -1:
                 if not flags & (COLLIDED | CONTACT):  # contact-free motion: friction error
-                    self._learn(g.qd, self._drag_est, mdt)
+                    self._learn(g.qd, self.tau_ext[self.drag_row], mdt)
 
     def _front(self, dt: float) -> None:
         """Sections 2-3: the joint state in SI, the snapshot and the observers over the sample
@@ -138,7 +140,7 @@ class ReferenceTick(Tick):
             self._bank.update(dt)
         else:
             h = dt / k
-            prev, x = self._prev, self._interp
+            prev, x = self._prev, self.state["interp"][0]
             for s in range(1, k + 1):
                 a = s / k
                 for j, now in enumerate((q, qd, tau)):
