@@ -42,7 +42,7 @@ import numpy as np
 
 from drivers.cia402.kernels import command_raw, read_si
 from hofto_hw import jit as K  # the project's jit: K.jit, K.available
-from hofto_hw.control.joint_motion import DRAG, fade_in
+from hofto_hw.control.joint_motion import DRAG, MOVE, fade_in
 from hofto_hw.control.kernels import friction_learn, path_eval
 from hofto_hw.model import kernels as MK
 from hofto_hw.model.kernels import inverse_dynamics_native, snapshot_native
@@ -665,6 +665,10 @@ class FusedTick:
                 return True
             i += 1
         return False
+
+    def moves(self, m: Any) -> bool:
+        """The motion ``m`` (JointMotion) follows the demo path the call evaluates (MOVE)."""
+        return m.mode == MOVE and self.path_ok and m.path is self.path
 
     def hot_path(self, p: Any) -> bool:
         """The path's workspace is its field of the hot record (built on it)."""

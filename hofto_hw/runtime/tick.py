@@ -47,7 +47,7 @@ from drivers.cia402.state_machine import State
 from hofto_hw import jit
 from hofto_hw.control.drag import DragController
 from hofto_hw.control.enabling import EnableInput
-from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, JointMotion
+from hofto_hw.control.joint_motion import DRAG, HOLD, JointMotion
 from hofto_hw.errors import ConfigError
 from hofto_hw.jit import Backend
 from hofto_hw.model.data import ModelData
@@ -310,9 +310,7 @@ class Tick(TickEvents):
         if self.script is not None:
             self.script.step(self)  # may change anything: the rare states again
             self._refresh(rebuild=False)
-        m = self.feedforward.model
-        rev, fr, pl = self._ff_model  # what tau_ff was evaluated with
-        if m.revision != rev or m.friction is not fr or m.payload is not pl:
+        if self._model_moved():
             self._follow_model()  # rare: the native models and the call's arguments first
 
         # 1. exchange
@@ -493,7 +491,7 @@ class Tick(TickEvents):
             if motion.mode == DRAG:
                 d = self.drag
                 motion.follow(d.q_cmd, d.qd_cmd, d.qdd_cmd)
-            elif motion.mode == MOVE and self._fz.path_ok and motion.path is self._fz.path:
+            elif self._fz.moves(motion):
                 motion.version += 1  # JointMotion.update's, the path in the compiled call
                 motion._still = False
                 self.st["t0"] = motion.t0  # a move started this tick: _refresh has not
@@ -550,7 +548,7 @@ class Tick(TickEvents):
         m = self.motion
         if m.mode == HOLD and m._still:
             kind = HOLD_STILL
-        elif m.mode == MOVE and fz.path_ok and m.path is fz.path:
+        elif fz.moves(m):
             kind = MOVE_PATH
         else:
             kind = OTHER
@@ -568,7 +566,7 @@ class Tick(TickEvents):
     def _busy(self) -> int:
         """The rare states now, as BUSY_* bits (0: nothing keeps the next tick off the quiet
         path; requests from other threads and this tick's status are checked per tick)."""
-        stop, m, model = self.stop, self.motion, self.feedforward.model
+        stop, m = self.stop, self.motion
         b = 0
         if stop.latched or stop.category != NO_CATEGORY or self._measuring:
             b |= BUSY_STOP
@@ -582,10 +580,7 @@ class Tick(TickEvents):
             b |= BUSY_TEACH
         if not self.snapshot.finite:
             b |= BUSY_NONFINITE
-        rev, fr, pl = self._ff_model
-        if m.version != self._ff_version or not (
-            model.revision == rev and model.friction is fr and model.payload is pl
-        ):
+        if m.version != self._ff_version or self._model_moved():
             b |= BUSY_REFERENCE
         if self.collision is not None and self.collision._tool is not None:
             b |= BUSY_TOOL_FORCE
@@ -600,14 +595,20 @@ class Tick(TickEvents):
         if not self._bank.bound():
             self._bank = ObserverBank(self.observers, self.snapshot, self.tau_ext)
 
-    def _ff_model_changed(self) -> bool:
-        """True (once) when the model changed since tau_ff was evaluated: its parameters
-        (``RobotModel.revision``: identified parameters, rotor inertia, payload) or its friction
-        or payload object replaced (then taken as the one tau_ff is evaluated with)."""
+    def _model_moved(self) -> bool:
+        """The model is not the one tau_ff was evaluated with (``_ff_model``): its parameters
+        (``RobotModel.revision``: identified parameters, rotor inertia, payload) changed or its
+        friction or payload object was replaced."""
         m = self.feedforward.model
         rev, fr, pl = self._ff_model
-        if m.revision == rev and m.friction is fr and m.payload is pl:
+        return m.revision != rev or m.friction is not fr or m.payload is not pl
+
+    def _ff_model_changed(self) -> bool:
+        """True (once) when :meth:`_model_moved`: the model now is the one tau_ff is
+        evaluated with."""
+        if not self._model_moved():
             return False
+        m = self.feedforward.model
         self._ff_model = (m.revision, m.friction, m.payload)
         return True
 
