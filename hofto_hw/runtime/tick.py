@@ -627,15 +627,8 @@ class Tick(TickEvents):
         self.sink.push_tick(self.tick_rec)
         ev = self._events
         while self._events_pushed < ev.count:  # one integer compare on a tick without events
-            i = self._events_pushed % ev.capacity
-            e = self.event_rec
-            e["t"] = self.t
-            e["tick"] = ev.tick[i]
-            e["kind"] = ev.kind[i]
-            e["joint"] = ev.joint[i]
-            e["category"] = ev.category[i]
-            e["value"] = ev.value[i]
-            self.sink.push_event(e)
+            ev.copy(self._events_pushed, self.event_rec, self.t)
+            self.sink.push_event(self.event_rec)
             self._events_pushed += 1
         if self.tick % self.diag_every == 0:
             self._diag()
