@@ -402,9 +402,7 @@ class Tick(TickEvents):
         drag's front, a homing run's step (before the limit checks), the monitor's input while
         dragging and the tool-force check; then section 4 as the second compiled call."""
         self._drag_front()
-        if self.homing is not None and self.homing.step(self):  # before the limit checks
-            self.homing = None
-            self.restart_estimates()
+        self._homing_step()
         st, c = self.st, self.collision
         est = self._monitored(True) if self.motion.mode == DRAG else self.tau_ext
         st["use_mon"] = est is not self.tau_ext  # then it is _tau_mon (tau_mon's field)
@@ -412,6 +410,12 @@ class Tick(TickEvents):
             st["tool_value"] = c._tool.check(est, self.group.q)
         self._state_in()
         return self._s4_call(self._fz_args[0], self._rec1, self.tick, dt, False)
+
+    def _homing_step(self) -> None:
+        """A homing run's step, before the limit checks; its end restarts the estimates."""
+        if self.homing is not None and self.homing.step(self):
+            self.homing = None
+            self.restart_estimates()
 
     def _bus_found(self) -> None:
         """The drive scan found an axis faulted (j < n) or out of Operation enabled: its fault

@@ -41,7 +41,7 @@ class ReferenceTick(Tick):
         self._control()  # 5. controller and 6. command
         self._record(status, wakeup_us, compute_us)  # 7. the record into the sink
 
-    def _control(self) -> None:  # type: ignore[override]
+    def _control(self) -> None:
         """Sections 5 (controller) and 6 (command): the rare decisions as production takes
         them (Tick._decide), then the steps of sections 5-7 they ask for in Python, through
         the parts' own methods (production: fused.section57, compiled)."""
@@ -74,9 +74,7 @@ class ReferenceTick(Tick):
         """Section 4 through the parts' own methods, each reporting to the stop controller as
         it finds (production: fused.section4's fault array, Tick._report_faults)."""
         g, stop, motion, snap = self.group, self.stop, self.motion, self.snapshot
-        if self.homing is not None and self.homing.step(self):  # before the limit checks
-            self.homing = None
-            self.restart_estimates()
+        self._homing_step()
         q, qd, tau = g.q, g.qd, g.tau
         st = self.st
         obs_dt = float(st["sample_dt"])
