@@ -96,6 +96,17 @@ class EventLog:
         self.value[i] = value
         self.count += 1
 
+    def copy(self, i: int, rec: np.ndarray, t: float) -> None:
+        """Entry ``i`` into the 0-d record ``rec`` (fields t, tick, kind, joint, category,
+        value: the flight log's and the control plane's event record) at loop time ``t`` [s]."""
+        j = i % self.capacity
+        rec["t"] = t
+        rec["tick"] = self.tick[j]
+        rec["kind"] = self.kind[j]
+        rec["joint"] = self.joint[j]
+        rec["category"] = self.category[j]
+        rec["value"] = self.value[j]
+
 
 class StopController:
     """Latches faults and tells the loop which stop category to act (see module docstring).

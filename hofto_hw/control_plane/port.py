@@ -284,13 +284,7 @@ class LoopPort:
         tick = self.tick
         ev, e = tick.stop.events, self.ev_rec
         while self._events_seen < ev.count:
-            i = self._events_seen % ev.capacity
-            e["t"] = tick.t
-            e["tick"] = ev.tick[i]
-            e["kind"] = ev.kind[i]
-            e["joint"] = ev.joint[i]
-            e["category"] = ev.category[i]
-            e["value"] = ev.value[i]
+            ev.copy(self._events_seen, e, tick.t)
             if not self.chan.events.push(e):
                 self.ctl[ch.EVENTS_LOST] += 1
             self._events_seen += 1

@@ -4,18 +4,17 @@
 (``read_si``) and the dynamics snapshot and observers (``snapshot_native``,
 ``bank_update``) over the sample interval, a lost sample held and a stall integrated in
 one-cycle sub-steps. Then section 4, the one place the safety checks are sequenced
-(:func:`_section4`, on every tick; after a Python pre-safety step as the second call
-:func:`section4`): the bus (``drive_scan``), the finiteness checks, the tick's flags
-(``tick_flags``), the limits (``limits_scan``, ``limits_commit``), the collision monitor
-(``monitor_tick``) and the friction learning (``friction_learn``). The checks report into
-the tick state's fault array, never to the stop controller; Python turns it into reports
+(:func:`section4`, which it calls; after a Python pre-safety step the tick calls it itself):
+the bus (``drive_scan``), the finiteness checks, the tick's flags (``tick_flags``), the
+limits (``limits_scan``, ``limits_commit``), the collision monitor (``monitor_tick``) and
+the friction learning (``friction_learn``). The checks report into the tick state's fault
+array, never to the stop controller; Python turns it into reports
 (``Tick._report_faults``). On a tick where nothing unusual can happen (the caller's
-``quiet``) and section 4 found nothing it goes on into sections 5-7 (:func:`_section57`,
-their one sequencing; on every other tick the third call :func:`section57`, after the
-Python stages' rare decisions): the demo path (``path_eval``), the feed-forward
-(``inverse_dynamics_native``), the hand's torque on it, the command (``command_raw``) and
-the record fill (``fill_tick``). The flight recorder's push stays in Python (the tick's
-sink).
+``quiet``) and section 4 found nothing it goes on into sections 5-7 (:func:`section57`, their
+one sequencing, which the tick calls itself on every other tick after the Python stages' rare
+decisions): the demo path (``path_eval``), the feed-forward (``inverse_dynamics_native``),
+the hand's torque on it, the command (``command_raw``) and the record fill (``fill_tick``).
+The flight recorder's push stays in Python (the tick's sink).
 
 Otherwise the kernel returns the stage where the tick's Python takes over for the rest of
 the SAME tick (the :data:`STAGES` codes); it has not written anything Python redoes from
@@ -36,14 +35,14 @@ timings). Numba types each field by its dtype and shape; with numba's JIT switch
 from __future__ import annotations
 
 import math
-import sys
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from drivers.cia402.kernels import command_raw, read_si
 from hofto_hw import jit as K  # the project's jit: K.jit, K.available
-from hofto_hw.control.joint_motion import DRAG, fade_in
+from hofto_hw.control.joint_motion import DRAG, MOVE, fade_in
 from hofto_hw.control.kernels import friction_learn, path_eval
 from hofto_hw.model import kernels as MK
 from hofto_hw.model.kernels import inverse_dynamics_native, snapshot_native
@@ -166,14 +165,14 @@ def tick_state_dtype(n: int, k: int) -> np.dtype:
             ("use_mon", b1),  # the monitor judges tau_mon (dragging), not tau_ext
             ("tool_value", f8),  # the tool force of this tick [N] (Python's pre-step)
             # what section 4 found: the fault array (kind, joint, value) in the order the
-            # checks ran, the drive scan's axis, the monitor's flags; the sample was finite
+            # checks ran (the monitor's flags in its entry's joint column), the drive scan's
+            # axis; the sample was finite
             ("nf", i8),
             ("fk", i8, (fault_cap(k),)),
             ("fj", i8, (fault_cap(k),)),
             ("fv", f8, (fault_cap(k),)),
             ("scan_j", i8),
             ("finite", b1),
-            ("mflags", i8),
             ("tau_ext", f8, (k, n)),  # the observers' estimates [N·m]
             ("tau_mon", f8, (k, n)),  # the monitor's input while dragging [N·m]
             ("prev", f8, (3, n)),  # last tick's q, qd, tau (a stall's interpolation start)
@@ -252,14 +251,18 @@ def _quiet_inputs(ts: Any) -> None:
 
 
 @K.jit
-def _section4(h: Any, ts: Any, rec: np.ndarray, tick: int, dt: float, resume: bool) -> int:
-    """Section 4 of every tick, the one sequencing of the safety checks: the bus (loss streak,
-    drive scan), the finiteness of the sample and of the estimates, the limits, the collision
-    monitor (with the tool force) and the friction learning. Each finding goes into the fault
-    array in the order the checks ran, with its effect on the stop's state that later checks
-    read (``powered``, ``trusted``, the learning's "no stop"); Python turns the array into
-    stop.report calls (Tick._report_faults). Returns -1 when the drive scan found an axis
-    (its fault is Python's to name; then called again with ``resume``), else the entries."""
+def section4(hot: np.ndarray, rec: np.ndarray, tick: int, dt: float, resume: bool) -> int:
+    """Section 4 of every tick, the one sequencing of the safety checks, on the hot record
+    ``hot`` (1,) and the tick record ``rec`` (1,): the bus (loss streak, drive scan), the
+    finiteness of the sample and of the estimates, the limits, the collision monitor (with the
+    tool force) and the friction learning. Each finding goes into the fault array (``nf``
+    entries) in the order the checks ran, with its effect on the stop's state that later
+    checks read (``powered``, ``trusted``, the learning's "no stop"); Python turns the array
+    into stop.report calls (Tick._report_faults). Called by :func:`fused_tick`, and by the
+    tick's Python after a pre-safety step. Returns BUS when the drive scan found an axis (its
+    fault is Python's to name; then called again with ``resume``), else CONTROL."""
+    h = hot[0]
+    ts = h["tick_state"]
     si, states = h["group_si"], h["group_states"]
     sample = si[:3]
     q, qd, tau = si[0], si[1], si[2]
@@ -272,7 +275,7 @@ def _section4(h: Any, ts: Any, rec: np.ndarray, tick: int, dt: float, resume: bo
             j = drive_scan(states, ts["fault_min"], ts["op_enabled"] if ts["expect"] else -1)
             if j >= 0:
                 ts["scan_j"] = j
-                return -1
+                return BUS
     # a finite snapshot sample means q, qd, tau are all finite (their sum is): the checks
     # that name the joint run only when something is not (each of the three: no short cut)
     ok = ts["finite"]
@@ -308,7 +311,6 @@ def _section4(h: Any, ts: Any, rec: np.ndarray, tick: int, dt: float, resume: bo
     if monitored != ts["monitored"]:
         ts["monitored"] = monitored
         rec[0]["monitored"] = monitored  # replay judges the same ticks
-    ts["mflags"] = 0
     if monitored:
         # over the interval the observers integrated (DC: the drives' own; a stalled
         # master's dt made the acceleration feature, and the threshold, too small)
@@ -318,7 +320,6 @@ def _section4(h: Any, ts: Any, rec: np.ndarray, tick: int, dt: float, resume: bo
         cr = h["coll_record"]
         bbuf = h["coll_bbuf"].view(np.bool_)  # numba has no boolean subarray fields
         f = monitor_tick(cr["fbuf"], bbuf, cr["first_tick"], est, qd, ms["qdd"], mdt, tick)
-        ts["mflags"] = f
         if f != 0 or ts["was_contact"]:  # CollisionLevels._report's findings, in its order
             _entry(ts, K_MONITOR, f, 0.0)
             if f & NONFINITE:
@@ -337,28 +338,18 @@ def _section4(h: Any, ts: Any, rec: np.ndarray, tick: int, dt: float, resume: bo
                 qd, tau_ext[ts["l_row"]], mdt, ts["l_vs"], ts["l_tau"], ts["l_min"],
                 ts["l_every"], lrn["S"], lrn["b"], lrn["st"],
             )  # fmt: skip
-    return ts["nf"]
+    return CONTROL
 
 
-@K.jit
-def section4(hot: np.ndarray, rec: np.ndarray, tick: int, dt: float, resume: bool) -> int:
-    """The tick's second compiled call (after a pre-safety step or the drive scan's finding,
-    both Python's): section 4 (:func:`_section4`) on the hot record ``hot`` (1,) and the tick
-    record ``rec`` (1,); returns BUS or CONTROL."""
-    h = hot[0]
-    return BUS if _section4(h, h["tick_state"], rec, tick, dt, resume) < 0 else CONTROL
-
-
-#: :func:`_section57`'s ``what`` bits: the steps of sections 5-6 this tick takes
+#: :func:`section57`'s ``what`` bits: the steps of sections 5-6 this tick takes
 S_PATH = 1  # 5. the demo path at t_cmd - t0 (MOVE on the compiled path)
 S_FF = 2  # 5. the feed-forward of the reference (a new reference or a new model)
 S_OFF = 4  # 5. the hand's torque (tau_off, dragging) added to the feed-forward
 
 
 @K.jit
-def _section57(
-    h: Any,
-    ts: Any,
+def section57(
+    hot: np.ndarray,
     rx: np.ndarray,
     rec: np.ndarray,
     t_loop: float,
@@ -370,13 +361,17 @@ def _section57(
     wake: float,
     comp: float,
 ) -> None:
-    """Sections 5-7 of every tick, their one sequencing, after Python's rare decisions (the
-    stop category's drive commands, mode changes, enabling, the drag's follow, playback, the
-    ramp, teach recording: they wrote the motion's reference): the demo path (``what`` &
-    S_PATH), the feed-forward (S_FF) and the hand's torque on it (S_OFF), the command (CSP
-    with the torque offset) and the tick record (q_sent = the command just sent) with the
-    motion's ``mode``, the stop's ``latched`` faults, the exchange's ``status`` and the
-    loop's timings [µs]. The sink's push is Python's."""
+    """Sections 5-7 of every tick, their one sequencing, on the hot record ``hot`` (1,), the
+    output image's bytes ``rx`` and the tick record ``rec`` (1,): called by :func:`fused_tick`
+    on a quiet tick, else by the tick's Python after its rare decisions (the stop category's
+    drive commands, mode changes, enabling, the drag's follow, playback, the ramp, teach
+    recording: they wrote the motion's reference). The demo path (``what`` & S_PATH), the
+    feed-forward (S_FF) and the hand's torque on it (S_OFF), the command (CSP with the torque
+    offset) and the tick record (q_sent = the command just sent) with the motion's ``mode``,
+    the stop's ``latched`` faults, the exchange's ``status`` and the loop's timings [µs]. The
+    sink's push is Python's."""
+    h = hot[0]
+    ts = h["tick_state"]
     ms = h["motion_state"]
     mq, mqd, mqdd = ms["q"], ms["qd"], ms["qdd"]
     tau_ff = ts["tau_ff"]
@@ -398,27 +393,6 @@ def _section57(
         rec, h["group_si"][:3], mq, ts["tau_ext"], ts["q_sent"], t_loop, tick, mode,
         np.int64(latched), np.int64(status), wake, comp, ts["sample_dt"],
     )  # fmt: skip
-
-
-@K.jit
-def section57(
-    hot: np.ndarray,
-    rx: np.ndarray,
-    rec: np.ndarray,
-    t_loop: float,
-    tick: int,
-    what: int,
-    mode: int,
-    latched: int,
-    status: int,
-    wake: float,
-    comp: float,
-) -> None:
-    """The tick's last compiled call on a tick that is not quiet: sections 5-7
-    (:func:`_section57`) on the hot record ``hot`` (1,), the output image's bytes ``rx`` and
-    the tick record ``rec`` (1,), after Python's stages decided what is rare."""
-    h = hot[0]
-    _section57(h, h["tick_state"], rx, rec, t_loop, tick, what, mode, latched, status, wake, comp)
 
 
 @K.jit
@@ -484,7 +458,7 @@ def fused_tick(
     elif ts["pre"]:
         return SAFETY
     ts["use_mon"] = False
-    if _section4(h, ts, rec, tick, dt, False) < 0:
+    if section4(hot, rec, tick, dt, False) == BUS:
         return BUS
     if not quiet or ts["nf"] > 0 or sdt < 0.0:
         return CONTROL
@@ -493,7 +467,7 @@ def fused_tick(
     if kind == OTHER:
         return CONTROL
     what = S_PATH | S_FF if kind == MOVE_PATH else 0
-    _section57(h, ts, rx, rec, t_loop, tick, what, ts["mode"], 0, 0, wake, comp)
+    section57(hot, rx, rec, t_loop, tick, what, ts["mode"], 0, 0, wake, comp)
     return DONE
 
 
@@ -562,14 +536,33 @@ def _path_ok(p: Any) -> bool:
     return p is not None and p._use_kernel and p._eval is path_eval
 
 
-_SAID: list[str] = []
-
-
-def say_once(line: str) -> None:
-    """Print ``line`` on stderr once per process (why the tick runs without the fused call)."""
-    if not _SAID:
-        _SAID.append(line)
-        print(f"hofto-hw: {line}", file=sys.stderr)
+#: what :meth:`FusedTick.args` reads that can change while the tick runs (:meth:`FusedTick.
+#: stale` compares): objects by identity, numbers by value. The motion's path, the native
+#: models' handles (a model change), the bus's codes, the collision monitor, the friction
+#: learning on or off and its row, the bank, the process images, the tick record, the path's
+#: workspace and ramp, the tool-force check and its limit, the stop categories (the friction
+#: learning's constants are its own, set when it is built)
+_INPUTS: tuple[Callable[[Tick], Any], ...] = (
+    lambda t: t.motion.path,
+    lambda t: t.snapshot._native.handle,
+    lambda t: t.feedforward._native.handle,
+    lambda t: t.bus.fault_min,
+    lambda t: t.bus.op_enabled,
+    lambda t: t.collision,
+    _learning,
+    lambda t: t.drag_row,
+    lambda t: t._bank.args,
+    lambda t: t.group._tx_bytes,
+    lambda t: t.group._rx_bytes,
+    lambda t: t._rec1,
+    lambda t: None if t.motion.path is None else t.motion.path._k,
+    lambda t: None if t.motion.path is None else t.motion.path.ramp,
+    lambda t: None if t.collision is None else t.collision._tool,
+    lambda t: None if t.collision is None else t.collision.tool_force,
+    lambda t: t.stop.categories,
+)
+_N_INPUTS = len(_INPUTS)
+_NUMBERS = (int, float, np.integer)
 
 
 class FusedTick:
@@ -583,7 +576,7 @@ class FusedTick:
         self.why = self._check(tick)
         self.ok = not self.why
         self.path: Any = None
-        self._seen: tuple[Any, ...] = ()  # what args() read (stale() compares with it)
+        self._seen: list[Any] = []  # what args() read of _INPUTS (stale() compares with it)
         self.kept = [(o, a, getattr(o, a)) for _, o, a in _parts(tick)] if self.ok else []
         if self.ok:
             try:
@@ -638,7 +631,7 @@ class FusedTick:
         """The call's arguments before this tick's scalars, and the parts' constants into the
         tick's state (:attr:`path_ok`: the motion's path is the compiled one on the hot record).
         Called again only when :meth:`stale`: whatever it reads that can change goes into
-        :meth:`_inputs` and :meth:`stale` too."""
+        :data:`_INPUTS`."""
         t = self.tick
         g, m, st = t.group, t.motion, t.st
         st["fault_min"], st["op_enabled"] = t.bus.fault_min, t.bus.op_enabled
@@ -658,52 +651,24 @@ class FusedTick:
         self.path_ok = _path_ok(p) and self.hot_path(p)
         if self.path_ok:
             st["ramp"] = p.ramp
-        self._seen = self._inputs()
+        self._seen = [get(t) for get in _INPUTS]
         return (self.hot, t._bank.args, g._tx_bytes, g._rx_bytes, t._rec1)
 
-    def _inputs(self) -> tuple[Any, ...]:
-        """What :meth:`args` read that can change while the tick runs (objects and the
-        numbers it copied into the state), besides the motion's path (:attr:`path`)."""
-        t, p, c = self.tick, self.path, self.tick.collision
-        return (
-            t.snapshot._native.handle,  # type: ignore[union-attr]
-            t.feedforward._native.handle,  # type: ignore[union-attr]
-            t.bus.fault_min, t.bus.op_enabled, c, _learning(t), t.drag_row,
-            t._bank.args, t.group._tx_bytes, t.group._rx_bytes, t._rec1,
-            None if p is None else p._k, None if p is None else p.ramp,
-            # the tool-force check and the stop categories (section 4's compiled checks)
-            None if c is None else c._tool, None if c is None else c.tool_force,
-            t.stop.categories,
-        )  # fmt: skip
-
     def stale(self) -> bool:
-        """:meth:`args` would answer differently now: the motion's path replaced, a native
-        model's new handle (a model change), the bus's codes, the collision monitor, the
-        friction learning on or off, the bank, the process images, the tick record, the path's
-        workspace or ramp, the collision monitor's tool-force check or the stop categories
-        changed (the friction learning's constants are its own, set when it is built).
-        Identities and numbers, no allocation: args itself writes numpy scalars and compares
-        addresses (~6 µs)."""
-        t, p, c = self.tick, self.path, self.tick.collision
-        (snap_h, ff_h, fault_min, op_enabled, coll, fr, row, bank, tx, rx, rec, k, ramp, tool,
-         tool_force, cats) = self._seen  # fmt: skip
-        return not (
-            t.motion.path is p
-            and t.snapshot._native.handle == snap_h  # type: ignore[union-attr]
-            and t.feedforward._native.handle == ff_h  # type: ignore[union-attr]
-            and t.bus.fault_min == fault_min
-            and t.bus.op_enabled == op_enabled
-            and t.collision is coll
-            and _learning(t) is fr
-            and t.drag_row == row
-            and t._bank.args is bank
-            and t.group._tx_bytes is tx
-            and t.group._rx_bytes is rx
-            and t._rec1 is rec
-            and (p is None or (p._k is k and p.ramp == ramp))
-            and (c is None or (c._tool is tool and c.tool_force == tool_force))
-            and t.stop.categories is cats
-        )
+        """:meth:`args` would answer differently now: one of :data:`_INPUTS` is another
+        object or number than it read. Allocates nothing (an index, not an iterator: a drag
+        tick asks on every tick)."""
+        t, seen, i = self.tick, self._seen, 0
+        while i < _N_INPUTS:
+            now, was = _INPUTS[i](t), seen[i]
+            if now is not was and not (isinstance(now, _NUMBERS) and now == was):
+                return True
+            i += 1
+        return False
+
+    def moves(self, m: Any) -> bool:
+        """The motion ``m`` (JointMotion) follows the demo path the call evaluates (MOVE)."""
+        return m.mode == MOVE and self.path_ok and m.path is self.path
 
     def hot_path(self, p: Any) -> bool:
         """The path's workspace is its field of the hot record (built on it)."""

@@ -17,16 +17,15 @@ turns into the stop controller's reports in the order they ran. The steps before
 that have no compiled form (the drag's front, a homing step, the tool force) run between
 section 3 and a second compiled call of section 4; the drive scan's finding is named in
 Python (STO, brake) and section 4 resumes. Sections 5-7 (the demo path, the feed-forward,
-the command, the record fill) are sequenced once too (``fused._section57``): on a quiet tick
+the command, the record fill) are sequenced once too (``fused.section57``): on a quiet tick
 (nothing rare can happen: :attr:`Tick.busy` is 0 and no request, fault or bad status came
-in) on which section 4 found nothing the same call goes on into them. When it stops early it
-answers a stage and the methods below finish the same tick from there: they handle what is
-rare (reports, events, stop decisions, requests, reset, mode changes, enabling, brake
-release, drag, homing, teach; :meth:`Tick._control` writes the motion's reference and says
-which steps of sections 5-7 the tick takes), then a last compiled call
-(``fused.section57``) runs sections 5-7. A configuration the compiled call cannot run is
-refused when the tick is
-built, in one line. The Python reference that runs every stage on every tick is
+in) on which section 4 found nothing the fused call goes on into them. When it stops early
+it answers a stage and the methods below finish the same tick from there: they handle what
+is rare (reports, events, stop decisions, requests, reset, mode changes, enabling, brake
+release, drag, homing, teach; :meth:`Tick._decide` writes the motion's reference and says
+which steps of sections 5-7 the tick takes), then the tick calls ``fused.section57``
+itself. A configuration the compiled call cannot run is refused when the tick is built, in
+one line. The Python reference that runs every stage on every tick is
 tests/support/reference_tick.py; tests/hofto_hw/runtime/test_fused.py checks both tick by
 tick, bit for bit.
 
@@ -48,7 +47,7 @@ from drivers.cia402.state_machine import State
 from hofto_hw import jit
 from hofto_hw.control.drag import DragController
 from hofto_hw.control.enabling import EnableInput
-from hofto_hw.control.joint_motion import DRAG, HOLD, MOVE, JointMotion
+from hofto_hw.control.joint_motion import DRAG, HOLD, JointMotion
 from hofto_hw.errors import ConfigError
 from hofto_hw.jit import Backend
 from hofto_hw.model.data import ModelData
@@ -172,7 +171,6 @@ class Tick(TickEvents):
         self.st["stall"], self.st["two"] = self._stall_dt, 2.0
         self.st["period"] = self.period
         self._prev = self.state["prev"][0]  # last tick's q, qd, tau (interpolation start)
-        self._interp = self.state["interp"][0]  # one substep's q, qd, tau
         self.tau_ext = self.state["tau_ext"][0]
         self._bank = ObserverBank(self.observers, snapshot, self.tau_ext)  # row i: observer i
         self.tau_ff = self.state["tau_ff"][0]
@@ -223,7 +221,6 @@ class Tick(TickEvents):
         self._q_detect = np.zeros(n)
         self._d = np.zeros(n)
         self._cw = np.zeros(n, dtype=np.uint16)
-        self._fin = np.zeros(n, dtype=bool)
         # records (preallocated; field views fetched once)
         self.tick_rec = new_record(tick_dtype(n, len(self.observers)))
         self.event_rec = new_record(EVENT_DTYPE)
@@ -237,13 +234,11 @@ class Tick(TickEvents):
         self._events_pushed = 0
         self._events = stop.events  # the stop controller's event log (never replaced)
         self._rec1 = r.reshape(1)  # the same memory as a one-element array, for the kernel
-        self._sample = group.sample  # q, qd, tau as rows of one (3, n) view
         # drag (hand guiding): controller, enabling input, the observer row that drives it
         self.drag = drag
         self.enable_input = enable_input if enable_input is not None else EnableInput()
         self._din = group.transport.tx["digital_inputs"]
         self.drag_row = int(drag_row)
-        self._drag_est = self.tau_ext[self.drag_row]  # the drag's observer row (a view)
         #: the drag's friction learning outside drag mode (None: no drag or no learning)
         self._learn = drag.learn if drag is not None else None
         self.drag_reason = 0
@@ -258,7 +253,6 @@ class Tick(TickEvents):
         self._tau_mon = self.state["tau_mon"][0]  # the collision monitor's input (dragging)
         self._wrench = r["wrench"]
         self._wrench_set = False  # the record's wrench holds a drag estimate (else all NaN)
-        self._qdd_rec = r["qdd_cmd"]
         #: the kernels' backend (the compiled calls below compile and warm every kernel;
         #: python: the tick is refused)
         self.backend = jit.resolve(backend)
@@ -316,9 +310,7 @@ class Tick(TickEvents):
         if self.script is not None:
             self.script.step(self)  # may change anything: the rare states again
             self._refresh(rebuild=False)
-        m = self.feedforward.model
-        rev, fr, pl = self._ff_model  # what tau_ff was evaluated with
-        if m.revision != rev or m.friction is not fr or m.payload is not pl:
+        if self._model_moved():
             self._follow_model()  # rare: the native models and the call's arguments first
 
         # 1. exchange
@@ -359,7 +351,7 @@ class Tick(TickEvents):
             stage = self._s4_call(self._fz_args[0], self._rec1, self.tick, dt, True)
         self._report_faults()  # 4. what the checks found, as reports, in their order
         self._requests(missed)  # 4 (end): overruns, requests, reset, stop measurement
-        what = self._control()  # 5-6: what is rare (the stop category's commands, ...)
+        what = self._decide()  # 5-6: what is rare (the stop category's commands, ...)
         # 5-7 compiled: the demo path, the feed-forward, the command, the record's fill
         self._s57_call(
             self._fz_args[0], self._fz_args[3], self._rec1, self.t, self.tick, what,
@@ -410,9 +402,7 @@ class Tick(TickEvents):
         drag's front, a homing run's step (before the limit checks), the monitor's input while
         dragging and the tool-force check; then section 4 as the second compiled call."""
         self._drag_front()
-        if self.homing is not None and self.homing.step(self):  # before the limit checks
-            self.homing = None
-            self.restart_estimates()
+        self._homing_step()
         st, c = self.st, self.collision
         est = self._monitored(True) if self.motion.mode == DRAG else self.tau_ext
         st["use_mon"] = est is not self.tau_ext  # then it is _tau_mon (tau_mon's field)
@@ -420,6 +410,12 @@ class Tick(TickEvents):
             st["tool_value"] = c._tool.check(est, self.group.q)
         self._state_in()
         return self._s4_call(self._fz_args[0], self._rec1, self.tick, dt, False)
+
+    def _homing_step(self) -> None:
+        """A homing run's step, before the limit checks; its end restarts the estimates."""
+        if self.homing is not None and self.homing.step(self):
+            self.homing = None
+            self.restart_estimates()
 
     def _bus_found(self) -> None:
         """The drive scan found an axis faulted (j < n) or out of Operation enabled: its fault
@@ -464,12 +460,13 @@ class Tick(TickEvents):
         if self._measuring or stop.first_tick == self.tick:
             self._measure_stop(self.group.q, self.group.qd)
 
-    def _control(self) -> int:
+    def _decide(self) -> int:
         """Sections 5 (controller) and 6 (command, acting the stop category): what is rare,
         in Python (the stop category's drive commands, mode changes, enabling, the drag's
         follow, playback, the ramp, teach recording), writing the motion's reference; returns
-        the steps of the compiled sections 5-7 (:func:`~hofto_hw.runtime.fused.section57`'s
-        ``what``: the demo path, the feed-forward, the hand's torque) that this tick takes."""
+        the steps of sections 5-7 (:func:`~hofto_hw.runtime.fused.section57`'s ``what``: the
+        demo path, the feed-forward, the hand's torque) that this tick takes. The tick runs
+        them compiled; tests/support/reference_tick.py runs them in Python."""
         g, stop, motion = self.group, self.stop, self.motion
         q, qd = g.q, g.qd
         what = 0
@@ -498,7 +495,7 @@ class Tick(TickEvents):
             if motion.mode == DRAG:
                 d = self.drag
                 motion.follow(d.q_cmd, d.qd_cmd, d.qdd_cmd)
-            elif motion.mode == MOVE and self._fz.path_ok and motion.path is self._fz.path:
+            elif self._fz.moves(motion):
                 motion.version += 1  # JointMotion.update's, the path in the compiled call
                 motion._still = False
                 self.st["t0"] = motion.t0  # a move started this tick: _refresh has not
@@ -555,7 +552,7 @@ class Tick(TickEvents):
         m = self.motion
         if m.mode == HOLD and m._still:
             kind = HOLD_STILL
-        elif m.mode == MOVE and fz.path_ok and m.path is fz.path:
+        elif fz.moves(m):
             kind = MOVE_PATH
         else:
             kind = OTHER
@@ -573,7 +570,7 @@ class Tick(TickEvents):
     def _busy(self) -> int:
         """The rare states now, as BUSY_* bits (0: nothing keeps the next tick off the quiet
         path; requests from other threads and this tick's status are checked per tick)."""
-        stop, m, model = self.stop, self.motion, self.feedforward.model
+        stop, m = self.stop, self.motion
         b = 0
         if stop.latched or stop.category != NO_CATEGORY or self._measuring:
             b |= BUSY_STOP
@@ -587,10 +584,7 @@ class Tick(TickEvents):
             b |= BUSY_TEACH
         if not self.snapshot.finite:
             b |= BUSY_NONFINITE
-        rev, fr, pl = self._ff_model
-        if m.version != self._ff_version or not (
-            model.revision == rev and model.friction is fr and model.payload is pl
-        ):
+        if m.version != self._ff_version or self._model_moved():
             b |= BUSY_REFERENCE
         if self.collision is not None and self.collision._tool is not None:
             b |= BUSY_TOOL_FORCE
@@ -605,14 +599,20 @@ class Tick(TickEvents):
         if not self._bank.bound():
             self._bank = ObserverBank(self.observers, self.snapshot, self.tau_ext)
 
-    def _ff_model_changed(self) -> bool:
-        """True (once) when the model changed since tau_ff was evaluated: its parameters
-        (``RobotModel.revision``: identified parameters, rotor inertia, payload) or its friction
-        or payload object replaced (then taken as the one tau_ff is evaluated with)."""
+    def _model_moved(self) -> bool:
+        """The model is not the one tau_ff was evaluated with (``_ff_model``): its parameters
+        (``RobotModel.revision``: identified parameters, rotor inertia, payload) changed or its
+        friction or payload object was replaced."""
         m = self.feedforward.model
         rev, fr, pl = self._ff_model
-        if m.revision == rev and m.friction is fr and m.payload is pl:
+        return m.revision != rev or m.friction is not fr or m.payload is not pl
+
+    def _ff_model_changed(self) -> bool:
+        """True (once) when :meth:`_model_moved`: the model now is the one tau_ff is
+        evaluated with."""
+        if not self._model_moved():
             return False
+        m = self.feedforward.model
         self._ff_model = (m.revision, m.friction, m.payload)
         return True
 
@@ -631,15 +631,8 @@ class Tick(TickEvents):
         self.sink.push_tick(self.tick_rec)
         ev = self._events
         while self._events_pushed < ev.count:  # one integer compare on a tick without events
-            i = self._events_pushed % ev.capacity
-            e = self.event_rec
-            e["t"] = self.t
-            e["tick"] = ev.tick[i]
-            e["kind"] = ev.kind[i]
-            e["joint"] = ev.joint[i]
-            e["category"] = ev.category[i]
-            e["value"] = ev.value[i]
-            self.sink.push_event(e)
+            ev.copy(self._events_pushed, self.event_rec, self.t)
+            self.sink.push_event(self.event_rec)
             self._events_pushed += 1
         if self.tick % self.diag_every == 0:
             self._diag()

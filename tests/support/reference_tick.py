@@ -15,18 +15,10 @@ import numpy as np
 
 from hofto_hw.control.joint_motion import DRAG
 from hofto_hw.recording.kernels import fill_tick
+from hofto_hw.runtime import tick_kernels as tk
+from hofto_hw.runtime.fused import S_FF, S_OFF, S_PATH
 from hofto_hw.runtime.tick import Tick
 from hofto_hw.runtime.tick_events import DRIVE_CAUSES
-from hofto_hw.runtime.tick_kernels import (
-    ESTIMATES_FINITE,
-    POWERED,
-    command_dt,
-    gap_steps,
-    judged,
-    jump_gap,
-    lerp,
-    tick_flags,
-)
 from safety.collision import COLLIDED, CONTACT
 from tests.support.reference_safety import bus_check, finite, limits_check
 
@@ -50,58 +42,27 @@ class ReferenceTick(Tick):
         self._control()  # 5. controller and 6. command
         self._record(status, wakeup_us, compute_us)  # 7. the record into the sink
 
-    def _control(self) -> None:  # type: ignore[override]
-        """Sections 5 (controller) and 6 (command, acting the stop category) through the
-        parts' own methods (production: the rare part in Tick._control, the rest in
-        fused._section57)."""
-        g, stop, motion = self.group, self.stop, self.motion
-        q, qd = g.q, g.qd
-        cmd_dt = float(self.st["cmd_dt"])
-        cat = stop.category
-        if cat == 0 or cat == 1:
-            self.expect_enabled = False
-            self.enabling = False
-            if cat == 0:
-                g.command_disable_voltage()
-            else:
-                g.command_quick_stop()
-            if self._fault_resetting > 0:
-                self._fault_reset_edge()
-            motion.start(q)  # targets follow the arm: bumpless when enabled again
-            if self.mode_request >= 0:
-                self._refuse_mode()
-        else:
-            if cat == 2:
-                motion.ramp_down()
-                if self.mode_request >= 0:
-                    self._refuse_mode()
-            elif self.mode_request >= 0:
-                self._change_mode(qd)
-            if self.enabling:
-                self._enable_step()
-            if motion.mode == DRAG:
-                d = self.drag
-                motion.follow(d.q_cmd, d.qd_cmd, d.qdd_cmd)
-            else:
-                motion.update(float(self.st["t_cmd"]), cmd_dt)
-        if self.recording is not None or self.playback is not None:
-            self._teach_record(q)
-        # the feed-forward is a function of the reference (and the model): a hold reuses it
-        if self._ff_model_changed() or motion.version != self._ff_version:
-            self.feedforward.inverse_dynamics(motion.q, motion.qd, motion.qdd, out=self.tau_ff)
-            self._ff_version = motion.version
-        if motion.mode == DRAG:
-            self.tau_ff += self.drag.tau_offset  # the hand's torque off the drives' offset
-            self._ff_version = -1  # tau_ff holds the hand's torque: evaluate it again
-        g.command_position(motion.q, self.tau_ff)
+    def _control(self) -> None:
+        """Sections 5 (controller) and 6 (command): the rare decisions as production takes
+        them (Tick._decide), then the steps of sections 5-7 they ask for in Python, through
+        the parts' own methods (production: fused.section57, compiled)."""
+        m = self.motion
+        what = self._decide()
+        if what & S_PATH:  # the demo path (JointMotion.update's; _decide moved its version)
+            m.path.evaluate(float(self.st["t_cmd"]) - m.t0, m.q0, m.q, m.qd, m.qdd)
+        if what & S_FF:
+            self.feedforward.inverse_dynamics(m.q, m.qd, m.qdd, out=self.tau_ff)
+        if what & S_OFF:
+            self.tau_ff += self._tau_off  # the hand's torque off the drives' offset
+        self.group.command_position(m.q, self.tau_ff)
 
     def _record(self, status: int, wakeup_us: float, compute_us: float) -> None:
         """Section 7: the tick record (and q_sent = motion.q, the command just sent) by the
-        record fill (production: fused._section57), then into the sink."""
+        record fill (production: fused.section57), then into the sink."""
         m = self.motion
         # the casts keep the kernel on its warmed signature whatever numbers callers pass
         fill_tick(
-            self._rec1, self._sample, m.q, self.tau_ext, self.q_sent, float(self.t), self.tick,
+            self._rec1, self.group.sample, m.q, self.tau_ext, self.q_sent, float(self.t), self.tick,
             m.mode, self.stop.latched, int(status), float(wakeup_us), float(compute_us),
             float(self.st["sample_dt"]),
         )  # fmt: skip
@@ -112,11 +73,9 @@ class ReferenceTick(Tick):
 
     def _safety(self, status: int, dt: float) -> None:
         """Section 4 through the parts' own methods, each reporting to the stop controller as
-        it finds (production: fused._section4's fault array, Tick._report_faults)."""
+        it finds (production: fused.section4's fault array, Tick._report_faults)."""
         g, stop, motion, snap = self.group, self.stop, self.motion, self.snapshot
-        if self.homing is not None and self.homing.step(self):  # before the limit checks
-            self.homing = None
-            self.restart_estimates()
+        self._homing_step()
         q, qd, tau = g.q, g.qd, g.tau
         st = self.st
         obs_dt = float(st["sample_dt"])
@@ -126,20 +85,22 @@ class ReferenceTick(Tick):
         )
         lim = self.limits
         ok = snap.finite or (finite(stop, q) & finite(stop, qd) & finite(stop, tau))
-        flags = tick_flags(self.tau_ext, g.states, POWERED, motion.qdd, self._qdd_rec)
-        if not flags & ESTIMATES_FINITE:
+        flags = tk.tick_flags(
+            self.tau_ext, g.states, tk.POWERED, motion.qdd, self.tick_rec["qdd_cmd"]
+        )
+        if not flags & tk.ESTIMATES_FINITE:
             for i in range(len(self.observers)):
                 ok &= finite(stop, self.tau_ext[i])
         powered = self.expect_enabled and not self.enabling and stop.category in (-1, 2)
         st["since_fresh"] += dt
-        gap = jump_gap(float(st["since_fresh"]), self.period)
+        gap = tk.jump_gap(float(st["since_fresh"]), self.period)
         limits_check(lim, stop, q, qd, tau, self.q_sent, good, powered, gap)
         if good:
             st["since_fresh"] = 0.0
         trusted = ok and good and not stop.active & DRIVE_CAUSES and not self.enabling
         trusted = trusted and self.homing is None
         monitored = (
-            self.collision is not None and trusted and judged(self.tick, self._judge_from, flags)
+            self.collision is not None and trusted and tk.judged(self.tick, self._judge_from, flags)
         )
         if monitored != st["monitored"]:
             monitored = bool(monitored)
@@ -151,7 +112,7 @@ class ReferenceTick(Tick):
             flags = self.collision.update(stop, est, q, qd, motion.qdd, mdt)
             if self._learn is not None and motion.mode != DRAG and stop.category == -1:
                 if not flags & (COLLIDED | CONTACT):  # contact-free motion: friction error
-                    self._learn(g.qd, self._drag_est, mdt)
+                    self._learn(g.qd, self.tau_ext[self.drag_row], mdt)
 
     def _front(self, dt: float) -> None:
         """Sections 2-3: the joint state in SI, the snapshot and the observers over the sample
@@ -165,7 +126,7 @@ class ReferenceTick(Tick):
         st = self.st
         st["finite"] = self.snapshot.finite
         st["sample_dt"] = obs_dt
-        st["cmd_dt"] = cmd_dt = command_dt(dt, self.period)
+        st["cmd_dt"] = cmd_dt = tk.command_dt(dt, self.period)
         st["t_cmd"] += cmd_dt
 
     def _observe(self, dt: float) -> None:
@@ -174,17 +135,17 @@ class ReferenceTick(Tick):
         linearly; then the sample kept (the next stall's interpolation start)."""
         snap, g = self.snapshot, self.group
         q, qd, tau = g.q, g.qd, g.tau
-        k = 1 if dt <= self._stall_dt else gap_steps(dt, self.period)
+        k = 1 if dt <= self._stall_dt else tk.gap_steps(dt, self.period)
         if k == 1:
             snap.compute(q, qd, tau)
             self._bank.update(dt)
         else:
             h = dt / k
-            prev, x = self._prev, self._interp
+            prev, x = self._prev, self.state["interp"][0]
             for s in range(1, k + 1):
                 a = s / k
                 for j, now in enumerate((q, qd, tau)):
-                    lerp(prev[j], now, a, x[j])
+                    tk.lerp(prev[j], now, a, x[j])
                 snap.compute(x[0], x[1], x[2])
                 self._bank.update(h)
         np.copyto(self._prev, g.sample)

@@ -4,6 +4,7 @@ native handles: the old ones are freed), a changed bus code and a new path do.""
 
 from __future__ import annotations
 
+import tracemalloc
 from typing import Any
 
 import pytest
@@ -87,5 +88,55 @@ def test_a_model_change_a_bus_code_and_a_new_path_rebuild_them(cfg: SystemConfig
         assert tick._fz.stale()
         tick.motion.path = path
         assert not tick._fz.stale()
+    finally:
+        system.close()
+
+
+def test_every_input_of_the_arguments_makes_them_stale_and_asking_allocates_nothing(
+    cfg: SystemConfig,
+) -> None:
+    """Each thing FusedTick.args reads that can change (fused._INPUTS) makes stale() answer
+    True when it changes (an object replaced, a number changed) and False once it is back; an
+    equal number in a new object is no change. stale() allocates nothing (a drag tick asks it
+    on every tick)."""
+    system = build(cfg, clock="sim", contact=False)
+    try:
+        tick = system.tick
+        system.loop.run(max_ticks=20)
+        fz = tick._fz
+        assert not fz.stale()
+        c = tick.collision
+        assert c is not None
+        changes: list[tuple[Any, str, Any]] = [
+            (tick, "drag_row", tick.drag_row + 1),
+            (tick, "collision", None),
+            (tick, "_rec1", tick._rec1.copy()),
+            (tick.group, "_rx_bytes", tick.group._rx_bytes.copy()),
+            (tick.bus, "fault_min", tick.bus.fault_min + 1),
+            (tick.snapshot._native, "handle", tick.snapshot._native.handle + 8),
+            (c, "tool_force", 1.0 if c.tool_force is None else None),
+            (c, "_tool", object()),
+        ]
+        for owner, name, value in changes:
+            kept = getattr(owner, name)
+            setattr(owner, name, value)
+            assert fz.stale(), name
+            setattr(owner, name, kept)
+            assert not fz.stale(), name
+        native = tick.snapshot._native
+        native.handle = int(str(native.handle))  # the same number, another object
+        assert not fz.stale()
+        tracemalloc.start()
+        try:
+            for _ in range(10):
+                fz.stale()
+            tracemalloc.reset_peak()
+            before = tracemalloc.get_traced_memory()[0]
+            for _ in range(1000):
+                fz.stale()
+            now, peak = tracemalloc.get_traced_memory()
+        finally:
+            tracemalloc.stop()
+        assert now - before <= 64 and peak - before <= 256, (now - before, peak - before)
     finally:
         system.close()
