@@ -156,8 +156,11 @@ class Probe:
                 # a tick that is not quiet: sections 5-7's compiled call (the path, the
                 # feed-forward, the command, the record fill: fused.section57)
                 "command": (tick, "_s57_call"),
-                "bus": (tick.bus, "check"),
-                "limits": (tick.limits, "check"),
+                # section 4 runs compiled (inside the fused call on most ticks): what is left
+                # outside it is the scan's finding named in Python, and section 4's own call
+                # after a pre-safety step or that finding (the limits and the rest of it)
+                "bus": (tick, "_bus_found"),
+                "limits": (tick, "_s4_call"),
                 "motion": (tick.motion, "update"),
                 "record": (tick, "_push"),  # the filled record into the sink
             }
