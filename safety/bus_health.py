@@ -18,8 +18,8 @@ The CiA 402 state codes come from the caller (safety does not import drivers/). 
 compiled section 4 (hofto_hw/runtime/fused.py) runs the per-tick part: the loss streak of
 :meth:`BusHealth.count` (kept here, its one place) on every exchange and
 :func:`safety.kernels.drive_scan` on the drive states of good data only (stale states are not
-the drives'); what the scan finds is named here, in Python (:meth:`BusHealth._fault`,
-:meth:`BusHealth._disabled`), on that rare tick. ``backend`` ``numba``/``auto`` compiles and
+the drives'); what the scan finds is named here, in Python (:meth:`BusHealth.report_found`), on
+that rare tick. ``backend`` ``numba``/``auto`` compiles and
 warms the scan, ``python`` does not. The numpy implementation it replaced is
 tests/safety/reference.py; the same checks as Python calls on a monitor, for tests and the
 tick's Python reference, are tests/support/reference_safety.py.
@@ -82,6 +82,18 @@ class BusHealth:
         self.streak += 1
         self.lost_total += 1
         return self.streak >= self.lost_cycles
+
+    def report_found(
+        self, stop: StopController, j: int, error_codes: np.ndarray, states: np.ndarray
+    ) -> None:
+        """What :func:`safety.kernels.drive_scan` found (its answer ``j``: an axis j < n in a
+        fault state, or j - n out of Operation enabled), named and reported: on the rare tick
+        the scan finds something, from the 0x603F codes ``error_codes`` and the state codes
+        ``states`` (n,)."""
+        if j < self.n:
+            self._fault(stop, j, error_codes)
+        else:
+            self._disabled(stop, j - self.n, states)
 
     def _fault(self, stop: StopController, j: int, error_codes: np.ndarray) -> None:
         """Axis ``j`` in a fault state: DRIVE_FAULT with its 0x603F code, and BRAKE when the

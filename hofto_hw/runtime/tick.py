@@ -420,11 +420,7 @@ class Tick(TickEvents):
     def _bus_found(self) -> None:
         """The drive scan found an axis faulted (j < n) or out of Operation enabled: its fault
         named by the bus (STO, brake fault: the drive layer's readings) and reported."""
-        j, n, bus = int(self.st["scan_j"]), self.n, self.bus
-        if j < n:
-            bus._fault(self.stop, j, self.err_codes)
-        else:
-            bus._disabled(self.stop, j - n, self.group.states)
+        self.bus.report_found(self.stop, int(self.st["scan_j"]), self.err_codes, self.group.states)
         self._state_in()
 
     def _report_faults(self) -> None:

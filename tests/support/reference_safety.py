@@ -47,11 +47,7 @@ def bus_check(
     scan = jit.compiled_or_python(drive_scan, bus.backend)
     j = scan(states, bus.fault_min, bus.op_enabled if expect_enabled else -1)
     if j >= 0:
-        n = bus.n
-        if j < n:
-            bus._fault(stop, j, error_codes)
-        else:
-            bus._disabled(stop, j - n, states)
+        bus.report_found(stop, j, error_codes, states)
     return True
 
 
