@@ -31,7 +31,7 @@ from __future__ import annotations
 import hashlib
 import os
 import types
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -62,7 +62,7 @@ def sources_stamp(roots: Iterable[Path]) -> str:
     return h.hexdigest()
 
 
-def cache_folder(environ: dict[str, str] | os._Environ[str] = os.environ) -> Path:
+def cache_folder(environ: Mapping[str, str] = os.environ) -> Path:
     """The folder numba's cache uses for the sources as they are now (module docstring)."""
     base = environ.get("NUMBA_CACHE_DIR", "")
     if not base:
