@@ -46,11 +46,12 @@ Figures (µs; median / p99 / p99.9):
   frame's round trip and the plant runs in another process;
 - each loop runs once, uninterrupted, through its phases (:func:`loop_phases`), and lists
   the ``stops`` latched during it (any later phase ran on a stopped arm);
-- the numpy path (a subprocess with HOFTO_HW_NO_NUMBA=1, the official switch) and the
-  compiled path; ratio tick / floor;
+- the compiled path (``paths.numba``), the tick's only path: without numba or the native
+  dynamics the tick is refused (``loop.acceleration``), so ``paths.numpy`` says so in one
+  line; the tick's Python stages are timed as the reference above; ratio tick / floor;
 - tracemalloc over 10,000 ticks after warm-up (growth, the sites that grew) and the
-  transient peak per part; start-up of ``compose.build`` with an empty numba cache, a
-  filled one and without numba.
+  transient peak per part; start-up of ``compose.build`` with an empty numba cache and a
+  filled one (``no_numba`` says why it is not run).
 The machine is shared and noisy: compare medians and ratios, not single runs.
 """
 
@@ -342,8 +343,7 @@ def loop_phases(system, ticks: int, part_ticks: int, floor: float, rate_hz, res:
         yield from fused_split(system, part_ticks, split)
         warm_call(system, part_ticks, split)
     # the floor and a no-op compiled call in the tick's own conditions (same loop, the tick
-    # itself not run); once, on the compiled path's run (the numpy-path subprocess has no
-    # compiled call to time)
+    # itself not run)
     costs: dict = {}
     if noop is not None:
         yield from in_loop_costs(system, part_ticks, noop, costs)
@@ -650,22 +650,19 @@ print(t1 - t0, t2 - t1, system.tick.observers[0].backend, system.group.backend)
 
 def startup(config: Path) -> dict:
     """Seconds to import and to build the System (compiling and warming every kernel):
-    with an empty numba cache, with the cache filled, and without numba."""
+    with an empty numba cache and with the cache filled; ``no_numba`` says in one line why it
+    is not measured (the tick is refused without numba: it has no other path)."""
     out: dict = {}
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
-        for label, extra in (
-            ("cold", {}),
-            ("cached", {}),
-            ("no_numba", {"HOFTO_HW_NO_NUMBA": "1"}),
-        ):
+        for label in ("cold", "cached"):
             r = subprocess.run(
                 [sys.executable, "-c", _STARTUP, str(config)],
-                env={**env, **extra},
+                env=env,
                 capture_output=True,
                 text=True,
             )
-            if r.returncode != 0:  # without numba the tick is refused (it has no other path)
+            if r.returncode != 0:  # its last line: the error, not the traceback above it
                 out[label] = {"skipped": r.stderr.strip().splitlines()[-1][-300:]}
                 continue
             imp, build, obs, drives = r.stdout.split()
@@ -675,7 +672,11 @@ def startup(config: Path) -> dict:
                 "observers": obs,
                 "drive_group": drives,
             }
+    out["no_numba"] = {"skipped": NO_NUMBA_STARTUP}
     return out
+
+
+NO_NUMBA_STARTUP = "not run: the tick runs compiled only (without numba it is refused)"
 
 
 def bench_path(cfg, quick: bool, floor: float) -> dict:
@@ -793,16 +794,12 @@ def realtime(cpu_latency_us: int | None) -> str:
     return policy + f", CPU wake-up latency <= {cpu_latency_us} µs"
 
 
-def numpy_path(config: Path, quick: bool, floor: float) -> dict:
-    """The numpy path in a subprocess with HOFTO_HW_NO_NUMBA=1."""
-    cmd = [sys.executable, __file__, "--config", str(config), "--path-only", "--floor", str(floor)]
-    if quick:
-        cmd.append("--quick")
-    env = dict(os.environ, HOFTO_HW_NO_NUMBA="1", PYTHONPATH=str(ROOT))
-    r = subprocess.run(cmd, env=env, capture_output=True, text=True)
-    if r.returncode != 0:
-        return {"skipped": f"numpy-path subprocess failed: {r.stderr.strip()[-300:]}"}
-    return json.loads(r.stdout)
+#: ``paths.numpy``: the key kept (the report's keys stay the same), the path gone
+NO_NUMPY_PATH = (
+    "not run: the tick runs compiled only (loop.acceleration; HOFTO_HW_NO_NUMBA refuses it); "
+    "its Python stages are timed as paths.numba.<loop>.reference (tests/support/"
+    "reference_tick.py)"
+)
 
 
 def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
@@ -812,6 +809,8 @@ def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
     from hofto_hw.config import load_config
     from hofto_hw.model.snapshot import pinocchio_traits
 
+    if not jit.available():  # the tick is refused (it has no other path): nothing to measure
+        raise SystemExit(f"bench_tick: the tick runs compiled only: {jit.unavailable_reason()}")
     cfg = load_config(config)
     policy = realtime(cfg.loop.cpu_latency_us)
     floor = floor_us(cfg, 1000 if quick else 20000)
@@ -831,17 +830,13 @@ def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
     from hofto_hw.model import RobotModel
 
     res["pinocchio"] = pinocchio_traits(RobotModel.from_config(cfg.robot)).__dict__
-    res["paths"]["numpy"] = numpy_path(config, quick, f)
-    if jit.available():
-        res["paths"]["numba"] = bench_path(cfg, quick, f)
-        res["paths"]["numba"]["alloc"] = allocations(cfg, 1000 if quick else 10000)
-        res["paths"]["numba"]["snapshot_parts"] = snapshot_parts(cfg, 1000 if quick else 20000)
-    else:
-        res["paths"]["numba"] = {"skipped": jit.unavailable_reason()}
-    best = "numba" if "back_to_back" in res["paths"]["numba"] else "numpy"
-    res["path"] = best
+    res["paths"]["numpy"] = {"skipped": NO_NUMPY_PATH}
+    res["paths"]["numba"] = bench_path(cfg, quick, f)
+    res["paths"]["numba"]["alloc"] = allocations(cfg, 1000 if quick else 10000)
+    res["paths"]["numba"]["snapshot_parts"] = snapshot_parts(cfg, 1000 if quick else 20000)
+    res["path"] = "numba"
     for key in (*LOOPS, HOLD_LOOP):
-        res[key] = res["paths"][best][key]
+        res[key] = res["paths"]["numba"][key]
     if ethercat:
         res["ethercat"] = ethercat_loop(config, quick, f)
     res["startup"] = {"skipped": "--quick"} if quick else startup(config)
@@ -981,14 +976,16 @@ def print_report(res: dict) -> None:
                 print(f"  a run given up on, stopped in its measured phase: {stops}")
             print_loop("loop_1khz", ec["loop_1khz"])
     s = res["startup"]
-    if "cold" in s:
+    if "skipped" not in s:
         print(
             "\nstart-up (compose.build, import excluded): "
             + ", ".join(
                 f"{k} {v['build_s']:.2f} s ({v['observers']}/{v['drive_group']})"
+                if "build_s" in v
+                else f"{k}: {v['skipped']}"
                 for k, v in s.items()
             )
-            + f"; import {s['cold']['import_s']:.2f} s"
+            + (f"; import {s['cold']['import_s']:.2f} s" if "import_s" in s["cold"] else "")
         )
     print(f"\ntargets ({res['path']} path):")
     for name, value, ok in targets(res):
@@ -1062,16 +1059,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--rounds", type=int, default=7, help="--mixed: interleaved rounds")
     parser.add_argument("--json", action="store_true")
-    parser.add_argument("--path-only", action="store_true", help=argparse.SUPPRESS)
-    parser.add_argument("--floor", type=float, default=0.0, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    if args.path_only:  # the numpy-path subprocess
-        from hofto_hw.config import load_config
-
-        cfg = load_config(args.config)
-        realtime(cfg.loop.cpu_latency_us)
-        print(json.dumps(bench_path(cfg, args.quick, args.floor)))
-        return 0
     if args.mixed is not None:
         res = mixed(args.config, args.mixed, args.rounds, 1500 if args.quick else 5000)
         if args.json:

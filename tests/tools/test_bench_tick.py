@@ -126,3 +126,100 @@ def test_beside_an_installed_wheel_the_tick_is_measured_and_the_reference_said_m
     bench.print_loop("loop_1khz", res)
     out = capsys.readouterr().out
     assert "reference not measured" in out and bench.NO_REFERENCE in out
+
+
+def _fake_loop(bench) -> dict:
+    """One loop's figures as bench_path reports them (the fields the report and targets read)."""
+    import numpy as np
+
+    t = bench.stats(np.array([5.0, 6.0, 7.0]))
+    return {
+        "ticks": 3,
+        "tick": t,
+        "exchange": t,
+        "median": t["median"],
+        "p99": t["p99"],
+        "p999": t["p999"],
+        "ratio_to_floor": 1.0,
+        "share_of_period": 0.01,
+    }
+
+
+def _fake_runs(bench, monkeypatch) -> None:
+    """bench()'s runs replaced by figures (their phases are the tests above), no Python
+    subprocess."""
+    import numpy as np
+
+    run = bench.subprocess.run  # platform's own calls (uname) still run
+
+    def no_python(cmd, *args, **kwargs):
+        assert cmd[0] != sys.executable, f"a Python subprocess was started: {cmd}"
+        return run(cmd, *args, **kwargs)
+
+    loops = (*bench.LOOPS, bench.HOLD_LOOP)
+    monkeypatch.setattr(bench, "floor_us", lambda cfg, n: np.full(10, 7.0))
+    monkeypatch.setattr(
+        bench, "bench_path", lambda cfg, q, f: {k: _fake_loop(bench) for k in loops}
+    )
+    alloc = {"growth_bytes": 0, "growth_second_half_bytes": 0, "growth_sites": []}
+    monkeypatch.setattr(
+        bench, "allocations", lambda cfg, n: {"ticks": n, **alloc, "transient_peak_bytes": {}}
+    )
+    monkeypatch.setattr(bench, "snapshot_parts", lambda cfg, n: {"backend": "native"})
+    monkeypatch.setattr(bench, "realtime", lambda us: "SCHED_OTHER (test)")
+    monkeypatch.setattr(bench.subprocess, "run", no_python)
+
+
+def test_the_numpy_path_is_not_run_and_says_why_in_one_line(bench, monkeypatch, capsys) -> None:
+    """The tick runs compiled only: ``paths.numpy`` keeps its key as one line saying why (no
+    subprocess, no traceback), the compiled path is the report's path, and the report prints
+    that line."""
+    _fake_runs(bench, monkeypatch)
+    res = bench.bench(ROOT / "configs" / "er3a.yaml", True)
+    assert list(res["paths"]["numpy"]) == ["skipped"]
+    why = res["paths"]["numpy"]["skipped"]
+    assert "\n" not in why and "Traceback" not in why and 'File "' not in why
+    assert "compiled only" in why and "reference" in why
+    assert res["path"] == "numba"
+    for key in (*bench.LOOPS, bench.HOLD_LOOP):
+        assert res[key] is res["paths"]["numba"][key]
+    assert res["startup"] == {"skipped": "--quick"}
+    bench.print_report(res)
+    out = capsys.readouterr().out
+    assert f"[numpy] skipped: {why}\n" in out and "targets (numba path):" in out
+
+
+def test_the_start_up_without_numba_is_said_not_run_and_the_report_prints(
+    bench, monkeypatch, capsys
+) -> None:
+    """``startup``: the cold and the cached build measured (their subprocesses faked here),
+    ``no_numba`` one line saying why it is not run; the report prints all three."""
+    import subprocess
+
+    _fake_runs(bench, monkeypatch)
+    res = bench.bench(ROOT / "configs" / "er3a.yaml", True)
+    envs = []
+
+    def run(cmd, env, capture_output, text):
+        envs.append(env)
+        return subprocess.CompletedProcess(cmd, 0, stdout="1.5 2.5 numba numba\n", stderr="")
+
+    monkeypatch.setattr(bench.subprocess, "run", run)
+    res["startup"] = bench.startup(ROOT / "configs" / "er3a.yaml")
+    assert len(envs) == 2 and all("HOFTO_HW_NO_NUMBA" not in e for e in envs)
+    assert res["startup"]["cold"]["build_s"] == 2.5 and res["startup"]["cached"]["import_s"] == 1.5
+    assert res["startup"]["no_numba"] == {"skipped": bench.NO_NUMBA_STARTUP}
+    assert "\n" not in bench.NO_NUMBA_STARTUP
+    bench.print_report(res)
+    out = capsys.readouterr().out
+    assert "cold 2.50 s (numba/numba)" in out and f"no_numba: {bench.NO_NUMBA_STARTUP}" in out
+
+
+def test_without_numba_the_bench_stops_in_one_line(bench, monkeypatch) -> None:
+    from hofto_hw import jit
+
+    monkeypatch.setattr(jit, "available", lambda: False)
+    monkeypatch.setattr(jit, "unavailable_reason", lambda: "disabled for the test")
+    with pytest.raises(SystemExit) as exc:
+        bench.bench(ROOT / "configs" / "er3a.yaml", True)
+    assert str(exc.value) == "bench_tick: the tick runs compiled only: disabled for the test"
