@@ -796,9 +796,9 @@ def realtime(cpu_latency_us: int | None) -> str:
 
 #: ``paths.numpy``: the key kept (the report's keys stay the same), the path gone
 NO_NUMPY_PATH = (
-    "not run: the tick runs compiled only (loop.acceleration; HOFTO_HW_NO_NUMBA refuses it); "
-    "its Python stages are timed as paths.numba.<loop>.reference (tests/support/"
-    "reference_tick.py)"
+    "not run: the tick runs compiled only (loop.acceleration: without numba or the native "
+    "dynamics it is refused); its Python stages are timed as paths.numba.<loop>.reference "
+    "(tests/support/reference_tick.py)"
 )
 
 
@@ -809,8 +809,6 @@ def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
     from hofto_hw.config import load_config
     from hofto_hw.model.snapshot import pinocchio_traits
 
-    if not jit.available():  # the tick is refused (it has no other path): nothing to measure
-        raise SystemExit(f"bench_tick: the tick runs compiled only: {jit.unavailable_reason()}")
     cfg = load_config(config)
     policy = realtime(cfg.loop.cpu_latency_us)
     floor = floor_us(cfg, 1000 if quick else 20000)
@@ -1033,6 +1031,15 @@ def mixed(config: Path, mixed_config: Path, rounds: int, ticks: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from hofto_hw.errors import UserError
+
+    try:
+        return _main(argv)
+    except UserError as exc:  # a config the tick refuses (e.g. no compiled path): one line
+        raise SystemExit(f"bench_tick: {exc}") from None
+
+
+def _main(argv: list[str] | None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", type=Path, default=ROOT / "configs" / "er3a.yaml")
     parser.add_argument(

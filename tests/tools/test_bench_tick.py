@@ -215,11 +215,22 @@ def test_the_start_up_without_numba_is_said_not_run_and_the_report_prints(
     assert "cold 2.50 s (numba/numba)" in out and f"no_numba: {bench.NO_NUMBA_STARTUP}" in out
 
 
-def test_without_numba_the_bench_stops_in_one_line(bench, monkeypatch) -> None:
-    from hofto_hw import jit
+@pytest.mark.parametrize("switch", ["HOFTO_HW_NO_NUMBA", "HOFTO_HW_NO_NATIVE"])
+def test_without_the_compiled_path_the_bench_stops_in_one_line(switch) -> None:
+    """The tick refuses to run without numba or the native dynamics: the bench says why in one
+    line on stderr (the tick's own refusal), no traceback, exit status 1."""
+    import subprocess
 
-    monkeypatch.setattr(jit, "available", lambda: False)
-    monkeypatch.setattr(jit, "unavailable_reason", lambda: "disabled for the test")
-    with pytest.raises(SystemExit) as exc:
-        bench.bench(ROOT / "configs" / "er3a.yaml", True)
-    assert str(exc.value) == "bench_tick: the tick runs compiled only: disabled for the test"
+    env = {**os.environ, switch: "1", "PYTHONPATH": str(ROOT)}
+    r = subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "bench_tick.py"), "--quick", "--json"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 1 and r.stdout == "", r
+    err = r.stderr.strip()
+    assert "Traceback" not in err and 'File "' not in err, err
+    # the last line says why (the lines before: the product's own warnings, one line each)
+    assert err.splitlines()[-1].startswith("bench_tick: the tick cannot run compiled: "), err
