@@ -78,7 +78,7 @@ def measure(args: argparse.Namespace, name: str, setup, th, recs) -> dict:
         thr, joints, _ = run_monitor(run.rec, run.est, CollisionMonitor(mcfg))
         tripped = joints.any(axis=0)
         false += tripped
-        per_file[Path(run.rec.source).name] = [j + 1 for j in np.flatnonzero(tripped)]
+        per_file[Path(run.rec.source).name] = [int(j) + 1 for j in np.flatnonzero(tripped)]
         for a, rounds in enumerate(run.pulsed):
             for est, pulses in rounds:
                 tally(stats, a, pulses, score(pulses, est, thr, run.rec.t, mcfg.debounce_time))
