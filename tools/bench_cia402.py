@@ -2,7 +2,7 @@
 
 Prints medians over repeated blocks (the machine is shared: read ratios, not absolutes):
 - master side: DriveGroup.read() + command_position() (the tick's drive-layer cost), and
-  read() alone with the numpy and the compiled (numba) implementation;
+  read() alone with its kernel run as Python (backend python) and compiled (numba);
 - emulator: EmulatedDrives.step() without the plant (drive logic only);
 - plant.step() alone, and a whole SimBus.exchange() (drives + plant + copies).
 

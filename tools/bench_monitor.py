@@ -1,4 +1,4 @@
-"""Per-update cost of the collision monitor (safety/collision/), numpy reference vs compiled.
+"""Per-update cost of the collision monitor (safety/collision/), its kernels as Python vs compiled.
 
     .venv/bin/python tools/bench_monitor.py [--ticks 20000] [--quick] [--json]
 

@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         "--backend",
         choices=("python", "numba", "auto"),
         default="auto",
-        help="observer path (numpy: the kernels run as Python)",
+        help="observer path (python: the kernels' source run by the interpreter)",
     )
     args = parser.parse_args(argv)
 
