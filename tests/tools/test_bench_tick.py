@@ -55,8 +55,9 @@ def test_the_phases_run_on_one_loop_and_leave_the_tick_as_it_was(bench) -> None:
     assert res["fused_call"]["median"] < res["tick"]["p999"] * 10
     assert math.isfinite(res["ratio_to_floor_in_loop"]) and res["ratio_to_floor_in_loop"] > 0
     assert set(bench.PARTS) <= set(res["parts"])
-    # the parts phase ran the reference (each part's own call), not the compiled tick
-    for part in ("read", "snapshot", "observers"):
+    # the parts phase ran the reference (each part's own call, safety's checks, the path, the
+    # command and the record included), not the compiled tick
+    for part in ("read", "snapshot", "observers", "bus", "limits", "motion", "command", "record"):
         assert res["parts"][part]["median"] > 0.0, (part, res["parts"][part])
     # the repeated call: timed, or one line saying why not (the arm moves: a contact)
     warm = res["fused_call_warm"]
