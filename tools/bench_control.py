@@ -412,6 +412,10 @@ def _replay_phases(robot: Robot, sock: Path, reader: RingReader, tmp: Path, args
                 "attempts": got.get("attempts", 1),
             }
         )
+        if name == "replay_planning" and "message" in got:
+            # a short path planned before the first stop: it plays; stopped (reset by the
+            # next phase's _clear), else the next replay is refused ('mode hold first')
+            robot.stop()
     return out
 
 
