@@ -509,13 +509,7 @@ def _bank_hofto(
     if group is not None:
         for entry in literal_unroll(group):  # HOFTOs of different orders: records' types
             row, rec = entry
-            c = rec[0]
-            z = c["z"]
-            hofto_advance(
-                z, c["neg_gains"], c["powers"], c["prev"], c["work"], c["substeps"], c["flags"],
-                y, a, dt,
-            )  # fmt: skip
-            _mat_vec(M, z[2], out[row])
+            hofto_update(rec, y, a, dt, M, out[row])
 
 
 @jit
