@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numba as _numba
+import numpy as np
 
 Backend = Literal["python", "numba", "auto"]
 
@@ -76,6 +77,21 @@ def cache_folder(environ: Mapping[str, str] = os.environ) -> Path:
 
 # before any kernel is decorated: numba's cache locator reads the folder when it is
 _numba.config.CACHE_DIR = str(cache_folder())
+
+
+#: one dtype object per structured dtype in this process (:func:`interned`)
+_DTYPES: dict[np.dtype, np.dtype] = {}
+
+
+def interned(dt: np.dtype) -> np.dtype:
+    """This process's one dtype object equal to ``dt`` (the first one seen). numba's
+    dispatcher finds the compiled code for a structured array in a dict keyed by its dtype
+    object: the object it first saw is found at once, an equal new one only after numpy
+    compares the two field by field, on every call (~4 µs for the tick's hot record,
+    tools/bench_tick.py). The structured arrays the tick's compiled calls take are allocated
+    with interned dtypes, so that a second tick built in one process (a test, a benchmark)
+    calls as fast as the first."""
+    return _DTYPES.setdefault(dt, dt)
 
 
 def jit(fn: Callable[..., Any], **options: Any) -> Callable[..., Any]:

@@ -109,12 +109,12 @@ class HoftoCore:
         f8 = np.float64
         self.record = np.zeros(
             1,
-            np.dtype(
+            jit.interned(np.dtype(
                 [("z", f8, (s, j)), ("neg_gains", f8, (s, j)), ("powers", f8, (s,)),
                  ("prev", f8, (j,)), ("work", f8, (s + 3, s)), ("substeps", np.int64),
                  ("flags", np.int64)],
                 align=True,
-            ),
+            )),
         )  # fmt: skip
         rec = self.record[0]
         self.z = rec["z"]
