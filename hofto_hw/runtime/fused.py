@@ -497,7 +497,7 @@ def hot_record(parts: dict[str, dict[str, np.dtype]]) -> tuple[np.ndarray, dict[
     buf, at_ = hot.view(np.uint8), iter(offsets)
     views = {
         part: {
-            name: np.ndarray((1,), K.interned(dt), buf, next(at_))
+            name: np.ndarray((1,), dt, buf, next(at_))
             if dt.names
             else np.ndarray(dt.shape, dt.base, buf, next(at_))
             for name, dt in fields.items()
