@@ -2,7 +2,7 @@
 
 Every module of hot-path arithmetic (hofto_hw/*/kernels.py, safety/, drivers/cia402/kernels.py,
 runtime/) compiles its functions with :func:`jit` (or :func:`jit_inline` for small helpers) and
-lets its user choose a backend: ``numba`` (compiled), ``numpy`` (the same source run by the
+lets its user choose a backend: ``numba`` (compiled), ``python`` (the same source run by the
 interpreter, :func:`compiled_or_python`; nothing is compiled) or ``auto`` (compiled when
 :func:`available`). One source serves both; the numpy formulations of the formulas live in
 tests/ as references.
@@ -126,8 +126,8 @@ def unavailable_reason() -> str:
 
 
 def resolve(backend: Backend) -> Literal["python", "numba"]:
-    """The backend a kernel user runs: ``auto`` is numba when :func:`available`, else numpy
-    (the kernels' source as Python).
+    """The backend a kernel user runs: ``auto`` is numba when :func:`available`, else
+    python (the kernels' source run by the interpreter).
 
     ``numba`` when the compiled path is not available raises RuntimeError naming the reason.
     """
@@ -159,7 +159,7 @@ def warm(call: Callable[[], object]) -> bool:
 
 def ready(backend: Backend, warm_call: Callable[[], object]) -> Literal["python", "numba"]:
     """The backend a kernel user runs: :func:`resolve`, and for numba :func:`warm` with
-    ``warm_call`` now (compiled before the loop); numpy when that compilation fails."""
+    ``warm_call`` now (compiled before the loop); python when that compilation fails."""
     chosen = resolve(backend)
     if chosen == "numba" and not warm(warm_call):
         return "python"

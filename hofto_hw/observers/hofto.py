@@ -29,7 +29,7 @@ docs/observers.md for the measured comparison with forward Euler and substeps). 
 and the model acceleration a is held. No allocation in a step.
 
 The arithmetic is :mod:`hofto_hw.observers.kernels`' (``hofto_step``), compiled (backend
-``numba``) or its source run as Python (``numpy``); the numpy formulation of the equations
+``numba``) or its source run as Python (``python``); the numpy formulation of the equations
 above is the reference in tests/hofto_hw/observers/reference.py.
 """
 
@@ -65,7 +65,7 @@ class HoftoCore:
       It lags: on a unit double integrator with a ramp x3 of slope s its error settles at
       ~5·dt·s for n = 2, and it grows with time on a parabola.
 
-    ``backend`` (``auto``, ``numba``, ``numpy``: see :mod:`hofto_hw.jit`) is
+    ``backend`` (``auto``, ``numba``, ``python``: see :mod:`hofto_hw.jit`) is
     the one :meth:`step` runs (``kernels.hofto_advance``, compiled at its first call); the
     observer updates the same record through its own kernel call.
     """
