@@ -2,7 +2,7 @@
 
 Every module of hot-path arithmetic (hofto_hw/*/kernels.py, safety/, drivers/cia402/kernels.py,
 runtime/) compiles its functions with :func:`jit` (or :func:`jit_inline` for small helpers) and
-lets its user choose a backend: ``numba`` (compiled), ``numpy`` (the same source run by the
+lets its user choose a backend: ``numba`` (compiled), ``python`` (the same source run by the
 interpreter, :func:`compiled_or_python`; nothing is compiled) or ``auto`` (compiled when
 :func:`available`). One source serves both; the numpy formulations of the formulas live in
 tests/ as references.
@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numba as _numba
+import numpy as np
 
 Backend = Literal["python", "numba", "auto"]
 
@@ -78,6 +79,21 @@ def cache_folder(environ: Mapping[str, str] = os.environ) -> Path:
 _numba.config.CACHE_DIR = str(cache_folder())
 
 
+#: one dtype object per structured dtype in this process (:func:`interned`)
+_DTYPES: dict[np.dtype, np.dtype] = {}
+
+
+def interned(dt: np.dtype) -> np.dtype:
+    """This process's one dtype object equal to ``dt`` (the first one seen). numba's
+    dispatcher finds the compiled code for a structured array in a dict keyed by its dtype
+    object: the object it first saw is found at once, an equal new one only after numpy
+    compares the two field by field, on every call (~4 µs for the tick's hot record,
+    tools/bench_tick.py). The structured arrays the tick's compiled calls take are allocated
+    with interned dtypes, so that a second tick built in one process (a test, a benchmark)
+    calls as fast as the first."""
+    return _DTYPES.setdefault(dt, dt)
+
+
 def jit(fn: Callable[..., Any], **options: Any) -> Callable[..., Any]:
     """``fn`` compiled as every kernel is: cached, nogil, numpy's error model (a float
     division by zero gives inf or NaN instead of raising)."""
@@ -110,8 +126,8 @@ def unavailable_reason() -> str:
 
 
 def resolve(backend: Backend) -> Literal["python", "numba"]:
-    """The backend a kernel user runs: ``auto`` is numba when :func:`available`, else numpy
-    (the kernels' source as Python).
+    """The backend a kernel user runs: ``auto`` is numba when :func:`available`, else
+    python (the kernels' source run by the interpreter).
 
     ``numba`` when the compiled path is not available raises RuntimeError naming the reason.
     """
@@ -143,7 +159,7 @@ def warm(call: Callable[[], object]) -> bool:
 
 def ready(backend: Backend, warm_call: Callable[[], object]) -> Literal["python", "numba"]:
     """The backend a kernel user runs: :func:`resolve`, and for numba :func:`warm` with
-    ``warm_call`` now (compiled before the loop); numpy when that compilation fails."""
+    ``warm_call`` now (compiled before the loop); python when that compilation fails."""
     chosen = resolve(backend)
     if chosen == "numba" and not warm(warm_call):
         return "python"

@@ -60,7 +60,7 @@ class DriveGroup(ImageFields):
     ``transition_timeout`` [s] bounds each single state transition; it is converted to bus
     cycles with ``transport.cycle_time`` so simulated buses time out in simulated time.
     ``backend``: the read and commands are the kernels of :mod:`drivers.cia402.kernels`
-    (their one implementation), ``numba`` compiled, ``numpy`` their Python source run by the
+    (their one implementation), ``numba`` compiled, ``python`` their Python source run by the
     interpreter (for tests and debugging; ~75 µs a call against ~0.5), ``auto`` (default)
     compiled when numba works. The numpy reference of the same arithmetic is a test's
     (tests/drivers/cia402/reference.py).
@@ -141,7 +141,7 @@ class DriveGroup(ImageFields):
         self._tx_bytes = kernels.image_bytes(transport.tx)
         self._rx_bytes = kernels.image_bytes(transport.rx)
         #: the implementation of read and command: the kernels of drivers/cia402/kernels.py,
-        #: ``numba`` compiled, ``numpy`` their Python source run by the interpreter
+        #: ``numba`` compiled, ``python`` their Python source run by the interpreter
         self.backend = kernels.resolve(backend)
         if self.backend == "numba" and not kernels.ready(backend, self._warm):
             self.backend = "python"
@@ -214,7 +214,7 @@ class DriveGroup(ImageFields):
     ) -> DriveGroup:
         """From a :class:`hofto_hw.config.drives.BusConfig`; ``backend`` and ``hot`` as the
         constructor's (``auto``: the compiled read/command when numba is available, else their
-        Python source; ``numba``: compiled; ``numpy``: the kernels' Python source)."""
+        Python source; ``numba``: compiled; ``python``: the kernels' Python source)."""
         scaling = Scaling([AxisScaling.from_config(d) for d in bus.drives])
         return cls(
             transport,

@@ -1,5 +1,5 @@
 """The drive group's raw <-> SI conversions of its hot path, its one implementation: compiled
-(numba) or, for the ``numpy`` backend, the same functions' Python source run by the
+(numba) or, for the ``python`` backend, the same functions' Python source run by the
 interpreter (:func:`hofto_hw.jit.compiled_or_python`).
 
 One drive-group read is five conversions of six-element arrays (position, velocity, torque,
@@ -19,7 +19,7 @@ SI values and constant scale rows as the rows of one float64 workspace (:data:`S
 
 The backend conventions are those of :mod:`hofto_hw.jit` (its availability,
 ``HOFTO_HW_NO_NUMBA``, compile options and warm-up are reused, so one switch decides whether
-compiled code runs anywhere): ``numpy`` (the Python source), ``numba``, ``auto``. Kernels write
+compiled code runs anywhere): ``python`` (the Python source), ``numba``, ``auto``. Kernels write
 only into the arrays passed in and never allocate.
 """
 

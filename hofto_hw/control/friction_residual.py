@@ -18,7 +18,7 @@ the correction is zero. Units: rad/s, N·m. Allocation-free per tick (solve incl
 
 :meth:`FrictionResidual.learn` is the kernel :func:`hofto_hw.control.kernels.friction_learn`
 (its one place; the tick's fused call compiles the same function): compiled for backend
-``numba`` (``auto`` where numba works), its own source run by the interpreter for ``numpy``;
+``numba`` (``auto`` where numba works), its own source run by the interpreter for ``python``;
 the feature s(qd) of :meth:`correction` is that kernel's own
 (:func:`~hofto_hw.control.kernels.friction_feature`), and the bound's model friction is
 FrictionParams.torque (the model's friction kernel).

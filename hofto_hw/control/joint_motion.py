@@ -13,7 +13,7 @@ changes whenever the reference (q, qd, qdd) may have changed: the tick's feed-fo
 function of the reference alone, is reused while it stays the same (a hold). The path and
 the ramp are the kernels of :mod:`hofto_hw.control.kernels` (their one place), called with
 the observers' ``backend`` conventions: ``numba`` (``auto`` where numba works) runs them
-compiled, ``numpy`` runs the kernels' own source in the interpreter (same bits).
+compiled, ``python`` runs the kernels' own source in the interpreter (same bits).
 """
 
 from __future__ import annotations

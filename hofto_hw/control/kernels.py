@@ -5,7 +5,7 @@ their arithmetic.
 :meth:`~hofto_hw.control.joint_motion.JointMotion.update` and
 :meth:`hofto_hw.control.friction_residual.FrictionResidual.learn` always call these: compiled
 (backend ``numba``; the tick's fused call compiles the same functions) or their own source run
-by the interpreter (backend ``numpy``: numba's ``py_func``, as under ``NUMBA_DISABLE_JIT``).
+by the interpreter (backend ``python``: numba's ``py_func``, as under ``NUMBA_DISABLE_JIT``).
 Both take their sines, cosines, tanh and exp from the C library (the interpreter's ``math``
 module and the compiled code call the same functions), so the two give the same bits.
 numpy references of the same formulas live in tests/hofto_hw/control/reference.py for the

@@ -30,10 +30,38 @@ from hofto_hw.errors import ModelError
 
 if TYPE_CHECKING:
     from hofto_hw.model.friction import FrictionParams
+    from hofto_hw.model.native import NativeModel
     from hofto_hw.model.robot import RobotModel
 
 
-class ModelData:
+class FollowsModel:
+    """A workspace whose kernel rows ``_W`` hold its model's friction (packed from
+    ``_fr_src``) and whose native copy ``_native`` (None: none) its model's numbers."""
+
+    model: RobotModel
+    _W: np.ndarray
+    _fr_src: FrictionParams
+    _native: NativeModel | None
+
+    def follow_model(self) -> None:
+        """Make the workspace its model's current one (rare): the friction repacked when
+        ``model.friction`` was replaced, the native copy synced when the parameters moved
+        (identified parameters, rotor inertia, a payload). Nothing changes otherwise."""
+        fr, nm = self.model.friction, self._native
+        if fr is not self._fr_src:
+            self._fr_src = fr
+            self._pack(fr, self._W)
+        if nm is not None and nm.stale:
+            nm.sync()
+
+    def _moved(self) -> bool:
+        """:meth:`follow_model` has something to do."""
+        nm = self._native
+        m = self.model
+        return m.friction is not self._fr_src or (nm is not None and m.revision != nm.revision)
+
+
+class ModelData(FollowsModel):
     """Workspace of one consumer: pinocchio Data and every buffer. Arrays float64, shape (n,)
     or (n, n); q [rad], qd [rad/s], qdd [rad/s²], torques [N·m].
 
@@ -185,18 +213,12 @@ class ModelData:
         """M·qdd + C·qd + g + f [N·m]: the motor torque that produces qdd with no contact."""
         m = self.model
         tau = self._tau_id if out is None else out
+        if self._moved():
+            self.follow_model()
         nm = self._native
         if nm is not None:
-            if m.friction is not self._fr_src or m.revision != nm.revision:
-                self._fr_src = m.friction
-                self._pack(self._fr_src, self._W)
-                if nm.stale:
-                    nm.sync()
             self._id_native(q, qd, qdd, self._W, tau, nm.handle)
             return tau
-        if m.friction is not self._fr_src:
-            self._fr_src = m.friction
-            self._pack(self._fr_src, self._W)
         # pinocchio's return (a transient copy of data.tau) is the kernel's input
         self._add_friction(_rnea(m.pin_model, self.pin_data, q, qd, qdd), qd, self._W, tau)
         return tau

@@ -67,6 +67,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
+from hofto_hw.model.data import FollowsModel
+
 if TYPE_CHECKING:
     from hofto_hw.model.robot import RobotModel
 
@@ -133,7 +135,7 @@ def require_supported_pinocchio(model: RobotModel) -> None:
         )
 
 
-class DynamicsSnapshot:
+class DynamicsSnapshot(FollowsModel):
     """The model terms of one sample for a set of consumers; see the module docstring.
 
     ``needs`` is the union of the consumers' :class:`Needs`. ``backend`` "numba"/"auto" runs
@@ -258,11 +260,10 @@ class DynamicsSnapshot:
         Returns ``finite``: False (and nothing evaluated) when the sample holds a NaN or inf.
         """
         self.q, self.qd, self.tau = q, qd, tau
+        if self._moved():
+            self.follow_model()
         nm = self._native
         if nm is not None:
-            m = self.model
-            if m.friction is not self._fr_src or m.revision != nm.revision:
-                self._repack()
             self.finite = finite = self._snap(q, qd, tau, self._W, self._O, nm.handle)
             return finite
         pm, pd = self.pin_model, self.pin_data
@@ -273,8 +274,6 @@ class DynamicsSnapshot:
         # its own kinematics from q)
         if self._ct:
             _coriolis(pm, pd, q, qd)
-        if self.model.friction is not self._fr_src:
-            self._repack()
         self.finite = finite = self._terms(q, qd, tau, self._C, self._W)
         if not finite:
             return False
@@ -287,13 +286,6 @@ class DynamicsSnapshot:
         if self._nle:
             _nle(pm, pd, q, qd)
         return True
-
-    def _repack(self) -> None:
-        """``model.friction`` was replaced (a new parameter set): the kernel's copy follows."""
-        self._fr_src = fr = self.model.friction
-        self._pack(fr, self._W)
-        if self._native is not None and self._native.stale:
-            self._native.sync()  # new inertial parameters, rotor inertia or payload
 
     def parts(self) -> dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray], object]]:
         """The calls :meth:`compute` makes, by name, each callable alone as f(q, qd, tau) (for

@@ -29,7 +29,7 @@ docs/observers.md for the measured comparison with forward Euler and substeps). 
 and the model acceleration a is held. No allocation in a step.
 
 The arithmetic is :mod:`hofto_hw.observers.kernels`' (``hofto_step``), compiled (backend
-``numba``) or its source run as Python (``numpy``); the numpy formulation of the equations
+``numba``) or its source run as Python (``python``); the numpy formulation of the equations
 above is the reference in tests/hofto_hw/observers/reference.py.
 """
 
@@ -65,7 +65,7 @@ class HoftoCore:
       It lags: on a unit double integrator with a ramp x3 of slope s its error settles at
       ~5·dt·s for n = 2, and it grows with time on a parabola.
 
-    ``backend`` (``auto``, ``numba``, ``numpy``: see :mod:`hofto_hw.jit`) is
+    ``backend`` (``auto``, ``numba``, ``python``: see :mod:`hofto_hw.jit`) is
     the one :meth:`step` runs (``kernels.hofto_advance``, compiled at its first call); the
     observer updates the same record through its own kernel call.
     """
@@ -109,12 +109,12 @@ class HoftoCore:
         f8 = np.float64
         self.record = np.zeros(
             1,
-            np.dtype(
+            jit.interned(np.dtype(
                 [("z", f8, (s, j)), ("neg_gains", f8, (s, j)), ("powers", f8, (s,)),
                  ("prev", f8, (j,)), ("work", f8, (s + 3, s)), ("substeps", np.int64),
                  ("flags", np.int64)],
                 align=True,
-            ),
+            )),
         )  # fmt: skip
         rec = self.record[0]
         self.z = rec["z"]

@@ -5,7 +5,7 @@ calls on six-element arrays, the time goes to the ~0.5 µs each call costs, not 
 Each kernel does one observer update (every stage, every joint, substeps, M·z3) in one call,
 and these kernels are the only implementation of the observers' formulas in the package: an
 observer calls its kernel compiled (backend ``numba``) or the same source run by the
-interpreter (backend ``numpy``); compilation, the backends and the switch that turns compiled
+interpreter (backend ``python``); compilation, the backends and the switch that turns compiled
 code off are :mod:`hofto_hw.jit`'s. The numpy formulation of the paper's equations is kept in
 tests/hofto_hw/observers/reference.py, where tests/hofto_hw/observers/test_kernels.py checks
 both backends against it to 1e-12 over thousands of random steps, Remark 7's equivalences and
@@ -509,13 +509,7 @@ def _bank_hofto(
     if group is not None:
         for entry in literal_unroll(group):  # HOFTOs of different orders: records' types
             row, rec = entry
-            c = rec[0]
-            z = c["z"]
-            hofto_advance(
-                z, c["neg_gains"], c["powers"], c["prev"], c["work"], c["substeps"], c["flags"],
-                y, a, dt,
-            )  # fmt: skip
-            _mat_vec(M, z[2], out[row])
+            hofto_update(rec, y, a, dt, M, out[row])
 
 
 @jit

@@ -37,7 +37,7 @@ class MomentumObserver(SnapshotUpdate):
         self.n = n
         #: gain, p0, integral and the residual r (n,) as one record (observers.bank passes it
         #: as one argument); the attributes are its fields
-        self.record = np.zeros(1, np.dtype([(f, np.float64, (n,)) for f in _FIELDS]))
+        self.record = np.zeros(1, jit.interned(np.dtype([(f, np.float64, (n,)) for f in _FIELDS])))
         self.gain, self.p0, self.integral, self.r = (self.record[0][f] for f in _FIELDS)
         self.gain[:] = per_joint(gain, n, "momentum.gain")
         self._guard = SampleGuard(self.n)

@@ -118,7 +118,7 @@ def make_observer(cfg: ObserverConfig, model: RobotModel, *, backend: Backend = 
     """The observer a validated config section describes, on ``model``.
 
     ``backend``: ``auto`` (compiled when available, as the loop runs), ``numba`` (compiled
-    and warmed here, or RuntimeError) or ``numpy`` (the same kernels' source as Python; see
+    and warmed here, or RuntimeError) or ``python`` (the same kernels' source as Python; see
     :mod:`hofto_hw.jit`)."""
     entry = OBSERVERS.get(cfg.type)
     if entry is None or not isinstance(cfg, entry.config):

@@ -146,8 +146,8 @@ def build_drive_group(
     cfg: SystemConfig, transport: Transport, hot: dict[str, Any] | None = None
 ) -> DriveGroup:
     """The CiA-402 drive layer for ``bus.drives`` over ``transport`` (scaling, timeouts),
-    with the compiled read/command when numba is available (the same numbers as numpy's);
-    ``hot``: its hot arrays in the tick's record (DriveGroup.hot_fields)."""
+    with the compiled read/command when numba is available (the same numbers as the kernels'
+    Python source); ``hot``: its hot arrays in the tick's record (DriveGroup.hot_fields)."""
     from drivers.cia402.drive_group import DriveGroup
     from hofto_hw.commands.backend import observer_backend
 

@@ -490,7 +490,8 @@ def hot_record(parts: dict[str, dict[str, np.dtype]]) -> tuple[np.ndarray, dict[
             offsets.append(at)
             at += dt.itemsize
     size = -(-at // 16) * 16
-    hot = np.zeros(1, {"names": names, "formats": formats, "offsets": offsets, "itemsize": size})
+    layout = {"names": names, "formats": formats, "offsets": offsets, "itemsize": size}
+    hot = np.zeros(1, K.interned(np.dtype(layout)))
     # plain arrays on the record's bytes (a field view's np.void keeps allocating when its
     # fields are written: ~1 kB per thousand ticks in the drag test, tracemalloc)
     buf, at_ = hot.view(np.uint8), iter(offsets)

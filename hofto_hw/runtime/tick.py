@@ -390,12 +390,10 @@ class Tick(TickEvents):
         """The stop's state (latched, active, category: section 4 keeps its copies as its
         findings change them) and the tick's that section 4 reads; again after a pre-safety
         step or a report Python made (the drive scan's)."""
-        st, stop, c = self.st, self.stop, self.collision
+        st, stop = self.st, self.stop
         st["s_latched"], st["s_active"], st["s_cat"] = stop.latched, stop.active, stop.category
         st["enabling"], st["homing"] = self.enabling, self.homing is not None
-        st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
-        st["mode"], st["was_contact"] = self.motion.mode, c is not None and c._was_contact
-        self._slow = ()  # _refresh writes its slow scalars again (they were written here)
+        self._write_slow(self._slow_now())
 
     def _pre_safety(self, dt: float) -> int:
         """Section 3b and the steps before section 4 that have no compiled form (rare): the
@@ -516,19 +514,12 @@ class Tick(TickEvents):
     # ----------------------------------------------------------- the fused call
 
     def _follow_model(self) -> None:
-        """The model changed since tau_ff was evaluated (new parameters, rotor inertia,
-        payload or friction; rare): the snapshot's and the feed-forward's native models and
-        packed friction follow it now, before the compiled call reads them (what their own
-        ``compute``/``inverse_dynamics`` do on a change), and the call gets the handles
-        they hold now. The tick is not quiet (BUSY_REFERENCE): its stages evaluate tau_ff."""
-        m = self.feedforward.model
-        for part in (self.snapshot, self.feedforward):
-            nm = part._native
-            if m.friction is not part._fr_src or m.revision != nm.revision:
-                part._fr_src = m.friction
-                part._pack(m.friction, part._W)
-                if nm.stale:
-                    nm.sync()
+        """The model changed since tau_ff was evaluated (rare): the snapshot's and the
+        feed-forward's workspaces follow it now, before the compiled call reads them, and the
+        call gets the native handles they hold now. The tick is not quiet (BUSY_REFERENCE):
+        its stages evaluate tau_ff."""
+        self.snapshot.follow_model()
+        self.feedforward.follow_model()
         self._refresh()
 
     def _refresh(self, rebuild: bool = True) -> None:
@@ -553,15 +544,22 @@ class Tick(TickEvents):
         else:
             kind = OTHER
         self._fz_kind = kind
-        c = self.collision
-        was_contact = c is not None and c._was_contact
-        slow = (kind, m.t0, m.mode, self.expect_enabled, self._judge_from, was_contact)
+        slow = self._slow_now()
         if slow != self._slow:  # written when one changed: numpy scalar writes (~0.3 µs each)
-            self._slow = slow
-            st = self.st
-            st["kind"], st["t0"], st["mode"] = kind, m.t0, m.mode
-            st["expect"], st["judge_from"] = self.expect_enabled, self._judge_from
-            st["was_contact"] = was_contact
+            self._write_slow(slow)
+
+    def _slow_now(self) -> tuple[Any, ...]:
+        """The state's slow scalars as they are now: the motion's update, its start [s] and
+        mode, the drives expected enabled, the monitor's first judged tick, its contact."""
+        m, c = self.motion, self.collision
+        was_contact = c is not None and c._was_contact
+        return (self._fz_kind, m.t0, m.mode, self.expect_enabled, self._judge_from, was_contact)
+
+    def _write_slow(self, slow: tuple[Any, ...]) -> None:
+        """:meth:`_slow_now`'s answer into the tick's state (and kept, to compare with)."""
+        self._slow = slow
+        st = self.st
+        st["kind"], st["t0"], st["mode"], st["expect"], st["judge_from"], st["was_contact"] = slow
 
     def _busy(self) -> int:
         """The rare states now, as BUSY_* bits (0: nothing keeps the next tick off the quiet

@@ -4,7 +4,7 @@ The ONE implementation of the monitor's arithmetic: :func:`threshold` (the thres
 of safety/collision/__init__.py, which the loop, flight-log replay, calibration and tuning all
 call), :func:`features_step` (the threshold features a, moving, r, s), :func:`monitor_step`
 (a whole tick) and :func:`monitor_tick` (the same on the packed state). Backend ``numba``
-runs them compiled; backend ``numpy`` runs the top-level function's own Python source
+runs them compiled; backend ``python`` runs the top-level function's own Python source
 (``py_func``; :func:`hofto_hw.jit.compiled_or_python`), and with numba's
 ``NUMBA_DISABLE_JIT=1`` every line runs as Python. The numpy implementation this replaced is
 the reference in tests/safety/collision/reference.py (tests/safety/collision/test_kernel.py:

@@ -35,7 +35,7 @@ class CollisionLevels:
     (e.g. :func:`safety.collision.params.from_thresholds`), or ``CollisionLevels(cfg, rows,
     model, backend=...)`` (= from_config). One implementation (safety/collision/kernel.py);
     ``backend`` says how it runs: ``numba`` compiled (RuntimeError when unavailable),
-    ``numpy`` the kernel's own Python source run by the interpreter, ``auto`` compiled when
+    ``python`` the kernel's own Python source run by the interpreter, ``auto`` compiled when
     available, else the Python source (``backend`` then says which runs).
 
     Public state after :meth:`step`/:meth:`update` (views, valid until the next call):

@@ -114,3 +114,17 @@ def test_a_kernel_edited_in_another_file_is_compiled_again(tmp_path: Path) -> No
     assert list((tmp_path / "cache").rglob("*.nbi")), "nothing was cached"
     b.write_text(_PROBE_B.format("10.0"))  # outer's file untouched
     assert run() == "31.0"
+
+
+def test_interned_gives_one_dtype_object_per_layout() -> None:
+    """Equal structured dtypes built apart are one object after interning (what numba's
+    dispatcher finds at once); another layout stays another object."""
+    import numpy as np
+
+    def layout(n: int) -> np.dtype:
+        return np.dtype([("z", np.float64, (4, n)), ("flags", np.int64)], align=True)
+
+    a, b = layout(6), layout(6)
+    assert a == b and a is not b
+    assert jit.interned(a) is jit.interned(b) is jit.interned(a)
+    assert jit.interned(layout(7)) is not jit.interned(a)

@@ -142,6 +142,32 @@ def test_parameter_changes_are_followed() -> None:
     check()
 
 
+def test_follow_model_is_what_a_compute_does_on_a_change() -> None:
+    """follow_model() (what the tick calls before its compiled call reads the workspaces):
+    nothing to do leaves the native handle as it is; new parameters sync the native copy (a
+    new handle at the model's revision); a new friction set is packed into the kernel rows."""
+    from hofto_hw.model import kernels as mk
+
+    model = _model("er3a")
+    snap = DynamicsSnapshot(model, ALL | Needs.FRICTION, "numba")
+    ff = model.create_data("numba")
+    assert snap.native and ff.native
+    for ws in (snap, ff):
+        h = ws._native.handle
+        ws.follow_model()
+        assert ws._native.handle == h  # nothing moved: nothing rebuilt
+    model.set_inertial_parameters(model.inertial_parameters() * 1.1)
+    fr = FrictionParams(np.full(model.n, 2.0), np.full(model.n, 0.5), np.zeros(model.n))
+    model.friction = fr
+    for ws in (snap, ff):
+        h = ws._native.handle
+        assert ws._native.stale
+        ws.follow_model()
+        assert not ws._native.stale and ws._native.handle != h
+        np.testing.assert_array_equal(ws._W[mk.COULOMB], fr.coulomb)
+        np.testing.assert_array_equal(ws._W[mk.VISCOUS], fr.viscous)
+
+
 @pytest.mark.parametrize("which", ["all", *NEEDS_SETS])
 def test_non_finite_sample_keeps_the_last_terms(which: str) -> None:
     model = _model("ur10e")

@@ -140,3 +140,33 @@ def test_every_input_of_the_arguments_makes_them_stale_and_asking_allocates_noth
         assert now - before <= 64 and peak - before <= 256, (now - before, peak - before)
     finally:
         system.close()
+
+
+def _structured(args: Any) -> list[Any]:
+    """Every structured array among the fused call's arguments (tuples walked), in order."""
+    if isinstance(args, tuple):
+        return [a for x in args for a in _structured(x)]
+    return [args] if getattr(getattr(args, "dtype", None), "names", None) else []
+
+
+def test_a_second_tick_in_one_process_passes_the_first_ones_dtype_objects(
+    cfg: SystemConfig,
+) -> None:
+    """``hofto-hw run`` on a real bus builds the system once on the simulated arm (to compile)
+    and then the one it runs: numba's dispatcher finds a structured array's compiled code at
+    once only for the dtype object it saw first (an equal new one is compared field by field
+    on every call, ~4 µs for the hot record). Every structured argument of the second tick's
+    compiled calls is the first tick's dtype object."""
+    first = build(cfg, clock="sim", contact=False)
+    try:
+        a = _structured((*first.tick._fz_args, first.tick._rec1))
+    finally:
+        first.close()
+    second = build(cfg, clock="sim", contact=False)
+    try:
+        b = _structured((*second.tick._fz_args, second.tick._rec1))
+        assert len(a) == len(b) >= 4  # the hot record, HOFTO's and momentum's, the tick record
+        for x, y in zip(a, b, strict=True):
+            assert y.dtype is x.dtype, y.dtype.names
+    finally:
+        second.close()
