@@ -73,22 +73,6 @@ def _needs_log(p: float) -> bool:
 
 
 @jit
-def _progression(powers: np.ndarray) -> float:
-    """The common difference d of powers p_i = p_0 + i·d (to 4.5e-16, two roundings of
-    1 + i·sigma) when there are at least two and each needs the logarithm (see
-    :func:`_needs_log`), else NaN. Eq. (17)'s powers 1 + i·sigma are such a progression, so
-    |e|^p_i = |e|^p_0·(|e|^d)^i: two exp2 per joint and substep instead of one per stage."""
-    s = powers.shape[0]
-    if s < 2:
-        return np.nan
-    d = (powers[s - 1] - powers[0]) / (s - 1)
-    for i in range(s):
-        if not _needs_log(powers[i]) or abs(powers[i] - (powers[0] + i * d)) > 4.5e-16:
-            return np.nan
-    return d
-
-
-@jit
 def _mat_vec(M: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
     n = M.shape[0]
     for i in range(n):
@@ -125,13 +109,6 @@ def hofto_step(
     s, joints = z.shape
     inj = col[0]
     if taylor:
-        if not recursive:
-            ratio = _progression(powers)
-            if ratio == ratio:  # eq. (17)'s powers 1 + i·sigma: a loop of its own
-                _taylor_progression(
-                    z, neg_gains, powers, ratio, T, y, y_prev, a, h, a_h2, substeps, inj
-                )
-                return
         # substeps outside, joints inside: the prediction runs along rows of z (contiguous,
         # all joints at once) and consecutive joints' injections do not depend on each other;
         # each joint's arithmetic is the one joint-by-joint order does, in the same order
@@ -209,39 +186,6 @@ def _injection(
 
 
 @jit_inline
-def _injection_progression(
-    z: np.ndarray,
-    jj: int,
-    y: float,
-    neg_gains: np.ndarray,
-    powers: np.ndarray,
-    ratio: float,
-    inj: np.ndarray,
-    h: float,
-    apply: bool,
-) -> None:
-    """:func:`_injection` of eq. (17)'s form for powers in progression p_i = p_0 + i·ratio
-    (:func:`_progression`): |e1|^p_0, then times |e1|^ratio stage by stage, when |e1| is
-    normal (each product then normal and finite, every p_i being in [0, 1]); a zero,
-    subnormal, infinite or NaN e1 goes through :func:`_injection`."""
-    e = y - z[0, jj]
-    a = abs(e)
-    if 2.2250738585072014e-308 <= a < math.inf:
-        log2a = math.log2(a)
-        b = math.exp2(powers[0] * log2a)
-        r = math.exp2(ratio * log2a)
-        for i in range(z.shape[0]):
-            v = -(math.copysign(b, e) * neg_gains[i, jj])
-            b = b * r
-            if apply:
-                z[i, jj] = z[i, jj] + v * h
-            else:
-                inj[i] = v
-    else:
-        _injection(z, jj, y, neg_gains, powers, False, inj, h, apply)
-
-
-@jit_inline
 def _predict(z: np.ndarray, T: np.ndarray, a: np.ndarray, h: float, a_h2: float) -> None:
     """z = T·z (the chain's prediction, upper triangular) for every joint, in place: row i
     reads rows >= i, not yet predicted; summed from T[i, i]·z_i up, as a dot product; then
@@ -271,31 +215,6 @@ def _held(y: np.ndarray, y_prev: np.ndarray, jj: int, k: int, substeps: int) -> 
     for _ in range(k + 1):
         yk = yk + step
     return yk
-
-
-@jit
-def _taylor_progression(
-    z: np.ndarray,
-    neg_gains: np.ndarray,
-    powers: np.ndarray,
-    ratio: float,
-    T: np.ndarray,
-    y: np.ndarray,
-    y_prev: np.ndarray,
-    a: np.ndarray,
-    h: float,
-    a_h2: float,
-    substeps: int,
-    inj: np.ndarray,
-) -> None:
-    """:func:`hofto_step` with Taylor terms in eq. (17)'s form, powers in progression
-    (:func:`_injection_progression`). A function of its own, called once per step: inlined
-    beside the other forms, its code made theirs ~0.1-0.4 µs slower (tools/bench_bank.py)."""
-    for k in range(substeps):
-        _predict(z, T, a, h, a_h2)
-        for jj in range(z.shape[1]):
-            yk = _held(y, y_prev, jj, k, substeps)
-            _injection_progression(z, jj, yk, neg_gains, powers, ratio, inj, h, True)
 
 
 @jit_inline

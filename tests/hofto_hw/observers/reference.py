@@ -3,7 +3,7 @@
 
 Each class here computes what its namesake in hofto_hw/observers computes, from the paper's
 equations as vector operations over the joints, with none of the kernels' formulation
-(per-joint loops, one log2 shared by the stages, powers in progression, record layouts): two
+(per-joint loops, one log2 shared by the stages, record layouts): two
 independent writings of each formula, so that an agreement test can fail. They take the same
 constructor arguments (without ``backend``) and have ``reset(q, qd)``, ``update(q, qd, tau,
 dt)`` and ``update_snapshot(snap, dt)``; they are not used by the package.

@@ -47,13 +47,8 @@ def _reference(e: np.ndarray, p: float) -> np.ndarray:
 
 
 def _inject(z, y, neg_gains, powers, recursive, inj):
-    """Injection terms of joint 0 into inj (s,) as hofto_step computes them: powers in
-    progression through their own path, the others stage by stage (compiled calls)."""
-    ratio = kernels._progression(powers) if not recursive else np.nan
-    if ratio == ratio:
-        kernels._injection_progression(z, 0, y, neg_gains, powers, ratio, inj, 0.0, False)
-    else:
-        kernels._injection(z, 0, y, neg_gains, powers, recursive, inj, 0.0, False)
+    """Injection terms of joint 0 into inj (s,) as hofto_step computes them (compiled)."""
+    kernels._injection(z, 0, y, neg_gains, powers, recursive, inj, 0.0, False)
 
 
 def _compiled(e: np.ndarray, powers: list[float], recursive: bool) -> np.ndarray:
@@ -77,8 +72,8 @@ def _compiled(e: np.ndarray, powers: list[float], recursive: bool) -> np.ndarray
     return out
 
 
-#: powers in arithmetic progression (eq. (17)'s 1 + i·sigma, rising, coarse): one exp2 for
-#: the first stage and one for the ratio, then products (kernels._progression)
+#: eq. (17)'s powers 1 + i·sigma and other progressions (rising, coarse): one log2 shared by
+#: the stages, one exp2 each
 PROGRESSIONS = [
     list(sigma_powers(2, -0.05)),
     list(sigma_powers(3, -0.02)),
@@ -92,8 +87,6 @@ PROGRESSIONS = [
     [(False, POWERS), (True, POWERS)] + [(False, p) for p in PROGRESSIONS],
 )
 def test_injection_powers_match_numpy_on_edge_values(recursive, powers):
-    if not recursive and powers in PROGRESSIONS:  # the path this case is for
-        assert not np.isnan(kernels._progression(np.array(powers)))
     mags = np.array(FINITE + [np.inf])
     e = np.concatenate([mags, -mags, [np.nan, -0.0]])
     rng = np.random.default_rng(3)
@@ -111,8 +104,7 @@ def test_injection_powers_match_numpy_on_edge_values(recursive, powers):
         np.testing.assert_array_equal(np.signbit(g[signed]), np.signbit(ref[signed]), f"p={p}")
         np.testing.assert_array_equal(g == 0.0, ref == 0.0, err_msg=f"p={p}")
         ok = np.isfinite(ref) & (ref != 0.0)
-        # rounding only: 2^(p·log2|e|) carries ~|p·log2|e||·2^-53 (< 1e-13 over the range),
-        # so do the products of a progression (plus one rounding per stage)
+        # rounding only: 2^(p·log2|e|) carries ~|p·log2|e||·2^-53 (< 1e-13 over the range)
         np.testing.assert_allclose(g[ok], ref[ok], rtol=1e-13, atol=0.0, err_msg=f"p={p}")
         if p in (0.0, 1.0, 0.5):  # sign, identity and sqrt: exact
             np.testing.assert_array_equal(g[ok], ref[ok], err_msg=f"p={p}")
@@ -150,13 +142,3 @@ def test_each_joint_steps_as_it_does_alone(recursive, taylor, substeps):
         y_prev = y
     assert np.all(np.isfinite(z)) and np.abs(z[2]).max() > 1e-3
     np.testing.assert_array_equal(z, np.hstack(alone))
-
-
-def test_eq17_powers_take_the_progression():
-    """The main job's powers (configs/er3a.yaml: order 2, sigma = -0.05) and those of other
-    orders and sigmas are found to be a progression; powers with a root or sign are not."""
-    for order, sigma in [(2, -0.05), (1, -0.1), (3, -0.02), (4, -0.12)]:
-        p = sigma_powers(order, sigma)
-        assert kernels._progression(p) == pytest.approx(sigma, abs=1e-15)
-    for p in ([0.75, 2 / 3, 0.5, 0.0], [1.0, 1.0, 1.0], [0.9, 0.8, 0.75], [0.9, 0.8, 0.6], [0.9]):
-        assert np.isnan(kernels._progression(np.array(p)))
