@@ -89,8 +89,9 @@ def interned(dt: np.dtype) -> np.dtype:
     object: the object it first saw is found at once, an equal new one only after numpy
     compares the two field by field, on every call (~4 µs for the tick's hot record,
     tools/bench_tick.py). The structured arrays the tick's compiled calls take are allocated
-    with interned dtypes, so that a second tick built in one process (a test, a benchmark)
-    calls as fast as the first."""
+    with interned dtypes, so that a second tick built in one process calls as fast as the
+    first: ``hofto-hw run`` on a real bus builds one on the simulated arm first (to compile),
+    as do tests and benchmarks."""
     return _DTYPES.setdefault(dt, dt)
 
 
