@@ -19,7 +19,7 @@ The workspace reads the model's parameters at every call, so a change of paramet
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from types import ModuleType
 from typing import TYPE_CHECKING
 
@@ -41,6 +41,7 @@ class FollowsModel:
     model: RobotModel
     _W: np.ndarray
     _fr_src: FrictionParams
+    _pack: Callable[[FrictionParams, np.ndarray], None]  # kernels.pack_friction
     _native: NativeModel | None
 
     def follow_model(self) -> None:
@@ -53,12 +54,6 @@ class FollowsModel:
             self._pack(fr, self._W)
         if nm is not None and nm.stale:
             nm.sync()
-
-    def _moved(self) -> bool:
-        """:meth:`follow_model` has something to do."""
-        nm = self._native
-        m = self.model
-        return m.friction is not self._fr_src or (nm is not None and m.revision != nm.revision)
 
 
 class ModelData(FollowsModel):
@@ -213,8 +208,7 @@ class ModelData(FollowsModel):
         """M·qdd + C·qd + g + f [N·m]: the motor torque that produces qdd with no contact."""
         m = self.model
         tau = self._tau_id if out is None else out
-        if self._moved():
-            self.follow_model()
+        self.follow_model()
         nm = self._native
         if nm is not None:
             self._id_native(q, qd, qdd, self._W, tau, nm.handle)

@@ -260,8 +260,7 @@ class DynamicsSnapshot(FollowsModel):
         Returns ``finite``: False (and nothing evaluated) when the sample holds a NaN or inf.
         """
         self.q, self.qd, self.tau = q, qd, tau
-        if self._moved():
-            self.follow_model()
+        self.follow_model()
         nm = self._native
         if nm is not None:
             self.finite = finite = self._snap(q, qd, tau, self._W, self._O, nm.handle)

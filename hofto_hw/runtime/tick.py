@@ -272,7 +272,7 @@ class Tick(TickEvents):
         if not self._fz.ok:
             raise ConfigError(f"the tick cannot run compiled: {self._fz.why}")
         self._fz_args: tuple[Any, ...] = self._fz.args()
-        self._slow: tuple[Any, ...] = ()  # the state's slow scalars as _refresh last wrote them
+        self._slow: tuple[Any, ...] = ()  # the state's slow scalars as _sync_slow last wrote them
 
     # --------------------------------------------------------------- start-up
 
@@ -393,7 +393,7 @@ class Tick(TickEvents):
         st, stop = self.st, self.stop
         st["s_latched"], st["s_active"], st["s_cat"] = stop.latched, stop.active, stop.category
         st["enabling"], st["homing"] = self.enabling, self.homing is not None
-        self._write_slow(self._slow_now())
+        self._sync_slow()
 
     def _pre_safety(self, dt: float) -> int:
         """Section 3b and the steps before section 4 that have no compiled form (rare): the
@@ -544,22 +544,20 @@ class Tick(TickEvents):
         else:
             kind = OTHER
         self._fz_kind = kind
-        slow = self._slow_now()
-        if slow != self._slow:  # written when one changed: numpy scalar writes (~0.3 µs each)
-            self._write_slow(slow)
+        self._sync_slow()
 
-    def _slow_now(self) -> tuple[Any, ...]:
-        """The state's slow scalars as they are now: the motion's update, its start [s] and
-        mode, the drives expected enabled, the monitor's first judged tick, its contact."""
+    def _sync_slow(self) -> None:
+        """The state's slow scalars (the motion's update, its start [s] and mode, the drives
+        expected enabled, the monitor's first judged tick, its contact) into the tick's state
+        when one changed since they were written (numpy scalar writes, ~0.3 µs each)."""
         m, c = self.motion, self.collision
         was_contact = c is not None and c._was_contact
-        return (self._fz_kind, m.t0, m.mode, self.expect_enabled, self._judge_from, was_contact)
-
-    def _write_slow(self, slow: tuple[Any, ...]) -> None:
-        """:meth:`_slow_now`'s answer into the tick's state (and kept, to compare with)."""
-        self._slow = slow
-        st = self.st
-        st["kind"], st["t0"], st["mode"], st["expect"], st["judge_from"], st["was_contact"] = slow
+        slow = (self._fz_kind, m.t0, m.mode, self.expect_enabled, self._judge_from, was_contact)
+        if slow != self._slow:
+            self._slow = slow
+            st = self.st
+            st["kind"], st["t0"], st["mode"] = slow[0], slow[1], slow[2]
+            st["expect"], st["judge_from"], st["was_contact"] = slow[3], slow[4], slow[5]
 
     def _busy(self) -> int:
         """The rare states now, as BUSY_* bits (0: nothing keeps the next tick off the quiet
