@@ -861,6 +861,9 @@ def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
 
 
 def targets(res: dict) -> list[tuple[str, str, bool]]:
+    """(target, value, met) for each target of the report: the tick's against ``floor`` as
+    issue #27 states them (1 kHz median <= 3x, p99 <= 100 µs, back to back <= 2.5x), the
+    observers' and the 2 kHz share as their issues stated them."""
     f = res["floor_us"]
     l1, l2, b = res["loop_1khz"], res["loop_2khz"], res["back_to_back"]
     hm = l1.get("hofto_plus_momentum", {}).get("median", math.nan)
@@ -872,9 +875,9 @@ def targets(res: dict) -> list[tuple[str, str, bool]]:
         ),
         ("1 kHz loop p99 <= 100 µs", f"{l1['p99']:.1f}", l1["p99"] <= 100),
         (
-            "back to back median <= 2x floor",
-            f"{b['median']:.1f} <= {2 * f:.1f}",
-            b["median"] <= 2 * f,
+            "back to back median <= 2.5x floor",
+            f"{b['median']:.1f} <= {2.5 * f:.1f}",
+            b["median"] <= 2.5 * f,
         ),
         (
             "HOFTO n=2 + momentum median <= 15 µs (1 kHz loop)",

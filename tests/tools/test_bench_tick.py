@@ -235,3 +235,24 @@ def test_without_the_compiled_path_the_bench_stops_in_one_line(switch) -> None:
     assert "Traceback" not in err and 'File "' not in err, err
     # the last line says why (the lines before: the product's own warnings, one line each)
     assert err.splitlines()[-1].startswith("bench_tick: the tick cannot run compiled: "), err
+
+
+def _judged(bench, back_to_back: float, loop: float, p99: float) -> dict[str, bool]:
+    """targets() on a report whose floor is 6 µs, keyed by each target's name up to its bound."""
+    res = {
+        "floor_us": 6.0,
+        "loop_1khz": {"median": loop, "p99": p99, "hofto_plus_momentum": {}},
+        "loop_2khz": {"median": 5.0, "share_of_period": 0.01},
+        "back_to_back": {"median": back_to_back},
+    }
+    return {name.split(" <= ")[0]: met for name, _, met in bench.targets(res)}
+
+
+def test_the_tick_targets_are_the_issues_ratios_to_the_floor(bench) -> None:
+    """Back to back <= 2.5x the floor, the 1 kHz median <= 3x, its p99 <= 100 µs: each met
+    just inside its bound and missed just outside it."""
+    keys = ("back to back median", "1 kHz loop median", "1 kHz loop p99")
+    inside = _judged(bench, back_to_back=14.9, loop=17.9, p99=99.0)
+    assert [inside[k] for k in keys] == [True, True, True]
+    outside = _judged(bench, back_to_back=15.1, loop=18.1, p99=101.0)
+    assert [outside[k] for k in keys] == [False, False, False]
