@@ -200,9 +200,7 @@ def test_installed_config_check_and_run_by_robot_name(install: Install) -> None:
     res = install.run("config", "check", "er3a", "er3a_service")
     assert res.returncode == 0, res.stderr
     assert "er3a.yaml: ok" in res.stdout and "er3a_service.yaml: ok" in res.stdout
-    res = install.run(
-        "run", "--clock", "sim", "--summary-json", "summary.json", "--log-dir", "logs"
-    )
+    res = install.run("run", "--clock", "sim", "--summary-json", "summary.json")
     assert res.returncode == 0, res.stderr[-3000:]
     summary = json.loads((install.work / "summary.json").read_text())
     assert summary["acceleration"]["compiled"] is True, summary["acceleration"]
@@ -211,7 +209,10 @@ def test_installed_config_check_and_run_by_robot_name(install: Install) -> None:
     assert summary["drag"]["steady_speed_mps"] is not None
     assert "real-time" not in res.stderr  # no real-time warning for the sim clock
     assert "tick: compiled" in res.stdout
-    assert list((install.work / "logs").glob("*.mcap"))
+    # the shipped config's ../out/logs is the working directory's out/logs, not the package's
+    assert list((install.work / "out" / "logs").glob("*.mcap"))
+    package = Path(install.python("import hofto_hw; print(hofto_hw.__file__)").strip()).parent
+    assert not (package / "out").exists() and not (package.parent / "out").exists()
 
 
 # ------------------------------------------------------------------------- deployment

@@ -494,5 +494,6 @@ def _live_spec(live: object) -> object:
 
 
 def _log_dir(cfg: object, config_path: Path) -> Path:
-    d = cfg.run.log_dir  # type: ignore[attr-defined]
-    return d if d.is_absolute() else (config_path.resolve().parent / d).resolve()
+    from hofto_hw.config.locate import output_folder
+
+    return output_folder(cfg.run.log_dir, config_path)  # type: ignore[attr-defined]

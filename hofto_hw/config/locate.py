@@ -25,6 +25,25 @@ def _shipped_configs() -> Path:
 
 #: the configs shipped with the project (see the module docstring)
 PROJECT_CONFIGS = _shipped_configs()
+#: whether they are the installed package's data (a wheel) rather than a checkout's configs/
+SHIPPED_IN_PACKAGE = PROJECT_CONFIGS.name == "robot_configs"
+
+
+def output_folder(value: Path, config: Path) -> Path:
+    """A folder a config names for output (``run.log_dir``), made absolute.
+
+    A relative value is taken from the config file's folder, as every path in a config is,
+    except in a config read from the installed package's data (a robot name after a wheel
+    install): the installed package is no place to write to, so there the working directory
+    stands in for the project and the config counts as being in its ``configs/`` (the shipped
+    ``../out/logs`` is ``./out/logs``, as it is when run from a checkout's root).
+    """
+    if value.is_absolute():
+        return value
+    base = config.resolve().parent
+    if SHIPPED_IN_PACKAGE and base.is_relative_to(PROJECT_CONFIGS):
+        base = Path.cwd() / "configs" / base.relative_to(PROJECT_CONFIGS)
+    return (base / value).resolve()
 
 
 def config_dirs() -> list[Path]:

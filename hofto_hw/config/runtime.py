@@ -115,7 +115,11 @@ class RunConfig(FileModel):
     model_error: NonNeg | None = Field(
         None, description="override simulation.model_error for the run (relative, 1 sigma)"
     )
-    log_dir: Path = Field(Path("out/logs"), description="folder of the flight-recorder logs")
+    log_dir: Path = Field(
+        Path("out/logs"),
+        description="folder of the flight-recorder logs; relative: from the config's folder "
+        "(config.locate.output_folder: a shipped config of an installed wheel writes to ./out)",
+    )
     drag: ScriptedDragConfig | None = Field(
         None, description="scripted drag after the collision stop (needs a drag: section)"
     )
