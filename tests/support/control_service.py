@@ -74,6 +74,29 @@ class Service:
             self.proc.wait()
 
 
+def settled(robot: Any, ticks: int = 200) -> Callable[[], bool]:
+    """A :func:`wait_for` condition: the arm holding, every joint slower than the service's
+    STANDSTILL, in every state read over at least ``ticks`` ticks of loop time. One slow
+    sample is not rest: a settling swing passes through zero speed, and a request that needs
+    standstill, judged a few ticks later, was refused ("the arm is moving")."""
+    import numpy as np
+
+    from hofto_hw.runtime.tick_events import STANDSTILL
+
+    first: list[int] = []  # the tick of the first slow state of the current run of them
+
+    def cond() -> bool:
+        s = robot.state()
+        if s.mode != "hold" or float(np.abs(s.qd).max()) >= STANDSTILL:
+            first.clear()
+            return False
+        if not first:
+            first.append(s.tick)
+        return s.tick - first[0] >= ticks
+
+    return cond
+
+
 def wait_for(cond: Callable[[], Any], what: str, timeout: float = 120.0) -> Any:
     """Poll ``cond`` until truthy (a state reached, not a time waited); fail after a long
     ``timeout`` naming ``what``."""

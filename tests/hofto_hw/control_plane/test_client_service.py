@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support.control_service import ROOT, Service, children, socket_config, wait_for
+from support.control_service import ROOT, Service, children, settled, socket_config, wait_for
 
 from hofto_hw.client import Refused, Robot
 
@@ -25,11 +25,6 @@ def service(tmp_path_factory: pytest.TempPathFactory):
         yield svc
     finally:
         svc.stop()
-
-
-def _at_rest(robot: Robot) -> bool:
-    s = robot.state()
-    return s.mode == "hold" and float(np.abs(s.qd).max()) < 0.01
 
 
 def test_stream_1000_states_at_100_hz_none_missed(service: Service) -> None:
@@ -55,12 +50,12 @@ def test_state_is_a_typed_snapshot(service: Service) -> None:
 
 def test_move_joints_waits_and_reaches_the_target(service: Service) -> None:
     with Robot.connect(socket=service.sock) as robot:
-        wait_for(lambda: _at_rest(robot), "hold at rest")
+        wait_for(settled(robot), "hold at rest")
         q0 = robot.state().q_cmd
         target = q0 + np.array([0.1, -0.05, 0.05, 0.1, -0.1, 0.1])
         m = robot.move_joints(target, speed=0.5, acceleration=0.5, timeout=120.0)
         assert m.result == "completed"
-        wait_for(lambda: _at_rest(robot), "rest after the move")
+        wait_for(settled(robot), "rest after the move")
         assert np.abs(robot.state().q - target).max() < 2e-3
         with pytest.raises(Refused, match="outside its limits"):
             robot.move_joints(q0 + np.array([0, 0, 9.0, 0, 0, 0]))
@@ -70,7 +65,7 @@ def test_move_joints_waits_and_reaches_the_target(service: Service) -> None:
 
 def test_move_linear_moves_the_tool_along_a_line(service: Service) -> None:
     with Robot.connect(socket=service.sock) as robot:
-        wait_for(lambda: _at_rest(robot), "hold at rest")
+        wait_for(settled(robot), "hold at rest")
         s = robot.state()
         from scipy.spatial.transform import Rotation
 
@@ -83,14 +78,14 @@ def test_move_linear_moves_the_tool_along_a_line(service: Service) -> None:
         assert np.array_equal(robot.state().q_cmd, q_before)  # refused before moving
         m = robot.move_linear(target, speed=0.5, timeout=120.0)
         assert m.result == "completed"
-        wait_for(lambda: _at_rest(robot), "rest after the line")
+        wait_for(settled(robot), "rest after the line")
         assert np.abs(robot.state().tcp_position - target[:3]).max() < 1e-3
         robot.move_linear(start, timeout=120.0)  # back
 
 
 def test_drag_holds_the_lease_and_another_client_is_refused(service: Service) -> None:
     with Robot.connect(socket=service.sock) as robot, Robot.connect(socket=service.sock) as other:
-        wait_for(lambda: _at_rest(robot), "hold at rest")
+        wait_for(settled(robot), "hold at rest")
         with robot.drag():
             s = wait_for(lambda: (st := robot.state()).enabling.drag_active and st, "drag active")
             assert s.mode == "drag" and s.enabling.pressed
@@ -126,7 +121,7 @@ def test_client_killed_or_hung_mid_drag_stops_the_arm_category_2(
     """SIGKILL: the connection closes (released at once); SIGSTOP: the connection stays and
     the lease lapses. Either way: enabling_released, category 2, the arm at rest."""
     with Robot.connect(socket=service.sock) as robot:
-        wait_for(lambda: _at_rest(robot), "hold at rest")
+        wait_for(settled(robot), "hold at rest")
         env = {**os.environ, "PYTHONPATH": str(ROOT)}
         child = subprocess.Popen(
             [sys.executable, "-c", CLIENT, str(service.sock)],
@@ -168,7 +163,7 @@ def test_safety_profile_switch_refused_while_moving_accepted_at_standstill(tmp_p
     try:
         with Robot.connect(socket=svc.sock) as robot:
             assert robot.state().profile == "normal"
-            wait_for(lambda: _at_rest(robot), "hold at rest")
+            wait_for(settled(robot), "hold at rest")
             q0 = robot.state().q_cmd
             m = robot.move_joints(q0 + 0.2, speed=0.1, acceleration=0.1, wait=False)  # seconds
             wait_for(lambda: robot.state().moving, "moving")
@@ -176,7 +171,7 @@ def test_safety_profile_switch_refused_while_moving_accepted_at_standstill(tmp_p
                 robot.set_safety_profile("reduced")
             assert robot.state().profile == "normal"
             m.wait(timeout=120.0)
-            wait_for(lambda: _at_rest(robot), "at rest after the move")
+            wait_for(settled(robot), "at rest after the move")
             content = robot.set_safety_profile("reduced")
             assert content == {
                 "collision_scale": 0.8, "speed_scale": 0.25, "drag_mass_scale": 1.0,

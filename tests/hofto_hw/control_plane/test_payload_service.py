@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from support.control_service import ROOT, Service, socket_config, wait_for
+from support.control_service import ROOT, Service, settled, socket_config, wait_for
 
 from hofto_hw.client import Refused, Robot
 from hofto_hw.config.loader import load_config
@@ -53,11 +53,6 @@ def _weight(cfg, q: np.ndarray, mass: float) -> np.ndarray:
     return bare.create_data().gravity(q) - loaded.create_data().gravity(q)
 
 
-def _at_rest(robot: Robot) -> bool:
-    s = robot.state()
-    return s.mode == "hold" and float(np.abs(s.qd).max()) < 0.01
-
-
 def _shows(robot: Robot, expected: np.ndarray, tol: float) -> bool:
     s = robot.state()
     return all(float(np.abs(v - expected).max()) < tol for v in s.tau_ext.values())
@@ -73,14 +68,14 @@ def test_set_payload_through_the_client_and_the_cli(tmp_path: Path) -> None:
         with Robot.connect(socket=svc.sock) as robot:
             s = robot.state()
             assert s.payload is not None and s.payload.mass == 0.0
-            wait_for(lambda: _at_rest(robot), "hold at rest")
+            wait_for(settled(robot), "hold at rest")
             q0 = robot.state().q_cmd
             m = robot.move_joints(q0 + 0.2, speed=0.1, acceleration=0.1, wait=False)
             wait_for(lambda: robot.state().moving, "moving")
             with pytest.raises(Refused, match="changes at standstill"):
                 robot.set_payload(2.0, COM)
             m.wait(timeout=120.0)
-            wait_for(lambda: _at_rest(robot), "at rest after the move")
+            wait_for(settled(robot), "at rest after the move")
             with pytest.raises(Refused, match=r"within \[0, 3\] kg"):
                 robot.set_payload(5.0, COM)
             with pytest.raises(Refused, match=r"com_max = 0\.15 m"):

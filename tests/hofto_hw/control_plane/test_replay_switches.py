@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from support.control_service import Service, socket_config, wait_for
+from support.control_service import Service, settled, socket_config, wait_for
 
 from hofto_hw.cli import main
 from hofto_hw.client import Robot
@@ -33,10 +33,7 @@ def run_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     svc = Service(tmp, "--hold", config=path)
     try:
         with Robot.connect(socket=svc.sock) as robot:
-            wait_for(
-                lambda: (s := robot.state()).mode == "hold" and float(np.abs(s.qd).max()) < 0.01,
-                "hold at rest",
-            )
+            wait_for(settled(robot), "hold at rest")
             robot.set_safety_profile("reduced")
             robot.set_payload(2.4, [0.0, 0.0, 0.05])  # the arm holds 3 kg: 0.6 kg not modelled
             assert robot.state().faults == [], "a stop before the scripted collision"
