@@ -75,12 +75,13 @@ class Service:
 
 
 def settled(robot: Any, ticks: int = 200) -> Callable[[], bool]:
-    """A :func:`wait_for` condition: the arm holding, every joint slower than the service's
-    STANDSTILL, in every state read over at least ``ticks`` ticks of loop time. One slow
-    sample is not rest: right after the start the held arm's speed settles down through the
-    threshold with noise on it (max |qd| 0.0124, 0.0079, 0.0090, 0.0057 rad/s at reads ten
-    ticks apart, one run), and a request that needs standstill, judged a few ticks after the
-    read, was refused ("the arm is moving")."""
+    """A :func:`wait_for` condition: the arm holding still (mode hold, not ``moving``, every
+    joint slower than the service's STANDSTILL: what a home, a zero set, a replay, a profile
+    or a payload change asks) in every state read over at least ``ticks`` ticks of loop time.
+    One slow sample is not rest: right after the start the held arm's speed settles down
+    through the threshold with noise on it (max |qd| 0.0124, 0.0079, 0.0090, 0.0057 rad/s at
+    reads ten ticks apart, one run), and a request that needs standstill, judged a few ticks
+    after the read, was refused ("the arm is moving")."""
     import numpy as np
 
     from hofto_hw.runtime.tick_events import STANDSTILL
@@ -89,7 +90,7 @@ def settled(robot: Any, ticks: int = 200) -> Callable[[], bool]:
 
     def cond() -> bool:
         s = robot.state()
-        if s.mode != "hold" or float(np.abs(s.qd).max()) >= STANDSTILL:
+        if s.mode != "hold" or s.moving or float(np.abs(s.qd).max()) >= STANDSTILL:
             first.clear()
             return False
         if not first:

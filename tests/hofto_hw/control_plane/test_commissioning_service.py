@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from support.control_service import Service, move_if_still, socket_config, wait_for
+from support.control_service import Service, move_if_still, settled, socket_config, wait_for
 
 from hofto_hw.cli import main
 from hofto_hw.client import Refused, Robot, ServiceError
@@ -44,11 +44,6 @@ def service(tmp_path_factory: pytest.TempPathFactory):
         svc.stop()
 
 
-def _at_rest(robot: Robot) -> bool:
-    s = robot.state()
-    return s.mode == "hold" and not s.moving and float(np.abs(s.qd).max()) < 0.01
-
-
 def _cli(capsys, *argv: object) -> tuple[int, str, str]:
     code = main([str(a) for a in argv])
     out, err = capsys.readouterr()
@@ -57,7 +52,7 @@ def _cli(capsys, *argv: object) -> tuple[int, str, str]:
 
 def test_home_through_the_service_and_back_to_the_loop_mode(service: Service, capsys) -> None:
     with Robot.connect(socket=service.sock) as robot:
-        wait_for(lambda: _at_rest(robot), "hold at rest")
+        wait_for(settled(robot), "hold at rest")
         assert robot.state().q[1] == pytest.approx(0.3, abs=5e-3)  # the home pose
         code, out, err = _cli(
             capsys,
@@ -77,7 +72,7 @@ def test_home_through_the_service_and_back_to_the_loop_mode(service: Service, ca
         # back in the loop's mode: the loop moves the homed joint again
         target = s.q_cmd + np.array([0.0, 0.05, 0.0, 0.0, 0.0, 0.0])
         assert robot.move_joints(target, speed=0.5, timeout=120.0).result == "completed"
-        wait_for(lambda: _at_rest(robot), "rest after the move")
+        wait_for(settled(robot), "rest after the move")
         assert abs(robot.state().q[1] - target[1]) < 2e-3
         assert robot.home("joint_2").startswith("homed: joint_2")
         assert robot.state().faults == []
@@ -85,7 +80,7 @@ def test_home_through_the_service_and_back_to_the_loop_mode(service: Service, ca
 
 def test_home_and_zero_set_refused_while_latched_moving_or_held(service: Service) -> None:
     with Robot.connect(socket=service.sock) as robot, Robot.connect(socket=service.sock) as other:
-        wait_for(lambda: _at_rest(robot), "hold at rest")
+        wait_for(settled(robot), "hold at rest")
         with pytest.raises(Refused, match="absolute encoder"):
             robot.home(["joint_1"])
         robot.stop()
@@ -94,9 +89,10 @@ def test_home_and_zero_set_refused_while_latched_moving_or_held(service: Service
             robot.home()
         with pytest.raises(Refused, match="zero set refused: stop_request latched"):
             robot.zero_set("joint_1", 0.0)
-        wait_for(lambda: _at_rest(robot), "at rest after the stop")
+        wait_for(settled(robot), "at rest after the stop")
         robot.reset()
-        wait_for(lambda: robot.state().faults == [] and _at_rest(robot), "reset")
+        wait_for(lambda: robot.state().faults == [], "reset")
+        wait_for(settled(robot), "at rest after the reset")
         # moving: a move to a target and back, refused on the way
         s = robot.state()
         # the re-enable after the reset sways the arm for a few ticks (> 0.01 rad/s): the
@@ -116,9 +112,9 @@ def test_home_and_zero_set_refused_while_latched_moving_or_held(service: Service
             other.home()
         with pytest.raises(Refused, match="held by"):
             other.zero_set(1, 0.0)
-        wait_for(lambda: _at_rest(robot), "rest")
+        wait_for(settled(robot), "rest")
         robot.move_joints(s.q_cmd, timeout=120.0)
-        wait_for(lambda: _at_rest(robot), "rest after the way back")
+        wait_for(settled(robot), "rest after the way back")
         assert robot.state().faults == []
 
 
@@ -126,7 +122,7 @@ def test_zero_set_round_trip_through_the_service(service: Service, capsys) -> No
     config = service.config  # type: ignore[attr-defined]
     original = load_config(config).bus.drives[0].zero_offset  # type: ignore[union-attr]
     with Robot.connect(socket=service.sock) as robot:
-        wait_for(lambda: _at_rest(robot), "hold at rest")
+        wait_for(settled(robot), "hold at rest")
         q0 = float(robot.state().q[0])
         code, out, err = _cli(
             capsys, "zero", "set", "--config", config, "--socket", service.sock,
@@ -191,7 +187,7 @@ def test_status_and_state_show_sto_and_brake_per_axis(in_process, capsys) -> Non
     system, sock = in_process
     drives = system.bus.drives
     with Robot.connect(socket=sock) as robot:
-        wait_for(lambda: _at_rest(robot), "hold at rest")
+        wait_for(settled(robot), "hold at rest")
         axes = robot.state().axes
         assert [a.name for a in axes] == list(system.cfg.robot.joints)
         assert [(a.sto, a.brake) for a in axes] == [(False, "open")] * 6
@@ -221,7 +217,7 @@ def test_status_and_state_show_sto_and_brake_per_axis(in_process, capsys) -> Non
         assert robot.state().faults  # STO while running is a category 0 stop
         drives.set_safe_torque_off(2, False)
         wait_for(lambda: not robot.state().axes[2].sto, "STO released")
-        wait_for(lambda: _at_rest(robot), "at rest")
+        wait_for(settled(robot), "at rest")
         robot.reset()
         wait_for(
             lambda: (st := robot.state()).faults == [] and st.axes[2].brake == "open",

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support.control_service import Service, connect_raw, wait_for
+from support.control_service import Service, connect_raw, settled, wait_for
 
 from hofto_hw.client import Robot
 from hofto_hw.client.connection import Connection
@@ -152,8 +152,7 @@ def test_300_s_replay_is_planned_off_the_loop_and_stop_answered_while_it_plays(
     service: Service, tmp_path: Path
 ) -> None:
     with Robot.connect(socket=service.sock) as robot:
-        wait_for(lambda: robot.state().mode == "hold", "hold")
-        wait_for(lambda: float(np.abs(robot.state().qd).max()) < 0.01, "rest")
+        wait_for(settled(robot), "hold at rest")
         home = robot.state().q_cmd
         file = _long_path(6, home, 300.0, tmp_path)
         answered: list[bool] = []

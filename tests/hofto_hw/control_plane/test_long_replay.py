@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from support.control_service import CONFIG, Service, wait_for
+from support.control_service import CONFIG, Service, settled, wait_for
 
 from hofto_hw.client import Refused, Robot
 from hofto_hw.config.loader import load_config
@@ -34,8 +34,7 @@ def test_a_path_longer_than_the_plan_ring_is_streamed_and_followed_to_its_end(
     svc = Service(tmp_path, "--hold", "--no-collision", log=False)
     try:
         with Robot.connect(socket=svc.sock) as robot:
-            wait_for(lambda: robot.state().mode == "hold", "hold")
-            wait_for(lambda: float(np.abs(robot.state().qd).max()) < 0.01, "rest")
+            wait_for(settled(robot), "hold at rest")
             home = robot.state().q_cmd
             file = _path(home, tmp_path)
             m = robot.replay(file, wait=False)
