@@ -21,9 +21,12 @@ Figures (µs; median / p99 / p99.9):
   gravity) back to back on the tick's own samples;
 - the tick back to back (SimClock, as ``--clock sim``) and inside a 1 kHz and a 2 kHz loop
   (RealClock: absolute CLOCK_MONOTONIC deadlines with clock_nanosleep TIMER_ABSTIME, as
-  ``--clock real``), SCHED_FIFO 50 when permitted, the config's CPU wake-up latency limit
-  held as ``hofto-hw run`` holds it (``loop.cpu_latency_us``), gc frozen and off (the
-  Loop's own);
+  ``--clock real``), with the config's real-time set-up applied as ``hofto-hw run`` applies
+  it (hofto_hw.runtime.realtime.setup, ``preferred``: SCHED_FIFO at ``loop.priority``,
+  mlockall, the ``loop.cpus`` affinity, the CPU wake-up latency limit
+  ``loop.cpu_latency_us``; what it got is ``scheduler``), gc frozen and off (the Loop's
+  own); processes it starts (the EtherCAT emulator, the start-up runs) run beside a pinned
+  loop, not on its CPU;
   and back to back with the arm holding (``hold_back_to_back``: the reference does not
   change, so the tick reuses its feed-forward);
 - the tick as it runs: the fused call (hofto_hw/runtime/fused.py) on quiet ticks (``path``,
@@ -60,6 +63,7 @@ The machine is shared and noisy: compare medians and ratios, not single runs.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import json
 import math
@@ -674,12 +678,13 @@ def startup(config: Path) -> dict:
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
         for label in ("cold", "cached"):
-            r = subprocess.run(
-                [sys.executable, "-c", _STARTUP, str(config)],
-                env=env,
-                capture_output=True,
-                text=True,
-            )
+            with beside_loop():
+                r = subprocess.run(
+                    [sys.executable, "-c", _STARTUP, str(config)],
+                    env=env,
+                    capture_output=True,
+                    text=True,
+                )
             if r.returncode != 0:  # its last line: the error, not the traceback above it
                 out[label] = {"skipped": r.stderr.strip().splitlines()[-1][-300:]}
                 continue
@@ -760,7 +765,8 @@ def ethercat_loop(config: Path, quick: bool, floor: float) -> dict:
             cfg = load_config(path)
             for _ in range(ETHERCAT_ATTEMPTS):
                 try:  # a fresh arm for every run
-                    proc = start_emulator(slave, path, Path(tmp))
+                    with beside_loop():
+                        proc = start_emulator(slave, path, Path(tmp))
                 except SystemExit as exc:  # its message: why the emulator did not start
                     return {"skipped": f"the EtherCAT emulator did not start: {exc}"}
                 try:
@@ -794,22 +800,30 @@ def _stop_process(proc: subprocess.Popen) -> None:
             proc.wait()
 
 
-def realtime(cpu_latency_us: int | None) -> str:
-    """SCHED_FIFO 50 if permitted, and the CPU wake-up latency limit ``hofto-hw run`` holds
-    (``loop.cpu_latency_us``); returns what is in use."""
-    from hofto_hw.runtime.realtime import hold_cpu_latency
+def realtime(loop) -> str:
+    """The config's ``loop`` real-time set-up as ``hofto-hw run`` applies it, ``preferred``
+    (what is missing is said on stderr and in the answer): SCHED_FIFO at ``loop.priority``,
+    mlockall, the ``loop.cpus`` affinity, the CPU wake-up latency limit; returns what is in
+    use (RealtimeReport.describe)."""
+    from hofto_hw.runtime.realtime import setup
 
+    rep = setup("preferred", loop.priority, loop.cpus, loop.cpu_latency_us)
+    return rep.describe() + "".join(f"; missing {m}" for m in rep.missing)
+
+
+@contextlib.contextmanager
+def beside_loop():
+    """Processes started inside run on the CPUs beside the loop's (``loop.cpus``; as the
+    service keeps its helpers off the loop's CPU), this process's affinity back after."""
+    from hofto_hw.runtime.realtime import cpus_beside_loop
+
+    mine, beside = os.sched_getaffinity(0), cpus_beside_loop()
+    if beside:
+        os.sched_setaffinity(0, beside)
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
-        policy = "SCHED_FIFO 50"
-    except (PermissionError, OSError, AttributeError):
-        policy = "SCHED_OTHER (SCHED_FIFO not permitted)"
-    if cpu_latency_us is None:
-        return policy + ", no CPU wake-up latency limit (loop.cpu_latency_us: null)"
-    problem = hold_cpu_latency(cpu_latency_us)
-    if problem is not None:
-        return policy + f", no CPU wake-up latency limit (missing {problem})"
-    return policy + f", CPU wake-up latency <= {cpu_latency_us} µs"
+        yield
+    finally:
+        os.sched_setaffinity(0, mine)
 
 
 #: ``paths.numpy``: the key kept (the report's keys stay the same), the path gone
@@ -828,7 +842,7 @@ def bench(config: Path, quick: bool, ethercat: bool = False) -> dict:
     from hofto_hw.model.snapshot import pinocchio_traits
 
     cfg = load_config(config)
-    policy = realtime(cfg.loop.cpu_latency_us)
+    policy = realtime(cfg.loop)
     floor = floor_us(cfg, 1000 if quick else 20000)
     f = float(np.median(floor))
     res: dict = {

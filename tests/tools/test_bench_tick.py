@@ -256,3 +256,49 @@ def test_the_tick_targets_are_the_issues_ratios_to_the_floor(bench) -> None:
     assert [inside[k] for k in keys] == [True, True, True]
     outside = _judged(bench, back_to_back=15.1, loop=18.1, p99=101.0)
     assert [outside[k] for k in keys] == [False, False, False]
+
+
+def test_the_loops_real_time_set_up_is_the_configs_as_run_applies_it(bench, monkeypatch) -> None:
+    """The bench applies the config's ``loop`` section through the one set-up ``hofto-hw run``
+    uses (hofto_hw.runtime.realtime.setup, ``preferred``): its priority, ``loop.cpus`` and
+    latency limit, not a copy of its own; the answer says what was got and what is missing."""
+    from hofto_hw.config import load_config
+    from hofto_hw.runtime import realtime
+
+    calls = []
+
+    def setup(mode, priority, cpus, latency):
+        calls.append((mode, priority, cpus, latency))
+        rep = realtime.RealtimeReport(fifo=True, locked=False, cpus=[1], cpu_latency_us=latency)
+        rep.missing.append("CAP_IPC_LOCK (test)")
+        return rep
+
+    monkeypatch.setattr(realtime, "setup", setup)
+    loop = load_config(ROOT / "configs" / "er3a.yaml").loop
+    said = bench.realtime(loop)
+    assert calls == [("preferred", loop.priority, loop.cpus, loop.cpu_latency_us)]
+    assert loop.cpus == "last"  # the service's placement (test_service_config)
+    assert "SCHED_FIFO" in said and "CPUs [1]" in said and "missing CAP_IPC_LOCK (test)" in said
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: nothing to run beside")
+def test_processes_the_bench_starts_run_beside_a_pinned_loop(bench) -> None:
+    """With the loop pinned (``loop.cpus``), what the bench starts (the EtherCAT emulator, the
+    start-up runs) runs on the other CPUs, and the bench's own affinity is the loop's again."""
+    import subprocess
+
+    mine = os.sched_getaffinity(0)
+    loop_cpu = max(mine)
+    probe = "import os; print(' '.join(map(str, sorted(os.sched_getaffinity(0)))))"
+    os.sched_setaffinity(0, {loop_cpu})
+    try:
+        with bench.beside_loop():
+            out = subprocess.run(
+                [sys.executable, "-c", probe], capture_output=True, text=True, check=True
+            ).stdout
+        after = os.sched_getaffinity(0)
+    finally:
+        os.sched_setaffinity(0, mine)
+    child = {int(c) for c in out.split()}
+    assert child and loop_cpu not in child, (child, loop_cpu)
+    assert after == {loop_cpu}

@@ -75,6 +75,18 @@ def test_service_config_scripts_nothing_and_runs_until_sigterm(tmp_path: Path) -
     assert "real-time" not in stderr and "realtime" not in stderr
 
 
+def test_the_demo_config_runs_its_loop_as_the_service_does() -> None:
+    """configs/er3a.yaml (the README's job, and what tools/bench_tick.py and bench_loop.py
+    measure by default) sets up its loop as the service's config does: rate, real-time mode,
+    priority, CPU placement and wake-up latency limit; only ``acceleration`` differs (the
+    service requires the compiled tick)."""
+    keys = ("rate_hz", "realtime", "priority", "cpus", "cpu_latency_us")
+    demo = yaml.safe_load((ROOT / "configs" / "er3a.yaml").read_text())["loop"]
+    service = yaml.safe_load(SERVICE.read_text())["loop"]
+    assert {k: demo.get(k) for k in keys} == {k: service.get(k) for k in keys}
+    assert service["cpus"] == "last"
+
+
 def test_required_acceleration_refuses_without_the_native_library(tmp_path: Path) -> None:
     proc = _run(
         "--config",
